@@ -1,0 +1,53 @@
+"""The ``foresight`` command: one entry point that dispatches to each component's own CLI.
+
+Every sub-command lives in the module that implements it and exposes ``main(argv) -> int``;
+``foresight <command> --help`` documents all of its options.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+__all__ = ["COMMANDS", "main"]
+
+# command -> (module with main(argv), one-line description)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "replayer": ("services.replayer.__main__", "stream recorded human poses over Zenoh"),
+    "router": ("shared.router", "run a Zenoh router on loopback for local multi-process runs"),
+    "library": ("shared.library_cli", "inspect/validate/convert motion libraries"),
+}
+
+
+def _parser() -> argparse.ArgumentParser:
+    width = max(map(len, COMMANDS))
+    lines = "\n".join(f"  {name:<{width}}  {desc}" for name, (_, desc) in COMMANDS.items())
+    return argparse.ArgumentParser(
+        prog="foresight",
+        description="Foresight: plan robot motion around the early-predicted workspace occupancy of a human.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=f"commands:\n{lines}\n\nRun 'foresight COMMAND --help' for the options of a command.",
+        usage="foresight [-h] COMMAND [ARGS...]",
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Dispatch ``foresight COMMAND ARGS...``; returns the process exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = _parser()
+    if not argv or argv[0] in ("-h", "--help"):
+        parser.print_help()
+        return 0 if argv else 2
+    command, rest = argv[0], argv[1:]
+    if command not in COMMANDS:
+        parser.print_usage(sys.stderr)
+        print(f"foresight: error: unknown command {command!r} (choose from {', '.join(COMMANDS)})",
+              file=sys.stderr)
+        return 2
+    module = importlib.import_module(COMMANDS[command][0])
+    return int(module.main(rest, prog=f"foresight {command}") or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

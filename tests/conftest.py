@@ -1,0 +1,60 @@
+"""Shared fixtures: loopback Zenoh endpoints (scouting off) and the reference-material location."""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from shared.config import ZenohConfig
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"  # read-only reference material beside the clone
+PAPER_LIBRARY = SHARED / "data" / "paper-library"
+REFERENCE = SHARED / "reference"
+
+
+def free_port() -> int:
+    """A currently free TCP port on 127.0.0.1."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def zenoh_hub() -> Callable[[], ZenohConfig]:
+    """Factory of Zenoh configs that all meet at one loopback endpoint.
+
+    The first config returned listens on a fresh port; every later one connects to it. Multicast
+    scouting is off in all of them.
+    """
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    made: list[ZenohConfig] = []
+
+    def make() -> ZenohConfig:
+        if not made:
+            cfg = ZenohConfig(mode="peer", listen=[endpoint], connect=[], multicast_scouting=False)
+        else:
+            cfg = ZenohConfig(mode="peer", listen=["tcp/127.0.0.1:0"], connect=[endpoint], multicast_scouting=False)
+        made.append(cfg)
+        return cfg
+
+    return make
+
+
+@pytest.fixture
+def paper_library() -> Path:
+    """The paper's motion library beside the repo; skips the test when it is absent."""
+    if not PAPER_LIBRARY.is_dir():
+        pytest.skip("../shared/data/paper-library not present")
+    return PAPER_LIBRARY
+
+
+@pytest.fixture
+def reference_dir() -> Path:
+    """../shared/reference; skips the test when it is absent."""
+    if not REFERENCE.is_dir():
+        pytest.skip("../shared/reference not present")
+    return REFERENCE
