@@ -94,12 +94,14 @@ class HumanPose(Message):
 
     ``features`` are the paper's 12 joint features in the recorder's frame, in this order:
     pelvis x, y, z (m), pelvis yaw, torso X, Y, Z, right shoulder X, Z, Y (rad), right arm
-    translation (m), right elbow Z (rad).
+    translation (m), right elbow Z (rad). ``tick_last`` is true on the last pose the replayer
+    publishes for lock-step tick ``tick`` (always true in real-time mode, where ``tick`` is -1).
     """
 
     TYPE: ClassVar[str] = "HumanPose"
     stamp: float
     tick: int
+    tick_last: bool
     demo_id: int
     index: int
     features: np.ndarray = array("float64", N_FEATURES)
@@ -162,12 +164,14 @@ class OccupancyGrid(Message):
     The grid has ``dims`` = (nx, ny, nz) voxels of edge ``resolution`` (m); voxel (i, j, k) has its
     lower corner at ``origin + resolution * (i, j, k)`` in the scene frame. Only voxels with
     non-zero probability are sent: ``indices`` are C-order flat indices ``(i * ny + j) * nz + k`` and
-    ``values`` their probability quantised as ``round(255 * p)``.
+    ``values`` their probability quantised as ``round(255 * p)``. ``tick``, ``tick_last``,
+    ``demo_id`` and ``index`` are copied from the pose the prediction was made from.
     """
 
     TYPE: ClassVar[str] = "OccupancyGrid"
     stamp: float
     tick: int
+    tick_last: bool
     demo_id: int
     index: int
     method: str
