@@ -197,6 +197,8 @@ def add_config_arguments(parser: argparse.ArgumentParser, section: str, cls: typ
     """Add ``--config``, the Zenoh flags and one flag per field of ``cls`` to ``parser``.
 
     Flags default to ``None`` (argparse.SUPPRESS) so that only given flags override file and env.
+    A Zenoh field whose flag a section field already uses (e.g. a section's own ``mode``) is
+    offered as ``--zenoh-<name>`` instead.
     """
     if not any(a.dest == "config" for a in parser._actions):
         parser.add_argument("--config", metavar="FILE", default=None,
@@ -213,18 +215,24 @@ def add_config_arguments(parser: argparse.ArgumentParser, section: str, cls: typ
             shown = ",".join(map(str, default)) if is_list else default
             text = f"{f.metadata.get('help', '')} (default: {shown})"
             dest = f"{sec}__{f.name}"
+            flag = _flag(f.name)
+            if flag in parser._option_string_actions:
+                # a section field of the same name (e.g. the replayer's --mode) keeps the short flag
+                flag = _flag(f"{sec}_{f.name}")
             if inner is bool and not is_list:
-                group.add_argument(_flag(f.name), dest=dest,
+                group.add_argument(flag, dest=dest,
                                    action=argparse.BooleanOptionalAction, default=argparse.SUPPRESS, help=text)
             else:
                 choices = f.metadata.get("choices")
                 metavar = "{" + ",".join(map(str, choices)) + "}" if choices else f.name.upper()
-                group.add_argument(_flag(f.name), dest=dest, metavar=metavar,
+                group.add_argument(flag, dest=dest, metavar=metavar,
                                    default=argparse.SUPPRESS, help=text)
 
 
 def _resolve_section(section: str, cls: type[T], file_values: dict[str, Any],
-                     env: typing.Mapping[str, str], cli: dict[str, Any], base: T | None = None) -> T:
+                     env: typing.Mapping[str, str], cli: dict[str, Any], base: T | None = None,
+                     cli_names: dict[str, str] | None = None) -> T:
+    cli_names = cli_names or {}
     unknown = set(file_values) - {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     if unknown:
         raise ConfigError(f"[{section}]: unknown option(s) {', '.join(sorted(unknown))}")
@@ -234,7 +242,7 @@ def _resolve_section(section: str, cls: type[T], file_values: dict[str, Any],
         choices = f.metadata.get("choices")
         env_key = f"{ENV_PREFIX}_{section.upper()}_{f.name.upper()}"
         if f"{section}__{f.name}" in cli:
-            kwargs[f.name] = parse_value(f"--{f.name.replace('_', '-')}", tp, cli[f"{section}__{f.name}"],
+            kwargs[f.name] = parse_value(cli_names.get(f.name, _flag(f.name)), tp, cli[f"{section}__{f.name}"],
                                          choices)
         elif env_key in env:
             kwargs[f.name] = parse_value(env_key, tp, env[env_key], choices)
@@ -276,6 +284,8 @@ def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None =
         if not isinstance(value, dict):
             raise ConfigError(f"config file: top-level key {key!r} must be a table like [{key}]")
     sec = _resolve_section(section, cls, data.get(section, {}), env, cli)
-    zen = (_resolve_section("zenoh", ZenohConfig, data.get("zenoh", {}), env, cli, zenoh_base)
+    shadowed = {f.name for f in dataclasses.fields(ZenohConfig)} & {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    zen = (_resolve_section("zenoh", ZenohConfig, data.get("zenoh", {}), env, cli, zenoh_base,
+                            {n: _flag(f"zenoh_{n}") for n in shadowed})
            if with_zenoh else ZenohConfig())
     return sec, zen

@@ -1,0 +1,167 @@
+"""The replayer's Zenoh loop: publish the core's messages in real time or on each ClockTick."""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from dataclasses import dataclass
+
+import zenoh
+
+from shared.config import ZenohConfig
+from shared.library import MotionLibrary
+from shared.protocol import ClockTick, DemoMarker, HumanPose, Keys, Message
+from shared.runtime import UserError
+from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe
+
+from .core import ReplayerConfig, ReplayerCore, load_replay_library, select_demos
+
+__all__ = ["ReplayStats", "ReplayerService", "LINGER_S"]
+
+log = logging.getLogger("foresight.replayer")
+
+LINGER_S = 0.3
+"""Seconds the session stays open after the last message so that it is delivered before closing."""
+
+
+@dataclass
+class ReplayStats:
+    """What a run published."""
+
+    poses: int = 0
+    markers: int = 0
+    demos: int = 0
+    ticks: int = 0
+    finished: bool = False
+
+
+class ReplayerService:
+    """Streams a library's demonstrations over Zenoh.
+
+    Args:
+        config: Replayer options.
+        zenoh_config: Session options (endpoints, prefix).
+        library: The library to stream; default: loaded from ``config`` (see
+            :func:`~services.replayer.core.load_replay_library`).
+    """
+
+    def __init__(self, config: ReplayerConfig, zenoh_config: ZenohConfig, library: MotionLibrary | None = None) -> None:
+        self.config = config
+        self.zenoh_config = zenoh_config
+        self.library = library if library is not None else load_replay_library(config)
+        self.demos = select_demos(self.library, config)
+        self.keys = Keys(zenoh_config.prefix)
+        self.stats = ReplayStats()
+        self.rejects = RejectCounter("replayer")
+
+    def run(self, stop: threading.Event | None = None) -> ReplayStats:
+        """Publish until the selection is streamed (or forever with ``loop``) or ``stop`` is set."""
+        stop = stop or threading.Event()
+        cfg = self.config
+        core = ReplayerCore(self.demos, loop=cfg.loop, max_demos=cfg.max_demos)
+        try:
+            session_cm = open_session(self.zenoh_config)
+            session = session_cm.__enter__()
+        except zenoh.ZError as exc:
+            raise UserError(f"zenoh: cannot open a session with {self.zenoh_config}: {exc}") from None
+        try:
+            presence = Presence(session, self.keys, "replayer")
+            pose_pub: TypedPublisher[HumanPose] = TypedPublisher(session, self.keys.pose)
+            demo_pub: TypedPublisher[DemoMarker] = TypedPublisher(session, self.keys.demo)
+            total = core.total_poses
+            log.info("replayer: %d demonstrations selected from %s (%s poses), mode %s, session %s",
+                     len(self.demos), self.library.source, "endless" if total is None else total, cfg.mode,
+                     describe(session)["zid"])
+            try:
+                if cfg.mode == "lockstep":
+                    self._run_lockstep(session, core, pose_pub, demo_pub, stop)
+                else:
+                    self._wait_for_peers(presence, stop)
+                    self._run_realtime(core, pose_pub, demo_pub, stop)
+                self.stats.finished = core.done
+                if core.done:
+                    stop.wait(LINGER_S)
+            finally:
+                presence.close()
+        finally:
+            session_cm.__exit__(None, None, None)
+        log.info("replayer: %s after %d demonstrations, %d poses, %d ticks",
+                 "finished" if self.stats.finished else "stopped", self.stats.demos, self.stats.poses,
+                 self.stats.ticks)
+        return self.stats
+
+    # ------------------------------------------------------------------------------------------
+
+    def _publish(self, msgs: list[Message], pose_pub: TypedPublisher[HumanPose],
+                 demo_pub: TypedPublisher[DemoMarker]) -> None:
+        for m in msgs:
+            if isinstance(m, HumanPose):
+                pose_pub.put(m)
+                self.stats.poses += 1
+            else:
+                assert isinstance(m, DemoMarker)
+                demo_pub.put(m)
+                self.stats.markers += 1
+                if m.event == "start":
+                    self.stats.demos += 1
+                    log.info("replayer: demo %d start: %s (class %d, %s), %d samples", m.demo_id, m.class_name,
+                             m.true_class, self._source(m), m.n_samples)
+
+    def _source(self, m: DemoMarker) -> str:
+        d = self.demos[m.demo_id % len(self.demos)]
+        return d.source
+
+    def _wait_for_peers(self, presence: Presence, stop: threading.Event) -> None:
+        wanted = list(self.config.wait_for)
+        if not wanted:
+            return
+        deadline = time.monotonic() + self.config.wait_timeout
+        while not stop.is_set():
+            missing = [s for s in wanted if not presence.is_alive(s)]
+            if not missing:
+                log.info("replayer: %s present, streaming", ", ".join(wanted))
+                return
+            if time.monotonic() >= deadline:
+                log.warning("replayer: %s not present after %.1f s, streaming anyway", ", ".join(missing),
+                            self.config.wait_timeout)
+                return
+            stop.wait(0.02)
+
+    def _run_realtime(self, core: ReplayerCore, pose_pub: TypedPublisher[HumanPose],
+                      demo_pub: TypedPublisher[DemoMarker], stop: threading.Event) -> None:
+        period = 1.0 / self.config.rate_hz
+        next_t = time.monotonic()
+        while not stop.is_set() and not core.done:
+            self._publish(core.step(1, stamp=time.time()), pose_pub, demo_pub)
+            next_t += period
+            delay = next_t - time.monotonic()
+            if delay > 0:
+                stop.wait(delay)
+            elif delay < -1.0:  # fell far behind (suspended?): do not burst to catch up
+                next_t = time.monotonic()
+
+    def _run_lockstep(self, session: zenoh.Session, core: ReplayerCore, pose_pub: TypedPublisher[HumanPose],
+                      demo_pub: TypedPublisher[DemoMarker], stop: threading.Event) -> None:
+        ticks: queue.Queue[ClockTick] = queue.Queue()
+        sub = subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects)
+        last = -1
+        n = self.config.samples_per_tick
+        try:
+            while not stop.is_set() and not core.done:
+                try:
+                    tick = ticks.get(timeout=0.1)
+                except queue.Empty:
+                    continue
+                if tick.tick <= last:
+                    log.warning("replayer: ignoring clock tick %d (already at tick %d)", tick.tick, last)
+                    continue
+                if tick.tick != last + 1 and last >= 0:
+                    log.warning("replayer: clock jumped from tick %d to %d", last, tick.tick)
+                last = tick.tick
+                self.stats.ticks += 1
+                self._publish(core.step(n, stamp=tick.stamp, tick=tick.tick, dt=tick.period / n), pose_pub,
+                              demo_pub)
+        finally:
+            sub.undeclare()
