@@ -1,0 +1,258 @@
+"""The motion-library reader: paper CSV format, validation by rule, native npz, held-out split."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shared.library import (
+    FEATURE_NAMES,
+    PLAUSIBLE_RANGES,
+    LibraryError,
+    LibraryIssue,
+    MotionLibrary,
+    heldout_split,
+    load_library,
+    save_library,
+    validate_block,
+)
+from shared.library_cli import main as library_main
+
+
+def plausible_demo(rng: np.random.Generator, t: int = 40) -> np.ndarray:
+    """A smooth (T, 12) motion inside every plausible range."""
+    centre = np.array([1.8, 1.7, 0.95, -2.5, 0.1, 0.1, 0.0, 1.6, 0.1, 0.1, 0.05, 0.5])
+    s = np.linspace(0, 1, t)[:, None]
+    return centre + 0.1 * np.sin(2 * np.pi * (s + rng.uniform(size=12)))
+
+
+def write_class(path: Path, blocks: list[np.ndarray], index_fn=None) -> None:
+    rows = []
+    for b in blocks:
+        for i, f in enumerate(b):
+            idx = index_fn(i) if index_fn else i
+            rows.append(",".join([str(idx)] + [repr(float(v)) for v in f]))
+    path.write_text("\n".join(rows) + "\n")
+
+
+def make_lib(tmp_path: Path, n_classes: int = 3, n_demos: int = 4, t: int = 40, seed: int = 0) -> Path:
+    rng = np.random.default_rng(seed)
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    for m in range(n_classes):
+        write_class(tmp_path / f"compound_{m}.csv", [plausible_demo(rng, t) for _ in range(n_demos)])
+    return tmp_path
+
+
+def test_feature_names():
+    assert len(FEATURE_NAMES) == 12 and set(PLAUSIBLE_RANGES) == set(FEATURE_NAMES)
+
+
+def test_valid_library(tmp_path):
+    lib = load_library(make_lib(tmp_path))
+    assert lib.class_names == ["compound_0", "compound_1", "compound_2"]
+    assert lib.n_classes == 3 and len(lib.demos) == 12 and lib.issues == []
+    assert lib.counts() == [4, 4, 4]
+    d = lib.by_class(1)[2]
+    assert (d.label, d.index, d.class_name, d.source) == (1, 2, "compound_1", "compound_1.csv#block 2")
+    assert d.features.shape == (40, 12) and d.features.dtype == np.float64
+    raw = np.loadtxt(tmp_path / "compound_1.csv", delimiter=",")
+    np.testing.assert_array_equal(d.features, raw[80:120, 1:])
+
+
+def test_class_files_sorted_numerically(tmp_path):
+    make_lib(tmp_path, n_classes=11, n_demos=1)
+    lib = load_library(tmp_path)
+    assert lib.class_names[:3] == ["compound_0", "compound_1", "compound_2"] and lib.class_names[10] == "compound_10"
+
+
+def check_one_issue(tmp_path: Path, bad: str, block: int, pattern: str, n_blocks: int = 4) -> MotionLibrary:
+    lib = load_library(tmp_path)
+    assert len(lib.issues) == 1, lib.issues
+    issue = lib.issues[0]
+    assert issue.class_name == bad and issue.block == block
+    assert __import__("re").search(pattern, issue.reason), issue.reason
+    assert len(lib.by_class(lib.class_names.index(bad))) == n_blocks - 1
+    # the valid ones keep consecutive indices
+    assert [d.index for d in lib.by_class(lib.class_names.index(bad))] == list(range(n_blocks - 1))
+    return lib
+
+
+def blocks(seed: int = 1, n: int = 4, t: int = 40) -> list[np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return [plausible_demo(rng, t) for _ in range(n)]
+
+
+def test_shifted_block_like_the_papers_class_6(tmp_path):
+    """Columns shifted by one (a 0/25/50/75 value first) and the last four columns zero."""
+    make_lib(tmp_path)
+    b = blocks()
+    shifted = np.zeros_like(b[0])
+    shifted[:, 0] = (np.arange(len(shifted)) % 4) * 25
+    shifted[:, 1:8] = b[0][:, 0:7]
+    b[0] = shifted
+    write_class(tmp_path / "compound_2.csv", b)
+    check_one_issue(tmp_path, "compound_2", 0, r"lines 1-40: dead channel.*r_shoulder_z.*r_elbow_z.*pelvis_x outside")
+
+
+def test_nan_block(tmp_path):
+    make_lib(tmp_path)
+    b = blocks()
+    b[2][5, 3] = np.nan
+    write_class(tmp_path / "compound_1.csv", b)
+    check_one_issue(tmp_path, "compound_1", 2, r"non-finite values in pelvis_yaw at samples 5")
+
+
+def test_out_of_range_block(tmp_path):
+    make_lib(tmp_path)
+    b = blocks()
+    b[1][10:20, 10] = 0.9  # a 90 cm arm extension
+    write_class(tmp_path / "compound_0.csv", b)
+    check_one_issue(tmp_path, "compound_0", 1, r"r_arm_trans outside its plausible range \[-0.5, 0.5\] m in 10 samples")
+
+
+def test_wrong_column_count(tmp_path):
+    make_lib(tmp_path)
+    write_class(tmp_path / "compound_1.csv", blocks())
+    lines = (tmp_path / "compound_1.csv").read_text().splitlines()
+    lines[45] = lines[45].rsplit(",", 1)[0]  # block 1, sample 5 loses a column
+    (tmp_path / "compound_1.csv").write_text("\n".join(lines) + "\n")
+    check_one_issue(tmp_path, "compound_1", 1, r"line 46: 12 columns, expected 13")
+
+
+def test_non_numeric_value(tmp_path):
+    make_lib(tmp_path)
+    write_class(tmp_path / "compound_1.csv", blocks())
+    lines = (tmp_path / "compound_1.csv").read_text().splitlines()
+    lines[130] = lines[130].replace(",", ",abc,", 1).rsplit(",", 1)[0]
+    (tmp_path / "compound_1.csv").write_text("\n".join(lines) + "\n")
+    check_one_issue(tmp_path, "compound_1", 3, r"line 131: non-numeric value 'abc'")
+
+
+def test_index_gap(tmp_path):
+    make_lib(tmp_path)
+    write_class(tmp_path / "compound_0.csv", blocks())
+    lines = (tmp_path / "compound_0.csv").read_text().splitlines()
+    del lines[50]  # block 1 jumps from sample 9 to 11
+    (tmp_path / "compound_0.csv").write_text("\n".join(lines) + "\n")
+    check_one_issue(tmp_path, "compound_0", 1, r"line 51: sample index 11 where 10 was expected")
+
+
+def test_truncated_and_too_short_blocks(tmp_path):
+    make_lib(tmp_path)
+    b = blocks()
+    b[3] = b[3][:15]
+    write_class(tmp_path / "compound_0.csv", b)
+    check_one_issue(tmp_path, "compound_0", 3, r"truncated: 15 samples")
+    b = blocks(t=8, n=4)
+    write_class(tmp_path / "compound_0.csv", b)
+    lib = load_library(tmp_path)
+    assert [i.block for i in lib.issues] == [0, 1, 2, 3, -1]
+    assert "fewer than the minimum" in lib.issues[0].reason and "no valid demonstration" in lib.issues[-1].reason
+
+
+def test_file_not_starting_at_zero(tmp_path):
+    make_lib(tmp_path)
+    write_class(tmp_path / "compound_0.csv", blocks(), index_fn=lambda i: i + 1)
+    lib = load_library(tmp_path)
+    assert len(lib.by_class(0)) == 0 and lib.issues[0].block == 0
+    assert "sample index 1 where 0 was expected" in lib.issues[0].reason
+
+
+def test_subnormal_garbage(tmp_path):
+    f = blocks()[0]
+    f[3, 4] = 2.4e-322
+    assert any("subnormal" in r for r in validate_block(f))
+    assert validate_block(blocks()[0]) == []
+
+
+def test_missing_paths(tmp_path):
+    with pytest.raises(LibraryError, match=r"^library '.*nowhere' not found$"):
+        load_library(tmp_path / "nowhere")
+    with pytest.raises(LibraryError, match="holds no .csv class files"):
+        load_library(tmp_path)
+    (tmp_path / "x.txt").write_text("hi")
+    with pytest.raises(LibraryError, match="neither a directory"):
+        load_library(tmp_path / "x.txt")
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(LibraryError, match="bad.npz.*unreadable npz"):
+        load_library(tmp_path / "bad.npz")
+    np.savez(tmp_path / "other.npz", a=np.zeros(3))
+    with pytest.raises(LibraryError, match="not a Foresight library npz"):
+        load_library(tmp_path / "other.npz")
+
+
+def test_npz_round_trip(tmp_path):
+    make_lib(tmp_path / "csv")
+    b = blocks()
+    b[1][0, 0] = np.inf
+    write_class(tmp_path / "csv" / "compound_1.csv", b)
+    lib = load_library(tmp_path / "csv")
+    save_library(lib, tmp_path / "out" / "lib.npz")
+    with np.load(tmp_path / "out" / "lib.npz", allow_pickle=False) as z:
+        assert all(z[k].dtype != object for k in z.files)
+    back = load_library(tmp_path / "out" / "lib.npz")
+    assert back.class_names == lib.class_names and back.issues == lib.issues and back.source == lib.source
+    assert len(back.demos) == len(lib.demos) == 11
+    for a, b2 in zip(lib.demos, back.demos, strict=True):
+        assert (a.label, a.index, a.class_name, a.source) == (b2.label, b2.index, b2.class_name, b2.source)
+        np.testing.assert_array_equal(a.features, b2.features)
+
+
+def test_heldout_split(tmp_path):
+    lib = load_library(make_lib(tmp_path, n_demos=6))
+    train, held = heldout_split(lib, 2, seed=3)
+    assert len(held) == 6 and len(train) == 12
+    assert {(d.label, d.index) for d in train}.isdisjoint({(d.label, d.index) for d in held})
+    assert [sum(d.label == m for d in held) for m in range(3)] == [2, 2, 2]
+    again = heldout_split(lib, 2, seed=3)
+    assert [(d.label, d.index) for d in again[1]] == [(d.label, d.index) for d in held]
+    other = heldout_split(lib, 2, seed=4)[1]
+    assert [(d.label, d.index) for d in other] != [(d.label, d.index) for d in held]
+    assert heldout_split(lib, 0, seed=0) == (lib.demos, [])
+    with pytest.raises(LibraryError, match="cannot hold out 6"):
+        heldout_split(lib, 6, seed=0)
+
+
+def test_issue_str():
+    assert str(LibraryIssue("c", 2, "why")) == "c block 2: why"
+    assert str(LibraryIssue("c", -1, "why")) == "c whole file: why"
+
+
+def test_cli(tmp_path, capsys):
+    make_lib(tmp_path / "csv")
+    assert library_main(["info", str(tmp_path / "csv")]) == 0
+    out = capsys.readouterr().out
+    assert "classes: 3, valid demonstrations: 12, issues: 0" in out
+    assert library_main(["validate", str(tmp_path / "csv")]) == 0
+    assert library_main(["convert", str(tmp_path / "csv"), "--out", str(tmp_path / "l.npz")]) == 0
+    assert load_library(tmp_path / "l.npz").counts() == [4, 4, 4]
+    b = blocks()
+    b[0][:, 11] = 0.0
+    write_class(tmp_path / "csv" / "compound_0.csv", b)
+    assert library_main(["validate", str(tmp_path / "csv")]) == 1
+    out = capsys.readouterr().out
+    assert "issue: compound_0 block 0:" in out and "dead channel(s): r_elbow_z" in out
+    with pytest.raises(SystemExit) as e:
+        library_main(["info", str(tmp_path / "missing")])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "missing' not found" in err
+    with pytest.raises(SystemExit) as e:
+        library_main(["convert", str(tmp_path / "csv"), "--out", str(tmp_path / "l.txt")])
+    assert e.value.code == 2
+
+
+def test_paper_library(paper_library, tmp_path):
+    lib = load_library(paper_library)
+    assert lib.n_classes == 8 and len(lib.demos) == 200 and lib.counts() == [25] * 8
+    assert all(d.n_samples == 100 for d in lib.demos)
+    assert len(lib.issues) == 1
+    issue = lib.issues[0]
+    assert (issue.class_name, issue.block) == ("compound_6", 0)
+    assert "dead channel" in issue.reason
+    assert lib.by_class(6)[0].source == "compound_6.csv#block 1"
+    save_library(lib, tmp_path / "paper.npz")
+    back = load_library(tmp_path / "paper.npz")
+    assert back.counts() == [25] * 8 and back.issues == lib.issues

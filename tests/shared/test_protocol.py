@@ -1,0 +1,234 @@
+"""The wire contract: every message round-trips; decode rejects bad payloads naming the field."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+
+import msgpack
+import numpy as np
+import pytest
+
+from shared.protocol import (
+    MESSAGE_TYPES,
+    SCHEMA_VERSION,
+    ClassPosterior,
+    ClockTick,
+    DemoMarker,
+    HumanPose,
+    Keys,
+    Message,
+    OccupancyGrid,
+    Plan,
+    ProtocolError,
+    RobotState,
+    decode,
+    encode,
+)
+
+DOC = Path(__file__).resolve().parents[2] / "docs" / "protocol.md"
+
+
+def samples() -> dict[str, Message]:
+    rng = np.random.default_rng(0)
+    grid = np.zeros((4, 5, 6), dtype=np.float32)
+    grid[1, 2, 3] = 0.5
+    grid[3, 4, 5] = 1.0
+    post = np.array([0.2, 0.3, 0.5])
+    return {
+        "HumanPose": HumanPose(stamp=1.5, tick=3, tick_last=True, demo_id=2, index=7, features=rng.normal(size=12)),
+        "DemoMarker": DemoMarker(stamp=1.0, tick=-1, demo_id=2, event="start", true_class=4, class_name="compound_4",
+                                 n_samples=100),
+        "ClassPosterior": ClassPosterior(stamp=2.0, tick=-1, demo_id=1, index=5, class_names=["a", "b", "c"],
+                                         posterior=post, log_likelihood=np.array([-1.0, -np.inf, -3.0])),
+        "OccupancyGrid": OccupancyGrid.from_dense(grid, np.array([0.1, -0.5, 0.0]), 0.05, stamp=2.0, tick=4,
+                                                  tick_last=True, demo_id=1, index=5, method="prediction"),
+        "Plan": Plan(stamp=3.0, tick=5, step=5, goal_names=["g0", "g1"], joint_names=[f"j{i}" for i in range(8)],
+                     dt=0.1, chosen=1, planning_ms=12.5, occupancy_tick=4, occupancy_index=5,
+                     trajectories=rng.normal(size=(2, 10, 8)).astype(np.float32),
+                     cost_smoothness=np.array([1.0, 2.0]), cost_obstacle=np.array([0.0, 0.1]),
+                     cost_human=np.array([0.5, 0.2]), cost_total=np.array([1.5, 2.3]),
+                     valid=np.array([True, True])),
+        "RobotState": RobotState(stamp=4.0, tick=6, joint_names=["a", "b"], goal=-1, reached=False, holding=True,
+                                 reason="no plan yet", q=np.array([0.1, 0.2]), qd=np.zeros(2)),
+        "ClockTick": ClockTick(stamp=0.5, tick=0, period=0.1),
+    }
+
+
+def raw(msg: Message) -> dict:
+    return msgpack.unpackb(encode(msg), raw=False)
+
+
+def pack(d: dict) -> bytes:
+    return msgpack.packb(d, use_bin_type=True)
+
+
+def test_samples_cover_every_message_type():
+    assert set(samples()) == set(MESSAGE_TYPES)
+
+
+@pytest.mark.parametrize("name", sorted(MESSAGE_TYPES))
+def test_round_trip(name):
+    msg = samples()[name]
+    back = decode(encode(msg))
+    assert type(back) is type(msg)
+    for f in dataclasses.fields(msg):
+        a, b = getattr(msg, f.name), getattr(back, f.name)
+        if isinstance(a, np.ndarray):
+            assert b.dtype == np.dtype(f.metadata["array"].dtype)
+            np.testing.assert_array_equal(a, b)
+        else:
+            assert a == b, f.name
+    assert decode(encode(msg), type(msg)) is not None
+
+
+def test_occupancy_quantisation_and_sparsity():
+    msg = samples()["OccupancyGrid"]
+    assert msg.indices.tolist() == [(1 * 5 + 2) * 6 + 3, (3 * 5 + 4) * 6 + 5]
+    assert msg.values.tolist() == [128, 255]
+    dense = msg.to_dense()
+    assert dense.shape == (4, 5, 6) and dense[1, 2, 3] == pytest.approx(128 / 255) and dense.sum() == pytest.approx(
+        1 + 128 / 255)
+
+
+def test_truncated_bytes():
+    data = encode(samples()["HumanPose"])
+    for cut in (1, len(data) // 2, len(data) - 1):
+        with pytest.raises(ProtocolError, match="message"):
+            decode(data[:cut])
+
+
+def test_not_a_map_and_unknown_type():
+    with pytest.raises(ProtocolError, match="expected a map"):
+        decode(pack([1, 2]))
+    d = raw(samples()["ClockTick"])
+    d["_type"] = "Teleport"
+    with pytest.raises(ProtocolError, match=r"message\._type: unknown message type 'Teleport'"):
+        decode(pack(d))
+
+
+def test_expected_type_mismatch():
+    with pytest.raises(ProtocolError, match="got ClockTick, expected HumanPose"):
+        decode(encode(samples()["ClockTick"]), HumanPose)
+
+
+def test_wrong_version():
+    d = raw(samples()["HumanPose"])
+    d["_v"] = SCHEMA_VERSION + 1
+    with pytest.raises(ProtocolError, match=r"HumanPose\._v: schema version"):
+        decode(pack(d))
+
+
+@pytest.mark.parametrize("name", sorted(MESSAGE_TYPES))
+def test_missing_field(name):
+    msg = samples()[name]
+    for f in dataclasses.fields(msg):
+        d = raw(msg)
+        del d[f.name]
+        with pytest.raises(ProtocolError, match=rf"^{name}\.{f.name}: missing$"):
+            decode(pack(d))
+
+
+def test_wrong_dtype():
+    d = raw(samples()["HumanPose"])
+    d["features"]["dtype"] = "<f4"
+    d["features"]["data"] = d["features"]["data"][: 12 * 4]
+    with pytest.raises(ProtocolError, match=r"HumanPose\.features: dtype float32 where float64 is required"):
+        decode(pack(d))
+    d["features"]["dtype"] = "not-a-dtype"
+    with pytest.raises(ProtocolError, match=r"HumanPose\.features: unknown dtype"):
+        decode(pack(d))
+
+
+def test_wrong_shape():
+    d = raw(samples()["HumanPose"])
+    d["features"]["shape"] = [11]
+    with pytest.raises(ProtocolError, match=r"HumanPose\.features: shape \(11,\) axis 0 must be 12"):
+        decode(pack(d))
+    d["features"]["shape"] = [3, 4]
+    with pytest.raises(ProtocolError, match=r"HumanPose\.features: shape \(3, 4\) has 2 axes"):
+        decode(pack(d))
+
+
+def test_shape_symbols_must_agree():
+    d = raw(samples()["Plan"])
+    d["cost_total"] = {"dtype": "<f8", "shape": [3], "data": np.zeros(3).tobytes()}
+    with pytest.raises(ProtocolError, match=r"Plan\.cost_total: .*\(K\) must be 2"):
+        decode(pack(d))
+
+
+def test_data_length_mismatch():
+    d = raw(samples()["HumanPose"])
+    d["features"]["data"] = d["features"]["data"][:-8]
+    with pytest.raises(ProtocolError, match=r"HumanPose\.features: data has 88 bytes"):
+        decode(pack(d))
+
+
+def test_nan_and_inf_rejected():
+    msg = samples()["HumanPose"]
+    d = raw(msg)
+    f = msg.features.copy()
+    f[3] = np.nan
+    d["features"]["data"] = f.tobytes()
+    with pytest.raises(ProtocolError, match=r"HumanPose\.features: contains NaN"):
+        decode(pack(d))
+    d = raw(msg)
+    d["stamp"] = float("inf")
+    with pytest.raises(ProtocolError, match=r"HumanPose\.stamp: must be finite"):
+        decode(pack(d))
+    bad = dataclasses.replace(msg, features=f)
+    with pytest.raises(ProtocolError, match=r"HumanPose\.features"):
+        encode(bad)  # bad data never leaves
+
+
+def test_wrong_scalar_types():
+    d = raw(samples()["HumanPose"])
+    d["index"] = "7"
+    with pytest.raises(ProtocolError, match=r"HumanPose\.index: expected an integer, got str"):
+        decode(pack(d))
+    d = raw(samples()["HumanPose"])
+    d["tick_last"] = 1
+    with pytest.raises(ProtocolError, match=r"HumanPose\.tick_last: expected a boolean"):
+        decode(pack(d))
+    d = raw(samples()["ClassPosterior"])
+    d["class_names"] = ["a", 2, "c"]
+    with pytest.raises(ProtocolError, match=r"ClassPosterior\.class_names: expected a list of strings"):
+        decode(pack(d))
+
+
+def test_invariants():
+    s = samples()
+    cases = [
+        (dataclasses.replace(s["DemoMarker"], event="middle"), r"DemoMarker\.event"),
+        (dataclasses.replace(s["ClassPosterior"], posterior=np.array([0.5, 0.5, 0.5])), r"ClassPosterior\.posterior"),
+        (dataclasses.replace(s["ClockTick"], tick=-2), r"ClockTick\.tick"),
+        (dataclasses.replace(s["ClockTick"], period=0.0), r"ClockTick\.period"),
+        (dataclasses.replace(s["HumanPose"], index=-1), r"HumanPose\.index"),
+        (dataclasses.replace(s["Plan"], chosen=2), r"Plan\.chosen"),
+        (dataclasses.replace(s["RobotState"], joint_names=["a"]), r"RobotState\.joint_names"),
+        (dataclasses.replace(s["OccupancyGrid"], method="guess"), r"OccupancyGrid\.method"),
+    ]
+    for msg, pattern in cases:
+        with pytest.raises(ProtocolError, match=pattern):
+            encode(msg)
+
+
+def test_keys_under_prefix():
+    k = Keys("lab/x")
+    assert all(key.startswith("lab/x/") for key in k.data_keys())
+    assert len(set(k.data_keys())) == len(MESSAGE_TYPES)
+    assert set(k.data_keys().values()) == set(MESSAGE_TYPES.values())
+    assert k.alive("replayer") == "lab/x/alive/replayer"
+
+
+def test_protocol_doc_mentions_every_key_type_and_field():
+    text = DOC.read_text()
+    for key in Keys("foresight").data_keys():
+        assert f"`{key}`" in text, key
+    assert "foresight/alive/" in text
+    for name, cls in MESSAGE_TYPES.items():
+        section = re.search(rf"^###? .*`?{name}`?.*$(.*?)(?=^###? |\Z)", text, re.M | re.S)
+        assert section, f"no section for {name}"
+        for f in dataclasses.fields(cls):
+            assert f"`{f.name}`" in section.group(1), f"{name}.{f.name} not documented"
