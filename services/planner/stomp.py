@@ -1,0 +1,276 @@
+"""STOMP (Kalakrishnan et al., ICRA 2011) in torch, batched over K goals.
+
+The optimizer sees only a per-waypoint cost callable and the joint bounds. One iteration, for all K
+trajectories at once (tensors ``(K, R, T, D)``: goals x rollouts x waypoints x joints):
+
+1. noisy rollouts ``theta + eps_r``, ``eps ~ N(0, sigma^2 R^-1)`` (``R = A^T A``, A the finite
+   differencing matrix of accelerations), clamped to the joint limits;
+2. costs ``S(r, i)`` per rollout and waypoint (cost-to-go by default);
+3. probabilities ``P(r, i) = softmax_r(-h (S - min_r S) / (max_r S - min_r S))``;
+4. update ``delta = M sum_r P(r, i) eps_r(i)``, ``M`` = R^-1 with each column scaled so its max is 1/N;
+   ``theta <- clamp(theta + delta)``.
+
+Start and goal waypoints stay fixed; the best trajectory seen so far is kept per goal. The loop has
+no host synchronisation (no ``.item()``, no data-dependent branching), so it runs unchanged on cuda.
+Each goal draws its exploration noise from its own ``torch.Generator`` seeded per goal, so a batch of
+K goals gives the same result as K separate runs with the same seeds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import torch
+
+__all__ = ["StompConfig", "StompError", "StompResult", "Stomp", "finite_difference_matrix", "CostFn"]
+
+CostFn = Callable[[torch.Tensor], torch.Tensor]
+"""Per-waypoint cost: ``q (K, R, T, D) -> (K, R, T)``."""
+
+_NONFINITE_COST = 1e9  # a rollout whose cost is NaN/inf is treated as this costly per waypoint
+
+
+class StompError(ValueError):
+    """Bad input to STOMP (shape, non-finite values, start/goal outside the bounds); names the problem."""
+
+
+@dataclass
+class StompConfig:
+    """Parameters of :class:`Stomp`.
+
+    Attributes:
+        rollouts: Noisy rollouts R per goal and iteration.
+        waypoints: Waypoints T per trajectory (start and goal included).
+        iterations: Iterations per call of :meth:`Stomp.optimize` (one replanning step).
+        noise_std: Exploration noise standard deviation (rad) at the middle of the trajectory (the
+            scaled R^-1 has unit maximum variance).
+        joint_noise_scale: Optional per-joint factors (length D) on ``noise_std``; empty = all 1.
+        noise_decay: Noise multiplied by this factor after every iteration (1 = constant).
+        sensitivity: h, the exponent scale of the per-timestep probabilities (paper: 10).
+        cost_to_go: Rank rollouts per waypoint by their cost-to-go (sum of costs from that waypoint
+            to the goal, as in PI^2) rather than the waypoint's own cost.
+        seed: Base seed; goal k uses ``seed + k`` unless seeds are given to :meth:`Stomp.optimize`.
+        device: Torch device, e.g. ``"cpu"`` or ``"cuda"``.
+        dtype: ``"float32"`` or ``"float64"``.
+    """
+
+    rollouts: int = 16
+    waypoints: int = 40
+    iterations: int = 50
+    noise_std: float = 0.1
+    joint_noise_scale: list[float] = field(default_factory=list)
+    noise_decay: float = 1.0
+    sensitivity: float = 10.0
+    cost_to_go: bool = True
+    seed: int = 0
+    device: str = "cpu"
+    dtype: str = "float32"
+
+    def validate(self) -> None:
+        """Raise :class:`StompError` naming the first bad field."""
+        if self.rollouts < 2:
+            raise StompError(f"stomp.rollouts must be >= 2, got {self.rollouts}")
+        if self.waypoints < 3:
+            raise StompError(f"stomp.waypoints must be >= 3, got {self.waypoints}")
+        if self.iterations < 0:
+            raise StompError(f"stomp.iterations must be >= 0, got {self.iterations}")
+        if not (self.noise_std >= 0 and math.isfinite(self.noise_std)):
+            raise StompError(f"stomp.noise_std must be finite and >= 0, got {self.noise_std}")
+        if any(not (s >= 0 and math.isfinite(s)) for s in self.joint_noise_scale):
+            raise StompError(f"stomp.joint_noise_scale must be finite and >= 0, got {self.joint_noise_scale}")
+        if not (0 < self.noise_decay <= 1):
+            raise StompError(f"stomp.noise_decay must be in (0, 1], got {self.noise_decay}")
+        if not (self.sensitivity > 0 and math.isfinite(self.sensitivity)):
+            raise StompError(f"stomp.sensitivity must be > 0, got {self.sensitivity}")
+        if self.dtype not in ("float32", "float64"):
+            raise StompError(f"stomp.dtype must be float32 or float64, got {self.dtype!r}")
+
+    @property
+    def torch_dtype(self) -> torch.dtype:
+        """The torch dtype named by :attr:`dtype`."""
+        return torch.float32 if self.dtype == "float32" else torch.float64
+
+
+@dataclass
+class StompResult:
+    """Output of :meth:`Stomp.optimize`.
+
+    Attributes:
+        trajectories: ``(K, T, D)`` the least-cost trajectory seen per goal (within the bounds).
+        cost: ``(K,)`` its total cost (sum over waypoints of the cost callable).
+        history: ``(I + 1, K)`` total cost of the current (noise-free) trajectory before each
+            iteration and after the last one.
+    """
+
+    trajectories: torch.Tensor
+    cost: torch.Tensor
+    history: torch.Tensor
+
+
+def finite_difference_matrix(n: int, dtype: torch.dtype = torch.float64) -> torch.Tensor:
+    """Acceleration finite differencing matrix A of the STOMP paper.
+
+    Args:
+        n: Number of free (interior) waypoints N.
+        dtype: Result dtype.
+
+    Returns:
+        ``(N + 2, N)``: row i gives ``theta[i-2] - 2 theta[i-1] + theta[i]`` with the fixed start and
+        goal contributing zero, so ``theta^T A^T A theta`` is the sum of squared accelerations of
+        the deviation from a trajectory with the same endpoints.
+    """
+    a = torch.zeros(n + 2, n, dtype=dtype)
+    idx = torch.arange(n)
+    a[idx, idx] = 1.0
+    a[idx + 1, idx] = -2.0
+    a[idx + 2, idx] = 1.0
+    return a
+
+
+class Stomp:
+    """Batched STOMP optimizer over K independent trajectories.
+
+    Args:
+        config: Parameters (validated).
+        bounds: ``(lower (D,), upper (D,))`` joint limits; every rollout and result is clamped into them.
+    """
+
+    def __init__(self, config: StompConfig, bounds: tuple[torch.Tensor, torch.Tensor]) -> None:
+        config.validate()
+        self.config = config
+        self.device = torch.device(config.device)
+        self.dtype = config.torch_dtype
+        lower, upper = (torch.as_tensor(b, dtype=self.dtype, device=self.device).reshape(-1) for b in bounds)
+        if lower.shape != upper.shape or not bool(torch.all(lower <= upper)):
+            raise StompError(f"bounds must be two (D,) tensors with lower <= upper, got {lower} and {upper}")
+        self.lower, self.upper = lower, upper
+        self.dof = int(lower.shape[0])
+        if config.joint_noise_scale and len(config.joint_noise_scale) != self.dof:
+            raise StompError(f"stomp.joint_noise_scale has {len(config.joint_noise_scale)} values for "
+                             f"{self.dof} joints")
+        scale = torch.tensor(config.joint_noise_scale or [1.0] * self.dof, dtype=self.dtype, device=self.device)
+        self.joint_std = config.noise_std * scale  # (D,)
+
+        n = config.waypoints - 2
+        a = finite_difference_matrix(n)
+        r = a.T @ a  # (N, N) = A^T A, positive definite
+        r_inv = torch.linalg.inv(r)
+        cov = r_inv / r_inv.max()  # scaled R^-1: unit maximum variance
+        m = r_inv / r_inv.max(dim=0, keepdim=True).values / n  # columns scaled to max 1/N
+        self.R = r.to(self.device, self.dtype)
+        self.noise_chol = torch.linalg.cholesky(cov).to(self.device, self.dtype)  # (N, N) lower
+        self.M = m.to(self.device, self.dtype)  # (N, N)
+
+    def sample_noise(self, k: int, seeds: Sequence[int]) -> torch.Tensor:
+        """Exploration noise for all iterations, drawn per goal from its own generator.
+
+        Args:
+            k: Number of goals K.
+            seeds: K seeds, one per goal.
+
+        Returns:
+            ``(I, K, R, N, D)`` noise ``eps ~ N(0, diag(sigma^2) (x) scaled R^-1)`` per iteration.
+        """
+        c = self.config
+        n = c.waypoints - 2
+        z = []
+        for s in seeds:
+            g = torch.Generator(device=self.device)
+            g.manual_seed(int(s))
+            z.append(torch.randn((n, c.iterations, c.rollouts, self.dof), generator=g, device=self.device,
+                                 dtype=self.dtype))
+        zz = torch.stack(z, dim=1) if z else torch.zeros((n, k, c.iterations, c.rollouts, self.dof),
+                                                         device=self.device, dtype=self.dtype)
+        decay = c.noise_decay ** torch.arange(c.iterations, device=self.device, dtype=self.dtype)
+        std = self.joint_std * decay[:, None, None]  # (I, 1, D)
+        # L z as one (N, N) x (N, K*I*R*D) product: correlated along the waypoints, independent elsewhere
+        eps = (self.noise_chol @ zz.reshape(n, -1)).reshape(zz.shape) * std
+        return eps.permute(2, 1, 3, 0, 4).contiguous()  # (I, K, R, N, D)
+
+    def _check(self, q0: torch.Tensor) -> torch.Tensor:
+        c = self.config
+        q0 = torch.as_tensor(q0, device=self.device, dtype=self.dtype)
+        if q0.ndim != 3 or q0.shape[1] != c.waypoints or q0.shape[2] != self.dof:
+            raise StompError(f"initial trajectories must have shape (K, {c.waypoints}, {self.dof}), "
+                             f"got {tuple(q0.shape)}")
+        if not bool(torch.isfinite(q0).all()):
+            raise StompError("initial trajectories contain NaN or inf")
+        tol = 1e-5 if self.dtype == torch.float32 else 1e-9
+        ends = q0[:, [0, -1]]
+        if bool(((ends < self.lower - tol) | (ends > self.upper + tol)).any()):
+            raise StompError("start or goal configuration outside the joint limits")
+        return torch.maximum(torch.minimum(q0, self.upper), self.lower)
+
+    def optimize(self, q0: torch.Tensor, cost_fn: CostFn, seeds: Sequence[int] | None = None) -> StompResult:
+        """Run ``config.iterations`` STOMP iterations on K trajectories at once.
+
+        Args:
+            q0: ``(K, T, D)`` initial trajectories; ``q0[:, 0]`` and ``q0[:, -1]`` (start and goal)
+                stay fixed and must lie within the bounds; interior waypoints are clamped into them.
+            cost_fn: ``q (K, R', T, D) -> (K, R', T)`` per-waypoint cost, called once per iteration
+                with R' = R + 1 (the current trajectory first, then the R noisy rollouts) and once at
+                the end with R' = 1. Goals must not interact (row k depends only on ``q[k]``).
+            seeds: K noise seeds (default ``config.seed + k``).
+
+        Returns:
+            The least-cost trajectory per goal, its cost and the cost history.
+
+        Raises:
+            StompError: If ``q0`` has the wrong shape, is not finite, or its endpoints violate the bounds.
+        """
+        c = self.config
+        q0 = self._check(q0)
+        k = q0.shape[0]
+        if seeds is None:
+            seeds = [c.seed + i for i in range(k)]
+        if len(seeds) != k:
+            raise StompError(f"got {len(seeds)} seeds for {k} goals")
+        noise = self.sample_noise(k, seeds)  # (I, K, R, N, D)
+        start, goal = q0[:, :1], q0[:, -1:]  # (K, 1, D)
+        theta = q0[:, 1:-1]  # (K, N, D) the free waypoints
+        best_theta = theta
+        best_cost = torch.full((k,), math.inf, device=self.device, dtype=self.dtype)
+        history = []
+
+        def full(interior: torch.Tensor) -> torch.Tensor:  # (K, R', N, D) -> (K, R', T, D)
+            r = interior.shape[1]
+            return torch.cat([start[:, None].expand(k, r, 1, -1), interior, goal[:, None].expand(k, r, 1, -1)], 2)
+
+        for it in range(c.iterations):
+            # 1. noisy rollouts, clamped to the joint limits (eps is the noise actually applied)
+            noisy = torch.maximum(torch.minimum(theta[:, None] + noise[it], self.upper), self.lower)
+            eps = noisy - theta[:, None]  # (K, R, N, D)
+            # 2. costs of the current trajectory (rollout 0) and of the R noisy rollouts
+            cost = self._cost(cost_fn, full(torch.cat([theta[:, None], noisy], 1)), k, c.rollouts + 1)
+            total = cost[:, 0].sum(-1)  # (K,)
+            history.append(total)
+            better = total < best_cost
+            best_cost = torch.where(better, total, best_cost)
+            best_theta = torch.where(better[:, None, None], theta, best_theta)
+            s = cost[:, 1:, 1:-1]  # (K, R, N) per free waypoint
+            if c.cost_to_go:
+                s = s.flip(-1).cumsum(-1).flip(-1)
+            # 3. probabilities per waypoint over the rollouts
+            s_min, s_max = s.amin(1, keepdim=True), s.amax(1, keepdim=True)
+            p = torch.softmax(-c.sensitivity * (s - s_min) / (s_max - s_min).clamp_min(1e-12), dim=1)
+            # 4. update: probability-weighted noise, smoothed by M, kept within the limits
+            delta = torch.matmul(self.M, (p[..., None] * eps).sum(1))  # (K, N, D)
+            theta = torch.maximum(torch.minimum(theta + delta, self.upper), self.lower)
+
+        total = self._cost(cost_fn, full(theta[:, None]), k, 1)[:, 0].sum(-1)
+        history.append(total)
+        better = total < best_cost
+        best_cost = torch.where(better, total, best_cost)
+        best_theta = torch.where(better[:, None, None], theta, best_theta)
+        traj = torch.cat([start, best_theta, goal], 1)
+        return StompResult(traj, best_cost, torch.stack(history))
+
+    def _cost(self, cost_fn: CostFn, q: torch.Tensor, k: int, r: int) -> torch.Tensor:
+        cost = cost_fn(q)
+        if tuple(cost.shape) != (k, r, self.config.waypoints):
+            raise StompError(f"cost callable returned shape {tuple(cost.shape)}, expected "
+                             f"{(k, r, self.config.waypoints)}")
+        return torch.nan_to_num(cost.to(self.dtype), nan=_NONFINITE_COST, posinf=_NONFINITE_COST,
+                                neginf=-_NONFINITE_COST)

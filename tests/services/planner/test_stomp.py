@@ -1,0 +1,133 @@
+"""STOMP optimizer on abstract costs: convergence, obstacle avoidance, limits, batched == looped."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from services.planner.multigoal import init_straight_lines
+from services.planner.stomp import Stomp, StompConfig, StompError, finite_difference_matrix
+
+T = 40
+
+
+def _bump_target(d: int = 3) -> torch.Tensor:
+    """(T, D) smooth via-point trajectory with zero end velocities (the bowl's minimum)."""
+    s = torch.linspace(0, 1, T)[:, None]
+    start, goal = torch.zeros(d), torch.linspace(0.5, 1.0, d)
+    bump = torch.sin(torch.pi * s) ** 2 * torch.tensor([0.6, -0.4, 0.3][:d])
+    return start + s * (goal - start) + bump
+
+
+def _acc_cost(q: torch.Tensor, w: float) -> torch.Tensor:
+    """(..., T, D) -> (..., T) w * squared acceleration per interior waypoint."""
+    acc = q[..., 2:, :] - 2 * q[..., 1:-1, :] + q[..., :-2, :]
+    out = torch.zeros(q.shape[:-1], dtype=q.dtype)
+    out[..., 1:-1] = w * (acc**2).sum(-1)
+    return out
+
+
+def _blob(q: torch.Tensor) -> torch.Tensor:
+    """(..., T, 2) -> (..., T) gaussian 'occupancy' blob centred on the straight line's middle."""
+    return torch.exp(-((q - torch.tensor([0.5, 0.0])) ** 2).sum(-1) / (2 * 0.1**2))
+
+
+def test_matrices_follow_the_paper() -> None:
+    n = T - 2
+    a = finite_difference_matrix(n)
+    assert a.shape == (n + 2, n)
+    theta = torch.randn(n, dtype=torch.float64)
+    padded = torch.cat([torch.zeros(2, dtype=torch.float64), theta, torch.zeros(2, dtype=torch.float64)])
+    acc = padded[2:] - 2 * padded[1:-1] + padded[:-2]
+    assert torch.allclose(a @ theta, acc[: n + 2])
+    st = Stomp(StompConfig(), (-torch.ones(2), torch.ones(2)))
+    assert torch.allclose(st.M.max(0).values, torch.full((n,), 1.0 / n))
+    assert torch.linalg.eigvalsh(st.R.double()).min() > 0
+    cov = st.noise_chol.double() @ st.noise_chol.double().T
+    assert float(cov.max()) == pytest.approx(1.0, abs=1e-4)
+
+
+def test_converges_to_the_minimum_of_a_quadratic_bowl() -> None:
+    target = _bump_target()
+    q0 = init_straight_lines(target[0], target[-1:], T)
+
+    def cost(q: torch.Tensor) -> torch.Tensor:
+        return ((q - target) ** 2).sum(-1)
+
+    stomp = Stomp(StompConfig(iterations=150, noise_std=0.1, seed=3), (-2 * torch.ones(3), 2 * torch.ones(3)))
+    res = stomp.optimize(q0, cost)
+    initial = float(cost(q0).sum())
+    assert float(res.cost[0]) < 0.01 * initial
+    assert float((res.trajectories[0] - target).abs().max()) < 0.06
+    assert torch.equal(res.trajectories[0, 0], target[0]) and torch.equal(res.trajectories[0, -1], target[-1])
+    assert float(res.cost[0]) == pytest.approx(float(cost(res.trajectories).sum()), rel=1e-4)
+
+
+def test_avoids_an_occupancy_blob_10x() -> None:
+    q0 = init_straight_lines(torch.zeros(2), torch.tensor([[1.0, 0.0], [1.0, 0.05]]), T)
+    stomp = Stomp(StompConfig(seed=0), (-torch.ones(2), torch.ones(2)))
+    res = stomp.optimize(q0, lambda q: _blob(q) + _acc_cost(q, 10.0))
+    before, after = _blob(q0).sum(-1), _blob(res.trajectories).sum(-1)
+    assert torch.all(after * 10 <= before), (before, after)
+    assert torch.equal(res.trajectories[:, 0], q0[:, 0]) and torch.equal(res.trajectories[:, -1], q0[:, -1])
+
+
+def test_never_leaves_the_joint_limits() -> None:
+    lower, upper = torch.tensor([-0.2, -0.1]), torch.tensor([1.0, 0.15])
+    seen: list[torch.Tensor] = []
+
+    def cost(q: torch.Tensor) -> torch.Tensor:  # rewards leaving the box upwards in joint 1
+        seen.append(q)
+        return -10 * q[..., 1] + _blob(q)
+
+    q0 = init_straight_lines(torch.tensor([0.0, 0.1]), torch.tensor([[1.0, 0.1]]), T)
+    res = Stomp(StompConfig(noise_std=0.5, iterations=30), (lower, upper)).optimize(q0, cost)
+    for q in [*seen, res.trajectories]:
+        assert torch.all(q >= lower) and torch.all(q <= upper)
+    assert float(res.trajectories[0, T // 2, 1]) > 0.14  # pushed up to the limit
+
+
+def test_batched_equals_looped_with_the_same_seeds() -> None:
+    goals = torch.tensor([[1.0, 0.0], [1.0, 0.2], [0.8, -0.3]])
+    q0 = init_straight_lines(torch.zeros(2), goals, T)
+    stomp = Stomp(StompConfig(iterations=25), (-torch.ones(2), torch.ones(2)))
+
+    def cost(q: torch.Tensor) -> torch.Tensor:
+        return _blob(q) + _acc_cost(q, 10.0)
+
+    batched = stomp.optimize(q0, cost, seeds=[11, 12, 13])
+    for k, seed in enumerate([11, 12, 13]):
+        single = stomp.optimize(q0[k : k + 1], cost, seeds=[seed])
+        assert torch.allclose(batched.trajectories[k], single.trajectories[0], atol=1e-5)
+        assert torch.allclose(batched.history[:, k], single.history[:, 0], rtol=1e-4, atol=1e-6)
+    again = stomp.optimize(q0, cost, seeds=[11, 12, 13])
+    assert torch.equal(again.trajectories, batched.trajectories)  # deterministic
+
+
+def test_bad_input_raises_a_named_error() -> None:
+    stomp = Stomp(StompConfig(iterations=2), (-torch.ones(2), torch.ones(2)))
+    q0 = init_straight_lines(torch.zeros(2), torch.tensor([[0.5, 0.5]]), T)
+    with pytest.raises(StompError, match="shape"):
+        stomp.optimize(q0[:, :10], _blob)
+    bad = q0.clone()
+    bad[0, 3, 1] = float("nan")
+    with pytest.raises(StompError, match="NaN"):
+        stomp.optimize(bad, _blob)
+    outside = q0.clone()
+    outside[0, 0, 0] = 1.5
+    with pytest.raises(StompError, match="outside the joint limits"):
+        stomp.optimize(outside, _blob)
+    with pytest.raises(StompError, match="cost callable"):
+        stomp.optimize(q0, lambda q: q.sum(-1).sum(-1))
+    with pytest.raises(StompError, match="rollouts"):
+        Stomp(StompConfig(rollouts=1), (-torch.ones(2), torch.ones(2)))
+
+
+def test_nan_costs_do_not_poison_the_trajectory() -> None:
+    def cost(q: torch.Tensor) -> torch.Tensor:
+        c = _blob(q)
+        return torch.where(q[..., 1] > 0.2, torch.full_like(c, float("nan")), c)
+
+    q0 = init_straight_lines(torch.zeros(2), torch.tensor([[1.0, 0.0]]), T)
+    res = Stomp(StompConfig(iterations=20), (-torch.ones(2), torch.ones(2))).optimize(q0, cost)
+    assert torch.isfinite(res.trajectories).all()
