@@ -325,6 +325,7 @@ class Keys:
         self.robot_state = f"{prefix}/robot/state"
         self.clock = f"{prefix}/clock/tick"
         self.alive_all = f"{prefix}/alive/*"
+        self.human_all = f"{prefix}/human/*"  # poses and markers in one ordered subscription
 
     def alive(self, service: str) -> str:
         """Liveliness token key of a service."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
@@ -28,6 +28,7 @@ __all__ = [
     "open_session",
     "TypedPublisher",
     "subscribe",
+    "subscribe_ordered",
     "LatestSubscriber",
     "RejectCounter",
     "Presence",
@@ -64,9 +65,18 @@ def open_session(cfg: ZenohConfig) -> Iterator[zenoh.Session]:
 class TypedPublisher(Generic[M]):
     """Publisher of one message type on one key; encodes (and so validates) before sending."""
 
-    def __init__(self, session: zenoh.Session, key: str) -> None:
+    def __init__(self, session: zenoh.Session, key: str, block: bool = False) -> None:
+        """Declare the publisher.
+
+        Args:
+            session: Open Zenoh session.
+            key: Key expression.
+            block: Block ``put`` when the network is congested instead of dropping the message
+                (Zenoh's default is to drop); use it for streams where every message counts.
+        """
         self.key = key
-        self._pub = session.declare_publisher(key)
+        cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+        self._pub = session.declare_publisher(key, congestion_control=cc)
 
     def put(self, msg: M) -> bytes:
         """Encode and publish ``msg``; returns the bytes sent (for logging)."""
@@ -143,6 +153,44 @@ def subscribe(session: zenoh.Session, key: str, cls: type[M], callback: Callable
             log.exception("handler for %s failed", key)
 
     return session.declare_subscriber(key, handler)
+
+
+def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str, type[Message]],
+                      callback: Callable[[Message], None], rejects: RejectCounter | None = None) -> zenoh.Subscriber:
+    """One subscription over several keys that delivers their messages in publishing order.
+
+    Zenoh runs each subscriber's callback on its own thread, so two :func:`subscribe` calls (e.g. on
+    poses and on demonstration markers) may see messages of different keys out of order. This
+    subscribes once to ``key_expr`` (a wildcard such as :attr:`Keys.human_all`) and decodes each
+    sample as the type its key maps to in ``types``; samples on other keys are rejected.
+
+    Args:
+        session: Open Zenoh session.
+        key_expr: Wildcard key expression covering the keys of ``types``.
+        types: Key -> expected message type.
+        callback: Called on one Zenoh thread with each valid message, in arrival order.
+        rejects: Where to count rejections (default: log only).
+    """
+
+    def handler(sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        try:
+            cls = types.get(key)
+            if cls is None:
+                raise ProtocolError(f"message: unexpected key {key}")
+            msg = decode(sample.payload.to_bytes(), cls)
+        except ProtocolError as exc:
+            if rejects is not None:
+                rejects.reject(key, exc)
+            else:
+                log.warning("rejected message on %s: %s", key, exc)
+            return
+        try:
+            callback(msg)
+        except Exception:  # a bug in one handler must not kill the subscription
+            log.exception("handler for %s failed", key)
+
+    return session.declare_subscriber(key_expr, handler)
 
 
 class LatestSubscriber(Generic[M]):

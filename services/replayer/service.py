@@ -67,16 +67,21 @@ class ReplayerService:
         except zenoh.ZError as exc:
             raise UserError(f"zenoh: cannot open a session with {self.zenoh_config}: {exc}") from None
         try:
+            pose_pub: TypedPublisher[HumanPose] = TypedPublisher(session, self.keys.pose, block=True)
+            demo_pub: TypedPublisher[DemoMarker] = TypedPublisher(session, self.keys.demo, block=True)
+            # lock-step: listen to the clock before announcing ourselves, so no tick sent after our
+            # liveliness token appears is missed
+            ticks: queue.Queue[ClockTick] = queue.Queue()
+            clock_sub = (subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects)
+                         if cfg.mode == "lockstep" else None)
             presence = Presence(session, self.keys, "replayer")
-            pose_pub: TypedPublisher[HumanPose] = TypedPublisher(session, self.keys.pose)
-            demo_pub: TypedPublisher[DemoMarker] = TypedPublisher(session, self.keys.demo)
             total = core.total_poses
             log.info("replayer: %d demonstrations selected from %s (%s poses), mode %s, session %s",
                      len(self.demos), self.library.source, "endless" if total is None else total, cfg.mode,
                      describe(session)["zid"])
             try:
-                if cfg.mode == "lockstep":
-                    self._run_lockstep(session, core, pose_pub, demo_pub, stop)
+                if clock_sub is not None:
+                    self._run_lockstep(ticks, core, pose_pub, demo_pub, stop)
                 else:
                     self._wait_for_peers(presence, stop)
                     self._run_realtime(core, pose_pub, demo_pub, stop)
@@ -85,6 +90,8 @@ class ReplayerService:
                     stop.wait(LINGER_S)
             finally:
                 presence.close()
+                if clock_sub is not None:
+                    clock_sub.undeclare()
         finally:
             session_cm.__exit__(None, None, None)
         log.info("replayer: %s after %d demonstrations, %d poses, %d ticks",
@@ -142,26 +149,20 @@ class ReplayerService:
             elif delay < -1.0:  # fell far behind (suspended?): do not burst to catch up
                 next_t = time.monotonic()
 
-    def _run_lockstep(self, session: zenoh.Session, core: ReplayerCore, pose_pub: TypedPublisher[HumanPose],
+    def _run_lockstep(self, ticks: queue.Queue[ClockTick], core: ReplayerCore, pose_pub: TypedPublisher[HumanPose],
                       demo_pub: TypedPublisher[DemoMarker], stop: threading.Event) -> None:
-        ticks: queue.Queue[ClockTick] = queue.Queue()
-        sub = subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects)
         last = -1
         n = self.config.samples_per_tick
-        try:
-            while not stop.is_set() and not core.done:
-                try:
-                    tick = ticks.get(timeout=0.1)
-                except queue.Empty:
-                    continue
-                if tick.tick <= last:
-                    log.warning("replayer: ignoring clock tick %d (already at tick %d)", tick.tick, last)
-                    continue
-                if tick.tick != last + 1 and last >= 0:
-                    log.warning("replayer: clock jumped from tick %d to %d", last, tick.tick)
-                last = tick.tick
-                self.stats.ticks += 1
-                self._publish(core.step(n, stamp=tick.stamp, tick=tick.tick, dt=tick.period / n), pose_pub,
-                              demo_pub)
-        finally:
-            sub.undeclare()
+        while not stop.is_set() and not core.done:
+            try:
+                tick = ticks.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            if tick.tick <= last:
+                log.warning("replayer: ignoring clock tick %d (already at tick %d)", tick.tick, last)
+                continue
+            if tick.tick != last + 1 and last >= 0:
+                log.warning("replayer: clock jumped from tick %d to %d", last, tick.tick)
+            last = tick.tick
+            self.stats.ticks += 1
+            self._publish(core.step(n, stamp=tick.stamp, tick=tick.tick, dt=tick.period / n), pose_pub, demo_pub)

@@ -1,0 +1,129 @@
+"""The replayer's pure schedule: selection, ordering, markers, lock-step batching, determinism."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from services.replayer.core import ReplayerConfig, ReplayerCore, load_replay_library, select_demos
+from shared.config import ConfigError
+from shared.library import LibraryError, save_library
+from shared.protocol import DemoMarker, HumanPose, decode, encode
+
+
+def drain(core: ReplayerCore, n: int = 1, **kw) -> list:
+    out = []
+    tick = 0
+    while not core.done:
+        out.append(core.step(n, stamp=float(tick), tick=tick if kw.get("lockstep") else -1, dt=0.01))
+        tick += 1
+    return out
+
+
+def test_realtime_stream_order(small_lib):
+    demos = select_demos(small_lib, ReplayerConfig())
+    core = ReplayerCore(demos)
+    assert core.total_poses == sum(d.n_samples for d in demos)
+    msgs = [m for step in drain(core) for m in step]
+    poses = [m for m in msgs if isinstance(m, HumanPose)]
+    assert len(poses) == core.total_poses == core.poses_emitted
+    assert all(p.tick == -1 and p.tick_last for p in poses)
+    # start marker, T poses, end marker per demonstration, demo ids 0, 1, ...
+    i = 0
+    for demo_id, d in enumerate(demos):
+        start, end = msgs[i], msgs[i + d.n_samples + 1]
+        assert isinstance(start, DemoMarker) and (start.event, start.demo_id) == ("start", demo_id)
+        assert (start.true_class, start.class_name, start.n_samples) == (d.label, d.class_name, d.n_samples)
+        assert isinstance(end, DemoMarker) and (end.event, end.demo_id) == ("end", demo_id)
+        body = msgs[i + 1:i + 1 + d.n_samples]
+        assert [p.index for p in body] == list(range(d.n_samples))
+        np.testing.assert_array_equal(np.stack([p.features for p in body]), d.features)
+        i += d.n_samples + 2
+    assert i == len(msgs)
+    for m in msgs:
+        decode(encode(m))  # every message is valid on the wire
+
+
+def test_each_step_one_pose_with_its_markers(small_lib):
+    core = ReplayerCore(select_demos(small_lib, ReplayerConfig(classes=[0], indices=[0])))
+    steps = drain(core)
+    assert len(steps) == 12
+    assert [type(m).__name__ for m in steps[0]] == ["DemoMarker", "HumanPose"]
+    assert [type(m).__name__ for m in steps[-1]] == ["HumanPose", "DemoMarker"]
+    assert all(len(s) == 1 for s in steps[1:-1])
+
+
+@pytest.mark.parametrize("n", [1, 3, 5])
+def test_lockstep_batches(small_lib, n):
+    demos = select_demos(small_lib, ReplayerConfig(classes=[1]))
+    core = ReplayerCore(demos)
+    steps = drain(core, n, lockstep=True)
+    total = sum(d.n_samples for d in demos)
+    assert len(steps) == -(-total // n)
+    for tick, step in enumerate(steps):
+        poses = [m for m in step if isinstance(m, HumanPose)]
+        assert len(poses) == (n if tick < len(steps) - 1 else total - n * (len(steps) - 1))
+        assert all(m.tick == tick for m in step)
+        assert [p.tick_last for p in poses] == [False] * (len(poses) - 1) + [True]
+        np.testing.assert_allclose([p.stamp for p in poses], tick + 0.01 * np.arange(len(poses)))
+    markers = [m for s in steps for m in s if isinstance(m, DemoMarker)]
+    assert [(m.demo_id, m.event) for m in markers] == [(k, e) for k in range(4) for e in ("start", "end")]
+
+
+def test_loop_and_max_demos(small_lib):
+    demos = select_demos(small_lib, ReplayerConfig(classes=[2], indices=[0, 1]))
+    core = ReplayerCore(demos, loop=True, max_demos=5)
+    assert core.total_poses == 12 + 13 + 12 + 13 + 12
+    markers = [m for s in drain(core) for m in s if isinstance(m, DemoMarker) and m.event == "start"]
+    assert [(m.demo_id, m.n_samples) for m in markers] == [(0, 12), (1, 13), (2, 12), (3, 13), (4, 12)]
+    assert ReplayerCore(demos, loop=True).total_poses is None
+    core = ReplayerCore(demos, max_demos=1)
+    assert len([m for s in drain(core) for m in s if isinstance(m, HumanPose)]) == 12
+
+
+def test_selection(small_lib):
+    sel = select_demos(small_lib, ReplayerConfig(classes=[0, 2], indices=[1, 3]))
+    assert [(d.label, d.index) for d in sel] == [(0, 1), (0, 3), (2, 1), (2, 3)]
+    held = select_demos(small_lib, ReplayerConfig(heldout=1, seed=5))
+    assert [d.label for d in held] == [0, 1, 2]
+    assert [(d.label, d.index) for d in held] == [(d.label, d.index) for d in
+                                                  select_demos(small_lib, ReplayerConfig(heldout=1, seed=5))]
+    sh1 = select_demos(small_lib, ReplayerConfig(shuffle=True, seed=1))
+    sh2 = select_demos(small_lib, ReplayerConfig(shuffle=True, seed=1))
+    assert [d.source for d in sh1] == [d.source for d in sh2] != [d.source for d in small_lib.demos]
+    assert sorted(d.source for d in sh1) == sorted(d.source for d in small_lib.demos)
+
+
+def test_selection_errors(small_lib):
+    with pytest.raises(ConfigError, match=r"replayer.classes: \[5\] out of range"):
+        select_demos(small_lib, ReplayerConfig(classes=[5]))
+    with pytest.raises(ConfigError, match="no demonstration matches"):
+        select_demos(small_lib, ReplayerConfig(indices=[99]))
+    with pytest.raises(LibraryError, match="cannot hold out 4"):
+        select_demos(small_lib, ReplayerConfig(heldout=4))
+
+
+@pytest.mark.parametrize(("field", "value", "pattern"), [
+    ("rate_hz", 0.0, "rate_hz"), ("samples_per_tick", 0, "samples_per_tick"), ("heldout", -1, "heldout"),
+    ("max_demos", -2, "max_demos"), ("classes", [-1], "classes"), ("wait_timeout", -1.0, "wait_timeout"),
+])
+def test_config_validation(field, value, pattern):
+    with pytest.raises(ConfigError, match=pattern):
+        dataclasses.replace(ReplayerConfig(), **{field: value}).validate()
+
+
+def test_load_replay_library(small_lib, tmp_path):
+    save_library(small_lib, tmp_path / "lib.npz")
+    lib = load_replay_library(ReplayerConfig(library=tmp_path / "lib.npz"))
+    assert len(lib.demos) == len(small_lib.demos)
+    with pytest.raises(LibraryError, match="not found"):
+        load_replay_library(ReplayerConfig(library=tmp_path / "none"))
+    try:
+        import shared.synthetic  # noqa: F401
+    except ModuleNotFoundError:
+        with pytest.raises(ConfigError, match="pass --library"):
+            load_replay_library(ReplayerConfig())
+    else:
+        assert load_replay_library(ReplayerConfig()).n_classes >= 1
