@@ -1,0 +1,135 @@
+"""Transport over real Zenoh on loopback: typed pub/sub, rejects, latest-only, ordered, presence."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from shared.protocol import ClockTick, DemoMarker, HumanPose, Keys, encode
+from shared.transport import (
+    LatestSubscriber,
+    Presence,
+    RejectCounter,
+    TypedPublisher,
+    open_session,
+    subscribe,
+    subscribe_ordered,
+    zenoh_config,
+)
+
+
+def wait_until(cond, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.01)
+    return cond()
+
+
+def publish_until(pub: TypedPublisher, msg, cond, timeout: float = 10.0) -> bool:
+    """Re-send ``msg`` until ``cond()``: a new subscription takes a moment to reach the publisher."""
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            return False
+        pub.put(msg)
+        time.sleep(0.02)
+    return True
+
+
+def test_zenoh_config_has_scouting_off(zenoh_hub):
+    conf = zenoh_config(zenoh_hub())
+    assert conf.get_json("scouting/multicast/enabled") == "false"
+    assert "127.0.0.1" in conf.get_json("listen/endpoints")
+
+
+def test_typed_pub_sub_and_rejects(zenoh_hub):
+    a, b = zenoh_hub(), zenoh_hub()
+    keys = Keys("t1")
+    got: list[ClockTick] = []
+    rejects = RejectCounter("test")
+    with open_session(a) as sa, open_session(b) as sb:
+        subscribe(sa, keys.clock, ClockTick, got.append, rejects)
+        pub = TypedPublisher(sb, keys.clock)
+        assert publish_until(pub, ClockTick(stamp=0.0, tick=0, period=0.1), lambda: bool(got))
+        time.sleep(0.1)
+        got.clear()
+        sb.put(keys.clock, b"\x93garbage")
+        sb.put(keys.clock, encode(HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=0, index=0,
+                                            features=np.zeros(12))))  # right bytes, wrong type for this key
+        for n in range(1, 6):
+            pub.put(ClockTick(stamp=0.1 * n, tick=n, period=0.1))
+        assert wait_until(lambda: len(got) == 5)
+        assert [t.tick for t in got] == [1, 2, 3, 4, 5]
+        assert wait_until(lambda: rejects.total == 2)
+        assert rejects.counts == {keys.clock: 2}
+
+
+def test_latest_subscriber_drops_stale(zenoh_hub):
+    a, b = zenoh_hub(), zenoh_hub()
+    keys = Keys("t2")
+    with open_session(a) as sa, open_session(b) as sb:
+        latest = LatestSubscriber(sa, keys.clock, ClockTick)
+        pub = TypedPublisher(sb, keys.clock)
+        assert publish_until(pub, ClockTick(stamp=0.0, tick=0, period=1.0), lambda: latest.latest is not None)
+        assert latest.take(timeout=1.0) is not None
+        for n in range(1, 21):
+            pub.put(ClockTick(stamp=float(n), tick=n, period=1.0))
+        msg = latest.wait_for(lambda m: m.tick == 20, timeout=10.0)
+        assert msg is not None and msg.tick == 20
+        taken = latest.take(timeout=1.0)
+        assert taken is not None and taken.tick == 20  # not tick 1: stale ones are never queued
+        assert latest.take(timeout=0.05) is None  # nothing newer
+        latest.undeclare()
+
+
+def test_subscribe_ordered_keeps_order_across_keys(zenoh_hub):
+    a, b = zenoh_hub(), zenoh_hub()
+    keys = Keys("t3")
+    got: list = []
+    lock = threading.Lock()
+
+    def add(m) -> None:
+        with lock:
+            got.append(m)
+
+    with open_session(a) as sa, open_session(b) as sb:
+        subscribe_ordered(sa, keys.human_all, {keys.pose: HumanPose, keys.demo: DemoMarker}, add)
+        poses = TypedPublisher(sb, keys.pose, block=True)
+        demos = TypedPublisher(sb, keys.demo, block=True)
+        probe = DemoMarker(stamp=0.0, tick=-1, demo_id=-1, event="end", true_class=0, class_name="x", n_samples=0)
+        assert publish_until(demos, probe, lambda: bool(got))
+        time.sleep(0.2)
+        with lock:
+            got.clear()
+        for d in range(5):
+            demos.put(DemoMarker(stamp=0.0, tick=-1, demo_id=d, event="start", true_class=0, class_name="x",
+                                 n_samples=3))
+            for i in range(3):
+                poses.put(HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=d, index=i, features=np.ones(12)))
+            demos.put(DemoMarker(stamp=0.0, tick=-1, demo_id=d, event="end", true_class=0, class_name="x",
+                                 n_samples=3))
+        assert wait_until(lambda: len(got) == 25)
+        kinds = [(type(m).__name__, m.demo_id, getattr(m, "index", getattr(m, "event", None))) for m in got]
+        want = [x for d in range(5) for x in ([("DemoMarker", d, "start")] + [("HumanPose", d, i) for i in range(3)]
+                                              + [("DemoMarker", d, "end")])]
+        assert kinds == want
+
+
+def test_presence_sees_peers_come_and_go(zenoh_hub):
+    a, b = zenoh_hub(), zenoh_hub()
+    keys = Keys("t4")
+    changes: list[tuple[str, bool]] = []
+    with open_session(a) as sa:
+        watcher = Presence(sa, keys, "executor", on_change=lambda s, up: changes.append((s, up)))
+        with open_session(b) as sb:
+            other = Presence(sb, keys, "replayer")
+            assert wait_until(lambda: watcher.is_alive("replayer"))
+            other.close()
+            assert wait_until(lambda: not watcher.is_alive("replayer"))
+        assert ("replayer", True) in changes and ("replayer", False) in changes
+        assert watcher.is_alive("executor")
+        watcher.close()
