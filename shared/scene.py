@@ -117,6 +117,7 @@ class RobotPlacement:
     base_xy: np.ndarray
     base_yaw: float  # radians
     torso_lift: float
+    start_arm: np.ndarray | None = None  # (7,) right-arm start configuration (rad), optional
 
     def base_transform(self) -> np.ndarray:
         """``(4, 4)`` world-from-base transform."""
@@ -188,7 +189,8 @@ def parse_scene(data: dict[str, Any], source: str = "<scene>") -> Scene:
                            math.radians(_num(f"{source}: human.pelvis_yaw_deg", h.get("pelvis_yaw_deg"))))
     robot = RobotPlacement(_vec(f"{source}: robot.base_xy", r.get("base_xy"), 2),
                            math.radians(_num(f"{source}: robot.base_yaw_deg", r.get("base_yaw_deg"))),
-                           _num(f"{source}: robot.torso_lift", r.get("torso_lift")))
+                           _num(f"{source}: robot.torso_lift", r.get("torso_lift")),
+                           _vec(f"{source}: robot.start_arm", r["start_arm"], 7) if "start_arm" in r else None)
     boxes = []
     for i, b in enumerate(data.get("boxes", [])):
         where = f"{source}: boxes[{i}]"
