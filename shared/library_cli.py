@@ -6,6 +6,7 @@ means writing its ``add_arguments``/``run`` pair and one entry there):
 - ``info PATH``: classes, valid demonstrations per class, sample counts, issues.
 - ``validate PATH``: print every malformed demonstration; exit status 1 if there is any.
 - ``convert PATH --out FILE.npz``: write the native npz (valid demonstrations and the issue list).
+- ``generate --classes 8 --demos 25 --seed 0 --out PATH``: a synthetic library (shared/synthetic.py).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 
 from shared.library import FEATURE_NAMES, LibraryError, MotionLibrary, load_library, save_library
 from shared.runtime import cli_errors
+from shared.synthetic import add_generate_arguments, run_generate
 
 __all__ = ["main", "SUBCOMMANDS", "format_info"]
 
@@ -79,6 +81,8 @@ SUBCOMMANDS: dict[str, tuple[str, Callable[[argparse.ArgumentParser], None], Cal
     "info": ("classes, demonstrations per class and issues of a library", _info_args, _cmd_info),
     "validate": ("report malformed demonstrations; exit status 1 if any", _info_args, _cmd_validate),
     "convert": ("convert a library (e.g. the paper's CSVs) to the native .npz", _convert_args, _cmd_convert),
+    "generate": ("generate a synthetic library of table reaches (IK on the human model; shared/synthetic.py)",
+                 add_generate_arguments, run_generate),
 }
 
 
