@@ -14,9 +14,12 @@ __all__ = ["COMMANDS", "main"]
 
 # command -> (module with main(argv), one-line description)
 COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("services.demo", "run the whole system on this machine and show it live (make demo)"),
     "replayer": ("services.replayer.__main__", "stream recorded human poses over Zenoh"),
     "router": ("shared.router", "run a Zenoh router on loopback for local multi-process runs"),
     "library": ("shared.library_cli", "inspect/validate/convert motion libraries"),
+    "executor": ("services.executor.__main__", "simulate the PR2 executing the plans; log the run to MCAP"),
+    "log": ("shared.logtools", "inspect (info) and draw (render) a run's MCAP log"),
 }
 
 
