@@ -228,7 +228,7 @@ def test_protocol_doc_mentions_every_key_type_and_field():
         assert f"`{key}`" in text, key
     assert "foresight/alive/" in text
     for name, cls in MESSAGE_TYPES.items():
-        section = re.search(rf"^###? .*`?{name}`?.*$(.*?)(?=^###? |\Z)", text, re.M | re.S)
+        section = re.search(rf"^### `{name}`$(.*?)(?=^##|\Z)", text, re.M | re.S)
         assert section, f"no section for {name}"
         for f in dataclasses.fields(cls):
             assert f"`{f.name}`" in section.group(1), f"{name}.{f.name} not documented"
