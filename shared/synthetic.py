@@ -13,9 +13,10 @@ tracking a hand path made of two overlapping minimum-jerk submovements (Flash & 
 Human-like variability, all drawn from one seeded generator: rest posture, arm length, first pelvis
 pose in the recorder's frame, goal position, via point, onset, duration and overlap of the
 submovements (so speed varies), the posture the IK prefers (elbow swivel), a slow pelvis sway and
-Kinect-like jitter on every feature. The recording window is resampled to 100 samples like the
-paper's data, in the same 12-feature format. Optionally the hand returns to rest (as in the paper's
-recordings) instead of ending at the goal.
+Kinect-like jitter on every feature. Timing is expressed in fractions of the recording window, which
+is sampled at ``n_samples`` (100) points like the paper's resampled data, in the same 12-feature
+format. Optionally the hand returns to rest (as in the paper's recordings) instead of ending at the
+goal.
 """
 
 from __future__ import annotations
@@ -93,8 +94,8 @@ class SyntheticConfig:
     return_to_rest: bool = False
     ik_iterations: int = 3
     posture_weight: float = 1.0
-    jitter_angle: float = 0.012
-    jitter_position: float = 0.004
+    jitter_angle: float = 0.006
+    jitter_position: float = 0.003
     sway: float = 0.01
     recorder_pelvis: tuple[float, float, float, float] = (1.8, 1.7, 0.975, -2.4)
     recorder_noise: tuple[float, float, float, float] = (0.05, 0.05, 0.01, 0.08)
@@ -312,7 +313,7 @@ def generate_library(n_classes: int = 8, n_demos: int = 25, seed: int = 0,
     transport_start = rng.uniform(*cfg.transport_start, b)
     pref_noise = rng.normal(size=(b, 12)) * np.array([0, 0, 0, 0.05, 0.03, 0.05, 0.03, 0.1, 0.1, 0.3, 0, 0.15])
     sway = _smooth_noise(rng, (b, t_count, 3), 25) * np.array([cfg.sway, cfg.sway, 2 * cfg.sway / 10])
-    jitter = _smooth_noise(rng, (b, t_count, 12), 3)
+    jitter = _smooth_noise(rng, (b, t_count, 12), 5)
 
     # --- hand path in the recorder frame ----------------------------------------------------
     rot0 = _rz(pelvis0[:, 3])                                             # (B, 3, 3)
