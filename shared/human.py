@@ -102,6 +102,11 @@ SEGMENTS: tuple[Segment, ...] = (
     Segment("l_hand", TORSO, tuple(P_L_WRIST), TORSO, tuple(P_L_HAND), 0.045),
 )
 
+_L0 = [s.link0 for s in SEGMENTS]
+_L1 = [s.link1 for s in SEGMENTS]
+_P0 = np.array([s.p0 for s in SEGMENTS])
+_P1 = np.array([s.p1 for s in SEGMENTS])
+
 # name -> (link, zero-pose position)
 JOINTS: tuple[tuple[str, int, np.ndarray], ...] = (
     ("pelvis", PELVIS, np.zeros(3)),
@@ -270,13 +275,14 @@ class HumanModel:
             ``(ends (..., S, 2, 3), radii (S,))``: the segment endpoints and the capsule radii.
         """
         rs, ts = self.link_transforms(features)
-        l0 = [s.link0 for s in SEGMENTS]
-        l1 = [s.link1 for s in SEGMENTS]
-        p0 = np.array([s.p0 for s in SEGMENTS])
-        p1 = np.array([s.p1 for s in SEGMENTS])
-        e0 = np.einsum("...sab,sb->...sa", rs[..., l0, :, :], p0) + ts[..., l0, :]
-        e1 = np.einsum("...sab,sb->...sa", rs[..., l1, :, :], p1) + ts[..., l1, :]
-        return np.stack([e0, e1], axis=-2), self.radii.copy()
+        return self._ends(rs, ts), self.radii.copy()
+
+    @staticmethod
+    def _ends(rs: np.ndarray, ts: np.ndarray) -> np.ndarray:
+        """``(..., L, 3, 3), (..., L, 3)`` link poses -> ``(..., S, 2, 3)`` capsule endpoints."""
+        e0 = np.einsum("...sab,sb->...sa", rs[..., _L0, :, :], _P0) + ts[..., _L0, :]
+        e1 = np.einsum("...sab,sb->...sa", rs[..., _L1, :, :], _P1) + ts[..., _L1, :]
+        return np.stack([e0, e1], axis=-2)
 
     # ---- surface sampling -------------------------------------------------------------------
     def _template(self, spacing: float, interior: bool) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -306,13 +312,14 @@ class HumanModel:
         """
         if not (isinstance(spacing, int | float) and math.isfinite(spacing) and spacing > 0):
             raise HumanError(f"spacing must be a positive number of metres, got {spacing!r}")
-        (ends, _), (rs, _) = self.capsules(features), self.link_transforms(features)
+        rs, ts = self.link_transforms(features)
+        ends = self._ends(rs, ts)
         out = []
         for k, (seg, (s, off)) in enumerate(zip(SEGMENTS, self._template(spacing, interior), strict=True)):
             e0, e1 = ends[..., k, 0, :], ends[..., k, 1, :]
             rot = rs[..., seg.link0, :, :]
             pts = (e0[..., None, :] + s[:, None] * (e1 - e0)[..., None, :]
-                   + np.einsum("...ab,pb->...pa", rot, off))
+                   + off @ np.swapaxes(rot, -1, -2))
             out.append(pts)
         return np.concatenate(out, axis=-2)
 
@@ -446,3 +453,42 @@ def plot_reach_points(reach: np.ndarray, labels: np.ndarray, scene, path, title:
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
+
+
+def main(argv: list[str] | None = None, prog: str = "python -m shared.human") -> int:
+    """``python -m shared.human LIBRARY --out PNG``: plot a library's reach points placed in a scene.
+
+    Prints each class's mean reach point and spread; the top view shows whether the model's
+    conventions put the hand over the table (see docs/human-model.md).
+    """
+    import argparse
+
+    from shared.library import load_library
+    from shared.runtime import cli_errors
+    from shared.scene import load_scene
+
+    parser = argparse.ArgumentParser(prog=prog, description=main.__doc__.splitlines()[0])
+    parser.add_argument("library", help="a directory of compound_*.csv or a .npz library")
+    parser.add_argument("--scene", default=None, help="scene file or embedded name (default pr2_two_cups)")
+    parser.add_argument("--out", default="runs/plots/human_goals.png", help="output PNG")
+    args = parser.parse_args(argv)
+    with cli_errors(prog):
+        lib = load_library(args.library)
+        scene = load_scene(args.scene)
+        reach, index = reach_points(HumanModel(), [d.features for d in lib.demos], scene)
+        labels = np.array([d.label for d in lib.demos])
+        for m, name in enumerate(lib.class_names):
+            r = reach[labels == m]
+            if len(r):
+                spread = np.linalg.norm(r - r.mean(axis=0), axis=1).mean()
+                print(f"{m:>2} {name:<14} reach mean ({r[:, 0].mean():+.3f}, {r[:, 1].mean():+.3f}, "
+                      f"{r[:, 2].mean():+.3f}) m  spread {spread:.3f} m  at sample {index[labels == m].mean():.0f}")
+        plot_reach_points(reach, labels, scene, args.out, f"{lib.source}: hand at its reach point, in {scene.name}")
+        print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())
