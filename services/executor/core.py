@@ -1,0 +1,321 @@
+"""The executor's pure simulation: a PR2 arm that follows the chosen trajectory of the latest plan.
+
+No Zenoh here (see :mod:`services.executor.service` for the loop around it). The simulation is a
+kinematic one: each step of ``h`` seconds the arm moves towards the plan's reference at the next
+instant, with its joint velocities scaled down uniformly (so the direction in joint space is kept)
+until every joint is within its velocity limit, and every commanded configuration clamped to the
+joint limits.
+
+Timing follows the paper's Fig. 4: the robot executes the plan of replanning step n-1 during step n.
+The core keeps its own clock ``t`` (seconds of simulated time); the service decides when a plan is
+adopted (:meth:`ExecutorCore.adopt`) and at which time a message counts as received
+(:meth:`ExecutorCore.note_occupancy`). Safety: :meth:`ExecutorCore.stale_reason` says why the robot
+must hold (zero velocity) -- no plan yet, or the latest plan or occupancy older than
+``stale_limit_s`` -- and the reference's own clock stops while the robot holds, so execution resumes
+where it stopped when fresh data arrives.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from shared.config import ConfigError, opt
+from shared.protocol import Plan, RobotState
+
+__all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "Reference"]
+
+
+class ExecutorError(ValueError):
+    """A plan or configuration the executor cannot use; the message names what is wrong."""
+
+
+@dataclass
+class ExecutorConfig:
+    """Executor options (``[executor]`` in a config file, ``FORESIGHT_EXECUTOR_<NAME>`` in the environment)."""
+
+    mode: str = opt("lockstep", help="lockstep: the executor is the simulation master and emits clock ticks; "
+                    "realtime: wall clock", choices=("lockstep", "realtime"))
+    steps: int = opt(20, help="replanning steps to run (the paper runs 20); 0 = until stopped")
+    step_period_s: float = opt(0.2, help="replanning period: simulated seconds per clock tick (lockstep) or the "
+                               "run length unit steps * period (realtime)")
+    state_rate_hz: float = opt(50.0, help="RobotState publishing rate (per simulated second in lockstep)")
+    stale_limit_s: float = opt(0.5, help="hold the robot when the latest plan or occupancy is older than this")
+    require_occupancy: bool = opt(True, help="also hold when the occupancy prediction is missing or stale")
+    goal_tolerance: float = opt(0.02, help="goal reached when every joint is within this of the goal (rad or m)")
+    velocity_scale: float = opt(1.0, help="fraction of the robot's joint velocity limits the simulation may use")
+    stop_on_goal: bool = opt(False, help="end the run at the end of the step in which the goal is reached")
+    lockstep_timeout_s: float = opt(30.0, help="lockstep: longest wait (wall s) for the plan of a tick before "
+                                    "going on without it")
+    wait_for: list[str] = opt(default_factory=lambda: ["replayer", "predictor", "planner"],
+                              help="lockstep: services whose liveliness token to wait for (at most "
+                              "startup_timeout_s) before the first tick")
+    startup_timeout_s: float = opt(60.0, help="lockstep: longest wait (wall s) for the wait_for services")
+    start_q: list[float] = opt(default_factory=list, help="start configuration, one value per joint in the "
+                               "robot model's order (empty: the robot model's start configuration)")
+    scene: str = opt("", help="scene file or embedded scene name (empty: the default scene)")
+    mcap: str = opt("", help="MCAP log path (empty: runs/<UTC timestamp>.mcap; 'none': no log)")
+    viz_rate_hz: float = opt(5.0, help="highest rate of the Foxglove robot/human/occupancy scene updates per channel")
+    device: str = opt("cpu", help="torch device of the robot model (cpu or cuda)")
+    log_level: str = opt("INFO", help="log level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+
+    def validate(self) -> None:
+        """Check ranges; raises ConfigError naming the option."""
+        positive = ("step_period_s", "state_rate_hz", "stale_limit_s", "goal_tolerance", "velocity_scale",
+                    "lockstep_timeout_s", "startup_timeout_s", "viz_rate_hz")
+        for name in positive:
+            value = getattr(self, name)
+            if not (value > 0 and math.isfinite(value)):
+                raise ConfigError(f"executor.{name}: must be > 0, got {value}")
+        if self.steps < 0:
+            raise ConfigError(f"executor.steps: must be >= 0, got {self.steps}")
+        if self.velocity_scale > 1.0:
+            raise ConfigError(f"executor.velocity_scale: must be <= 1, got {self.velocity_scale}")
+        unknown = set(self.wait_for) - {"replayer", "predictor", "planner"}
+        if unknown:
+            raise ConfigError(f"executor.wait_for: unknown service(s) {sorted(unknown)}")
+        if not all(math.isfinite(v) for v in self.start_q):
+            raise ConfigError(f"executor.start_q: values must be finite, got {self.start_q}")
+
+    @property
+    def substeps(self) -> int:
+        """Simulation substeps per replanning period (one RobotState each)."""
+        return max(1, round(self.step_period_s * self.state_rate_hz))
+
+    def mcap_path(self, now: str) -> Path | None:
+        """The MCAP path to write (``now``: a UTC timestamp for the default name), or None for 'none'."""
+        if self.mcap.lower() == "none":
+            return None
+        return Path(self.mcap) if self.mcap else Path("runs") / f"{now}.mcap"
+
+
+@dataclass(frozen=True)
+class ArmLimits:
+    """Joint names and limits of the simulated arm.
+
+    Attributes:
+        joint_names: The D joint names, in the order of every ``q`` the core handles.
+        lower: ``(D,)`` lower joint limits.
+        upper: ``(D,)`` upper joint limits.
+        velocity: ``(D,)`` positive joint velocity limits (per second).
+    """
+
+    joint_names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+
+    def __post_init__(self) -> None:
+        d = len(self.joint_names)
+        for name in ("lower", "upper", "velocity"):
+            arr = np.asarray(getattr(self, name), dtype=np.float64)
+            if arr.shape != (d,) or not np.all(np.isfinite(arr)):
+                raise ExecutorError(f"ArmLimits.{name}: expected {d} finite values, got shape {arr.shape}")
+            object.__setattr__(self, name, arr)
+        if np.any(self.upper < self.lower):
+            bad = [n for n, lo, hi in zip(self.joint_names, self.lower, self.upper, strict=True) if hi < lo]
+            raise ExecutorError(f"ArmLimits: upper limit below lower limit for {bad}")
+        if np.any(self.velocity <= 0):
+            raise ExecutorError("ArmLimits.velocity: limits must be > 0")
+
+    @property
+    def dof(self) -> int:
+        """Number of joints D."""
+        return len(self.joint_names)
+
+    def clamp(self, q: np.ndarray) -> np.ndarray:
+        """Clamp configurations ``(..., D)`` into the joint limits."""
+        return np.clip(q, self.lower, self.upper)
+
+    @classmethod
+    def from_robot(cls, robot: object) -> ArmLimits:
+        """Take the limits from a robot model with ``joint_names``, ``lower``, ``upper``, ``velocity_limits``.
+
+        ``lower`` etc. may be torch tensors or numpy arrays (shared.robot.PR2 holds tensors).
+        """
+
+        def arr(x: object) -> np.ndarray:
+            x = x.detach().cpu().numpy() if hasattr(x, "detach") else x
+            return np.asarray(x, dtype=np.float64)
+
+        return cls(tuple(robot.joint_names), arr(robot.lower), arr(robot.upper),  # type: ignore[attr-defined]
+                   arr(robot.velocity_limits))  # type: ignore[attr-defined]
+
+
+class Reference:
+    """The chosen trajectory of one plan as a piecewise-linear function of its own clock.
+
+    Args:
+        waypoints: ``(T, D)`` configurations ``dt`` seconds apart (already clamped to the limits).
+        dt: Waypoint spacing, seconds.
+    """
+
+    def __init__(self, waypoints: np.ndarray, dt: float) -> None:
+        self.waypoints = waypoints
+        self.dt = float(dt)
+        self.duration = self.dt * (len(waypoints) - 1)
+
+    @property
+    def goal(self) -> np.ndarray:
+        """``(D,)`` last waypoint."""
+        return self.waypoints[-1]
+
+    def at(self, tau: float) -> np.ndarray:
+        """``(D,)`` reference configuration ``tau`` seconds after the trajectory's start (held at the ends)."""
+        if tau <= 0.0 or len(self.waypoints) == 1:
+            return self.waypoints[0].copy()
+        if tau >= self.duration:
+            return self.waypoints[-1].copy()
+        x = tau / self.dt
+        i = int(math.floor(x))
+        a = x - i
+        return (1.0 - a) * self.waypoints[i] + a * self.waypoints[i + 1]
+
+
+@dataclass
+class _Freshness:
+    plan: float | None = None       # time (core clock) of the latest plan
+    occupancy: float | None = None  # time (core clock) of the latest occupancy
+
+
+class ExecutorCore:
+    """Simulates the arm following the chosen trajectory of the latest adopted plan.
+
+    Args:
+        limits: Joint names and limits; every plan must name the same joints in the same order.
+        q0: ``(D,)`` start configuration (clamped into the limits).
+        config: The executor's options (uses ``stale_limit_s``, ``require_occupancy``, ``goal_tolerance``,
+            ``velocity_scale``).
+
+    Attributes:
+        t: Simulated time, seconds.
+        q: ``(D,)`` current configuration.
+        qd: ``(D,)`` current joint velocity (of the last step).
+        plan: The plan being executed, or None.
+        goal: Index of the goal being executed (-1 before the first plan).
+        holding: Whether the last step held the robot; ``reason`` says why.
+        reached: Whether the configuration is within ``goal_tolerance`` of the executed goal.
+    """
+
+    def __init__(self, limits: ArmLimits, q0: np.ndarray, config: ExecutorConfig | None = None) -> None:
+        self.limits = limits
+        self.config = config or ExecutorConfig()
+        q0 = np.asarray(q0, dtype=np.float64)
+        if q0.shape != (limits.dof,) or not np.all(np.isfinite(q0)):
+            raise ExecutorError(f"start configuration: expected {limits.dof} finite values, got shape {q0.shape}")
+        self.t = 0.0
+        self.q = limits.clamp(q0)
+        self.qd = np.zeros(limits.dof)
+        self.plan: Plan | None = None
+        self.reference: Reference | None = None
+        self.tau = 0.0  # progress along the reference (stops while holding)
+        self.goal = -1
+        self.holding = True
+        self.reason = "waiting for the first plan"
+        self.reached = False
+        self.fresh = _Freshness()
+        self.plans_adopted = 0
+
+    # ------------------------------------------------------------------------------------------
+    # inputs
+
+    def check_plan(self, plan: Plan) -> None:
+        """Raise ExecutorError if ``plan`` does not fit this arm (joint names/order)."""
+        if tuple(plan.joint_names) != self.limits.joint_names:
+            raise ExecutorError(f"Plan.joint_names: {list(plan.joint_names)} do not match the executor's "
+                                f"{list(self.limits.joint_names)}")
+
+    def adopt(self, plan: Plan, stamp: float | None = None) -> None:
+        """Start executing ``plan``'s chosen trajectory now (at ``self.t``).
+
+        Args:
+            plan: A decoded (hence validated) plan.
+            stamp: Time (core clock) the plan counts as received for the staleness check; default now.
+
+        Raises:
+            ExecutorError: If the plan's joints differ from the arm's.
+        """
+        self.check_plan(plan)
+        waypoints = self.limits.clamp(plan.trajectories[plan.chosen].astype(np.float64))
+        self.plan = plan
+        self.reference = Reference(waypoints, plan.dt)
+        self.tau = 0.0
+        self.goal = int(plan.chosen)
+        self.fresh.plan = self.t if stamp is None else float(stamp)
+        self.plans_adopted += 1
+        self._update_reached()
+
+    def note_occupancy(self, stamp: float | None = None) -> None:
+        """Record that an occupancy prediction was received at ``stamp`` (core clock; default now)."""
+        stamp = self.t if stamp is None else float(stamp)
+        if self.fresh.occupancy is None or stamp > self.fresh.occupancy:
+            self.fresh.occupancy = stamp
+
+    # ------------------------------------------------------------------------------------------
+    # simulation
+
+    def stale_reason(self, t: float | None = None) -> str:
+        """Why the robot must hold at time ``t`` (default now), or ``""`` when it may move."""
+        t = self.t if t is None else t
+        limit = self.config.stale_limit_s
+        if self.reference is None or self.fresh.plan is None:
+            return "waiting for the first plan"
+        age = t - self.fresh.plan
+        if age > limit + 1e-9:
+            return f"plan is {age:.2f} s old (limit {limit:.2f} s)"
+        if self.config.require_occupancy:
+            if self.fresh.occupancy is None:
+                return "no occupancy prediction received yet"
+            age = t - self.fresh.occupancy
+            if age > limit + 1e-9:
+                return f"occupancy is {age:.2f} s old (limit {limit:.2f} s)"
+        return ""
+
+    def step(self, h: float, hold_reason: str | None = None) -> None:
+        """Advance the simulation by ``h`` seconds.
+
+        Args:
+            h: Step length, seconds (> 0).
+            hold_reason: If given, use it instead of :meth:`stale_reason` (lock-step mode decides once
+                per replanning step); ``""`` means move.
+        """
+        if not (h > 0 and math.isfinite(h)):
+            raise ExecutorError(f"step: h must be > 0, got {h}")
+        reason = self.stale_reason() if hold_reason is None else hold_reason
+        if reason or self.reference is None:
+            self.holding, self.reason = True, reason or "waiting for the first plan"
+            self.qd = np.zeros(self.limits.dof)
+        else:
+            self.holding, self.reason = False, ""
+            self.tau += h
+            target = self.reference.at(self.tau)
+            v = (target - self.q) / h
+            vmax = self.limits.velocity * self.config.velocity_scale
+            scale = float(np.max(np.abs(v) / vmax))
+            if scale > 1.0:
+                v = v / scale
+            q_new = self.limits.clamp(self.q + v * h)
+            self.qd = (q_new - self.q) / h
+            self.q = q_new
+        self.t += h
+        self._update_reached()
+
+    def _update_reached(self) -> None:
+        if self.reference is None:
+            self.reached = False
+            return
+        self.reached = bool(np.max(np.abs(self.q - self.reference.goal)) <= self.config.goal_tolerance)
+
+    def state(self, tick: int, stamp: float | None = None) -> RobotState:
+        """The current state as a RobotState message (``stamp`` default: the core's time)."""
+        return RobotState(stamp=self.t if stamp is None else float(stamp), tick=int(tick),
+                          joint_names=list(self.limits.joint_names), goal=self.goal, reached=self.reached,
+                          holding=self.holding, reason=self.reason, q=self.q.copy(), qd=self.qd.copy())
+
+    def replace_config(self, **changes: object) -> None:
+        """Change options of the running core (e.g. ``stale_limit_s``)."""
+        self.config = dataclasses.replace(self.config, **changes)

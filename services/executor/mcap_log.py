@@ -1,0 +1,323 @@
+"""MCAP log of a run: every message on every key under the prefix, plus Foxglove scene channels.
+
+Layout (see docs/executor.md):
+
+* one channel per Zenoh key expression (topic = the key, e.g. ``foresight/planner/plan``), message
+  encoding ``msgpack`` (the raw payload, byte for byte), schema = the message type's JSON Schema
+  (encoding ``jsonschema``, generated from the :mod:`shared.protocol` dataclasses by
+  :func:`message_json_schema`); only payloads that decode are written there;
+* ``/foresight/rejected`` (JSON): one record per payload that failed to decode (key, error, size,
+  the first bytes in hex), and per-key reject counts in the ``foresight.rejects`` metadata record
+  written when the file is closed;
+* Foxglove channels (JSON, well-known schemas, see :mod:`services.executor.foxglove`);
+* attachment ``scene.toml`` (the scene the run used) and metadata ``foresight.run`` (the config).
+
+The file is written in chunks straight to the operating system (no user-space buffer) and the open
+chunk is flushed every ``flush_period_s``; if the process is killed, everything up to the last
+complete chunk stays readable (with a non-seeking reader, see :func:`shared.logtools.read_messages`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import logging
+import os
+import threading
+import time
+import typing
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from mcap.writer import CompressionType, Writer
+
+from shared.protocol import (
+    MESSAGE_TYPES,
+    SCHEMA_VERSION,
+    HumanPose,
+    Keys,
+    Message,
+    OccupancyGrid,
+    Plan,
+    ProtocolError,
+    RobotState,
+    decode,
+)
+
+from .foxglove import SCHEMAS, TOPICS, SceneBuilder
+
+__all__ = ["McapLog", "message_json_schema", "REJECTED_TOPIC", "REJECTED_SCHEMA", "PROFILE"]
+
+log = logging.getLogger(__name__)
+
+PROFILE = "foresight"
+REJECTED_TOPIC = "/foresight/rejected"
+REJECTED_SCHEMA: dict[str, Any] = {
+    "title": "foresight.Rejected",
+    "description": "A payload on a Foresight key that failed to decode; it was not logged on the key's channel",
+    "type": "object",
+    "properties": {
+        "key": {"type": "string", "description": "Zenoh key expression the payload arrived on"},
+        "error": {"type": "string", "description": "The decoder's error, naming the offending field"},
+        "size": {"type": "integer", "description": "Payload size in bytes"},
+        "head_hex": {"type": "string", "description": "The first (at most 64) payload bytes, hex"},
+    },
+}
+
+
+def message_json_schema(cls: type[Message]) -> dict[str, Any]:
+    """JSON Schema of a message type's msgpack map (one property per dataclass field).
+
+    Arrays are described as maps ``{dtype, shape, data}`` with ``data`` the raw little-endian bytes
+    (msgpack ``bin``); ``x-dtype`` / ``x-shape`` give the expected dtype and shape (symbols such as
+    ``"K"`` must agree across the fields of one message).
+    """
+    hints = typing.get_type_hints(cls)
+    props: dict[str, Any] = {
+        "_type": {"const": cls.TYPE, "description": "message type name"},
+        "_v": {"const": SCHEMA_VERSION, "description": "schema version"},
+    }
+    scalar = {float: {"type": "number"}, int: {"type": "integer"}, bool: {"type": "boolean"},
+              str: {"type": "string"}}
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+        spec = f.metadata.get("array")
+        if spec is not None:
+            props[f.name] = {
+                "type": "object",
+                "description": f"numpy array, dtype {spec.dtype}, shape {list(spec.shape)}",
+                "x-dtype": spec.dtype,
+                "x-shape": list(spec.shape),
+                "properties": {"dtype": {"type": "string"},
+                               "shape": {"type": "array", "items": {"type": "integer", "minimum": 0}},
+                               "data": {"type": "string", "contentEncoding": "binary",
+                                        "description": "raw little-endian bytes (msgpack bin)"}},
+                "required": ["dtype", "shape", "data"],
+            }
+        else:
+            tp = hints[f.name]
+            props[f.name] = ({"type": "array", "items": {"type": "string"}} if typing.get_origin(tp) is list
+                             else dict(scalar[tp]))
+    doc = (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
+    return {"title": f"foresight.{cls.TYPE}", "description": doc, "type": "object", "properties": props,
+            "required": list(props)}
+
+
+class _DirectFile:
+    """A binary file whose writes go straight to the OS (the mcap writer buffers a chunk itself)."""
+
+    def __init__(self, path: Path) -> None:
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._pos = 0
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:
+        view = memoryview(data)
+        while view:
+            n = os.write(self._fd, view)
+            view = view[n:]
+            self._pos += n
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def flush(self) -> None:
+        """Nothing is buffered here."""
+
+    def fsync(self) -> None:
+        os.fsync(self._fd)
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+
+
+class McapLog:
+    """Thread-safe MCAP writer of Foresight messages (call :meth:`on_sample` from any thread).
+
+    Args:
+        path: Output file (parent directories are created).
+        keys: The key expressions of the run (its prefix).
+        builder: Builds the Foxglove scene channels (None: no Foxglove channels).
+        viz_period_s: Smallest time (message stamps) between two Foxglove updates of the robot, the
+            human or the occupancy (plans are drawn every time).
+        chunk_size: Chunk size in bytes.
+        flush_period_s: Longest time an incomplete chunk stays in memory.
+        scene_text: The scene file's text, attached as ``scene.toml``.
+        run_metadata: String map written as metadata ``foresight.run``.
+        clock: Log-time source in nanoseconds (default ``time.time_ns``).
+    """
+
+    def __init__(self, path: str | os.PathLike[str], keys: Keys, builder: SceneBuilder | None = None,
+                 viz_period_s: float = 0.2, chunk_size: int = 256 * 1024, flush_period_s: float = 1.0,
+                 scene_text: str | None = None, run_metadata: dict[str, str] | None = None,
+                 clock: Callable[[], int] = time.time_ns) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.keys = keys
+        self.builder = builder
+        self.viz_period_s = viz_period_s
+        self.flush_period_s = flush_period_s
+        self._clock = clock
+        self._lock = threading.RLock()
+        self._file = _DirectFile(self.path)
+        # No compression: zstandard/lz4 are not dependencies (the writer would need them).
+        self._writer = Writer(typing.cast(io.BufferedWriter, self._file), chunk_size=chunk_size,
+                              compression=CompressionType.NONE)
+        self._writer.start(profile=PROFILE, library="foresight executor")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._last_flush = time.monotonic()
+        self._last_viz: dict[str, float] = {}
+        self._closed = False
+        self.counts: dict[str, int] = {}
+        self.rejects: dict[str, int] = {}
+        self.viz_errors = 0
+        self._expected = keys.data_keys()
+        if scene_text is not None:
+            now = self._clock()
+            self._writer.add_attachment(now, now, "scene.toml", "application/toml", scene_text.encode())
+        if run_metadata:
+            self._writer.add_metadata("foresight.run", {k: str(v) for k, v in run_metadata.items()})
+        if builder is not None:
+            now_s = self._clock() / 1e9
+            self.write_json("/viz/scene", builder.static_scene(now_s))
+            self.write_json("/tf", builder.base_transform(now_s))
+        self._writer.flush()
+
+    # -- channels ------------------------------------------------------------------------------
+
+    def _schema_id(self, name: str, schema: dict[str, Any]) -> int:
+        if name not in self._schemas:
+            self._schemas[name] = self._writer.register_schema(
+                name=name, encoding="jsonschema", data=json.dumps(schema, separators=(",", ":")).encode())
+        return self._schemas[name]
+
+    def _channel_id(self, topic: str, schema_name: str, schema: dict[str, Any], encoding: str) -> int:
+        if topic not in self._channels:
+            sid = self._schema_id(schema_name, schema)
+            self._channels[topic] = self._writer.register_channel(topic=topic, message_encoding=encoding,
+                                                                  schema_id=sid)
+        return self._channels[topic]
+
+    def _add(self, channel: int, topic: str, data: bytes, log_time: int, publish_time: int) -> None:
+        self._writer.add_message(channel_id=channel, log_time=log_time, data=data, publish_time=publish_time,
+                                 sequence=self.counts.get(topic, 0))
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+        if time.monotonic() - self._last_flush >= self.flush_period_s:
+            self.flush()
+
+    def write_json(self, topic: str, obj: dict[str, Any], log_time: int | None = None) -> None:
+        """Write a JSON message on a Foxglove (or other JSON) topic."""
+        with self._lock:
+            if self._closed:
+                return
+            if topic == REJECTED_TOPIC:
+                name, schema = "foresight.Rejected", REJECTED_SCHEMA
+            else:
+                name = TOPICS[topic]
+                schema = SCHEMAS[name]
+            cid = self._channel_id(topic, name, schema, "json")
+            t = self._clock() if log_time is None else log_time
+            self._add(cid, topic, json.dumps(obj, separators=(",", ":")).encode(), t, t)
+
+    # -- samples -------------------------------------------------------------------------------
+
+    def on_sample(self, key: str, payload: bytes) -> Message | None:
+        """Log one sample received on ``key``; returns the decoded message (None if rejected)."""
+        log_time = self._clock()
+        expected = self._expected.get(key)
+        try:
+            msg: Message = decode(payload, expected)
+        except ProtocolError as exc:
+            self.reject(key, payload, str(exc), log_time)
+            return None
+        stamp = float(getattr(msg, "stamp", -1.0))
+        publish = int(stamp * 1e9) if stamp >= 0 else log_time
+        with self._lock:
+            if self._closed:
+                return msg
+            cls = MESSAGE_TYPES[msg.TYPE]
+            cid = self._channel_id(key, f"foresight.{msg.TYPE}", message_json_schema(cls), "msgpack")
+            self._add(cid, key, bytes(payload), log_time, publish)
+        if self.builder is not None:
+            self._visualise(msg, log_time)
+        return msg
+
+    def reject(self, key: str, payload: bytes, error: str, log_time: int | None = None) -> None:
+        """Count and log a payload that failed to decode."""
+        with self._lock:
+            self.rejects[key] = self.rejects.get(key, 0) + 1
+            n = self.rejects[key]
+        if n == 1 or n % 100 == 0:
+            log.warning("mcap log: rejected payload #%d on %s: %s", n, key, error)
+        self.write_json(REJECTED_TOPIC, {"key": key, "error": error, "size": len(payload),
+                                         "head_hex": bytes(payload[:64]).hex()}, log_time)
+
+    def _due(self, topic: str, stamp: float) -> bool:
+        last = self._last_viz.get(topic)
+        if last is not None and 0.0 <= stamp - last < self.viz_period_s - 1e-9:
+            return False
+        self._last_viz[topic] = stamp
+        return True
+
+    def _visualise(self, msg: Message, log_time: int) -> None:
+        b = self.builder
+        assert b is not None
+        try:
+            if isinstance(msg, Plan):
+                upd = b.plan_paths(msg)
+                if upd is not None:
+                    self.write_json("/viz/plan", upd, log_time)
+            elif isinstance(msg, RobotState) and self._due("/viz/robot", msg.stamp):
+                upd = b.robot_spheres(msg)
+                if upd is not None:
+                    self.write_json("/viz/robot", upd, log_time)
+                tf = b.end_effector_transform(msg)
+                if tf is not None:
+                    self.write_json("/tf", tf, log_time)
+            elif isinstance(msg, OccupancyGrid) and self._due("/viz/occupancy", msg.stamp):
+                self.write_json("/viz/occupancy", b.occupancy_cubes(msg), log_time)
+            elif isinstance(msg, HumanPose) and self._due("/viz/human", msg.stamp):
+                upd = b.human_body(msg)
+                if upd is not None:
+                    self.write_json("/viz/human", upd, log_time)
+        except Exception:  # a visualisation bug must never cost the raw log
+            self.viz_errors += 1
+            if self.viz_errors == 1 or self.viz_errors % 100 == 0:
+                log.exception("mcap log: Foxglove update for %s failed (%d so far)", msg.TYPE, self.viz_errors)
+
+    # -- lifecycle -----------------------------------------------------------------------------
+
+    def flush(self) -> None:
+        """Write the open chunk to the file now."""
+        with self._lock:
+            if not self._closed:
+                self._writer.flush()
+                self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        """Write the reject counts, the summary and the footer; idempotent."""
+        with self._lock:
+            if self._closed:
+                return
+            self._writer.add_metadata("foresight.rejects", {k: str(v) for k, v in sorted(self.rejects.items())})
+            self._writer.finish()
+            self._file.fsync()
+            self._file.close()
+            self._closed = True
+        log.info("mcap log: wrote %s (%d messages on %d channels, %d rejected)", self.path,
+                 sum(self.counts.values()), len(self.counts), sum(self.rejects.values()))
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` has run."""
+        return self._closed
+
+    def __enter__(self) -> McapLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

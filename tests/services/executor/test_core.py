@@ -1,0 +1,193 @@
+"""ExecutorCore: follows the chosen trajectory within the velocity limits, reaches the goal, holds on
+stale data and resumes, never leaves the joint limits."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.executor.core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, Reference
+from shared.config import ConfigError
+from shared.protocol import Plan
+
+NAMES = ("j0", "j1", "j2")
+LIMITS = ArmLimits(NAMES, np.array([-1.0, -2.0, 0.0]), np.array([1.0, 2.0, 0.3]), np.array([0.5, 1.0, 0.05]))
+
+
+def make_plan(start: np.ndarray, goals: list[np.ndarray], chosen: int = 0, t: int = 11, dt: float = 0.1,
+              tick: int = 0, names: tuple[str, ...] = NAMES) -> Plan:
+    traj = np.stack([np.linspace(start, g, t) for g in goals]).astype(np.float32)
+    k = len(goals)
+    return Plan(stamp=0.0, tick=tick, step=max(tick, 0), goal_names=[f"g{i}" for i in range(k)],
+                joint_names=list(names), dt=dt, chosen=chosen, planning_ms=1.0, occupancy_tick=tick,
+                occupancy_index=0, trajectories=traj, cost_smoothness=np.zeros(k), cost_obstacle=np.zeros(k),
+                cost_human=np.zeros(k), cost_total=np.zeros(k), valid=np.ones(k, bool))
+
+
+def run(core: ExecutorCore, seconds: float, h: float = 0.02, fresh: bool = True) -> np.ndarray:
+    """Step for ``seconds``; keeps occupancy fresh when ``fresh``; returns the visited configurations."""
+    qs = []
+    for _ in range(round(seconds / h)):
+        if fresh:
+            core.note_occupancy()
+        core.step(h)
+        qs.append(core.q.copy())
+    return np.array(qs)
+
+
+def test_holds_until_the_first_plan() -> None:
+    core = ExecutorCore(LIMITS, np.zeros(3), ExecutorConfig())
+    run(core, 0.2)
+    assert core.holding and core.reason == "waiting for the first plan"
+    assert np.all(core.q == 0) and np.all(core.qd == 0)
+    assert core.state(tick=-1).holding
+
+
+def test_follows_a_slow_trajectory_exactly_and_reaches_the_goal() -> None:
+    cfg = ExecutorConfig(stale_limit_s=10.0)
+    core = ExecutorCore(LIMITS, np.zeros(3), cfg)
+    goal = np.array([0.3, -0.5, 0.02])
+    plan = make_plan(np.zeros(3), [goal, -goal], chosen=0, t=21, dt=0.1)  # 2 s, well within the limits
+    core.adopt(plan)
+    core.note_occupancy()
+    qs = run(core, 1.0)
+    ref = Reference(plan.trajectories[0].astype(np.float64), plan.dt)
+    assert np.allclose(qs[-1], ref.at(1.0), atol=1e-6)  # on the reference, no lag
+    assert not core.reached and core.goal == 0
+    run(core, 1.2)
+    assert core.reached
+    assert np.allclose(core.q, goal, atol=1e-6)
+    st = core.state(tick=3)
+    assert st.reached and st.goal == 0 and st.tick == 3 and not st.holding
+
+
+def test_velocity_limits_are_never_exceeded_and_direction_is_kept() -> None:
+    core = ExecutorCore(LIMITS, np.zeros(3), ExecutorConfig(stale_limit_s=100.0))
+    goal = np.array([0.8, 1.5, 0.25])
+    core.adopt(make_plan(np.zeros(3), [goal], t=3, dt=0.05))  # demands ~10x the limits
+    h = 0.02
+    prev = core.q.copy()
+    for _ in range(400):
+        core.note_occupancy()
+        core.step(h)
+        v = (core.q - prev) / h
+        assert np.all(np.abs(v) <= LIMITS.velocity + 1e-9)
+        assert np.all(np.abs(core.qd) <= LIMITS.velocity + 1e-9)
+        prev = core.q.copy()
+        if core.reached:
+            break
+    assert core.reached
+    # uniform scaling: while the limiting joint moves, the others move proportionally (straight line)
+    core2 = ExecutorCore(LIMITS, np.zeros(3), ExecutorConfig(stale_limit_s=100.0))
+    core2.adopt(make_plan(np.zeros(3), [goal], t=2, dt=0.01))
+    core2.note_occupancy()
+    core2.step(h)
+    assert np.allclose(np.cross(core2.q, goal), 0.0, atol=1e-9)
+
+
+def test_velocity_scale_slows_the_arm() -> None:
+    core = ExecutorCore(LIMITS, np.zeros(3), ExecutorConfig(velocity_scale=0.5, stale_limit_s=100.0))
+    core.adopt(make_plan(np.zeros(3), [np.array([0.0, 0.0, 0.3])], t=2, dt=0.01))
+    core.note_occupancy()
+    core.step(1.0)
+    assert core.q[2] == pytest.approx(0.025)
+
+
+def test_commanded_configuration_never_leaves_the_joint_limits() -> None:
+    rng = np.random.default_rng(0)
+    core = ExecutorCore(LIMITS, np.array([5.0, -5.0, 1.0]), ExecutorConfig(stale_limit_s=100.0))
+    assert np.all(core.q >= LIMITS.lower) and np.all(core.q <= LIMITS.upper)  # start clamped
+    for i in range(30):
+        # plans far outside the limits (the planner must not do this; the executor clamps anyway)
+        goals = [rng.uniform(-10, 10, size=3) for _ in range(2)]
+        core.adopt(make_plan(rng.uniform(-10, 10, size=3), goals, chosen=i % 2, t=5, dt=0.05))
+        for _ in range(20):
+            core.note_occupancy()
+            core.step(0.02)
+            assert np.all(core.q >= LIMITS.lower) and np.all(core.q <= LIMITS.upper)
+            st = core.state(tick=i)
+            assert np.all(st.q >= LIMITS.lower) and np.all(st.q <= LIMITS.upper)
+
+
+def test_holds_on_stale_plan_and_resumes_where_it_stopped() -> None:
+    cfg = ExecutorConfig(stale_limit_s=0.5)
+    core = ExecutorCore(LIMITS, np.zeros(3), cfg)
+    goal = np.array([0.4, 0.0, 0.0])
+    core.adopt(make_plan(np.zeros(3), [goal], t=21, dt=0.1))
+    run(core, 0.5)  # plan age reaches 0.5 s: still moving
+    assert not core.holding
+    q_before = core.q.copy()
+    run(core, 0.3)  # plan older than 0.5 s -> hold
+    assert core.holding and "plan is" in core.reason and "limit 0.50 s" in core.reason
+    assert np.all(core.qd == 0)
+    held_at = core.q.copy()
+    assert np.all(held_at >= q_before)
+    run(core, 1.0)
+    assert np.array_equal(core.q, held_at)  # did not move at all while holding
+    # fresh plan (same trajectory re-sent from where the robot is) -> resumes
+    core.adopt(make_plan(held_at, [goal], t=21, dt=0.1))
+    run(core, 0.1)
+    assert not core.holding and core.reason == ""
+    assert core.q[0] > held_at[0]
+
+
+def test_holds_on_stale_or_missing_occupancy() -> None:
+    core = ExecutorCore(LIMITS, np.zeros(3), ExecutorConfig(stale_limit_s=0.5))
+    core.adopt(make_plan(np.zeros(3), [np.array([0.4, 0, 0])], t=21, dt=0.1))
+    core.step(0.02)
+    assert core.holding and core.reason == "no occupancy prediction received yet"
+    core.note_occupancy()
+    core.adopt(make_plan(core.q, [np.array([0.4, 0, 0])], t=21, dt=0.1))
+    run(core, 0.4, fresh=False)
+    assert not core.holding
+    core.adopt(make_plan(core.q, [np.array([0.4, 0, 0])], t=21, dt=0.1))  # plan fresh, occupancy not
+    run(core, 0.2, fresh=False)
+    assert core.holding and core.reason.startswith("occupancy is")
+    core.note_occupancy()
+    core.adopt(make_plan(core.q, [np.array([0.4, 0, 0])], t=21, dt=0.1))
+    core.step(0.02)
+    assert not core.holding
+    # without require_occupancy only the plan counts
+    core2 = ExecutorCore(LIMITS, np.zeros(3), ExecutorConfig(require_occupancy=False))
+    core2.adopt(make_plan(np.zeros(3), [np.array([0.4, 0, 0])], t=21, dt=0.1))
+    core2.step(0.02)
+    assert not core2.holding
+
+
+def test_reference_clock_stops_while_holding() -> None:
+    core = ExecutorCore(LIMITS, np.zeros(3), ExecutorConfig(stale_limit_s=0.5))
+    core.adopt(make_plan(np.zeros(3), [np.array([0.4, 0, 0])], t=21, dt=0.1))
+    core.note_occupancy()
+    core.step(0.1, hold_reason="")
+    tau = core.tau
+    core.step(0.1, hold_reason="test hold")
+    assert core.tau == tau and core.reason == "test hold"
+
+
+def test_plan_with_other_joints_is_rejected() -> None:
+    core = ExecutorCore(LIMITS, np.zeros(3))
+    with pytest.raises(ExecutorError, match="joint_names"):
+        core.adopt(make_plan(np.zeros(3), [np.ones(3)], names=("j0", "j2", "j1")))
+    assert core.plan is None
+
+
+def test_bad_inputs_are_named() -> None:
+    with pytest.raises(ExecutorError, match="start configuration"):
+        ExecutorCore(LIMITS, np.zeros(2))
+    with pytest.raises(ExecutorError, match="velocity"):
+        ArmLimits(NAMES, np.zeros(3), np.ones(3), np.array([1.0, 0.0, 1.0]))
+    with pytest.raises(ExecutorError, match="step"):
+        ExecutorCore(LIMITS, np.zeros(3)).step(float("nan"))
+    with pytest.raises(ConfigError, match="stale_limit_s"):
+        ExecutorConfig(stale_limit_s=0).validate()
+    with pytest.raises(ConfigError, match="wait_for"):
+        ExecutorConfig(wait_for=["planer"]).validate()
+
+
+def test_reference_interpolates_and_holds_at_the_ends() -> None:
+    ref = Reference(np.array([[0.0, 0.0], [1.0, 2.0], [1.0, 4.0]]), dt=0.5)
+    assert np.allclose(ref.at(-1.0), [0, 0])
+    assert np.allclose(ref.at(0.25), [0.5, 1.0])
+    assert np.allclose(ref.at(0.75), [1.0, 3.0])
+    assert np.allclose(ref.at(5.0), [1.0, 4.0])
+    assert ref.duration == 1.0

@@ -1,0 +1,159 @@
+"""ExecutorService over Zenoh on loopback with fake predictor/planner: lock-step ticks, plan n-1 executed
+during step n, determinism, safety hold and resume, bad input, MCAP contents."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import msgpack
+import numpy as np
+import pytest
+
+from services.executor.core import ExecutorConfig
+from services.executor.service import ExecutorService
+from shared.logtools import read_log
+from shared.protocol import Keys, RobotState, decode
+from shared.transport import open_session
+
+from .conftest import SCENE, FakeSystem, new_hub
+
+
+def lockstep_config(tmp_path, **kw) -> ExecutorConfig:
+    base = dict(mode="lockstep", steps=8, step_period_s=0.2, state_rate_hz=25.0, lockstep_timeout_s=5.0,
+                wait_for=["predictor", "planner"], mcap=str(tmp_path / "run.mcap"))
+    base.update(kw)
+    return ExecutorConfig(**base)
+
+
+def run_lockstep(zenoh_hub, pr2, cfg: ExecutorConfig, **fake_kw):
+    exec_z = zenoh_hub()
+    fake = FakeSystem(zenoh_hub(), **fake_kw)
+    service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
+    with fake.running():
+        result = service.run()
+    return result, fake, service
+
+
+def test_lockstep_ticks_plans_and_goal(zenoh_hub, pr2, tmp_path) -> None:
+    cfg = lockstep_config(tmp_path)
+    result, fake, _ = run_lockstep(zenoh_hub, pr2, cfg)
+    assert fake.ticks == list(range(8))  # ClockTick n for n = 0..7, in order
+    assert result.steps == 8 and result.plans == 7  # plan of tick n runs during step n+1; the last never runs
+    assert result.goal_per_step == [-1] + [0] * 7
+    assert result.held_steps == 1  # step 0: no plan yet
+    assert result.reached and 0 < result.reached_step < 8
+    # states: one before tick 0 plus 5 per step, stamps on the simulated clock
+    assert result.q.shape == (1 + 8 * 5, 8)
+    assert np.allclose(result.times, np.r_[0.0, 0.04 * np.arange(1, 41)])
+    # within limits and velocity limits all along
+    lo, hi = pr2.lower.numpy(), pr2.upper.numpy()
+    assert np.all(result.q >= lo - 1e-6) and np.all(result.q <= hi + 1e-6)
+    v = np.abs(np.diff(result.q, axis=0)) / 0.04
+    assert np.all(v <= pr2.velocity_limits.numpy() + 1e-4)
+    # step 1 starts exactly where plan 0 starts (the executor published that state before tick 0)
+    assert np.allclose(fake.plans[0].trajectories[0, 0], result.q[5], atol=1e-6)
+    goal = fake.plans[-1].trajectories[0, -1]
+    assert np.max(np.abs(result.q[-1] - goal)) <= cfg.goal_tolerance
+
+
+def test_lockstep_is_deterministic(zenoh_hub, pr2, tmp_path) -> None:
+    r1, _, _ = run_lockstep(new_hub(), pr2, lockstep_config(tmp_path, steps=6, mcap="none"), switch_at=3)
+    r2, _, _ = run_lockstep(new_hub(), pr2, lockstep_config(tmp_path, steps=6, mcap="none"), switch_at=3)
+    assert r1.goal_per_step == r2.goal_per_step == [-1, 0, 0, 0, 1, 1]
+    assert np.array_equal(r1.q, r2.q)
+    assert r1.mcap_path is None
+
+
+def test_lockstep_holds_without_plans_then_resumes(zenoh_hub, pr2, tmp_path) -> None:
+    cfg = lockstep_config(tmp_path, steps=9, lockstep_timeout_s=0.3, mcap="none")
+    result, fake, _ = run_lockstep(zenoh_hub, pr2, cfg, skip_plans=frozenset({2, 3, 4}), waypoints=40)
+    # plan 1 runs in step 2, still in 3 (0.4 s old), too old from step 4 (0.6 s > 0.5 s) until plan 5 runs in 6
+    q = result.q[1:].reshape(9, 5, 8)
+    moved = np.abs(np.diff(np.concatenate([result.q[:1], q[:, -1]]), axis=0)).max(axis=1) > 1e-9
+    assert moved.tolist() == [False, True, True, True, False, False, True, True, True]
+    assert result.held_steps == 3
+
+
+def test_mcap_has_every_channel_decodable_with_schemas(zenoh_hub, pr2, tmp_path) -> None:
+    cfg = lockstep_config(tmp_path, steps=5)
+    exec_z = zenoh_hub()
+    fake = FakeSystem(zenoh_hub())
+    service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
+    keys = Keys(exec_z.prefix)
+    garbage = [b"", b"\x00\x01", msgpack.packb({"_type": "Plan", "_v": 1}), msgpack.packb([1, 2, 3])]
+    with fake.running():
+        t = threading.Thread(target=service.run)
+        t.start()
+        deadline = time.monotonic() + 20
+        while not fake.ticks and time.monotonic() < deadline:
+            time.sleep(0.01)
+        for g in garbage:  # malformed payloads while it runs
+            fake.session.put(keys.plan, g)
+            fake.session.put(keys.occupancy, g)
+        t.join(timeout=30)
+    assert not t.is_alive()
+    result = service.result
+    assert result.steps == 5
+    assert sum(result.rejects.values()) == 2 * len(garbage)
+    lf = read_log(cfg.mcap, keep=lambda ch: True)
+    assert lf.complete and not lf.error
+    by_topic = {c.topic: c for c in lf.channels.values()}
+    for key in (keys.plan, keys.occupancy, keys.robot_state, keys.clock):
+        ch = by_topic[key]
+        assert ch.message_encoding == "msgpack" and ch.schema_encoding == "jsonschema"
+        assert ch.schema_name.startswith("foresight.") and ch.count > 0
+        for m in lf.topic_messages(key):
+            decode(m.data)
+    assert by_topic[keys.clock].count == 5
+    assert by_topic[keys.robot_state].count == 1 + 5 * 5
+    assert by_topic[keys.plan].count == 5
+    for topic in ("/viz/scene", "/viz/robot", "/viz/plan", "/viz/occupancy", "/tf"):
+        assert by_topic[topic].message_encoding == "json" and by_topic[topic].count > 0
+    assert by_topic["/foresight/rejected"].count == 2 * len(garbage)
+    assert lf.metadata["foresight.rejects"] == {keys.plan: "4", keys.occupancy: "4"}
+    assert lf.metadata["foresight.run"]["mode"] == "lockstep"
+    assert b"pr2_two_cups" in lf.attachments["scene.toml"]
+
+
+def test_realtime_holds_when_predictor_stops_and_resumes(zenoh_hub, pr2, tmp_path) -> None:
+    exec_z = zenoh_hub()
+    cfg = ExecutorConfig(mode="realtime", steps=0, state_rate_hz=50.0, stale_limit_s=0.3, mcap="none")
+    fake = FakeSystem(zenoh_hub(), waypoints=200)
+    service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
+    states: list[RobotState] = []
+    with fake.running(realtime_hz=10.0), open_session(zenoh_hub()) as watch:
+        sub = watch.declare_subscriber(Keys(exec_z.prefix).robot_state,
+                                       lambda s: states.append(decode(s.payload.to_bytes(), RobotState)))
+        t = threading.Thread(target=service.run)
+        t.start()
+        try:
+            deadline = time.monotonic() + 10
+            while not (states and not states[-1].holding) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert states and not states[-1].holding, "never started moving"
+            fake.predictor_on.clear()  # the predictor goes away
+            time.sleep(1.0)
+            held = states[-1]
+            assert held.holding and held.reason.startswith("occupancy is"), held.reason
+            q_held = held.q.copy()
+            time.sleep(0.3)
+            assert np.array_equal(states[-1].q, q_held) and np.all(states[-1].qd == 0)
+            fake.predictor_on.set()  # ... and comes back
+            time.sleep(1.0)
+            assert not states[-1].holding
+            assert np.abs(states[-1].q - q_held).max() > 1e-4
+        finally:
+            service.stop.set()
+            t.join(timeout=10)
+            sub.undeclare()
+    assert not t.is_alive()
+    assert service.result.held_steps > 0
+
+
+@pytest.mark.parametrize("bad", [dict(start_q=[0.0] * 3), dict(start_q=[9.0] * 8)])
+def test_bad_start_configuration_is_named(pr2, zenoh_hub, bad) -> None:
+    from services.executor.core import ExecutorError
+
+    with pytest.raises(ExecutorError, match="start_q"):
+        ExecutorService(ExecutorConfig(**bad), zenoh_hub(), robot=pr2, human=(None, None), scene=SCENE)
