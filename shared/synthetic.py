@@ -48,7 +48,7 @@ IK_DAMPING = 1e-3
 # Joint limits of the features the IK moves (macro limits; the elbow does not hyperextend).
 LIMITS = {
     4: (-math.radians(45), math.radians(45)),
-    5: (-math.radians(20), math.radians(40)),
+    5: (-math.radians(20), math.radians(50)),
     6: (-math.radians(45), math.radians(45)),
     7: (-math.pi, math.pi),
     8: (-math.pi, math.pi),
