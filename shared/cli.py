@@ -49,7 +49,11 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     module = importlib.import_module(COMMANDS[command][0])
-    return int(module.main(rest, prog=f"foresight {command}") or 0)
+    try:
+        return int(module.main(rest, prog=f"foresight {command}") or 0)
+    except BrokenPipeError:  # output piped into e.g. `head`, which exited early
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight router") -> int:
     stop = threading.Event()
     restore = stop_on_signals(stop)
     try:
-        with open_session(zcfg) as session:
+        with cli_errors(prog), open_session(zcfg) as session:
             log.info("router listening on %s (%s)", ",".join(zcfg.listen), describe(session)["zid"])
             while not stop.wait(1.0):
                 pass

@@ -24,6 +24,7 @@ from shared.config import ZenohConfig
 from shared.protocol import Keys, Message, ProtocolError, decode, encode
 
 __all__ = [
+    "TransportError",
     "zenoh_config",
     "open_session",
     "TypedPublisher",
@@ -52,10 +53,23 @@ def zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
     return conf
 
 
+class TransportError(ValueError):
+    """A Zenoh session could not be opened (e.g. the listen port is taken); the message says where."""
+
+
 @contextmanager
 def open_session(cfg: ZenohConfig) -> Iterator[zenoh.Session]:
-    """Open a Zenoh session for ``cfg`` and close it on exit."""
-    session = zenoh.open(zenoh_config(cfg))
+    """Open a Zenoh session for ``cfg`` and close it on exit.
+
+    Raises:
+        TransportError: If Zenoh refuses to open the session (one-line message with the endpoints).
+    """
+    try:
+        session = zenoh.open(zenoh_config(cfg))
+    except zenoh.ZError as exc:
+        reason = str(exc).split(" at /")[0].strip()  # drop the Rust source location
+        raise TransportError(f"zenoh: cannot open a {cfg.mode} session (listen {','.join(cfg.listen) or '-'}, "
+                             f"connect {','.join(cfg.connect) or '-'}): {reason}") from None
     try:
         yield session
     finally:

@@ -8,12 +8,9 @@ import threading
 import time
 from dataclasses import dataclass
 
-import zenoh
-
 from shared.config import ZenohConfig
 from shared.library import MotionLibrary
 from shared.protocol import ClockTick, DemoMarker, HumanPose, Keys, Message
-from shared.runtime import UserError
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe
 
 from .core import ReplayerConfig, ReplayerCore, load_replay_library, select_demos
@@ -61,12 +58,7 @@ class ReplayerService:
         stop = stop or threading.Event()
         cfg = self.config
         core = ReplayerCore(self.demos, loop=cfg.loop, max_demos=cfg.max_demos)
-        try:
-            session_cm = open_session(self.zenoh_config)
-            session = session_cm.__enter__()
-        except zenoh.ZError as exc:
-            raise UserError(f"zenoh: cannot open a session with {self.zenoh_config}: {exc}") from None
-        try:
+        with open_session(self.zenoh_config) as session:
             pose_pub: TypedPublisher[HumanPose] = TypedPublisher(session, self.keys.pose, block=True)
             demo_pub: TypedPublisher[DemoMarker] = TypedPublisher(session, self.keys.demo, block=True)
             # lock-step: listen to the clock before announcing ourselves, so no tick sent after our
@@ -92,8 +84,6 @@ class ReplayerService:
                 presence.close()
                 if clock_sub is not None:
                     clock_sub.undeclare()
-        finally:
-            session_cm.__exit__(None, None, None)
         log.info("replayer: %s after %d demonstrations, %d poses, %d ticks",
                  "finished" if self.stats.finished else "stopped", self.stats.demos, self.stats.poses,
                  self.stats.ticks)

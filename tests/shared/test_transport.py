@@ -2,22 +2,36 @@
 
 from __future__ import annotations
 
+import signal
+import socket
+import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
+import pytest
 
+from shared.config import ZenohConfig
 from shared.protocol import ClockTick, DemoMarker, HumanPose, Keys, encode
 from shared.transport import (
     LatestSubscriber,
     Presence,
     RejectCounter,
+    TransportError,
     TypedPublisher,
     open_session,
     subscribe,
     subscribe_ordered,
     zenoh_config,
 )
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def wait_until(cond, timeout: float = 10.0) -> bool:
@@ -133,3 +147,49 @@ def test_presence_sees_peers_come_and_go(zenoh_hub):
         assert ("replayer", True) in changes and ("replayer", False) in changes
         assert watcher.is_alive("executor")
         watcher.close()
+
+
+def test_open_session_error_is_one_line(zenoh_hub):
+    a = zenoh_hub()
+    with open_session(a):
+        with pytest.raises(TransportError, match=r"^zenoh: cannot open a peer session \(listen tcp/127\.0\.0\.1:\d+"):
+            with open_session(ZenohConfig(listen=a.listen, connect=[])):
+                pass
+
+
+def test_router_process_relays_between_clients(tmp_path):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    log = (tmp_path / "router.log").open("wb")
+    proc = subprocess.Popen([sys.executable, "-m", "shared.router", "--listen", endpoint], stdout=log,
+                            stderr=subprocess.STDOUT, cwd=Path(__file__).resolve().parents[2])
+    try:
+        client = ZenohConfig(mode="client", listen=[], connect=[endpoint])
+        keys = Keys("t5")
+        got: list[ClockTick] = []
+        deadline = time.monotonic() + 20
+        while True:  # the router needs a moment to listen
+            try:
+                sa_cm = open_session(client)
+                sa = sa_cm.__enter__()
+                break
+            except TransportError:
+                assert time.monotonic() < deadline and proc.poll() is None, (tmp_path / "router.log").read_text()
+                time.sleep(0.1)
+        try:
+            subscribe(sa, keys.clock, ClockTick, got.append)
+            with open_session(client) as sb:
+                pub = TypedPublisher(sb, keys.clock)
+                assert publish_until(pub, ClockTick(stamp=0.0, tick=0, period=0.1), lambda: bool(got))
+        finally:
+            sa_cm.__exit__(None, None, None)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            code = proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5)
+            raise
+        log.close()
+    assert code == 0, (tmp_path / "router.log").read_text()
+    assert "router stopped" in (tmp_path / "router.log").read_text()
