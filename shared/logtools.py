@@ -377,7 +377,7 @@ def render_step(view: StepView, scene: Scene, out: str | Path, robot: Any = None
         pk = p[keep]
         order = np.argsort(pk)
         if c.size:
-            sc = ax3.scatter(c[order, 0], c[order, 1], c[order, 2], c=pk[order], cmap="YlOrRd", vmin=0, vmax=1,
+            ax3.scatter(c[order, 0], c[order, 1], c[order, 2], c=pk[order], cmap="YlOrRd", vmin=0, vmax=1,
                              s=10, alpha=0.25, depthshade=False, linewidths=0)
             # top view: the most probable voxel of each (x, y) column
             cols: dict[tuple[int, int], float] = {}
@@ -389,22 +389,29 @@ def render_step(view: StepView, scene: Scene, out: str | Path, robot: Any = None
             ax2.scatter(occ.origin[0] + occ.resolution * (ij[o, 0] + 0.5),
                         occ.origin[1] + occ.resolution * (ij[o, 1] + 0.5), c=v[o], cmap="YlOrRd", vmin=0,
                         vmax=1, marker="s", s=28, alpha=0.6, linewidths=0, zorder=1)
-            fig.colorbar(sc, ax=ax2, shrink=0.7, label="predicted occupancy p(x|ξ) (top view: column max)")
+            from matplotlib.cm import ScalarMappable
+            from matplotlib.colors import Normalize
 
-    # human body
+            fig.colorbar(ScalarMappable(Normalize(0, 1), "YlOrRd"), ax=ax2, shrink=0.7,
+                         label="predicted occupancy p(x|ξ) (top view: column max)")
+
+    span = float(np.max(hi - lo))
+    pts_per_m = 0.45 * 7.2 * 72 / span  # rough size of a metre in points in the 3D view
+    # human body: capsules (3D: thick lines; top view: the capsules' footprints)
     if human is not None:
         ends, hr = human
         for (a, b_), r in zip(ends, hr, strict=True):
-            ax3.plot(*zip(a, b_, strict=True), color="#3060d0", lw=max(1.5, 60 * r), alpha=0.7,
+            ax3.plot(*zip(a, b_, strict=True), color="#3060d0", lw=max(1.5, 2 * r * pts_per_m), alpha=0.6,
                      solid_capstyle="round")
-            ax2.plot([a[0], b_[0]], [a[1], b_[1]], color="#3060d0", lw=max(1.5, 40 * r), alpha=0.55,
-                     solid_capstyle="round", zorder=3)
+            for s in np.linspace(0.0, 1.0, 6):
+                c = a + s * (b_ - a)
+                ax2.add_patch(Circle((c[0], c[1]), r, facecolor="#3060d0", edgecolor="none", alpha=0.18,
+                                     zorder=3))
+            ax2.plot([a[0], b_[0]], [a[1], b_[1]], color="#1a3a90", lw=1.2, zorder=3)
         ax2.plot([], [], color="#3060d0", lw=4, label="human body")
 
     # robot spheres
     if centers is not None and radii is not None:
-        span = float(np.max(hi - lo))
-        pts_per_m = 0.45 * 7.2 * 72 / span
         ax3.scatter(centers[:, 0], centers[:, 1], centers[:, 2], s=(2 * radii * pts_per_m) ** 2,
                     color="#8a8a9a", alpha=0.35, edgecolors="#555", linewidths=0.3)
         for cc, r in zip(centers, radii, strict=True):
