@@ -179,9 +179,13 @@ def test_subprocess_bad_input_one_line(tmp_path):
     for args, pattern in ((["--library", str(tmp_path / "missing")], "missing' not found"),
                           (["--rate-hz", "-3", "--library", str(tmp_path)], "rate_hz: must be > 0")):
         proc = _spawn(args)
-        code, err = _stop(proc, timeout=30.0) if False else (proc.wait(timeout=30.0), proc.stderr.read())
-        proc.stdout.close()
-        proc.stderr.close()
+        try:
+            _, err = proc.communicate(timeout=30.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate(timeout=5.0)
+            pytest.fail(f"replayer {args} did not exit on bad input")
+        code = proc.returncode
         assert code == 2, err
         assert err.strip().count("\n") == 0 and pattern in err and "Traceback" not in err, err
 
