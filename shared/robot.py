@@ -196,8 +196,10 @@ class PR2:
         link_names: The L links returned by :meth:`fk_links` (root, each joint's child, tool frame).
         sphere_radii: ``(S,)``; sphere_links: ``(S,)`` link names; sphere_anchor: ``(S,)`` index into
             ``link_names`` of the planned link each sphere moves with.
-        arm_spheres, body_spheres: index tensors of the self-collision groups.
-        moving_spheres: ``(S',)`` indices of spheres that move with q (all but the fixed base's).
+        arm_spheres, body_spheres: index tensors of the self-collision groups (``arm_slice``,
+            ``body_slice``: the same as slices; spheres are ordered so that groups are contiguous).
+        moving_spheres: ``(S',)`` indices of spheres that move with q (all but the fixed base's),
+            ``moving_slice`` the same as a slice.
         chain: pytorch-kinematics ``SerialChain`` root -> tool frame (reference FK).
     """
 
@@ -279,17 +281,21 @@ class PR2:
         unknown = [j for j in self.posture if j not in full.get_joint_parameter_names()]
         if unknown:
             raise RobotModelError(f"{self.sphere_source}: posture names unknown joints {unknown}")
-        anchors, locals_, radii, links = [], [], [], []
+        rows_ = []
         t_world = self._posture_fk()
+        groups = sph["groups"]
+        arm_links, body_links = set(groups.get("arm", [])), set(groups.get("body", []))
         for link, rows in sph["spheres"].items():
-            anchor = self._anchor_of(link)
-            t_al = np.linalg.inv(t_world[anchor]) @ t_world[link]
+            anchor = self._frame_index[self._anchor_of(link)]
+            t_al = np.linalg.inv(t_world[self.link_names[anchor]]) @ t_world[link]
+            # order: other moving, arm, body moving, static (base) -> the groups are contiguous slices
+            rank = 3 if anchor == 0 else 1 if link in arm_links else 2 if link in body_links else 0
             for x, y, z, rad in rows:
-                c = t_al[:3, :3] @ np.array([x, y, z]) + t_al[:3, 3]
-                anchors.append(self._frame_index[anchor])
-                locals_.append(c)
-                radii.append(rad)
-                links.append(link)
+                rows_.append((rank, anchor, t_al[:3, :3] @ np.array([x, y, z]) + t_al[:3, 3], rad, link))
+        rows_.sort(key=lambda r_: r_[0])  # stable: file order within a rank
+        anchors = [r_[1] for r_ in rows_]
+        locals_ = [r_[2] for r_ in rows_]
+        links = [r_[4] for r_ in rows_]
         self.sphere_links = links
         self.sphere_anchor = torch.tensor(anchors, device=self.device, dtype=torch.long)
         self._sphere_local = torch.tensor(np.asarray(locals_), device=self.device, dtype=dtype)
@@ -298,14 +304,23 @@ class PR2:
             w[a_, :3, s_] = torch.tensor(c_, dtype=dtype)
             w[a_, 3, s_] = 1.0
         self._sphere_weights = w.to(self.device)
-        self.sphere_radii = torch.tensor(radii, device=self.device, dtype=dtype)
-        groups = sph["groups"]
-        self.arm_spheres = torch.tensor([i for i, ln in enumerate(links) if ln in groups.get("arm", [])],
-                                        device=self.device, dtype=torch.long)
-        self.body_spheres = torch.tensor([i for i, ln in enumerate(links) if ln in groups.get("body", [])],
-                                         device=self.device, dtype=torch.long)
-        self.moving_spheres = torch.tensor([i for i, a in enumerate(anchors) if a != 0],
-                                           device=self.device, dtype=torch.long)
+        self.sphere_radii = torch.tensor([r_[3] for r_ in rows_], device=self.device, dtype=dtype)
+
+        def _slice(sel: list[int]) -> slice:
+            if not sel:
+                return slice(0, 0)
+            if sel != list(range(sel[0], sel[-1] + 1)):
+                raise RobotModelError(f"{self.sphere_source}: the body group must hold every fixed-base link "
+                                      "(groups must be contiguous after ordering)")
+            return slice(sel[0], sel[-1] + 1)
+
+        self.arm_slice = _slice([i for i, ln in enumerate(links) if ln in arm_links])
+        self.body_slice = _slice([i for i, ln in enumerate(links) if ln in body_links])
+        self.moving_slice = _slice([i for i, a in enumerate(anchors) if a != 0])
+        self.arm_spheres = torch.arange(len(links), device=self.device)[self.arm_slice]
+        self.body_spheres = torch.arange(len(links), device=self.device)[self.body_slice]
+        self.moving_spheres = torch.arange(len(links), device=self.device)[self.moving_slice]
+        self._pair_radii = (self.sphere_radii[self.arm_slice][:, None] + self.sphere_radii[self.body_slice][None, :])
         self._sphere_fn: Callable[..., torch.Tensor] = _sphere_kernel
         self._fk_fn: Callable[..., tuple[torch.Tensor, torch.Tensor]] = _serial_fk
         if self.compiled:
@@ -430,10 +445,11 @@ class PR2:
         Returns:
             ``(..., A, B)`` distances (m), negative where the spheres overlap.
         """
-        a = centers[..., self.arm_spheres, :]
-        b = centers[..., self.body_spheres, :]
-        d = torch.linalg.vector_norm(a.unsqueeze(-2) - b.unsqueeze(-3), dim=-1)
-        return d - (self.sphere_radii[self.arm_spheres][:, None] + self.sphere_radii[self.body_spheres][None, :])
+        a = centers[..., self.arm_slice, :]
+        b = centers[..., self.body_slice, :]
+        d2 = ((a * a).sum(-1).unsqueeze(-1) + (b * b).sum(-1).unsqueeze(-2)
+              - 2.0 * torch.matmul(a, b.transpose(-1, -2)))
+        return torch.sqrt(d2.clamp(min=1e-12)) - self._pair_radii
 
     # ------------------------------------------------------------------------------------------
     # limits and validation
