@@ -221,8 +221,8 @@ class Plan(Message):
 
     ``trajectories[k]`` has T waypoints of the D joints in ``joint_names``, ``dt`` seconds apart,
     starting at the configuration the robot will have when this plan starts executing. Goals that
-    could not be planned (e.g. IK failed) have ``valid[k] = False`` and are never chosen.
-    ``occupancy_tick`` / ``occupancy_index`` identify the prediction the costs were computed on.
+    could not be planned (e.g. IK failed) have ``valid[k] = False``, cost ``+inf`` and are never
+    chosen; valid goals have finite costs. ``occupancy_tick`` / ``occupancy_index`` identify the prediction the costs were computed on.
     """
 
     TYPE: ClassVar[str] = "Plan"
@@ -237,10 +237,10 @@ class Plan(Message):
     occupancy_tick: int
     occupancy_index: int
     trajectories: np.ndarray = array("float32", "K", "T", "D")
-    cost_smoothness: np.ndarray = array("float64", "K")
-    cost_obstacle: np.ndarray = array("float64", "K")
-    cost_human: np.ndarray = array("float64", "K")
-    cost_total: np.ndarray = array("float64", "K")
+    cost_smoothness: np.ndarray = array("float64", "K", finite=False)
+    cost_obstacle: np.ndarray = array("float64", "K", finite=False)
+    cost_human: np.ndarray = array("float64", "K", finite=False)
+    cost_total: np.ndarray = array("float64", "K", finite=False)
     valid: np.ndarray = array("bool", "K")
 
     def check(self) -> None:
@@ -252,6 +252,10 @@ class Plan(Message):
             raise _err(self.TYPE, "joint_names", f"has {len(self.joint_names)} names for {d} joints")
         if not (0 <= self.chosen < k) or not bool(self.valid[self.chosen]):
             raise _err(self.TYPE, "chosen", f"{self.chosen} is not a valid goal index")
+        for name in ("cost_smoothness", "cost_obstacle", "cost_human", "cost_total"):
+            cost = getattr(self, name)
+            if np.any(np.isnan(cost)) or not np.all(np.isfinite(cost[self.valid])) or np.any(cost == -np.inf):
+                raise _err(self.TYPE, name, "must be finite for valid goals (+inf allowed for invalid ones), no NaN")
         if not (self.dt > 0 and math.isfinite(self.dt)):
             raise _err(self.TYPE, "dt", f"must be > 0, got {self.dt}")
 
