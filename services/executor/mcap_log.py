@@ -122,6 +122,11 @@ class _DirectFile:
     def tell(self) -> int:
         return self._pos
 
+    def flush_if_due(self) -> None:
+        """Write the open chunk if it is older than ``flush_period_s`` (call it periodically)."""
+        if time.monotonic() - self._last_flush >= self.flush_period_s:
+            self.flush()
+
     def flush(self) -> None:
         """Nothing is buffered here."""
 
@@ -206,8 +211,7 @@ class McapLog:
         self._writer.add_message(channel_id=channel, log_time=log_time, data=data, publish_time=publish_time,
                                  sequence=self.counts.get(topic, 0))
         self.counts[topic] = self.counts.get(topic, 0) + 1
-        if time.monotonic() - self._last_flush >= self.flush_period_s:
-            self.flush()
+        self.flush_if_due()
 
     def write_json(self, topic: str, obj: dict[str, Any], log_time: int | None = None) -> None:
         """Write a JSON message on a Foxglove (or other JSON) topic."""
@@ -290,6 +294,11 @@ class McapLog:
                 log.exception("mcap log: Foxglove update for %s failed (%d so far)", msg.TYPE, self.viz_errors)
 
     # -- lifecycle -----------------------------------------------------------------------------
+
+    def flush_if_due(self) -> None:
+        """Write the open chunk if it is older than ``flush_period_s`` (call it periodically)."""
+        if time.monotonic() - self._last_flush >= self.flush_period_s:
+            self.flush()
 
     def flush(self) -> None:
         """Write the open chunk to the file now."""

@@ -250,6 +250,8 @@ class ExecutorService:
 
     def _publish_state(self, pub: TypedPublisher[Any], tick: int, stamp: float) -> None:
         pub.put(self.core.state(tick, stamp))
+        if self.mcap is not None:
+            self.mcap.flush_if_due()
         self._times.append(stamp)
         self._qs.append(self.core.q.copy())
 
@@ -313,6 +315,8 @@ class ExecutorService:
                 if left <= 0:
                     return False
                 self._cond.wait(min(left, 0.1))
+                if self.mcap is not None:
+                    self.mcap.flush_if_due()
         return False
 
     def _run_realtime(self, state_pub: TypedPublisher[Any]) -> None:
