@@ -230,32 +230,44 @@ class McapLog:
     # -- samples -------------------------------------------------------------------------------
 
     def on_sample(self, key: str, payload: bytes) -> Message | None:
-        """Log one sample received on ``key``; returns the decoded message (None if rejected)."""
+        """Decode and log one sample received on ``key``; returns the message (None if rejected)."""
         log_time = self._clock()
-        expected = self._expected.get(key)
         try:
-            msg: Message = decode(payload, expected)
+            msg: Message = decode(payload, self._expected.get(key))
         except ProtocolError as exc:
             self.reject(key, payload, str(exc), log_time)
             return None
+        self.log_message(key, payload, msg, log_time)
+        return msg
+
+    def log_message(self, key: str, payload: bytes, msg: Message, log_time: int | None = None) -> None:
+        """Log a payload already decoded (and so validated) as ``msg`` on ``key``'s channel."""
+        log_time = self._clock() if log_time is None else log_time
         stamp = float(getattr(msg, "stamp", -1.0))
         publish = int(stamp * 1e9) if stamp >= 0 else log_time
         with self._lock:
             if self._closed:
-                return msg
+                return
             cls = MESSAGE_TYPES[msg.TYPE]
             cid = self._channel_id(key, f"foresight.{msg.TYPE}", message_json_schema(cls), "msgpack")
             self._add(cid, key, bytes(payload), log_time, publish)
         if self.builder is not None:
             self._visualise(msg, log_time)
-        return msg
 
-    def reject(self, key: str, payload: bytes, error: str, log_time: int | None = None) -> None:
-        """Count and log a payload that failed to decode."""
+    def reject(self, key: str, payload: bytes, error: str, log_time: int | None = None, quiet: bool = False) -> None:
+        """Count a payload that failed to decode and write it to the rejects channel.
+
+        Args:
+            key: Key it arrived on.
+            payload: The bytes.
+            error: The decoder's message.
+            log_time: Receive time (ns; default now).
+            quiet: Do not log a warning (the caller already did).
+        """
         with self._lock:
             self.rejects[key] = self.rejects.get(key, 0) + 1
             n = self.rejects[key]
-        if n == 1 or n % 100 == 0:
+        if not quiet and (n == 1 or n % 100 == 0):
             log.warning("mcap log: rejected payload #%d on %s: %s", n, key, error)
         self.write_json(REJECTED_TOPIC, {"key": key, "error": error, "size": len(payload),
                                          "head_hex": bytes(payload[:64]).hex()}, log_time)

@@ -153,6 +153,7 @@ class ExecutorService:
         q0 = start_configuration(self.limits, config, robot, self.scene)
         self.core = ExecutorCore(self.limits, q0, config)
         self.rejects = RejectCounter("executor")
+        self._expected = self.keys.data_keys()
         self.result = ExecutorResult()
         self._cond = threading.Condition()
         self._latest_plan: Plan | None = None     # newest valid plan received
@@ -167,17 +168,15 @@ class ExecutorService:
     # -- inputs (Zenoh threads) ------------------------------------------------------------------
 
     def _on_sample(self, key: str, payload: bytes) -> None:
+        try:
+            msg = decode(payload, self._expected.get(key))
+        except ProtocolError as exc:
+            self.rejects.reject(key, exc)  # counted, logged (rate-limited) with the decoder's message
+            if self.mcap is not None:
+                self.mcap.reject(key, payload, str(exc), quiet=True)
+            return
         if self.mcap is not None:
-            msg = self.mcap.on_sample(key, payload)
-            if msg is None:
-                self.rejects.reject(key, ProtocolError("payload failed to decode (see the MCAP's rejects)"))
-                return
-        else:
-            try:
-                msg = decode(payload, self.keys.data_keys().get(key))
-            except ProtocolError as exc:
-                self.rejects.reject(key, exc)
-                return
+            self.mcap.log_message(key, payload, msg)
         self._dispatch(key, msg)
 
     def _dispatch(self, key: str, msg: Message) -> None:
