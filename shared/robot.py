@@ -490,14 +490,14 @@ class PR2:
             self._ik_chain = ch
         return self._ik_chain
 
-    def ik_batch(self, targets: np.ndarray | torch.Tensor, q_seed: Any, n_seeds: int = 24, seed: int = 0,
-                 pos_tolerance: float = 2e-3, rot_tolerance: float = 2e-2, max_iterations: int = 80
-                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Arm IK for M world targets with the torso held at ``q_seed``'s lift.
+    def ik_solutions(self, targets: np.ndarray | torch.Tensor, q_seed: Any, n_seeds: int = 24, seed: int = 0,
+                     pos_tolerance: float = 2e-3, rot_tolerance: float = 2e-2, max_iterations: int = 80
+                     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Arm IK for M world targets from N seeds each, the torso held at ``q_seed``'s lift.
 
         Seeds: ``q_seed``'s arm plus ``n_seeds - 1`` uniform samples within the limits (deterministic
-        from ``seed``). pytorch-kinematics' damped least-squares IK with the model's finite limits;
-        among converged solutions the one closest to ``q_seed`` is kept.
+        from ``seed``). pytorch-kinematics' damped least-squares IK (``PseudoInverseIK``) on the
+        torso -> tool chain with the model's finite limits (clamped every step).
 
         Args:
             targets: ``(M, 4, 4)`` world-from-tool targets.
@@ -509,8 +509,11 @@ class PR2:
             max_iterations: Damped least-squares iterations.
 
         Returns:
-            ``(q, ok, pos_err, rot_err)``: ``(M, D)`` solutions (within the limits), ``(M,)`` bool,
-            ``(M,)`` position error (m) and rotation error (rad) of the returned solution.
+            ``(q, ok, pos_err, rot_err)``: ``(M, N, D)`` solutions (clamped within the limits),
+            ``(M, N)`` bool converged and within limits, ``(M, N)`` position (m) and rotation (rad) errors.
+
+        Raises:
+            RobotModelError: Bad seed (shape, NaN, outside the limits) or targets not finite ``(M, 4, 4)``.
         """
         q0 = self.validate_configuration(q_seed, what="IK seed")
         tw = torch.as_tensor(np.asarray(targets, dtype=np.float64) if not torch.is_tensor(targets)
@@ -531,17 +534,25 @@ class PR2:
                                     lr=0.5, clamp_to_limits=True)
         sol = solver.solve(pk.Transform3d(matrix=local.to(self.device, self.dtype)))
         qa = sol.solutions  # (M, N, 7)
-        m = qa.shape[0]
-        full = torch.cat([q0[0].expand(m, qa.shape[1], 1), qa], dim=-1)
+        full = torch.cat([q0[0].expand(*qa.shape[:2], 1), qa], dim=-1)
         inside = self.within_limits(full)
-        good = sol.converged & inside
-        dist = (qa - q0[1:]).abs().sum(-1)
-        score = torch.where(good, dist, dist + 1e6 + (sol.err_pos + sol.err_rot) * 1e3)
+        full = torch.minimum(torch.maximum(full, self.lower), self.upper)
+        return full, sol.converged & inside, sol.err_pos, sol.err_rot
+
+    def ik_batch(self, targets: np.ndarray | torch.Tensor, q_seed: Any, **kwargs: Any
+                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Like :meth:`ik_solutions`, keeping per target the converged solution closest to ``q_seed``.
+
+        Returns:
+            ``(q, ok, pos_err, rot_err)``: ``(M, D)`` (within the limits), ``(M,)`` bool, ``(M,)``, ``(M,)``.
+        """
+        q, good, ep, er = self.ik_solutions(targets, q_seed, **kwargs)
+        q0 = self.validate_configuration(q_seed, what="IK seed")
+        dist = (q - q0).abs().sum(-1)
+        score = torch.where(good, dist, dist + 1e6 + (ep + er) * 1e3)
         best = score.argmin(dim=1)
-        ar = torch.arange(m, device=qa.device)
-        q = full[ar, best]
-        q = torch.minimum(torch.maximum(q, self.lower), self.upper)
-        return q, good[ar, best], sol.err_pos[ar, best], sol.err_rot[ar, best]
+        ar = torch.arange(q.shape[0], device=q.device)
+        return q[ar, best], good[ar, best], ep[ar, best], er[ar, best]
 
     def ik(self, target: np.ndarray, q_seed: Any, **kwargs: Any) -> tuple[torch.Tensor, bool]:
         """IK for one world target ``(4, 4)`` -> ``(q (D,), ok)``; ``q`` is always within the limits."""
