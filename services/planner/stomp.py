@@ -162,6 +162,8 @@ class Stomp:
         self.R = r.to(self.device, self.dtype)
         self.noise_chol = torch.linalg.cholesky(cov).to(self.device, self.dtype)  # (N, N) lower
         self.M = m.to(self.device, self.dtype)  # (N, N)
+        # cost-to-go as one product: S (.., N) @ U, U[j, i] = 1 for j >= i
+        self.to_go = torch.triu(torch.ones(n, n)).T.contiguous().to(self.device, self.dtype)
 
     def sample_noise(self, k: int, seeds: Sequence[int]) -> torch.Tensor:
         """Exploration noise for all iterations, drawn per goal from its own generator.
@@ -201,7 +203,7 @@ class Stomp:
         ends = q0[:, [0, -1]]
         if bool(((ends < self.lower - tol) | (ends > self.upper + tol)).any()):
             raise StompError("start or goal configuration outside the joint limits")
-        return torch.maximum(torch.minimum(q0, self.upper), self.lower)
+        return torch.clamp(q0, self.lower, self.upper)
 
     def optimize(self, q0: torch.Tensor, cost_fn: CostFn, seeds: Sequence[int] | None = None) -> StompResult:
         """Run ``config.iterations`` STOMP iterations on K trajectories at once.
@@ -240,7 +242,7 @@ class Stomp:
 
         for it in range(c.iterations):
             # 1. noisy rollouts, clamped to the joint limits (eps is the noise actually applied)
-            noisy = torch.maximum(torch.minimum(theta[:, None] + noise[it], self.upper), self.lower)
+            noisy = torch.clamp(theta[:, None] + noise[it], self.lower, self.upper)
             eps = noisy - theta[:, None]  # (K, R, N, D)
             # 2. costs of the current trajectory (rollout 0) and of the R noisy rollouts
             cost = self._cost(cost_fn, full(torch.cat([theta[:, None], noisy], 1)), k, c.rollouts + 1)
@@ -251,13 +253,13 @@ class Stomp:
             best_theta = torch.where(better[:, None, None], theta, best_theta)
             s = cost[:, 1:, 1:-1]  # (K, R, N) per free waypoint
             if c.cost_to_go:
-                s = s.flip(-1).cumsum(-1).flip(-1)
+                s = s @ self.to_go  # S(r, i) = sum_{j >= i} q(r, j)
             # 3. probabilities per waypoint over the rollouts
             s_min, s_max = s.amin(1, keepdim=True), s.amax(1, keepdim=True)
             p = torch.softmax(-c.sensitivity * (s - s_min) / (s_max - s_min).clamp_min(1e-12), dim=1)
             # 4. update: probability-weighted noise, smoothed by M, kept within the limits
             delta = torch.matmul(self.M, (p[..., None] * eps).sum(1))  # (K, N, D)
-            theta = torch.maximum(torch.minimum(theta + delta, self.upper), self.lower)
+            theta = torch.clamp(theta + delta, self.lower, self.upper)
 
         total = self._cost(cost_fn, full(theta[:, None]), k, 1)[:, 0].sum(-1)
         history.append(total)

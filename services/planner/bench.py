@@ -1,0 +1,315 @@
+"""``foresight bench planner``: time one replanning step (STOMP, all goals batched) against raw FK.
+
+For K = 1, 2, 4, 8 goals (the scene's IK goals, then joint-space perturbations of them) at the
+configured rollouts R and waypoints T, it times :meth:`Planner.step` (``iterations`` STOMP
+iterations, reconnectPrevious, cost terms) on a synthetic occupancy blob, next to the time of the
+robot's batched forward kinematics (``PR2.fk_links``, the kernel the cost uses) for the same number
+of configurations (K x R x T per iteration, times the iterations), and prints their ratio.
+``--json`` prints one JSON object with (at least) the keys ``K``, ``step_ms`` and ``fk_ms`` (lists).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from typing import Any
+
+import numpy as np
+import torch
+
+from shared.runtime import cli_errors
+from shared.scene import Scene, load_scene
+
+from .core import GoalSet, Planner, PlannerConfig
+
+__all__ = ["main", "bench_goals", "blob_occupancy", "run_bench"]
+
+
+def blob_occupancy(scene: Scene, center: tuple[float, float, float] | None = None, sigma: float = 0.12) -> np.ndarray:
+    """A synthetic predicted occupancy: a gaussian blob (peak 1) on the scene grid.
+
+    Args:
+        scene: Its ``grid`` gives the geometry.
+        center: ``(3,)`` world position of the blob (default: between the two first cups, 0.2 m above
+            the table).
+        sigma: Standard deviation (m).
+
+    Returns:
+        ``(nx, ny, nz)`` float32 probabilities.
+    """
+    if center is None:
+        cups = [c.center for c in scene.cups[:2]] or [scene.grid.min + (scene.grid.max - scene.grid.min) / 2]
+        center = tuple(np.mean(cups, axis=0) + np.array([0.0, 0.0, 0.2]))
+    c = scene.grid.centers()
+    return np.exp(-((c - np.asarray(center)) ** 2).sum(-1) / (2 * sigma**2)).astype(np.float32)
+
+
+def bench_goals(base: GoalSet, robot: Any, k: int, seed: int = 0, spread: float = 0.15) -> GoalSet:
+    """``k`` goals: the valid goals of ``base``, then seeded joint-space perturbations of them.
+
+    Args:
+        base: Goals with at least one valid entry.
+        robot: Gives the joint limits.
+        k: Number of goals wanted.
+        seed: Perturbation seed.
+        spread: Standard deviation of the perturbation (rad; the torso joint gets 1/100 of it).
+
+    Returns:
+        ``k`` valid joint-space goals (within the limits).
+    """
+    idx = torch.nonzero(base.valid).flatten().tolist()
+    gen = torch.Generator().manual_seed(seed)
+    names, qs = [], []
+    for i in range(k):
+        j = idx[i % len(idx)]
+        q = base.q[j].double().cpu()
+        if i >= len(idx):
+            scale = torch.full_like(q, spread)
+            scale[0] = spread / 100
+            q = q + scale * torch.randn(q.shape, generator=gen, dtype=torch.float64)
+        names.append(base.names[j] if i < len(idx) else f"{base.names[j]}~{i}")
+        qs.append(q)
+    lo, hi = robot.lower.double().cpu(), robot.upper.double().cpu()
+    q = torch.maximum(torch.minimum(torch.stack(qs), hi), lo)
+    return GoalSet.joint_space(names, q.numpy(), robot)
+
+
+def _time_fk(robot: Any, n: int, iterations: int, repeats: int, seed: int) -> float:
+    """Median ms of ``iterations`` calls of ``robot.fk_links`` on ``n`` random configurations."""
+    gen = torch.Generator(device=robot.lower.device).manual_seed(seed)
+    q = robot.lower + (robot.upper - robot.lower) * torch.rand(n, robot.lower.shape[0], generator=gen,
+                                                               device=robot.lower.device, dtype=robot.lower.dtype)
+    robot.fk_links(q)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(iterations):
+            robot.fk_links(q)
+        times.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(times)
+
+
+def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene | None = None,
+              progress: bool = True) -> dict[str, Any]:
+    """Time replanning steps and FK for each K; returns the report dict (see module docstring)."""
+    from tqdm import tqdm
+
+    scene = scene or load_scene()
+    base = Planner(scene, config)  # builds the robot, the cost and the IK goals once
+    occ = blob_occupancy(scene)
+    q0 = base.robot.q_start if getattr(base.robot, "q_start", None) is not None else (
+        (base.robot.lower + base.robot.upper) / 2)
+    q0 = q0.double().cpu().numpy()
+    out: dict[str, Any] = {"K": [], "step_ms": [], "step_ms_min": [], "fk_ms": [], "ratio": [],
+                           "rollouts": config.rollouts, "waypoints": config.waypoints,
+                           "iterations": config.iterations, "threads": torch.get_num_threads(),
+                           "device": config.device, "dtype": config.dtype, "steps": steps,
+                           "load_avg_1min": os.getloadavg()[0]}
+    for k in tqdm(ks, desc="bench planner", unit="K", disable=not progress, file=sys.stderr):
+        goals = bench_goals(base.goals, base.robot, k, seed=config.seed)
+        planner = Planner(scene, config, robot=base.robot, cost=base.cost, goals=goals)
+        res = planner.step(q0, occ)  # warm-up (first step: straight lines)
+        times = []
+        for _ in range(steps):
+            res = planner.step(res.start, occ)  # the robot is where the last plan starts
+            times.append(res.planning_ms)
+        fk = _time_fk(base.robot, k * config.rollouts * config.waypoints, config.iterations, 3, config.seed)
+        step_ms = statistics.median(times)
+        out["K"].append(k)
+        out["step_ms"].append(round(step_ms, 2))
+        out["step_ms_min"].append(round(min(times), 2))
+        out["fk_ms"].append(round(fk, 2))
+        out["ratio"].append(round(step_ms / fk, 2))
+    out["load_avg_1min_end"] = os.getloadavg()[0]
+    return out
+
+
+def profile_step(config: PlannerConfig, k: int = 2, rows: int = 15) -> str:
+    """A torch.profiler table (self CPU time) of one replanning step with ``k`` goals."""
+    scene = load_scene()
+    base = Planner(scene, config)
+    planner = Planner(scene, config, robot=base.robot, cost=base.cost,
+                      goals=bench_goals(base.goals, base.robot, k, seed=config.seed))
+    occ = blob_occupancy(scene)
+    res = planner.step(base.robot.q_start.double().cpu().numpy(), occ)
+    res = planner.step(res.start, occ)
+    with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU]) as prof:
+        res = planner.step(res.start, occ)
+    return (f"one replanning step, K={k}: {res.planning_ms:.1f} ms wall (profiler overhead included)\n"
+            + prof.key_averages().table(sort_by="self_cpu_time_total", row_limit=rows))
+
+
+def peak_memory_mb(k: int, config: PlannerConfig, steps: int = 3) -> float:
+    """Peak RSS (MB) of a fresh process that builds the planner and runs ``steps`` steps with ``k`` goals."""
+    code = ("import json, resource, sys; from services.planner.bench import _memory_probe; "
+            f"_memory_probe({k}, {steps}, json.loads(sys.argv[1]))")
+    cfg = {f: getattr(config, f) for f in ("device", "dtype", "threads", "seed", "rollouts", "waypoints",
+                                           "iterations")}
+    done = subprocess.run([sys.executable, "-c", code, json.dumps(cfg)], capture_output=True, text=True,
+                          timeout=600, check=True)
+    return float(done.stdout.strip().splitlines()[-1])
+
+
+def _memory_probe(k: int, steps: int, cfg: dict[str, Any]) -> None:
+    config = PlannerConfig(**cfg)
+    scene = load_scene()
+    base = Planner(scene, config)
+    planner = Planner(scene, config, robot=base.robot, cost=base.cost,
+                      goals=bench_goals(base.goals, base.robot, k, seed=config.seed))
+    occ = blob_occupancy(scene)
+    res = planner.step(base.robot.q_start.double().cpu().numpy(), occ)
+    for _ in range(steps):
+        res = planner.step(res.start, occ)
+    print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)  # Linux: KiB
+
+
+def _box_edges(lo: np.ndarray, hi: np.ndarray) -> list[np.ndarray]:
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    pairs = [(a, b) for a in range(8) for b in range(a + 1, 8) if np.sum(corners[a] != corners[b]) == 1]
+    return [corners[[a, b]] for a, b in pairs]
+
+
+def plot_blob(path: str, config: PlannerConfig | None = None, center: tuple[float, float, float] | None = None,
+              steps: int = 1) -> dict[str, Any]:
+    """Plan for the scene's goals around a synthetic blob and draw the end-effector paths (PNG).
+
+    Three panels: top view (x-y), side view (x-z) and 3-D; the optimised paths (solid), the straight
+    lines they started from (dashed), the blob (voxels with p > 0.3), the table and the cups.
+
+    Returns:
+        Per-goal human cost of the straight lines and of the optimised trajectories.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    config = config or PlannerConfig()
+    scene = load_scene()
+    planner = Planner(scene, config)
+    occ = blob_occupancy(scene, center)
+    q0 = planner.robot.q_start.double().cpu().numpy()
+    res = planner.step(q0, occ)
+    for _ in range(steps - 1):
+        res = planner.step(res.start, occ)
+    dev, dt = planner.device, planner.dtype
+    trajs = torch.as_tensor(res.trajectories, device=dev, dtype=dt)
+    from .multigoal import init_straight_lines
+
+    lines = init_straight_lines(trajs[:, 0], trajs[:, -1], trajs.shape[1])
+    t_opt, t_line = planner.cost_terms(trajs), planner.cost_terms(lines)
+    ee = planner.robot.end_effector(trajs)[..., :3, 3].cpu().numpy()  # (K, T, 3)
+    ee_line = planner.robot.end_effector(lines)[..., :3, 3].cpu().numpy()
+    blob = scene.grid.centers()[occ > 0.3]
+    fig = plt.figure(figsize=(16, 5.5))
+    axes = [fig.add_subplot(1, 3, 1), fig.add_subplot(1, 3, 2), fig.add_subplot(1, 3, 3, projection="3d")]
+    colors = ["tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown", "tab:pink", "tab:gray"]
+    for ax, (i, j), title in zip(axes[:2], [(0, 1), (0, 2)], ["top view (x-y)", "side view (x-z)"], strict=True):
+        ax.scatter(blob[:, i], blob[:, j], s=4, c="orange", alpha=0.15, label="occupancy p > 0.3")
+        for b in scene.boxes:
+            ax.add_patch(plt.Rectangle((b.lower[i], b.lower[j]), b.size[i], b.size[j], fill=False, color="k",
+                                       label=b.name))
+        for cup in scene.cups:
+            ax.add_patch(plt.Circle((cup.center[i], cup.center[j]), cup.radius, color="saddlebrown", alpha=0.7))
+            ax.annotate(cup.name, (cup.center[i], cup.center[j]), fontsize=8, xytext=(4, 4), textcoords="offset points")
+        for k in range(ee.shape[0]):
+            col = colors[k % len(colors)]
+            ax.plot(ee_line[k, :, i], ee_line[k, :, j], "--", color=col, alpha=0.6)
+            ax.plot(ee[k, :, i], ee[k, :, j], "-o", ms=2, color=col,
+                    label=f"{res.goal_names[k]}{' (chosen)' if k == res.chosen else ''}")
+        ax.plot(ee[0, 0, i], ee[0, 0, j], "k*", ms=10, label="start")
+        ax.set_xlabel("xyz"[i] + " (m)")
+        ax.set_ylabel("xyz"[j] + " (m)")
+        ax.set_aspect("equal")
+        ax.set_title(title)
+    axes[0].legend(fontsize=7, loc="best")
+    ax3 = axes[2]
+    ax3.scatter(blob[:, 0], blob[:, 1], blob[:, 2], s=3, c="orange", alpha=0.08)
+    for b in scene.boxes:
+        for e in _box_edges(b.lower, b.upper):
+            ax3.plot(e[:, 0], e[:, 1], e[:, 2], "k-", lw=0.8)
+    for cup in scene.cups:
+        ax3.plot([cup.position[0]] * 2, [cup.position[1]] * 2, [cup.position[2], cup.position[2] + cup.height],
+                 color="saddlebrown", lw=5)
+    for k in range(ee.shape[0]):
+        col = colors[k % len(colors)]
+        ax3.plot(ee_line[k, :, 0], ee_line[k, :, 1], ee_line[k, :, 2], "--", color=col, alpha=0.6)
+        ax3.plot(ee[k, :, 0], ee[k, :, 1], ee[k, :, 2], "-", color=col, lw=2)
+    ax3.set_xlabel("x")
+    ax3.set_ylabel("y")
+    ax3.set_zlabel("z")
+    ax3.set_title("3-D (dashed: straight lines in joint space)")
+    human_line = t_line["human"].double().cpu().numpy()
+    human_opt = t_opt["human"].double().cpu().numpy()
+    fig.suptitle("STOMP around a predicted-occupancy blob: end-effector paths; human cost straight -> optimised: "
+                 + ", ".join(f"{n} {a:.2f} -> {b:.3f}" for n, a, b in zip(res.goal_names, human_line, human_opt,
+                                                                           strict=True)), fontsize=10)
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return {"goal_names": res.goal_names, "human_straight": human_line.tolist(), "human_optimised": human_opt.tolist(),
+            "chosen": res.chosen, "png": path}
+
+
+def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -> int:
+    """Run the planner benchmark; see ``--help``."""
+    p = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    p.add_argument("--json", action="store_true", help="print one JSON object (keys K, step_ms, fk_ms, ...)")
+    p.add_argument("--k", default="1,2,4,8", help="comma-separated goal counts (default 1,2,4,8)")
+    p.add_argument("--steps", type=int, default=5, help="timed replanning steps per K (median reported)")
+    p.add_argument("--rollouts", type=int, default=16)
+    p.add_argument("--waypoints", type=int, default=40)
+    p.add_argument("--iterations", type=int, default=50)
+    p.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--profile", action="store_true", help="also print a torch.profiler table of a K=2 step")
+    p.add_argument("--memory", action="store_true", help="also measure the peak RSS of a K=8 planning process")
+    p.add_argument("--plot", metavar="PNG", default=None,
+                   help="also plan around a blob and draw the paths (e.g. runs/plots/stomp_blob.png)")
+    args = p.parse_args(argv)
+    with cli_errors(prog):
+        try:
+            ks = [int(x) for x in args.k.split(",") if x.strip()]
+        except ValueError:
+            p.error(f"--k: expected comma-separated integers, got {args.k!r}")
+        if not ks or min(ks) < 1 or args.steps < 1:
+            p.error("--k values and --steps must be >= 1")
+        config = PlannerConfig(rollouts=args.rollouts, waypoints=args.waypoints, iterations=args.iterations,
+                               threads=args.threads, device=args.device)
+        report = run_bench(ks, config, steps=args.steps, progress=not args.json)
+        if args.memory:
+            report["peak_rss_mb"] = round(peak_memory_mb(max(ks), config), 1)
+            report["peak_rss_K"] = max(ks)
+        if args.json:
+            print(json.dumps(report))
+        else:
+            print(f"planner step ({config.iterations} STOMP iterations, R={config.rollouts}, T={config.waypoints}, "
+                  f"{report['threads']} threads, {config.device}, {config.dtype}); load avg "
+                  f"{report['load_avg_1min']:.2f} -> {report['load_avg_1min_end']:.2f} (other processes share the CPU)")
+            print(f"{'K':>3} {'step ms':>9} {'min ms':>8} {'FK ms':>8} {'step/FK':>8}")
+            for i, k in enumerate(report["K"]):
+                print(f"{k:>3} {report['step_ms'][i]:>9.1f} {report['step_ms_min'][i]:>8.1f} "
+                      f"{report['fk_ms'][i]:>8.1f} {report['ratio'][i]:>8.2f}")
+            print("FK ms = fk_links on K*R*T configurations x iterations (the planner costs K*(R+1)*T per iteration)")
+            if args.memory:
+                print(f"peak RSS of a K={report['peak_rss_K']} planning process: {report['peak_rss_mb']:.0f} MB")
+        if args.profile:
+            print(profile_step(config), file=sys.stderr if args.json else sys.stdout)
+        if args.plot:
+            info = plot_blob(args.plot, config)
+            print(f"wrote {info['png']}: human cost straight -> optimised "
+                  + ", ".join(f"{n} {a:.2f} -> {b:.3f}" for n, a, b in zip(info["goal_names"], info["human_straight"],
+                                                                          info["human_optimised"], strict=True)),
+                  file=sys.stderr if args.json else sys.stdout)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

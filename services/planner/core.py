@@ -1,0 +1,431 @@
+"""Pure multi-goal planner (Algorithm 1 of Mainprice & Berenson, IROS 2013); no Zenoh in here.
+
+:class:`Planner` holds the robot model, the goal configurations, the state cost (obstacle signed
+distance + predicted human occupancy) and a batched :class:`~services.planner.stomp.Stomp`. Each
+:meth:`Planner.step` is one replanning step:
+
+1. validate the robot configuration and the occupancy grid (``PlannerInputError`` naming the problem);
+2. set the predicted occupancy X in the cost (predictVoxelOccupancy happens in the predictor);
+3. ``q_t``: where the robot will be when this plan starts, i.e. ``lookahead_s`` further along the
+   previous tau_best from the robot's projection onto it (or the robot's configuration itself on the
+   first step or when it has left tau_best);
+4. reconnectPrevious for every goal (initStraightLines on the first step);
+5. STOMP for all valid goals in one batch (``iterations`` iterations);
+6. getBestTrajectory: the least total cost (smoothness + obstacle + human) among valid goals.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from shared.config import ConfigError, opt
+from shared.protocol import OccupancyGrid
+from shared.scene import Grid, Scene
+
+from .multigoal import best, init_straight_lines, interpolate_path, project_onto_path, reconnect_previous
+from .stomp import Stomp, StompConfig
+
+__all__ = ["PlannerConfig", "PlannerError", "PlannerInputError", "GoalSet", "PlanResult", "Planner",
+           "acceleration_cost"]
+
+log = logging.getLogger("foresight.planner")
+
+
+class PlannerError(ValueError):
+    """The planner cannot plan (e.g. no reachable goal); the message says why."""
+
+
+class PlannerInputError(PlannerError):
+    """A replanning step's input (configuration, occupancy grid) is malformed; the message names it."""
+
+
+@dataclass
+class PlannerConfig:
+    """The ``[planner]`` config section: STOMP, costs, timing and device."""
+
+    device: str = opt("cpu", help="torch device (cpu, cuda, cuda:1, ...)")
+    dtype: str = opt("float32", help="torch float dtype", choices=("float32", "float64"))
+    threads: int = opt(0, help="torch intra-op threads (0: leave torch's default)")
+    seed: int = opt(0, help="base seed of STOMP's exploration noise (per step and goal)")
+    goals: list[str] = opt(default_factory=list, help="cup names to plan for, in order (empty: every cup)")
+    rollouts: int = opt(16, help="STOMP noisy rollouts R per goal and iteration")
+    waypoints: int = opt(40, help="STOMP waypoints T per trajectory")
+    iterations: int = opt(50, help="STOMP iterations per replanning step")
+    noise_std: float = opt(0.1, help="STOMP exploration noise std (rad, m for the torso) mid-trajectory")
+    joint_noise_scale: list[float] = opt(default_factory=list,
+                                         help="per-joint factors on noise_std (empty: velocity limits / their max)")
+    noise_decay: float = opt(1.0, help="STOMP noise factor per iteration (1: constant)")
+    sensitivity: float = opt(10.0, help="STOMP sensitivity h of the per-waypoint probabilities")
+    cost_to_go: bool = opt(True, help="rank rollouts by cost-to-go (else by the waypoint's own cost)")
+    w_smooth: float = opt(-1.0, help="weight of the squared accelerations (negative: the cost model's default)")
+    w_obstacle: float = opt(-1.0, help="weight of the obstacle cost (negative: the cost model's default)")
+    w_human: float = opt(-1.0, help="weight of the human occupancy cost (negative: the cost model's default)")
+    lookahead_s: float = opt(0.5, help="time the robot executes tau_best while a step is planned (s)")
+    velocity_scale: float = opt(0.5, help="fraction of the joint velocity limits used to time trajectories")
+    min_dt: float = opt(0.01, help="smallest time between waypoints (s)")
+    off_path_tol: float = opt(0.05, help="joint-space distance beyond which the robot is taken as off tau_best")
+    limit_tol: float = opt(1e-3, help="start configurations this far outside the limits are clamped, not refused")
+
+    def validate(self) -> None:
+        """Raise :class:`ConfigError` naming the first bad value."""
+        try:
+            self.stomp().validate()
+        except ValueError as exc:
+            raise ConfigError(str(exc).replace("stomp.", "planner.")) from None
+        checks = [("threads", self.threads >= 0), ("lookahead_s", self.lookahead_s >= 0),
+                  ("velocity_scale", 0 < self.velocity_scale <= 1), ("min_dt", self.min_dt > 0),
+                  ("off_path_tol", self.off_path_tol >= 0), ("limit_tol", self.limit_tol >= 0)]
+        for name, ok in checks:
+            if not ok:
+                raise ConfigError(f"planner.{name}: bad value {getattr(self, name)!r}")
+
+    def stomp(self, joint_noise_scale: Sequence[float] | None = None) -> StompConfig:
+        """The :class:`StompConfig` these settings describe (``joint_noise_scale`` if not configured)."""
+        scale = list(self.joint_noise_scale or joint_noise_scale or [])
+        return StompConfig(rollouts=self.rollouts, waypoints=self.waypoints, iterations=self.iterations,
+                           noise_std=self.noise_std, joint_noise_scale=scale, noise_decay=self.noise_decay,
+                           sensitivity=self.sensitivity, cost_to_go=self.cost_to_go, seed=self.seed,
+                           device=self.device, dtype=self.dtype)
+
+
+@dataclass
+class GoalSet:
+    """The K goals planned for.
+
+    Attributes:
+        names: K goal names (e.g. cup names).
+        q: ``(K, D)`` goal configurations (within the joint limits; arbitrary where invalid).
+        valid: ``(K,)`` bool, goals that can be planned for.
+        reasons: K strings, why a goal is invalid ("" when valid).
+    """
+
+    names: list[str]
+    q: torch.Tensor
+    valid: torch.Tensor
+    reasons: list[str] = field(default_factory=list)
+
+    @classmethod
+    def joint_space(cls, names: Sequence[str], q: Any, robot: Any) -> GoalSet:
+        """Goals given directly as configurations ``q`` ``(K, D)``; those outside the limits are invalid."""
+        q = torch.as_tensor(np.asarray(q, dtype=np.float64), device=robot.lower.device, dtype=robot.lower.dtype)
+        if q.ndim != 2 or q.shape[1] != robot.lower.shape[0] or len(names) != q.shape[0]:
+            raise PlannerError(f"joint-space goals must be (K, {robot.lower.shape[0]}) with K names, "
+                               f"got {tuple(q.shape)} and {len(names)} names")
+        finite = torch.isfinite(q).all(-1)
+        inside = ((q >= robot.lower - 1e-6) & (q <= robot.upper + 1e-6)).all(-1) & finite
+        reasons = ["" if bool(ok) else "goal configuration outside the joint limits" for ok in inside]
+        q = torch.where(finite[:, None], q, robot.lower.expand_as(q))
+        return cls(list(names), torch.maximum(torch.minimum(q, robot.upper), robot.lower), inside, reasons)
+
+
+@dataclass
+class PlanResult:
+    """One replanning step's output (numpy, on the host).
+
+    Attributes:
+        step: Replanning step index (0 for the first).
+        goal_names: K names; joint_names: D names.
+        trajectories: ``(K, T, D)`` float32 trajectories, all starting at ``start`` and within the
+            limits; an invalid goal's trajectory holds ``start``.
+        cost_smoothness, cost_obstacle, cost_human, cost_total: ``(K,)`` float64 (inf where invalid).
+        valid: ``(K,)`` bool.
+        chosen: Index of tau_best (a valid goal).
+        dt: Seconds between waypoints of the chosen trajectory (velocity limits x ``velocity_scale``).
+        start: ``(D,)`` the configuration the trajectories start at (q_t).
+        planning_ms: Wall time of :meth:`Planner.step`.
+        reasons: Why each invalid goal is invalid.
+    """
+
+    step: int
+    goal_names: list[str]
+    joint_names: list[str]
+    trajectories: np.ndarray
+    cost_smoothness: np.ndarray
+    cost_obstacle: np.ndarray
+    cost_human: np.ndarray
+    cost_total: np.ndarray
+    valid: np.ndarray
+    chosen: int
+    dt: float
+    start: np.ndarray
+    planning_ms: float
+    reasons: list[str]
+
+
+def acceleration_cost(q: torch.Tensor) -> torch.Tensor:
+    """Squared joint accelerations (finite differences) per waypoint.
+
+    Args:
+        q: ``(..., T, D)`` trajectories.
+
+    Returns:
+        ``(..., T)``: ``|q[t+1] - 2 q[t] + q[t-1]|^2`` at interior waypoints, 0 at both ends; the sum over
+        T is the trajectory's smoothness cost.
+    """
+    acc = q[..., 2:, :] - 2 * q[..., 1:-1, :] + q[..., :-2, :]
+    return F.pad((acc * acc).sum(-1), (1, 1))
+
+
+class Planner:
+    """Multi-goal STOMP planner over a scene (Algorithm 1).
+
+    Args:
+        scene: The scene (robot placement, obstacles, cups, grid).
+        config: Planner settings.
+        robot: A robot model (default: ``PR2.from_scene``) with ``lower``, ``upper``,
+            ``velocity_limits``, ``joint_names``.
+        cost: State cost ``q (K, R, T, D) -> (K, R, T, 2)`` (obstacle, human) with
+            ``set_occupancy(occ, origin, resolution)`` (default: the PR2 ``StateCost`` of the scene).
+        goals: Goals with ``names``, ``q (K, D)``, ``valid (K,)`` and ``reasons`` (a :class:`GoalSet`, or
+            by default the ``IKGoals`` of a pre-grasp at each cup of ``config.goals``).
+        w_smooth: Weight of the squared accelerations (default: the cost model's ``config.w_smooth``).
+
+    Raises:
+        PlannerError: If no goal is valid.
+    """
+
+    def __init__(self, scene: Scene, config: PlannerConfig | None = None, *, robot: Any = None, cost: Any = None,
+                 goals: Any = None, w_smooth: float | None = None) -> None:
+        self.config = config or PlannerConfig()
+        self.config.validate()
+        c = self.config
+        if c.threads:
+            torch.set_num_threads(c.threads)
+        self.scene = scene
+        self.device = torch.device(c.device)
+        self.dtype = torch.float32 if c.dtype == "float32" else torch.float64
+        if robot is None:
+            from shared.robot import PR2
+
+            robot = PR2.from_scene(scene, device=self.device, dtype=self.dtype)
+        self.robot = robot
+        if cost is None:
+            cost = _default_cost(scene, robot, c)
+        self.cost = cost
+        if w_smooth is None:
+            w_smooth = c.w_smooth if c.w_smooth >= 0 else float(getattr(getattr(cost, "config", None), "w_smooth", 1.0))
+        self.w_smooth = float(w_smooth)
+        if goals is None:
+            goals = _default_goals(scene, robot, cost, c)
+        if not bool(goals.valid.any()):
+            raise PlannerError("no reachable goal: " + "; ".join(f"{n}: {r}" for n, r in
+                                                                 zip(goals.names, goals.reasons, strict=False)))
+        self.goals = goals
+        for name, reason in zip(goals.names, goals.reasons, strict=False):
+            if reason:
+                log.warning("goal %s dropped: %s", name, reason)
+        self.lower, self.upper = robot.lower.to(self.device, self.dtype), robot.upper.to(self.device, self.dtype)
+        vel = robot.velocity_limits.double().cpu()
+        self.stomp = Stomp(c.stomp((vel / vel.max()).tolist()), (self.lower, self.upper))
+        self.valid_index = torch.nonzero(goals.valid.cpu()).flatten().tolist()
+        self.goal_q = goals.q.to(self.device, self.dtype)[self.valid_index]  # (Kv, D)
+        self.step_index = 0
+        self._prev: torch.Tensor | None = None  # (Kv, T, D) previous optimised trajectories
+        self._prev_best: int | None = None  # index into the valid goals
+        self._prev_dt = 1.0
+        self._occupancy_set = False
+
+    # ------------------------------------------------------------------------------------------
+    # costs
+
+    def waypoint_cost(self, q: torch.Tensor) -> torch.Tensor:
+        """Total cost per waypoint, the callable STOMP optimises.
+
+        Args:
+            q: ``(K, R, T, D)`` trajectories.
+
+        Returns:
+            ``(K, R, T)``: ``w_smooth`` x squared acceleration + obstacle + human terms.
+        """
+        return self.cost(q).sum(-1) + self.w_smooth * acceleration_cost(q)
+
+    def cost_terms(self, q: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Per-trajectory cost terms.
+
+        Args:
+            q: ``(K, T, D)`` trajectories.
+
+        Returns:
+            ``{"smoothness", "obstacle", "human", "total"}`` -> ``(K,)`` each.
+        """
+        terms = self.cost(q[:, None])[:, 0].sum(1)  # (K, 2)
+        smooth = self.w_smooth * acceleration_cost(q).sum(-1)
+        out = {"smoothness": smooth, "obstacle": terms[:, 0], "human": terms[:, 1]}
+        out["total"] = out["smoothness"] + out["obstacle"] + out["human"]
+        return out
+
+    # ------------------------------------------------------------------------------------------
+    # input checks
+
+    def check_configuration(self, q: Any) -> torch.Tensor:
+        """Validate a robot configuration ``(D,)``; returns it as a tensor clamped into the limits.
+
+        Raises:
+            PlannerInputError: Wrong shape, not finite, or more than ``limit_tol`` outside the limits.
+        """
+        d = self.lower.shape[0]
+        try:
+            arr = np.asarray(q, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise PlannerInputError(f"robot configuration must be {d} numbers, got {q!r}") from None
+        if arr.shape != (d,):
+            raise PlannerInputError(f"robot configuration must have shape ({d},), got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise PlannerInputError(f"robot configuration contains NaN or inf: {arr.tolist()}")
+        lo, hi = self.lower.double().cpu().numpy(), self.upper.double().cpu().numpy()
+        bad = np.nonzero((arr < lo - self.config.limit_tol) | (arr > hi + self.config.limit_tol))[0]
+        if bad.size:
+            names = getattr(self.robot, "joint_names", [str(i) for i in range(d)])
+            what = ", ".join(f"{names[i]}={arr[i]:.4f} not in [{lo[i]:.4f}, {hi[i]:.4f}]" for i in bad)
+            raise PlannerInputError(f"robot configuration outside the joint limits: {what}")
+        return torch.as_tensor(np.clip(arr, lo, hi), device=self.device, dtype=self.dtype)
+
+    def check_occupancy(self, occupancy: Any, grid: Grid | None = None) -> tuple[torch.Tensor, np.ndarray, float]:
+        """Validate an occupancy grid: an ``OccupancyGrid`` message or a dense ``(nx, ny, nz)`` array.
+
+        Args:
+            occupancy: The message, or a dense array of probabilities in [0, 1].
+            grid: Geometry of a dense array (default: the scene's grid).
+
+        Returns:
+            ``(occ (nx, ny, nz) tensor, origin (3,), resolution)``.
+
+        Raises:
+            PlannerInputError: Wrong shape or geometry, NaN, values outside [0, 1].
+        """
+        if isinstance(occupancy, OccupancyGrid):
+            try:
+                occupancy.check()
+            except ValueError as exc:
+                raise PlannerInputError(f"occupancy grid: {exc}") from None
+            dense, origin, res = occupancy.to_dense(), np.asarray(occupancy.origin, float), float(occupancy.resolution)
+        else:
+            grid = grid or self.scene.grid
+            try:
+                dense = np.asarray(occupancy, dtype=np.float32)
+            except (TypeError, ValueError):
+                raise PlannerInputError("occupancy grid is not a numeric array") from None
+            if dense.shape != tuple(grid.dims):
+                raise PlannerInputError(f"occupancy grid has shape {dense.shape}, expected {tuple(grid.dims)} "
+                                        f"for the grid {grid.min.tolist()}..{grid.max.tolist()} at {grid.resolution} m")
+            origin, res = np.asarray(grid.origin, float), float(grid.resolution)
+        if dense.ndim != 3:
+            raise PlannerInputError(f"occupancy grid must be 3-D, got shape {dense.shape}")
+        if not np.all(np.isfinite(dense)):
+            raise PlannerInputError(f"occupancy grid contains {int(np.sum(~np.isfinite(dense)))} NaN/inf values")
+        if dense.size and (dense.min() < 0 or dense.max() > 1):
+            raise PlannerInputError(f"occupancy values must be in [0, 1], got [{dense.min()}, {dense.max()}]")
+        if not (math.isfinite(res) and res > 0) or not np.all(np.isfinite(origin)):
+            raise PlannerInputError(f"occupancy grid geometry invalid: origin {origin}, resolution {res}")
+        return torch.as_tensor(dense, device=self.device, dtype=self.dtype), origin, res
+
+    # ------------------------------------------------------------------------------------------
+    # Algorithm 1
+
+    def reset(self) -> None:
+        """Forget the previous trajectories (next step starts from straight lines)."""
+        self._prev, self._prev_best, self.step_index = None, None, 0
+
+    def _seeds(self) -> list[int]:
+        ss = np.random.SeedSequence([self.config.seed, self.step_index])
+        return [int(x) for x in ss.generate_state(len(self.goals.names))[self.valid_index]]
+
+    def _dt(self, traj: torch.Tensor) -> torch.Tensor:
+        """``(K, T, D)`` -> ``(K,)`` seconds per waypoint so no joint exceeds its scaled velocity limit."""
+        vmax = self.robot.velocity_limits.to(self.device, self.dtype) * self.config.velocity_scale
+        step = ((traj[:, 1:] - traj[:, :-1]).abs() / vmax).amax(dim=(1, 2))
+        return step.clamp_min(self.config.min_dt)
+
+    def start_configuration(self, q_current: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """``q_t``: where the robot will be when the new plan starts, and its index on tau_best.
+
+        Args:
+            q_current: ``(D,)`` the robot's configuration now.
+
+        Returns:
+            ``(q_t (D,), s_t)``: ``s_t`` is the fractional waypoint index on the previous tau_best, or
+            None on the first step or when the robot is farther than ``off_path_tol`` from tau_best.
+        """
+        if self._prev is None or self._prev_best is None:
+            return q_current, None
+        tau = self._prev[self._prev_best]
+        s_cur, dist = project_onto_path(tau, q_current)
+        if float(dist) > self.config.off_path_tol:
+            log.info("robot %.3f from tau_best: reconnecting every goal from its configuration", float(dist))
+            return q_current, None
+        s_t = (s_cur + self.config.lookahead_s / self._prev_dt).clamp(max=tau.shape[0] - 1)
+        return interpolate_path(tau, s_t), s_t
+
+    def step(self, q_current: Any, occupancy: Any, grid: Grid | None = None) -> PlanResult:
+        """One replanning step of Algorithm 1.
+
+        Args:
+            q_current: ``(D,)`` the robot's configuration.
+            occupancy: Predicted occupancy: an ``OccupancyGrid`` message or a dense ``(nx, ny, nz)``
+                array of probabilities on ``grid``.
+            grid: Geometry of a dense ``occupancy`` (default: the scene's grid).
+
+        Returns:
+            The K trajectories, their cost terms and the chosen goal.
+
+        Raises:
+            PlannerInputError: Malformed input; the planner's state is left unchanged.
+        """
+        t0 = time.perf_counter()
+        q = self.check_configuration(q_current)
+        occ, origin, res = self.check_occupancy(occupancy, grid)
+        self.cost.set_occupancy(occ, origin, res)
+        c = self.config
+        q_t, s_t = self.start_configuration(q)
+        if self._prev is None:
+            init = init_straight_lines(q_t, self.goal_q, c.waypoints)
+        else:
+            init = reconnect_previous(self._prev, self._prev_best, q_t, s_t, self.waypoint_cost)
+        result = self.stomp.optimize(init, self.waypoint_cost, seeds=self._seeds())
+        trajs = result.trajectories  # (Kv, T, D)
+        terms = self.cost_terms(trajs)
+        valid = torch.ones(len(self.valid_index), dtype=torch.bool, device=self.device)
+        chosen_v = best(terms["total"], valid)
+        dts = self._dt(trajs)
+        self._prev, self._prev_best, self._prev_dt = trajs, chosen_v, float(dts[chosen_v])
+
+        k = len(self.goals.names)
+        out_traj = q_t.expand(k, c.waypoints, -1).clone()
+        out_traj[self.valid_index] = trajs
+        costs = {name: np.full(k, np.inf) for name in ("smoothness", "obstacle", "human", "total")}
+        for name in costs:
+            costs[name][self.valid_index] = terms[name].double().cpu().numpy()
+        result_step = self.step_index
+        self.step_index += 1
+        return PlanResult(
+            step=result_step, goal_names=list(self.goals.names), joint_names=list(self.robot.joint_names),
+            trajectories=out_traj.float().cpu().numpy(), cost_smoothness=costs["smoothness"],
+            cost_obstacle=costs["obstacle"], cost_human=costs["human"], cost_total=costs["total"],
+            valid=self.goals.valid.cpu().numpy().astype(bool), chosen=self.valid_index[chosen_v],
+            dt=self._prev_dt, start=q_t.double().cpu().numpy(), planning_ms=(time.perf_counter() - t0) * 1e3,
+            reasons=list(self.goals.reasons) or [""] * k)
+
+
+def _default_cost(scene: Scene, robot: Any, config: PlannerConfig) -> Callable[[torch.Tensor], torch.Tensor]:
+    """The PR2's :class:`~services.planner.costs.StateCost` of the scene, weights overridden by ``config``."""
+    from .costs import CostConfig, StateCost
+
+    weights = {n: getattr(config, n) for n in ("w_smooth", "w_obstacle", "w_human") if getattr(config, n) >= 0}
+    return StateCost.from_scene(scene, robot, dataclasses.replace(CostConfig(), **weights))
+
+
+def _default_goals(scene: Scene, robot: Any, cost: Any, config: PlannerConfig) -> Any:
+    """A pre-grasp goal at each cup of ``config.goals`` (default: every cup) by IK (``goals.cup_goals``)."""
+    from .goals import cup_goals
+
+    return cup_goals(scene, robot, cost, names=config.goals or None)

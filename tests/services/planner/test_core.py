@@ -1,0 +1,189 @@
+"""Planner core (Algorithm 1) on a toy planar robot, and on the PR2 with its real state cost."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from services.planner.core import GoalSet, Planner, PlannerConfig, PlannerError, PlannerInputError
+from services.planner.multigoal import init_straight_lines
+from shared.protocol import OccupancyGrid
+from shared.scene import load_scene
+
+
+class ToyRobot:
+    """Two prismatic joints moving a point in the plane z = 1 m of the scene."""
+
+    joint_names = ["x", "y"]
+    lower = torch.tensor([-0.5, -1.0])
+    upper = torch.tensor([1.2, 0.3])
+    velocity_limits = torch.tensor([1.0, 1.0])
+
+
+class ToyCost:
+    """(K, R, T, 2) -> (K, R, T, 2): no obstacle; the occupancy at (x, y, 1.0) as the human term."""
+
+    terms = ("obstacle", "human")
+
+    def set_occupancy(self, occupancy: torch.Tensor, origin: np.ndarray, resolution: float) -> None:
+        self.occ, self.origin, self.res = occupancy, torch.as_tensor(origin, dtype=torch.float32), resolution
+
+    def __call__(self, q: torch.Tensor) -> torch.Tensor:
+        xyz = torch.cat([q, torch.ones_like(q[..., :1])], -1)
+        idx = ((xyz - self.origin) / self.res).floor().long()
+        dims = torch.tensor(self.occ.shape)
+        idx = torch.minimum(torch.maximum(idx, torch.zeros(3, dtype=torch.long)), dims - 1)
+        human = 10 * self.occ[idx[..., 0], idx[..., 1], idx[..., 2]]
+        return torch.stack([torch.zeros_like(human), human], -1)
+
+
+@pytest.fixture
+def scene():
+    return load_scene()
+
+
+def blob_grid(scene, center=(0.5, -0.2, 1.0), sigma=0.12) -> np.ndarray:
+    """Dense (nx, ny, nz) gaussian occupancy blob on the scene grid."""
+    c = scene.grid.centers()
+    return np.exp(-((c - np.asarray(center)) ** 2).sum(-1) / (2 * sigma**2)).astype(np.float32)
+
+
+def toy_planner(scene, **cfg) -> Planner:
+    goals = GoalSet.joint_space(["a", "b"], [[1.0, -0.2], [0.9, 0.2]], ToyRobot)
+    config = PlannerConfig(**{"noise_std": 0.1, **cfg})
+    return Planner(scene, config, robot=ToyRobot(), cost=ToyCost(), goals=goals, w_smooth=5.0)
+
+
+def test_first_step_plans_around_the_blob(scene) -> None:
+    planner = toy_planner(scene)
+    occ = blob_grid(scene)
+    res = planner.step([0.0, -0.2], occ)
+    assert res.trajectories.shape == (2, 40, 2) and res.step == 0
+    assert np.allclose(res.trajectories[:, 0], [0.0, -0.2]) and np.allclose(res.start, [0.0, -0.2])
+    assert np.allclose(res.trajectories[:, -1], [[1.0, -0.2], [0.9, 0.2]], atol=1e-6)
+    assert np.all(res.trajectories >= ToyRobot.lower.numpy()) and np.all(res.trajectories <= ToyRobot.upper.numpy())
+    assert res.valid.all() and res.chosen in (0, 1) and res.dt > 0 and res.planning_ms > 0
+    assert np.allclose(res.cost_total, res.cost_smoothness + res.cost_obstacle + res.cost_human)
+    assert res.cost_total[res.chosen] == res.cost_total.min()
+    # the straight line to goal a crosses the blob; the optimised one is >= 10x less penetrating
+    line = torch.stack([torch.linspace(0, 1, 40), torch.full((40,), -0.2)], -1)[None]
+    straight = float(planner.cost_terms(line)["human"][0])
+    assert res.cost_human[0] * 10 <= straight
+
+
+def test_next_step_starts_ahead_on_tau_best(scene) -> None:
+    planner = toy_planner(scene, lookahead_s=0.3, iterations=20)
+    occ = blob_grid(scene)
+    first = planner.step([0.0, -0.2], occ)
+    tau = torch.as_tensor(first.trajectories[first.chosen])
+    q_now = tau[3]  # the robot followed tau_best for 3 waypoints
+    second = planner.step(q_now.numpy(), occ)
+    assert second.step == 1
+    assert np.allclose(second.trajectories[:, 0], second.start)
+    # q_t lies on tau_best, 0.3 s further than q_now
+    s_expected = 3 + 0.3 / first.dt
+    i = int(s_expected)
+    expected = tau[i] + (s_expected - i) * (tau[i + 1] - tau[i])
+    assert np.allclose(second.start, expected.numpy(), atol=1e-4)
+    assert np.allclose(second.trajectories[:, -1], [[1.0, -0.2], [0.9, 0.2]], atol=1e-6)
+    # off the path: restart from the robot's own configuration
+    third = planner.step([0.0, 0.25], occ)
+    assert np.allclose(third.start, [0.0, 0.25]) and np.allclose(third.trajectories[:, 0], [0.0, 0.25])
+
+
+def test_bad_input_is_refused_and_the_planner_keeps_working(scene) -> None:
+    planner = toy_planner(scene, iterations=5)
+    occ = blob_grid(scene)
+    with pytest.raises(PlannerInputError, match="shape"):
+        planner.step([0.0, 0.0], occ[:-1])
+    nan = occ.copy()
+    nan[3, 4, 5] = np.nan
+    with pytest.raises(PlannerInputError, match="NaN"):
+        planner.step([0.0, 0.0], nan)
+    with pytest.raises(PlannerInputError, match=r"\[0, 1\]"):
+        planner.step([0.0, 0.0], occ * 3)
+    with pytest.raises(PlannerInputError, match="outside the joint limits: y"):
+        planner.step([0.0, 0.5], occ)
+    with pytest.raises(PlannerInputError, match="shape"):
+        planner.step([0.0, 0.0, 0.0], occ)
+    with pytest.raises(PlannerInputError, match="NaN"):
+        planner.step([np.nan, 0.0], occ)
+    assert planner.step_index == 0
+    res = planner.step([0.0, 0.3 + 5e-4], occ)  # within limit_tol: clamped
+    assert np.allclose(res.start, [0.0, 0.3]) and res.step == 0
+
+
+def test_occupancy_message_equals_dense(scene) -> None:
+    occ = blob_grid(scene)
+    msg = OccupancyGrid.from_dense(occ, scene.grid.origin, scene.grid.resolution, stamp=0.0, tick=-1, demo_id=0,
+                                   index=0, method="prediction", tick_last=True)
+    a = toy_planner(scene, iterations=10).step([0.0, -0.2], msg)
+    b = toy_planner(scene, iterations=10).step([0.0, -0.2], msg.to_dense())
+    assert np.array_equal(a.trajectories, b.trajectories)  # same seeds: deterministic
+    bad = OccupancyGrid.from_dense(occ[:, :, :10], scene.grid.origin, scene.grid.resolution, stamp=0.0, tick=-1,
+                                   demo_id=0, index=0, method="prediction", tick_last=True)
+    bad.indices = np.array([10**8], dtype=np.uint32)
+    bad.values = np.array([3], dtype=np.uint8)
+    with pytest.raises(PlannerInputError, match="occupancy grid"):
+        toy_planner(scene, iterations=2).step([0.0, -0.2], bad)
+
+
+def test_invalid_goals_are_reported_and_never_chosen(scene) -> None:
+    goals = GoalSet.joint_space(["in", "out", "nan"], [[1.0, -0.2], [2.0, 0.0], [np.nan, 0.0]], ToyRobot)
+    assert goals.valid.tolist() == [True, False, False] and "outside the joint limits" in goals.reasons[1]
+    planner = Planner(scene, PlannerConfig(iterations=5), robot=ToyRobot(), cost=ToyCost(), goals=goals)
+    res = planner.step([0.0, -0.2], blob_grid(scene))
+    assert res.valid.tolist() == [True, False, False] and res.chosen == 0
+    assert np.isinf(res.cost_total[1:]).all() and np.allclose(res.trajectories[1:], [0.0, -0.2])
+    assert res.reasons[1]
+    none = GoalSet.joint_space(["out"], [[2.0, 0.0]], ToyRobot)
+    with pytest.raises(PlannerError, match="no reachable goal"):
+        Planner(scene, PlannerConfig(), robot=ToyRobot(), cost=ToyCost(), goals=none)
+
+
+# ----------------------------------------------------------------------------------------------
+# the PR2 with its real state cost (signed distance field, occupancy, self-collision) and IK goals
+
+
+@pytest.fixture(scope="module")
+def pr2_planner():
+    return Planner(load_scene(), PlannerConfig(seed=1))
+
+
+def test_pr2_plans_around_a_blob_on_the_straight_path(pr2_planner) -> None:
+    planner = pr2_planner
+    planner.reset()
+    scene = planner.scene
+    assert planner.goals.valid.all(), planner.goals.reasons
+    q0 = planner.robot.q_start
+    line = init_straight_lines(q0, planner.goal_q, 40)  # (K, T, D)
+    mid = planner.robot.end_effector(line[0, 20])[:3, 3].numpy()  # blob on goal 0's straight path
+    occ = blob_grid(scene, center=tuple(mid), sigma=0.1)
+    res = planner.step(q0.numpy(), occ)
+    lo, hi = planner.robot.lower.numpy(), planner.robot.upper.numpy()
+    assert np.all(res.trajectories >= lo) and np.all(res.trajectories <= hi)
+    assert np.allclose(res.trajectories[:, 0], q0.numpy()) and np.allclose(res.trajectories[:, -1], planner.goal_q)
+    straight = planner.cost_terms(line)["human"].numpy()
+    assert res.cost_human[0] * 10 <= straight[0], (res.cost_human, straight)
+    assert res.cost_human[res.chosen] * 10 <= straight[res.chosen]
+    assert np.all(np.isfinite(res.cost_total)) and res.dt > 0
+    nxt = planner.step(res.start, occ)  # replanning from where the plan starts keeps the goals
+    assert np.allclose(nxt.trajectories[:, -1], planner.goal_q) and nxt.step == 1
+
+
+def test_pr2_bad_occupancy_and_start(pr2_planner) -> None:
+    planner = pr2_planner
+    planner.reset()
+    q0 = planner.robot.q_start.numpy()
+    occ = np.zeros(planner.scene.grid.dims, dtype=np.float32)
+    with pytest.raises(PlannerInputError, match="shape"):
+        planner.step(q0, occ[..., :5])
+    occ[0, 0, 0] = np.nan
+    with pytest.raises(PlannerInputError, match="NaN"):
+        planner.step(q0, occ)
+    bad = q0.copy()
+    bad[4] = 0.5  # elbow flex upper limit is 0
+    with pytest.raises(PlannerInputError, match="r_elbow_flex_joint"):
+        planner.step(bad, np.zeros(planner.scene.grid.dims, dtype=np.float32))
+    assert planner.step_index == 0
