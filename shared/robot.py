@@ -199,7 +199,8 @@ class PR2:
         arm_spheres, body_spheres: index tensors of the self-collision groups (``arm_slice``,
             ``body_slice``: the same as slices; spheres are ordered so that groups are contiguous).
         moving_spheres: ``(S',)`` indices of spheres that move with q (all but the fixed base's),
-            ``moving_slice`` the same as a slice.
+            ``moving_slice`` the same as a slice; it is ``arm_carried_slice`` (spheres that depend on the
+            arm joints) followed by ``torso_carried_slice`` (spheres that depend on the torso lift only).
         chain: pytorch-kinematics ``SerialChain`` root -> tool frame (reference FK).
     """
 
@@ -288,8 +289,14 @@ class PR2:
         for link, rows in sph["spheres"].items():
             anchor = self._frame_index[self._anchor_of(link)]
             t_al = np.linalg.inv(t_world[self.link_names[anchor]]) @ t_world[link]
-            # order: other moving, arm, body moving, static (base) -> the groups are contiguous slices
-            rank = 3 if anchor == 0 else 1 if link in arm_links else 2 if link in body_links else 0
+            # order: carried by the arm joints (non-arm group, then arm group), carried by the torso only
+            # (non-body, then body), fixed base (body, then non-body) -> every group is a contiguous slice
+            if anchor >= 2:
+                rank = 1 if link in arm_links else 0
+            elif anchor == 1:
+                rank = 3 if link in body_links else 2
+            else:
+                rank = 4 if link in body_links else 5
             for x, y, z, rad in rows:
                 rows_.append((rank, anchor, t_al[:3, :3] @ np.array([x, y, z]) + t_al[:3, 3], rad, link))
         rows_.sort(key=lambda r_: r_[0])  # stable: file order within a rank
@@ -317,6 +324,8 @@ class PR2:
         self.arm_slice = _slice([i for i, ln in enumerate(links) if ln in arm_links])
         self.body_slice = _slice([i for i, ln in enumerate(links) if ln in body_links])
         self.moving_slice = _slice([i for i, a in enumerate(anchors) if a != 0])
+        self.arm_carried_slice = _slice([i for i, a in enumerate(anchors) if a >= 2])
+        self.torso_carried_slice = _slice([i for i, a in enumerate(anchors) if a == 1])
         self.arm_spheres = torch.arange(len(links), device=self.device)[self.arm_slice]
         self.body_spheres = torch.arange(len(links), device=self.device)[self.body_slice]
         self.moving_spheres = torch.arange(len(links), device=self.device)[self.moving_slice]

@@ -48,6 +48,7 @@ class CostConfig:
     human_points: int = 1  # points per sphere for the human cost: 1 (centre) or 7 (centre + 6)
     human_point_radius: float = 0.7  # offset of the extra points, as a fraction of the sphere radius
     human_interp: str = "trilinear"  # "trilinear" or "nearest" (the voxel containing the point)
+    torso_table_step: float = 0.002  # lift step (m) of the tabulated costs of torso-carried spheres; 0: off
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first bad value."""
@@ -55,7 +56,8 @@ class CostConfig:
                   ("w_human", self.w_human >= 0), ("clearance", self.clearance > 0),
                   ("sdf_resolution", self.sdf_resolution > 0), ("human_points", self.human_points in (1, 7)),
                   ("human_point_radius", 0 <= self.human_point_radius <= 1),
-                  ("human_interp", self.human_interp in ("trilinear", "nearest"))]
+                  ("human_interp", self.human_interp in ("trilinear", "nearest")),
+                  ("torso_table_step", self.torso_table_step >= 0)]
         for name, ok in checks:
             if not ok:
                 raise ValueError(f"costs.{name}: bad value {getattr(self, name)!r}")
@@ -121,6 +123,53 @@ class StateCost:
         self._occ: _Lookup | None = None
         self.has_self = bool(self.config.self_clearance >= 0 and robot.arm_spheres.numel() > 0
                              and robot.body_spheres.numel() > 0)
+        # Spheres carried by the torso alone (head, left arm, torso) depend on q[..., 0] only: their
+        # obstacle and human costs are tabulated over the lift range and interpolated linearly.
+        arm_c, torso_c = robot.arm_carried_slice, robot.torso_carried_slice
+        self._use_table = (self.config.torso_table_step > 0 and arm_c.start == self.spheres.start
+                           and arm_c.stop == torso_c.start and torso_c.stop == self.spheres.stop)
+        if self._use_table:
+            lo, hi = float(robot.lower[0]), float(robot.upper[0])
+            n = max(int(np.ceil((hi - lo) / self.config.torso_table_step)) + 1, 2)
+            self._lift_lo, self._lift_step, self._lift_n = lo, (hi - lo) / (n - 1), n
+            q_tab = robot.lower.expand(n, -1).clone()
+            q_tab[:, 0] = torch.linspace(lo, hi, n, device=self.device, dtype=self.dtype)
+            rel = slice(torso_c.start - self.spheres.start, torso_c.stop - self.spheres.start)
+            self._tab_rel = rel
+            self._tab_centers = robot.sphere_centers(q_tab)[:, torso_c]  # (n, St, 3)
+            self._arm_rel = slice(0, arm_c.stop - self.spheres.start)
+            self._tab_obstacle = self._pack(self._obstacle_spheres(self._tab_centers, rel))
+            self._tab_human = self._pack(torch.zeros(n, device=self.device, dtype=self.dtype))
+
+    @staticmethod
+    def _pack(values: torch.Tensor) -> torch.Tensor:
+        """``(n,)`` table -> ``(n - 1, 2)`` (value, next value) rows for one index_select per lookup."""
+        return torch.stack([values[:-1], values[1:]], dim=-1).contiguous()
+
+    def _table(self, packed: torch.Tensor, lift: torch.Tensor) -> torch.Tensor:
+        """Linear interpolation of a packed lift table at ``lift`` ``(...)`` -> ``(...)``."""
+        u = ((lift - self._lift_lo) / self._lift_step).clamp(0, self._lift_n - 1)
+        i = torch.clamp(u.long(), max=self._lift_n - 2)
+        f = u - i
+        v = packed.index_select(0, i.reshape(-1)).reshape(*lift.shape, 2)
+        return v[..., 0] + (v[..., 1] - v[..., 0]) * f
+
+    def _obstacle_spheres(self, c: torch.Tensor, rel: slice) -> torch.Tensor:
+        """Static-obstacle hinge of spheres ``c`` ``(..., s, 3)`` (``rel``: their slice of the costed spheres)."""
+        return smooth_penetration(self.sdf(c) - self.radii[rel], self.config.clearance).sum(-1)
+
+    def _human_spheres(self, c: torch.Tensor, rel: slice) -> torch.Tensor:
+        """Summed occupancy at spheres ``c`` ``(..., s, 3)``."""
+        assert self._occ is not None
+        pts = c.unsqueeze(-2) + self._offsets[rel] if self.config.human_points > 1 else c
+        p = self._occ(pts, self.config.human_interp)
+        if self.config.human_points > 1:
+            p = p.mean(-1)
+        return p.sum(-1)
+
+    def _self_term(self, centers: torch.Tensor) -> torch.Tensor:
+        ds = self.robot.self_collision_distance(centers).amin(-1)  # (..., A) nearest body sphere per arm sphere
+        return smooth_penetration(ds, max(self.config.self_clearance, 1e-6)).sum(-1)
 
     @classmethod
     def from_scene(cls, scene: Scene, robot: PR2, config: CostConfig | None = None) -> StateCost:
@@ -141,6 +190,8 @@ class StateCost:
         """
         if occupancy is None:
             self._occ = None
+            if self._use_table:
+                self._tab_human = self._pack(torch.zeros(self._lift_n, device=self.device, dtype=self.dtype))
             return
         occ = torch.as_tensor(np.asarray(occupancy) if not torch.is_tensor(occupancy) else occupancy)
         occ = occ.to(self.device, self.dtype)
@@ -155,30 +206,31 @@ class StateCost:
             self._occ = _Lookup(occ.clamp(0, 1), origin, resolution, "zeros", "occupancy")
         except GridLookupError as exc:
             raise CostInputError(str(exc)) from None
+        if self._use_table:
+            self._tab_human = self._pack(self._human_spheres(self._tab_centers, self._tab_rel))
 
     def obstacle(self, centers: torch.Tensor) -> torch.Tensor:
-        """Unweighted obstacle term: ``centers`` ``(..., S, 3)`` (all spheres) -> ``(...)``."""
-        c = centers[..., self.spheres, :]
-        d = self.sdf(c) - self.radii
-        cost = smooth_penetration(d, self.config.clearance).sum(-1)
+        """Unweighted obstacle term, every sphere evaluated directly: ``centers`` ``(..., S, 3)`` -> ``(...)``."""
+        cost = self._obstacle_spheres(centers[..., self.spheres, :], slice(None))
         if self.has_self:
-            ds = self.robot.self_collision_distance(centers).amin(-1)  # (..., A) nearest body sphere per arm sphere
-            cost = cost + smooth_penetration(ds, max(self.config.self_clearance, 1e-6)).sum(-1)
+            cost = cost + self._self_term(centers)
         return cost
 
     def human(self, centers: torch.Tensor) -> torch.Tensor:
-        """Unweighted human term: ``centers`` ``(..., S, 3)`` -> ``(...)`` summed occupancy (0 when unset)."""
+        """Unweighted human term, every sphere evaluated directly.
+
+        ``centers`` ``(..., S, 3)`` -> ``(...)`` summed occupancy (0 when no occupancy is set).
+        """
         if self._occ is None:
             return torch.zeros(centers.shape[:-2], device=centers.device, dtype=centers.dtype)
-        c = centers[..., self.spheres, :]
-        pts = c.unsqueeze(-2) + self._offsets if self.config.human_points > 1 else c
-        p = self._occ(pts, self.config.human_interp)
-        if self.config.human_points > 1:
-            p = p.mean(-1)
-        return p.sum(-1)
+        return self._human_spheres(centers[..., self.spheres, :], slice(None))
 
     def __call__(self, q: torch.Tensor) -> torch.Tensor:
         """Weighted per-waypoint terms.
+
+        Spheres carried by the arm joints are evaluated at their centres; spheres carried by the torso
+        alone come from the lift tables (``torso_table_step``; equal to :meth:`obstacle` / :meth:`human`
+        up to the linear interpolation in the lift).
 
         Args:
             q: ``(K, R, T, D)`` configurations (any leading shape works).
@@ -187,8 +239,19 @@ class StateCost:
             ``(K, R, T, 2)``: ``w_obstacle`` x obstacle and ``w_human`` x human, in ``terms`` order.
         """
         centers = self.robot.sphere_centers(q)
-        return torch.stack([self.config.w_obstacle * self.obstacle(centers),
-                            self.config.w_human * self.human(centers)], dim=-1)
+        if not self._use_table:
+            obstacle, human = self.obstacle(centers), self.human(centers)
+        else:
+            lift = q[..., 0]
+            arm = centers[..., self.robot.arm_carried_slice, :]
+            obstacle = self._obstacle_spheres(arm, self._arm_rel) + self._table(self._tab_obstacle, lift)
+            if self.has_self:
+                obstacle = obstacle + self._self_term(centers)
+            if self._occ is None:
+                human = torch.zeros_like(obstacle)
+            else:
+                human = self._human_spheres(arm, self._arm_rel) + self._table(self._tab_human, lift)
+        return torch.stack([self.config.w_obstacle * obstacle, self.config.w_human * human], dim=-1)
 
     def collision_free(self, q: torch.Tensor, margin: float = 0.0) -> torch.Tensor:
         """Collision check: ``q`` ``(..., D)`` -> ``(...)`` bool.

@@ -132,3 +132,23 @@ def test_config_validation() -> None:
         CostConfig(human_points=3).validate()
     with pytest.raises(ValueError, match="clearance"):
         CostConfig(clearance=0).validate()
+
+
+def test_torso_tables_match_direct_evaluation(scene, robot) -> None:
+    from services.planner.sdf import SignedDistanceField
+
+    sdf = SignedDistanceField(scene, resolution=0.05)
+    direct = StateCost(robot, sdf, CostConfig(torso_table_step=0.0))
+    tabled = StateCost(robot, sdf, CostConfig(torso_table_step=0.001))
+    grid = scene.grid
+    rng = np.random.default_rng(1)
+    occ = rng.uniform(0, 1, grid.dims).astype(np.float32)
+    for c in (direct, tabled):
+        c.set_occupancy(occ, grid.origin, grid.resolution)
+    g = torch.Generator().manual_seed(1)
+    q = robot.lower + (robot.upper - robot.lower) * torch.rand(64, 8, generator=g)
+    a, b = direct(q), tabled(q)
+    assert torch.allclose(a[:, 0], b[:, 0], atol=1e-3)  # static obstacles: smooth in the lift
+    assert torch.allclose(a[:, 1], b[:, 1], rtol=2e-3, atol=2e-3)  # random occupancy: piecewise linear
+    centers = robot.sphere_centers(q)
+    assert torch.allclose(direct.obstacle(centers) * direct.config.w_obstacle, a[:, 0], atol=1e-5)
