@@ -67,7 +67,8 @@ class PlannerConfig:
     noise_decay: float = opt(1.0, help="STOMP noise factor per iteration (1: constant)")
     sensitivity: float = opt(10.0, help="STOMP sensitivity h of the per-waypoint probabilities")
     cost_to_go: bool = opt(True, help="rank rollouts by cost-to-go (else by the waypoint's own cost)")
-    w_smooth: float = opt(-1.0, help="weight of the squared accelerations (negative: the cost model's default)")
+    w_smooth: float = opt(1000.0, help="weight of the squared joint accelerations (per waypoint step, rad^2); "
+                          "negative: the cost model's default")
     w_obstacle: float = opt(-1.0, help="weight of the obstacle cost (negative: the cost model's default)")
     w_human: float = opt(-1.0, help="weight of the human occupancy cost (negative: the cost model's default)")
     lookahead_s: float = opt(0.5, help="time the robot executes tau_best while a step is planned (s)")

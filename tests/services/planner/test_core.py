@@ -166,7 +166,7 @@ def test_pr2_plans_around_a_blob_on_the_straight_path(pr2_planner) -> None:
     assert np.allclose(res.trajectories[:, 0], q0.numpy()) and np.allclose(res.trajectories[:, -1], planner.goal_q)
     straight = planner.cost_terms(line)["human"].numpy()
     assert res.cost_human[0] * 10 <= straight[0], (res.cost_human, straight)
-    assert res.cost_human[res.chosen] * 10 <= straight[res.chosen]
+    assert np.all(res.cost_human * 3 <= straight)  # the other goal's line crosses the blob's tail: less, too
     assert np.all(np.isfinite(res.cost_total)) and res.dt > 0
     nxt = planner.step(res.start, occ)  # replanning from where the plan starts keeps the goals
     assert np.allclose(nxt.trajectories[:, -1], planner.goal_q) and nxt.step == 1
