@@ -111,7 +111,7 @@ def _quiet_build_chain(urdf_text: str) -> pk.Chain:
 
 
 def _serial_fk(q: torch.Tensor, base_r: torch.Tensor, base_p: torch.Tensor, off_r: torch.Tensor,
-               off_p: torch.Tensor, tool_p: torch.Tensor, plan: tuple[tuple[bool, int, float, bool], ...]
+               off_p: torch.Tensor, tool_p: torch.Tensor, plan: tuple[tuple[bool, int, float, bool, int, float], ...]
                ) -> tuple[torch.Tensor, torch.Tensor]:
     """Fused FK of a serial chain with coordinate-axis joints.
 
@@ -122,7 +122,9 @@ def _serial_fk(q: torch.Tensor, base_r: torch.Tensor, base_p: torch.Tensor, off_
         off_r: ``(J, 3, 3)`` fixed rotation from the previous joint's link to each joint.
         off_p: ``(J, 3)`` fixed translation from the previous joint's link to each joint.
         tool_p: ``(3,)`` tool frame offset from the last joint's link (no rotation).
-        plan: Per joint ``(has_rotation_offset, axis index 0/1/2, axis sign, is_prismatic)`` (static).
+        plan: Per joint ``(has_rotation_offset, axis index 0/1/2, axis sign, is_prismatic, offset kind,
+            offset value)`` (static); offset kind: -2 no translation, 0/1/2 along that axis only (by
+            ``offset value``), -1 general (``off_p``).
 
     Returns:
         ``(R, p)``: ``(B, J + 2, 3, 3)`` and ``(B, J + 2, 3)`` world rotations and positions of the root,
@@ -132,8 +134,11 @@ def _serial_fk(q: torch.Tensor, base_r: torch.Tensor, base_p: torch.Tensor, off_
     r = base_r.expand(b, 3, 3)
     p = base_p.expand(b, 3)
     rs, ps = [r], [p]
-    for j, (has_rot, k, sign, prismatic) in enumerate(plan):
-        p = p + r @ off_p[j]
+    for j, (has_rot, k, sign, prismatic, off_axis, off_val) in enumerate(plan):
+        if off_axis == -1:  # general offset
+            p = p + r @ off_p[j]
+        elif off_axis >= 0:  # offset along one axis of the parent link: one column, no matmul
+            p = p + r[:, :, off_axis] * off_val
         if has_rot:
             r = r @ off_r[j]
         if prismatic:
@@ -156,7 +161,7 @@ def _serial_fk(q: torch.Tensor, base_r: torch.Tensor, base_p: torch.Tensor, off_
 
 def _sphere_kernel(q: torch.Tensor, base_r: torch.Tensor, base_p: torch.Tensor, off_r: torch.Tensor,
                    off_p: torch.Tensor, tool_p: torch.Tensor, weights: torch.Tensor,
-                   plan: tuple[tuple[bool, int, float, bool], ...]) -> torch.Tensor:
+                   plan: tuple[tuple[bool, int, float, bool, int, float], ...]) -> torch.Tensor:
     """Sphere centres for a batch: fused FK then one contraction over links.
 
     Args:
@@ -260,7 +265,11 @@ class PR2:
             has_rot = not torch.allclose(acc[:3, :3], torch.eye(3, dtype=torch.float64), atol=1e-12)
             off_r.append(acc[:3, :3].clone())
             off_p.append(acc[:3, 3].clone())
-            plan.append((has_rot, k, float(axis[k]), f.joint.joint_type == "prismatic"))
+            t_ = acc[:3, 3]
+            nz = [i for i in range(3) if abs(float(t_[i])) > 1e-12]
+            off_kind = -2 if not nz else nz[0] if len(nz) == 1 else -1
+            plan.append((has_rot, k, float(axis[k]), f.joint.joint_type == "prismatic", off_kind,
+                         float(t_[nz[0]]) if len(nz) == 1 else 0.0))
             self.link_names.append(f.name)
             acc = torch.eye(4, dtype=torch.float64)
         tool_acc = acc
