@@ -1,0 +1,190 @@
+"""The predictor's pure core (no Zenoh): early recognition and predicted workspace occupancy.
+
+For the demonstration being observed (paper IV.C, IV.E):
+
+- every new posture ``xi_t`` adds ``ln p(xi_t | C_m)`` to each class's running log-likelihood
+  (constant work per pose);
+- ``p(C_m | xi) = p(xi | C_m) / sum_j p(xi | C_j)`` by log-sum-exp normalisation;
+- ``p(x | xi) = sum_m p(x | C_m) p(C_m | xi)``, with ``p(x | C_m)`` the class's swept volume (0/1).
+
+Only voxels inside the union of the swept volumes can be non-zero, so the occupancy is one
+``(M,) @ (M, U)`` float32 product over those U voxels. The baseline ``current`` method returns
+the voxels of the current posture only (placed in the scene relative to the demonstration's
+first pelvis pose).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from shared.config import ConfigError, opt
+from shared.human import HumanModel, place_in_scene
+from shared.protocol import OccupancyGrid
+from shared.scene import Grid, Scene
+
+from .gmm import posterior_from_log_likelihood
+from .model import PredictionModel
+from .swept_volume import posture_voxels
+
+__all__ = ["PredictorConfig", "PredictionResult", "PredictorCore", "PredictorError", "METHODS"]
+
+METHODS = ("prediction", "current")
+
+
+class PredictorError(ValueError):
+    """Bad input to the predictor core (wrong shape, NaN); the message names it."""
+
+
+@dataclass
+class PredictorConfig:
+    """Options of the predictor service (``[predictor]`` in the TOML config)."""
+
+    model: Path = opt(Path("models/model.npz"), help="prediction model file written by `foresight train`")
+    scene: str = opt("", help="scene file (default: the embedded pr2_two_cups); must match the model's")
+    method: str = opt("prediction", help="occupancy published: predicted p(x|xi) or the current posture only",
+                      choices=METHODS)
+    log_level: str = opt("INFO", help="logging level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+
+    def validate(self) -> None:
+        """Check the options."""
+        if not str(self.model):
+            raise ConfigError("predictor.model: must name a model file")
+
+
+@dataclass
+class PredictionResult:
+    """The prediction after one posture.
+
+    Attributes:
+        posterior: ``(M,)`` class posteriors p(C_m | xi), summing to 1.
+        log_likelihood: ``(M,)`` ln p(xi | C_m) of the observed prefix.
+        grid: The voxel grid.
+        method: ``"prediction"`` or ``"current"``.
+        indices: ``(N,)`` flat C-order indices of the voxels with non-zero probability.
+        values: ``(N,)`` float32 their probability.
+        n_observed: Number of postures observed in this demonstration.
+    """
+
+    posterior: np.ndarray
+    log_likelihood: np.ndarray
+    grid: Grid
+    method: str
+    indices: np.ndarray
+    values: np.ndarray
+    n_observed: int
+
+    @property
+    def occupancy(self) -> np.ndarray:
+        """``(nx, ny, nz)`` float32 dense occupancy in [0, 1]."""
+        out = np.zeros(int(np.prod(self.grid.dims)), dtype=np.float32)
+        out[self.indices] = self.values
+        return out.reshape(self.grid.dims)
+
+    def to_message(self, **meta: object) -> OccupancyGrid:
+        """The quantised sparse :class:`OccupancyGrid` (same result as ``OccupancyGrid.from_dense``).
+
+        Args:
+            **meta: stamp, tick, tick_last, demo_id, index.
+        """
+        q = np.rint(np.clip(self.values, 0.0, 1.0) * np.float32(255.0)).astype(np.uint8)
+        keep = q > 0
+        return OccupancyGrid(resolution=float(self.grid.resolution), origin=np.asarray(self.grid.min, np.float64),
+                             dims=np.asarray(self.grid.dims, dtype=np.int32),
+                             indices=self.indices[keep].astype(np.uint32), values=q[keep], method=self.method,
+                             **meta)  # type: ignore[arg-type]
+
+
+class PredictorCore:
+    """Incremental recognition and occupancy prediction for one observed human.
+
+    Args:
+        model: Trained prediction model.
+        scene: Scene (must place the human where the model's volumes were computed).
+        config: Options (method).
+    """
+
+    def __init__(self, model: PredictionModel, scene: Scene, config: PredictorConfig | None = None) -> None:
+        self.model = model
+        self.scene = scene
+        self.config = config or PredictorConfig()
+        if self.config.method not in METHODS:
+            raise PredictorError(f"method {self.config.method!r} is not one of {', '.join(METHODS)}")
+        model.check_scene(scene)
+        self.bank = model.bank()
+        self.encoder = model.encoder()
+        self.human = HumanModel()
+        flat = model.volumes.reshape(model.n_classes, -1)
+        self.support = np.flatnonzero(flat.any(axis=0))                      # (U,) union of the volumes
+        self.volumes_u = np.ascontiguousarray(flat[:, self.support], dtype=np.float32)  # (M, U)
+        self.demo_id = -1
+        self._ll = np.zeros(model.n_classes)
+        self._first: np.ndarray | None = None
+        self._count = 0
+
+    @property
+    def n_observed(self) -> int:
+        """Postures observed since the last reset."""
+        return self._count
+
+    def reset(self, demo_id: int) -> None:
+        """Start observing a new demonstration (clears the likelihoods and the first pose)."""
+        self.demo_id = int(demo_id)
+        self._ll = np.zeros(self.model.n_classes)
+        self._first = None
+        self._count = 0
+        self.encoder.reset()
+
+    def log_likelihood(self) -> np.ndarray:
+        """``(M,)`` running ln p(xi | C_m)."""
+        return self._ll.copy()
+
+    def occupancy_for(self, posterior: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted occupancy ``sum_m p(x|C_m) p(C_m|xi)`` for given class posteriors.
+
+        Args:
+            posterior: ``(M,)`` class probabilities.
+
+        Returns:
+            ``(indices (U,), values (U,) float32)``: flat voxel indices (the union of the swept
+            volumes) and their probabilities.
+        """
+        val = np.asarray(posterior, dtype=np.float32) @ self.volumes_u
+        return self.support, np.minimum(val, np.float32(1.0))
+
+    def update(self, features: np.ndarray, index: int | None = None) -> PredictionResult:
+        """Observe one posture and predict.
+
+        Args:
+            features: ``(12,)`` recorder-frame posture.
+            index: Its sample index in the demonstration (default: the number observed so far).
+
+        Returns:
+            The updated prediction.
+
+        Raises:
+            PredictorError: If ``features`` is not 12 finite numbers or ``index`` is negative.
+        """
+        f = np.asarray(features, dtype=np.float64)
+        if f.shape != (12,) or not np.all(np.isfinite(f)):
+            raise PredictorError(f"features: expected 12 finite numbers, got shape {f.shape}"
+                                 + ("" if f.shape != (12,) else " with NaN/inf"))
+        t = self._count if index is None else int(index)
+        if t < 0:
+            raise PredictorError(f"index must be >= 0, got {t}")
+        if self._first is None:
+            self._first = f.copy()
+        x = self.encoder.step(f, t)
+        self._ll = self._ll + self.bank.log_likelihood(x[None])[0]
+        self._count += 1
+        post = posterior_from_log_likelihood(self._ll)
+        if self.config.method == "prediction":
+            idx, val = self.occupancy_for(post)
+        else:
+            placed = place_in_scene(f, self._first, self.scene)
+            idx = posture_voxels(self.human.surface_points(placed, spacing=self.model.spacing,
+                                                           interior=self.model.interior), self.model.grid)
+            val = np.ones(len(idx), dtype=np.float32)
+        return PredictionResult(post, self._ll.copy(), self.model.grid, self.config.method, idx, val, self._count)

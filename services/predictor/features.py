@@ -1,0 +1,114 @@
+"""Feature vectors the class mixtures are fitted on: time plus the 12 posture features (and variants).
+
+Every variant starts with the time (the sample index times ``time_scale``) followed by the 12
+posture features in :data:`shared.library.FEATURE_NAMES` order, so GMR conditioned on column 0
+regresses columns 1..12 back into a posture. Variants:
+
+- ``paper``: ``[t, features]`` exactly as recorded (the paper, IV.A).
+- ``relative``: the pelvis x, y, z and yaw are taken relative to the demonstration's first pelvis
+  pose (rotated into its heading), so where the recorder stood does not matter.
+- ``relative_velocity``: ``relative`` plus the per-sample change of the 5 arm features
+  (backward differences, 0 at the first sample), times ``velocity_scale``.
+
+The same encoder serves training (:meth:`FeatureEncoder.batch`) and the online query
+(:meth:`FeatureEncoder.step`); both give identical vectors.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["VARIANTS", "FeatureEncoder", "N_POSTURE"]
+
+VARIANTS = ("paper", "relative", "relative_velocity")
+N_POSTURE = 12
+_ARM = slice(7, 12)
+
+
+def _relative(f: np.ndarray, first: np.ndarray) -> np.ndarray:
+    out = np.array(f, dtype=np.float64, copy=True)
+    yaw0 = float(first[3])
+    c, s = math.cos(-yaw0), math.sin(-yaw0)
+    d = f[..., 0:3] - first[0:3]
+    out[..., 0] = c * d[..., 0] - s * d[..., 1]
+    out[..., 1] = s * d[..., 0] + c * d[..., 1]
+    out[..., 2] = d[..., 2]
+    out[..., 3] = f[..., 3] - yaw0
+    return out
+
+
+class FeatureEncoder:
+    """Turns postures into the mixtures' feature vectors.
+
+    Args:
+        variant: One of :data:`VARIANTS`.
+        time_scale: Time units per sample (1.0: the time feature is the sample index).
+        velocity_scale: Multiplier of the velocity features (``relative_velocity``).
+    """
+
+    def __init__(self, variant: str = "paper", time_scale: float = 1.0, velocity_scale: float = 10.0) -> None:
+        if variant not in VARIANTS:
+            raise ValueError(f"feature variant {variant!r} is not one of {', '.join(VARIANTS)}")
+        self.variant = variant
+        self.time_scale = float(time_scale)
+        self.velocity_scale = float(velocity_scale)
+        self._first: np.ndarray | None = None
+        self._prev: np.ndarray | None = None
+
+    @property
+    def dim(self) -> int:
+        """Feature dimension D (time included)."""
+        return 1 + N_POSTURE + (5 if self.variant == "relative_velocity" else 0)
+
+    def batch(self, features: np.ndarray) -> np.ndarray:
+        """Encode a whole demonstration.
+
+        Args:
+            features: ``(T, 12)`` recorder-frame postures.
+
+        Returns:
+            ``(T, D)`` feature vectors.
+        """
+        f = np.asarray(features, dtype=np.float64)
+        if f.ndim != 2 or f.shape[1] != N_POSTURE:
+            raise ValueError(f"features: expected shape (T, 12), got {f.shape}")
+        t = np.arange(len(f), dtype=np.float64)[:, None] * self.time_scale
+        post = f if self.variant == "paper" else _relative(f, f[0])
+        cols = [t, post]
+        if self.variant == "relative_velocity":
+            v = np.zeros((len(f), 5))
+            v[1:] = np.diff(f[:, _ARM], axis=0)
+            cols.append(v * self.velocity_scale)
+        return np.hstack(cols)
+
+    def reset(self) -> None:
+        """Start a new demonstration (forget the first and previous posture)."""
+        self._first = None
+        self._prev = None
+
+    def step(self, features: np.ndarray, index: int) -> np.ndarray:
+        """Encode one posture of the demonstration being observed.
+
+        Args:
+            features: ``(12,)`` recorder-frame posture.
+            index: Its sample index in the demonstration (0 for the first).
+
+        Returns:
+            ``(D,)`` feature vector.
+        """
+        f = np.asarray(features, dtype=np.float64)
+        if self._first is None:
+            self._first = f.copy()
+        post = f if self.variant == "paper" else _relative(f, self._first)
+        parts = [np.array([index * self.time_scale]), post]
+        if self.variant == "relative_velocity":
+            v = np.zeros(5) if self._prev is None else f[_ARM] - self._prev[_ARM]
+            parts.append(v * self.velocity_scale)
+        self._prev = f.copy()
+        return np.concatenate(parts)
+
+    def posture_columns(self) -> slice:
+        """Columns of the feature vector that hold the 12 posture features (GMR outputs)."""
+        return slice(1, 1 + N_POSTURE)

@@ -1,0 +1,204 @@
+"""One Gaussian mixture per motion class (paper IV.A-IV.C) and their batched log-likelihood.
+
+Training uses scikit-learn's ``GaussianMixture`` (full covariances, k-means initialisation, seeded);
+the fitted parameters of all M classes are then stacked into one :class:`MixtureBank` whose
+:meth:`MixtureBank.log_likelihood` scores a posture under every class at once. The query of the
+paper, ``ln p(xi|C_m) = sum_t ln p(xi_t|C_m)``, is kept incrementally: each new posture adds its
+own term only (:class:`IncrementalLogLikelihood`), so the work per pose is constant.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import logsumexp
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.mixture import GaussianMixture
+
+__all__ = ["GMMConfig", "fit_class_gmm", "MixtureBank", "IncrementalLogLikelihood", "posterior_from_log_likelihood"]
+
+
+@dataclass(frozen=True)
+class GMMConfig:
+    """Options of the per-class Gaussian mixtures.
+
+    Attributes:
+        n_components: Gaussians per class (the paper: 20). ``0`` picks the number per class by BIC
+            among ``bic_candidates``.
+        reg_covar: Added to the covariance diagonals (numerical floor; in the feature units).
+        max_iter: EM iterations at most.
+        n_init: k-means/EM restarts; the best is kept.
+        tol: EM convergence threshold on the mean log-likelihood gain.
+        seed: Random seed of the k-means initialisation.
+        bic_candidates: Component counts tried when ``n_components == 0``.
+    """
+
+    n_components: int = 20
+    reg_covar: float = 1e-3
+    max_iter: int = 100
+    n_init: int = 1
+    tol: float = 1e-3
+    seed: int = 0
+    bic_candidates: tuple[int, ...] = (5, 10, 15, 20, 30)
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` on a bad option."""
+        if self.n_components < 0:
+            raise ValueError(f"components must be >= 0 (0 = by BIC), got {self.n_components}")
+        if not (self.reg_covar > 0 and math.isfinite(self.reg_covar)):
+            raise ValueError(f"reg_covar must be > 0, got {self.reg_covar}")
+        if self.max_iter < 1 or self.n_init < 1:
+            raise ValueError("max_iter and n_init must be >= 1")
+
+
+def _fit(data: np.ndarray, k: int, cfg: GMMConfig) -> GaussianMixture:
+    gmm = GaussianMixture(n_components=k, covariance_type="full", init_params="kmeans", reg_covar=cfg.reg_covar,
+                          max_iter=cfg.max_iter, n_init=cfg.n_init, tol=cfg.tol, random_state=cfg.seed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)  # an unconverged EM is still a usable fit
+        return gmm.fit(data)
+
+
+def fit_class_gmm(data: np.ndarray, cfg: GMMConfig) -> GaussianMixture:
+    """Fit the mixture of one class.
+
+    Args:
+        data: ``(N, D)`` feature vectors of all the class's demonstrations, stacked.
+        cfg: Options.
+
+    Returns:
+        The fitted ``GaussianMixture`` (``weights_``, ``means_``, ``covariances_``).
+
+    Raises:
+        ValueError: If there are fewer samples than components or the data is not finite.
+    """
+    data = np.asarray(data, dtype=np.float64)
+    if data.ndim != 2 or not np.all(np.isfinite(data)):
+        raise ValueError(f"GMM data must be a finite (N, D) array, got shape {data.shape}")
+    ks = [cfg.n_components] if cfg.n_components > 0 else [k for k in cfg.bic_candidates if k < len(data)]
+    if not ks or ks[0] > len(data):
+        raise ValueError(f"cannot fit {cfg.n_components} Gaussians to {len(data)} samples")
+    best, best_bic = None, np.inf
+    for k in ks:
+        gmm = _fit(data, k, cfg)
+        bic = gmm.bic(data) if len(ks) > 1 else 0.0
+        if bic < best_bic or best is None:
+            best, best_bic = gmm, bic
+    assert best is not None
+    return best
+
+
+class MixtureBank:
+    """The M class mixtures, stacked for batched scoring (classes with fewer Gaussians are padded).
+
+    Args:
+        weights: ``(M, K)`` mixing weights (0 for padding).
+        means: ``(M, K, D)`` component means.
+        covariances: ``(M, K, D, D)`` full covariances (identity for padding).
+    """
+
+    def __init__(self, weights: np.ndarray, means: np.ndarray, covariances: np.ndarray) -> None:
+        self.weights_ = np.asarray(weights, dtype=np.float64)
+        self.means_ = np.asarray(means, dtype=np.float64)
+        self.covariances_ = np.asarray(covariances, dtype=np.float64)
+        m, k, d = self.means_.shape
+        if self.weights_.shape != (m, k) or self.covariances_.shape != (m, k, d, d):
+            raise ValueError(f"mixture shapes disagree: weights {self.weights_.shape}, means {self.means_.shape}, "
+                             f"covariances {self.covariances_.shape}")
+        chol = np.linalg.cholesky(self.covariances_)                      # (M, K, D, D) lower
+        eye = np.broadcast_to(np.eye(d), chol.shape)
+        # precision Cholesky factor U with U U^T = Sigma^-1: U = L^-T
+        self.prec_chol_ = np.swapaxes(np.linalg.solve(chol, eye), -1, -2)  # (M, K, D, D)
+        log_det = np.sum(np.log(np.diagonal(self.prec_chol_, axis1=-2, axis2=-1)), axis=-1)  # (M, K)
+        with np.errstate(divide="ignore"):
+            self._log_norm = np.log(self.weights_) + log_det - 0.5 * d * math.log(2 * math.pi)  # (M, K)
+        self._flat_prec = self.prec_chol_.reshape(m * k, d, d)
+        self._flat_means = self.means_.reshape(m * k, d)
+
+    @property
+    def n_classes(self) -> int:
+        """Number of classes M."""
+        return int(self.means_.shape[0])
+
+    @property
+    def n_features(self) -> int:
+        """Dimension D of the feature vectors (time included)."""
+        return int(self.means_.shape[2])
+
+    @classmethod
+    def from_sklearn(cls, mixtures: list[GaussianMixture]) -> MixtureBank:
+        """Stack fitted scikit-learn mixtures (one per class), padding to the largest K."""
+        k = max(g.n_components for g in mixtures)
+        d = mixtures[0].means_.shape[1]
+        m = len(mixtures)
+        w = np.zeros((m, k))
+        mu = np.zeros((m, k, d))
+        cov = np.broadcast_to(np.eye(d), (m, k, d, d)).copy()
+        for i, g in enumerate(mixtures):
+            n = g.n_components
+            w[i, :n], mu[i, :n], cov[i, :n] = g.weights_, g.means_, g.covariances_
+        return cls(w, mu, cov)
+
+    def log_likelihood(self, x: np.ndarray) -> np.ndarray:
+        """``ln p(x_t | C_m)`` of each sample under each class.
+
+        Args:
+            x: ``(..., D)`` feature vectors.
+
+        Returns:
+            ``(..., M)`` log densities.
+        """
+        x = np.asarray(x, dtype=np.float64)
+        m, k, d = self.means_.shape
+        lead = x.shape[:-1]
+        xs = x.reshape(-1, d)                                               # (N, D)
+        diff = xs[:, None, :] - self._flat_means[None]                      # (N, MK, D)
+        y = np.einsum("nkd,kde->nke", diff, self._flat_prec)                # (N, MK, D)
+        maha = np.einsum("nke,nke->nk", y, y).reshape(-1, m, k)             # (N, M, K)
+        out = logsumexp(self._log_norm[None] - 0.5 * maha, axis=-1)         # (N, M)
+        return out.reshape(*lead, m)
+
+
+def posterior_from_log_likelihood(log_likelihood: np.ndarray, log_prior: np.ndarray | None = None) -> np.ndarray:
+    """``p(C_m | xi)`` from ``ln p(xi | C_m)`` by log-sum-exp normalisation (uniform prior by default).
+
+    Args:
+        log_likelihood: ``(..., M)``.
+        log_prior: ``(M,)`` optional class log priors.
+
+    Returns:
+        ``(..., M)`` posteriors summing to 1 over the last axis.
+    """
+    ll = np.asarray(log_likelihood, dtype=np.float64)
+    if log_prior is not None:
+        ll = ll + log_prior
+    if not np.any(np.isfinite(ll)):
+        return np.full(ll.shape, 1.0 / ll.shape[-1])
+    return np.exp(ll - logsumexp(ll, axis=-1, keepdims=True))
+
+
+class IncrementalLogLikelihood:
+    """Running ``ln p(xi_1..t | C_m) = sum_t ln p(xi_t | C_m)``: one bank evaluation per new sample.
+
+    Args:
+        bank: The class mixtures.
+    """
+
+    def __init__(self, bank: MixtureBank) -> None:
+        self.bank = bank
+        self.total = np.zeros(bank.n_classes)
+        self.count = 0
+
+    def reset(self) -> None:
+        """Forget the observed samples."""
+        self.total = np.zeros(self.bank.n_classes)
+        self.count = 0
+
+    def add(self, x: np.ndarray) -> np.ndarray:
+        """Add one sample ``x (D,)``; returns the updated ``(M,)`` log-likelihoods."""
+        self.total = self.total + self.bank.log_likelihood(x[None])[0]
+        self.count += 1
+        return self.total.copy()

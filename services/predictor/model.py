@@ -1,0 +1,179 @@
+"""The prediction model file: everything the predictor needs, in one versioned ``.npz`` (no pickles).
+
+Contents (M classes, K Gaussians at most per class, D feature dimensions, V voxels):
+
+| key | dtype, shape | meaning |
+|---|---|---|
+| ``format`` | str | ``"foresight-prediction-model"`` |
+| ``version`` | int | :data:`MODEL_VERSION` |
+| ``class_names`` | str (M,) | class names |
+| ``feature_variant`` | str | ``services.predictor.features`` variant |
+| ``time_scale``, ``velocity_scale`` | float | feature scaling |
+| ``weights`` | f8 (M, K) | mixing weights (0: padding) |
+| ``means`` | f8 (M, K, D) | component means |
+| ``covariances`` | f8 (M, K, D, D) | full covariances |
+| ``motions`` | f8 (M, T, 12) | GMR-regressed motion of each class |
+| ``motion_lengths`` | i8 (M,) | valid postures of each motion (rest is padding) |
+| ``grid_min``, ``grid_max`` | f8 (3,) | grid bounds (scene frame) |
+| ``grid_resolution`` | float | voxel edge (m) |
+| ``volumes`` | u1 (M, ceil(V/8)) | swept volumes, ``numpy.packbits`` of the C-order bool grids |
+| ``scene_name`` | str | scene the volumes were placed in |
+| ``human_pelvis`` | f8 (4,) | that scene's human placement (x, y, z, yaw) |
+| ``spacing`` | float | surface sample spacing (m) used for the volumes |
+| ``interior`` | bool | whether the body's inside was sampled too |
+| ``meta`` | str | JSON: library source, demonstrations per class, options, timestamp |
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from shared.scene import Grid, Scene
+
+from .features import FeatureEncoder
+from .gmm import MixtureBank
+from .swept_volume import pack_volumes, unpack_volumes
+
+__all__ = ["MODEL_FORMAT", "MODEL_VERSION", "ModelError", "PredictionModel"]
+
+MODEL_FORMAT = "foresight-prediction-model"
+MODEL_VERSION = 1
+
+
+class ModelError(ValueError):
+    """A model file is missing, corrupt, of another version or inconsistent; the message says which."""
+
+
+@dataclass
+class PredictionModel:
+    """Trained per-class mixtures, regressed motions and swept volumes on one voxel grid."""
+
+    class_names: list[str]
+    feature_variant: str
+    time_scale: float
+    velocity_scale: float
+    weights: np.ndarray        # (M, K)
+    means: np.ndarray          # (M, K, D)
+    covariances: np.ndarray    # (M, K, D, D)
+    motions: np.ndarray        # (M, T, 12)
+    motion_lengths: np.ndarray  # (M,)
+    grid: Grid
+    volumes: np.ndarray        # (M, nx, ny, nz) bool
+    scene_name: str
+    human_pelvis: np.ndarray   # (4,) x, y, z, yaw
+    spacing: float = 0.02
+    interior: bool = False
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_classes(self) -> int:
+        """Number of classes M."""
+        return len(self.class_names)
+
+    def bank(self) -> MixtureBank:
+        """The class mixtures, stacked for scoring."""
+        return MixtureBank(self.weights, self.means, self.covariances)
+
+    def encoder(self) -> FeatureEncoder:
+        """A fresh feature encoder matching the training features."""
+        return FeatureEncoder(self.feature_variant, self.time_scale, self.velocity_scale)
+
+    def motion(self, m: int) -> np.ndarray:
+        """``(T_m, 12)`` regressed motion of class ``m``."""
+        return self.motions[m, : int(self.motion_lengths[m])]
+
+    def check_scene(self, scene: Scene) -> None:
+        """Raise :class:`ModelError` if ``scene`` places the human elsewhere than the training scene."""
+        pelvis = np.array([*scene.human.pelvis_xyz, scene.human.pelvis_yaw])
+        if not np.allclose(pelvis, self.human_pelvis, atol=1e-6):
+            raise ModelError(f"model: its swept volumes were computed for the human of scene {self.scene_name!r} at "
+                             f"{np.round(self.human_pelvis, 3).tolist()}, scene {scene.name!r} places the human at "
+                             f"{np.round(pelvis, 3).tolist()}; retrain with `foresight train --scene ...`")
+
+    # ---- file --------------------------------------------------------------------------------
+    def save(self, path: str | Path) -> None:
+        """Write the model file (compressed npz)."""
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        arrays = {
+            "format": np.array(MODEL_FORMAT), "version": np.array(MODEL_VERSION, dtype=np.int64),
+            "class_names": np.array(self.class_names, dtype=np.str_),
+            "feature_variant": np.array(self.feature_variant),
+            "time_scale": np.array(self.time_scale), "velocity_scale": np.array(self.velocity_scale),
+            "weights": self.weights, "means": self.means, "covariances": self.covariances,
+            "motions": self.motions, "motion_lengths": self.motion_lengths.astype(np.int64),
+            "grid_min": self.grid.min, "grid_max": self.grid.max, "grid_resolution": np.array(self.grid.resolution),
+            "volumes": pack_volumes(self.volumes), "scene_name": np.array(self.scene_name),
+            "human_pelvis": self.human_pelvis, "spacing": np.array(self.spacing),
+            "interior": np.array(self.interior), "meta": np.array(json.dumps(self.meta)),
+        }
+        tmp = p.with_name(p.name + ".tmp.npz")
+        with tmp.open("wb") as f:
+            np.savez_compressed(f, **arrays)
+        tmp.replace(p)
+
+    @classmethod
+    def load(cls, path: str | Path) -> PredictionModel:
+        """Read and validate a model file.
+
+        Raises:
+            ModelError: If the file is missing, not a model file, of another version, or corrupt.
+        """
+        p = Path(path)
+        if not p.is_file():
+            raise ModelError(f"model file {str(p)!r} not found; run `foresight train --out {p}` first")
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+            raise ModelError(f"model file {str(p)!r} is corrupt or not a model file ({type(exc).__name__}: "
+                             f"{exc}); retrain with `foresight train`") from None
+        if str(data.get("format", "")) != MODEL_FORMAT:
+            raise ModelError(f"model file {str(p)!r} is not a Foresight prediction model (format "
+                             f"{str(data.get('format', 'missing'))!r})")
+        version = int(data["version"]) if "version" in data else None
+        if version != MODEL_VERSION:
+            raise ModelError(f"model file {str(p)!r} has version {version}, this build reads version {MODEL_VERSION}; "
+                             "retrain with `foresight train`")
+        try:
+            return cls._from_arrays(data)
+        except (KeyError, ValueError, TypeError, IndexError) as exc:
+            raise ModelError(f"model file {str(p)!r} is inconsistent: {exc}") from None
+
+    @classmethod
+    def _from_arrays(cls, d: dict[str, np.ndarray]) -> PredictionModel:
+        names = [str(s) for s in d["class_names"].tolist()]
+        m = len(names)
+        w, mu, cov = d["weights"], d["means"], d["covariances"]
+        if w.shape[0] != m or mu.shape[:2] != w.shape or cov.shape != (*mu.shape, mu.shape[2]):
+            raise ValueError(f"mixture shapes {w.shape}, {mu.shape}, {cov.shape} do not fit {m} classes")
+        for name, arr in (("weights", w), ("means", mu), ("covariances", cov), ("motions", d["motions"])):
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name} contains NaN or infinity")
+        grid = Grid(d["grid_min"].astype(np.float64), d["grid_max"].astype(np.float64), float(d["grid_resolution"]))
+        dims = grid.dims
+        packed = d["volumes"]
+        if packed.dtype != np.uint8 or packed.shape != (m, (int(np.prod(dims)) + 7) // 8):
+            raise ValueError(f"volumes of shape {packed.shape} do not fit {m} classes on a {dims} grid")
+        motions = d["motions"].astype(np.float64)
+        lengths = d["motion_lengths"].astype(np.int64)
+        if motions.shape[0] != m or motions.shape[2] != 12 or lengths.shape != (m,) or np.any(lengths < 1) \
+                or np.any(lengths > motions.shape[1]):
+            raise ValueError(f"motions {motions.shape} / lengths {lengths.tolist()} do not fit {m} classes")
+        model = cls(class_names=names, feature_variant=str(d["feature_variant"]), time_scale=float(d["time_scale"]),
+                    velocity_scale=float(d["velocity_scale"]), weights=w.astype(np.float64),
+                    means=mu.astype(np.float64), covariances=cov.astype(np.float64), motions=motions,
+                    motion_lengths=lengths, grid=grid, volumes=unpack_volumes(packed, dims),
+                    scene_name=str(d["scene_name"]), human_pelvis=d["human_pelvis"].astype(np.float64),
+                    spacing=float(d["spacing"]), interior=bool(d["interior"]), meta=json.loads(str(d["meta"])))
+        if model.encoder().dim != mu.shape[2]:
+            raise ValueError(f"feature variant {model.feature_variant!r} has {model.encoder().dim} dimensions, "
+                             f"the mixtures {mu.shape[2]}")
+        model.bank()  # covariances must be positive definite
+        return model

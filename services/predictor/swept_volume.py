@@ -1,0 +1,74 @@
+"""Swept volumes (paper IV.D): the voxels a body passes through along a motion, in the scene's grid.
+
+Points are sampled on the human model's surface (``shared.human.HumanModel.surface_points``, 2 cm
+apart by default), the model is set to every posture of the motion placed in the scene (relative to
+the motion's first pelvis pose, ``shared.human.place_in_scene``) and every voxel containing a point
+is marked; the swept volume is the union over the postures.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shared.human import HumanModel, place_in_scene
+from shared.scene import Grid, Scene
+
+__all__ = ["posture_voxels", "swept_volume", "pack_volumes", "unpack_volumes"]
+
+
+def _mark(points: np.ndarray, grid: Grid, out: np.ndarray) -> None:
+    p = points.reshape(-1, 3)
+    idx = np.floor((p - grid.min) / grid.resolution).astype(np.int64)
+    dims = np.asarray(out.shape)
+    inside = np.all((idx >= 0) & (idx < dims), axis=1)
+    idx = idx[inside]
+    out[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+
+
+def posture_voxels(points: np.ndarray, grid: Grid) -> np.ndarray:
+    """Flat C-order indices of the voxels containing any of ``points (..., 3)`` (unique, sorted)."""
+    p = points.reshape(-1, 3)
+    idx = np.floor((p - grid.min) / grid.resolution).astype(np.int64)
+    nx, ny, nz = grid.dims
+    inside = np.all((idx >= 0) & (idx < np.array([nx, ny, nz])), axis=1)
+    idx = idx[inside]
+    return np.unique((idx[:, 0] * ny + idx[:, 1]) * nz + idx[:, 2])
+
+
+def swept_volume(motion: np.ndarray, scene: Scene, grid: Grid, human: HumanModel | None = None,
+                 spacing: float = 0.02, interior: bool = False, chunk: int = 64) -> np.ndarray:
+    """The voxels hit by the body along a motion.
+
+    Args:
+        motion: ``(T, 12)`` postures in the recorder's (or a relative) frame; placed in the scene
+            relative to ``motion[0]``. Sample it densely enough that the body moves less than a
+            voxel between postures.
+        scene: Scene giving the human's placement.
+        grid: Voxel grid (scene frame).
+        human: Human model (default: a new :class:`HumanModel`).
+        spacing: Surface sample spacing (m).
+        interior: Also sample the inside of the body (see ``HumanModel.surface_points``).
+        chunk: Postures per batch (bounds memory).
+
+    Returns:
+        ``(nx, ny, nz)`` bool occupancy.
+    """
+    human = human or HumanModel()
+    motion = np.asarray(motion, dtype=np.float64)
+    placed = place_in_scene(motion, motion[0], scene)
+    out = np.zeros(grid.dims, dtype=bool)
+    for s in range(0, len(placed), chunk):
+        _mark(human.surface_points(placed[s:s + chunk], spacing=spacing, interior=interior), grid, out)
+    return out
+
+
+def pack_volumes(volumes: np.ndarray) -> np.ndarray:
+    """``(M, nx, ny, nz)`` bool -> ``(M, ceil(V / 8))`` uint8 (C order, big-endian bits)."""
+    m = volumes.shape[0]
+    return np.packbits(volumes.reshape(m, -1), axis=1)
+
+
+def unpack_volumes(packed: np.ndarray, dims: tuple[int, int, int]) -> np.ndarray:
+    """Inverse of :func:`pack_volumes`: ``(M, ceil(V / 8))`` uint8 -> ``(M, nx, ny, nz)`` bool."""
+    n = int(np.prod(dims))
+    return np.unpackbits(packed, axis=1, count=n).astype(bool).reshape(packed.shape[0], *dims)

@@ -1,0 +1,68 @@
+from __future__ import annotations
+
+import numpy as np
+from sklearn.mixture import GaussianMixture
+
+from services.predictor.features import FeatureEncoder
+from services.predictor.gmm import (
+    GMMConfig,
+    IncrementalLogLikelihood,
+    MixtureBank,
+    fit_class_gmm,
+    posterior_from_log_likelihood,
+)
+from services.predictor.gmr import gmr
+
+
+def _curve(t: np.ndarray) -> np.ndarray:
+    return np.stack([np.sin(2 * np.pi * t / 100), 0.5 * (t / 100) ** 2], axis=-1)
+
+
+def test_gmr_reproduces_known_curve() -> None:
+    rng = np.random.default_rng(0)
+    t = np.tile(np.arange(100.0), 20)
+    y = _curve(t) + rng.normal(0, 0.02, (len(t), 2))
+    g = fit_class_gmm(np.column_stack([t, y]), GMMConfig(n_components=12, reg_covar=1e-6))
+    q = np.arange(5.0, 95.0)
+    mean, cov = gmr(g.weights_, g.means_, g.covariances_, q, return_covariance=True)
+    assert mean.shape == (len(q), 2) and cov.shape == (len(q), 2, 2)
+    assert np.max(np.abs(mean - _curve(q))) < 0.06
+    # the conditional spread is about the noise, and positive definite
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    assert np.median(np.sqrt(cov[:, 0, 0])) < 0.06
+
+
+def test_gmr_single_gaussian_is_linear_regression() -> None:
+    cov = np.array([[[4.0, 2.0], [2.0, 3.0]]])
+    mean = gmr(np.array([1.0]), np.array([[1.0, -1.0]]), cov, np.array([3.0]))
+    assert np.allclose(mean, [[-1.0 + 2.0 / 4.0 * 2.0]])
+
+
+def test_bank_matches_sklearn_and_posterior_sums_to_one() -> None:
+    rng = np.random.default_rng(1)
+    mixtures = [GaussianMixture(k, covariance_type="full", random_state=0).fit(rng.normal(i, 1.0 + i, (300, 4)))
+                for i, k in enumerate((2, 3, 4))]
+    bank = MixtureBank.from_sklearn(mixtures)
+    x = rng.normal(1.0, 2.0, (50, 4))
+    ll = bank.log_likelihood(x)
+    ref = np.stack([g.score_samples(x) for g in mixtures], axis=1)
+    assert np.allclose(ll, ref, atol=1e-8)
+    post = posterior_from_log_likelihood(np.cumsum(ll, axis=0))
+    assert np.all(post >= 0) and np.allclose(post.sum(axis=1), 1.0)
+    # extreme log-likelihoods (thousands apart) still normalise
+    post = posterior_from_log_likelihood(np.array([-1e5, -2e5, -1e5 - 3]))
+    assert np.isclose(post.sum(), 1.0) and post[0] > 0.9
+
+
+def test_incremental_equals_batch_log_likelihood(small_library) -> None:
+    enc = FeatureEncoder("relative_velocity")
+    data = np.vstack([enc.batch(d.features) for d in small_library.by_class(0)])
+    bank = MixtureBank.from_sklearn([fit_class_gmm(data, GMMConfig(n_components=3, max_iter=30))])
+    demo = small_library.by_class(1)[0].features
+    batch = bank.log_likelihood(enc.batch(demo)).sum(axis=0)
+    inc = IncrementalLogLikelihood(bank)
+    enc.reset()
+    for i, f in enumerate(demo):
+        total = inc.add(enc.step(f, i))
+    assert inc.count == len(demo)
+    assert np.allclose(total, batch, rtol=1e-10, atol=1e-8)

@@ -1,0 +1,138 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.predictor.core import PredictorConfig, PredictorCore, PredictorError
+from services.predictor.model import PredictionModel
+from shared.human import HumanModel, place_in_scene
+from shared.protocol import OccupancyGrid, decode, encode
+
+
+def _meta(i: int) -> dict:
+    return {"stamp": 0.0, "tick": -1, "tick_last": True, "demo_id": 0, "index": i}
+
+
+def test_model_round_trip(small_model: PredictionModel, tmp_path) -> None:
+    path = tmp_path / "m.npz"
+    small_model.save(path)
+    back = PredictionModel.load(path)
+    assert back.class_names == small_model.class_names
+    assert back.grid.dims == small_model.grid.dims
+    assert np.array_equal(back.volumes, small_model.volumes)
+    assert np.allclose(back.covariances, small_model.covariances)
+    assert np.allclose(back.motions, small_model.motions)
+    assert back.meta["components"] == [4, 4, 4]
+
+
+def test_model_rejects_wrong_version_corrupt_and_missing(small_model: PredictionModel, tmp_path) -> None:
+    path = tmp_path / "m.npz"
+    small_model.save(path)
+    with np.load(path) as z:
+        data = {k: z[k] for k in z.files}
+    data["version"] = np.array(99)
+    other = tmp_path / "v99.npz"
+    np.savez(other, **data)
+    with pytest.raises(ValueError, match="version 99"):
+        PredictionModel.load(other)
+    corrupt = tmp_path / "corrupt.npz"
+    corrupt.write_bytes(path.read_bytes()[:2000])
+    with pytest.raises(ValueError, match="corrupt"):
+        PredictionModel.load(corrupt)
+    with pytest.raises(ValueError, match="foresight train"):
+        PredictionModel.load(tmp_path / "missing.npz")
+    data["version"] = np.array(1)
+    data["volumes"] = data["volumes"][:, :-3]
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **data)
+    with pytest.raises(ValueError, match="volumes"):
+        PredictionModel.load(bad)
+
+
+def test_swept_volume_contains_regressed_hand_path(small_model: PredictionModel, scene) -> None:
+    human = HumanModel()
+    for m in range(small_model.n_classes):
+        mot = small_model.motion(m)
+        hand = human.hand_position(place_in_scene(mot, mot[0], scene))
+        idx, inside = small_model.grid.index(hand)
+        assert inside.all()
+        assert small_model.volumes[m][idx[:, 0], idx[:, 1], idx[:, 2]].all()
+
+
+def test_swept_volume_contains_demo_hand_positions(small_model: PredictionModel, small_library, scene) -> None:
+    """Every demonstration's hand stays within one voxel of its class's swept volume."""
+    from scipy.ndimage import binary_dilation
+
+    human = HumanModel()
+    for m in range(small_model.n_classes):
+        vol = binary_dilation(small_model.volumes[m], iterations=1)
+        for d in small_library.by_class(m):
+            hand = human.hand_position(place_in_scene(d.features, d.features[0], scene))
+            idx, inside = small_model.grid.index(hand)
+            assert inside.all()
+            assert vol[idx[:, 0], idx[:, 1], idx[:, 2]].mean() >= 0.95
+
+
+def test_posterior_and_occupancy(small_model: PredictionModel, small_library, scene) -> None:
+    core = PredictorCore(small_model, scene)
+    demo = small_library.by_class(2)[1]
+    core.reset(7)
+    for i, f in enumerate(demo.features):
+        res = core.update(f, i)
+        assert np.isclose(res.posterior.sum(), 1.0) and np.all(res.posterior >= 0)
+        occ = res.occupancy
+        assert occ.shape == small_model.grid.dims and occ.dtype == np.float32
+        assert occ.min() >= 0.0 and occ.max() <= 1.0
+    assert int(np.argmax(res.posterior)) == 2
+    # one-hot posterior: the occupancy is that class's swept volume
+    for m in range(small_model.n_classes):
+        idx, val = core.occupancy_for(np.eye(small_model.n_classes)[m])
+        dense = np.zeros(small_model.volumes[m].size, np.float32)
+        dense[idx] = val
+        assert np.array_equal(dense.reshape(small_model.grid.dims), small_model.volumes[m].astype(np.float32))
+    # the wire message equals OccupancyGrid.from_dense of the dense grid
+    msg = res.to_message(**_meta(99))
+    ref = OccupancyGrid.from_dense(res.occupancy, small_model.grid.min, small_model.grid.resolution,
+                                   method="prediction", **_meta(99))
+    assert np.array_equal(msg.indices, ref.indices) and np.array_equal(msg.values, ref.values)
+    back = decode(encode(msg), OccupancyGrid)
+    assert np.allclose(back.to_dense(), res.occupancy, atol=0.5 / 255 + 1e-6)
+
+
+def test_reset_and_incremental_matches_batch(small_model: PredictionModel, small_library, scene) -> None:
+    core = PredictorCore(small_model, scene)
+    demo = small_library.by_class(0)[0].features
+    enc = small_model.encoder()
+    batch = small_model.bank().log_likelihood(enc.batch(demo)).sum(axis=0)
+    for _ in range(2):  # the second pass checks that reset forgets everything
+        core.reset(1)
+        for i, f in enumerate(demo):
+            res = core.update(f, i)
+        assert np.allclose(res.log_likelihood, batch)
+
+
+def test_current_occupancy_is_the_posture(small_model: PredictionModel, small_library, scene) -> None:
+    core = PredictorCore(small_model, scene, PredictorConfig(method="current"))
+    demo = small_library.by_class(0)[0].features
+    core.reset(0)
+    core.update(demo[0], 0)
+    res = core.update(demo[50], 50)
+    occ = res.occupancy
+    assert set(np.unique(occ)) <= {0.0, 1.0} and occ.sum() > 20
+    hand = HumanModel().hand_position(place_in_scene(demo[50], demo[0], scene))
+    idx, inside = small_model.grid.index(hand[None])
+    i, j, k = idx[0]
+    assert inside[0] and occ[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2, max(k - 1, 0):k + 2].sum() > 0
+    pelvis = small_model.grid.index(np.asarray(scene.human.pelvis_xyz)[None])[0][0]
+    assert occ[max(pelvis[0] - 2, 0):pelvis[0] + 3, max(pelvis[1] - 2, 0):pelvis[1] + 3].sum() > 0
+
+
+def test_bad_input_rejected(small_model: PredictionModel, scene) -> None:
+    core = PredictorCore(small_model, scene)
+    core.reset(0)
+    with pytest.raises(PredictorError, match="12 finite"):
+        core.update(np.zeros(11))
+    with pytest.raises(PredictorError, match="NaN"):
+        core.update(np.full(12, np.nan))
+    with pytest.raises(PredictorError, match="method"):
+        PredictorCore(small_model, scene, PredictorConfig(method="bogus"))

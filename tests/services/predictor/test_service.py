@@ -1,0 +1,100 @@
+"""The predictor service over real Zenoh on loopback (in-process), and its CLI's bad-input errors."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from services.predictor.__main__ import main as predictor_main
+from services.predictor.core import PredictorConfig
+from services.predictor.service import PredictorService
+from shared.protocol import ClassPosterior, DemoMarker, HumanPose, Keys, OccupancyGrid, encode
+from shared.transport import Presence, TypedPublisher, open_session, subscribe
+
+
+class Inbox:
+    def __init__(self) -> None:
+        self.items: list = []
+        self.cond = threading.Condition()
+
+    def add(self, msg) -> None:
+        with self.cond:
+            self.items.append(msg)
+            self.cond.notify_all()
+
+    def wait(self, n: int, timeout: float = 15.0) -> bool:
+        with self.cond:
+            return self.cond.wait_for(lambda: len(self.items) >= n, timeout=timeout)
+
+
+def _pose(demo_id: int, i: int, f: np.ndarray, tick: int = -1) -> HumanPose:
+    return HumanPose(stamp=float(i), tick=tick, tick_last=True, demo_id=demo_id, index=i, features=f)
+
+
+def test_service_publishes_grid_per_pose_and_survives_bad_input(zenoh_hub, small_model, small_library) -> None:
+    svc_cfg, cli_cfg = zenoh_hub(), zenoh_hub()
+    keys = Keys(cli_cfg.prefix)
+    service = PredictorService(PredictorConfig(), svc_cfg, model=small_model)
+    stop, ready = threading.Event(), threading.Event()
+    th = threading.Thread(target=service.run, args=(stop, ready), daemon=True)
+    th.start()
+    try:
+        assert ready.wait(15.0)
+        grids, posts = Inbox(), Inbox()
+        with open_session(cli_cfg) as session:
+            s1 = subscribe(session, keys.occupancy, OccupancyGrid, grids.add)
+            s2 = subscribe(session, keys.posterior, ClassPosterior, posts.add)
+            presence = Presence(session, keys, "tester")
+            deadline = time.monotonic() + 10
+            while not presence.is_alive("predictor") and time.monotonic() < deadline:
+                time.sleep(0.02)
+            assert presence.is_alive("predictor")
+            time.sleep(0.3)  # let the subscriptions propagate
+            pose_pub = TypedPublisher(session, keys.pose, block=True)
+            demo_pub = TypedPublisher(session, keys.demo, block=True)
+            raw = session.declare_publisher(keys.pose)
+            demo = small_library.by_class(1)[0]
+            n = 30
+            demo_pub.put(DemoMarker(stamp=0.0, tick=-1, demo_id=5, event="start", true_class=1, class_name="x",
+                                    n_samples=demo.n_samples))
+            for i in range(n):
+                pose_pub.put(_pose(5, i, demo.features[i], tick=i))
+                if i == 10:  # malformed payloads in the middle of the stream
+                    raw.put(b"\x00garbage")
+                    bad = bytearray(encode(_pose(5, 999, demo.features[0])))
+                    raw.put(bytes(bad[:-7]))
+            assert grids.wait(n) and posts.wait(n), f"got {len(grids.items)} grids, {len(posts.items)} posteriors"
+            time.sleep(0.2)
+            assert len(grids.items) == n
+            assert [g.index for g in grids.items] == list(range(n))
+            assert [g.tick for g in grids.items] == list(range(n))
+            assert all(g.demo_id == 5 and g.method == "prediction" for g in grids.items)
+            assert tuple(grids.items[0].dims) == small_model.grid.dims
+            assert all(np.isclose(p.posterior.sum(), 1.0) for p in posts.items)
+            assert service.rejects.total == 2
+            # a new demonstration after a start marker starts from scratch
+            demo_pub.put(DemoMarker(stamp=0.0, tick=-1, demo_id=6, event="start", true_class=1, class_name="x",
+                                    n_samples=demo.n_samples))
+            pose_pub.put(_pose(6, 0, demo.features[0]))
+            assert posts.wait(n + 1)
+            assert posts.items[-1].demo_id == 6
+            assert np.allclose(posts.items[-1].log_likelihood, posts.items[0].log_likelihood)
+            for s in (s1, s2):
+                s.undeclare()
+            presence.close()
+    finally:
+        stop.set()
+        th.join(10.0)
+    assert not th.is_alive()
+    assert service.stats.resets == 2
+
+
+def test_cli_missing_model_is_one_line_error(tmp_path, capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        predictor_main(["--model", str(tmp_path / "none.npz")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "foresight train" in err[0]
