@@ -18,6 +18,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "replayer": ("services.replayer.__main__", "stream recorded human poses over Zenoh"),
     "router": ("shared.router", "run a Zenoh router on loopback for local multi-process runs"),
     "library": ("shared.library_cli", "inspect/validate/convert motion libraries"),
+    "planner": ("services.planner.__main__", "plan for every goal at once around the predicted occupancy"),
     "executor": ("services.executor.__main__", "simulate the PR2 executing the plans; log the run to MCAP"),
     "log": ("shared.logtools", "inspect (info) and draw (render) a run's MCAP log"),
 }

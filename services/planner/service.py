@@ -1,0 +1,263 @@
+"""The planner's Zenoh loop: occupancy + robot state in, one Plan per replanning step out.
+
+Lock-step mode (deterministic; see docs/protocol.md): on ClockTick n the planner takes
+
+* the robot configuration at the end of step n, i.e. the last RobotState of tick n (stamp
+  ``tick.stamp + tick.period``), which is where plan n starts executing, and
+* the prediction made during step n-1 (Fig. 4 of the paper): the OccupancyGrid of tick n-1 with
+  ``tick_last`` (none at tick 0: an empty grid),
+
+waiting for each at most ``input_timeout_s``, runs :meth:`Planner.step` and publishes Plan(tick=n).
+
+Real-time mode: every ``period_s`` the planner plans from the newest robot state with the newest
+occupancy (latest-only subscription, so a slow planner never works through stale grids), looking
+``period_s`` ahead along the previous tau_best.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shared.config import ZenohConfig, opt
+from shared.protocol import ClockTick, DemoMarker, Keys, OccupancyGrid, Plan, RobotState
+from shared.scene import Scene, load_scene
+from shared.transport import (
+    LatestSubscriber,
+    Presence,
+    RejectCounter,
+    TypedPublisher,
+    describe,
+    open_session,
+    subscribe,
+)
+
+from .core import Planner, PlannerConfig, PlannerError, PlanResult
+
+__all__ = ["PlannerServiceConfig", "PlannerService", "PlannerStats", "plan_message"]
+
+log = logging.getLogger("foresight.planner")
+
+
+@dataclass
+class PlannerServiceConfig(PlannerConfig):
+    """The ``[planner]`` section: the planner's settings plus how the service runs it."""
+
+    mode: str = opt("realtime", help="replan on a wall-clock period or on every ClockTick (lock-step: no lookahead)",
+                    choices=("realtime", "lockstep"))
+    period_s: float = opt(0.5, help="real-time replanning period (s)")
+    input_timeout_s: float = opt(10.0, help="lock-step: longest wait for a tick's robot state / occupancy (s)")
+    scene: str = opt("", help="scene file (empty: the embedded pr2_two_cups scene)")
+    log_level: str = opt("INFO", help="log level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+
+    def validate(self) -> None:
+        """Check the planner settings and the service's own."""
+        super().validate()
+        from shared.config import ConfigError
+
+        if not self.period_s > 0:
+            raise ConfigError(f"planner.period_s: must be > 0, got {self.period_s}")
+        if not self.input_timeout_s > 0:
+            raise ConfigError(f"planner.input_timeout_s: must be > 0, got {self.input_timeout_s}")
+
+    def planner_config(self) -> PlannerConfig:
+        """The :class:`PlannerConfig` part.
+
+        In lock-step mode the executor's last RobotState of a tick already is the configuration the plan
+        starts from, so there is no lookahead; in real time the plan starts ``lookahead_s`` ahead.
+        """
+        base = {f.name: getattr(self, f.name) for f in dataclasses.fields(PlannerConfig)}
+        if self.mode == "lockstep":
+            base["lookahead_s"] = 0.0
+        return PlannerConfig(**base)
+
+
+@dataclass
+class PlannerStats:
+    """What the service did."""
+
+    plans: int = 0
+    failures: int = 0
+    last_error: str = ""
+    planning_ms: list[float] = field(default_factory=list)
+
+
+def plan_message(result: PlanResult, tick: int, stamp: float, occupancy: OccupancyGrid | None) -> Plan:
+    """The Plan message of a planning result.
+
+    Args:
+        result: Output of :meth:`Planner.step`.
+        tick: Clock tick (-1 in real-time mode).
+        stamp: Message time (simulated in lock-step, wall clock in real time).
+        occupancy: The prediction planned against (None: the empty grid).
+    """
+    return Plan(stamp=float(stamp), tick=tick, step=result.step, goal_names=list(result.goal_names),
+                joint_names=list(result.joint_names), dt=float(result.dt), chosen=int(result.chosen),
+                planning_ms=float(result.planning_ms),
+                occupancy_tick=occupancy.tick if occupancy is not None else -1,
+                occupancy_index=occupancy.index if occupancy is not None else -1,
+                trajectories=result.trajectories.astype(np.float32), cost_smoothness=result.cost_smoothness,
+                cost_obstacle=result.cost_obstacle, cost_human=result.cost_human, cost_total=result.cost_total,
+                valid=result.valid.astype(bool))
+
+
+class _Inbox:
+    """Robot states and final occupancy grids by tick (lock-step), with waiting."""
+
+    def __init__(self, keep: int = 8) -> None:
+        self.cond = threading.Condition()
+        self.states: dict[int, RobotState] = {}
+        self.occupancy: dict[int, OccupancyGrid] = {}
+        self.keep = keep
+
+    def _trim(self, d: dict[int, object]) -> None:
+        while len(d) > self.keep:
+            d.pop(min(d))
+
+    def add_state(self, msg: RobotState) -> None:
+        with self.cond:
+            old = self.states.get(msg.tick)
+            if old is None or msg.stamp >= old.stamp:
+                self.states[msg.tick] = msg
+                self._trim(self.states)
+            self.cond.notify_all()
+
+    def add_occupancy(self, msg: OccupancyGrid) -> None:
+        if not msg.tick_last:
+            return
+        with self.cond:
+            self.occupancy[msg.tick] = msg
+            self._trim(self.occupancy)
+            self.cond.notify_all()
+
+    def wait_state(self, tick: int, stamp: float, timeout: float) -> RobotState | None:
+        """The state of ``tick`` stamped at least ``stamp`` (else the newest of that tick after the timeout)."""
+        with self.cond:
+            self.cond.wait_for(lambda: tick in self.states and self.states[tick].stamp >= stamp - 1e-9, timeout)
+            return self.states.get(tick)
+
+    def wait_occupancy(self, tick: int, timeout: float) -> OccupancyGrid | None:
+        """The final grid of ``tick``, else the newest final grid of an earlier tick after the timeout."""
+        with self.cond:
+            if self.cond.wait_for(lambda: tick in self.occupancy, timeout):
+                return self.occupancy[tick]
+            earlier = [t for t in self.occupancy if t < tick]
+            return self.occupancy[max(earlier)] if earlier else None
+
+
+class PlannerService:
+    """Wraps a :class:`Planner` in a Zenoh session.
+
+    Args:
+        config: Service + planner options.
+        zenoh: Session options.
+        planner: A ready planner (default: built from ``config`` and the scene).
+        scene: The scene (default: ``config.scene``).
+    """
+
+    def __init__(self, config: PlannerServiceConfig, zenoh: ZenohConfig, planner: Planner | None = None,
+                 scene: Scene | None = None) -> None:
+        config.validate()
+        self.config = config
+        self.zenoh = zenoh
+        self.scene = scene or load_scene(config.scene or None)
+        self.planner = planner or Planner(self.scene, config.planner_config())
+        self.keys = Keys(zenoh.prefix)
+        self.rejects = RejectCounter("planner")
+        self.stats = PlannerStats()
+        self._empty = np.zeros(self.scene.grid.dims, dtype=np.float32)
+
+    def _plan(self, q: np.ndarray, occupancy: OccupancyGrid | None, tick: int, stamp: float,
+              pub: TypedPublisher[Plan]) -> None:
+        try:
+            result = self.planner.step(q, occupancy if occupancy is not None else self._empty)
+            pub.put(plan_message(result, tick, stamp, occupancy))
+        except (PlannerError, ValueError) as exc:  # bad input or no plan: log, keep serving
+            self.stats.failures += 1
+            self.stats.last_error = str(exc)
+            log.error("planner: step at tick %d failed: %s", tick, exc)
+            return
+        self.stats.plans += 1
+        self.stats.planning_ms.append(result.planning_ms)
+        costs = ", ".join(f"{n}={c:.3g}" for n, c in zip(result.goal_names, result.cost_total, strict=True))
+        log.info("planner: tick %d step %d chose %s (%s) in %.0f ms", tick, result.step,
+                 result.goal_names[result.chosen], costs, result.planning_ms)
+
+    def run(self, stop: threading.Event | None = None) -> PlannerStats:
+        """Serve until ``stop`` is set."""
+        stop = stop or threading.Event()
+        with open_session(self.zenoh) as session:
+            pub: TypedPublisher[Plan] = TypedPublisher(session, self.keys.plan, block=True)
+            log.info("planner: %s mode, %d goals %s, session %s", self.config.mode, len(self.planner.goals.names),
+                     self.planner.goals.names, describe(session)["zid"])
+            if self.config.mode == "lockstep":
+                self._run_lockstep(session, pub, stop)
+            else:
+                self._run_realtime(session, pub, stop)
+        return self.stats
+
+    def _run_lockstep(self, session: object, pub: TypedPublisher[Plan], stop: threading.Event) -> None:
+        inbox = _Inbox()
+        ticks: queue.Queue[ClockTick] = queue.Queue()
+        subs = [subscribe(session, self.keys.robot_state, RobotState, inbox.add_state, self.rejects),
+                subscribe(session, self.keys.occupancy, OccupancyGrid, inbox.add_occupancy, self.rejects),
+                subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects)]
+        presence = Presence(session, self.keys, "planner")  # announce only once subscribed
+        try:
+            while not stop.is_set():
+                try:
+                    tick = ticks.get(timeout=0.2)
+                except queue.Empty:
+                    continue
+                if tick.tick == 0:
+                    self.planner.reset()
+                wait = self.config.input_timeout_s
+                state = inbox.wait_state(tick.tick, tick.stamp + tick.period, wait)
+                if state is None:
+                    log.error("planner: no robot state for tick %d within %.1f s; skipping it", tick.tick, wait)
+                    self.stats.failures += 1
+                    continue
+                occ = inbox.wait_occupancy(tick.tick - 1, wait) if tick.tick > 0 else None
+                if tick.tick > 0 and (occ is None or occ.tick != tick.tick - 1):
+                    log.warning("planner: prediction of tick %d missing; planning tick %d with %s", tick.tick - 1,
+                                tick.tick, "an empty grid" if occ is None else f"the one of tick {occ.tick}")
+                self._plan(state.q, occ, tick.tick, tick.stamp, pub)
+        finally:
+            presence.close()
+            for s in subs:
+                s.undeclare()
+
+    def _run_realtime(self, session: object, pub: TypedPublisher[Plan], stop: threading.Event) -> None:
+        occupancy = LatestSubscriber(session, self.keys.occupancy, OccupancyGrid, self.rejects)
+        state = LatestSubscriber(session, self.keys.robot_state, RobotState, self.rejects)
+
+        def on_demo(msg: DemoMarker) -> None:
+            if msg.event == "start":
+                log.info("planner: demonstration %d starts", msg.demo_id)
+
+        demo_sub = subscribe(session, self.keys.demo, DemoMarker, on_demo, self.rejects)
+        presence = Presence(session, self.keys, "planner")
+        try:
+            next_t = time.monotonic()
+            while not stop.is_set():
+                robot = state.latest
+                if robot is None:
+                    stop.wait(0.05)
+                    continue
+                self._plan(robot.q, occupancy.latest, -1, time.time(), pub)
+                next_t += self.config.period_s
+                delay = next_t - time.monotonic()
+                if delay < 0:  # overran the period: start the next step now, do not pile up
+                    next_t = time.monotonic()
+                stop.wait(max(delay, 0.0))
+        finally:
+            presence.close()
+            for s in (occupancy, state):
+                s.undeclare()
+            demo_sub.undeclare()
