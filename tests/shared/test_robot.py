@@ -194,3 +194,11 @@ def test_joint_definitions_match_reference(reference_dir) -> None:
     for name in JOINT_NAMES:
         assert name in ours
     assert checked >= 30
+
+
+def test_float64_model() -> None:
+    robot = PR2(dtype=torch.float64)
+    q = _random_q(robot, 10, seed=4)
+    assert q.dtype == torch.float64
+    assert robot.sphere_centers(q).dtype == torch.float64
+    assert (robot.fk_links(q) - robot.fk_reference(q)).abs().max() < 1e-10
