@@ -131,7 +131,16 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
 
 
 def profile_step(config: PlannerConfig, k: int = 2, rows: int = 15) -> str:
-    """A torch.profiler table (self CPU time) of one replanning step with ``k`` goals."""
+    """Where one replanning step with ``k`` goals spends its time.
+
+    Returns:
+        A cProfile summary of the repository's functions (cumulative time) and a torch.profiler table
+        of the aten operators (self CPU time).
+    """
+    import cProfile
+    import io
+    import pstats
+
     scene = load_scene()
     base = Planner(scene, config)
     planner = Planner(scene, config, robot=base.robot, cost=base.cost,
@@ -139,10 +148,19 @@ def profile_step(config: PlannerConfig, k: int = 2, rows: int = 15) -> str:
     occ = blob_occupancy(scene)
     res = planner.step(base.robot.q_start.double().cpu().numpy(), occ)
     res = planner.step(res.start, occ)
-    with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU]) as prof:
+    prof = cProfile.Profile()
+    prof.enable()
+    res = planner.step(res.start, occ)
+    prof.disable()
+    text = io.StringIO()
+    stats = pstats.Stats(prof, stream=text).sort_stats("cumulative")
+    stats.print_stats(r"(services|shared)/", rows)
+    lines = [ln for ln in text.getvalue().splitlines() if ln.strip() and "function calls" not in ln]
+    with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU]) as tprof:
         res = planner.step(res.start, occ)
-    return (f"one replanning step, K={k}: {res.planning_ms:.1f} ms wall (profiler overhead included)\n"
-            + prof.key_averages().table(sort_by="self_cpu_time_total", row_limit=rows))
+    return (f"one replanning step, K={k}, R={config.rollouts}, T={config.waypoints}: cProfile "
+            "(cumulative, repository functions)\n" + "\n".join(lines) + "\n\ntorch.profiler (self CPU):\n"
+            + tprof.key_averages().table(sort_by="self_cpu_time_total", row_limit=rows))
 
 
 def peak_memory_mb(k: int, config: PlannerConfig, steps: int = 3) -> float:
@@ -267,7 +285,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
     p.add_argument("--rollouts", type=int, default=16)
     p.add_argument("--waypoints", type=int, default=40)
     p.add_argument("--iterations", type=int, default=50)
-    p.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
+    p.add_argument("--threads", type=int, default=1, help="torch threads (0: torch's default)")
     p.add_argument("--device", default="cpu")
     p.add_argument("--profile", action="store_true", help="also print a torch.profiler table of a K=2 step")
     p.add_argument("--memory", action="store_true", help="also measure the peak RSS of a K=8 planning process")

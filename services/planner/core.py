@@ -55,7 +55,7 @@ class PlannerConfig:
 
     device: str = opt("cpu", help="torch device (cpu, cuda, cuda:1, ...)")
     dtype: str = opt("float32", help="torch float dtype", choices=("float32", "float64"))
-    threads: int = opt(0, help="torch intra-op threads (0: leave torch's default)")
+    threads: int = opt(1, help="torch intra-op threads of the process (0: torch's default; >1 is slow on shared cores)")
     seed: int = opt(0, help="base seed of STOMP's exploration noise (per step and goal)")
     goals: list[str] = opt(default_factory=list, help="cup names to plan for, in order (empty: every cup)")
     rollouts: int = opt(16, help="STOMP noisy rollouts R per goal and iteration")
