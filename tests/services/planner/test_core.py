@@ -187,3 +187,16 @@ def test_pr2_bad_occupancy_and_start(pr2_planner) -> None:
     with pytest.raises(PlannerInputError, match="r_elbow_flex_joint"):
         planner.step(bad, np.zeros(planner.scene.grid.dims, dtype=np.float32))
     assert planner.step_index == 0
+
+
+def test_pr2_unreachable_cup_is_dropped_and_reported() -> None:
+    import dataclasses
+
+    scene = load_scene()
+    far = dataclasses.replace(scene.cup("red_cup"), position=np.array([-1.8, -2.8, 0.73]))  # far end of the room
+    scene = dataclasses.replace(scene, cups=(scene.cup("blue_cup"), far))
+    planner = Planner(scene, PlannerConfig(iterations=5))
+    assert planner.goals.valid.tolist() == [True, False]
+    res = planner.step(planner.robot.q_start.numpy(), np.zeros(scene.grid.dims, dtype=np.float32))
+    assert res.valid.tolist() == [True, False] and res.chosen == 0 and res.reasons[1]
+    assert np.isinf(res.cost_total[1]) and np.allclose(res.trajectories[1], res.start)
