@@ -200,3 +200,20 @@ def test_pr2_unreachable_cup_is_dropped_and_reported() -> None:
     res = planner.step(planner.robot.q_start.numpy(), np.zeros(scene.grid.dims, dtype=np.float32))
     assert res.valid.tolist() == [True, False] and res.chosen == 0 and res.reasons[1]
     assert np.isinf(res.cost_total[1]) and np.allclose(res.trajectories[1], res.start)
+
+
+def test_config_resolves_and_names_bad_values() -> None:
+    import argparse
+
+    from shared.config import ConfigError, add_config_arguments, resolve_config
+
+    parser = argparse.ArgumentParser()
+    add_config_arguments(parser, "planner", PlannerConfig)
+    args = parser.parse_args(["--rollouts", "24", "--goals", "red_cup,blue_cup"])
+    cfg, _ = resolve_config("planner", PlannerConfig, args, env={"FORESIGHT_PLANNER_W_SMOOTH": "50"})
+    assert (cfg.rollouts, cfg.goals, cfg.w_smooth) == (24, ["red_cup", "blue_cup"], 50.0)
+    assert cfg.stomp().rollouts == 24
+    with pytest.raises(ConfigError, match="planner.rollouts"):
+        PlannerConfig(rollouts=1).validate()
+    with pytest.raises(ConfigError, match="planner.velocity_scale"):
+        PlannerConfig(velocity_scale=0).validate()
