@@ -188,6 +188,10 @@ def _fields(cls: type) -> list[tuple[dataclasses.Field[Any], Any]]:
     return [(f, hints[f.name]) for f in dataclasses.fields(cls)]
 
 
+ZENOH_FLAG_NAMES = {"mode": "zenoh_mode"}
+"""Zenoh options whose flag differs from the field name in every command (``--mode`` is the services' own)."""
+
+
 def _flag(field_name: str) -> str:
     return "--" + field_name.replace("_", "-")
 
@@ -197,8 +201,8 @@ def add_config_arguments(parser: argparse.ArgumentParser, section: str, cls: typ
     """Add ``--config``, the Zenoh flags and one flag per field of ``cls`` to ``parser``.
 
     Flags default to ``None`` (argparse.SUPPRESS) so that only given flags override file and env.
-    A Zenoh field whose flag a section field already uses (e.g. a section's own ``mode``) is
-    offered as ``--zenoh-<name>`` instead.
+    The Zenoh session mode is always ``--zenoh-mode``; any other Zenoh field whose flag a section
+    field already uses is offered as ``--zenoh-<name>`` instead.
     """
     if not any(a.dest == "config" for a in parser._actions):
         parser.add_argument("--config", metavar="FILE", default=None,
@@ -215,7 +219,7 @@ def add_config_arguments(parser: argparse.ArgumentParser, section: str, cls: typ
             shown = ",".join(map(str, default)) if is_list else default
             text = f"{f.metadata.get('help', '')} (default: {shown})"
             dest = f"{sec}__{f.name}"
-            flag = _flag(f.name)
+            flag = _flag(ZENOH_FLAG_NAMES.get(f.name, f.name) if sec == "zenoh" else f.name)
             if flag in parser._option_string_actions:
                 # a section field of the same name (e.g. the replayer's --mode) keeps the short flag
                 flag = _flag(f"{sec}_{f.name}")
@@ -285,7 +289,8 @@ def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None =
             raise ConfigError(f"config file: top-level key {key!r} must be a table like [{key}]")
     sec = _resolve_section(section, cls, data.get(section, {}), env, cli)
     shadowed = {f.name for f in dataclasses.fields(ZenohConfig)} & {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    zen = (_resolve_section("zenoh", ZenohConfig, data.get("zenoh", {}), env, cli, zenoh_base,
-                            {n: _flag(f"zenoh_{n}") for n in shadowed})
+    names = {n: _flag(f"zenoh_{n}" if n in shadowed else ZENOH_FLAG_NAMES.get(n, n))
+             for n in (f.name for f in dataclasses.fields(ZenohConfig))}
+    zen = (_resolve_section("zenoh", ZenohConfig, data.get("zenoh", {}), env, cli, zenoh_base, names)
            if with_zenoh else ZenohConfig())
     return sec, zen

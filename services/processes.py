@@ -1,0 +1,120 @@
+"""Run Foresight services as separate processes: start, wait for liveliness, stop within bounds."""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from shared.runtime import UserError
+
+__all__ = ["ServiceProcess", "free_port"]
+
+log = logging.getLogger("foresight.processes")
+
+
+class ServiceProcess:
+    """One Foresight service run as ``python -m MODULE ARGS`` in its own process.
+
+    Output (stdout and stderr) goes to ``log_path``. :meth:`stop` sends SIGTERM, waits up to a
+    bounded time, then kills.
+
+    Args:
+        name: Service name; also the liveliness token it declares (``<prefix>/alive/<name>``).
+        module: Module run with ``python -m``, e.g. ``services.replayer``.
+        args: Command-line arguments (typically including ``--connect <router endpoint>``).
+        log_path: File receiving the process's output.
+        env: Extra environment variables.
+    """
+
+    def __init__(self, name: str, module: str, args: list[str], log_path: Path,
+                 env: dict[str, str] | None = None) -> None:
+        self.name = name
+        self.module = module
+        self.args = list(args)
+        self.log_path = Path(log_path)
+        self.env = dict(env or {})
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    @property
+    def command(self) -> list[str]:
+        """The full command line."""
+        return [sys.executable, "-m", self.module, *self.args]
+
+    def start(self) -> ServiceProcess:
+        """Start the process (returns self)."""
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        with self.log_path.open("wb") as out:
+            self.proc = subprocess.Popen(self.command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                         env={**os.environ, "PYTHONUNBUFFERED": "1", **self.env})
+        log.info("started %s (pid %d): %s", self.name, self.proc.pid, " ".join(self.command))
+        return self
+
+    @property
+    def running(self) -> bool:
+        """Whether the process has been started and not yet exited."""
+        return self.proc is not None and self.proc.poll() is None
+
+    @property
+    def returncode(self) -> int | None:
+        """Exit status once exited, else None."""
+        return None if self.proc is None else self.proc.poll()
+
+    def tail(self, lines: int = 3) -> str:
+        """The last lines of the process's output."""
+        try:
+            text = self.log_path.read_text(errors="replace")
+        except OSError:
+            return ""
+        return "\n".join(text.strip().splitlines()[-lines:])
+
+    def wait_alive(self, is_alive: Callable[[str], bool], timeout: float) -> None:
+        """Wait until the service's liveliness token is seen.
+
+        Args:
+            is_alive: E.g. :meth:`shared.transport.Presence.is_alive`.
+            timeout: Seconds.
+
+        Raises:
+            UserError: If the process exits first (with its last output line) or the timeout passes.
+        """
+        deadline = time.monotonic() + timeout
+        while not is_alive(self.name):
+            if not self.running:
+                raise UserError(f"{self.name} exited with status {self.returncode}: {self.tail(1)}")
+            if time.monotonic() > deadline:
+                raise UserError(f"{self.name} did not come up within {timeout:g} s (see {self.log_path})")
+            time.sleep(0.02)
+
+    def stop(self, timeout: float = 5.0) -> int | None:
+        """SIGTERM, wait up to ``timeout`` s, then SIGKILL; returns the exit status."""
+        if self.proc is None:
+            return None
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                log.warning("%s did not stop within %g s: killing it", self.name, timeout)
+                self.proc.kill()
+                self.proc.wait(timeout=5.0)
+        return self.proc.returncode
+
+    def __enter__(self) -> ServiceProcess:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+def free_port() -> int:
+    """A currently free TCP port on 127.0.0.1."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
