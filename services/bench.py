@@ -1,0 +1,41 @@
+"""``foresight bench {predictor,planner}``: dispatch to each component's benchmark script.
+
+Each benchmark lives beside the code it measures and exposes ``main(argv, prog) -> int``; it is
+imported only when asked for.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+__all__ = ["BENCHES", "main"]
+
+BENCHES: dict[str, tuple[str, str]] = {
+    "predictor": ("services.predictor.bench", "one pose -> encoded occupancy message (64^3 grid)"),
+    "planner": ("services.planner.bench", "one replanning step (STOMP over all goals)"),
+}
+
+
+def main(argv: list[str] | None = None, prog: str = "foresight bench") -> int:
+    """Run ``foresight bench NAME ARGS...``; returns the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    usage = "\n".join(f"  {k:<10} {desc}" for k, (_, desc) in BENCHES.items())
+    if not argv or argv[0] in ("-h", "--help"):
+        print(f"usage: {prog} {{{','.join(BENCHES)}}} [ARGS...]\n\nbenchmarks:\n{usage}\n\n"
+              f"Run '{prog} NAME --help' for a benchmark's options.")
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in BENCHES:
+        print(f"{prog}: error: unknown benchmark {name!r} (choose from {', '.join(BENCHES)})", file=sys.stderr)
+        return 2
+    try:
+        module = importlib.import_module(BENCHES[name][0])
+    except ModuleNotFoundError as exc:
+        print(f"{prog}: error: benchmark {name!r} is not available ({exc})", file=sys.stderr)
+        return 2
+    return int(module.main(rest, prog=f"{prog} {name}") or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
