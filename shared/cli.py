@@ -21,6 +21,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "planner": ("services.planner.__main__", "plan for every goal at once around the predicted occupancy"),
     "executor": ("services.executor.__main__", "simulate the PR2 executing the plans; log the run to MCAP"),
     "log": ("shared.logtools", "inspect (info) and draw (render) a run's MCAP log"),
+    "predictor": ("services.predictor.__main__", "recognise the human's motion early; publish predicted occupancy"),
+    "train": ("services.predictor.train", "train the prediction model (GMMs, GMR motions, swept volumes)"),
+    "eval": ("services.predictor.recognition", "evaluate early recognition (leave-one-out, paper protocol)"),
+    "bench": ("services.bench", "benchmark a component: predictor | planner"),
 }
 
 
