@@ -159,7 +159,7 @@ def test_pr2_plans_around_a_blob_on_the_straight_path(pr2_planner) -> None:
     q0 = planner.robot.q_start
     line = init_straight_lines(q0, planner.goal_q, 40)  # (K, T, D)
     mid = planner.robot.end_effector(line[0, 20])[:3, 3].numpy()  # blob on goal 0's straight path
-    occ = blob_grid(scene, center=tuple(mid), sigma=0.1)
+    occ = blob_grid(scene, center=tuple(mid), sigma=0.08)
     res = planner.step(q0.numpy(), occ)
     lo, hi = planner.robot.lower.numpy(), planner.robot.upper.numpy()
     assert np.all(res.trajectories >= lo) and np.all(res.trajectories <= hi)
