@@ -80,19 +80,20 @@ def bench_goals(base: GoalSet, robot: Any, k: int, seed: int = 0, spread: float 
     return GoalSet.joint_space(names, q.numpy(), robot)
 
 
-def _time_fk(robot: Any, n: int, iterations: int, repeats: int, seed: int) -> float:
-    """Median ms of ``iterations`` calls of ``robot.fk_links`` on ``n`` random configurations."""
+def _time_fk(robot: Any, n: int, iterations: int, repeats: int, seed: int) -> tuple[float, float]:
+    """Median wall and process-CPU ms of ``iterations`` calls of ``robot.fk_links`` on ``n`` configurations."""
     gen = torch.Generator(device=robot.lower.device).manual_seed(seed)
     q = robot.lower + (robot.upper - robot.lower) * torch.rand(n, robot.lower.shape[0], generator=gen,
                                                                device=robot.lower.device, dtype=robot.lower.dtype)
     robot.fk_links(q)
-    times = []
+    times, cpu = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         for _ in range(iterations):
             robot.fk_links(q)
         times.append((time.perf_counter() - t0) * 1e3)
-    return statistics.median(times)
+        cpu.append((time.process_time() - c0) * 1e3)
+    return statistics.median(times), statistics.median(cpu)
 
 
 def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene | None = None,
@@ -106,7 +107,8 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
     q0 = base.robot.q_start if getattr(base.robot, "q_start", None) is not None else (
         (base.robot.lower + base.robot.upper) / 2)
     q0 = q0.double().cpu().numpy()
-    out: dict[str, Any] = {"K": [], "step_ms": [], "step_ms_min": [], "fk_ms": [], "ratio": [],
+    out: dict[str, Any] = {"K": [], "step_ms": [], "step_ms_min": [], "step_cpu_ms": [], "fk_ms": [],
+                           "fk_cpu_ms": [], "ratio": [],
                            "rollouts": config.rollouts, "waypoints": config.waypoints,
                            "iterations": config.iterations, "threads": torch.get_num_threads(),
                            "device": config.device, "dtype": config.dtype, "steps": steps,
@@ -115,16 +117,20 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
         goals = bench_goals(base.goals, base.robot, k, seed=config.seed)
         planner = Planner(scene, config, robot=base.robot, cost=base.cost, goals=goals)
         res = planner.step(q0, occ)  # warm-up (first step: straight lines)
-        times = []
+        times, cpu = [], []
         for _ in range(steps):
+            c0 = time.process_time()
             res = planner.step(res.start, occ)  # the robot is where the last plan starts
+            cpu.append((time.process_time() - c0) * 1e3)
             times.append(res.planning_ms)
-        fk = _time_fk(base.robot, k * config.rollouts * config.waypoints, config.iterations, 3, config.seed)
+        fk, fk_cpu = _time_fk(base.robot, k * config.rollouts * config.waypoints, config.iterations, 3, config.seed)
         step_ms = statistics.median(times)
         out["K"].append(k)
         out["step_ms"].append(round(step_ms, 2))
         out["step_ms_min"].append(round(min(times), 2))
+        out["step_cpu_ms"].append(round(statistics.median(cpu), 2))
         out["fk_ms"].append(round(fk, 2))
+        out["fk_cpu_ms"].append(round(fk_cpu, 2))
         out["ratio"].append(round(step_ms / fk, 2))
     out["load_avg_1min_end"] = os.getloadavg()[0]
     return out
@@ -311,11 +317,13 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
             print(f"planner step ({config.iterations} STOMP iterations, R={config.rollouts}, T={config.waypoints}, "
                   f"{report['threads']} threads, {config.device}, {config.dtype}); load avg "
                   f"{report['load_avg_1min']:.2f} -> {report['load_avg_1min_end']:.2f} (other processes share the CPU)")
-            print(f"{'K':>3} {'step ms':>9} {'min ms':>8} {'FK ms':>8} {'step/FK':>8}")
+            print(f"{'K':>3} {'step ms':>9} {'min ms':>8} {'cpu ms':>8} {'FK ms':>8} {'FK cpu':>8} {'step/FK':>8}")
             for i, k in enumerate(report["K"]):
                 print(f"{k:>3} {report['step_ms'][i]:>9.1f} {report['step_ms_min'][i]:>8.1f} "
-                      f"{report['fk_ms'][i]:>8.1f} {report['ratio'][i]:>8.2f}")
-            print("FK ms = fk_links on K*R*T configurations x iterations (the planner costs K*(R+1)*T per iteration)")
+                      f"{report['step_cpu_ms'][i]:>8.1f} {report['fk_ms'][i]:>8.1f} {report['fk_cpu_ms'][i]:>8.1f} "
+                      f"{report['ratio'][i]:>8.2f}")
+            print("FK ms = fk_links on K*R*T configurations x iterations (the planner costs K*(R+1)*T per iteration); "
+                  "cpu = process CPU time (with 1 thread: the time it would take on a core of its own)")
             if args.memory:
                 print(f"peak RSS of a K={report['peak_rss_K']} planning process: {report['peak_rss_mb']:.0f} MB")
         if args.profile:
