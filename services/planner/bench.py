@@ -27,6 +27,7 @@ from shared.runtime import cli_errors
 from shared.scene import Scene, load_scene
 
 from .core import GoalSet, Planner, PlannerConfig
+from .fk_bench import fk_time_ms
 
 __all__ = ["main", "bench_goals", "blob_occupancy", "run_bench"]
 
@@ -108,7 +109,7 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
         (base.robot.lower + base.robot.upper) / 2)
     q0 = q0.double().cpu().numpy()
     out: dict[str, Any] = {"K": [], "step_ms": [], "step_ms_min": [], "step_cpu_ms": [], "fk_ms": [],
-                           "fk_cpu_ms": [], "ratio": [],
+                           "fk_cpu_ms": [], "pk_fk_ms": [], "ratio": [],
                            "rollouts": config.rollouts, "waypoints": config.waypoints,
                            "iterations": config.iterations, "threads": torch.get_num_threads(),
                            "device": config.device, "dtype": config.dtype, "steps": steps,
@@ -131,6 +132,8 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
         out["step_cpu_ms"].append(round(statistics.median(cpu), 2))
         out["fk_ms"].append(round(fk, 2))
         out["fk_cpu_ms"].append(round(fk_cpu, 2))
+        pk = fk_time_ms(k * config.rollouts * config.waypoints, "pk", robot=base.robot, repeats=3, seed=config.seed)
+        out["pk_fk_ms"].append(round(pk * config.iterations, 2))
         out["ratio"].append(round(step_ms / fk, 2))
     out["load_avg_1min_end"] = os.getloadavg()[0]
     return out
@@ -317,13 +320,15 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
             print(f"planner step ({config.iterations} STOMP iterations, R={config.rollouts}, T={config.waypoints}, "
                   f"{report['threads']} threads, {config.device}, {config.dtype}); load avg "
                   f"{report['load_avg_1min']:.2f} -> {report['load_avg_1min_end']:.2f} (other processes share the CPU)")
-            print(f"{'K':>3} {'step ms':>9} {'min ms':>8} {'cpu ms':>8} {'FK ms':>8} {'FK cpu':>8} {'step/FK':>8}")
+            print(f"{'K':>3} {'step ms':>9} {'min ms':>8} {'cpu ms':>8} {'FK ms':>8} {'FK cpu':>8} {'step/FK':>8} "
+                  f"{'pk FK ms':>9}")
             for i, k in enumerate(report["K"]):
                 print(f"{k:>3} {report['step_ms'][i]:>9.1f} {report['step_ms_min'][i]:>8.1f} "
                       f"{report['step_cpu_ms'][i]:>8.1f} {report['fk_ms'][i]:>8.1f} {report['fk_cpu_ms'][i]:>8.1f} "
-                      f"{report['ratio'][i]:>8.2f}")
-            print("FK ms = fk_links on K*R*T configurations x iterations (the planner costs K*(R+1)*T per iteration); "
-                  "cpu = process CPU time (with 1 thread: the time it would take on a core of its own)")
+                      f"{report['ratio'][i]:>8.2f} {report['pk_fk_ms'][i]:>9.1f}")
+            print("FK ms = the fused fk_links on K*R*T configurations x iterations (the planner costs K*(R+1)*T per "
+                  "iteration); pk FK ms = pytorch-kinematics forward_kinematics_tensor, same count; cpu = process CPU "
+                  "time (with 1 thread: about the time on a core of its own)")
             if args.memory:
                 print(f"peak RSS of a K={report['peak_rss_K']} planning process: {report['peak_rss_mb']:.0f} MB")
         if args.profile:

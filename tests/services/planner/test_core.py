@@ -217,3 +217,17 @@ def test_config_resolves_and_names_bad_values() -> None:
         PlannerConfig(rollouts=1).validate()
     with pytest.raises(ConfigError, match="planner.velocity_scale"):
         PlannerConfig(velocity_scale=0).validate()
+
+
+def test_bench_json_prints_one_object(capsys) -> None:
+    import json
+
+    from services.planner.bench import main
+
+    assert main(["--json", "--k", "1,2", "--steps", "1", "--iterations", "2"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["K"] == [1, 2]
+    for key in ("step_ms", "fk_ms", "ratio", "pk_fk_ms"):
+        assert len(report[key]) == 2 and all(v > 0 for v in report[key])
+    with pytest.raises(SystemExit):
+        main(["--k", "0"])
