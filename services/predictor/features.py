@@ -9,6 +9,8 @@ regresses columns 1..12 back into a posture. Variants:
   pose (rotated into its heading), so where the recorder stood does not matter.
 - ``relative_velocity``: ``relative`` plus the per-sample change of the 5 arm features
   (backward differences, 0 at the first sample), times ``velocity_scale``.
+- ``hand``: ``paper`` plus the right hand's position (m) in the frame of the demonstration's first
+  pelvis pose (``shared.human.HumanModel.hand_position``), a Euclidean feature of where the reach goes.
 
 The same encoder serves training (:meth:`FeatureEncoder.batch`) and the online query
 (:meth:`FeatureEncoder.step`); both give identical vectors.
@@ -22,7 +24,7 @@ import numpy as np
 
 __all__ = ["VARIANTS", "FeatureEncoder", "N_POSTURE"]
 
-VARIANTS = ("paper", "relative", "relative_velocity")
+VARIANTS = ("paper", "relative", "relative_velocity", "hand")
 N_POSTURE = 12
 _ARM = slice(7, 12)
 
@@ -56,11 +58,12 @@ class FeatureEncoder:
         self.velocity_scale = float(velocity_scale)
         self._first: np.ndarray | None = None
         self._prev: np.ndarray | None = None
+        self._human = None
 
     @property
     def dim(self) -> int:
         """Feature dimension D (time included)."""
-        return 1 + N_POSTURE + (5 if self.variant == "relative_velocity" else 0)
+        return 1 + N_POSTURE + {"relative_velocity": 5, "hand": 3}.get(self.variant, 0)
 
     def batch(self, features: np.ndarray) -> np.ndarray:
         """Encode a whole demonstration.
@@ -75,8 +78,10 @@ class FeatureEncoder:
         if f.ndim != 2 or f.shape[1] != N_POSTURE:
             raise ValueError(f"features: expected shape (T, 12), got {f.shape}")
         t = np.arange(len(f), dtype=np.float64)[:, None] * self.time_scale
-        post = f if self.variant == "paper" else _relative(f, f[0])
+        post = f if self.variant in ("paper", "hand") else _relative(f, f[0])
         cols = [t, post]
+        if self.variant == "hand":
+            cols.append(self._hand(f, f[0]))
         if self.variant == "relative_velocity":
             v = np.zeros((len(f), 5))
             v[1:] = np.diff(f[:, _ARM], axis=0)
@@ -101,13 +106,22 @@ class FeatureEncoder:
         f = np.asarray(features, dtype=np.float64)
         if self._first is None:
             self._first = f.copy()
-        post = f if self.variant == "paper" else _relative(f, self._first)
+        post = f if self.variant in ("paper", "hand") else _relative(f, self._first)
         parts = [np.array([index * self.time_scale]), post]
+        if self.variant == "hand":
+            parts.append(self._hand(f, self._first))
         if self.variant == "relative_velocity":
             v = np.zeros(5) if self._prev is None else f[_ARM] - self._prev[_ARM]
             parts.append(v * self.velocity_scale)
         self._prev = f.copy()
         return np.concatenate(parts)
+
+    def _hand(self, f: np.ndarray, first: np.ndarray) -> np.ndarray:
+        if self._human is None:
+            from shared.human import HumanModel
+
+            self._human = HumanModel()
+        return self._human.hand_position(_relative(f, first))
 
     def posture_columns(self) -> slice:
         """Columns of the feature vector that hold the 12 posture features (GMR outputs)."""

@@ -1,9 +1,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from sklearn.mixture import GaussianMixture
 
-from services.predictor.features import FeatureEncoder
+from services.predictor.features import VARIANTS, FeatureEncoder
 from services.predictor.gmm import (
     GMMConfig,
     IncrementalLogLikelihood,
@@ -54,8 +55,9 @@ def test_bank_matches_sklearn_and_posterior_sums_to_one() -> None:
     assert np.isclose(post.sum(), 1.0) and post[0] > 0.9
 
 
-def test_incremental_equals_batch_log_likelihood(small_library) -> None:
-    enc = FeatureEncoder("relative_velocity")
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_incremental_equals_batch_log_likelihood(small_library, variant: str) -> None:
+    enc = FeatureEncoder(variant)
     data = np.vstack([enc.batch(d.features) for d in small_library.by_class(0)])
     bank = MixtureBank.from_sklearn([fit_class_gmm(data, GMMConfig(n_components=3, max_iter=30))])
     demo = small_library.by_class(1)[0].features
