@@ -67,13 +67,16 @@ class PlannerConfig:
     noise_decay: float = opt(1.0, help="STOMP noise factor per iteration (1: constant)")
     sensitivity: float = opt(10.0, help="STOMP sensitivity h of the per-waypoint probabilities")
     cost_to_go: bool = opt(True, help="rank rollouts by cost-to-go (else by the waypoint's own cost)")
-    w_smooth: float = opt(1000.0, help="weight of the squared joint accelerations (per waypoint step, rad^2); "
+    w_smooth: float = opt(10.0, help="weight of the squared joint accelerations (per waypoint step, rad^2); "
                           "negative: the cost model's default")
     w_obstacle: float = opt(-1.0, help="weight of the obstacle cost (negative: the cost model's default)")
     w_human: float = opt(-1.0, help="weight of the human occupancy cost (negative: the cost model's default)")
+    integrate_costs: bool = opt(True, help="weight obstacle/human costs by each waypoint's time at the velocity "
+                                "limits (else sum them per waypoint)")
     lookahead_s: float = opt(0.5, help="time the robot executes tau_best while a step is planned (s)")
     velocity_scale: float = opt(0.5, help="fraction of the joint velocity limits used to time trajectories")
     min_dt: float = opt(0.01, help="smallest time between waypoints (s)")
+    goal_tol: float = opt(1e-3, help="a goal this close (joint-space norm) to q_t is reached: its trajectory holds it")
     off_path_tol: float = opt(0.05, help="joint-space distance beyond which the robot is taken as off tau_best")
     limit_tol: float = opt(1e-3, help="start configurations this far outside the limits are clamped, not refused")
 
@@ -85,7 +88,8 @@ class PlannerConfig:
             raise ConfigError(str(exc).replace("stomp.", "planner.")) from None
         checks = [("threads", self.threads >= 0), ("lookahead_s", self.lookahead_s >= 0),
                   ("velocity_scale", 0 < self.velocity_scale <= 1), ("min_dt", self.min_dt > 0),
-                  ("off_path_tol", self.off_path_tol >= 0), ("limit_tol", self.limit_tol >= 0)]
+                  ("off_path_tol", self.off_path_tol >= 0), ("limit_tol", self.limit_tol >= 0),
+                  ("goal_tol", self.goal_tol >= 0)]
         for name, ok in checks:
             if not ok:
                 raise ConfigError(f"planner.{name}: bad value {getattr(self, name)!r}")
@@ -226,6 +230,7 @@ class Planner:
             if reason:
                 log.warning("goal %s dropped: %s", name, reason)
         self.lower, self.upper = robot.lower.to(self.device, self.dtype), robot.upper.to(self.device, self.dtype)
+        self._vmax = robot.velocity_limits.to(self.device, self.dtype) * c.velocity_scale  # (D,)
         vel = robot.velocity_limits.double().cpu()
         self.stomp = Stomp(c.stomp((vel / vel.max()).tolist()), (self.lower, self.upper))
         self.valid_index = torch.nonzero(goals.valid.cpu()).flatten().tolist()
@@ -239,6 +244,28 @@ class Planner:
     # ------------------------------------------------------------------------------------------
     # costs
 
+    def waypoint_time(self, q: torch.Tensor) -> torch.Tensor:
+        """Time attributed to each waypoint when the path is run at the (scaled) velocity limits.
+
+        Args:
+            q: ``(..., T, D)`` trajectories.
+
+        Returns:
+            ``(..., T)`` seconds: half of each adjacent segment's duration, a segment taking
+            ``max_j |dq_j| / (velocity_scale * v_j)``. With ``integrate_costs`` the state costs are
+            weighted by it, so they integrate over the path (a detour or a loop costs more, a
+            trajectory holding still costs nothing), instead of counting waypoints.
+        """
+        seg = ((q[..., 1:, :] - q[..., :-1, :]).abs() / self._vmax).amax(-1)  # (..., T-1)
+        return 0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0)))
+
+    def _state_terms(self, q: torch.Tensor) -> torch.Tensor:
+        """``(K, R, T, D)`` -> ``(K, R, T, 2)`` obstacle and human terms, time-weighted if configured."""
+        terms = self.cost(q)
+        if self.config.integrate_costs:
+            terms = terms * self.waypoint_time(q)[..., None]
+        return terms
+
     def waypoint_cost(self, q: torch.Tensor) -> torch.Tensor:
         """Total cost per waypoint, the callable STOMP optimises.
 
@@ -246,9 +273,10 @@ class Planner:
             q: ``(K, R, T, D)`` trajectories.
 
         Returns:
-            ``(K, R, T)``: ``w_smooth`` x squared acceleration + obstacle + human terms.
+            ``(K, R, T)``: ``w_smooth`` x squared acceleration + obstacle + human terms (the latter two
+            times :meth:`waypoint_time` when ``integrate_costs``).
         """
-        return self.cost(q).sum(-1) + self.w_smooth * acceleration_cost(q)
+        return self._state_terms(q).sum(-1) + self.w_smooth * acceleration_cost(q)
 
     def cost_terms(self, q: torch.Tensor) -> dict[str, torch.Tensor]:
         """Per-trajectory cost terms.
@@ -259,7 +287,7 @@ class Planner:
         Returns:
             ``{"smoothness", "obstacle", "human", "total"}`` -> ``(K,)`` each.
         """
-        terms = self.cost(q[:, None])[:, 0].sum(1)  # (K, 2)
+        terms = self._state_terms(q[:, None])[:, 0].sum(1)  # (K, 2)
         smooth = self.w_smooth * acceleration_cost(q).sum(-1)
         out = {"smoothness": smooth, "obstacle": terms[:, 0], "human": terms[:, 1]}
         out["total"] = out["smoothness"] + out["obstacle"] + out["human"]
@@ -343,8 +371,7 @@ class Planner:
 
     def _dt(self, traj: torch.Tensor) -> torch.Tensor:
         """``(K, T, D)`` -> ``(K,)`` seconds per waypoint so no joint exceeds its scaled velocity limit."""
-        vmax = self.robot.velocity_limits.to(self.device, self.dtype) * self.config.velocity_scale
-        step = ((traj[:, 1:] - traj[:, :-1]).abs() / vmax).amax(dim=(1, 2))
+        step = ((traj[:, 1:] - traj[:, :-1]).abs() / self._vmax).amax(dim=(1, 2))
         return step.clamp_min(self.config.min_dt)
 
     def start_configuration(self, q_current: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -393,7 +420,9 @@ class Planner:
         else:
             init = reconnect_previous(self._prev, self._prev_best, q_t, s_t, self.waypoint_cost)
         result = self.stomp.optimize(init, self.waypoint_cost, seeds=self._seeds())
-        trajs = result.trajectories  # (Kv, T, D)
+        # a reached goal holds still: STOMP would trade a tiny cost at the goal for a loop away and back
+        reached = (init[:, -1] - init[:, 0]).norm(dim=-1) <= c.goal_tol  # (Kv,)
+        trajs = torch.where(reached[:, None, None], init[:, -1:].expand_as(init), result.trajectories)  # (Kv, T, D)
         terms = self.cost_terms(trajs)
         valid = torch.ones(len(self.valid_index), dtype=torch.bool, device=self.device)
         chosen_v = best(terms["total"], valid)

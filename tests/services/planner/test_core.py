@@ -159,7 +159,7 @@ def test_pr2_plans_around_a_blob_on_the_straight_path(pr2_planner) -> None:
     q0 = planner.robot.q_start
     line = init_straight_lines(q0, planner.goal_q, 40)  # (K, T, D)
     mid = planner.robot.end_effector(line[0, 20])[:3, 3].numpy()  # blob on goal 0's straight path
-    occ = blob_grid(scene, center=tuple(mid), sigma=0.08)
+    occ = blob_grid(scene, center=tuple(mid), sigma=0.06)
     res = planner.step(q0.numpy(), occ)
     lo, hi = planner.robot.lower.numpy(), planner.robot.upper.numpy()
     assert np.all(res.trajectories >= lo) and np.all(res.trajectories <= hi)
@@ -231,3 +231,42 @@ def test_bench_json_prints_one_object(capsys) -> None:
         assert len(report[key]) == 2 and all(v > 0 for v in report[key])
     with pytest.raises(SystemExit):
         main(["--k", "0"])
+
+
+def test_algorithm1_loop_reaches_a_goal_following_tau_best(scene) -> None:
+    planner = toy_planner(scene, iterations=20, lookahead_s=0.5)
+    occ = blob_grid(scene)
+    goals = np.array([[1.0, -0.2], [0.9, 0.2]])
+    q = np.array([0.0, -0.2])
+    chosen = []
+    for _ in range(30):
+        res = planner.step(q, occ)
+        assert np.allclose(res.trajectories[:, 0], res.start, atol=1e-6)
+        assert np.all(res.trajectories >= ToyRobot.lower.numpy()) and np.all(res.trajectories <= ToyRobot.upper.numpy())
+        chosen.append(res.chosen)
+        tau = torch.as_tensor(res.trajectories[res.chosen])
+        from services.planner.multigoal import interpolate_path
+
+        q = interpolate_path(tau, 0.5 / res.dt).numpy()  # the robot executes the plan for lookahead_s
+        if np.linalg.norm(q - goals[res.chosen]) < 1e-4:
+            break
+    assert np.linalg.norm(q - goals[chosen[-1]]) < 1e-4, (q, chosen)
+    assert len(chosen) > 2
+
+
+def test_pr2_algorithm1_loop_reaches_the_chosen_goal(pr2_planner) -> None:
+    """Replanning while following tau_best converges: the remaining path is not re-inflated each step."""
+    from services.planner.multigoal import interpolate_path
+
+    planner = pr2_planner
+    planner.reset()
+    occ = blob_grid(planner.scene, center=(0.19, -0.77, 0.93), sigma=0.12)  # between the cups
+    q = planner.robot.q_start.numpy()
+    for _ in range(8):
+        res = planner.step(q, occ)
+        tau = torch.as_tensor(res.trajectories[res.chosen])
+        q = interpolate_path(tau, planner.config.lookahead_s / res.dt).numpy()  # executed while planning
+        if np.allclose(res.start, res.trajectories[res.chosen, -1], atol=1e-5):
+            break
+    assert np.allclose(res.start, res.trajectories[res.chosen, -1], atol=1e-5), "goal not reached in 8 steps"
+    assert np.allclose(res.trajectories[res.chosen], res.start)  # a reached goal holds still
