@@ -4,6 +4,7 @@ publishes one small occupancy grid per tick (or at a fixed rate)."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import socket
 import threading
@@ -109,10 +110,14 @@ class FakeSystem:
 
     @contextmanager
     def running(self, realtime_hz: float | None = None) -> Iterator[FakeSystem]:
-        with open_session(self.zcfg) as session:
-            occ_pub = TypedPublisher(session, self.keys.occupancy)
-            plan_pub = TypedPublisher(session, self.keys.plan)
-            self.session, self.occ_pub, self.plan_pub = session, occ_pub, plan_pub
+        # Publishing from a subscriber callback on keys that a subscriber of the same session matches
+        # can deadlock zenoh-python 1.10 when another thread publishes at the same time, so the fake
+        # listens in one session and publishes in another (``self.session``: for the tests' own puts).
+        out_cfg = dataclasses.replace(self.zcfg, listen=["tcp/127.0.0.1:0"])
+        with open_session(self.zcfg) as session, open_session(out_cfg) as out:
+            occ_pub = TypedPublisher(out, self.keys.occupancy, block=True)
+            plan_pub = TypedPublisher(out, self.keys.plan, block=True)
+            self.session, self.occ_pub, self.plan_pub = out, occ_pub, plan_pub
             # one ordered subscription: the last RobotState of step n arrives before ClockTick n
             latest: dict[str, RobotState] = {}
 

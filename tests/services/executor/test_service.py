@@ -157,3 +157,56 @@ def test_bad_start_configuration_is_named(pr2, zenoh_hub, bad) -> None:
 
     with pytest.raises(ExecutorError, match="start_q"):
         ExecutorService(ExecutorConfig(**bad), zenoh_hub(), robot=pr2, human=(None, None), scene=SCENE)
+
+
+def fuzz_payloads(rng: np.random.Generator, key: str, keys: Keys, n: int) -> list[bytes]:
+    """Malformed payloads for ``key``: random bytes, truncated and corrupted valid messages, other types."""
+    from shared.protocol import ClockTick, encode
+
+    valid = encode(ClockTick(stamp=1.0, tick=3, period=0.2)) if key != keys.clock else \
+        encode(RobotState(stamp=0.0, tick=0, joint_names=["a"], goal=0, reached=False, holding=False, reason="",
+                          q=np.zeros(1), qd=np.zeros(1)))
+    nan_state = msgpack.unpackb(encode(RobotState(stamp=0.0, tick=0, joint_names=["a"], goal=0, reached=False,
+                                                  holding=False, reason="", q=np.zeros(1), qd=np.zeros(1))))
+    nan_state["q"]["data"] = np.array([np.nan]).tobytes()
+    out = []
+    for i in range(n):
+        kind = i % 4
+        if kind == 0:
+            out.append(rng.bytes(int(rng.integers(0, 200))))
+        elif kind == 1:
+            out.append(valid[: int(rng.integers(0, len(valid)))])  # truncated
+        elif kind == 2:
+            out.append(valid)  # a valid message of the wrong type for this key
+        else:
+            out.append(msgpack.packb(nan_state))  # NaN in an array (wrong type too, except on robot/state)
+    return out
+
+
+def test_fuzzed_input_on_every_key_is_rejected_and_the_run_completes(zenoh_hub, pr2, tmp_path) -> None:
+    cfg = lockstep_config(tmp_path, steps=6)
+    exec_z = zenoh_hub()
+    fake = FakeSystem(zenoh_hub())
+    service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
+    keys = Keys(exec_z.prefix)
+    rng = np.random.default_rng(0)
+    sent: dict[str, int] = {}
+    with fake.running():
+        t = threading.Thread(target=service.run)
+        t.start()
+        deadline = time.monotonic() + 20
+        while not fake.ticks and time.monotonic() < deadline:
+            time.sleep(0.01)
+        for key in keys.data_keys():
+            payloads = fuzz_payloads(rng, key, keys, 100)
+            for p in payloads:
+                fake.session.put(key, p)
+            sent[key] = len(payloads)
+        t.join(timeout=60)
+    assert not t.is_alive()
+    assert service.result.steps == 6 and service.result.plans == 5
+    assert service.result.rejects == sent
+    lf = read_log(cfg.mcap)
+    assert lf.complete
+    assert {k: int(v) for k, v in lf.metadata["foresight.rejects"].items()} == sent
+    assert {c.topic: c.count for c in lf.channels.values()}["/foresight/rejected"] == sum(sent.values())
