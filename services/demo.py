@@ -1,347 +1,208 @@
-"""``foresight demo`` (``make demo``): run what exists of the system on this machine and show it live.
+"""``foresight demo`` (``make demo``): the two-cup scenario with the four services as processes.
 
-The demo session itself is the Zenoh router (router mode, listening on a loopback port); each
-service runs as its own process (``python -m services.<name> --connect <router>``), started and
-stopped by :class:`ServiceProcess`. For now only the replayer exists as a service: the demo streams
-a few demonstrations, prints a live summary of what arrives, and says which parts are not there yet.
-Service logs go to ``runs/demo/<service>.log``.
+1. Load the motion library (default: the embedded synthetic one) and pick the demonstration the human
+   performs (a reach for the red cup unless ``--human-class`` says otherwise).
+2. Train the prediction model without that demonstration, unless it is cached in ``models/``.
+3. Be the Zenoh router on a free loopback port and start the replayer, predictor, planner and
+   executor, each as ``python -m services.<name> --connect <router>`` (logs in ``runs/demo/``).
+4. Lock-step (default): the executor ticks ``--steps`` replanning steps; the human advances by a fixed
+   number of samples per step (the paper's protocol). Real time: the replayer streams at ``--rate-hz``,
+   the planner replans every ``--period-s``, the executor runs ``steps x period`` seconds.
+5. Stop everything (SIGTERM, then SIGKILL after a bounded wait) and print the summary: per step the
+   chosen goal, each candidate's cost and the planning time; the step where the robot switched goal;
+   the interference cost of the executed trajectory against the final prediction; the MCAP path.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib.util
+import json
 import logging
-import os
-import signal
-import socket
-import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable
+from datetime import UTC, datetime
 from pathlib import Path
 
-from services.replayer.core import ReplayerConfig, load_replay_library
+from services.processes import ServiceProcess, free_port
+from services.scenario import RunRecorder, Summary, choose_demonstration, model_for, summarise
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, resolve_config
-from shared.protocol import DemoMarker, HumanPose, Keys, Message
+from shared.library import MotionLibrary, load_library, save_library
+from shared.protocol import ClassPosterior, Keys, Message, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError, cli_errors, setup_logging, stop_on_signals
-from shared.transport import Presence, open_session, subscribe_ordered
+from shared.scene import load_scene
+from shared.transport import Presence, open_session, subscribe
 
-__all__ = ["DemoConfig", "ServiceProcess", "StreamMonitor", "main", "PENDING_PARTS"]
+__all__ = ["DemoConfig", "run_demo", "main", "SERVICES_IN_ORDER"]
 
 log = logging.getLogger("foresight.demo")
 
-# part -> (module run as a service, the issue that brings it, what is missing without it)
-PENDING_PARTS: dict[str, tuple[str, int, str]] = {
-    "predictor": ("services.predictor", 3, "nothing recognises the motion or predicts the occupancy"),
-    "planner": ("services.planner", 4, "nothing plans robot motion"),
-    "executor": ("services.executor", 5, "nothing moves the simulated PR2 or logs the run"),
-}
+SERVICES_IN_ORDER = ("predictor", "planner", "replayer", "executor")
+"""Start order: the executor (simulation master) last, once the others listen."""
 
 
 @dataclasses.dataclass
 class DemoConfig:
     """Options of ``foresight demo`` (``[demo]`` in the TOML file)."""
 
-    library: Path | None = opt(None, help="motion library (directory of compound_*.csv or .npz); unset = the "
-                                    "embedded synthetic library")
-    demos: int = opt(3, help="number of demonstrations to stream")
-    rate_hz: float = opt(30.0, help="replay rate (poses per second)")
-    seed: int = opt(0, help="seed of the demonstration order (and of the synthetic library)")
+    library: Path | None = opt(None, help="motion library (dir of compound_*.csv or .npz); unset = the embedded "
+                                    "synthetic library")
+    mode: str = opt("lockstep", choices=("lockstep", "realtime"),
+                    help="lockstep: deterministic, one replanning step per clock tick; realtime: wall clock")
+    steps: int = opt(20, help="replanning steps (the paper: 20)")
+    seed: int = opt(0, help="seed of the demonstration choice and of STOMP")
+    human_class: str = opt("", help="class (name or index) the human performs (default: red_cup, else the last)")
+    method: str = opt("prediction", choices=("prediction", "current"),
+                      help="occupancy the planner avoids: the early prediction, or the current posture only")
+    components: int = opt(-1, help="Gaussians per class when training (-1: the trainer's default, 20)")
+    period_s: float = opt(0.5, help="replanning period (simulated s per step in lock-step, wall s in real time)")
+    rate_hz: float = opt(30.0, help="real time: poses per second")
+    models_dir: Path = opt(Path("models"), help="where trained models are cached")
+    run_dir: Path = opt(Path("runs/demo"), help="service logs and the MCAP file go here")
     port: int = opt(0, help="loopback TCP port of the demo's Zenoh router (0 = a free port)")
     prefix: str = opt("foresight", help="key-expression prefix")
-    timeout: float = opt(120.0, help="stop everything after this many seconds")
-    run_dir: Path = opt(Path("runs/demo"), help="directory for the services' log files")
+    timeout: float = opt(900.0, help="give up after this many seconds")
+    json: bool = opt(False, help="print one JSON object with the summary (progress goes to stderr)")
     log_level: str = opt("WARNING", choices=("DEBUG", "INFO", "WARNING", "ERROR"), help="log level of the demo")
 
     def validate(self) -> None:
         """Check value ranges."""
-        if self.demos < 1:
-            raise ConfigError(f"demo.demos: must be >= 1, got {self.demos}")
-        if not self.rate_hz > 0:
-            raise ConfigError(f"demo.rate_hz: must be > 0, got {self.rate_hz}")
+        if self.steps < 1:
+            raise ConfigError(f"demo.steps: must be >= 1, got {self.steps}")
+        if not (self.period_s > 0 and self.rate_hz > 0 and self.timeout > 0):
+            raise ConfigError("demo.period_s, demo.rate_hz and demo.timeout must be > 0")
         if not 0 <= self.port < 65536:
             raise ConfigError(f"demo.port: must be 0..65535, got {self.port}")
-        if not self.timeout > 0:
-            raise ConfigError(f"demo.timeout: must be > 0, got {self.timeout}")
 
 
-# ----------------------------------------------------------------------------------------------
-# process management (reused by later demos: predictor, planner, executor)
+def _library(cfg: DemoConfig) -> MotionLibrary:
+    if cfg.library is None:
+        from shared.synthetic import generate_library
+
+        return generate_library(seed=0)
+    return load_library(cfg.library)
 
 
-class ServiceProcess:
-    """One Foresight service run as ``python -m MODULE ARGS`` in its own process.
-
-    Output (stdout and stderr) goes to ``log_path``. :meth:`stop` sends SIGTERM, waits up to a
-    bounded time, then kills.
-
-    Args:
-        name: Service name; also the liveliness token it declares (``<prefix>/alive/<name>``).
-        module: Module run with ``python -m``, e.g. ``services.replayer``.
-        args: Command-line arguments (typically including ``--connect <router endpoint>``).
-        log_path: File receiving the process's output.
-        env: Extra environment variables.
-    """
-
-    def __init__(self, name: str, module: str, args: list[str], log_path: Path,
-                 env: dict[str, str] | None = None) -> None:
-        self.name = name
-        self.module = module
-        self.args = list(args)
-        self.log_path = Path(log_path)
-        self.env = dict(env or {})
-        self.proc: subprocess.Popen[bytes] | None = None
-
-    @property
-    def command(self) -> list[str]:
-        """The full command line."""
-        return [sys.executable, "-m", self.module, *self.args]
-
-    def start(self) -> ServiceProcess:
-        """Start the process (returns self)."""
-        self.log_path.parent.mkdir(parents=True, exist_ok=True)
-        with self.log_path.open("wb") as out:
-            self.proc = subprocess.Popen(self.command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                         env={**os.environ, "PYTHONUNBUFFERED": "1", **self.env})
-        log.info("started %s (pid %d): %s", self.name, self.proc.pid, " ".join(self.command))
-        return self
-
-    @property
-    def running(self) -> bool:
-        """Whether the process has been started and not yet exited."""
-        return self.proc is not None and self.proc.poll() is None
-
-    @property
-    def returncode(self) -> int | None:
-        """Exit status once exited, else None."""
-        return None if self.proc is None else self.proc.poll()
-
-    def tail(self, lines: int = 3) -> str:
-        """The last lines of the process's output."""
-        try:
-            text = self.log_path.read_text(errors="replace")
-        except OSError:
-            return ""
-        return "\n".join(text.strip().splitlines()[-lines:])
-
-    def wait_alive(self, is_alive: Callable[[str], bool], timeout: float) -> None:
-        """Wait until the service's liveliness token is seen.
-
-        Args:
-            is_alive: E.g. :meth:`shared.transport.Presence.is_alive`.
-            timeout: Seconds.
-
-        Raises:
-            UserError: If the process exits first (with its last output line) or the timeout passes.
-        """
-        deadline = time.monotonic() + timeout
-        while not is_alive(self.name):
-            if not self.running:
-                raise UserError(f"{self.name} exited with status {self.returncode}: {self.tail(1)}")
-            if time.monotonic() > deadline:
-                raise UserError(f"{self.name} did not come up within {timeout:g} s (see {self.log_path})")
-            time.sleep(0.02)
-
-    def stop(self, timeout: float = 5.0) -> int | None:
-        """SIGTERM, wait up to ``timeout`` s, then SIGKILL; returns the exit status."""
-        if self.proc is None:
-            return None
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                log.warning("%s did not stop within %g s: killing it", self.name, timeout)
-                self.proc.kill()
-                self.proc.wait(timeout=5.0)
-        return self.proc.returncode
-
-    def __enter__(self) -> ServiceProcess:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
+def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Path, samples_per_tick: int,
+                 mcap: Path) -> dict[str, list[str]]:
+    """Command-line arguments of each service for this demo."""
+    common = ["--connect", endpoint, "--listen", "tcp/127.0.0.1:0", "--prefix", cfg.prefix, "--zenoh-mode", "peer",
+              "--log-level", "INFO"]
+    lockstep = cfg.mode == "lockstep"
+    return {
+        "predictor": ["--model", str(model), "--method", cfg.method, *common],
+        "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
+                    "--lookahead-s", str(cfg.period_s), *common],
+        "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
+                     "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"]), *common],
+        "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
+                     "--mcap", str(mcap), *common],
+    }
 
 
-def free_port() -> int:
-    """A currently free TCP port on 127.0.0.1."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+def _progress_line(msg: Plan, posterior: ClassPosterior | None) -> str:
+    costs = "  ".join(f"{n} {c:8.3f}" if v else f"{n} (invalid)"
+                      for n, c, v in zip(msg.goal_names, msg.cost_total, msg.valid, strict=True))
+    belief = ""
+    if posterior is not None:
+        k = int(posterior.posterior.argmax())
+        belief = f"  human: {posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
+    return f"step {msg.step:>3}: chosen {msg.goal_names[msg.chosen]:<10} {costs}  ({msg.planning_ms:.0f} ms){belief}"
 
 
-# ----------------------------------------------------------------------------------------------
-# live summary
-
-
-@dataclasses.dataclass
-class _DemoState:
-    demo_id: int
-    class_name: str
-    true_class: int
-    n_samples: int
-    received: int = 0
-    first: float | None = None
-    last: float | None = None
-    ended: bool = False
-
-    def rate(self) -> float:
-        if self.first is None or self.last is None or self.received < 2 or self.last <= self.first:
-            return 0.0
-        return (self.received - 1) / (self.last - self.first)
-
-
-class StreamMonitor:
-    """Turns the replayer's poses and markers into summary lines (thread-safe, no Zenoh).
-
-    Args:
-        clock: Time source for rates (seconds).
-    """
-
-    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
-        self._clock = clock
-        self._lock = threading.Lock()
-        self.demos: dict[int, _DemoState] = {}
-        self.current: int | None = None
-        self.lines: list[str] = []
-        self.total_poses = 0
-        self.stray_poses = 0
-
-    def on_message(self, msg: Message) -> None:
-        """Feed one received message."""
-        now = self._clock()
-        with self._lock:
-            if isinstance(msg, DemoMarker):
-                if msg.event == "start":
-                    self.demos[msg.demo_id] = _DemoState(msg.demo_id, msg.class_name, msg.true_class, msg.n_samples)
-                    self.current = msg.demo_id
-                    self.lines.append(f"demo {msg.demo_id}: start, class {msg.true_class} ({msg.class_name}), "
-                                      f"{msg.n_samples} samples")
-                else:
-                    st = self.demos.get(msg.demo_id)
-                    if st is not None:
-                        st.ended = True
-                        self.lines.append(f"demo {msg.demo_id}: end, received {st.received}/{st.n_samples} poses "
-                                          f"at {st.rate():.1f} Hz")
-            elif isinstance(msg, HumanPose):
-                self.total_poses += 1
-                st = self.demos.get(msg.demo_id)
-                if st is None:
-                    self.stray_poses += 1
-                    return
-                st.received += 1
-                st.first = now if st.first is None else st.first
-                st.last = now
-
-    def progress(self) -> str | None:
-        """One line on the demonstration in progress (None if none is)."""
-        with self._lock:
-            st = self.demos.get(self.current) if self.current is not None else None
-            if st is None or st.ended:
-                return None
-            return f"demo {st.demo_id}: {st.received}/{st.n_samples} poses, {st.rate():.1f} Hz"
-
-    def take_lines(self) -> list[str]:
-        """Event lines since the last call."""
-        with self._lock:
-            out, self.lines = self.lines, []
-            return out
-
-    @property
-    def finished(self) -> int:
-        """Number of demonstrations whose end marker arrived."""
-        with self._lock:
-            return sum(st.ended for st in self.demos.values())
-
-
-def pending_parts() -> list[str]:
-    """Plain statements about the parts this interim demo does not run."""
-    out = []
-    for part, (module, issue, missing) in PENDING_PARTS.items():
-        if importlib.util.find_spec(f"{module}.__main__") is None:
-            out.append(f"{part}: not implemented yet (issue {issue}): {missing}")
-        else:
-            out.append(f"{part}: exists ({module}) but this interim demo does not start it yet (issue 5): {missing}")
-    return out
-
-
-# ----------------------------------------------------------------------------------------------
-# main
-
-
-def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] = print) -> int:
-    """Run the demo until the demonstrations are streamed, ``cfg.timeout`` passes or ``stop`` is set."""
-    lib = load_replay_library(ReplayerConfig(library=cfg.library, seed=cfg.seed))  # fail early, one line
-    port = cfg.port or free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
+def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] = print) -> tuple[int, Summary | None]:
+    """Run the scenario; returns ``(exit status, summary)``."""
+    scene = load_scene()
+    lib = _library(cfg)
+    scenario = choose_demonstration(lib, cfg.steps, cfg.seed, cfg.human_class)
+    demo = scenario.demo
+    out(f"foresight demo: library {lib.source}: {lib.n_classes} classes, {len(lib.demos)} demonstrations; "
+        f"the human performs {demo.class_name} #{demo.index} ({demo.n_samples} samples, "
+        f"{scenario.samples_per_tick} per step)")
+    model = model_for(lib, scene, demo, cfg.models_dir, None if cfg.components < 0 else cfg.components)
+    out(f"foresight demo: prediction model {model}")
+    run_dir = Path(cfg.run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    replay_lib = run_dir / "human.npz"
+    save_library(MotionLibrary(class_names=list(lib.class_names), demos=[demo], issues=[],
+                               source=f"{lib.source} ({demo.class_name} #{demo.index})"), replay_lib)
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+    mcap = run_dir / f"{stamp}-{cfg.mode}.mcap"
+    endpoint = f"tcp/127.0.0.1:{cfg.port or free_port()}"
     keys = Keys(cfg.prefix)
-    out(f"foresight demo: library {lib.source}: {lib.n_classes} classes, {len(lib.demos)} demonstrations"
-        + (f" ({len(lib.issues)} malformed left out)" if lib.issues else ""))
-    out(f"foresight demo: router on {endpoint}; service logs in {cfg.run_dir}/")
-    replayer_args = ["--rate-hz", str(cfg.rate_hz), "--max-demos", str(cfg.demos), "--shuffle", "--seed",
-                     str(cfg.seed), "--wait-for", "monitor", "--connect", endpoint, "--listen", "tcp/127.0.0.1:0",
-                     "--prefix", cfg.prefix, "--zenoh-mode", "peer"]
-    if cfg.library is not None:
-        replayer_args += ["--library", str(cfg.library)]
-    monitor = StreamMonitor()
+    args = service_args(cfg, endpoint, model, replay_lib, scenario.samples_per_tick, mcap)
+    out(f"foresight demo: router on {endpoint}; {cfg.mode} mode, {cfg.steps} steps; logs in {run_dir}/")
     hub = ZenohConfig(mode="router", listen=[endpoint], connect=[], multicast_scouting=False, prefix=cfg.prefix)
-    deadline = time.monotonic() + cfg.timeout
+    recorder = RunRecorder()
+    latest_posterior: list[ClassPosterior | None] = [None]
+
+    def on_plan(msg: Plan) -> None:
+        recorder.on_message(msg)
+        out(_progress_line(msg, latest_posterior[0]))
+
+    def on_other(msg: Message) -> None:
+        if isinstance(msg, ClassPosterior):
+            latest_posterior[0] = msg
+        recorder.on_message(msg)
+
     status = 0
+    procs = {name: ServiceProcess(name, f"services.{name}", args[name], run_dir / f"{name}.log")
+             for name in SERVICES_IN_ORDER}
+    deadline = time.monotonic() + cfg.timeout
     with open_session(hub) as session:
-        sub = subscribe_ordered(session, keys.human_all, {keys.pose: HumanPose, keys.demo: DemoMarker},
-                                monitor.on_message)
-        presence = Presence(session, keys, "monitor")
-        replayer = ServiceProcess("replayer", "services.replayer", replayer_args, cfg.run_dir / "replayer.log")
+        subs = [subscribe(session, keys.plan, Plan, on_plan),
+                subscribe(session, keys.robot_state, RobotState, recorder.on_message),
+                subscribe(session, keys.occupancy, OccupancyGrid, on_other),
+                subscribe(session, keys.posterior, ClassPosterior, on_other)]
+        presence = Presence(session, keys, "demo")
         try:
-            replayer.start()
-            replayer.wait_alive(presence.is_alive, timeout=min(30.0, cfg.timeout))
-            out("foresight demo: replayer up, streaming")
-            last_progress = 0.0
-            while not stop.is_set():
-                for line in monitor.take_lines():
-                    out(line)
-                if monitor.finished >= cfg.demos:
-                    break
-                if not replayer.running:
-                    stop.wait(0.5)  # let the last messages arrive
-                    for line in monitor.take_lines():
-                        out(line)
-                    if monitor.finished < cfg.demos:
-                        out(f"foresight demo: replayer exited (status {replayer.returncode}) after "
-                            f"{monitor.finished}/{cfg.demos} demonstrations: {replayer.tail(1)}")
-                        status = 1
-                    break
+            for name in SERVICES_IN_ORDER:
+                procs[name].start()
+                if name != "executor":
+                    procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout))
+            executor = procs["executor"]
+            while not stop.is_set() and executor.running:
                 if time.monotonic() > deadline:
                     out(f"foresight demo: timeout after {cfg.timeout:g} s")
                     status = 1
                     break
-                now = time.monotonic()
-                if now - last_progress >= 1.0:
-                    line = monitor.progress()
-                    if line:
-                        out(line)
-                    last_progress = now
-                stop.wait(0.05)
+                for name, proc in procs.items():
+                    if name != "replayer" and not proc.running:
+                        raise UserError(f"{name} exited with status {proc.returncode}: {proc.tail(1)}")
+                stop.wait(0.1)
             if stop.is_set():
                 out("foresight demo: interrupted")
+                status = 130
+            elif executor.returncode not in (0, None):
+                out(f"foresight demo: executor exited with status {executor.returncode}: {executor.tail(2)}")
+                status = 1
         finally:
-            code = replayer.stop(timeout=5.0)
+            for name in reversed(SERVICES_IN_ORDER):
+                code = procs[name].stop(timeout=10.0)
+                if code not in (0, None, -15):
+                    log.warning("%s exited with status %s", name, code)
             presence.close()
-            sub.undeclare()
-    out(f"foresight demo: {monitor.finished} demonstrations, {monitor.total_poses} poses received; "
-        f"replayer exit status {code}")
-    out("not there yet:")
-    for line in pending_parts():
-        out(f"  {line}")
-    return status
+            for s in subs:
+                s.undeclare()
+    plans, states, final, posteriors = recorder.snapshot()
+    if not plans:
+        out("foresight demo: no plan was received; see the service logs in " + str(run_dir))
+        return 1, None
+    from shared.robot import PR2
+
+    summary = summarise(plans, states, final, posteriors, PR2.from_scene(scene), demo.class_name,
+                        str(mcap) if mcap.is_file() else None)
+    summary.extra["mode"] = cfg.mode
+    summary.extra["method"] = cfg.method
+    return status, summary
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
-    """Run the interim demo; returns 0 when every demonstration arrived."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0] + " " + __doc__.split("\n\n")[1])
+    """Run the demo; returns 0 when the run completed."""
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_arguments(parser, "demo", DemoConfig, with_zenoh=False)
     args = parser.parse_args(argv)
     with cli_errors(prog):
@@ -349,10 +210,19 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
         setup_logging(cfg.log_level)
         stop = threading.Event()
         restore = stop_on_signals(stop)
+        progress = (lambda line: print(line, file=sys.stderr, flush=True)) if cfg.json else \
+            (lambda line: print(line, flush=True))
         try:
-            return run_demo(cfg, stop, out=lambda line: print(line, flush=True))
+            status, summary = run_demo(cfg, stop, out=progress)
         finally:
             restore()
+        if summary is not None:
+            if cfg.json:
+                print(json.dumps(summary.to_json()))
+            else:
+                for line in summary.lines():
+                    print(line)
+        return status
 
 
 if __name__ == "__main__":

@@ -114,6 +114,7 @@ class _Inbox:
         self.cond = threading.Condition()
         self.states: dict[int, RobotState] = {}
         self.occupancy: dict[int, OccupancyGrid] = {}
+        self.end_tick: int | None = None  # tick of the observed demonstration's last pose, once it ended
         self.keep = keep
 
     def _trim(self, d: dict[int, object]) -> None:
@@ -136,6 +137,11 @@ class _Inbox:
             self._trim(self.occupancy)
             self.cond.notify_all()
 
+    def add_marker(self, msg: DemoMarker) -> None:
+        with self.cond:
+            self.end_tick = msg.tick if msg.event == "end" else None
+            self.cond.notify_all()
+
     def wait_state(self, tick: int, stamp: float, timeout: float) -> RobotState | None:
         """The state of ``tick`` stamped at least ``stamp`` (else the newest of that tick after the timeout)."""
         with self.cond:
@@ -143,10 +149,18 @@ class _Inbox:
             return self.states.get(tick)
 
     def wait_occupancy(self, tick: int, timeout: float) -> OccupancyGrid | None:
-        """The final grid of ``tick``, else the newest final grid of an earlier tick after the timeout."""
+        """The final grid of ``tick``, else the newest final grid of an earlier tick after the timeout.
+
+        Once the observed demonstration has ended (its end marker carries the tick of its last pose),
+        no grid comes after that tick: the grid of the last pose's tick is the prediction to use.
+        """
+
+        def target() -> int:
+            return tick if self.end_tick is None else min(tick, self.end_tick)
+
         with self.cond:
-            if self.cond.wait_for(lambda: tick in self.occupancy, timeout):
-                return self.occupancy[tick]
+            if self.cond.wait_for(lambda: target() in self.occupancy, timeout):
+                return self.occupancy[target()]
             earlier = [t for t in self.occupancy if t < tick]
             return self.occupancy[max(earlier)] if earlier else None
 
@@ -207,7 +221,8 @@ class PlannerService:
         ticks: queue.Queue[ClockTick] = queue.Queue()
         subs = [subscribe(session, self.keys.robot_state, RobotState, inbox.add_state, self.rejects),
                 subscribe(session, self.keys.occupancy, OccupancyGrid, inbox.add_occupancy, self.rejects),
-                subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects)]
+                subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects),
+                subscribe(session, self.keys.demo, DemoMarker, inbox.add_marker, self.rejects)]
         presence = Presence(session, self.keys, "planner")  # announce only once subscribed
         try:
             while not stop.is_set():
@@ -224,7 +239,9 @@ class PlannerService:
                     self.stats.failures += 1
                     continue
                 occ = inbox.wait_occupancy(tick.tick - 1, wait) if tick.tick > 0 else None
-                if tick.tick > 0 and (occ is None or occ.tick != tick.tick - 1):
+                end = inbox.end_tick
+                expected = tick.tick - 1 if end is None else min(tick.tick - 1, end)
+                if tick.tick > 0 and (occ is None or occ.tick != expected):
                     log.warning("planner: prediction of tick %d missing; planning tick %d with %s", tick.tick - 1,
                                 tick.tick, "an empty grid" if occ is None else f"the one of tick {occ.tick}")
                 self._plan(state.q, occ, tick.tick, tick.stamp, pub)
