@@ -162,8 +162,9 @@ class Stomp:
         self.R = r.to(self.device, self.dtype)
         self.noise_chol = torch.linalg.cholesky(cov).to(self.device, self.dtype)  # (N, N) lower
         self.M = m.to(self.device, self.dtype)  # (N, N)
-        # cost-to-go as one product: S (.., N) @ U, U[j, i] = 1 for j >= i
-        self.to_go = torch.triu(torch.ones(n, n)).T.contiguous().to(self.device, self.dtype)
+        # cost-to-go as one product: S (.., N) = c (.., N + 1) @ U, waypoints 1..T-1 (the goal's cost
+        # varies with the last segment), U[j, i] = 1 for j >= i
+        self.to_go = torch.tril(torch.ones(n + 1, n)).contiguous().to(self.device, self.dtype)
 
     def sample_noise(self, k: int, seeds: Sequence[int]) -> torch.Tensor:
         """Exploration noise for all iterations, drawn per goal from its own generator.
@@ -251,9 +252,10 @@ class Stomp:
             better = total < best_cost
             best_cost = torch.where(better, total, best_cost)
             best_theta = torch.where(better[:, None, None], theta, best_theta)
-            s = cost[:, 1:, 1:-1]  # (K, R, N) per free waypoint
             if c.cost_to_go:
-                s = s @ self.to_go  # S(r, i) = sum_{j >= i} q(r, j)
+                s = cost[:, 1:, 1:] @ self.to_go  # (K, R, N): S(r, i) = sum_{j >= i} q(r, j), goal included
+            else:
+                s = cost[:, 1:, 1:-1]  # (K, R, N) the free waypoints' own costs
             # 3. probabilities per waypoint over the rollouts
             s_min, s_max = s.amin(1, keepdim=True), s.amax(1, keepdim=True)
             p = torch.softmax(-c.sensitivity * (s - s_min) / (s_max - s_min).clamp_min(1e-12), dim=1)
