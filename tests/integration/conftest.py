@@ -1,0 +1,166 @@
+"""In-process system harness: the four services in one test process, each with its own Zenoh session.
+
+The test process's first session (the hub) listens on a free loopback port; every service connects
+to it. Multicast scouting is off everywhere. Every thread is joined with a bounded timeout.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from services.executor.core import ExecutorConfig
+from services.executor.service import ExecutorResult, ExecutorService
+from services.planner.service import PlannerService, PlannerServiceConfig
+from services.predictor.core import PredictorConfig
+from services.predictor.service import PredictorService
+from services.processes import free_port
+from services.replayer.core import ReplayerConfig
+from services.replayer.service import ReplayerService
+from services.scenario import RunRecorder, choose_demonstration, model_for
+from shared.config import ZenohConfig
+from shared.library import MotionLibrary, save_library
+from shared.protocol import ClassPosterior, Keys, OccupancyGrid, Plan, RobotState
+from shared.scene import load_scene
+from shared.synthetic import generate_library
+from shared.transport import open_session, subscribe
+
+JOIN_S = 60.0
+
+
+@dataclasses.dataclass
+class SystemFiles:
+    """A small synthetic library, the human's demonstration and a model trained without it."""
+
+    library: MotionLibrary
+    human: Path
+    model: Path
+    samples_per_tick: int
+    human_class: str
+
+
+@pytest.fixture(scope="session")
+def system_files(tmp_path_factory: pytest.TempPathFactory) -> SystemFiles:
+    """Trained once per test session: 8 classes x 6 demonstrations, 4 Gaussians per class."""
+    root = tmp_path_factory.mktemp("system")
+    lib = generate_library(8, 6, seed=3)
+    scenario = choose_demonstration(lib, steps=20, seed=0)
+    model = model_for(lib, load_scene(), scenario.demo, root / "models", components=4, progress=False)
+    human = root / "human.npz"
+    save_library(MotionLibrary(list(lib.class_names), [scenario.demo], [], "test human"), human)
+    return SystemFiles(lib, human, model, scenario.samples_per_tick, scenario.demo.class_name)
+
+
+class ServiceThread:
+    """Runs a service's blocking ``run`` in a daemon thread with its own stop event."""
+
+    def __init__(self, name: str, target: Callable[[threading.Event], Any]) -> None:
+        self.name = name
+        self.stop_event = threading.Event()
+        self.result: Any = None
+        self.error: BaseException | None = None
+
+        def body() -> None:
+            try:
+                self.result = target(self.stop_event)
+            except BaseException as exc:  # reported by join()
+                self.error = exc
+
+        self.thread = threading.Thread(target=body, name=f"svc-{name}", daemon=True)
+
+    def start(self) -> ServiceThread:
+        self.thread.start()
+        return self
+
+    def stop(self, timeout: float = JOIN_S) -> Any:
+        self.stop_event.set()
+        return self.join(timeout)
+
+    def join(self, timeout: float = JOIN_S) -> Any:
+        self.thread.join(timeout)
+        assert not self.thread.is_alive(), f"{self.name} did not stop within {timeout} s"
+        if self.error is not None:
+            raise self.error
+        return self.result
+
+
+@dataclasses.dataclass
+class System:
+    """A running in-process system."""
+
+    hub: ZenohConfig
+    keys: Keys
+    recorder: RunRecorder
+    threads: dict[str, ServiceThread]
+    services: dict[str, Any]
+
+    def executor_result(self, timeout: float = 240.0) -> ExecutorResult:
+        return self.threads["executor"].join(timeout)
+
+
+@pytest.fixture
+def run_system(system_files: SystemFiles, tmp_path: Path) -> Iterator[Callable[..., System]]:
+    """Factory: start the four services in-process; everything is stopped at teardown."""
+    started: list[System] = []
+    sessions: list[Any] = []
+
+    def start(mode: str = "lockstep", steps: int = 20, seed: int = 0, period: float = 0.2,
+              planner_overrides: dict[str, Any] | None = None, executor_overrides: dict[str, Any] | None = None,
+              replayer_overrides: dict[str, Any] | None = None, mcap: str = "") -> System:
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        hub = ZenohConfig(mode="peer", listen=[endpoint], connect=[], multicast_scouting=False)
+        peer = ZenohConfig(mode="peer", listen=["tcp/127.0.0.1:0"], connect=[endpoint], multicast_scouting=False)
+        keys = Keys(hub.prefix)
+        recorder = RunRecorder()
+        ctx = open_session(hub)
+        session = ctx.__enter__()
+        sessions.append(ctx)
+        subs = [subscribe(session, keys.plan, Plan, recorder.on_message),
+                subscribe(session, keys.robot_state, RobotState, recorder.on_message),
+                subscribe(session, keys.occupancy, OccupancyGrid, recorder.on_message),
+                subscribe(session, keys.posterior, ClassPosterior, recorder.on_message)]
+        sessions.append(subs)
+        predictor = PredictorService(PredictorConfig(model=system_files.model), peer)
+        planner_cfg = PlannerServiceConfig(mode=mode, seed=seed, period_s=period, lookahead_s=period,
+                                           iterations=20, input_timeout_s=20.0, **(planner_overrides or {}))
+        planner = PlannerService(planner_cfg, peer)
+        replayer = ReplayerService(ReplayerConfig(library=system_files.human, mode=mode,
+                                                  samples_per_tick=system_files.samples_per_tick,
+                                                  **(replayer_overrides or {})), peer)
+        ex_cfg = ExecutorConfig(mode=mode, steps=steps, step_period_s=period,
+                                mcap=mcap or str(tmp_path / f"run{len(started)}.mcap"), lockstep_timeout_s=60.0,
+                                **(executor_overrides or {}))
+        threads = {
+            "predictor": ServiceThread("predictor", predictor.run),
+            "planner": ServiceThread("planner", planner.run),
+            "replayer": ServiceThread("replayer", replayer.run),
+        }
+        for t in threads.values():
+            t.start()
+        ex_stop = threading.Event()
+        executor = ExecutorService(ex_cfg, peer, stop=ex_stop)
+        threads["executor"] = ServiceThread("executor", lambda _stop: executor.run())
+        threads["executor"].stop_event = ex_stop
+        threads["executor"].start()
+        system = System(hub, keys, recorder, threads,
+                        {"predictor": predictor, "planner": planner, "replayer": replayer, "executor": executor})
+        started.append(system)
+        return system
+
+    yield start
+    for system in started:
+        for t in system.threads.values():
+            t.stop_event.set()
+        for t in system.threads.values():
+            t.thread.join(JOIN_S)
+    for item in reversed(sessions):
+        if isinstance(item, list):
+            for s in item:
+                s.undeclare()
+        else:
+            item.__exit__(None, None, None)
