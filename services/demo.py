@@ -57,7 +57,7 @@ class DemoConfig:
     method: str = opt("prediction", choices=("prediction", "current"),
                       help="occupancy the planner avoids: the early prediction, or the current posture only")
     components: int = opt(-1, help="Gaussians per class when training (-1: the trainer's default, 20)")
-    period_s: float = opt(0.5, help="replanning period (simulated s per step in lock-step, wall s in real time)")
+    period_s: float = opt(0.2, help="replanning period (simulated s per step in lock-step, wall s in real time)")
     rate_hz: float = opt(30.0, help="real time: poses per second")
     models_dir: Path = opt(Path("models"), help="where trained models are cached")
     run_dir: Path = opt(Path("runs/demo"), help="service logs and the MCAP file go here")

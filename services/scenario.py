@@ -91,8 +91,8 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration, mod
               components: int | None = None, progress: bool = True) -> Path:
     """The prediction model for a run: trained on ``library`` without ``held_out``, cached in ``models_dir``.
 
-    The cache key covers the library's data, the held-out demonstration, the scene and the number of
-    components, so a changed library never reuses a stale model.
+    The cache key covers the library's data, the held-out demonstration, the scene and the training
+    options, so a changed library, scene or trainer default never reuses a stale model.
 
     Returns:
         Path of the model file (trained now if it was not cached).
@@ -100,17 +100,17 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration, mod
     from services.predictor.model import MODEL_VERSION
     from services.predictor.train import TrainConfig, train_model
 
-    key = hashlib.sha256(json.dumps([_library_digest(library), held_out.label, held_out.index, scene.name,
-                                     components, MODEL_VERSION]).encode()).hexdigest()[:12]
-    path = Path(models_dir) / f"demo-{scene.name}-{key}.npz"
-    if path.is_file():
-        log.info("using cached model %s", path)
-        return path
     cfg = TrainConfig()
     if components is not None:
         from dataclasses import replace
 
         cfg = replace(cfg, gmm=replace(cfg.gmm, n_components=components))
+    key = hashlib.sha256(json.dumps([_library_digest(library), held_out.label, held_out.index, repr(scene),
+                                     repr(cfg), MODEL_VERSION]).encode()).hexdigest()[:12]
+    path = Path(models_dir) / f"demo-{scene.name}-{key}.npz"
+    if path.is_file():
+        log.info("using cached model %s", path)
+        return path
     demos = [d for d in library.demos if not (d.label == held_out.label and d.index == held_out.index)]
     model = train_model(library, scene, cfg, demos=demos, progress=progress)
     path.parent.mkdir(parents=True, exist_ok=True)
