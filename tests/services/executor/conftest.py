@@ -140,7 +140,8 @@ class FakeSystem:
             types = {self.keys.robot_state: RobotState, self.keys.clock: ClockTick}
             sub = subscribe_ordered(session, f"{self.keys.prefix}/**", types, on_message,
                                     RejectCounter("fake"))
-            presence = [Presence(session, self.keys, s) for s in ("predictor", "planner")]
+            # the executor starts when it sees both tokens, i.e. when both sessions are connected to it
+            presence = [Presence(session, self.keys, "predictor"), Presence(out, self.keys, "planner")]
             thread = None
             if realtime_hz:
                 def loop() -> None:
