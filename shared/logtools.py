@@ -510,7 +510,10 @@ def _main_render(args: argparse.Namespace, prog: str) -> int:
 
 def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
     """``foresight log info|render``; returns the exit status."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog=prog, description="Look at a run's MCAP log without Foxglove: 'info' "
+                                     "lists channels, schemas and message counts; 'render' draws replanning steps "
+                                     "to PNG (table, cups, human, predicted occupancy, robot spheres, candidate "
+                                     "end-effector paths).")
     sub = parser.add_subparsers(dest="cmd", required=True, metavar="{info,render}")
     pi = sub.add_parser("info", help="channels, schemas and message counts of an MCAP log")
     pi.add_argument("file", help="MCAP file")
