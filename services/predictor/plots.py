@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.human import HumanModel, place_in_scene
-from shared.library import MotionLibrary, load_library
+from shared.human import HumanModel, place_in_scene, reach_points
+from shared.library import MotionLibrary, heldout_split, load_library
 from shared.runtime import cli_errors
 from shared.scene import Scene, load_scene
 
@@ -92,16 +92,19 @@ def plot_swept_volumes(model: PredictionModel, scene: Scene, library: MotionLibr
         _skeleton_top(ax, human, placed[0])
         ax.plot(hand[:, 0], hand[:, 1], color="cyan", lw=1.5)
         if library is not None:
-            ends = np.array([human.hand_position(place_in_scene(d.features, d.features[0], scene))[-1]
-                             for d in library.by_class(c)])
-            ax.scatter(ends[:, 0], ends[:, 1], color="red", s=6, zorder=5)
+            demos = [d.features for d in library.by_class(c)]
+            reach, _ = reach_points(human, demos, scene)
+            ends = np.array([human.hand_position(place_in_scene(f, f[0], scene))[-1] for f in demos])
+            ax.scatter(ends[:, 0], ends[:, 1], color="orange", marker="x", s=8, lw=0.8, zorder=5)
+            ax.scatter(reach[:, 0], reach[:, 1], color="red", s=6, zorder=6)
         _scene_top(ax, scene)
         ax.set_title(f"{c}: {model.class_names[c]} ({int(vol.sum())} voxels)", fontsize=9)
     for ax in axes.flat[m:]:
         ax.axis("off")
     fig.suptitle(f"swept volumes seen from above ({model.grid.resolution:g} m voxels). grey: in every class's "
                  "volume; colour: number of classes sharing the voxel (dark = this class only);\ncyan: regressed "
-                 "hand path; red: the demonstrations' final hand positions; black: first regressed posture",
+                 "hand path; red: the demonstrations' reach points (hand farthest from its start), "
+                 "orange x: their final hand positions; black: first regressed posture",
                  fontsize=9)
     fig.tight_layout()
     p = Path(path)
@@ -144,7 +147,7 @@ def plot_prediction_sequence(model: PredictionModel, scene: Scene, features: np.
                        interpolation="nearest")
         _skeleton_top(ax, human, placed)
         _scene_top(ax, scene)
-        order = np.argsort(res.posterior)[::-1][:3]
+        order = np.argsort(res.posterior)[::-1][:2]
         post = ", ".join(f"{model.class_names[j]} {res.posterior[j]:.2f}" for j in order)
         ax.set_title(f"{frac * 100:.0f}% executed (true: {model.class_names[true_class]})\n{post}", fontsize=8)
     for ax in axes.flat[len(snaps):]:
@@ -168,6 +171,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m services.predicto
     parser.add_argument("--scene", default=None, help="scene file (default: the embedded pr2_two_cups)")
     parser.add_argument("--demo", type=int, default=0, help="index (in the library) of the demonstration observed "
                         "in the prediction sequence (default 0)")
+    parser.add_argument("--heldout-seed", type=int, default=None, help="observe held-out demonstration --demo of "
+                        "heldout_split(library, 1, SEED) (train the model with --heldout 1 --seed SEED)")
     parser.add_argument("--out-dir", default="runs/plots", help="where to write the PNGs (default runs/plots)")
     args = parser.parse_args(argv)
     with cli_errors(prog):
@@ -176,7 +181,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m services.predicto
         lib = load_library(args.library) if args.library else default_library()
         out = Path(args.out_dir)
         print(plot_swept_volumes(model, scene, lib, out / "swept_volumes.png"))
-        d = lib.demos[args.demo % len(lib.demos)]
+        pool = lib.demos if args.heldout_seed is None else heldout_split(lib, 1, args.heldout_seed)[1]
+        d = pool[args.demo % len(pool)]
         print(plot_prediction_sequence(model, scene, d.features, d.label, out / "prediction_sequence.png",
                                        title=f"predicted occupancy while observing {d.source} "
                                              f"(class {d.class_name})"))
