@@ -15,6 +15,7 @@ needs no summary section.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import struct
@@ -508,13 +509,34 @@ def _main_render(args: argparse.Namespace, prog: str) -> int:
     return 0
 
 
+def _main_latency(args: argparse.Namespace) -> int:
+    from shared.latency import format_latencies, run_latencies
+
+    wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose"}
+    lf = read_log(args.file, keep=lambda ch: ch.schema_name in wanted and ch.message_encoding == "msgpack")
+    topics = {}
+    for ch in lf.channels.values():
+        for key, schema in (("pose", "foresight.HumanPose"), ("occupancy", "foresight.OccupancyGrid"),
+                            ("plan", "foresight.Plan")):
+            if ch.schema_name == schema and ch.message_encoding == "msgpack":
+                topics[key] = ch.topic
+    if set(topics) != {"pose", "occupancy", "plan"}:
+        raise UserError(f"{args.file}: needs HumanPose, OccupancyGrid and Plan channels, found {sorted(topics)}")
+    stats = run_latencies(lf.messages, topics)
+    if args.json:
+        print(json.dumps({k: dataclasses.asdict(v) for k, v in stats.items()}))
+    else:
+        print(format_latencies(stats))
+    return 0
+
+
 def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
-    """``foresight log info|render``; returns the exit status."""
+    """``foresight log info|render|latency``; returns the exit status."""
     parser = argparse.ArgumentParser(prog=prog, description="Look at a run's MCAP log without Foxglove: 'info' "
                                      "lists channels, schemas and message counts; 'render' draws replanning steps "
                                      "to PNG (table, cups, human, predicted occupancy, robot spheres, candidate "
-                                     "end-effector paths).")
-    sub = parser.add_subparsers(dest="cmd", required=True, metavar="{info,render}")
+                                     "end-effector paths); 'latency' measures pose -> occupancy -> plan.")
+    sub = parser.add_subparsers(dest="cmd", required=True, metavar="{info,render,latency}")
     pi = sub.add_parser("info", help="channels, schemas and message counts of an MCAP log")
     pi.add_argument("file", help="MCAP file")
     pi.add_argument("--json", action="store_true", help="print one JSON object")
@@ -524,10 +546,15 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
     pr.add_argument("--all", action="store_true", help="draw every step; --out is then a directory")
     pr.add_argument("--out", required=True, help="PNG path (or directory with --all)")
     pr.add_argument("--min-probability", type=float, default=0.05, help="hide voxels below this probability")
+    pl = sub.add_parser("latency", help="pose -> occupancy -> plan latencies and the replanning period (p50, p99)")
+    pl.add_argument("file", help="MCAP file")
+    pl.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
     with cli_errors(prog):
         if args.cmd == "info":
             return _main_info(args)
+        if args.cmd == "latency":
+            return _main_latency(args)
         if not (0.0 <= args.min_probability <= 1.0) or math.isnan(args.min_probability):
             raise UserError(f"--min-probability must be in [0, 1], got {args.min_probability}")
         return _main_render(args, prog)

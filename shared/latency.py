@@ -1,0 +1,97 @@
+"""Latencies of a run, from its MCAP log: pose -> occupancy -> plan, and the replanning period.
+
+Every message in the executor's log carries the time the executor received it (``log_time``, one
+clock for all), so differences between log times are end-to-end latencies across processes:
+
+* pose -> occupancy: an OccupancyGrid's log time minus that of the HumanPose it was predicted from
+  (same ``demo_id`` and ``index``);
+* pose -> plan: a Plan's log time minus that of the newest pose its occupancy was predicted from
+  (``occupancy_index``), i.e. how old the human's motion is that the published plan accounts for;
+* occupancy -> plan: the same, from the OccupancyGrid the plan used;
+* the replanning period achieved: differences between consecutive Plans' log times;
+* planning time: ``Plan.planning_ms`` as the planner measured it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from shared.protocol import HumanPose, OccupancyGrid, Plan, ProtocolError, decode
+
+__all__ = ["Stat", "run_latencies", "format_latencies"]
+
+
+@dataclass(frozen=True)
+class Stat:
+    """Summary of one latency series, milliseconds."""
+
+    count: int
+    p50: float
+    p99: float
+    max: float
+
+    @classmethod
+    def of(cls, values_ms: list[float]) -> Stat:
+        """Median, 99th percentile and max of ``values_ms`` (NaN when empty)."""
+        if not values_ms:
+            return cls(0, float("nan"), float("nan"), float("nan"))
+        a = np.asarray(values_ms, dtype=np.float64)
+        return cls(len(a), float(np.percentile(a, 50)), float(np.percentile(a, 99)), float(a.max()))
+
+
+def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat]:
+    """Latency statistics of a run.
+
+    Args:
+        messages: Log messages with ``topic``, ``log_time`` (ns) and ``data`` (msgpack payload), in file order.
+        topics: Topic of each message type: keys ``"pose"``, ``"occupancy"``, ``"plan"``.
+
+    Returns:
+        ``{"pose_to_occupancy", "pose_to_plan", "occupancy_to_plan", "replanning_period", "planning"}``.
+    """
+    pose_time: dict[tuple[int, int], int] = {}
+    occ_time: dict[tuple[int, int], int] = {}
+    pose_to_occ: list[float] = []
+    pose_to_plan: list[float] = []
+    occ_to_plan: list[float] = []
+    plan_times: list[int] = []
+    planning: list[float] = []
+    current_demo = -1
+    for m in sorted(messages, key=lambda m: m.log_time):
+        try:
+            if m.topic == topics["pose"]:
+                pose = decode(m.data, HumanPose)
+                pose_time[(pose.demo_id, pose.index)] = m.log_time
+                current_demo = pose.demo_id
+            elif m.topic == topics["occupancy"]:
+                occ = decode(m.data, OccupancyGrid)
+                occ_time[(occ.demo_id, occ.index)] = m.log_time
+                t0 = pose_time.get((occ.demo_id, occ.index))
+                if t0 is not None:
+                    pose_to_occ.append((m.log_time - t0) / 1e6)
+            elif m.topic == topics["plan"]:
+                plan = decode(m.data, Plan)
+                plan_times.append(m.log_time)
+                planning.append(plan.planning_ms)
+                key = (current_demo, plan.occupancy_index)
+                if plan.occupancy_index >= 0 and key in pose_time:
+                    pose_to_plan.append((m.log_time - pose_time[key]) / 1e6)
+                if plan.occupancy_index >= 0 and key in occ_time:
+                    occ_to_plan.append((m.log_time - occ_time[key]) / 1e6)
+        except ProtocolError:
+            continue
+    period = list(np.diff(np.asarray(plan_times, dtype=np.float64)) / 1e6)
+    return {"pose_to_occupancy": Stat.of(pose_to_occ), "pose_to_plan": Stat.of(pose_to_plan),
+            "occupancy_to_plan": Stat.of(occ_to_plan), "replanning_period": Stat.of(period),
+            "planning": Stat.of(planning)}
+
+
+def format_latencies(stats: dict[str, Stat]) -> str:
+    """A table of :func:`run_latencies`' result."""
+    lines = [f"{'latency (ms)':<22}{'count':>7}{'p50':>10}{'p99':>10}{'max':>10}"]
+    for name, s in stats.items():
+        lines.append(f"{name.replace('_', ' '):<22}{s.count:>7}{s.p50:>10.1f}{s.p99:>10.1f}{s.max:>10.1f}")
+    return "\n".join(lines)

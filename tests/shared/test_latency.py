@@ -1,0 +1,51 @@
+"""Latencies from log times: pose -> occupancy -> plan, replanning period."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from shared.latency import Stat, format_latencies, run_latencies
+from shared.protocol import HumanPose, OccupancyGrid, Plan, encode
+
+
+@dataclass
+class Msg:
+    topic: str
+    log_time: int
+    data: bytes
+
+
+def _plan(index: int) -> Plan:
+    return Plan(stamp=0.0, tick=-1, step=0, goal_names=["a"], joint_names=["j"], dt=0.1, chosen=0, planning_ms=40.0,
+                occupancy_tick=-1, occupancy_index=index, trajectories=np.zeros((1, 2, 1), np.float32),
+                cost_smoothness=np.zeros(1), cost_obstacle=np.zeros(1), cost_human=np.zeros(1),
+                cost_total=np.zeros(1), valid=np.ones(1, bool))
+
+
+def test_latencies_from_log_times():
+    ms = 1_000_000
+    msgs = []
+    for i in range(10):
+        t = i * 33 * ms
+        msgs.append(Msg("p", t, encode(HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=3, index=i,
+                                                 features=np.zeros(12)))))
+        occ = OccupancyGrid.from_dense(np.zeros((2, 2, 2)), np.zeros(3), 0.1, stamp=0.0, tick=-1, tick_last=True,
+                                       demo_id=3, index=i, method="prediction")
+        msgs.append(Msg("o", t + 4 * ms, encode(occ)))
+    msgs += [Msg("x", 100 * ms, encode(_plan(2))), Msg("x", 300 * ms, encode(_plan(8)))]
+    msgs.append(Msg("x", 301 * ms, b"\x00garbage"))  # ignored
+    stats = run_latencies(msgs, {"pose": "p", "occupancy": "o", "plan": "x"})
+    assert stats["pose_to_occupancy"] == Stat(10, 4.0, 4.0, 4.0)
+    assert stats["pose_to_plan"].count == 2 and stats["pose_to_plan"].max == 300 - 8 * 33
+    assert np.isclose(stats["pose_to_plan"].p50, ((100 - 66) + (300 - 264)) / 2)
+    assert stats["occupancy_to_plan"].max == 300 - 264 - 4
+    assert stats["replanning_period"] == Stat(1, 200.0, 200.0, 200.0)
+    assert stats["planning"].p50 == 40.0
+    assert "pose to occupancy" in format_latencies(stats)
+
+
+def test_empty_series_is_nan():
+    s = Stat.of([])
+    assert s.count == 0 and np.isnan(s.p50)
