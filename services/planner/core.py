@@ -32,6 +32,7 @@ from shared.config import ConfigError, opt
 from shared.protocol import OccupancyGrid
 from shared.scene import Grid, Scene
 
+from .fused import FusedCost, supports
 from .multigoal import best, init_straight_lines, interpolate_path, project_onto_path, reconnect_previous
 from .stomp import Stomp, StompConfig
 
@@ -56,6 +57,10 @@ class PlannerConfig:
     device: str = opt("cpu", help="torch device (cpu, cuda, cuda:1, ...)")
     dtype: str = opt("float32", help="torch float dtype", choices=("float32", "float64"))
     threads: int = opt(1, help="torch intra-op threads of the process (0: torch's default; >1 is slow on shared cores)")
+    fused_cost: bool = opt(True, help="evaluate the PR2 cost with the fused kernel (same numbers as the reference "
+                           "StateCost path, fewer ops)")
+    compile: bool = opt(False, help="torch.compile the fused cost (compiled once at construction for the STOMP "
+                        "batch shape)")
     seed: int = opt(0, help="base seed of STOMP's exploration noise (per step and goal)")
     goals: list[str] = opt(default_factory=list, help="cup names to plan for, in order (empty: every cup)")
     rollouts: int = opt(16, help="STOMP noisy rollouts R per goal and iteration")
@@ -67,8 +72,8 @@ class PlannerConfig:
     noise_decay: float = opt(1.0, help="STOMP noise factor per iteration (1: constant)")
     sensitivity: float = opt(10.0, help="STOMP sensitivity h of the per-waypoint probabilities")
     cost_to_go: bool = opt(True, help="rank rollouts by cost-to-go (else by the waypoint's own cost)")
-    w_smooth: float = opt(10.0, help="weight of the squared joint accelerations (per waypoint step, rad^2); "
-                          "negative: the cost model's default")
+    w_smooth: float = opt(-1.0, help="weight of the squared joint accelerations (per waypoint step, rad^2); "
+                          "negative: the cost model's default (CostConfig.w_smooth = 10)")
     w_obstacle: float = opt(-1.0, help="weight of the obstacle cost (negative: the cost model's default)")
     w_human: float = opt(-1.0, help="weight of the human occupancy cost (negative: the cost model's default)")
     integrate_costs: bool = opt(True, help="weight obstacle/human costs by each waypoint's time at the velocity "
@@ -235,6 +240,10 @@ class Planner:
         self.stomp = Stomp(c.stomp((vel / vel.max()).tolist()), (self.lower, self.upper))
         self.valid_index = torch.nonzero(goals.valid.cpu()).flatten().tolist()
         self.goal_q = goals.q.to(self.device, self.dtype)[self.valid_index]  # (Kv, D)
+        self.fused: FusedCost | None = None
+        if c.fused_cost and supports(robot, cost):
+            self.fused = FusedCost(robot, cost, self.w_smooth, self._vmax, c.integrate_costs, compile=c.compile)
+            self.fused.warm_up(len(self.valid_index) * (c.rollouts + 1), c.waypoints)
         self.step_index = 0
         self._prev: torch.Tensor | None = None  # (Kv, T, D) previous optimised trajectories
         self._prev_best: int | None = None  # index into the valid goals
@@ -269,6 +278,9 @@ class Planner:
     def waypoint_cost(self, q: torch.Tensor) -> torch.Tensor:
         """Total cost per waypoint, the callable STOMP optimises.
 
+        The fused kernel (:class:`~services.planner.fused.FusedCost`, ``fused_cost``) when the robot and
+        cost support it, else :meth:`waypoint_cost_reference`; the two are tested equal.
+
         Args:
             q: ``(K, R, T, D)`` trajectories.
 
@@ -276,6 +288,12 @@ class Planner:
             ``(K, R, T)``: ``w_smooth`` x squared acceleration + obstacle + human terms (the latter two
             times :meth:`waypoint_time` when ``integrate_costs``).
         """
+        if self.fused is not None:
+            return self.fused(q)
+        return self.waypoint_cost_reference(q)
+
+    def waypoint_cost_reference(self, q: torch.Tensor) -> torch.Tensor:
+        """:meth:`waypoint_cost` from the state cost callable (``(K, R, T, D) -> (K, R, T)``), unfused."""
         return self._state_terms(q).sum(-1) + self.w_smooth * acceleration_cost(q)
 
     def cost_terms(self, q: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -287,9 +305,13 @@ class Planner:
         Returns:
             ``{"smoothness", "obstacle", "human", "total"}`` -> ``(K,)`` each.
         """
-        terms = self._state_terms(q[:, None])[:, 0].sum(1)  # (K, 2)
-        smooth = self.w_smooth * acceleration_cost(q).sum(-1)
-        out = {"smoothness": smooth, "obstacle": terms[:, 0], "human": terms[:, 1]}
+        if self.fused is not None:
+            smooth, obstacle, human = self.fused.terms(q).sum(-1)  # (K,) each
+            out = {"smoothness": smooth, "obstacle": obstacle, "human": human}
+        else:
+            terms = self._state_terms(q[:, None])[:, 0].sum(1)  # (K, 2)
+            smooth = self.w_smooth * acceleration_cost(q).sum(-1)
+            out = {"smoothness": smooth, "obstacle": terms[:, 0], "human": terms[:, 1]}
         out["total"] = out["smoothness"] + out["obstacle"] + out["human"]
         return out
 

@@ -39,7 +39,7 @@ class CostInputError(ValueError):
 class CostConfig:
     """Weights and shape of the planning costs (held by :class:`StateCost` as ``config``)."""
 
-    w_smooth: float = 1000.0  # weight of the squared accelerations (rad^2; same default as PlannerConfig)
+    w_smooth: float = 10.0  # weight of the squared accelerations (rad^2 per waypoint step); the planner's default
     w_obstacle: float = 10.0  # weight of the obstacle penetration (m, summed over spheres)
     w_human: float = 1.0  # weight of the summed occupancy probability
     clearance: float = 0.05  # obstacle margin eps (m): spheres closer than this to a surface pay

@@ -1,0 +1,393 @@
+"""The planner's per-waypoint cost as one fused kernel: the same numbers as the reference path, fewer ops.
+
+The reference is :meth:`Planner.waypoint_cost_reference` = ``StateCost`` (sphere FK, signed distance
+field, occupancy, arm/body self-collision, torso lift tables) x waypoint time + ``w_smooth`` x squared
+accelerations. :class:`FusedCost` computes exactly those terms for a ``(K, R, T, D)`` batch with a
+handful of large tensor ops (each eager torch op costs 5-20 us on this CPU, so op count matters as much
+as FLOPs), and can be ``torch.compile``-d:
+
+* **FK**: every joint's local transform is ``A0 + cos(q) A1 + sin(q) A2 + q A3`` (base folded into the
+  torso joint), built for all joints in one ``baddbmm``; the chain is 3 broadcast multiply-adds per
+  joint on a batch-last ``(3, 4, B)`` layout; the arm-carried sphere centres are one matmul with a
+  ``(S, 7 x 4)`` table. Only the spheres that move with the arm joints are evaluated: the torso-carried
+  ones come from ``StateCost``'s lift tables, the base's never move.
+* **Lookups**: trilinear, from corner-major packed cells ``(8, cells)`` (one ``index_select`` per grid, 3
+  ``lerp``); the occupancy is re-packed when ``set_occupancy`` replaced it; the static field is
+  **cropped** to the cells where a sphere can pay anything (field value below ``clearance`` + the
+  largest arm sphere radius, plus one layer): outside the crop both the
+  reference and the crop give a zero hinge, inside they read the same corner values (tested).
+* **Self-collision**: the body spheres are rigid in the base frame up to the torso lift ``l``, so
+  ``|x - c_b - l v_b|^2`` is one ``(B_body, 7) x (7, A x B)`` matmul of features
+  ``[x, l (x . v), 1, l, l^2]`` plus ``|x|^2`` (exact, every arm/body pair, as the reference).
+* time weights and accelerations on ``(N, T, D)``.
+
+Tested equal to the reference to 1e-5 relative (``tests/services/planner/test_fused.py``).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+
+__all__ = ["FusedCost", "supports"]
+
+log = logging.getLogger("foresight.planner")
+
+
+def supports(robot: Any, cost: Any) -> bool:
+    """Whether :class:`FusedCost` reproduces ``cost`` for ``robot``.
+
+    That is a PR2 ``StateCost`` with lift tables, one point per sphere and trilinear occupancy; otherwise
+    the planner keeps the reference path.
+    """
+    from shared.robot import PR2
+
+    from .costs import StateCost
+
+    if not isinstance(robot, PR2) or not isinstance(cost, StateCost) or cost.robot is not robot:
+        return False
+    c = cost.config
+    arm = robot.arm_carried_slice
+    anchors = robot.sphere_anchor[arm].tolist()
+    return (cost._use_table and c.human_points == 1 and c.human_interp == "trilinear" and bool(anchors)
+            and min(anchors) >= 2 and max(anchors) <= len(robot.link_names) - 2
+            and robot.arm_slice.start >= arm.start and robot.arm_slice.stop <= arm.stop)
+
+
+def _local_transform_basis(robot: Any) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per joint j: ``H_j(q) = A0_j + cos(q) A1_j + sin(q) A2_j + q A3_j`` (4 x 4, float64).
+
+    Returns:
+        ``(A0 (D, 16, 1), A123^T (D, 16, 3))``; joint 0 includes the world-from-root base transform.
+    """
+    d = robot.dof
+    a = torch.zeros(d, 4, 4, 4, dtype=torch.float64)
+    base = torch.as_tensor(robot.base_transform, dtype=torch.float64)
+    for j, (_, k, sign, prismatic, _, _) in enumerate(robot._plan):
+        off = torch.eye(4, dtype=torch.float64)
+        off[:3, :3] = robot._off_r[j].double().cpu()
+        off[:3, 3] = robot._off_p[j].double().cpu()
+        if j == 0:
+            off = base @ off
+        axis = torch.zeros(3, dtype=torch.float64)
+        axis[k] = sign
+        if prismatic:
+            t = torch.zeros(4, 4, dtype=torch.float64)
+            t[:3, 3] = axis
+            a[j, 0], a[j, 3] = off, off @ t
+        else:  # Rodrigues: R = I + sin K + (1 - cos) K^2
+            kx = torch.zeros(3, 3, dtype=torch.float64)
+            kx[0, 1], kx[0, 2], kx[1, 0] = -axis[2], axis[1], axis[2]
+            kx[1, 2], kx[2, 0], kx[2, 1] = -axis[0], -axis[1], axis[0]
+            k2 = kx @ kx
+            c0, c1, c2 = torch.eye(4, dtype=torch.float64), torch.zeros(4, 4, dtype=torch.float64), torch.zeros(
+                4, 4, dtype=torch.float64)
+            c0[:3, :3] += k2
+            c1[:3, :3] = -k2
+            c2[:3, :3] = kx
+            a[j, 0], a[j, 1], a[j, 2] = off @ c0, off @ c1, off @ c2
+    return a[:, 0].reshape(d, 16, 1), a[:, 1:].reshape(d, 3, 16).transpose(1, 2)
+
+
+def _corner_major(volume: torch.Tensor) -> torch.Tensor:
+    """``(nx, ny, nz)`` -> ``(8, (nx-1)(ny-1)(nz-1))``: the 8 corner values of every cell, corner-major."""
+    nx, ny, nz = volume.shape
+    return torch.stack([volume[dx:nx - 1 + dx, dy:ny - 1 + dy, dz:nz - 1 + dz].reshape(-1)
+                        for dx in (0, 1) for dy in (0, 1) for dz in (0, 1)]).contiguous()
+
+
+class _Cells:
+    """Trilinear lookup tables of one voxel volume (values at voxel centres, ``first`` = centre of voxel 0)."""
+
+    def __init__(self, volume: torch.Tensor, first: torch.Tensor, inv_res: float) -> None:
+        dev, dt = volume.device, volume.dtype
+        nx, ny, nz = (int(n) for n in volume.shape)
+        self.packed = _corner_major(volume)
+        self.first = first.to(dev, dt).reshape(3, 1, 1)
+        self.inv_res = float(inv_res)
+        self.u_max = torch.tensor([nx - 1, ny - 1, nz - 1], device=dev, dtype=dt).reshape(3, 1, 1)
+        self.cell_max = torch.tensor([nx - 2, ny - 2, nz - 2], device=dev, dtype=dt).reshape(3, 1, 1)
+        self.strides = torch.tensor([(ny - 1) * (nz - 1), nz - 1, 1], device=dev, dtype=dt).reshape(3, 1, 1)
+
+    def args(self) -> tuple[torch.Tensor, ...]:
+        return self.packed, self.first, self.u_max, self.cell_max, self.strides
+
+
+def _crop(volume: torch.Tensor, first: torch.Tensor, res: float,
+          keep: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, bool]:
+    """Crop ``volume`` to the voxels where ``keep`` holds, plus one layer on every side.
+
+    Returns:
+        ``(cropped volume, centre of its voxel 0, whether the crop is strictly inside the volume)``.
+    """
+    dims = volume.shape
+    if not bool(keep.any()):
+        lo, hi = [0, 0, 0], [min(1, n - 1) for n in dims]
+        inside = False
+    else:
+        idx = torch.nonzero(keep)
+        lo = [max(int(v) - 1, 0) for v in idx.min(0).values]
+        hi = [min(int(v) + 1, n - 1) for v, n in zip(idx.max(0).values, dims, strict=True)]
+        inside = all(a_ > 0 for a_ in lo) and all(b_ < n - 1 for b_, n in zip(hi, dims, strict=True))
+    hi = [max(h, a_ + 1) for a_, h in zip(lo, hi, strict=True)]  # at least 2 voxels per axis
+    sub = volume[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].contiguous()
+    return sub, first + res * torch.tensor(lo, dtype=first.dtype, device=first.device), inside
+
+
+def _trilinear(p: torch.Tensor, inv_res: float, packed: torch.Tensor, first: torch.Tensor, u_max: torch.Tensor,
+               cell_max: torch.Tensor, strides: torch.Tensor) -> torch.Tensor:
+    """Trilinear lookup, border-clamped.
+
+    Args:
+        p: ``(3, S, B)`` points (coordinate-major).
+        inv_res: 1 / voxel edge.
+        packed: ``(8, cells)`` corner values (see :func:`_corner_major`).
+        first: ``(3, 1, 1)`` centre of voxel 0.
+        u_max: ``(3, 1, 1)`` last voxel index (float).
+        cell_max: ``(3, 1, 1)`` last cell index (float).
+        strides: ``(3, 1, 1)`` cell strides (float).
+
+    Returns:
+        ``(S, B)`` values.
+    """
+    u = torch.minimum(((p - first) * inv_res).clamp(min=0), u_max)
+    i0 = torch.minimum(u.floor(), cell_max)
+    f = u - i0
+    idx = (i0 * strides).sum(0).long()  # (S, B)
+    c = packed.index_select(1, idx.reshape(-1)).view(2, 2, 2, -1)
+    fx, fy, fz = f.reshape(3, 1, -1)
+    c = torch.lerp(c[:, :, 0], c[:, :, 1], fz)
+    c = torch.lerp(c[:, 0], c[:, 1], fy)
+    return torch.lerp(c[0], c[1], fx[0]).view(idx.shape)
+
+
+def _hinge_sum(e: torch.Tensor, eps: float) -> torch.Tensor:
+    """Sum over dim 0 of CHOMP's smooth hinge, written in ``e = eps - d``.
+
+    ``e - eps/2`` (e > eps), ``e^2 / (2 eps)`` (0 <= e <= eps), 0 (e < 0): ``costs.smooth_penetration(d, eps)``.
+    """
+    e = e.clamp(min=0)
+    m = e.clamp(max=eps)
+    return (m * m).sum(0) * (0.5 / eps) + (e - m).sum(0)
+
+
+def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Tensor, obs_thr: torch.Tensor,  # noqa: D417
+            sdf_packed: torch.Tensor, sdf_first: torch.Tensor, sdf_umax: torch.Tensor, sdf_cmax: torch.Tensor,
+            sdf_strides: torch.Tensor, sdf_lo: torch.Tensor, sdf_hi: torch.Tensor,
+            occ_packed: torch.Tensor, occ_first: torch.Tensor, occ_umax: torch.Tensor, occ_cmax: torch.Tensor,
+            occ_strides: torch.Tensor, tab: torch.Tensor, psi: torch.Tensor, v: torch.Tensor, r_arm: torch.Tensor,
+            inv_vmax: torch.Tensor, *, s: dict[str, Any]) -> torch.Tensor:
+    """Fused per-waypoint cost terms (tensor arguments are constants prepared by :class:`FusedCost`).
+
+    Args:
+        q: ``(N, T, D)`` trajectories.
+        a0, a123t: ``(D, 16, 1)``, ``(D, 16, 3)`` local transform basis (:func:`_local_transform_basis`).
+        wt: ``(S, 28)`` homogeneous local centres of the S arm-carried spheres in the 7 arm links' blocks.
+        obs_thr: ``(S, 1)`` ``clearance + radius``.
+        sdf_*: cropped static field cells; ``sdf_lo``/``sdf_hi`` ``(3, 1, 1)`` the field's grid box.
+        occ_*: occupancy cells (zero-padded).
+        tab: ``(4, n - 1)`` lift tables (obstacle, next, human, next) of the torso-carried spheres.
+        psi: ``(B_body, 7)`` self-collision coefficients; v: ``(3, 1)`` world torso axis.
+        r_arm: ``(A, 1)`` radii of the arm-group spheres.
+        inv_vmax: ``(D,)`` 1 / scaled velocity limits.
+        s: Static scalars (inverse resolutions, margins, weights, slices, flags).
+
+    Returns:
+        ``(3, N, T)``: smoothness, obstacle, human per waypoint (weighted; state terms time-weighted).
+    """
+    n, t, d = q.shape
+    b = n * t
+    qt = q.reshape(b, d).t()  # (D, B)
+    basis = torch.stack([torch.cos(qt), torch.sin(qt), qt], 1)  # (D, 3, B)
+    h = torch.baddbmm(a0, a123t, basis).view(d, 4, 4, b)
+    m = h[0, :3]
+    links = []
+    for j in range(1, d):
+        hj = h[j]
+        nm = m[:, 0:1] * hj[0]
+        nm = torch.addcmul(nm, m[:, 1:2], hj[1])
+        nm = torch.addcmul(nm, m[:, 2:3], hj[2])
+        nm[:, 3] += m[:, 3]
+        m = nm
+        links.append(m)
+    p = torch.matmul(wt, torch.stack(links, 1).view(3, 4 * (d - 1), b))  # (3, S, B)
+    # static obstacles (cropped field; the grid-box extension only where the crop reaches the grid's border)
+    sdf = _trilinear(p, s["sdf_inv"], sdf_packed, sdf_first, sdf_umax, sdf_cmax, sdf_strides)
+    if s["sdf_extend"]:
+        out = p - torch.minimum(torch.maximum(p, sdf_lo), sdf_hi)
+        sdf = sdf + (out * out).sum(0).sqrt()
+    obstacle = _hinge_sum(obs_thr - sdf, s["eps"])
+    human = _trilinear(p, s["occ_inv"], occ_packed, occ_first, occ_umax, occ_cmax, occ_strides).sum(0)
+    # torso-carried spheres: lift tables
+    lift = qt[0]
+    u = ((lift - s["lift_lo"]) * s["lift_inv"]).clamp(0, s["lift_n"] - 1)
+    i = u.floor().clamp(max=s["lift_n"] - 2)
+    tv = tab.index_select(1, i.long())
+    fl = u - i
+    obstacle = obstacle + torch.lerp(tv[0], tv[1], fl)
+    human = human + torch.lerp(tv[2], tv[3], fl)
+    if s["self"] and s["self_pairs"]:  # compiled: one fused loop over the pairs, nothing materialised
+        x = p[:, s["a0"]:s["a1"]]  # (3, A, B)
+        cb = psi[:, 8:11, None] + psi[:, 11:14, None] * lift  # (B_body, 3, B) body centres at the lift
+        diff = x[:, None] - cb.transpose(0, 1)[:, :, None]  # (3, B_body, A, B)
+        dist = ((diff * diff).sum(0).clamp(min=1e-12).sqrt() - psi[:, 7:8, None]).amin(0)  # (A, B)
+        obstacle = obstacle + _hinge_sum(s["self_eps"] - (dist - r_arm), s["self_eps"])
+    elif s["self"]:  # eager: one matmul of features, then 4 passes over the pairs
+        x = p[:, s["a0"]:s["a1"]].reshape(3, -1)  # (3, A * B)
+        la = lift.repeat(s["a1"] - s["a0"]).view(1, -1)  # lift per (arm sphere, config)
+        phi = torch.cat([x, la * (x * v).sum(0, keepdim=True), torch.ones_like(la), la, la * la], 0)  # (7, A*B)
+        d2 = torch.addmm((x * x).sum(0, keepdim=True), psi[:, :7], phi)  # (B_body, A * B)
+        dist = (d2.clamp(min=1e-12).sqrt() - psi[:, 7:8]).amin(0).view(-1, b)  # (A, B)
+        obstacle = obstacle + _hinge_sum(s["self_eps"] - (dist - r_arm), s["self_eps"])
+    state = torch.stack([s["w_obstacle"] * obstacle, s["w_human"] * human]).view(2, n, t)
+    if s["integrate"]:
+        seg = ((q[:, 1:] - q[:, :-1]).abs() * inv_vmax).amax(-1)  # (N, T - 1)
+        state = state * (0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0))))
+    acc = q[:, 2:] - 2 * q[:, 1:-1] + q[:, :-2]
+    smooth = s["w_smooth"] * F.pad((acc * acc).sum(-1), (1, 1))
+    return torch.cat([smooth[None], state], 0)
+
+
+class FusedCost:
+    """The planner's waypoint cost (smoothness + time-weighted obstacle and human) as one fused kernel.
+
+    Args:
+        robot: The PR2.
+        cost: Its :class:`~services.planner.costs.StateCost` (read again whenever its occupancy changes).
+        w_smooth: Weight of the squared accelerations.
+        vmax: ``(D,)`` scaled velocity limits (waypoint times).
+        integrate: Weight the state terms by the waypoint times (``PlannerConfig.integrate_costs``).
+        compile: ``torch.compile`` the kernel (call :meth:`warm_up` with the batch size to compile for).
+    """
+
+    def __init__(self, robot: Any, cost: Any, w_smooth: float, vmax: torch.Tensor, integrate: bool,
+                 compile: bool = False) -> None:
+        if not supports(robot, cost):
+            raise ValueError("FusedCost needs a PR2 StateCost with lift tables, 1 point per sphere, trilinear")
+        self.robot, self.cost = robot, cost
+        dev, dt = robot.device, robot.dtype
+        cfg = cost.config
+        a0, a123t = _local_transform_basis(robot)
+        arm = robot.arm_carried_slice
+        w = robot._sphere_weights[2:len(robot.link_names) - 1, :, arm]  # (7, 4, S) links of the arm joints
+        r_arm_c = robot.sphere_radii[arm]
+        # static field, cropped to where some arm-carried sphere can pay (value < clearance + largest radius)
+        sdf = cost.sdf
+        lk = sdf._lookup
+        vol = torch.as_tensor(sdf.distance_, device=dev, dtype=dt)
+        cap = cfg.clearance + float(r_arm_c.max())
+        sub, first, inside = _crop(vol, lk.first, 1.0 / lk.inv_res, vol < cap)
+        self._sdf = _Cells(sub, first, lk.inv_res)
+        # body spheres: centre(l) = c0 + l v (torso-carried) or c0 (fixed base)
+        lo = robot.lower.clone()
+        up = lo.clone()
+        up[0] = robot.upper[0]
+        body = robot.body_slice
+        c_lo, c_up = robot.sphere_centers(lo)[body].double(), robot.sphere_centers(up)[body].double()
+        vb = (c_up - c_lo) / float(robot.upper[0] - robot.lower[0])  # (Bb, 3): the torso axis or 0
+        moving = vb.norm(dim=1) > 0.5
+        axis = vb[moving].mean(0) if bool(moving.any()) else torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
+        axis = axis / axis.norm()
+        kappa = moving.double()
+        c0 = c_lo - float(robot.lower[0]) * kappa[:, None] * axis
+        psi = torch.cat([-2 * c0, -2 * kappa[:, None], (c0 * c0).sum(1, keepdim=True),
+                         (2 * kappa * (c0 @ axis))[:, None], kappa[:, None],
+                         robot.sphere_radii[body].double()[:, None], c0, kappa[:, None] * axis], 1)
+        # psi (Bb, 14): 7 feature coefficients, radius, centre at lift 0, lift velocity
+        self._consts = dict(a0=a0.to(dev, dt), a123t=a123t.contiguous().to(dev, dt),
+                            wt=w.reshape(-1, w.shape[-1]).t().contiguous(),
+                            obs_thr=(cfg.clearance + r_arm_c)[:, None].contiguous(),
+                            sdf_lo=torch.as_tensor(sdf.grid.min, device=dev, dtype=dt).reshape(3, 1, 1),
+                            sdf_hi=torch.as_tensor(sdf.grid.max, device=dev, dtype=dt).reshape(3, 1, 1),
+                            psi=psi.to(dev, dt).contiguous(), v=axis.to(dev, dt).reshape(3, 1),
+                            r_arm=robot.sphere_radii[robot.arm_slice][:, None].contiguous(),
+                            inv_vmax=(1.0 / vmax).to(dev, dt).contiguous())
+        self._static = dict(sdf_inv=lk.inv_res, sdf_extend=not inside, eps=float(cfg.clearance),
+                            occ_inv=1.0, lift_lo=float(cost._lift_lo), lift_inv=1.0 / float(cost._lift_step),
+                            lift_n=int(cost._lift_n), self=bool(cost.has_self),
+                            a0=robot.arm_slice.start - arm.start, a1=robot.arm_slice.stop - arm.start,
+                            self_eps=max(float(cfg.self_clearance), 1e-6), w_obstacle=float(cfg.w_obstacle),
+                            w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate),
+                            self_pairs=bool(compile))
+        self._occ_src: Any = object()
+        self._tab_src: Any = object()
+        self._occ: _Cells | None = None
+        self._tab: torch.Tensor | None = None
+        self._zero_occ = _Cells(torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0)
+        self.compiled = bool(compile)
+        self._fn: Callable[..., torch.Tensor] = _kernel
+        if self.compiled:
+            self._fn = torch.compile(_kernel, dynamic=False)
+        self.batch: int | None = None  # the compiled batch size N (trajectories per call), set by warm_up
+        self.compile_s = 0.0
+
+    def _refresh(self) -> None:
+        """Re-read the occupancy and the human lift table when ``cost.set_occupancy`` replaced them."""
+        cost = self.cost
+        if cost._occ is not self._occ_src:
+            self._occ_src = cost._occ
+            if cost._occ is None:
+                self._occ = self._zero_occ
+            else:
+                lk = cost._occ  # zero-padded volume (not cropped: a fixed shape for the compiled kernel)
+                self._occ = _Cells(lk.flat.view(*lk.dims), lk.first, lk.inv_res)
+        if cost._tab_human is not self._tab_src:
+            self._tab_src = cost._tab_human
+            self._tab = torch.cat([cost._tab_obstacle.t(), cost._tab_human.t()], 0).contiguous()  # (4, n - 1)
+
+    def _run(self, q3: torch.Tensor) -> torch.Tensor:
+        self._refresh()
+        assert self._occ is not None and self._tab is not None
+        c = self._consts
+        occ = self._occ
+        s = dict(self._static, occ_inv=occ.inv_res)
+        return self._fn(q3, c["a0"], c["a123t"], c["wt"], c["obs_thr"], *self._sdf.args(), c["sdf_lo"], c["sdf_hi"],
+                        *occ.args(), self._tab, c["psi"], c["v"], c["r_arm"], c["inv_vmax"], s=s)
+
+    def terms(self, q: torch.Tensor) -> torch.Tensor:
+        """Per-waypoint terms.
+
+        Args:
+            q: ``(..., T, D)`` trajectories.
+
+        Returns:
+            ``(3, ..., T)``: ``w_smooth`` x squared acceleration, obstacle, human (the state terms weighted
+            and, with ``integrate``, times the waypoint time), as ``Planner.waypoint_cost_reference`` sums.
+        """
+        lead, (t, d) = q.shape[:-2], q.shape[-2:]
+        q3 = q.reshape(-1, t, d).to(self.robot.dtype)
+        n = q3.shape[0]
+        if not self.compiled or self.batch is None or n == self.batch:
+            out = self._run(q3)
+        else:  # the compiled shape: chunks of `batch` trajectories, the last one padded
+            chunks = -(-n // self.batch)
+            pad = chunks * self.batch - n
+            if pad:
+                q3 = torch.cat([q3, q3[:1].expand(pad, t, d)], 0)
+            out = torch.cat([self._run(q3[i * self.batch:(i + 1) * self.batch]) for i in range(chunks)], 1)[:, :n]
+        return out.reshape(3, *lead, t)
+
+    def __call__(self, q: torch.Tensor) -> torch.Tensor:
+        """Total cost per waypoint: ``q`` ``(K, R, T, D)`` -> ``(K, R, T)`` (what STOMP optimises)."""
+        return self.terms(q).sum(0)
+
+    def warm_up(self, batch: int, waypoints: int) -> float:
+        """Fix the batch size (trajectories per kernel call) and, when compiled, compile for it.
+
+        Returns:
+            Seconds spent (the compilation).
+        """
+        q = self.robot.lower + 0.5 * (self.robot.upper - self.robot.lower)
+        t0 = time.perf_counter()
+        self.batch = int(batch)
+        self._run(q.expand(self.batch, waypoints, -1).contiguous())
+        self.compile_s = time.perf_counter() - t0
+        if self.compiled:
+            log.info("planner cost compiled for %d trajectories in %.1f s", self.batch, self.compile_s)
+        return self.compile_s
+
