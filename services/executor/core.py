@@ -219,6 +219,7 @@ class ExecutorCore:
         self.reached = False
         self.fresh = _Freshness()
         self.plans_adopted = 0
+        self.human_ended = False
 
     # ------------------------------------------------------------------------------------------
     # inputs
@@ -249,6 +250,14 @@ class ExecutorCore:
         self.plans_adopted += 1
         self._update_reached()
 
+    def note_demonstration(self, event: str) -> None:
+        """Record a DemoMarker event (``"start"`` or ``"end"``).
+
+        After the end of the observed demonstration the human stands still: the last prediction stays
+        valid and its age no longer holds the robot. A start requires fresh predictions again.
+        """
+        self.human_ended = event == "end"
+
     def note_occupancy(self, stamp: float | None = None) -> None:
         """Record that an occupancy prediction was received at ``stamp`` (core clock; default now)."""
         stamp = self.t if stamp is None else float(stamp)
@@ -267,7 +276,7 @@ class ExecutorCore:
         age = t - self.fresh.plan
         if age > limit + 1e-9:
             return f"plan is {age:.2f} s old (limit {limit:.2f} s)"
-        if self.config.require_occupancy:
+        if self.config.require_occupancy and not (self.human_ended and self.fresh.occupancy is not None):
             if self.fresh.occupancy is None:
                 return "no occupancy prediction received yet"
             age = t - self.fresh.occupancy

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from shared.config import ZenohConfig
-from shared.protocol import ClockTick, Keys, Message, OccupancyGrid, Plan, ProtocolError, decode
+from shared.protocol import ClockTick, DemoMarker, Keys, Message, OccupancyGrid, Plan, ProtocolError, decode
 from shared.scene import Scene, load_scene
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session
 
@@ -191,6 +191,9 @@ class ExecutorService:
                 self._latest_plan = msg
                 self._plan_seq += 1
                 self._cond.notify_all()
+        elif key == self.keys.demo and isinstance(msg, DemoMarker):
+            with self._cond:
+                self.core.note_demonstration(msg.event)
         elif key == self.keys.occupancy and isinstance(msg, OccupancyGrid):
             with self._cond:
                 self._occ_tick = max(self._occ_tick, msg.tick)

@@ -191,3 +191,17 @@ def test_reference_interpolates_and_holds_at_the_ends() -> None:
     assert np.allclose(ref.at(0.75), [1.0, 3.0])
     assert np.allclose(ref.at(5.0), [1.0, 4.0])
     assert ref.duration == 1.0
+
+
+def test_last_prediction_stays_valid_after_the_demonstration_ends():
+    limits = ArmLimits(("a",), np.array([-1.0]), np.array([1.0]), np.array([1.0]))
+    core = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=0.5))
+    core.fresh.plan, core.fresh.occupancy = 0.0, 0.0
+    core.reference = object()  # a plan is being executed
+    assert "occupancy" in core.stale_reason(1.0) or "plan" in core.stale_reason(1.0)
+    core.fresh.plan = 1.0
+    assert "occupancy is 1.00 s old" in core.stale_reason(1.0)
+    core.note_demonstration("end")
+    assert core.stale_reason(1.0) == ""
+    core.note_demonstration("start")
+    assert "occupancy" in core.stale_reason(1.0)
