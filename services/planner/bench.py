@@ -11,6 +11,7 @@ of configurations (K x R x T per iteration, times the iterations), and prints th
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import resource
@@ -103,20 +104,23 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
     from tqdm import tqdm
 
     scene = scene or load_scene()
-    base = Planner(scene, config)  # builds the robot, the cost and the IK goals once
+    base = Planner(scene, dataclasses.replace(config, compile=False))  # the robot, the cost and the IK goals, once
     occ = blob_occupancy(scene)
     q0 = base.robot.q_start if getattr(base.robot, "q_start", None) is not None else (
         (base.robot.lower + base.robot.upper) / 2)
     q0 = q0.double().cpu().numpy()
     out: dict[str, Any] = {"K": [], "step_ms": [], "step_ms_min": [], "step_cpu_ms": [], "fk_ms": [],
-                           "fk_cpu_ms": [], "pk_fk_ms": [], "ratio": [],
+                           "fk_cpu_ms": [], "pk_fk_ms": [], "ratio": [], "construct_s": [], "compiled": False,
                            "rollouts": config.rollouts, "waypoints": config.waypoints,
                            "iterations": config.iterations, "threads": torch.get_num_threads(),
                            "device": config.device, "dtype": config.dtype, "steps": steps,
                            "load_avg_1min": os.getloadavg()[0]}
     for k in tqdm(ks, desc="bench planner", unit="K", disable=not progress, file=sys.stderr):
         goals = bench_goals(base.goals, base.robot, k, seed=config.seed)
+        t0 = time.perf_counter()
         planner = Planner(scene, config, robot=base.robot, cost=base.cost, goals=goals)
+        out["construct_s"].append(round(time.perf_counter() - t0, 2))
+        out["compiled"] = bool(planner.fused is not None and planner.fused.compiled)
         res = planner.step(q0, occ)  # warm-up (first step: straight lines)
         times, cpu = [], []
         for _ in range(steps):
@@ -177,7 +181,7 @@ def peak_memory_mb(k: int, config: PlannerConfig, steps: int = 3) -> float:
     code = ("import json, resource, sys; from services.planner.bench import _memory_probe; "
             f"_memory_probe({k}, {steps}, json.loads(sys.argv[1]))")
     cfg = {f: getattr(config, f) for f in ("device", "dtype", "threads", "seed", "rollouts", "waypoints",
-                                           "iterations")}
+                                           "iterations", "compile", "fused_cost")}
     done = subprocess.run([sys.executable, "-c", code, json.dumps(cfg)], capture_output=True, text=True,
                           timeout=600, check=True)
     return float(done.stdout.strip().splitlines()[-1])
@@ -296,6 +300,10 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
     p.add_argument("--iterations", type=int, default=50)
     p.add_argument("--threads", type=int, default=1, help="torch threads (0: torch's default)")
     p.add_argument("--device", default="cpu")
+    p.add_argument("--compile", action=argparse.BooleanOptionalAction, default=True,
+                   help="torch.compile the fused cost (default on, as PlannerConfig)")
+    p.add_argument("--baseline", action="store_true",
+                   help="also time the unfused reference cost path (StateCost, eager) in the same process")
     p.add_argument("--profile", action="store_true", help="also print a torch.profiler table of a K=2 step")
     p.add_argument("--memory", action="store_true", help="also measure the peak RSS of a K=8 planning process")
     p.add_argument("--plot", metavar="PNG", default=None,
@@ -309,8 +317,14 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
         if not ks or min(ks) < 1 or args.steps < 1:
             p.error("--k values and --steps must be >= 1")
         config = PlannerConfig(rollouts=args.rollouts, waypoints=args.waypoints, iterations=args.iterations,
-                               threads=args.threads, device=args.device)
+                               threads=args.threads, device=args.device, compile=args.compile)
         report = run_bench(ks, config, steps=args.steps, progress=not args.json)
+        if args.baseline:
+            ref = run_bench(ks, dataclasses.replace(config, fused_cost=False, compile=False), steps=args.steps,
+                            progress=not args.json)
+            report["baseline_step_ms"] = ref["step_ms"]
+            report["speedup"] = [round(b / a, 2) for a, b in zip(report["step_ms"], ref["step_ms"], strict=True)]
+            report["load_avg_1min_end"] = ref["load_avg_1min_end"]
         if args.memory:
             report["peak_rss_mb"] = round(peak_memory_mb(max(ks), config), 1)
             report["peak_rss_K"] = max(ks)
@@ -318,7 +332,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
             print(json.dumps(report))
         else:
             print(f"planner step ({config.iterations} STOMP iterations, R={config.rollouts}, T={config.waypoints}, "
-                  f"{report['threads']} threads, {config.device}, {config.dtype}); load avg "
+                  f"{report['threads']} threads, {config.device}, {config.dtype}, fused cost"
+                  f"{', compiled' if report['compiled'] else ', eager'}); load avg "
                   f"{report['load_avg_1min']:.2f} -> {report['load_avg_1min_end']:.2f} (other processes share the CPU)")
             print(f"{'K':>3} {'step ms':>9} {'min ms':>8} {'cpu ms':>8} {'FK ms':>8} {'FK cpu':>8} {'step/FK':>8} "
                   f"{'pk FK ms':>9}")
@@ -326,6 +341,12 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
                 print(f"{k:>3} {report['step_ms'][i]:>9.1f} {report['step_ms_min'][i]:>8.1f} "
                       f"{report['step_cpu_ms'][i]:>8.1f} {report['fk_ms'][i]:>8.1f} {report['fk_cpu_ms'][i]:>8.1f} "
                       f"{report['ratio'][i]:>8.2f} {report['pk_fk_ms'][i]:>9.1f}")
+            if args.baseline:
+                print("unfused reference path (StateCost, eager), same process: "
+                      + ", ".join(f"K={k}: {b:.1f} ms ({x:.2f}x)" for k, b, x in
+                                  zip(report["K"], report["baseline_step_ms"], report["speedup"], strict=True)))
+            print("first Planner construction of each K (incl. compilation): "
+                  + ", ".join(f"{s_:.1f} s" for s_ in report["construct_s"]))
             print("FK ms = the fused fk_links on K*R*T configurations x iterations (the planner costs K*(R+1)*T per "
                   "iteration); pk FK ms = pytorch-kinematics forward_kinematics_tensor, same count; cpu = process CPU "
                   "time (with 1 thread: about the time on a core of its own)")

@@ -263,10 +263,12 @@ class FusedCost:
         vmax: ``(D,)`` scaled velocity limits (waypoint times).
         integrate: Weight the state terms by the waypoint times (``PlannerConfig.integrate_costs``).
         compile: ``torch.compile`` the kernel (call :meth:`warm_up` with the batch size to compile for).
+        grid: The occupancy grid geometry expected (``shared.scene.Grid``, e.g. the scene's): "no occupancy"
+            is then a zero grid of the same shape, so the compiled kernel keeps one shape.
     """
 
     def __init__(self, robot: Any, cost: Any, w_smooth: float, vmax: torch.Tensor, integrate: bool,
-                 compile: bool = False) -> None:
+                 compile: bool = False, grid: Any = None) -> None:
         if not supports(robot, cost):
             raise ValueError("FusedCost needs a PR2 StateCost with lift tables, 1 point per sphere, trilinear")
         self.robot, self.cost = robot, cost
@@ -318,7 +320,13 @@ class FusedCost:
         self._tab_src: Any = object()
         self._occ: _Cells | None = None
         self._tab: torch.Tensor | None = None
-        self._zero_occ = _Cells(torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0)
+        if grid is None:
+            self._zero_occ = _Cells(torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0)
+        else:  # the zero-padded shape and geometry of a real occupancy on `grid` (see costs._Lookup)
+            res = float(grid.resolution)
+            dims = [int(n) + 2 for n in grid.dims]
+            first = torch.as_tensor(grid.origin, dtype=torch.float64) - res / 2
+            self._zero_occ = _Cells(torch.zeros(*dims, device=dev, dtype=dt), first, 1.0 / res)
         self.compiled = bool(compile)
         self._fn: Callable[..., torch.Tensor] = _kernel
         if self.compiled:
@@ -382,10 +390,19 @@ class FusedCost:
         Returns:
             Seconds spent (the compilation).
         """
-        q = self.robot.lower + 0.5 * (self.robot.upper - self.robot.lower)
+        q = (self.robot.lower + 0.5 * (self.robot.upper - self.robot.lower)).expand(batch, waypoints, -1).contiguous()
         t0 = time.perf_counter()
         self.batch = int(batch)
-        self._run(q.expand(self.batch, waypoints, -1).contiguous())
+        try:
+            self._run(q)
+        except Exception as exc:  # no C++ compiler, unsupported backend...: the same kernel, eager
+            if not self.compiled:
+                raise
+            log.warning("torch.compile of the planner cost failed (%s: %s); running it eagerly",
+                        type(exc).__name__, str(exc).splitlines()[0] if str(exc) else "")
+            self.compiled, self._fn = False, _kernel
+            self._static["self_pairs"] = False
+            self._run(q)
         self.compile_s = time.perf_counter() - t0
         if self.compiled:
             log.info("planner cost compiled for %d trajectories in %.1f s", self.batch, self.compile_s)

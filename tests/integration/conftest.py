@@ -127,7 +127,8 @@ def run_system(system_files: SystemFiles, tmp_path: Path) -> Iterator[Callable[.
         sessions.append(subs)
         predictor = PredictorService(PredictorConfig(model=system_files.model), peer)
         planner_cfg = PlannerServiceConfig(mode=mode, seed=seed, period_s=period, lookahead_s=period,
-                                           iterations=20, input_timeout_s=20.0, **(planner_overrides or {}))
+                                           iterations=20, input_timeout_s=20.0,
+                                           **{"compile": False, **(planner_overrides or {})})
         planner = PlannerService(planner_cfg, peer)
         replayer = ReplayerService(ReplayerConfig(library=system_files.human, mode=mode,
                                                   samples_per_tick=system_files.samples_per_tick,

@@ -148,7 +148,7 @@ def test_invalid_goals_are_reported_and_never_chosen(scene) -> None:
 
 @pytest.fixture(scope="module")
 def pr2_planner():
-    return Planner(load_scene(), PlannerConfig(seed=1))
+    return Planner(load_scene(), PlannerConfig(seed=1, compile=False))
 
 
 def test_pr2_plans_around_a_blob_on_the_straight_path(pr2_planner) -> None:
@@ -195,7 +195,7 @@ def test_pr2_unreachable_cup_is_dropped_and_reported() -> None:
     scene = load_scene()
     far = dataclasses.replace(scene.cup("red_cup"), position=np.array([-1.8, -2.8, 0.73]))  # far end of the room
     scene = dataclasses.replace(scene, cups=(scene.cup("blue_cup"), far))
-    planner = Planner(scene, PlannerConfig(iterations=5))
+    planner = Planner(scene, PlannerConfig(iterations=5, compile=False))
     assert planner.goals.valid.tolist() == [True, False]
     res = planner.step(planner.robot.q_start.numpy(), np.zeros(scene.grid.dims, dtype=np.float32))
     assert res.valid.tolist() == [True, False] and res.chosen == 0 and res.reasons[1]
@@ -224,7 +224,7 @@ def test_bench_json_prints_one_object(capsys) -> None:
 
     from services.planner.bench import main
 
-    assert main(["--json", "--k", "1,2", "--steps", "1", "--iterations", "2"]) == 0
+    assert main(["--json", "--k", "1,2", "--steps", "1", "--iterations", "2", "--no-compile"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["K"] == [1, 2]
     for key in ("step_ms", "fk_ms", "ratio", "pk_fk_ms"):

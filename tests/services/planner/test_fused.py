@@ -21,9 +21,10 @@ def scene():
 
 @pytest.fixture(scope="module")
 def planner(scene):
-    base = Planner(scene, PlannerConfig(iterations=5))
+    config = PlannerConfig(iterations=5, compile=False)
+    base = Planner(scene, config)
     goals = bench_goals(base.goals, base.robot, 3, seed=0)
-    return Planner(scene, PlannerConfig(iterations=5), robot=base.robot, cost=base.cost, goals=goals)
+    return Planner(scene, config, robot=base.robot, cost=base.cost, goals=goals)
 
 
 def _batch(robot: PR2, shape: tuple[int, ...], seed: int, spread: float = 0.6) -> torch.Tensor:
