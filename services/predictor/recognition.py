@@ -119,7 +119,7 @@ def plot_recognition(results: list[RecognitionResult], path: str | Path, title: 
     ax.set_xlim(5, 102)
     ax.set_ylim(0, 101)
     ax.grid(alpha=0.3)
-    ax.set_title(title or "leave-one-out recognition")
+    ax.set_title(title or "leave-one-out recognition", fontsize=9)
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     fig.savefig(p)
@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             except ValueError as exc:
                 raise UserError(str(exc)) from None
             results.append(leave_one_out(lib, cfg, feats, n_jobs=args.n_jobs, progress=not args.quiet))
-        png = plot_recognition(results, args.plot, f"leave-one-out recognition: {lib.source} "
+        png = plot_recognition(results, args.plot, f"leave-one-out recognition: {Path(lib.source).name} "
                                f"({len(lib.demos)} demos, {lib.n_classes} classes)")
         if args.json:
             out = {"fractions": results[0].fractions, "recognition_rates": results[0].rates,
