@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -131,7 +132,7 @@ class PredictionModel:
         try:
             with np.load(p, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
-        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+        except (zipfile.BadZipFile, zlib.error, OSError, ValueError, EOFError) as exc:
             raise ModelError(f"model file {str(p)!r} is corrupt or not a model file ({type(exc).__name__}: "
                              f"{exc}); retrain with `foresight train`") from None
         if str(data.get("format", "")) != MODEL_FORMAT:
