@@ -146,7 +146,8 @@ def _trilinear(p: torch.Tensor, inv_res: float, packed: torch.Tensor, first: tor
     Args:
         p: ``(3, S, B)`` points (coordinate-major).
         inv_res: 1 / voxel edge.
-        packed: ``(8, cells)`` corner values (see :func:`_corner_major`).
+        packed: ``(8, cells)`` corner values (see :func:`_corner_major`; corner-major beat ``(cells, 8)`` rows by
+            2x eager and compiled).
         first: ``(3, 1, 1)`` centre of voxel 0.
         u_max: ``(3, 1, 1)`` last voxel index (float).
         cell_max: ``(3, 1, 1)`` last cell index (float).
@@ -231,11 +232,15 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
     fl = u - i
     obstacle = obstacle + torch.lerp(tv[0], tv[1], fl)
     human = human + torch.lerp(tv[2], tv[3], fl)
-    if s["self"] and s["self_pairs"]:  # compiled: one fused loop over the pairs, nothing materialised
+    if s["self"] and s["self_pairs"] and s["n_torso"] >= 0:  # compiled: one fused loop over the pairs
         x = p[:, s["a0"]:s["a1"]]  # (3, A, B)
-        cb = psi[:, 8:11, None] + psi[:, 11:14, None] * lift  # (B_body, 3, B) body centres at the lift
-        diff = x[:, None] - cb.transpose(0, 1)[:, :, None]  # (3, B_body, A, B)
-        dist = ((diff * diff).sum(0).clamp(min=1e-12).sqrt() - psi[:, 7:8, None]).amin(0)  # (A, B)
+        nt = s["n_torso"]  # body spheres [0, nt) move with the lift, [nt, B_body) are fixed
+        y = x - v[:, :, None] * lift  # the arm points in the frame that moves with the lift
+        c0 = psi[:, 8:11].t()[:, :, None, None]  # (3, B_body, 1, 1) centres at lift 0
+        dy, dx = y[:, None] - c0[:, :nt], x[:, None] - c0[:, nt:]  # (3, nt, A, B), (3, B_body - nt, A, B)
+        rb = psi[:, 7:8, None]
+        dist = torch.minimum(((dy * dy).sum(0).clamp(min=1e-12).sqrt() - rb[:nt]).amin(0),
+                             ((dx * dx).sum(0).clamp(min=1e-12).sqrt() - rb[nt:]).amin(0))  # (A, B)
         obstacle = obstacle + _hinge_sum(s["self_eps"] - (dist - r_arm), s["self_eps"])
     elif s["self"]:  # eager: one matmul of features, then 4 passes over the pairs
         x = p[:, s["a0"]:s["a1"]].reshape(3, -1)  # (3, A * B)
@@ -309,30 +314,35 @@ class FusedCost:
                             psi=psi.to(dev, dt).contiguous(), v=axis.to(dev, dt).reshape(3, 1),
                             r_arm=robot.sphere_radii[robot.arm_slice][:, None].contiguous(),
                             inv_vmax=(1.0 / vmax).to(dev, dt).contiguous())
-        self._static = dict(sdf_inv=lk.inv_res, sdf_extend=not inside, eps=float(cfg.clearance),
+        n_torso = int(moving.sum())
+        contiguous = bool(moving[:n_torso].all()) and n_torso < len(moving)
+        self._static = dict(n_torso=n_torso if contiguous else -1, sdf_inv=lk.inv_res, sdf_extend=not inside,
+                            eps=float(cfg.clearance),
                             occ_inv=1.0, lift_lo=float(cost._lift_lo), lift_inv=1.0 / float(cost._lift_step),
                             lift_n=int(cost._lift_n), self=bool(cost.has_self),
                             a0=robot.arm_slice.start - arm.start, a1=robot.arm_slice.stop - arm.start,
                             self_eps=max(float(cfg.self_clearance), 1e-6), w_obstacle=float(cfg.w_obstacle),
-                            w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate),
-                            self_pairs=bool(compile))
+                            w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate))
         self._occ_src: Any = object()
         self._tab_src: Any = object()
         self._occ: _Cells | None = None
         self._tab: torch.Tensor | None = None
         if grid is None:
-            self._zero_occ = _Cells(torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0)
+            self._zero_occ_args = (torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0)
         else:  # the zero-padded shape and geometry of a real occupancy on `grid` (see costs._Lookup)
             res = float(grid.resolution)
             dims = [int(n) + 2 for n in grid.dims]
             first = torch.as_tensor(grid.origin, dtype=torch.float64) - res / 2
-            self._zero_occ = _Cells(torch.zeros(*dims, device=dev, dtype=dt), first, 1.0 / res)
-        self.compiled = bool(compile)
-        self._fn: Callable[..., torch.Tensor] = _kernel
-        if self.compiled:
-            self._fn = torch.compile(_kernel, dynamic=False)
+            self._zero_occ_args = (torch.zeros(*dims, device=dev, dtype=dt), first, 1.0 / res)
+        self._set_mode(bool(compile))
         self.batch: int | None = None  # the compiled batch size N (trajectories per call), set by warm_up
         self.compile_s = 0.0
+
+    def _set_mode(self, compiled: bool) -> None:
+        """Compiled: the pair loop fused by inductor; eager: the self-collision as a feature matmul."""
+        self.compiled = compiled
+        self._fn: Callable[..., torch.Tensor] = torch.compile(_kernel, dynamic=False) if compiled else _kernel
+        self._static.update(self_pairs=compiled)
 
     def _refresh(self) -> None:
         """Re-read the occupancy and the human lift table when ``cost.set_occupancy`` replaced them."""
@@ -340,7 +350,7 @@ class FusedCost:
         if cost._occ is not self._occ_src:
             self._occ_src = cost._occ
             if cost._occ is None:
-                self._occ = self._zero_occ
+                self._occ = _Cells(*self._zero_occ_args)
             else:
                 lk = cost._occ  # zero-padded volume (not cropped: a fixed shape for the compiled kernel)
                 self._occ = _Cells(lk.flat.view(*lk.dims), lk.first, lk.inv_res)
@@ -348,13 +358,16 @@ class FusedCost:
             self._tab_src = cost._tab_human
             self._tab = torch.cat([cost._tab_obstacle.t(), cost._tab_human.t()], 0).contiguous()  # (4, n - 1)
 
-    def _run(self, q3: torch.Tensor) -> torch.Tensor:
+    def _run(self, q3: torch.Tensor, eager: bool = False) -> torch.Tensor:
         self._refresh()
         assert self._occ is not None and self._tab is not None
         c = self._consts
         occ = self._occ
         s = dict(self._static, occ_inv=occ.inv_res)
-        return self._fn(q3, c["a0"], c["a123t"], c["wt"], c["obs_thr"], *self._sdf.args(), c["sdf_lo"], c["sdf_hi"],
+        fn = self._fn
+        if eager:
+            fn, s["self_pairs"] = _kernel, False
+        return fn(q3, c["a0"], c["a123t"], c["wt"], c["obs_thr"], *self._sdf.args(), c["sdf_lo"], c["sdf_hi"],
                         *occ.args(), self._tab, c["psi"], c["v"], c["r_arm"], c["inv_vmax"], s=s)
 
     def terms(self, q: torch.Tensor) -> torch.Tensor:
@@ -372,6 +385,8 @@ class FusedCost:
         n = q3.shape[0]
         if not self.compiled or self.batch is None or n == self.batch:
             out = self._run(q3)
+        elif 4 * n <= self.batch:  # a few trajectories (final costs): cheaper eager than a padded compiled call
+            out = self._run(q3, eager=True)
         else:  # the compiled shape: chunks of `batch` trajectories, the last one padded
             chunks = -(-n // self.batch)
             pad = chunks * self.batch - n
@@ -400,8 +415,7 @@ class FusedCost:
                 raise
             log.warning("torch.compile of the planner cost failed (%s: %s); running it eagerly",
                         type(exc).__name__, str(exc).splitlines()[0] if str(exc) else "")
-            self.compiled, self._fn = False, _kernel
-            self._static["self_pairs"] = False
+            self._set_mode(False)
             self._run(q)
         self.compile_s = time.perf_counter() - t0
         if self.compiled:

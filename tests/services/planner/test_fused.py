@@ -85,6 +85,9 @@ def test_self_collision_and_cropped_field_are_exact(scene) -> None:
     # float32: both sides expand |a - b|^2 = |a|^2 + |b|^2 - 2 a.b in world coordinates (~1 m), so sphere
     # distances agree to ~1e-5 m; weighted (x 10) and summed over 16 spheres that is a few 1e-4
     assert torch.allclose(out, ref, rtol=1e-4, atol=5e-4), float((out - ref).abs().max())
+    fused._static["self_pairs"] = True  # the pair loop the compiled kernel uses (here run eagerly)
+    pairs = fused.terms(q[:, :, None].expand(20, 20, 3, 8))[1, :, :, 1]
+    assert torch.allclose(pairs, ref, rtol=1e-4, atol=5e-4), float((pairs - ref).abs().max())
 
 
 def test_chunked_batches_equal_one_call(planner, scene) -> None:
@@ -96,6 +99,8 @@ def test_chunked_batches_equal_one_call(planner, scene) -> None:
     whole = f(q)
     f.compiled, f.batch = True, 4  # chunks of 4 trajectories, eager kernel
     assert torch.allclose(f(q), whole, atol=1e-6)
+    assert torch.allclose(f(q[:, :1]), whole[:, :1], atol=1e-6)
+    f.batch = 12  # 3 trajectories: the small-batch path
     assert torch.allclose(f(q[:, :1]), whole[:, :1], atol=1e-6)
     planner.cost.set_occupancy(None, grid.origin, grid.resolution)
 
