@@ -111,3 +111,18 @@ def test_unsupported_costs_keep_the_reference_path(scene) -> None:
     assert not supports(robot, seven)
     with pytest.raises(ValueError, match="FusedCost"):
         FusedCost(robot, seven, 10.0, robot.velocity_limits, True)
+
+
+def test_flat_volume_lookups_equal_packed_cells(planner, scene) -> None:
+    """The compiled kernel gathers the 8 corners from the volume itself; eager from packed cells."""
+    from services.planner.fused import _Cells
+
+    grid = scene.grid
+    planner.cost.set_occupancy(blob_occupancy(scene), grid.origin, grid.resolution)
+    f = FusedCost(planner.robot, planner.cost, planner.w_smooth, planner._vmax, True, grid=grid)
+    q = _batch(planner.robot, (2, 6, 40), 11, spread=1.2)
+    packed = f(q)
+    f._flat, f._sdf, f._occ_src = True, _Cells(*f._sdf_args, flat=True), object()
+    assert f._sdf.packed.dim() == 1
+    assert torch.allclose(f(q), packed, rtol=1e-6, atol=1e-6)
+    planner.cost.set_occupancy(None, grid.origin, grid.resolution)
