@@ -305,7 +305,8 @@ class FusedCost:
         c_lo, c_up = robot.sphere_centers(lo)[body].double(), robot.sphere_centers(up)[body].double()
         vb = (c_up - c_lo) / float(robot.upper[0] - robot.lower[0])  # (Bb, 3): the torso axis or 0
         moving = vb.norm(dim=1) > 0.5
-        axis = vb[moving].mean(0) if bool(moving.any()) else torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
+        z = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64, device=vb.device)
+        axis = vb[moving].mean(0) if bool(moving.any()) else z
         axis = axis / axis.norm()
         kappa = moving.double()
         c0 = c_lo - float(robot.lower[0]) * kappa[:, None] * axis
