@@ -25,9 +25,12 @@ import time
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from services.processes import ServiceProcess, free_port
-from services.scenario import RunRecorder, Summary, choose_demonstration, model_for, summarise
+from services.scenario import RunRecorder, Summary, choose_demonstration, interference_cost, model_for, summarise
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, resolve_config
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, Keys, Message, OccupancyGrid, Plan, RobotState
@@ -56,6 +59,9 @@ class DemoConfig:
     human_class: str = opt("", help="class (name or index) the human performs (default: red_cup, else the last)")
     method: str = opt("prediction", choices=("prediction", "current"),
                       help="occupancy the planner avoids: the early prediction, or the current posture only")
+    human_cost: bool = opt(True, help="plan with the human-penetration cost (off: the paper's 'basic STOMP')")
+    compare: bool = opt(False, help="run the scenario three times (prediction, current occupancy, no human cost) "
+                        "and compare their interference with the final prediction (the paper's Table I)")
     components: int = opt(-1, help="Gaussians per class when training (-1: the trainer's default, 20)")
     period_s: float = opt(0.2, help="replanning period (simulated s per step in lock-step, wall s in real time)")
     rate_hz: float = opt(30.0, help="real time: poses per second")
@@ -94,7 +100,7 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
     return {
         "predictor": ["--model", str(model), "--method", cfg.method, *common],
         "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
-                    "--lookahead-s", str(cfg.period_s), *common],
+                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--w-human", "0"]), *common],
         "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
                      "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"]), *common],
         "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
@@ -112,8 +118,45 @@ def _progress_line(msg: Plan, posterior: ClassPosterior | None) -> str:
     return f"step {msg.step:>3}: chosen {msg.goal_names[msg.chosen]:<10} {costs}  ({msg.planning_ms:.0f} ms){belief}"
 
 
+VARIANTS = (("prediction", {"method": "prediction", "human_cost": True}),
+            ("current occupancy", {"method": "current", "human_cost": True}),
+            ("no human cost", {"method": "prediction", "human_cost": False}))
+"""The planners ``--compare`` runs: the paper's method and its two baselines (Fig. 8/9, Table I)."""
+
+
 def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] = print) -> tuple[int, Summary | None]:
-    """Run the scenario; returns ``(exit status, summary)``."""
+    """Run the scenario (three times with ``cfg.compare``); returns ``(exit status, summary)``."""
+    if not cfg.compare:
+        status, summary, _ = _run_once(cfg, stop, out)
+        return status, summary
+    from shared.robot import PR2
+
+    runs = []
+    for name, changes in VARIANTS:
+        out(f"foresight demo: --- {name} ---")
+        sub = dataclasses.replace(cfg, compare=False, run_dir=Path(cfg.run_dir) / name.replace(" ", "-"), **changes)
+        status, summary, record = _run_once(sub, stop, out)
+        if status != 0 or summary is None:
+            return status or 1, summary
+        runs.append((name, summary, record))
+    reference = runs[0][2][2]  # the final prediction of the paper's method
+    robot = PR2.from_scene(load_scene())
+    rows = []
+    for name, summary, (_, states, _, _) in runs:
+        states = sorted(states, key=lambda st: st.stamp)
+        q = np.array([st.q for st in states])
+        cost = interference_cost(robot, q, np.array([st.stamp for st in states]), reference) if reference else 0.0
+        rows.append({"planner": name, "interference_cost": cost, "switch_step": summary.switch_step,
+                     "reached_step": summary.reached_step, "chosen_goal_per_step": summary.chosen_goal_per_step,
+                     "mcap_path": summary.mcap_path})
+    main_summary = runs[0][1]
+    main_summary.extra["comparison"] = rows
+    return 0, main_summary
+
+
+def _run_once(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None]
+              ) -> tuple[int, Summary | None, tuple[Any, ...]]:
+    """One run of the scenario; returns ``(exit status, summary, the recorder's snapshot)``."""
     scene = load_scene()
     lib = _library(cfg)
     scenario = choose_demonstration(lib, cfg.steps, cfg.seed, cfg.human_class)
@@ -189,14 +232,15 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     plans, states, final, posteriors = recorder.snapshot()
     if not plans:
         out("foresight demo: no plan was received; see the service logs in " + str(run_dir))
-        return 1, None
+        return 1, None, (plans, states, final, posteriors)
     from shared.robot import PR2
 
     summary = summarise(plans, states, final, posteriors, PR2.from_scene(scene), demo.class_name,
                         str(mcap) if mcap.is_file() else None)
     summary.extra["mode"] = cfg.mode
     summary.extra["method"] = cfg.method
-    return status, summary
+    summary.extra["human_cost"] = cfg.human_cost
+    return status, summary, (plans, states, final, posteriors)
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:

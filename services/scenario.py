@@ -220,6 +220,15 @@ class Summary:
         out.append(f"human class: {self.human_class}; recognised at the end: {self.recognised_class}")
         out.append(f"interference cost of the executed trajectory (final prediction): {self.interference_cost:.4f}")
         out.append(f"MCAP log: {self.mcap_path}")
+        rows = self.extra.get("comparison")
+        if rows:
+            out.append("")
+            out.append("comparison (interference with the final prediction of the paper's method, as in its Table I):")
+            out.append(f"  {'planner':<20}{'interference':>13}{'switch step':>13}{'reached step':>14}")
+            for r in rows:
+                sw = "-" if r["switch_step"] is None else str(r["switch_step"])
+                re = "-" if r["reached_step"] is None else str(r["reached_step"])
+                out.append(f"  {r['planner']:<20}{r['interference_cost']:>13.4f}{sw:>13}{re:>14}")
         return out
 
 

@@ -1,0 +1,68 @@
+"""The scenario's pure pieces: choosing the human's demonstration, the summary, the interference cost."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from services.scenario import Summary, choose_demonstration, interference_cost, summarise
+from shared.protocol import OccupancyGrid, Plan, RobotState
+from shared.runtime import UserError
+from shared.synthetic import generate_library
+
+
+class PointRobot:
+    """One sphere at the first three joint values."""
+
+    lower = torch.zeros(3)
+
+    def sphere_centers(self, q: torch.Tensor) -> torch.Tensor:
+        return q[..., None, :3]
+
+
+def _grid(p: float) -> OccupancyGrid:
+    dense = np.zeros((4, 4, 4))
+    dense[1, 1, 1] = p
+    return OccupancyGrid.from_dense(dense, np.zeros(3), 0.1, stamp=0.0, tick=0, tick_last=True, demo_id=0, index=0,
+                                    method="prediction")
+
+
+def _plan(tick: int, chosen: int, costs: list[float]) -> Plan:
+    return Plan(stamp=0.0, tick=tick, step=tick, goal_names=["blue_cup", "red_cup"], joint_names=["a", "b", "c"],
+                dt=0.1, chosen=chosen, planning_ms=10.0, occupancy_tick=tick - 1, occupancy_index=0,
+                trajectories=np.zeros((2, 3, 3), np.float32), cost_smoothness=np.zeros(2), cost_obstacle=np.zeros(2),
+                cost_human=np.zeros(2), cost_total=np.array(costs), valid=np.ones(2, bool))
+
+
+def test_choose_demonstration_is_seeded_and_spreads_the_motion():
+    lib = generate_library(8, 4, seed=1)
+    a = choose_demonstration(lib, steps=20, seed=3)
+    assert a == choose_demonstration(lib, steps=20, seed=3)
+    assert a.demo.class_name == "red_cup" and a.samples_per_tick == 5
+    assert choose_demonstration(lib, steps=20, seed=3, human_class="0").demo.label == 0
+    with pytest.raises(UserError, match="nope"):
+        choose_demonstration(lib, steps=20, seed=0, human_class="nope")
+
+
+def test_interference_integrates_occupancy_at_the_spheres_over_time():
+    q = np.array([[0.15, 0.15, 0.15], [0.15, 0.15, 0.15], [0.35, 0.35, 0.35]])  # inside, inside, outside
+    t = np.array([0.0, 0.5, 1.0])
+    grid = _grid(1.0)
+    assert interference_cost(PointRobot(), q, t, grid) == pytest.approx(0.5)
+    assert interference_cost(PointRobot(), q[:1], t[:1], grid) == 0.0
+
+
+def test_summary_switch_step_and_comparison_table():
+    plans = [_plan(0, 1, [2.0, 1.0]), _plan(1, 1, [2.0, 1.5]), _plan(2, 0, [1.0, 3.0]), _plan(3, 0, [1.0, 3.0])]
+    states = [RobotState(stamp=0.1 * i, tick=i, joint_names=["a", "b", "c"], goal=0, reached=i == 3, holding=False,
+                         reason="", q=np.full(3, 0.15), qd=np.zeros(3)) for i in range(4)]
+    s = summarise(plans, states, _grid(0.5), {}, PointRobot(), "red_cup", None)
+    assert s.chosen_goal_per_step == ["red_cup", "red_cup", "blue_cup", "blue_cup"]
+    assert s.switch_step == 2 and s.reached and s.reached_step == 3
+    assert s.interference_cost == pytest.approx(128 / 255 * 0.3)  # 0.5 quantised to 8 bits, 3 intervals of 0.1 s
+    assert s.to_json()["switch_step"] == 2
+    s.extra["comparison"] = [{"planner": "prediction", "interference_cost": 0.1, "switch_step": 2, "reached_step": 3}]
+    text = "\n".join(s.lines())
+    assert "switch step: 2" in text and "prediction" in text and "Table I" in text
+    assert isinstance(s, Summary)
