@@ -4,7 +4,9 @@ For the demonstration being observed (paper IV.C, IV.E):
 
 - every new posture ``xi_t`` adds ``ln p(xi_t | C_m)`` to each class's running log-likelihood
   (constant work per pose);
-- ``p(C_m | xi) = p(xi | C_m) / sum_j p(xi | C_j)`` by log-sum-exp normalisation;
+- ``p(C_m | xi) = p(xi | C_m)^(1/tau) / sum_j p(xi | C_j)^(1/tau)`` by log-sum-exp normalisation, with
+  the temperature tau of the model file (or ``PredictorConfig.temperature``); tau = 1 is the paper's
+  posterior, tau > 1 deflates the over-counted evidence of correlated samples (calibration);
 - ``p(x | xi) = sum_m p(x | C_m) p(C_m | xi)``, with ``p(x | C_m)`` the class's swept volume (0/1).
 
 Only voxels inside the union of the swept volumes can be non-zero, so the occupancy is one
@@ -46,12 +48,16 @@ class PredictorConfig:
     scene: str = opt("", help="scene file (default: the embedded pr2_two_cups); must match the model's")
     method: str = opt("prediction", help="occupancy published: predicted p(x|xi) or the current posture only",
                       choices=METHODS)
+    temperature: float = opt(0.0, help="posterior temperature tau: p(C_m|xi) = softmax(ln p(xi|C_m) / tau); "
+                             "1 = the paper's; 0 = the model file's (set by `foresight train --temperature`)")
     log_level: str = opt("INFO", help="logging level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
     def validate(self) -> None:
         """Check the options."""
         if not str(self.model):
             raise ConfigError("predictor.model: must name a model file")
+        if not (self.temperature >= 0 and np.isfinite(self.temperature)):
+            raise ConfigError(f"predictor.temperature: must be >= 0 (0 = the model's), got {self.temperature}")
 
 
 @dataclass
@@ -59,7 +65,7 @@ class PredictionResult:
     """The prediction after one posture.
 
     Attributes:
-        posterior: ``(M,)`` class posteriors p(C_m | xi), summing to 1.
+        posterior: ``(M,)`` class posteriors p(C_m | xi) (at the core's temperature), summing to 1.
         log_likelihood: ``(M,)`` ln p(xi | C_m) of the observed prefix.
         grid: The voxel grid.
         method: ``"prediction"`` or ``"current"``.
@@ -103,7 +109,7 @@ class PredictorCore:
     Args:
         model: Trained prediction model.
         scene: Scene (must place the human where the model's volumes were computed).
-        config: Options (method).
+        config: Options (method, temperature).
     """
 
     def __init__(self, model: PredictionModel, scene: Scene, config: PredictorConfig | None = None) -> None:
@@ -112,7 +118,11 @@ class PredictorCore:
         self.config = config or PredictorConfig()
         if self.config.method not in METHODS:
             raise PredictorError(f"method {self.config.method!r} is not one of {', '.join(METHODS)}")
+        tau = float(self.config.temperature or model.temperature)
+        if not (tau > 0 and np.isfinite(tau)):
+            raise PredictorError(f"temperature must be a finite number > 0, got {tau}")
         model.check_scene(scene)
+        self.temperature = tau
         self.bank = model.bank()
         self.encoder = model.encoder()
         self.human = HumanModel()
@@ -179,7 +189,7 @@ class PredictorCore:
         x = self.encoder.step(f, t)
         self._ll = self._ll + self.bank.log_likelihood(x[None])[0]
         self._count += 1
-        post = posterior_from_log_likelihood(self._ll)
+        post = posterior_from_log_likelihood(self._ll, temperature=self.temperature)
         if self.config.method == "prediction":
             idx, val = self.occupancy_for(post)
         else:

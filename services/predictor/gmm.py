@@ -18,7 +18,11 @@ from scipy.special import logsumexp
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.mixture import GaussianMixture
 
-__all__ = ["GMMConfig", "fit_class_gmm", "MixtureBank", "IncrementalLogLikelihood", "posterior_from_log_likelihood"]
+__all__ = ["DEFAULT_TEMPERATURE", "GMMConfig", "fit_class_gmm", "MixtureBank", "IncrementalLogLikelihood",
+           "posterior_from_log_likelihood"]
+
+DEFAULT_TEMPERATURE = 1.0
+"""Default posterior temperature tau (see :func:`posterior_from_log_likelihood`)."""
 
 
 @dataclass(frozen=True)
@@ -162,17 +166,30 @@ class MixtureBank:
         return out.reshape(*lead, m)
 
 
-def posterior_from_log_likelihood(log_likelihood: np.ndarray, log_prior: np.ndarray | None = None) -> np.ndarray:
+def posterior_from_log_likelihood(log_likelihood: np.ndarray, log_prior: np.ndarray | None = None,
+                                  temperature: float = 1.0) -> np.ndarray:
     """``p(C_m | xi)`` from ``ln p(xi | C_m)`` by log-sum-exp normalisation (uniform prior by default).
+
+    With ``temperature`` tau the posterior is ``softmax(ln p(xi | C_m) / tau + ln prior)``: the
+    summed log-likelihood of T strongly correlated samples counts the same evidence many times
+    over, and tau > 1 deflates it (tau = 1 is the paper's posterior; the argmax never changes).
 
     Args:
         log_likelihood: ``(..., M)``.
         log_prior: ``(M,)`` optional class log priors.
+        temperature: tau > 0, the divisor of the log-likelihoods.
 
     Returns:
         ``(..., M)`` posteriors summing to 1 over the last axis.
+
+    Raises:
+        ValueError: If ``temperature`` is not a finite number > 0.
     """
+    if not (temperature > 0 and math.isfinite(temperature)):
+        raise ValueError(f"temperature must be a finite number > 0, got {temperature}")
     ll = np.asarray(log_likelihood, dtype=np.float64)
+    if temperature != 1.0:
+        ll = ll / temperature
     if log_prior is not None:
         ll = ll + log_prior
     if not np.any(np.isfinite(ll)):

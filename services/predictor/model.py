@@ -22,6 +22,7 @@ Contents (M classes, K Gaussians at most per class, D feature dimensions, V voxe
 | ``spacing`` | float | surface sample spacing (m) used for the volumes |
 | ``interior`` | bool | whether the body's inside was sampled too |
 | ``meta`` | str | JSON: library source, demonstrations per class, options, timestamp |
+| ``temperature`` | float | posterior temperature tau (optional: files without it use 1, the paper's) |
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ class PredictionModel:
     spacing: float = 0.02
     interior: bool = False
     meta: dict[str, Any] = field(default_factory=dict)
+    temperature: float = 1.0
 
     @property
     def n_classes(self) -> int:
@@ -113,6 +115,7 @@ class PredictionModel:
             "volumes": pack_volumes(self.volumes), "scene_name": np.array(self.scene_name),
             "human_pelvis": self.human_pelvis, "spacing": np.array(self.spacing),
             "interior": np.array(self.interior), "meta": np.array(json.dumps(self.meta)),
+            "temperature": np.array(float(self.temperature)),
         }
         tmp = p.with_name(p.name + ".tmp.npz")
         with tmp.open("wb") as f:
@@ -162,6 +165,9 @@ class PredictionModel:
         packed = d["volumes"]
         if packed.dtype != np.uint8 or packed.shape != (m, (int(np.prod(dims)) + 7) // 8):
             raise ValueError(f"volumes of shape {packed.shape} do not fit {m} classes on a {dims} grid")
+        temperature = float(d["temperature"]) if "temperature" in d else 1.0
+        if not (temperature > 0 and np.isfinite(temperature)):
+            raise ValueError(f"temperature must be a finite number > 0, got {temperature}")
         motions = d["motions"].astype(np.float64)
         lengths = d["motion_lengths"].astype(np.int64)
         if motions.shape[0] != m or motions.shape[2] != 12 or lengths.shape != (m,) or np.any(lengths < 1) \
@@ -172,7 +178,8 @@ class PredictionModel:
                     means=mu.astype(np.float64), covariances=cov.astype(np.float64), motions=motions,
                     motion_lengths=lengths, grid=grid, volumes=unpack_volumes(packed, dims),
                     scene_name=str(d["scene_name"]), human_pelvis=d["human_pelvis"].astype(np.float64),
-                    spacing=float(d["spacing"]), interior=bool(d["interior"]), meta=json.loads(str(d["meta"])))
+                    spacing=float(d["spacing"]), interior=bool(d["interior"]), meta=json.loads(str(d["meta"])),
+                    temperature=temperature)
         if model.encoder().dim != mu.shape[2]:
             raise ValueError(f"feature variant {model.feature_variant!r} has {model.encoder().dim} dimensions, "
                              f"the mixtures {mu.shape[2]}")

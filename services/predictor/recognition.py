@@ -23,10 +23,10 @@ from shared.library import MotionLibrary, load_library
 from shared.runtime import UserError, cli_errors
 
 from .features import VARIANTS, FeatureEncoder
-from .gmm import GMMConfig, MixtureBank, fit_class_gmm
+from .gmm import DEFAULT_TEMPERATURE, GMMConfig, MixtureBank, fit_class_gmm, posterior_from_log_likelihood
 from .train import DEFAULT_FEATURES, default_library
 
-__all__ = ["FRACTIONS", "RecognitionResult", "leave_one_out", "plot_recognition", "main"]
+__all__ = ["FRACTIONS", "RecognitionResult", "leave_one_out", "plot_recognition", "plot_calibration", "main"]
 
 FRACTIONS = tuple(round(0.1 * i, 1) for i in range(1, 11))
 PAPER_FIG6 = {"fractions": (0.43, 0.6, 0.8, 1.0), "rates": (0.5, 0.8, 0.92, 0.92)}
@@ -35,13 +35,43 @@ PAPER_FIG6 = {"fractions": (0.43, 0.6, 0.8, 1.0), "rates": (0.5, 0.8, 0.92, 0.92
 
 @dataclass
 class RecognitionResult:
-    """Leave-one-out recognition of one feature/mixture variant."""
+    """Leave-one-out recognition of one feature/mixture variant.
+
+    Attributes:
+        name: Label of the variant.
+        fractions: Executed fractions.
+        rates: Recognition rate at each fraction.
+        correct: ``(N, F)`` whether each held-out demonstration's prefix was classified right.
+        labels: ``(N,)`` true classes.
+        log_likelihood: ``(N, F, M)`` summed ``ln p(xi_1..t | C_m)`` of each prefix (own class refitted
+            without the demonstration), from which posteriors at any temperature follow.
+    """
 
     name: str
     fractions: list[float]
     rates: list[float]
     correct: np.ndarray  # (N demos, F) bool
     labels: np.ndarray   # (N,)
+    log_likelihood: np.ndarray  # (N, F, M)
+
+    def posteriors(self, temperature: float = 1.0) -> np.ndarray:
+        """``(N, F, M)`` class posteriors of every prefix at temperature tau."""
+        return posterior_from_log_likelihood(self.log_likelihood, temperature=temperature)
+
+    def log_loss(self, temperature: float = 1.0) -> np.ndarray:
+        """``(F,)`` mean negative natural log posterior of the true class (posteriors floored at 1e-12)."""
+        p = np.take_along_axis(self.posteriors(temperature), self.labels[:, None, None], axis=2)[..., 0]
+        return -np.log(np.maximum(p, 1e-12)).mean(axis=0)
+
+    def brier(self, temperature: float = 1.0) -> np.ndarray:
+        """``(F,)`` mean Brier score ``sum_m (p_m - [m = true])^2`` (0 best, 2 worst)."""
+        p = self.posteriors(temperature)
+        onehot = np.eye(p.shape[-1])[self.labels][:, None, :]
+        return ((p - onehot) ** 2).sum(axis=-1).mean(axis=0)
+
+    def best_temperature(self, candidates: tuple[float, ...]) -> float:
+        """The candidate tau with the least log-loss averaged over the fractions."""
+        return float(min(candidates, key=lambda tau: float(self.log_loss(tau).mean())))
 
     def per_class(self) -> np.ndarray:
         """``(M, F)`` recognition rate per class."""
@@ -61,8 +91,7 @@ def _score_demo(i: int, feats: list[np.ndarray], labels: np.ndarray, full: Mixtu
     ll = full.log_likelihood(feats[i])                  # (T, M)
     ll[:, m] = own.log_likelihood(feats[i])[:, 0]
     cum = np.cumsum(ll, axis=0)
-    pred = np.argmax(cum[_prefix_lengths(len(ll), fractions) - 1], axis=1)
-    return pred == m
+    return cum[_prefix_lengths(len(ll), fractions) - 1]                  # (F, M)
 
 
 def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAULT_FEATURES,
@@ -94,10 +123,11 @@ def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAUL
     bank = MixtureBank.from_sklearn(full)
     jobs = (delayed(_score_demo)(i, feats, labels, bank, cfg, fractions) for i in range(len(demos)))
     it = Parallel(n_jobs=n_jobs, return_as="generator")(jobs)
-    correct = np.array(list(tqdm(it, total=len(demos), desc=f"leave-one-out ({features})", unit="demo",
-                                 disable=not progress)))
+    cum = np.array(list(tqdm(it, total=len(demos), desc=f"leave-one-out ({features})", unit="demo",
+                             disable=not progress)))                   # (N, F, M)
+    correct = np.argmax(cum, axis=2) == labels[:, None]
     label = name or f"{features}, {cfg.n_components or 'BIC'} Gaussians"
-    return RecognitionResult(label, list(fractions), correct.mean(axis=0).tolist(), correct, labels)
+    return RecognitionResult(label, list(fractions), correct.mean(axis=0).tolist(), correct, labels, cum)
 
 
 def plot_recognition(results: list[RecognitionResult], path: str | Path, title: str = "") -> Path:
@@ -127,6 +157,58 @@ def plot_recognition(results: list[RecognitionResult], path: str | Path, title: 
     return p
 
 
+def plot_calibration(result: RecognitionResult, temperatures: tuple[float, ...], path: str | Path,
+                     title: str = "", bins: int = 10) -> Path:
+    """Calibration of the class posteriors at the given temperatures (one PNG, three panels).
+
+    Left: log-loss of the true class against executed fraction. Middle: recognition rate (the same
+    for every tau) and the mean posterior of the top class (its confidence). Right: reliability
+    diagram over all fractions: accuracy of the top class against its posterior, in ``bins`` bins
+    (a calibrated predictor lies on the diagonal).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    x = np.array(result.fractions) * 100
+    fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.2), dpi=110)
+    axes[1].plot(x, np.array(result.rates) * 100, "k-o", label="recognition rate (any tau)")
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    for tau in temperatures:
+        post = result.posteriors(tau)                                   # (N, F, M)
+        top = post.max(axis=2)
+        loss = result.log_loss(tau)
+        axes[0].plot(x, loss, marker="o", label=f"tau = {tau:g} (mean {loss.mean():.2f})")
+        axes[1].plot(x, top.mean(axis=0) * 100, marker=".", ls="--", label=f"mean top posterior, tau = {tau:g}")
+        which = np.clip(np.digitize(top.ravel(), edges) - 1, 0, bins - 1)
+        ok = result.correct.ravel()
+        conf = [top.ravel()[which == b].mean() for b in range(bins) if np.any(which == b)]
+        acc = [ok[which == b].mean() for b in range(bins) if np.any(which == b)]
+        axes[2].plot(conf, acc, marker="o", label=f"tau = {tau:g}")
+    axes[0].axhline(np.log(result.log_likelihood.shape[-1]), color="grey", ls=":", label="uniform posterior")
+    axes[0].set_ylabel("log-loss: mean -ln p(true class | prefix)")
+    axes[1].set_ylabel("%")
+    for ax in axes[:2]:
+        ax.set_xlabel("executed fraction of the motion (%)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[2].plot([0, 1], [0, 1], "k:", label="calibrated")
+    axes[2].set_xlabel("posterior of the top class (binned)")
+    axes[2].set_ylabel("share of those top classes that are right")
+    axes[2].set_xlim(0, 1)
+    axes[2].set_ylim(0, 1)
+    axes[2].grid(alpha=0.3)
+    axes[2].legend(fontsize=7)
+    fig.suptitle(title or f"posterior calibration: {result.name}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(p)
+    plt.close(fig)
+    return p
+
+
 def format_table(results: list[RecognitionResult]) -> str:
     """Fractions as rows, one column per result."""
     head = "executed  " + "  ".join(f"{r.name:>24}" for r in results)
@@ -136,9 +218,25 @@ def format_table(results: list[RecognitionResult]) -> str:
     return "\n".join(rows)
 
 
+def format_calibration(result: RecognitionResult, temperatures: tuple[float, ...]) -> str:
+    """Log-loss and Brier score per executed fraction, one column pair per temperature."""
+    head = "executed  " + "  ".join(f"{'log-loss tau=' + format(t, 'g'):>16} {'Brier':>6}" for t in temperatures)
+    rows = [head, "-" * len(head)]
+    cols = [(r.log_loss(t), r.brier(t)) for t in temperatures for r in [result]]
+    for k, f in enumerate(result.fractions):
+        rows.append(f"{f * 100:7.0f}%  " + "  ".join(f"{ll[k]:16.3f} {br[k]:6.3f}" for ll, br in cols))
+    rows.append("   mean   " + "  ".join(f"{ll.mean():16.3f} {br.mean():6.3f}" for ll, br in cols))
+    return "\n".join(rows)
+
+
+DEFAULT_TEMPERATURE_GRID = (1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0, 20.0, 30.0, 50.0)
+
 DESCRIPTION = """Evaluate early recognition with the paper's protocol: leave one demonstration out, refit
-only its class without it, classify its prefixes at executed fractions 10%..100%. Prints a table, writes a
-PNG of recognition rate against executed fraction; --json prints one JSON object instead of the table."""
+only its class without it, classify its prefixes at executed fractions 10%..100%. Prints a table of the
+recognition rate and of the calibration of the class posteriors (log-loss = mean -ln p(true class), Brier
+score) at temperature 1 (the paper) and --temperature, and the temperature of a grid with the least mean
+log-loss; writes a PNG of recognition rate against executed fraction and one of the calibration;
+--json prints one JSON object instead of the tables."""
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
@@ -160,9 +258,21 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
     p.add_argument("--json", action="store_true", help="print one JSON object {fractions, recognition_rates, ...}")
     p.add_argument("--plot", metavar="PNG", default="runs/plots/recognition.png",
                    help="plot file (default: runs/plots/recognition.png)")
+    p.add_argument("--temperature", type=float, default=DEFAULT_TEMPERATURE,
+                   help=f"posterior temperature tau to report besides 1 (default: {DEFAULT_TEMPERATURE:g})")
+    p.add_argument("--temperatures", metavar="T1,T2,...", default=",".join(f"{t:g}" for t in DEFAULT_TEMPERATURE_GRID),
+                   help="grid searched for the least mean log-loss (default: %(default)s)")
+    p.add_argument("--calibration-plot", metavar="PNG", default="runs/plots/calibration.png",
+                   help="calibration plot file (default: runs/plots/calibration.png)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     with cli_errors(f"{prog} recognition"):
+        try:
+            grid = tuple(float(t) for t in args.temperatures.split(",") if t.strip())
+        except ValueError:
+            raise UserError(f"--temperatures: {args.temperatures!r} is not a comma-separated list of numbers") from None
+        if not grid or not all(t > 0 and np.isfinite(t) for t in (*grid, args.temperature)):
+            raise UserError("--temperature/--temperatures: temperatures must be finite numbers > 0")
         lib = load_library(args.library) if args.library else default_library()
         variants = [(args.features, args.components)]
         for item in filter(None, (s.strip() for s in args.compare.split(","))):
@@ -181,12 +291,23 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             except ValueError as exc:
                 raise UserError(str(exc)) from None
             results.append(leave_one_out(lib, cfg, feats, n_jobs=args.n_jobs, progress=not args.quiet))
-        png = plot_recognition(results, args.plot, f"leave-one-out recognition: {Path(lib.source).name} "
-                               f"({len(lib.demos)} demos, {lib.n_classes} classes)")
+        where = f"{Path(lib.source).name} ({len(lib.demos)} demos, {lib.n_classes} classes)"
+        png = plot_recognition(results, args.plot, f"leave-one-out recognition: {where}")
+        main_res = results[0]
+        best = main_res.best_temperature(grid)
+        taus = tuple(dict.fromkeys((1.0, args.temperature, best)))
+        cal = plot_calibration(main_res, taus, args.calibration_plot, f"posterior calibration, leave-one-out: {where}, "
+                               f"{main_res.name}")
         if args.json:
-            out = {"fractions": results[0].fractions, "recognition_rates": results[0].rates,
-                   "variant": results[0].name, "library": lib.source, "n_demos": len(lib.demos),
-                   "plot": str(png)}
+            out = {"fractions": main_res.fractions, "recognition_rates": main_res.rates,
+                   "temperature": args.temperature,
+                   "log_loss": main_res.log_loss(args.temperature).tolist(),
+                   "brier": main_res.brier(args.temperature).tolist(),
+                   "log_loss_tau1": main_res.log_loss(1.0).tolist(), "brier_tau1": main_res.brier(1.0).tolist(),
+                   "mean_log_loss_by_temperature": {f"{t:g}": float(main_res.log_loss(t).mean()) for t in grid},
+                   "best_temperature": best,
+                   "variant": main_res.name, "library": lib.source, "n_demos": len(lib.demos),
+                   "plot": str(png), "calibration_plot": str(cal)}
             if len(results) > 1:
                 out["variants"] = {r.name: r.rates for r in results}
             print(json.dumps(out))
@@ -194,7 +315,12 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             print(f"leave-one-out recognition on {lib.source}: {len(lib.demos)} demonstrations, "
                   f"{lib.n_classes} classes")
             print(format_table(results))
-            print(f"plot: {png}")
+            print(f"\nposterior calibration of {main_res.name} (log-loss: mean -ln p(true class | prefix); "
+                  f"uniform = {np.log(lib.n_classes):.3f}):")
+            print(format_calibration(main_res, taus))
+            print("mean log-loss by temperature: " + ", ".join(f"{t:g}: {main_res.log_loss(t).mean():.3f}"
+                                                                for t in grid) + f"  -> least at tau = {best:g}")
+            print(f"plot: {png}\ncalibration plot: {cal}")
     return 0
 
 

@@ -24,7 +24,7 @@ from shared.runtime import UserError, cli_errors, setup_logging
 from shared.scene import Scene, load_scene
 
 from .features import VARIANTS, FeatureEncoder
-from .gmm import GMMConfig, MixtureBank, fit_class_gmm
+from .gmm import DEFAULT_TEMPERATURE, GMMConfig, MixtureBank, fit_class_gmm
 from .gmr import gmr
 from .model import PredictionModel
 from .swept_volume import swept_volume
@@ -48,6 +48,7 @@ class TrainConfig:
         spacing: Body surface sample spacing (m).
         interior: Also sample the inside of the body.
         oversample: Regressed postures per library sample used for the swept volumes.
+        temperature: Posterior temperature tau stored in the model (1: the paper's posterior).
     """
 
     gmm: GMMConfig = GMMConfig()
@@ -57,6 +58,7 @@ class TrainConfig:
     spacing: float = 0.02
     interior: bool = False
     oversample: int = 4
+    temperature: float = DEFAULT_TEMPERATURE
 
 
 def default_library() -> MotionLibrary:
@@ -109,6 +111,8 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     """
     cfg = config or TrainConfig()
     cfg.gmm.validate()
+    if not (cfg.temperature > 0 and np.isfinite(cfg.temperature)):
+        raise UserError(f"--temperature must be a finite number > 0, got {cfg.temperature}")
     if cfg.features not in VARIANTS:
         raise UserError(f"--features {cfg.features!r} is not one of {', '.join(VARIANTS)}")
     demos = list(library.demos) if demos is None else demos
@@ -137,7 +141,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
         padded[m, len(mot):] = mot[-1]
     meta = {"library": library.source, "demos_per_class": [len(ds) for ds in by_class],
             "components": [int(g.n_components) for g in mixtures], "gmm": asdict(cfg.gmm),
-            "oversample": cfg.oversample,
+            "oversample": cfg.oversample, "temperature": cfg.temperature,
             "trained_at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")}
     return PredictionModel(class_names=list(library.class_names), feature_variant=cfg.features,
                            time_scale=cfg.time_scale, velocity_scale=encoder.velocity_scale,
@@ -145,7 +149,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
                            motions=padded, motion_lengths=np.array(lengths, dtype=np.int64), grid=grid,
                            volumes=volumes, scene_name=scene.name,
                            human_pelvis=np.array([*scene.human.pelvis_xyz, scene.human.pelvis_yaw]),
-                           spacing=cfg.spacing, interior=cfg.interior, meta=meta)
+                           spacing=cfg.spacing, interior=cfg.interior, meta=meta, temperature=cfg.temperature)
 
 
 DESCRIPTION = """Train the prediction model: one Gaussian mixture per motion class over [time, 12 features]
@@ -171,6 +175,10 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
                         help=f"feature variant (default: {DEFAULT_FEATURES})")
     parser.add_argument("--reg-covar", type=float, default=GMMConfig.reg_covar,
                         help=f"covariance regularisation (default: {GMMConfig.reg_covar})")
+    parser.add_argument("--temperature", type=float, default=DEFAULT_TEMPERATURE,
+                        help="posterior temperature tau stored in the model: p(C_m|xi) = softmax(ln p(xi|C_m) / "
+                             f"tau); 1 = the paper's (default: {DEFAULT_TEMPERATURE:g}, chosen by "
+                             "`foresight eval recognition`)")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the k-means initialisation and of "
                         "--heldout (default: 0)")
     parser.add_argument("--heldout", type=int, default=0, help="leave out N random demonstrations per class "
@@ -189,13 +197,15 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
             gcfg.validate()
         except ValueError as exc:
             raise UserError(str(exc)) from None
-        cfg = TrainConfig(gmm=gcfg, features=args.features, resolution=args.resolution, interior=args.interior)
+        cfg = TrainConfig(gmm=gcfg, features=args.features, resolution=args.resolution, interior=args.interior,
+                          temperature=args.temperature)
         model = train_model(lib, scene, cfg, demos, progress=not args.quiet)
         model.save(args.out)
         size = Path(args.out).stat().st_size
         occ = model.volumes.reshape(model.n_classes, -1).sum(1)
         print(f"wrote {args.out} ({size / 1e6:.2f} MB): {model.n_classes} classes, "
               f"{len(demos)} demonstrations from {lib.source}, features {cfg.features}, "
+              f"temperature {cfg.temperature:g}, "
               f"components {model.meta['components']}, grid {model.grid.dims} at {model.grid.resolution:g} m, "
               f"swept voxels per class {occ.tolist()}")
     return 0

@@ -45,13 +45,23 @@ def test_train_cli_bad_options_are_one_line_errors(tiny_library_path, tmp_path, 
 def test_eval_recognition_json(tiny_library_path, tmp_path, capsys) -> None:
     png = tmp_path / "rec.png"
     assert eval_main(["recognition", "--library", str(tiny_library_path), "--components", "2", "--n-jobs", "1",
-                      "--json", "--plot", str(png), "--quiet"]) == 0
+                      "--json", "--plot", str(png), "--quiet", "--temperature", "4", "--temperatures", "1,4,16",
+                      "--calibration-plot", str(tmp_path / "cal.png")]) == 0
     out = capsys.readouterr().out.strip().splitlines()
     assert len(out) == 1
     data = json.loads(out[0])
     assert len(data["fractions"]) == len(data["recognition_rates"]) == 10
     assert all(0.0 <= r <= 1.0 for r in data["recognition_rates"])
     assert png.stat().st_size > 0
+    # calibration of the posteriors: log-loss and Brier score per fraction at tau = 1 and --temperature
+    assert data["temperature"] == 4.0
+    for key in ("log_loss", "log_loss_tau1", "brier", "brier_tau1"):
+        assert len(data[key]) == 10 and all(v >= 0.0 for v in data[key]), key
+    assert all(b <= 2.0 for b in data["brier"])
+    assert set(data["mean_log_loss_by_temperature"]) == {"1", "4", "16"}
+    best = data["best_temperature"]
+    assert data["mean_log_loss_by_temperature"][f"{best:g}"] == min(data["mean_log_loss_by_temperature"].values())
+    assert (tmp_path / "cal.png").stat().st_size > 0
 
 
 def test_bench_figures(small_model, small_library, scene) -> None:

@@ -68,3 +68,23 @@ def test_incremental_equals_batch_log_likelihood(small_library, variant: str) ->
         total = inc.add(enc.step(f, i))
     assert inc.count == len(demo)
     assert np.allclose(total, batch, rtol=1e-10, atol=1e-8)
+
+
+def test_tempered_posterior() -> None:
+    rng = np.random.default_rng(4)
+    ll = rng.normal(0.0, 50.0, (30, 5)).cumsum(axis=0)
+    paper = posterior_from_log_likelihood(ll)
+    # tau = 1 is the paper's posterior exactly
+    assert np.array_equal(posterior_from_log_likelihood(ll, temperature=1.0), paper)
+    for tau in (0.5, 3.0, 40.0):
+        post = posterior_from_log_likelihood(ll, temperature=tau)
+        assert np.all(post >= 0) and np.allclose(post.sum(axis=1), 1.0)
+        assert np.array_equal(np.argmax(post, axis=1), np.argmax(paper, axis=1))  # argmax unchanged
+        assert np.allclose(post, posterior_from_log_likelihood(ll / tau))
+    # a higher temperature spreads the posterior (entropy grows)
+    ent = [-(p * np.log(np.maximum(p, 1e-300))).sum(axis=1).mean()
+           for p in (posterior_from_log_likelihood(ll, temperature=t) for t in (1.0, 5.0, 50.0))]
+    assert ent[0] < ent[1] < ent[2]
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="temperature"):
+            posterior_from_log_likelihood(ll, temperature=bad)

@@ -136,3 +136,44 @@ def test_bad_input_rejected(small_model: PredictionModel, scene) -> None:
         core.update(np.full(12, np.nan))
     with pytest.raises(PredictorError, match="method"):
         PredictorCore(small_model, scene, PredictorConfig(method="bogus"))
+
+
+def test_temperature_from_model_and_config(small_model: PredictionModel, small_library, scene, tmp_path) -> None:
+    from dataclasses import replace
+
+    from services.predictor.gmm import posterior_from_log_likelihood
+
+    demo = small_library.by_class(1)[2].features[:40]
+    paper = PredictorCore(small_model, scene, PredictorConfig(temperature=1.0))
+    hot_model = replace(small_model, temperature=8.0)
+    hot = PredictorCore(hot_model, scene)                       # temperature 0 in the config: the model's
+    assert paper.temperature == 1.0 and hot.temperature == 8.0
+    assert PredictorCore(hot_model, scene, PredictorConfig(temperature=2.0)).temperature == 2.0
+    for core in (paper, hot):
+        core.reset(0)
+    for i, f in enumerate(demo):
+        a, b = paper.update(f, i), hot.update(f, i)
+        # tau = 1: the paper's posterior of the summed log-likelihoods (the behaviour before tempering)
+        assert np.array_equal(a.posterior, posterior_from_log_likelihood(a.log_likelihood))
+        assert np.allclose(b.log_likelihood, a.log_likelihood)
+        assert np.allclose(b.posterior, posterior_from_log_likelihood(a.log_likelihood / 8.0))
+        assert np.isclose(b.posterior.sum(), 1.0) and np.argmax(b.posterior) == np.argmax(a.posterior)
+        # the occupancy is built from the tempered posterior
+        idx, val = hot.occupancy_for(b.posterior)
+        assert np.array_equal(b.indices, idx) and np.allclose(b.values, val)
+    assert b.posterior.max() < a.posterior.max()                # tempered: less confident
+    # the model file keeps the temperature; a file without one (written before) means tau = 1
+    path = tmp_path / "hot.npz"
+    hot_model.save(path)
+    assert PredictionModel.load(path).temperature == 8.0
+    with np.load(path) as z:
+        data = {k: z[k] for k in z.files if k != "temperature"}
+    old = tmp_path / "old.npz"
+    np.savez(old, **data)
+    assert PredictionModel.load(old).temperature == 1.0
+    data["temperature"] = np.array(-1.0)
+    np.savez(old, **data)
+    with pytest.raises(ValueError, match="temperature"):
+        PredictionModel.load(old)
+    with pytest.raises(PredictorError, match="temperature"):
+        PredictorCore(small_model, scene, PredictorConfig(temperature=-2.0))
