@@ -108,12 +108,17 @@ def test_hand_paths_share_an_initial_lift(lib: MotionLibrary) -> None:
     scene = load_scene(None)
     hand = HumanModel().hand_position(np.stack([place_in_scene(x, x[0], scene) for x in f]))
     rel = hand - hand[:, :1]
-    # at 30% of the window the per-class mean displacements are close to each other (common lift) ...
-    means30 = np.stack([rel[labels == m, 30].mean(axis=0) for m in range(8)])
-    means_end = np.stack([rel[labels == m, -1].mean(axis=0) for m in range(8)])
-    spread30 = np.linalg.norm(means30 - means30.mean(axis=0), axis=1).mean()
-    spread_end = np.linalg.norm(means_end - means_end.mean(axis=0), axis=1).mean()
-    assert spread30 < 0.35 * spread_end, (spread30, spread_end)
+    def spread(k: int) -> float:
+        means = np.stack([rel[labels == m, k].mean(axis=0) for m in range(8)])
+        return float(np.linalg.norm(means - means.mean(axis=0), axis=1).mean())
+
+    # at 15% of the window the hands have started moving, but the per-class mean displacements are
+    # still close to each other (common lift; measured 0.06 of the final spread) ...
+    assert np.linalg.norm(rel[:, 15], axis=1).mean() > 0.03
+    assert spread(15) < 0.15 * spread(-1), (spread(15), spread(-1))
+    # ... and by 40% the classes have gone their own ways (measured 0.69), as real reaches have
+    # (the paper's library: 60% recognised at 40% executed)
+    assert spread(40) > 0.5 * spread(-1), (spread(40), spread(-1))
 
 
 def test_return_to_rest_and_bad_arguments() -> None:
