@@ -63,6 +63,8 @@ class DemoConfig:
     compare: bool = opt(False, help="run the scenario three times (prediction, current occupancy, no human cost) "
                         "and compare their interference with the final prediction (the paper's Table I)")
     components: int = opt(-1, help="Gaussians per class when training (-1: the trainer's default, 20)")
+    robot_speed: float = opt(0.25, help="fraction of the PR2's joint velocity limits the planner times trajectories "
+                             "with (a collaborative speed; the planner's --velocity-scale)")
     period_s: float = opt(0.2, help="replanning period (simulated s per step in lock-step, wall s in real time)")
     rate_hz: float = opt(30.0, help="real time: poses per second")
     models_dir: Path = opt(Path("models"), help="where trained models are cached")
@@ -79,6 +81,8 @@ class DemoConfig:
             raise ConfigError(f"demo.steps: must be >= 1, got {self.steps}")
         if not (self.period_s > 0 and self.rate_hz > 0 and self.timeout > 0):
             raise ConfigError("demo.period_s, demo.rate_hz and demo.timeout must be > 0")
+        if not 0 < self.robot_speed <= 1:
+            raise ConfigError(f"demo.robot_speed: must be in (0, 1], got {self.robot_speed}")
         if not 0 <= self.port < 65536:
             raise ConfigError(f"demo.port: must be 0..65535, got {self.port}")
 
@@ -100,6 +104,7 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
     return {
         "predictor": ["--model", str(model), "--method", cfg.method, *common],
         "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
+                    "--velocity-scale", str(cfg.robot_speed),
                     "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--w-human", "0"]), *common],
         "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
                      "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"]), *common],

@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+import argparse
 import logging
 import signal
 import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any
 
-from shared.config import ConfigError
+from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
 
-__all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError"]
+__all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError", "service_main"]
 
 
 class UserError(Exception):
@@ -63,3 +65,34 @@ def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
             signal.signal(s, h)
 
     return restore
+
+
+def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls: type, description: str,
+                 make: Callable[[Any, ZenohConfig, threading.Event], Callable[[], Any]]) -> int:
+    """The ``main`` of every service: options, logging, one-line errors, SIGINT/SIGTERM, run.
+
+    Args:
+        argv: Command-line arguments (None: ``sys.argv[1:]``).
+        prog: Program name for help and errors.
+        section: Config section, e.g. ``"planner"``.
+        config_cls: The section's config dataclass (with a ``log_level`` field).
+        description: ``--help`` text.
+        make: ``(config, zenoh_config, stop) -> run``: builds the service (bad input raises a
+            one-line error) and returns a callable that serves until ``stop`` is set.
+
+    Returns:
+        The exit status: 0 when the service stopped, 2 on bad input.
+    """
+    parser = argparse.ArgumentParser(prog=prog, description=description)
+    add_config_arguments(parser, section, config_cls)
+    args = parser.parse_args(argv)
+    stop = threading.Event()
+    with cli_errors(prog):
+        cfg, zcfg = resolve_config(section, config_cls, args)
+        setup_logging(cfg.log_level)
+        restore = stop_on_signals(stop)
+        try:
+            make(cfg, zcfg, stop)()
+        finally:
+            restore()
+    return 0

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
+from collections.abc import Callable
 
-from shared.config import add_config_arguments, resolve_config
-from shared.runtime import cli_errors, setup_logging, stop_on_signals
+from shared.config import ZenohConfig
+from shared.runtime import service_main
 
 from .core import ExecutorConfig
 from .service import ExecutorService
@@ -23,24 +23,21 @@ way). Options come from the dataclass defaults < --config FILE ([executor], [zen
 FORESIGHT_EXECUTOR_<NAME> / FORESIGHT_ZENOH_<NAME> < flags."""
 
 
+def _make(cfg: ExecutorConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
+    service = ExecutorService(cfg, zcfg, stop)
+
+    def run() -> None:
+        result = service.run()
+        if result.mcap_path:
+            print(f"mcap: {result.mcap_path}")
+
+    return run
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m services.executor") -> int:
     """Run the executor; returns the exit status (0 done or stopped, 2 bad input)."""
-    parser = argparse.ArgumentParser(prog=prog, description=DESCRIPTION)
-    add_config_arguments(parser, "executor", ExecutorConfig)
-    args = parser.parse_args(argv)
-    with cli_errors(prog):
-        cfg, zcfg = resolve_config("executor", ExecutorConfig, args)
-        setup_logging(cfg.log_level)
-        stop = threading.Event()
-        restore = stop_on_signals(stop)
-        try:
-            service = ExecutorService(cfg, zcfg, stop)
-            result = service.run()
-        finally:
-            restore()
-    if result.mcap_path:
-        print(f"mcap: {result.mcap_path}")
-    return 0
+    return service_main(argv, prog, section="executor", config_cls=ExecutorConfig, description=DESCRIPTION,
+                        make=_make)
 
 
 if __name__ == "__main__":

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
+from collections.abc import Callable
 
-from shared.config import add_config_arguments, resolve_config
-from shared.runtime import cli_errors, setup_logging, stop_on_signals
+from shared.config import ZenohConfig
+from shared.runtime import service_main
 
 from .service import PlannerService, PlannerServiceConfig
 
@@ -20,22 +20,15 @@ per ClockTick. Options come from the dataclass defaults < --config FILE ([planne
 FORESIGHT_PLANNER_<NAME> / FORESIGHT_ZENOH_<NAME> < flags."""
 
 
+def _make(cfg: PlannerServiceConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
+    service = PlannerService(cfg, zcfg)
+    return lambda: service.run(stop)
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m services.planner") -> int:
     """Run the planner service until SIGINT/SIGTERM; returns the exit status (2: bad input)."""
-    parser = argparse.ArgumentParser(prog=prog, description=DESCRIPTION)
-    add_config_arguments(parser, "planner", PlannerServiceConfig)
-    args = parser.parse_args(argv)
-    with cli_errors(prog):
-        cfg, zcfg = resolve_config("planner", PlannerServiceConfig, args)
-        setup_logging(cfg.log_level)
-        service = PlannerService(cfg, zcfg)
-    stop = threading.Event()
-    restore = stop_on_signals(stop)
-    try:
-        service.run(stop)
-    finally:
-        restore()
-    return 0
+    return service_main(argv, prog, section="planner", config_cls=PlannerServiceConfig, description=DESCRIPTION,
+                        make=_make)
 
 
 if __name__ == "__main__":

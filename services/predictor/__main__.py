@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
+from collections.abc import Callable
 
-from shared.config import add_config_arguments, resolve_config
-from shared.runtime import UserError, cli_errors, setup_logging, stop_on_signals
+from shared.config import ZenohConfig
+from shared.runtime import UserError, service_main
 
 from .core import PredictorConfig
 from .service import PredictorService
@@ -21,24 +21,17 @@ Needs a model file from `foresight train`. Options come from the dataclass defau
 ([predictor], [zenoh]) < env FORESIGHT_PREDICTOR_<NAME> / FORESIGHT_ZENOH_<NAME> < flags."""
 
 
+def _make(cfg: PredictorConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
+    if not cfg.model.is_file():
+        raise UserError(f"model file {str(cfg.model)!r} not found; run `foresight train --out {cfg.model}` first")
+    service = PredictorService(cfg, zcfg)
+    return lambda: service.run(stop)
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m services.predictor") -> int:
     """Run the predictor service; returns the exit status (0 stopped, 2 bad input)."""
-    parser = argparse.ArgumentParser(prog=prog, description=DESCRIPTION)
-    add_config_arguments(parser, "predictor", PredictorConfig)
-    args = parser.parse_args(argv)
-    with cli_errors(prog):
-        cfg, zcfg = resolve_config("predictor", PredictorConfig, args)
-        setup_logging(cfg.log_level)
-        if not cfg.model.is_file():
-            raise UserError(f"model file {str(cfg.model)!r} not found; run `foresight train --out {cfg.model}` first")
-        service = PredictorService(cfg, zcfg)
-        stop = threading.Event()
-        restore = stop_on_signals(stop)
-        try:
-            service.run(stop)
-        finally:
-            restore()
-    return 0
+    return service_main(argv, prog, section="predictor", config_cls=PredictorConfig, description=DESCRIPTION,
+                        make=_make)
 
 
 if __name__ == "__main__":

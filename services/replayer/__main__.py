@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
+from collections.abc import Callable
 
-from shared.config import add_config_arguments, resolve_config
-from shared.runtime import cli_errors, setup_logging, stop_on_signals
+from shared.config import ZenohConfig
+from shared.runtime import service_main
 
 from .core import ReplayerConfig
 from .service import ReplayerService
@@ -21,22 +21,15 @@ Options come from the dataclass defaults < --config FILE ([replayer], [zenoh]) <
 FORESIGHT_REPLAYER_<NAME> / FORESIGHT_ZENOH_<NAME> < flags."""
 
 
+def _make(cfg: ReplayerConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
+    service = ReplayerService(cfg, zcfg)
+    return lambda: service.run(stop)
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m services.replayer") -> int:
     """Run the replayer; returns the exit status (0 done or stopped, 2 bad input)."""
-    parser = argparse.ArgumentParser(prog=prog, description=DESCRIPTION)
-    add_config_arguments(parser, "replayer", ReplayerConfig)
-    args = parser.parse_args(argv)
-    with cli_errors(prog):
-        cfg, zcfg = resolve_config("replayer", ReplayerConfig, args)
-        setup_logging(cfg.log_level)
-        service = ReplayerService(cfg, zcfg)
-        stop = threading.Event()
-        restore = stop_on_signals(stop)
-        try:
-            service.run(stop)
-        finally:
-            restore()
-    return 0
+    return service_main(argv, prog, section="replayer", config_cls=ReplayerConfig, description=DESCRIPTION,
+                        make=_make)
 
 
 if __name__ == "__main__":
