@@ -132,8 +132,7 @@ class RejectCounter:
 
 
 def subscribe(session: zenoh.Session, key: str, cls: type[M], callback: Callable[[M], None],
-              rejects: RejectCounter | None = None,
-              raw_callback: Callable[[str, bytes], None] | None = None) -> zenoh.Subscriber:
+              rejects: RejectCounter | None = None) -> zenoh.Subscriber:
     """Subscribe to ``key``, decode each payload as ``cls`` and call ``callback`` with it.
 
     Malformed payloads are counted and logged by ``rejects`` and never reach ``callback``; an
@@ -141,32 +140,12 @@ def subscribe(session: zenoh.Session, key: str, cls: type[M], callback: Callable
 
     Args:
         session: Open Zenoh session.
-        key: Key expression.
+        key: Key expression (one key, no wildcard).
         cls: Expected message type.
         callback: Called on Zenoh's thread with each valid message.
         rejects: Where to count rejections (default: log only).
-        raw_callback: Called with ``(key, payload)`` for every sample, valid or not, before decoding
-            (the executor's logger uses it).
     """
-
-    def handler(sample: zenoh.Sample) -> None:
-        payload = sample.payload.to_bytes()
-        if raw_callback is not None:
-            raw_callback(str(sample.key_expr), payload)
-        try:
-            msg = decode(payload, cls)
-        except ProtocolError as exc:
-            if rejects is not None:
-                rejects.reject(key, exc)
-            else:
-                log.warning("rejected message on %s: %s", key, exc)
-            return
-        try:
-            callback(msg)
-        except Exception:  # a bug in one handler must not kill the subscription
-            log.exception("handler for %s failed", key)
-
-    return session.declare_subscriber(key, handler)
+    return subscribe_ordered(session, key, {key: cls}, callback, rejects)  # type: ignore[arg-type]
 
 
 def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str, type[Message]],
