@@ -216,7 +216,8 @@ class Summary:
             costs = "".join(f"{s['cost_total'].get(n, float('nan')):>16.3f}" for n in names)
             out.append(f"{s['step']:>4}  {s['chosen']:<12}{costs}{s['planning_ms']:>9.0f}")
         out.append(f"switch step: {self.switch_step if self.switch_step is not None else 'none (never switched)'}")
-        out.append(f"goal reached: {'yes, step ' + str(self.reached_step) if self.reached else 'no'}")
+        when = f", step {self.reached_step}" if self.reached_step is not None else ""
+        out.append(f"goal reached: {'yes' + when if self.reached else 'no'}")
         out.append(f"human class: {self.human_class}; recognised at the end: {self.recognised_class}")
         out.append(f"interference cost of the executed trajectory (final prediction): {self.interference_cost:.4f}")
         out.append(f"MCAP log: {self.mcap_path}")
@@ -270,7 +271,7 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     stamps = np.array([s.stamp for s in states])
     cost = interference_cost(robot, q, stamps, final_occupancy) if final_occupancy is not None and len(q) else 0.0
     reached_states = [s for s in states if s.reached]
-    reached_step = reached_states[0].tick if reached_states else None
+    reached_step = reached_states[0].tick if reached_states and reached_states[0].tick >= 0 else None
     recognised = None
     if posteriors:
         last = posteriors[max(posteriors)]

@@ -6,7 +6,8 @@ clock for all), so differences between log times are end-to-end latencies across
 * pose -> occupancy: an OccupancyGrid's log time minus that of the HumanPose it was predicted from
   (same ``demo_id`` and ``index``);
 * pose -> plan: a Plan's log time minus that of the newest pose its occupancy was predicted from
-  (``occupancy_index``), i.e. how old the human's motion is that the published plan accounts for;
+  (``occupancy_index``), i.e. how old the human's motion is that the published plan accounts for
+  (only plans published while a demonstration streams: after its end marker no pose is new);
 * occupancy -> plan: the same, from the OccupancyGrid the plan used;
 * the replanning period achieved: differences between consecutive Plans' log times;
 * planning time: ``Plan.planning_ms`` as the planner measured it.
@@ -19,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from shared.protocol import HumanPose, OccupancyGrid, Plan, ProtocolError, decode
+from shared.protocol import DemoMarker, HumanPose, OccupancyGrid, Plan, ProtocolError, decode
 
 __all__ = ["Stat", "run_latencies", "format_latencies"]
 
@@ -47,7 +48,8 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
 
     Args:
         messages: Log messages with ``topic``, ``log_time`` (ns) and ``data`` (msgpack payload), in file order.
-        topics: Topic of each message type: keys ``"pose"``, ``"occupancy"``, ``"plan"``.
+        topics: Topic of each message type: keys ``"pose"``, ``"occupancy"``, ``"plan"`` and optionally
+            ``"demo"`` (DemoMarker: plans after a demonstration's end do not count for pose -> plan).
 
     Returns:
         ``{"pose_to_occupancy", "pose_to_plan", "occupancy_to_plan", "replanning_period", "planning"}``.
@@ -60,9 +62,12 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
     plan_times: list[int] = []
     planning: list[float] = []
     current_demo = -1
+    streaming = True
     for m in sorted(messages, key=lambda m: m.log_time):
         try:
-            if m.topic == topics["pose"]:
+            if m.topic == topics.get("demo"):
+                streaming = decode(m.data, DemoMarker).event == "start"
+            elif m.topic == topics["pose"]:
                 pose = decode(m.data, HumanPose)
                 pose_time[(pose.demo_id, pose.index)] = m.log_time
                 current_demo = pose.demo_id
@@ -77,6 +82,8 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
                 plan_times.append(m.log_time)
                 planning.append(plan.planning_ms)
                 key = (current_demo, plan.occupancy_index)
+                if not streaming:
+                    continue
                 if plan.occupancy_index >= 0 and key in pose_time:
                     pose_to_plan.append((m.log_time - pose_time[key]) / 1e6)
                 if plan.occupancy_index >= 0 and key in occ_time:

@@ -512,15 +512,15 @@ def _main_render(args: argparse.Namespace, prog: str) -> int:
 def _main_latency(args: argparse.Namespace) -> int:
     from shared.latency import format_latencies, run_latencies
 
-    wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose"}
+    wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.DemoMarker"}
     lf = read_log(args.file, keep=lambda ch: ch.schema_name in wanted and ch.message_encoding == "msgpack")
     topics = {}
     for ch in lf.channels.values():
         for key, schema in (("pose", "foresight.HumanPose"), ("occupancy", "foresight.OccupancyGrid"),
-                            ("plan", "foresight.Plan")):
+                            ("plan", "foresight.Plan"), ("demo", "foresight.DemoMarker")):
             if ch.schema_name == schema and ch.message_encoding == "msgpack":
                 topics[key] = ch.topic
-    if set(topics) != {"pose", "occupancy", "plan"}:
+    if not {"pose", "occupancy", "plan"} <= set(topics):
         raise UserError(f"{args.file}: needs HumanPose, OccupancyGrid and Plan channels, found {sorted(topics)}")
     stats = run_latencies(lf.messages, topics)
     if args.json:

@@ -49,3 +49,16 @@ def test_latencies_from_log_times():
 def test_empty_series_is_nan():
     s = Stat.of([])
     assert s.count == 0 and np.isnan(s.p50)
+
+
+def test_plans_after_the_demonstration_ended_do_not_count_for_pose_to_plan():
+    from shared.protocol import DemoMarker
+
+    ms = 1_000_000
+    pose = HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=1, index=0, features=np.zeros(12))
+    end = DemoMarker(stamp=0.0, tick=-1, demo_id=1, event="end", true_class=0, class_name="a", n_samples=1)
+    msgs = [Msg("p", 0, encode(pose)), Msg("x", 50 * ms, encode(_plan(0))), Msg("d", 60 * ms, encode(end)),
+            Msg("x", 900 * ms, encode(_plan(0)))]
+    stats = run_latencies(msgs, {"pose": "p", "occupancy": "o", "plan": "x", "demo": "d"})
+    assert stats["pose_to_plan"] == Stat(1, 50.0, 50.0, 50.0)
+    assert stats["replanning_period"].count == 1  # the period counts every plan
