@@ -229,7 +229,7 @@ def format_calibration(result: RecognitionResult, temperatures: tuple[float, ...
     return "\n".join(rows)
 
 
-DEFAULT_TEMPERATURE_GRID = (1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0, 20.0, 30.0, 50.0)
+DEFAULT_TEMPERATURE_GRID = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 150.0, 200.0, 300.0, 500.0, 1000.0)
 
 DESCRIPTION = """Evaluate early recognition with the paper's protocol: leave one demonstration out, refit
 only its class without it, classify its prefixes at executed fractions 10%..100%. Prints a table of the
