@@ -222,7 +222,8 @@ class Plan(Message):
     ``trajectories[k]`` has T waypoints of the D joints in ``joint_names``, ``dt`` seconds apart,
     starting at the configuration the robot will have when this plan starts executing. Goals that
     could not be planned (e.g. IK failed) have ``valid[k] = False``, cost ``+inf`` and are never
-    chosen; valid goals have finite costs. ``occupancy_tick`` / ``occupancy_index`` identify the prediction the costs were computed on.
+    chosen; valid goals have finite costs. ``occupancy_tick`` / ``occupancy_index`` identify the
+    prediction the costs were computed on.
     """
 
     TYPE: ClassVar[str] = "Plan"
