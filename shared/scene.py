@@ -6,13 +6,13 @@ Every service loads the same scene file (TOML; default: the embedded ``pr2_two_c
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from shared.data_files import read_toml
 
 __all__ = ["SceneError", "Box", "Cup", "Grid", "HumanPlacement", "RobotPlacement", "Scene", "load_scene",
            "DEFAULT_SCENE"]
@@ -221,19 +221,5 @@ def load_scene(path: str | Path | None = None) -> Scene:
     Raises:
         SceneError: If the file is missing, not TOML, or has a bad entry.
     """
-    if path is None or (isinstance(path, str) and "/" not in path and not path.endswith(".toml")):
-        name = path or DEFAULT_SCENE
-        res = resources.files("shared") / "data" / "scenes" / f"{name}.toml"
-        if not res.is_file():
-            raise SceneError(f"no embedded scene named {name!r}")
-        text, source = res.read_text(), f"{name}.toml"
-    else:
-        p = Path(path)
-        if not p.is_file():
-            raise SceneError(f"scene file {str(p)!r} not found")
-        text, source = p.read_text(), str(p)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"scene file {source!r}: {exc}") from None
+    data, source = read_toml(path, "scenes", DEFAULT_SCENE, "scene file", SceneError)
     return parse_scene(data, source)

@@ -26,13 +26,12 @@ goal.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
+from shared.data_files import read_toml
 from shared.human import HumanModel
 from shared.library import Demonstration, LibraryError, MotionLibrary
 
@@ -159,21 +158,7 @@ def load_layout(layout: str | Path | None = None, scene=None) -> GoalLayout:
     """
     from shared.scene import load_scene
 
-    if layout is None or (isinstance(layout, str) and "/" not in layout and not layout.endswith(".toml")):
-        name = layout or DEFAULT_LAYOUT
-        res = resources.files("shared") / "data" / "goals" / f"{name}.toml"
-        if not res.is_file():
-            raise LibraryError(f"no embedded goal layout named {name!r}")
-        text, source = res.read_text(), f"{name}.toml"
-    else:
-        p = Path(layout)
-        if not p.is_file():
-            raise LibraryError(f"goal layout {str(p)!r} not found")
-        text, source = p.read_text(), str(p)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise LibraryError(f"goal layout {source!r}: {exc}") from None
+    data, source = read_toml(layout, "goals", DEFAULT_LAYOUT, "goal layout", LibraryError)
     entries = data.get("goals")
     if not isinstance(entries, list) or not entries:
         raise LibraryError(f"goal layout {source!r}: no [[goals]] entries")
