@@ -7,7 +7,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-__all__ = ["read_toml"]
+import numpy as np
+
+__all__ = ["read_toml", "finite_vector"]
 
 
 def read_toml(spec: str | Path | None, folder: str, default: str, what: str,
@@ -40,3 +42,14 @@ def read_toml(spec: str | Path | None, folder: str, default: str, what: str,
         return tomllib.loads(text), source
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{what} {source!r}: {exc}") from None
+
+
+def finite_vector(where: str, raw: Any, n: int, error: type[Exception]) -> np.ndarray:
+    """``raw`` as ``(n,)`` finite float64 numbers, else ``error`` naming ``where``."""
+    try:
+        arr = np.asarray(raw, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise error(f"{where}: expected {n} numbers, got {raw!r}") from None
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        raise error(f"{where}: expected {n} finite numbers, got {raw!r}")
+    return arr

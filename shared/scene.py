@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from shared.data_files import read_toml
+from shared.data_files import finite_vector, read_toml
 
 __all__ = ["SceneError", "Box", "Cup", "Grid", "HumanPlacement", "RobotPlacement", "Scene", "load_scene",
            "DEFAULT_SCENE"]
@@ -150,13 +150,7 @@ class Scene:
 
 
 def _vec(where: str, raw: Any, n: int) -> np.ndarray:
-    try:
-        arr = np.asarray(raw, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SceneError(f"{where}: expected {n} numbers, got {raw!r}") from None
-    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
-        raise SceneError(f"{where}: expected {n} finite numbers, got {raw!r}")
-    return arr
+    return finite_vector(where, raw, n, SceneError)
 
 
 def _num(where: str, raw: Any, positive: bool = False) -> float:

@@ -28,10 +28,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from shared.data_files import read_toml
+from shared.data_files import finite_vector, read_toml
 from shared.human import HumanModel
 from shared.library import Demonstration, LibraryError, MotionLibrary
 
@@ -133,14 +134,8 @@ def _pelvis_frame(scene) -> tuple[np.ndarray, np.ndarray]:
     return rot, np.asarray(scene.human.pelvis_xyz, dtype=np.float64)
 
 
-def _vec(where: str, raw, n: int) -> np.ndarray:
-    try:
-        v = np.asarray(raw, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise LibraryError(f"{where}: expected {n} numbers, got {raw!r}") from None
-    if v.shape != (n,) or not np.all(np.isfinite(v)):
-        raise LibraryError(f"{where}: expected {n} finite numbers, got {raw!r}")
-    return v
+def _vec(where: str, raw: Any, n: int) -> np.ndarray:
+    return finite_vector(where, raw, n, LibraryError)
 
 
 def load_layout(layout: str | Path | None = None, scene=None) -> GoalLayout:
