@@ -38,11 +38,6 @@ class ToyCost:
         return torch.stack([torch.zeros_like(human), human], -1)
 
 
-@pytest.fixture
-def scene():
-    return load_scene()
-
-
 def blob_grid(scene, center=(0.5, -0.2, 1.0), sigma=0.12) -> np.ndarray:
     """Dense (nx, ny, nz) gaussian occupancy blob on the scene grid."""
     c = scene.grid.centers()

@@ -7,18 +7,6 @@ import pytest
 import torch
 
 from services.planner.costs import CostConfig, CostInputError, StateCost, smooth_penetration, smoothness_cost
-from shared.robot import PR2
-from shared.scene import load_scene
-
-
-@pytest.fixture(scope="module")
-def scene():
-    return load_scene()
-
-
-@pytest.fixture(scope="module")
-def robot(scene):
-    return PR2.from_scene(scene)
 
 
 @pytest.fixture(scope="module")

@@ -11,12 +11,6 @@ from services.planner.core import Planner, PlannerConfig
 from services.planner.costs import CostConfig, StateCost
 from services.planner.fused import FusedCost, supports
 from shared.robot import PR2
-from shared.scene import load_scene
-
-
-@pytest.fixture(scope="module")
-def scene():
-    return load_scene()
 
 
 @pytest.fixture(scope="module")

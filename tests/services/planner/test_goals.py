@@ -10,18 +10,8 @@ import torch
 
 from services.planner.costs import StateCost
 from services.planner.goals import GraspConfig, cup_goals, grasp_candidates, joint_goals, pose_goals
-from shared.robot import PR2, RobotModelError
-from shared.scene import Cup, load_scene
-
-
-@pytest.fixture(scope="module")
-def scene():
-    return load_scene()
-
-
-@pytest.fixture(scope="module")
-def robot(scene):
-    return PR2.from_scene(scene)
+from shared.robot import RobotModelError
+from shared.scene import Cup
 
 
 @pytest.fixture(scope="module")

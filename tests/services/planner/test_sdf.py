@@ -8,12 +8,6 @@ import torch
 import torch.nn.functional as F
 
 from services.planner.sdf import GridLookupError, SignedDistanceField, grid_lookup, rasterize_obstacles
-from shared.scene import load_scene
-
-
-@pytest.fixture(scope="module")
-def scene():
-    return load_scene()
 
 
 @pytest.fixture(scope="module")
