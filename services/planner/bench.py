@@ -98,6 +98,19 @@ def _time_fk(robot: Any, n: int, iterations: int, repeats: int, seed: int) -> tu
     return statistics.median(times), statistics.median(cpu)
 
 
+def k_goal_planner(scene: Scene, config: PlannerConfig, k: int, base: Planner | None = None) -> Planner:
+    """A planner for ``k`` bench goals sharing ``base``'s robot, cost and IK goals (built if not given)."""
+    base = base or Planner(scene, config)
+    return Planner(scene, config, robot=base.robot, cost=base.cost,
+                   goals=bench_goals(base.goals, base.robot, k, seed=config.seed))
+
+
+def start_configuration(robot: Any) -> np.ndarray:
+    """``(D,)`` the robot's start configuration (mid-range if it has none)."""
+    q0 = robot.q_start if getattr(robot, "q_start", None) is not None else (robot.lower + robot.upper) / 2
+    return q0.double().cpu().numpy()
+
+
 def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene | None = None,
               progress: bool = True) -> dict[str, Any]:
     """Time replanning steps and FK for each K; returns the report dict (see module docstring)."""
@@ -106,9 +119,7 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
     scene = scene or load_scene()
     base = Planner(scene, dataclasses.replace(config, compile=False))  # the robot, the cost and the IK goals, once
     occ = blob_occupancy(scene)
-    q0 = base.robot.q_start if getattr(base.robot, "q_start", None) is not None else (
-        (base.robot.lower + base.robot.upper) / 2)
-    q0 = q0.double().cpu().numpy()
+    q0 = start_configuration(base.robot)
     out: dict[str, Any] = {"K": [], "step_ms": [], "step_ms_min": [], "step_cpu_ms": [], "fk_ms": [],
                            "fk_cpu_ms": [], "pk_fk_ms": [], "ratio": [], "construct_s": [], "compiled": False,
                            "rollouts": config.rollouts, "waypoints": config.waypoints,
@@ -116,9 +127,8 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
                            "device": config.device, "dtype": config.dtype, "steps": steps,
                            "load_avg_1min": os.getloadavg()[0]}
     for k in tqdm(ks, desc="bench planner", unit="K", disable=not progress, file=sys.stderr):
-        goals = bench_goals(base.goals, base.robot, k, seed=config.seed)
         t0 = time.perf_counter()
-        planner = Planner(scene, config, robot=base.robot, cost=base.cost, goals=goals)
+        planner = k_goal_planner(scene, config, k, base)
         out["construct_s"].append(round(time.perf_counter() - t0, 2))
         out["compiled"] = bool(planner.fused is not None and planner.fused.compiled)
         res = planner.step(q0, occ)  # warm-up (first step: straight lines)
@@ -155,11 +165,9 @@ def profile_step(config: PlannerConfig, k: int = 2, rows: int = 15) -> str:
     import pstats
 
     scene = load_scene()
-    base = Planner(scene, config)
-    planner = Planner(scene, config, robot=base.robot, cost=base.cost,
-                      goals=bench_goals(base.goals, base.robot, k, seed=config.seed))
+    planner = k_goal_planner(scene, config, k)
     occ = blob_occupancy(scene)
-    res = planner.step(base.robot.q_start.double().cpu().numpy(), occ)
+    res = planner.step(start_configuration(planner.robot), occ)
     res = planner.step(res.start, occ)
     prof = cProfile.Profile()
     prof.enable()
@@ -190,11 +198,9 @@ def peak_memory_mb(k: int, config: PlannerConfig, steps: int = 3) -> float:
 def _memory_probe(k: int, steps: int, cfg: dict[str, Any]) -> None:
     config = PlannerConfig(**cfg)
     scene = load_scene()
-    base = Planner(scene, config)
-    planner = Planner(scene, config, robot=base.robot, cost=base.cost,
-                      goals=bench_goals(base.goals, base.robot, k, seed=config.seed))
+    planner = k_goal_planner(scene, config, k)
     occ = blob_occupancy(scene)
-    res = planner.step(base.robot.q_start.double().cpu().numpy(), occ)
+    res = planner.step(start_configuration(planner.robot), occ)
     for _ in range(steps):
         res = planner.step(res.start, occ)
     print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)  # Linux: KiB
