@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -13,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from services.processes import free_port
 from shared.config import ZenohConfig
 from shared.protocol import ClockTick, DemoMarker, HumanPose, Keys, encode
 from shared.transport import (
@@ -26,12 +26,6 @@ from shared.transport import (
     subscribe_ordered,
     zenoh_config,
 )
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def wait_until(cond, timeout: float = 10.0) -> bool:
