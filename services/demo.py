@@ -35,7 +35,7 @@ from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, r
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, Keys, Message, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError, cli_errors, setup_logging, stop_on_signals
-from shared.scene import load_scene
+from shared.scene import Scene, load_scene
 from shared.transport import Presence, open_session, subscribe
 
 __all__ = ["DemoConfig", "run_demo", "main", "SERVICES_IN_ORDER"]
@@ -57,6 +57,8 @@ class DemoConfig:
     steps: int = opt(20, help="replanning steps (the paper: 20)")
     seed: int = opt(0, help="seed of the demonstration choice and of STOMP")
     human_class: str = opt("", help="class (name or index) the human performs (default: red_cup, else the last)")
+    scene: str = opt("", help="scene: an embedded name (pr2_two_cups, pr2_two_cups_facing, pr2_two_cups_side, or the "
+                     "paper's PR2TwoCups, PR2TwoCupsFacing, PR2TwoCupsSide) or a scene TOML file (empty: pr2_two_cups)")
     method: str = opt("prediction", choices=("prediction", "current"),
                       help="occupancy the planner avoids: the early prediction, or the current posture only")
     human_cost: bool = opt(True, help="plan with the human-penetration cost (off: the paper's 'basic STOMP')")
@@ -87,11 +89,11 @@ class DemoConfig:
             raise ConfigError(f"demo.port: must be 0..65535, got {self.port}")
 
 
-def _library(cfg: DemoConfig) -> MotionLibrary:
+def _library(cfg: DemoConfig, scene: Scene) -> MotionLibrary:
     if cfg.library is None:
         from shared.synthetic import generate_library
 
-        return generate_library(seed=0)
+        return generate_library(seed=0, scene=scene)  # its cup classes reach for this scene's cups
     return load_library(cfg.library)
 
 
@@ -100,16 +102,18 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
     """Command-line arguments of each service for this demo."""
     common = ["--connect", endpoint, "--listen", "tcp/127.0.0.1:0", "--prefix", cfg.prefix, "--zenoh-mode", "peer",
               "--log-level", "INFO"]
+    scene = ["--scene", cfg.scene] if cfg.scene else []
     lockstep = cfg.mode == "lockstep"
     return {
-        "predictor": ["--model", str(model), "--method", cfg.method, *common],
+        "predictor": ["--model", str(model), "--method", cfg.method, *scene, *common],
         "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
                     "--velocity-scale", str(cfg.robot_speed),
-                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--w-human", "0"]), *common],
+                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--w-human", "0"]), *scene,
+                    *common],
         "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
                      "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"]), *common],
         "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
-                     "--mcap", str(mcap), *common],
+                     "--mcap", str(mcap), *scene, *common],
     }
 
 
@@ -145,7 +149,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
             return status or 1, summary
         runs.append((name, summary, record))
     reference = runs[0][2][2]  # the final prediction of the paper's method
-    robot = PR2.from_scene(load_scene())
+    robot = PR2.from_scene(load_scene(cfg.scene or None))
     rows = []
     for name, summary, (_, states, _, _) in runs:
         states = sorted(states, key=lambda st: st.stamp)
@@ -162,8 +166,8 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
 def _run_once(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None]
               ) -> tuple[int, Summary | None, tuple[Any, ...]]:
     """One run of the scenario; returns ``(exit status, summary, the recorder's snapshot)``."""
-    scene = load_scene()
-    lib = _library(cfg)
+    scene = load_scene(cfg.scene or None)
+    lib = _library(cfg, scene)
     scenario = choose_demonstration(lib, cfg.steps, cfg.seed, cfg.human_class)
     demo = scenario.demo
     out(f"foresight demo: library {lib.source}: {lib.n_classes} classes, {len(lib.demos)} demonstrations; "

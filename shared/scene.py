@@ -15,9 +15,17 @@ import numpy as np
 from shared.data_files import finite_vector, read_toml
 
 __all__ = ["SceneError", "Box", "Cup", "Grid", "HumanPlacement", "RobotPlacement", "Scene", "load_scene",
-           "DEFAULT_SCENE"]
+           "DEFAULT_SCENE", "PAPER_SCENES", "embedded_scenes", "SCENE_HELP"]
 
 DEFAULT_SCENE = "pr2_two_cups"
+
+PAPER_SCENES = {"PR2TwoCups": "pr2_two_cups", "PR2TwoCupsFacing": "pr2_two_cups_facing",
+                "PR2TwoCupsSide": "pr2_two_cups_side"}
+"""The paper's Move3D scene names and the embedded scene files written from them (docs/scenes.md)."""
+
+SCENE_HELP = ("scene: an embedded name (pr2_two_cups, pr2_two_cups_facing, pr2_two_cups_side, or the paper's "
+              "PR2TwoCups, PR2TwoCupsFacing, PR2TwoCupsSide) or a scene TOML file")
+"""``--help`` text of every ``--scene`` option."""
 
 
 class SceneError(ValueError):
@@ -45,12 +53,17 @@ class Box:
 
 @dataclass(frozen=True)
 class Cup:
-    """Upright cylinder: ``position`` is the centre of its base disc (m)."""
+    """Upright cylinder: ``position`` is the centre of its base disc (m).
+
+    ``goal_arm``, when the scene gives it, is the robot's goal configuration for reaching this cup (the
+    paper's scenes record one per task); the planner then uses it instead of a pre-grasp found by IK.
+    """
 
     name: str
     position: np.ndarray
     radius: float
     height: float
+    goal_arm: np.ndarray | None = None  # (7,) the robot's right-arm goal configuration for this cup (rad), optional
 
     @property
     def center(self) -> np.ndarray:
@@ -140,6 +153,12 @@ class Scene:
     grid: Grid
     workspace: Grid
     source: str = field(default="")
+    paper_name: str = field(default="")
+
+    @property
+    def ref(self) -> str:
+        """What :func:`load_scene` takes to load this scene again: its embedded name, else its file path."""
+        return self.name if self.source == f"{self.name}.toml" else self.source
 
     def cup(self, name: str) -> Cup:
         """The cup called ``name``."""
@@ -199,21 +218,39 @@ def parse_scene(data: dict[str, Any], source: str = "<scene>") -> Scene:
             raise SceneError(f"{where}: missing name")
         cups.append(Cup(str(c["name"]), _vec(f"{where}.position", c.get("position"), 3),
                         _num(f"{where}.radius", c.get("radius", 0.04), positive=True),
-                        _num(f"{where}.height", c.get("height", 0.10), positive=True)))
+                        _num(f"{where}.height", c.get("height", 0.10), positive=True),
+                        _vec(f"{where}.goal_arm", c["goal_arm"], 7) if "goal_arm" in c else None))
     if len({c.name for c in cups}) != len(cups):
         raise SceneError(f"{source}: cup names must be unique")
     grid = _grid(f"{source}: grid", _table(source, data, "grid"))
     workspace = _grid(f"{source}: workspace", data.get("workspace", {"min": grid.min, "max": grid.max}),
                       grid.resolution)
     return Scene(str(data.get("name", Path(source).stem)), human, robot, tuple(boxes), tuple(cups), grid,
-                 workspace, source)
+                 workspace, source, str(data.get("paper_name", "")))
 
 
 def load_scene(path: str | Path | None = None) -> Scene:
     """Load a scene file; ``None`` or a bare name loads an embedded scene.
 
+    A bare name is an embedded scene's file name (``pr2_two_cups_facing``) or the paper's scene name
+    (``PR2TwoCupsFacing``, :data:`PAPER_SCENES`, any letter case).
+
     Raises:
         SceneError: If the file is missing, not TOML, or has a bad entry.
     """
+    if isinstance(path, str) and "/" not in path and not path.endswith(".toml"):
+        by_paper = {k.lower(): v for k, v in PAPER_SCENES.items()}
+        path = by_paper.get(path.lower(), path)
+        if path not in embedded_scenes():
+            raise SceneError(f"no embedded scene named {path!r} (have {', '.join(embedded_scenes())}, or the paper's "
+                             f"{', '.join(PAPER_SCENES)}; or give a scene file path)")
     data, source = read_toml(path, "scenes", DEFAULT_SCENE, "scene file", SceneError)
     return parse_scene(data, source)
+
+
+def embedded_scenes() -> list[str]:
+    """Names of the scene files that ship with Foresight (``shared/data/scenes/*.toml``), sorted."""
+    from importlib import resources
+
+    folder = resources.files("shared") / "data" / "scenes"
+    return sorted(p.name[: -len(".toml")] for p in folder.iterdir() if p.name.endswith(".toml"))

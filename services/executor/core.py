@@ -26,6 +26,7 @@ import numpy as np
 
 from shared.config import ConfigError, opt
 from shared.protocol import Plan, RobotState
+from shared.scene import SCENE_HELP
 
 __all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "Reference"]
 
@@ -57,7 +58,7 @@ class ExecutorConfig:
     startup_timeout_s: float = opt(60.0, help="lockstep: longest wait (wall s) for the wait_for services")
     start_q: list[float] = opt(default_factory=list, help="start configuration, one value per joint in the "
                                "robot model's order (empty: the robot model's start configuration)")
-    scene: str = opt("", help="scene file or embedded scene name (empty: the default scene)")
+    scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")
     mcap: str = opt("", help="MCAP log path (empty: runs/<UTC timestamp>.mcap; 'none': no log)")
     viz_rate_hz: float = opt(5.0, help="highest rate of the Foxglove robot/human/occupancy scene updates per channel")
     device: str = opt("cpu", help="torch device of the robot model (cpu or cuda)")

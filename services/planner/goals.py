@@ -273,6 +273,8 @@ def cup_goals(scene: Scene, robot: PR2, cost: StateCost | None = None, names: Se
         q_start = robot.q_start
     names = list(names) if names else [c.name for c in scene.cups]
     cups = [scene.cup(n) for n in names]
+    if any(c.goal_arm is not None for c in cups):
+        return _scene_or_ik_goals(scene, robot, cost, cups, q_start, config)
     q0 = robot.validate_configuration(q_start, what="start configuration")
     shoulder = robot.fk_links(q0)[2, :3, 3].double().cpu().numpy()
     cands = []
@@ -286,6 +288,24 @@ def cup_goals(scene: Scene, robot: PR2, cost: StateCost | None = None, names: Se
         if not _inside(scene.workspace, cup.center):
             out.reasons[g] = f"cup {cup.name} at {np.round(cup.center, 3).tolist()} is outside the workspace"
     return out
+
+
+def _scene_or_ik_goals(scene: Scene, robot: PR2, cost: StateCost, cups: list[Cup], q_start: Any,
+                       config: GraspConfig) -> IKGoals:
+    """Cups with a ``goal_arm`` take that configuration (torso at the scene's lift); the others IK."""
+    given = [c for c in cups if c.goal_arm is not None]
+    lift = float(scene.robot.torso_lift)
+    fixed = joint_goals([c.name for c in given], np.array([[lift, *c.goal_arm] for c in given]), robot, cost)
+    fixed.labels = ["scene goal configuration"] * len(given)
+    rest = [c.name for c in cups if c.goal_arm is None]
+    ik = cup_goals(scene, robot, cost, names=rest, q_start=q_start, config=config) if rest else None
+    order = [("fixed", given.index(c)) if c.goal_arm is not None else ("ik", rest.index(c.name)) for c in cups]
+    parts = {"fixed": fixed, "ik": ik}
+    pick = [(parts[src], i) for src, i in order]
+    return IKGoals([g.names[i] for g, i in pick], torch.stack([g.q[i] for g, i in pick]),
+                   torch.stack([g.valid[i] for g, i in pick]), [g.reasons[i] for g, i in pick],
+                   np.stack([g.poses[i] for g, i in pick]), [g.labels[i] for g, i in pick],
+                   np.array([g.clearance[i] for g, i in pick]))
 
 
 def joint_goals(names: Sequence[str], q: Any, robot: PR2, cost: StateCost | None = None) -> IKGoals:

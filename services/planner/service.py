@@ -27,7 +27,7 @@ import numpy as np
 
 from shared.config import ZenohConfig, opt
 from shared.protocol import ClockTick, DemoMarker, Keys, OccupancyGrid, Plan, RobotState
-from shared.scene import Scene, load_scene
+from shared.scene import SCENE_HELP, Scene, load_scene
 from shared.transport import (
     LatestSubscriber,
     Presence,
@@ -53,7 +53,7 @@ class PlannerServiceConfig(PlannerConfig):
                     choices=("realtime", "lockstep"))
     period_s: float = opt(0.5, help="real-time replanning period (s)")
     input_timeout_s: float = opt(10.0, help="lock-step: longest wait for a tick's robot state / occupancy (s)")
-    scene: str = opt("", help="scene file (empty: the embedded pr2_two_cups scene)")
+    scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")
     log_level: str = opt("INFO", help="log level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
     def validate(self) -> None:

@@ -25,7 +25,7 @@ import numpy as np
 from shared.config import ConfigError, opt
 from shared.human import HumanModel, place_in_scene
 from shared.protocol import OccupancyGrid
-from shared.scene import Grid, Scene
+from shared.scene import SCENE_HELP, Grid, Scene
 
 from .gmm import posterior_from_log_likelihood
 from .model import PredictionModel
@@ -45,7 +45,7 @@ class PredictorConfig:
     """Options of the predictor service (``[predictor]`` in the TOML config)."""
 
     model: Path = opt(Path("models/model.npz"), help="prediction model file written by `foresight train`")
-    scene: str = opt("", help="scene file (default: the embedded pr2_two_cups); must match the model's")
+    scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups); must be the model's")
     method: str = opt("prediction", help="occupancy published: predicted p(x|xi) or the current posture only",
                       choices=METHODS)
     temperature: float = opt(0.0, help="posterior temperature tau: p(C_m|xi) = softmax(ln p(xi|C_m) / tau); "

@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import hashlib
 import logging
 import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -21,7 +23,7 @@ from tqdm import tqdm
 from shared.human import HumanModel
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
 from shared.runtime import UserError, cli_errors, setup_logging
-from shared.scene import Scene, load_scene
+from shared.scene import SCENE_HELP, Scene, load_scene
 
 from .features import VARIANTS, FeatureEncoder
 from .gmm import DEFAULT_TEMPERATURE, GMMConfig, MixtureBank, fit_class_gmm
@@ -61,11 +63,15 @@ class TrainConfig:
     temperature: float = DEFAULT_TEMPERATURE
 
 
-def default_library() -> MotionLibrary:
-    """The embedded default library: the synthetic one (``shared.synthetic.generate_library``, seed 0)."""
+def default_library(scene: Scene | None = None) -> MotionLibrary:
+    """The embedded default library: the synthetic one (``shared.synthetic.generate_library``, seed 0).
+
+    Args:
+        scene: The scene whose cups the library's cup classes reach for (default: the default scene).
+    """
     from shared.synthetic import generate_library
 
-    return generate_library(seed=0)
+    return generate_library(seed=0, scene=scene)
 
 
 def class_data(demos: list[Demonstration], encoder: FeatureEncoder) -> np.ndarray:
@@ -96,7 +102,8 @@ def regress_motions(bank: MixtureBank, lengths: list[int], encoder: FeatureEncod
 
 
 def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None = None,
-                demos: list[Demonstration] | None = None, progress: bool = True) -> PredictionModel:
+                demos: list[Demonstration] | None = None, progress: bool = True,
+                fit_cache: dict[str, Any] | None = None) -> PredictionModel:
     """Train a prediction model.
 
     Args:
@@ -105,6 +112,10 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
         config: Options.
         demos: Demonstrations to train on (default: all of ``library``).
         progress: Show tqdm bars.
+        fit_cache: Fitted class mixtures by a digest of their training data and mixture options. Pass
+            the same dict to several calls (e.g. one model per held-out demonstration) and only the
+            classes whose data changed are refitted; the fits are seeded, so the model is the same as
+            without the cache.
 
     Returns:
         The trained model.
@@ -126,7 +137,15 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
         raise UserError(f"library {library.source}: no demonstrations for class(es) {', '.join(empty)}")
     mixtures = []
     for m in tqdm(range(library.n_classes), desc="GMM per class", unit="class", disable=not progress):
-        mixtures.append(fit_class_gmm(class_data(by_class[m], encoder), cfg.gmm))
+        data = class_data(by_class[m], encoder)
+        key = hashlib.sha256(np.ascontiguousarray(data).tobytes() + repr(cfg.gmm).encode()).hexdigest()
+        if fit_cache is not None and key in fit_cache:
+            mixture = fit_cache[key]
+        else:
+            mixture = fit_class_gmm(data, cfg.gmm)
+            if fit_cache is not None:
+                fit_cache[key] = mixture
+        mixtures.append(mixture)
     bank = MixtureBank.from_sklearn(mixtures)
     lengths = [int(np.median([d.n_samples for d in ds])) for ds in by_class]
     motions = regress_motions(bank, lengths, encoder)
@@ -165,8 +184,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
                              "seed 0)")
     parser.add_argument("--out", metavar="MODEL", default="models/model.npz", help="model file to write "
                         "(default: models/model.npz)")
-    parser.add_argument("--scene", metavar="FILE", default=None, help="scene file (default: the embedded "
-                        "pr2_two_cups)")
+    parser.add_argument("--scene", metavar="NAME|PATH", default=None, help=f"{SCENE_HELP} (default: pr2_two_cups); "
+                        "the synthetic library's cup classes reach for its cups")
     parser.add_argument("--components", type=int, default=20, help="Gaussians per class; 0 = choose by BIC "
                         "(default: 20, as in the paper)")
     parser.add_argument("--resolution", type=float, default=None, help="voxel edge in metres (default: the "
@@ -189,8 +208,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
     args = parser.parse_args(argv)
     setup_logging()
     with cli_errors(prog):
-        lib = load_library(args.library) if args.library else default_library()
         scene = load_scene(args.scene)
+        lib = load_library(args.library) if args.library else default_library(scene)
         demos = heldout_split(lib, args.heldout, args.seed)[0] if args.heldout else list(lib.demos)
         try:
             gcfg = GMMConfig(n_components=args.components, reg_covar=args.reg_covar, seed=args.seed)
