@@ -13,6 +13,7 @@ import json
 import logging
 import math
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -87,12 +88,23 @@ def _library_digest(library: MotionLibrary) -> str:
     return h.hexdigest()[:16]
 
 
-def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration, models_dir: Path,
-              components: int | None = None, progress: bool = True) -> Path:
+def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Sequence[Demonstration],
+              models_dir: Path, components: int | None = None, progress: bool = True,
+              fit_cache: dict[str, Any] | None = None) -> Path:
     """The prediction model for a run: trained on ``library`` without ``held_out``, cached in ``models_dir``.
 
-    The cache key covers the library's data, the held-out demonstration, the scene and the training
+    The cache key covers the library's data, the held-out demonstrations, the scene and the training
     options, so a changed library, scene or trainer default never reuses a stale model.
+
+    Args:
+        library: The motion library.
+        scene: The scene the swept volumes are placed in.
+        held_out: The demonstration(s) left out of the training data.
+        models_dir: Cache directory.
+        components: Gaussians per class (None: the trainer's default).
+        progress: Show progress bars while training.
+        fit_cache: Shared fitted class mixtures (``train_model``'s ``fit_cache``): with one model per
+            held-out demonstration, only the held-out demonstration's class is refitted.
 
     Returns:
         Path of the model file (trained now if it was not cached).
@@ -105,14 +117,17 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration, mod
         from dataclasses import replace
 
         cfg = replace(cfg, gmm=replace(cfg.gmm, n_components=components))
-    key = hashlib.sha256(json.dumps([_library_digest(library), held_out.label, held_out.index, repr(scene),
-                                     repr(cfg), MODEL_VERSION]).encode()).hexdigest()[:12]
+    out = [held_out] if isinstance(held_out, Demonstration) else list(held_out)
+    left = sorted((d.label, d.index) for d in out)
+    key = hashlib.sha256(json.dumps([_library_digest(library), left, repr(scene), repr(cfg),
+                                     MODEL_VERSION]).encode()).hexdigest()[:12]
     path = Path(models_dir) / f"demo-{scene.name}-{key}.npz"
     if path.is_file():
         log.info("using cached model %s", path)
         return path
-    demos = [d for d in library.demos if not (d.label == held_out.label and d.index == held_out.index)]
-    model = train_model(library, scene, cfg, demos=demos, progress=progress)
+    skip = set(left)
+    demos = [d for d in library.demos if (d.label, d.index) not in skip]
+    model = train_model(library, scene, cfg, demos=demos, progress=progress, fit_cache=fit_cache)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + ".tmp.npz")
     model.save(tmp)

@@ -384,8 +384,14 @@ class Planner:
     # ------------------------------------------------------------------------------------------
     # Algorithm 1
 
-    def reset(self) -> None:
-        """Forget the previous trajectories (next step starts from straight lines)."""
+    def reset(self, seed: int | None = None) -> None:
+        """Forget the previous trajectories (next step starts from straight lines).
+
+        Args:
+            seed: New base seed of STOMP's exploration noise (default: keep ``config.seed``).
+        """
+        if seed is not None:
+            self.config = dataclasses.replace(self.config, seed=int(seed))
         self._prev, self._prev_best, self.step_index = None, None, 0
 
     def _seeds(self) -> list[int]:

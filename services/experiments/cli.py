@@ -1,0 +1,140 @@
+"""foresight eval: the paper's experiments through the product.
+
+    foresight eval recognition   early recognition, leave-one-out (Fig. 6)
+    foresight eval interference  one robot task against a human reaching across it (Table I)
+    foresight eval switch        two robot tasks, when the robot settles on its goal (Fig. 8-9)
+    foresight eval all           all of them and the timings, one Markdown report with PNGs
+
+Every run goes through the four services (in-process, loopback Zenoh, lock-step, seeded): the same
+command prints the same numbers every time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+from shared.runtime import UserError, cli_errors, setup_logging
+from shared.scene import SCENE_HELP
+
+from .interference import TABLE1_SCENE, InterferenceConfig, run_interference
+from .planners import Timing
+from .switch import SWITCH_SCENE, SwitchConfig, plot_switch, run_switch
+
+__all__ = ["main"]
+
+
+def _common(p: argparse.ArgumentParser, scene: str) -> None:
+    p.add_argument("--library", default="synthetic", help="motion library: 'synthetic' (the embedded synthetic "
+                   "library, generated for the scene's cups) or a path (dir of compound_*.csv or .npz); "
+                   "default: synthetic")
+    p.add_argument("--scene", default=scene, help=f"{SCENE_HELP} (default: {scene})")
+    p.add_argument("--steps", type=int, default=Timing.steps, help="replanning steps per run (default: 20)")
+    p.add_argument("--period-s", type=float, default=Timing.period_s, help="simulated seconds the robot executes "
+                   "per step (default: 0.5, the paper's planning time per step)")
+    p.add_argument("--iterations", type=int, default=Timing.iterations, help="STOMP iterations per step "
+                   "(default: 50)")
+    p.add_argument("--robot-speed", type=float, default=Timing.robot_speed, help="fraction of the PR2's joint "
+                   "velocity limits (default: 0.25)")
+    p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20, the paper's)")
+    p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
+    p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
+    p.add_argument("--no-compile", action="store_true", help="evaluate the planner's cost eagerly (no "
+                   "torch.compile)")
+    p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
+
+
+@contextlib.contextmanager
+def _user_errors() -> Iterator[None]:
+    """Bad scene, library or model files are the user's to fix: one line, not a traceback."""
+    from services.predictor.model import ModelError
+    from shared.library import LibraryError
+    from shared.scene import SceneError
+
+    try:
+        yield
+    except (SceneError, LibraryError, ModelError) as exc:
+        raise UserError(str(exc)) from None
+
+
+def _timing(args: argparse.Namespace) -> Timing:
+    t = Timing(args.steps, args.period_s, args.iterations, args.robot_speed)
+    if t.steps < 1 or t.iterations < 1 or not t.period_s > 0 or not 0 < t.robot_speed <= 1:
+        raise UserError("--steps and --iterations must be >= 1, --period-s > 0, --robot-speed in (0, 1]")
+    if args.components < 1:
+        raise UserError(f"--components must be >= 1, got {args.components}")
+    return t
+
+
+def _parser(prog: str) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="what", required=True, metavar="{recognition,interference,switch,all}")
+    sub.add_parser("recognition", help="early recognition, leave-one-out (Fig. 6); see its --help", add_help=False)
+    p = sub.add_parser("interference", help="Table I: basic STOMP vs least penetration vs current occupancy",
+                       description=sys.modules["services.experiments.interference"].__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    _common(p, TABLE1_SCENE)
+    p.add_argument("--demos", type=int, default=5, help="held-out demonstrations (default: 5)")
+    p.add_argument("--seeds", type=int, default=10, help="runs per demonstration and planner (default: 10)")
+    p.add_argument("--robot-cup", default="red_cup", help="the robot's one task (default: red_cup)")
+    p.add_argument("--human-cup", default="blue_cup", help="the cup the human reaches for (default: blue_cup)")
+    p = sub.add_parser("switch", help="Fig. 8-9: the step at which the robot settles on its goal",
+                       description=sys.modules["services.experiments.switch"].__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    _common(p, SWITCH_SCENE)
+    p.add_argument("--human-cup", default="red_cup", help="the cup the human reaches for (default: red_cup)")
+    p.add_argument("--demos", type=int, default=0, help="demonstrations of the class, each held out in turn "
+                   "(default 0: all)")
+    p.add_argument("--seed", type=int, default=0, help="STOMP seed of every run (default: 0)")
+    p.add_argument("--plot", type=Path, default=Path("runs/plots/switch.png"), help="Fig. 9 PNG")
+    from .report import add_report_arguments
+
+    add_report_arguments(sub.add_parser("all", help="every experiment and the timings into one Markdown report",
+                                        description=sys.modules["services.experiments.report"].__doc__,
+                                        formatter_class=argparse.RawDescriptionHelpFormatter))
+    return parser
+
+
+def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
+    """``foresight eval ...``; returns the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "recognition":
+        from services.predictor.recognition import main as recognition_main
+
+        return recognition_main(argv, prog=prog)
+    args = _parser(prog).parse_args(argv)
+    setup_logging("WARNING")
+    with cli_errors(f"{prog} {args.what}"), _user_errors():
+        if args.what == "all":
+            from .report import run_report
+
+            return run_report(args)
+        out = (lambda line: print(line, file=sys.stderr, flush=True)) if args.json else \
+            (lambda line: print(line, flush=True))
+        timing = _timing(args)
+        common = {"library": str(args.library), "scene": args.scene, "timing": timing,
+                  "components": args.components, "models_dir": args.models_dir, "work_dir": args.work_dir}
+        if args.what == "interference":
+            res = run_interference(InterferenceConfig(robot_cup=args.robot_cup, human_cup=args.human_cup,
+                                                      demos=args.demos, seeds=args.seeds, **common),
+                                   out, compile=not args.no_compile)
+            lines, data = res.lines(), res.to_json()
+        else:
+            sres = run_switch(SwitchConfig(human_cup=args.human_cup, demos=args.demos, seed=args.seed, **common),
+                              out, compile=not args.no_compile)
+            png = plot_switch(sres, args.plot)
+            lines, data = [*sres.lines(), f"plot: {png}"], {**sres.to_json(), "plot": str(png)}
+        if args.json:
+            print(json.dumps(data))
+        else:
+            print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

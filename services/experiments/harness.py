@@ -1,0 +1,244 @@
+"""One lock-step run of the whole system, in-process: the four services over loopback Zenoh.
+
+The experiments do not re-implement the loop: each run starts the real replayer, predictor, planner
+and executor services (each with its own Zenoh session, connected to a hub session of this process
+that listens on a free loopback port, multicast scouting off), lets the executor tick the run, and
+records every message the services publish, as the wire carries it. The planner is built once per
+configuration and handed to each run (:meth:`Planner.reset` with the run's seed), so a run costs its
+planning, not the IK of its goals.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from services.executor.core import ExecutorConfig
+from services.executor.service import ExecutorResult, ExecutorService
+from services.planner.core import Planner
+from services.planner.service import PlannerService, PlannerServiceConfig
+from services.predictor.core import PredictorConfig
+from services.predictor.service import PredictorService
+from services.processes import free_port
+from services.replayer.core import ReplayerConfig
+from services.replayer.service import ReplayerService
+from shared.config import ZenohConfig
+from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyGrid, Plan, RobotState
+from shared.scene import Scene
+from shared.transport import open_session, subscribe
+
+__all__ = ["RunSpec", "RunRecord", "ServiceThread", "run_lockstep", "JOIN_S"]
+
+log = logging.getLogger("foresight.experiments")
+
+JOIN_S = 60.0
+"""Longest wait (s) for a service thread to stop."""
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """What one lock-step run is.
+
+    Attributes:
+        scene: The scene every service loads.
+        model: Prediction model file (trained without the streamed demonstration).
+        human: Library file holding the one demonstration the replayer streams.
+        samples_per_tick: Poses per replanning step (the human advances by a fixed amount per step).
+        method: The predictor's occupancy: ``"prediction"`` or ``"current"``.
+        steps: Replanning steps (the paper: 20).
+        period_s: Simulated seconds per step.
+        seed: STOMP seed of the run.
+        timeout_s: Longest wall time of the run.
+    """
+
+    scene: Scene
+    model: Path
+    human: Path
+    samples_per_tick: int
+    method: str = "prediction"
+    steps: int = 20
+    period_s: float = 0.2
+    seed: int = 0
+    timeout_s: float = 300.0
+
+
+@dataclass
+class RunRecord:
+    """Everything a run published, as received over Zenoh.
+
+    Attributes:
+        plans: One Plan per step, in tick order.
+        states: Executed RobotStates, in time order.
+        poses: The streamed HumanPoses, in time order.
+        occupancy: The final grid (``tick_last``) of each tick, by tick.
+        posteriors: The last ClassPosterior of each tick, by tick.
+        result: The executor's own account of the run.
+    """
+
+    plans: list[Plan] = field(default_factory=list)
+    states: list[RobotState] = field(default_factory=list)
+    poses: list[HumanPose] = field(default_factory=list)
+    occupancy: dict[int, OccupancyGrid] = field(default_factory=dict)
+    posteriors: dict[int, ClassPosterior] = field(default_factory=dict)
+    result: ExecutorResult | None = None
+
+    @property
+    def final_occupancy(self) -> OccupancyGrid | None:
+        """The grid of the last tick (the most accurate prediction of the run)."""
+        return self.occupancy[max(self.occupancy)] if self.occupancy else None
+
+    def q(self) -> np.ndarray:
+        """``(N, D)`` executed configurations."""
+        return np.array([s.q for s in self.states])
+
+    def stamps(self) -> np.ndarray:
+        """``(N,)`` their times (s)."""
+        return np.array([s.stamp for s in self.states])
+
+    def chosen_goals(self) -> list[str]:
+        """The goal chosen at each step."""
+        return [p.goal_names[p.chosen] for p in self.plans]
+
+
+class _Collector:
+    """Thread-safe sink of the messages of a run (fed by Zenoh subscriber threads)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.plans: dict[int, Plan] = {}
+        self.record = RunRecord()
+
+    def __call__(self, msg: Message) -> None:
+        with self.lock:
+            rec = self.record
+            if isinstance(msg, Plan):
+                self.plans[msg.tick] = msg
+            elif isinstance(msg, RobotState):
+                rec.states.append(msg)
+            elif isinstance(msg, HumanPose):
+                rec.poses.append(msg)
+            elif isinstance(msg, OccupancyGrid):
+                if msg.tick_last:
+                    rec.occupancy[msg.tick] = msg
+            elif isinstance(msg, ClassPosterior):
+                rec.posteriors[msg.tick] = msg
+
+    def finish(self, result: ExecutorResult | None) -> RunRecord:
+        with self.lock:
+            rec = self.record
+            rec.plans = [self.plans[t] for t in sorted(self.plans)]
+            rec.states.sort(key=lambda s: s.stamp)
+            rec.poses.sort(key=lambda p: (p.stamp, p.index))
+            rec.result = result
+            return rec
+
+
+class ServiceThread:
+    """Runs a service's blocking ``run(stop)`` in a daemon thread with its own stop event."""
+
+    def __init__(self, name: str, target: Callable[[threading.Event], Any],
+                 stop_event: threading.Event | None = None) -> None:
+        self.name = name
+        self.stop_event = stop_event or threading.Event()
+        self.result: Any = None
+        self.error: BaseException | None = None
+
+        def body() -> None:
+            try:
+                self.result = target(self.stop_event)
+            except BaseException as exc:  # re-raised by join()
+                self.error = exc
+
+        self.thread = threading.Thread(target=body, name=f"svc-{name}", daemon=True)
+
+    def start(self) -> ServiceThread:
+        """Start the thread."""
+        self.thread.start()
+        return self
+
+    def stop(self, timeout: float = JOIN_S) -> Any:
+        """Ask the service to stop and wait for it (see :meth:`join`)."""
+        self.stop_event.set()
+        return self.join(timeout)
+
+    def join(self, timeout: float = JOIN_S) -> Any:
+        """Wait for the service; its result, or its exception re-raised.
+
+        Raises:
+            TimeoutError: If it is still running after ``timeout`` seconds.
+        """
+        self.thread.join(timeout)
+        if self.thread.is_alive():
+            raise TimeoutError(f"{self.name} did not stop within {timeout:g} s")
+        if self.error is not None:
+            raise self.error
+        return self.result
+
+
+def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None) -> RunRecord:
+    """Run the four services in lock-step for ``spec.steps`` steps and record what they publish.
+
+    Args:
+        spec: The run.
+        planner: A planner for ``spec.scene`` (reset here with ``spec.seed``; reused across runs); the
+            planner service runs it in lock-step with its ``config``.
+        mcap: MCAP log of the run (None: no log).
+
+    Returns:
+        The run's messages and the executor's result.
+
+    Raises:
+        TimeoutError: If the run or a service's shutdown overran its time limit.
+    """
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    hub = ZenohConfig(mode="peer", listen=[endpoint], connect=[], multicast_scouting=False)
+    peer = ZenohConfig(mode="peer", listen=["tcp/127.0.0.1:0"], connect=[endpoint], multicast_scouting=False)
+    keys = Keys(hub.prefix)
+    collect = _Collector()
+    planner.reset(seed=spec.seed)
+    scene_ref = spec.scene.ref
+    svc_cfg = PlannerServiceConfig(**{**dataclasses.asdict(planner.config), "mode": "lockstep",
+                                      "period_s": spec.period_s, "input_timeout_s": min(60.0, spec.timeout_s),
+                                      "scene": scene_ref})
+    predictor = PredictorService(PredictorConfig(model=spec.model, method=spec.method, scene=scene_ref), peer)
+    planner_svc = PlannerService(svc_cfg, peer, planner=planner, scene=spec.scene)
+    replayer = ReplayerService(ReplayerConfig(library=spec.human, mode="lockstep",
+                                              samples_per_tick=spec.samples_per_tick), peer)
+    ex_stop = threading.Event()
+    executor = ExecutorService(ExecutorConfig(mode="lockstep", steps=spec.steps, step_period_s=spec.period_s,
+                                              mcap=str(mcap) if mcap else "none", scene=scene_ref,
+                                              lockstep_timeout_s=min(60.0, spec.timeout_s)),
+                               peer, stop=ex_stop)
+    threads = [ServiceThread("predictor", predictor.run), ServiceThread("planner", planner_svc.run),
+               ServiceThread("replayer", replayer.run),
+               ServiceThread("executor", lambda _stop: executor.run(), stop_event=ex_stop)]
+    result: ExecutorResult | None = None
+    with open_session(hub) as session:
+        subs = [subscribe(session, key, cls, collect) for key, cls in
+                ((keys.plan, Plan), (keys.robot_state, RobotState), (keys.occupancy, OccupancyGrid),
+                 (keys.posterior, ClassPosterior), (keys.pose, HumanPose))]
+        try:
+            for t in threads:
+                t.start()
+            result = threads[-1].join(spec.timeout_s)
+        finally:
+            for t in threads:
+                t.stop_event.set()
+            errors = []
+            for t in threads:
+                try:
+                    t.join(JOIN_S)
+                except Exception as exc:  # report the first after stopping all
+                    errors.append(exc)
+            for s in subs:
+                s.undeclare()
+        if errors:
+            raise errors[0]
+    return collect.finish(result)

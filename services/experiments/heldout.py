@@ -1,0 +1,124 @@
+"""The human side of an experiment: which class reaches which cup, and models that never saw the run.
+
+* :func:`load_experiment_library` reads a library for a scene (``synthetic``: the embedded synthetic
+  library generated for that scene's cups).
+* :func:`cup_class` finds the class whose demonstrations reach for a cup: the class whose mean reach
+  point (where the hand gets farthest from its start) lies nearest the cup, horizontally. The paper's
+  recorded library was not made in these scenes, so the distance is reported with the choice.
+* :class:`HeldOutModels` trains (and caches) prediction models without given demonstrations; with
+  one model per held-out demonstration only that demonstration's class is refitted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from services.scenario import model_for
+from shared.human import HumanModel, reach_points
+from shared.library import Demonstration, MotionLibrary, load_library, save_library
+from shared.runtime import UserError
+from shared.scene import Scene
+
+__all__ = ["SYNTHETIC", "load_experiment_library", "short_name", "CupClass", "cup_class", "HeldOutModels", "human_file",
+           "samples_per_tick"]
+
+SYNTHETIC = "synthetic"
+"""Library name of the embedded synthetic library (generated for the experiment's scene)."""
+
+
+def load_experiment_library(spec: str | Path, scene: Scene) -> MotionLibrary:
+    """``"synthetic"`` (the synthetic library, seed 0, its cup goals at ``scene``'s cups) or a library path."""
+    if str(spec) == SYNTHETIC:
+        from shared.synthetic import generate_library
+
+        return generate_library(seed=0, scene=scene)
+    return load_library(spec)
+
+
+def short_name(source: str) -> str:
+    """A library's name for titles: ``synthetic`` or the last part of its path."""
+    return SYNTHETIC if source.startswith(SYNTHETIC) else Path(source.rstrip("/")).name
+
+
+@dataclass(frozen=True)
+class CupClass:
+    """The class of a library that reaches for a cup.
+
+    Attributes:
+        cup: The cup's name.
+        label: Class index; ``name`` its name.
+        distance: Horizontal distance (m) from the class's mean reach point to the cup.
+    """
+
+    cup: str
+    label: int
+    name: str
+    distance: float
+
+
+def cup_class(library: MotionLibrary, scene: Scene, cup: str, exclude: tuple[int, ...] = ()) -> CupClass:
+    """The class whose mean reach point is nearest ``cup`` of ``scene`` (horizontal distance).
+
+    Args:
+        library: The motion library.
+        scene: The scene the demonstrations are placed in.
+        cup: Cup name.
+        exclude: Class labels not to choose (e.g. the class chosen for another cup).
+    """
+    target = scene.cup(cup).center[:2]
+    human = HumanModel()
+    best: CupClass | None = None
+    for m, name in enumerate(library.class_names):
+        demos = library.by_class(m)
+        if m in exclude or not demos:
+            continue
+        reach, _ = reach_points(human, [d.features for d in demos], scene)
+        d = float(np.linalg.norm(reach.mean(axis=0)[:2] - target))
+        if best is None or d < best.distance:
+            best = CupClass(cup, m, name, d)
+    if best is None:
+        raise UserError(f"library {library.source}: no class with demonstrations to reach {cup}")
+    return best
+
+
+def samples_per_tick(demo: Demonstration, steps: int) -> int:
+    """Poses per step so that the demonstration spans ``steps`` replanning steps."""
+    return max(1, math.ceil(demo.n_samples / steps))
+
+
+def human_file(library: MotionLibrary, demo: Demonstration, directory: Path) -> Path:
+    """A one-demonstration library file for the replayer (written once per demonstration)."""
+    path = Path(directory) / f"human-{demo.label}-{demo.index}.npz"
+    if not path.is_file():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        save_library(MotionLibrary(class_names=list(library.class_names), demos=[demo], issues=[],
+                                   source=f"{library.source} ({demo.class_name} #{demo.index})"), path)
+    return path
+
+
+@dataclass
+class HeldOutModels:
+    """Prediction models trained without given demonstrations, cached in ``models_dir``.
+
+    Attributes:
+        library: The motion library.
+        scene: The scene the swept volumes are placed in.
+        models_dir: Cache directory.
+        components: Gaussians per class (None: the trainer's default, 20 as in the paper).
+    """
+
+    library: MotionLibrary
+    scene: Scene
+    models_dir: Path
+    components: int | None = None
+    _fits: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def without(self, demos: list[Demonstration]) -> Path:
+        """The model file trained on every demonstration but ``demos``."""
+        return model_for(self.library, self.scene, demos, self.models_dir, self.components, progress=False,
+                         fit_cache=self._fits)

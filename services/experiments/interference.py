@@ -1,0 +1,222 @@
+"""``foresight eval interference``: the paper's Table I, plus the human who was really there.
+
+Protocol (section VI.B): the robot has one task (the red cup); the human performs a held-out
+demonstration of the class that reaches for the other cup. Each run is 20 lock-step replanning steps
+of 50 STOMP iterations, the human advanced by a fixed number of samples per step. Three planners
+(:mod:`services.experiments.planners`): basic STOMP, least penetration of the predicted occupancy, and
+the current occupancy only. 5 held-out demonstrations (one model trained without all five, as in the
+paper) x 10 seeds.
+
+Scored per run (:mod:`services.experiments.measures`): the integral penetration cost of the executed
+trajectory against the final prediction of that demonstration (the paper's measure), and against the
+real human: minimum clearance, time in contact and time within 5 cm.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from shared.scene import Scene, load_scene
+
+from .harness import RunRecord, RunSpec, run_lockstep
+from .heldout import CupClass, HeldOutModels, cup_class, human_file, load_experiment_library, samples_per_tick
+from .measures import body_clearance, contact_summary, interference_over_time, postures_at
+from .planners import VARIANTS, Timing, build_planner
+
+__all__ = ["TABLE1_SCENE", "InterferenceConfig", "RunScore", "InterferenceResult", "score_run",
+           "run_interference"]
+
+TABLE1_SCENE = "pr2_two_cups_side"
+"""The scene of the paper's Table I and Fig. 7 (docs/scenes.md says why)."""
+
+PAPER_TABLE1 = {"basic": [24.41, 21.47, 27.52, 24.44, 25.13], "least_penetration": [0.41, 0.49, 0.60, 0.41, 0.74]}
+"""The paper's Table I (mean over 10 runs per demonstration)."""
+
+
+@dataclass(frozen=True)
+class InterferenceConfig:
+    """Options of the Table I experiment."""
+
+    library: str = "synthetic"
+    scene: str = TABLE1_SCENE
+    robot_cup: str = "red_cup"
+    human_cup: str = "blue_cup"
+    demos: int = 5
+    seeds: int = 10
+    timing: Timing = Timing()
+    components: int | None = None
+    selection_seed: int = 0
+    models_dir: Path = Path("models/experiments")
+    work_dir: Path = Path("runs/experiments")
+
+
+@dataclass(frozen=True)
+class RunScore:
+    """The measures of one run.
+
+    Attributes:
+        demo: Index of the demonstration within its class; ``seed``: the run's STOMP seed.
+        planner: Variant name (:data:`services.experiments.planners.VARIANTS`).
+        interference: Integral penetration of the final prediction (probability-voxels x s).
+        interference_at_goal: The part of it accrued once the robot was at its goal (holding there).
+        min_clearance: Smallest robot-body clearance to the real human (m).
+        time_in_contact: Seconds with clearance <= 0; ``time_near``: seconds within 5 cm.
+        reached_step: First step at which the robot was at its goal (None: never).
+        goals: The goal chosen at each step.
+        planning_ms: Median planning time of a step.
+    """
+
+    demo: int
+    seed: int
+    planner: str
+    interference: float
+    interference_at_goal: float
+    min_clearance: float
+    time_in_contact: float
+    time_near: float
+    reached_step: int | None
+    goals: tuple[str, ...]
+    planning_ms: float
+
+
+def score_run(rec: RunRecord, robot: Any, scene: Scene, final: Any, demo: int, seed: int, planner: str) -> RunScore:
+    """Score one run against the final prediction ``final`` and the streamed human."""
+    q, t = rec.q(), rec.stamps()
+    contact = contact_summary(body_clearance(robot, q, postures_at(rec.poses, t, scene)), t)
+    res = rec.result
+    reached = res.reached_step if res is not None and res.reached and res.reached_step >= 0 else None
+    per_state = interference_over_time(robot, q, t, final)
+    at_goal = np.array([s.reached for s in rec.states], dtype=bool)
+    at_goal = np.maximum.accumulate(at_goal) if len(at_goal) else at_goal  # from the first state at the goal on
+    return RunScore(demo, seed, planner, float(per_state.sum()), float(per_state[at_goal].sum()),
+                    contact.min_clearance, contact.time_in_contact, contact.time_near, reached,
+                    tuple(rec.chosen_goals()),
+                    float(np.median([p.planning_ms for p in rec.plans])) if rec.plans else math.nan)
+
+
+@dataclass
+class InterferenceResult:
+    """All runs of the experiment and what they were."""
+
+    config: InterferenceConfig
+    library: str
+    human: CupClass
+    demos: list[int]
+    runs: list[RunScore] = field(default_factory=list)
+
+    def values(self, planner: str, measure: str) -> np.ndarray:
+        """``(demos, seeds)`` values of one measure of one planner."""
+        return np.array([[getattr(r, measure) for r in self.runs if r.planner == planner and r.demo == d]
+                         for d in self.demos], dtype=np.float64)
+
+    def per_demo(self, planner: str, measure: str = "interference") -> tuple[list[float], list[float]]:
+        """Mean and standard deviation over seeds, per demonstration."""
+        v = self.values(planner, measure)
+        return v.mean(axis=1).tolist(), v.std(axis=1).tolist()
+
+    def ratio(self) -> float:
+        """Mean basic interference over mean least-penetration interference (the paper: about 45)."""
+        lp = self.values("least_penetration", "interference").mean()
+        return float(self.values("basic", "interference").mean() / lp) if lp > 0 else math.inf
+
+    def contact_violations(self) -> int:
+        """Runs (demo, seed) where least penetration spent longer in contact than basic STOMP."""
+        return int(np.sum(self.values("least_penetration", "time_in_contact")
+                          > self.values("basic", "time_in_contact") + 1e-9))
+
+    def to_json(self) -> dict[str, Any]:
+        """``basic``, ``least_penetration``, ``current``: per-demonstration mean interference; and more."""
+        out: dict[str, Any] = {name: self.per_demo(name)[0] for name in VARIANTS}
+        out.update({f"{name}_std": self.per_demo(name)[1] for name in VARIANTS})
+        for measure in ("min_clearance", "time_in_contact", "time_near"):
+            out[measure] = {name: self.per_demo(name, measure)[0] for name in VARIANTS}
+        out["median_min_clearance"] = {n: float(np.median(self.values(n, "min_clearance"))) for n in VARIANTS}
+        out["interference_at_goal"] = {name: self.per_demo(name, "interference_at_goal")[0] for name in VARIANTS}
+        out["ratio_basic_over_least_penetration"] = self.ratio()
+        out["runs_with_more_contact_than_basic"] = self.contact_violations()
+        out["reached"] = {n: int(sum(r.reached_step is not None for r in self.runs if r.planner == n))
+                          for n in VARIANTS}
+        out.update(library=self.library, scene=self.config.scene, human_class=self.human.name,
+                   human_class_distance_m=self.human.distance, demos=self.demos, seeds=self.config.seeds,
+                   robot_cup=self.config.robot_cup, human_cup=self.config.human_cup,
+                   timing=dataclasses.asdict(self.config.timing), runs=[dataclasses.asdict(r) for r in self.runs])
+        return out
+
+    def lines(self) -> list[str]:
+        """The Table I layout: one row per demonstration, mean (std) over seeds; then the real human."""
+        names = list(VARIANTS)
+        head = f"{'demo':>6}" + "".join(f"{VARIANTS[n].label:>22}" for n in names)
+        out = [f"interference with the final prediction (probability-voxels x s), mean (std) of "
+               f"{self.config.seeds} seeds; {self.library}, scene {self.config.scene}, human: {self.human.name}", head]
+        stats = {n: self.per_demo(n) for n in names}
+        for i, d in enumerate(self.demos):
+            cells = "".join(f"{stats[n][0][i]:>14.3f} ({stats[n][1][i]:5.3f})" for n in names)
+            out.append(f"{'#' + str(d):>6}" + cells)
+        out.append(f"{'mean':>6}" + "".join(f"{np.mean(stats[n][0]):>22.3f}" for n in names))
+        out.append(f"basic / least penetration: {self.ratio():.1f}x (the paper: about 45x)")
+        goal = {n: float(self.values(n, "interference_at_goal").mean()) for n in names}
+        out.append("of which accrued holding at the goal: " + ", ".join(
+            f"{VARIANTS[n].label} {goal[n]:.3f}" for n in names))
+        out.append("")
+        out.append("the real human: min clearance (m) / time in contact (s) / time within 5 cm (s), mean of seeds")
+        out.append(f"{'demo':>6}" + "".join(f"{VARIANTS[n].label:>26}" for n in names))
+        for i, d in enumerate(self.demos):
+            cells = []
+            for n in names:
+                c, k, w = (self.per_demo(n, m)[0][i] for m in ("min_clearance", "time_in_contact", "time_near"))
+                cells.append(f"{c:>+10.3f} / {k:5.2f} / {w:5.2f}")
+            out.append(f"{'#' + str(d):>6}" + "".join(f"{s:>26}" for s in cells))
+        med = {n: float(np.median(self.values(n, "min_clearance"))) for n in names}
+        out.append("median min clearance: " + ", ".join(f"{VARIANTS[n].label} {med[n]:+.3f} m" for n in names))
+        out.append(f"runs where least penetration touched the human longer than basic STOMP: "
+                   f"{self.contact_violations()} of {len(self.demos) * self.config.seeds}")
+        reached = self.to_json()["reached"]
+        out.append("runs that reached the goal: " + ", ".join(f"{VARIANTS[n].label} {reached[n]}" for n in names))
+        return out
+
+
+def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = print,
+                     compile: bool = True) -> InterferenceResult:
+    """Run the experiment (every run in lock-step through the four services)."""
+    scene = load_scene(cfg.scene)
+    lib = load_experiment_library(cfg.library, scene)
+    human = cup_class(lib, scene, cfg.human_cup)
+    pool = lib.by_class(human.label)
+    rng = np.random.default_rng(cfg.selection_seed)
+    picked = sorted(rng.choice(len(pool), size=min(cfg.demos, len(pool)), replace=False).tolist())
+    demos = [pool[i] for i in picked]
+    progress(f"interference: {lib.source}, scene {scene.name}; robot -> {cfg.robot_cup}; human -> {cfg.human_cup}: "
+             f"class {human.name} (mean reach {human.distance:.3f} m from the cup), demonstrations "
+             f"{[d.index for d in demos]} held out")
+    model = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components).without(demos)
+    planners = {flag: build_planner(scene, [cfg.robot_cup], flag, cfg.timing, compile=compile)
+                for flag in (False, True)}
+    result = InterferenceResult(cfg, lib.source, human, [d.index for d in demos])
+    total, done = len(demos) * cfg.seeds * len(VARIANTS), 0
+    for demo in demos:
+        path = human_file(lib, demo, Path(cfg.work_dir) / "humans")
+        final = None
+        for seed in range(cfg.seeds):
+            for name, variant in VARIANTS.items():  # basic first: a prediction run gives the final grid
+                spec = RunSpec(scene, model, path, samples_per_tick(demo, cfg.timing.steps), method=variant.method,
+                               steps=cfg.timing.steps, period_s=cfg.timing.period_s, seed=seed)
+                planner = planners[variant.human_cost]
+                rec = run_lockstep(spec, planner)
+                if final is None and variant.method == "prediction":
+                    final = rec.final_occupancy
+                if final is None:
+                    raise RuntimeError("interference: no final prediction was received")
+                score = score_run(rec, planner.robot, scene, final, demo.index, seed, name)
+                result.runs.append(score)
+                done += 1
+                progress(f"  [{done}/{total}] demo #{demo.index} seed {seed} {variant.label:<18} interference "
+                         f"{score.interference:8.3f}  min clearance {score.min_clearance:+.3f} m  reached step "
+                         f"{score.reached_step}")
+    return result

@@ -1,0 +1,210 @@
+"""What an executed robot trajectory did to the human: the paper's interference and the real clearance.
+
+* :func:`interference` is the paper's Table I measure (section V.A, VI.B): the penetration cost of a
+  configuration q is the sum of the predicted occupancy p(x|xi) over the voxels x that contain points
+  sampled on the robot's structure; the measure integrates it over the executed trajectory (seconds),
+  against one occupancy grid (the final, most accurate prediction).
+  The points are the robot's collision spheres, sampled on their surfaces (and centres) at most half
+  a voxel apart, so that no voxel a sphere reaches into is missed ("the sampling has to be dense
+  enough not to miss any voxel", IV.D). Each voxel counts once per configuration, however many points
+  fall in it, so the value does not depend on the sampling density.
+* :func:`clearance` measures against the human who was really there: the distance between the
+  robot's collision spheres and the human model's body capsules, posed at the same instant.
+
+Both are pure numpy/torch functions of logged data (configurations, stamps, grids, postures).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from shared.human import HumanModel
+from shared.protocol import OccupancyGrid
+
+__all__ = ["sphere_surface_offsets", "robot_points", "penetration_per_state", "interference", "interference_over_time",
+           "ContactSummary",
+           "postures_at", "body_clearance", "contact_summary", "NEAR_M"]
+
+NEAR_M = 0.05
+"""Clearance (m) under which the robot counts as near the human (``time_near``)."""
+
+
+def sphere_surface_offsets(radius: float, spacing: float) -> np.ndarray:
+    """Points on a sphere of ``radius`` about the origin, at most about ``spacing`` apart, plus the centre.
+
+    A Fibonacci lattice of ``n = max(6, ceil(4 pi r^2 / spacing^2))`` points: each covers a patch of
+    area ``4 pi r^2 / n <= spacing^2``.
+
+    Returns:
+        ``(n + 1, 3)`` offsets (m); row 0 is the centre.
+    """
+    n = max(6, math.ceil(4 * math.pi * radius * radius / (spacing * spacing)))
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    phi = math.pi * (3 - math.sqrt(5)) * i
+    r = np.sqrt(np.clip(1 - z * z, 0, None))
+    pts = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1) * radius
+    return np.vstack([np.zeros((1, 3)), pts])
+
+
+def robot_points(robot: Any, q: np.ndarray, spacing: float) -> np.ndarray:
+    """Points sampled on the robot's structure (every collision sphere: centre and surface).
+
+    Args:
+        robot: Robot model with ``sphere_centers(q (N, D)) -> (N, S, 3)`` and ``sphere_radii (S,)`` (torch).
+        q: ``(N, D)`` configurations.
+        spacing: Largest distance between neighbouring surface points (m).
+
+    Returns:
+        ``(N, P, 3)`` world points (float64).
+    """
+    qt = torch.as_tensor(np.asarray(q, dtype=np.float64), dtype=robot.lower.dtype, device=robot.lower.device)
+    with torch.no_grad():
+        centres = robot.sphere_centers(qt).double().cpu().numpy()  # (N, S, 3)
+    radii = robot.sphere_radii.double().cpu().numpy()
+    offsets = [sphere_surface_offsets(float(r), spacing) for r in radii]
+    owner = np.concatenate([np.full(len(o), s) for s, o in enumerate(offsets)])  # (P,)
+    return centres[:, owner, :] + np.vstack(offsets)[None]
+
+
+def _dense(occupancy: OccupancyGrid | np.ndarray) -> np.ndarray:
+    return occupancy.to_dense(np.float64) if isinstance(occupancy, OccupancyGrid) else np.asarray(occupancy, float)
+
+
+def penetration_per_state(points: np.ndarray, occupancy: OccupancyGrid) -> np.ndarray:
+    """The paper's penetration cost of each configuration: sum of p(x) over the voxels its points occupy.
+
+    Args:
+        points: ``(N, P, 3)`` robot points per configuration (:func:`robot_points`).
+        occupancy: The occupancy grid (voxel probabilities in [0, 1]).
+
+    Returns:
+        ``(N,)`` sum over the distinct voxels containing at least one point (points outside the grid
+        add nothing).
+    """
+    dense = _dense(occupancy)
+    dims = np.asarray(dense.shape, dtype=np.int64)
+    idx = np.floor((points - np.asarray(occupancy.origin)) / float(occupancy.resolution)).astype(np.int64)
+    inside = np.all((idx >= 0) & (idx < dims), axis=-1)  # (N, P)
+    flat = np.ravel_multi_index(tuple(np.clip(idx, 0, dims - 1).reshape(-1, 3).T), tuple(dims)).reshape(idx.shape[:2])
+    n_states, n_vox = points.shape[0], int(np.prod(dims))
+    state = np.broadcast_to(np.arange(n_states)[:, None], flat.shape)
+    keys = np.unique(state[inside].astype(np.int64) * n_vox + flat[inside])
+    return np.bincount(keys // n_vox, weights=dense.reshape(-1)[keys % n_vox], minlength=n_states)
+
+
+def interference_over_time(robot: Any, q: np.ndarray, stamps: np.ndarray, occupancy: OccupancyGrid,
+                           spacing: float | None = None) -> np.ndarray:
+    """Each executed state's share of :func:`interference`: ``cost(q_n) * (t_n - t_{n-1})``, 0 for the first.
+
+    Args:
+        robot: Robot model (:func:`robot_points`).
+        q: ``(N, D)`` executed configurations, in time order.
+        stamps: ``(N,)`` their times (s).
+        occupancy: The grid to score against (the final prediction).
+        spacing: Surface sampling of the robot's spheres (default: half the grid's voxel edge).
+
+    Returns:
+        ``(N,)`` probability-voxels x seconds.
+    """
+    q = np.asarray(q, dtype=np.float64)
+    if len(q) < 2:
+        return np.zeros(len(q))
+    pts = robot_points(robot, q, spacing or float(occupancy.resolution) / 2)
+    cost = penetration_per_state(pts, occupancy)
+    dt = np.clip(np.diff(np.asarray(stamps, dtype=np.float64)), 0.0, None)
+    return np.concatenate([[0.0], cost[1:] * dt])
+
+
+def interference(robot: Any, q: np.ndarray, stamps: np.ndarray, occupancy: OccupancyGrid,
+                 spacing: float | None = None) -> float:
+    """Integral penetration cost of an executed trajectory against one grid (the paper's Table I).
+
+    Same arguments as :func:`interference_over_time`.
+
+    Returns:
+        ``sum_{n >= 1} cost(q_n) * (t_n - t_{n-1})`` in probability-voxels x seconds (0 for N < 2).
+    """
+    return float(interference_over_time(robot, q, stamps, occupancy, spacing).sum())
+
+
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from points to segments, broadcast: ``p (..., 3)``, ``a, b (..., 3)`` -> ``(...)``."""
+    ab = b - a
+    t = np.clip(np.sum((p - a) * ab, -1) / np.maximum(np.sum(ab * ab, -1), 1e-12), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
+
+
+def body_clearance(robot: Any, q: np.ndarray, postures: np.ndarray, human: HumanModel | None = None) -> np.ndarray:
+    """Clearance between the robot and the human's body at each instant.
+
+    Args:
+        robot: Robot model with ``sphere_centers`` and ``sphere_radii``.
+        q: ``(N, D)`` robot configurations.
+        postures: ``(N, 12)`` scene-frame human postures at the same instants.
+        human: The human model (default: a new :class:`HumanModel`).
+
+    Returns:
+        ``(N,)`` the smallest surface-to-surface distance (m) between any robot sphere and any body
+        capsule; negative where they overlap.
+    """
+    human = human or HumanModel()
+    qt = torch.as_tensor(np.asarray(q, dtype=np.float64), dtype=robot.lower.dtype, device=robot.lower.device)
+    with torch.no_grad():
+        centres = robot.sphere_centers(qt).double().cpu().numpy()  # (N, S, 3)
+    r_robot = robot.sphere_radii.double().cpu().numpy()  # (S,)
+    ends, r_body = human.capsules(np.asarray(postures, dtype=np.float64))  # (N, C, 2, 3), (C,)
+    d = _segment_distance(centres[:, :, None, :], ends[:, None, :, 0, :], ends[:, None, :, 1, :])  # (N, S, C)
+    return (d - r_robot[None, :, None] - np.asarray(r_body)[None, None, :]).min(axis=(1, 2))
+
+
+@dataclass(frozen=True)
+class ContactSummary:
+    """How close an executed trajectory came to the real human.
+
+    Attributes:
+        min_clearance: Smallest clearance over the run (m; negative: overlap).
+        time_in_contact: Seconds with clearance <= 0.
+        time_near: Seconds with clearance <= :data:`NEAR_M`.
+    """
+
+    min_clearance: float
+    time_in_contact: float
+    time_near: float
+
+
+def contact_summary(clearances: np.ndarray, stamps: np.ndarray, near: float = NEAR_M) -> ContactSummary:
+    """Summarise per-instant clearances ``(N,)`` at ``stamps (N,)``; each instant counts ``t_n - t_{n-1}``."""
+    c = np.asarray(clearances, dtype=np.float64)
+    if len(c) == 0:
+        return ContactSummary(math.inf, 0.0, 0.0)
+    dt = np.concatenate([[0.0], np.clip(np.diff(np.asarray(stamps, dtype=np.float64)), 0.0, None)])
+    return ContactSummary(float(c.min()), float(dt[c <= 0].sum()), float(dt[c <= near].sum()))
+
+
+def postures_at(poses: list[Any], stamps: np.ndarray, scene: Any) -> np.ndarray:
+    """The human's scene-frame posture at given times, from the poses a run streamed.
+
+    Args:
+        poses: The streamed ``HumanPose`` messages of one demonstration, in time order.
+        stamps: ``(N,)`` times (s) in the poses' time base.
+        scene: The scene the human is placed in (relative to the first pose, as the predictor does).
+
+    Returns:
+        ``(N, 12)`` postures, linearly interpolated between samples; before the first pose the first,
+        after the last pose the last (the human holds still).
+    """
+    from shared.human import place_in_scene
+
+    if not poses:
+        raise ValueError("postures_at: the run streamed no human pose")
+    feats = np.array([p.features for p in poses], dtype=np.float64)  # (M, 12)
+    t = np.array([p.stamp for p in poses], dtype=np.float64)
+    s = np.asarray(stamps, dtype=np.float64)
+    out = np.stack([np.interp(s, t, feats[:, j]) for j in range(feats.shape[1])], axis=-1)
+    return place_in_scene(out, feats[0], scene)

@@ -1,0 +1,216 @@
+"""``foresight eval switch``: the paper's Fig. 8-9, over every demonstration of the human's class.
+
+Protocol (section VI.C): the PR2 faces the human across the table and plans for both cups (K = 2);
+the human reaches for the red cup. Two planners: the predicted occupancy (the paper's method) against
+the current occupancy only. Each demonstration of the class is held out in turn (a model trained
+without it) and run once per planner (seed ``seed``).
+
+Per step, both candidates' integral cost (the Plan's ``cost_total``, evaluated at the end of the
+step, Fig. 9) and the goal chosen. The *settle step* of a run is the step from which the robot keeps
+its final goal to the end (0: it never changed its mind). A PNG like Fig. 9: two panels (current on
+top, prediction below), one curve per candidate cup in its colour, every run thin, the median bold.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from shared.scene import load_scene
+
+from .harness import RunSpec, run_lockstep
+from .heldout import (
+    CupClass,
+    HeldOutModels,
+    cup_class,
+    human_file,
+    load_experiment_library,
+    samples_per_tick,
+    short_name,
+)
+from .measures import body_clearance, contact_summary, postures_at
+from .planners import Timing, build_planner
+
+__all__ = ["SWITCH_SCENE", "SwitchConfig", "SwitchRun", "SwitchResult", "settle_step", "run_switch", "plot_switch"]
+
+SWITCH_SCENE = "pr2_two_cups_facing"
+"""The scene of the paper's Fig. 8-9."""
+
+METHODS = ("prediction", "current")
+
+
+def settle_step(chosen: list[str]) -> int | None:
+    """First step from which every chosen goal equals the last one (None for an empty run)."""
+    if not chosen:
+        return None
+    s = len(chosen) - 1
+    while s > 0 and chosen[s - 1] == chosen[-1]:
+        s -= 1
+    return s
+
+
+@dataclass(frozen=True)
+class SwitchConfig:
+    """Options of the Fig. 8-9 experiment (``demos`` 0: every demonstration of the class)."""
+
+    library: str = "synthetic"
+    scene: str = SWITCH_SCENE
+    human_cup: str = "red_cup"
+    demos: int = 0
+    seed: int = 0
+    timing: Timing = Timing()
+    components: int | None = None
+    models_dir: Path = Path("models/experiments")
+    work_dir: Path = Path("runs/experiments")
+
+
+@dataclass(frozen=True)
+class SwitchRun:
+    """One run: its demonstration, method, chosen goals and per-step costs of each candidate."""
+
+    demo: int
+    method: str
+    goals: tuple[str, ...]
+    goal_names: tuple[str, ...]
+    cost_total: tuple[tuple[float, ...], ...]   # (steps, K)
+    cost_human: tuple[tuple[float, ...], ...]   # (steps, K)
+    settle_step: int | None
+    final_goal: str
+    reached_step: int | None
+    min_clearance: float
+    time_in_contact: float
+    planning_ms: float
+
+
+@dataclass
+class SwitchResult:
+    """Every run of the experiment."""
+
+    config: SwitchConfig
+    library: str
+    human: CupClass
+    runs: list[SwitchRun] = field(default_factory=list)
+
+    def settle(self, method: str) -> list[int | None]:
+        """Settle step of each run of ``method``, in demonstration order."""
+        return [r.settle_step for r in self.runs if r.method == method]
+
+    def median_settle(self, method: str) -> float:
+        """Median settle step of ``method`` (NaN without runs)."""
+        v = [s for s in self.settle(method) if s is not None]
+        return float(np.median(v)) if v else math.nan
+
+    def to_json(self) -> dict[str, Any]:
+        """``switch_step_prediction``, ``switch_step_current`` (medians), per-run lists and the runs."""
+        out: dict[str, Any] = {f"switch_step_{m}": self.median_settle(m) for m in METHODS}
+        out.update({f"switch_steps_{m}": self.settle(m) for m in METHODS})
+        out.update({f"final_goal_{m}": [r.final_goal for r in self.runs if r.method == m] for m in METHODS})
+        out.update({f"reached_step_{m}": [r.reached_step for r in self.runs if r.method == m] for m in METHODS})
+        out["earlier_by"] = self.median_settle("current") - self.median_settle("prediction")
+        out.update(library=self.library, scene=self.config.scene, human_class=self.human.name,
+                   human_class_distance_m=self.human.distance, timing=dataclasses.asdict(self.config.timing),
+                   runs=[dataclasses.asdict(r) for r in self.runs])
+        return out
+
+    def lines(self) -> list[str]:
+        """A table: per demonstration, each method's settle step, final goal and reach step."""
+        out = [f"goal switch ({self.library}, scene {self.config.scene}, human: {self.human.name} -> "
+               f"{self.config.human_cup}): the step from which the robot keeps its final goal",
+               f"{'demo':>6}" + "".join(f"{m + ': settle / goal / reached':>40}" for m in METHODS)]
+        by = {(r.demo, r.method): r for r in self.runs}
+        for d in dict.fromkeys(r.demo for r in self.runs):
+            cells = []
+            for m in METHODS:
+                r = by.get((d, m))
+                cells.append("-" if r is None else f"{r.settle_step} / {r.final_goal} / {r.reached_step}")
+            out.append(f"{'#' + str(d):>6}" + "".join(f"{c:>40}" for c in cells))
+        out.append("median settle step: " + ", ".join(f"{m} {self.median_settle(m):g}" for m in METHODS)
+                   + "  (the paper: prediction 4, current 13)")
+        return out
+
+
+def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compile: bool = True) -> SwitchResult:
+    """Run the experiment (every run in lock-step through the four services)."""
+    scene = load_scene(cfg.scene)
+    lib = load_experiment_library(cfg.library, scene)
+    human = cup_class(lib, scene, cfg.human_cup)
+    demos = lib.by_class(human.label)
+    demos = demos[: cfg.demos] if cfg.demos > 0 else demos
+    cups = [c.name for c in scene.cups]
+    progress(f"switch: {lib.source}, scene {scene.name}; robot -> {', '.join(cups)}; human -> {cfg.human_cup}: class "
+             f"{human.name} (mean reach {human.distance:.3f} m from the cup); {len(demos)} demonstrations, each "
+             f"held out in turn")
+    models = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components)
+    planner = build_planner(scene, cups, True, cfg.timing, compile=compile)
+    result = SwitchResult(cfg, lib.source, human)
+    total = len(demos) * len(METHODS)
+    for i, demo in enumerate(demos):
+        model = models.without([demo])
+        path = human_file(lib, demo, Path(cfg.work_dir) / "humans")
+        for j, method in enumerate(METHODS):
+            spec = RunSpec(scene, model, path, samples_per_tick(demo, cfg.timing.steps), method=method,
+                           steps=cfg.timing.steps, period_s=cfg.timing.period_s, seed=cfg.seed)
+            rec = run_lockstep(spec, planner)
+            chosen = rec.chosen_goals()
+            q, t = rec.q(), rec.stamps()
+            contact = contact_summary(body_clearance(planner.robot, q, postures_at(rec.poses, t, scene)), t)
+            res = rec.result
+            run = SwitchRun(demo.index, method, tuple(chosen), tuple(rec.plans[0].goal_names) if rec.plans else (),
+                            tuple(tuple(float(c) for c in p.cost_total) for p in rec.plans),
+                            tuple(tuple(float(c) for c in p.cost_human) for p in rec.plans),
+                            settle_step(chosen), chosen[-1] if chosen else "",
+                            res.reached_step if res is not None and res.reached and res.reached_step >= 0 else None,
+                            contact.min_clearance, contact.time_in_contact,
+                            float(np.median([p.planning_ms for p in rec.plans])) if rec.plans else math.nan)
+            result.runs.append(run)
+            progress(f"  [{2 * i + j + 1}/{total}] demo #{demo.index} {method:<10} goals "
+                     f"{''.join(g[0] for g in chosen)}  settle step {run.settle_step}  final {run.final_goal}  "
+                     f"reached step {run.reached_step}")
+    return result
+
+
+def _colour(name: str) -> str:
+    return {"red_cup": "tab:red", "blue_cup": "tab:blue"}.get(name, "tab:gray")
+
+
+def plot_switch(result: SwitchResult, path: str | Path) -> Path:
+    """Fig. 9: per-step integral cost of each candidate, current occupancy (top) and prediction (bottom)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    for ax, method in zip(axes, ("current", "prediction"), strict=True):
+        runs = [r for r in result.runs if r.method == method and r.cost_total]
+        for r in runs:
+            cost = np.array(r.cost_total)
+            for k, name in enumerate(r.goal_names):
+                ax.plot(np.arange(len(cost)), cost[:, k], color=_colour(name), alpha=0.15, lw=0.8)
+        if runs:
+            n = min(len(r.cost_total) for r in runs)
+            stack = np.array([np.array(r.cost_total)[:n] for r in runs])  # (runs, steps, K)
+            for k, name in enumerate(runs[0].goal_names):
+                ax.plot(np.arange(n), np.median(stack[:, :, k], axis=0), color=_colour(name), lw=2.2,
+                        label=f"{name} (median of {len(runs)})")
+            settle = result.median_settle(method)
+            if not math.isnan(settle):
+                ax.axvline(settle, color="k", ls="--", lw=1, label=f"median settle step {settle:g}")
+        ax.set_ylabel("integral cost")
+        ax.set_title(f"{'current occupancy only' if method == 'current' else 'predicted occupancy'}")
+        ax.legend(fontsize=8)
+    axes[-1].set_xlabel("replanning step")
+    cfg = result.config
+    fig.suptitle(f"Fig. 9: {short_name(result.library)}, scene {cfg.scene}, human -> {cfg.human_cup}", fontsize=10)
+    fig.tight_layout()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

@@ -1,0 +1,62 @@
+"""Held-out models and the class that reaches each cup."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.experiments.heldout import HeldOutModels, cup_class, load_experiment_library, short_name
+from services.experiments.switch import settle_step
+from services.predictor.gmm import GMMConfig
+from services.predictor.model import PredictionModel
+from services.predictor.train import TrainConfig, train_model
+from shared.scene import load_scene
+from shared.synthetic import generate_library
+
+
+@pytest.mark.parametrize("name", ["pr2_two_cups", "pr2_two_cups_facing", "pr2_two_cups_side"])
+def test_the_synthetic_cup_classes_are_found_at_their_cups(name):
+    scene = load_scene(name)
+    lib = load_experiment_library("synthetic", scene)
+    for cup in ("blue_cup", "red_cup"):
+        found = cup_class(lib, scene, cup)
+        assert found.name == cup and found.distance < 0.05
+
+
+def test_a_fit_cache_refits_only_the_changed_class_and_changes_nothing(tmp_path):
+    scene = load_scene()
+    lib = generate_library(8, 4, seed=1, scene=scene)
+    cfg = TrainConfig(gmm=GMMConfig(n_components=2))
+    out = lib.by_class(3)[0]
+    demos = [d for d in lib.demos if d is not out]
+    cache: dict = {}
+    train_model(lib, scene, cfg, progress=False, fit_cache=cache)
+    assert len(cache) == 8
+    cached = train_model(lib, scene, cfg, demos=demos, progress=False, fit_cache=cache)
+    assert len(cache) == 9  # one refit: class 3
+    plain = train_model(lib, scene, cfg, demos=demos, progress=False)
+    for field in ("weights", "means", "covariances", "motions", "volumes"):
+        np.testing.assert_array_equal(getattr(cached, field), getattr(plain, field))
+
+
+def test_held_out_models_are_cached_per_held_out_set(tmp_path):
+    scene = load_scene()
+    lib = generate_library(8, 3, seed=2, scene=scene)
+    models = HeldOutModels(lib, scene, tmp_path, components=2)
+    a = models.without([lib.by_class(0)[0]])
+    b = models.without([lib.by_class(0)[1]])
+    assert a != b and models.without([lib.by_class(0)[0]]) == a
+    model = PredictionModel.load(a)
+    assert model.meta["demos_per_class"][0] == 2
+
+
+def test_settle_step():
+    assert settle_step([]) is None
+    assert settle_step(["r"] * 5) == 0
+    assert settle_step(["r", "r", "b", "b"]) == 2
+    assert settle_step(["r", "b", "r", "b", "b"]) == 3
+
+
+def test_short_names():
+    assert short_name("synthetic:table_8 classes=8") == "synthetic"
+    assert short_name("../shared/data/paper-library/") == "paper-library"

@@ -1,0 +1,24 @@
+"""``foresight eval all --quick``: every experiment into one Markdown report with its PNGs (runs in CI)."""
+
+from __future__ import annotations
+
+import json
+
+from services.experiments.cli import main
+
+
+def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path):
+    out = tmp_path / "report"
+    assert main(["all", "--quick", "--out", str(out), "--models-dir", str(tmp_path / "models")]) == 0
+    text = (out / "report.md").read_text()
+    headings = ("### Recognition (Fig. 6)", "### Interference (Table I)", "### Goal switch (Fig. 8-9)", "## Timing")
+    for heading in headings:
+        assert heading in text
+    for png in ("recognition-synthetic.png", "interference-synthetic.png", "switch-synthetic.png"):
+        assert (out / png).stat().st_size > 10_000, png
+        assert f"]({png})" in text
+    data = json.loads((out / "report.json").read_text())
+    lib = data["libraries"]["synthetic"]
+    assert set(lib) >= {"recognition", "interference", "switch", "prediction_ms"}
+    assert len(lib["interference"]["basic"]) == 1
+    assert "paper:" in text  # every section compares with the paper's numbers
