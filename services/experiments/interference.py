@@ -66,6 +66,8 @@ class RunScore:
         planner: Variant name (:data:`services.experiments.planners.VARIANTS`).
         interference: Integral penetration of the final prediction (probability-voxels x s).
         interference_at_goal: The part of it accrued once the robot was at its goal (holding there).
+        interference_unrecognised: The part accrued during steps planned with a prediction in which the
+            human's true class had probability < 0.5 (not yet recognised).
         min_clearance: Smallest robot-body clearance to the real human (m).
         time_in_contact: Seconds with clearance <= 0; ``time_near``: seconds within 5 cm.
         reached_step: First step at which the robot was at its goal (None: never).
@@ -78,6 +80,7 @@ class RunScore:
     planner: str
     interference: float
     interference_at_goal: float
+    interference_unrecognised: float
     min_clearance: float
     time_in_contact: float
     time_near: float
@@ -86,8 +89,9 @@ class RunScore:
     planning_ms: float
 
 
-def score_run(rec: RunRecord, robot: Any, scene: Scene, final: Any, demo: int, seed: int, planner: str) -> RunScore:
-    """Score one run against the final prediction ``final`` and the streamed human."""
+def score_run(rec: RunRecord, robot: Any, scene: Scene, final: Any, demo: int, seed: int, planner: str,
+              label: int) -> RunScore:
+    """Score one run against the final prediction ``final`` and the streamed human of class ``label``."""
     q, t = rec.q(), rec.stamps()
     contact = contact_summary(body_clearance(robot, q, postures_at(rec.poses, t, scene)), t)
     res = rec.result
@@ -95,8 +99,12 @@ def score_run(rec: RunRecord, robot: Any, scene: Scene, final: Any, demo: int, s
     per_state = interference_over_time(robot, q, t, final)
     at_goal = np.array([s.reached for s in rec.states], dtype=bool)
     at_goal = np.maximum.accumulate(at_goal) if len(at_goal) else at_goal  # from the first state at the goal on
+    # the plan executed during tick n was made with the prediction of tick n - 1 (Fig. 4)
+    belief = {t: float(p.posterior[label]) for t, p in rec.posteriors.items()}
+    unknown = np.array([belief.get(s.tick - 1, 0.0) < 0.5 for s in rec.states], dtype=bool)
     return RunScore(demo, seed, planner, float(per_state.sum()), float(per_state[at_goal].sum()),
-                    contact.min_clearance, contact.time_in_contact, contact.time_near, reached,
+                    float(per_state[unknown].sum()), contact.min_clearance, contact.time_in_contact, contact.time_near,
+                    reached,
                     tuple(rec.chosen_goals()),
                     float(np.median([p.planning_ms for p in rec.plans])) if rec.plans else math.nan)
 
@@ -138,7 +146,8 @@ class InterferenceResult:
         for measure in ("min_clearance", "time_in_contact", "time_near"):
             out[measure] = {name: self.per_demo(name, measure)[0] for name in VARIANTS}
         out["median_min_clearance"] = {n: float(np.median(self.values(n, "min_clearance"))) for n in VARIANTS}
-        out["interference_at_goal"] = {name: self.per_demo(name, "interference_at_goal")[0] for name in VARIANTS}
+        for part in ("interference_at_goal", "interference_unrecognised"):
+            out[part] = {name: self.per_demo(name, part)[0] for name in VARIANTS}
         out["ratio_basic_over_least_penetration"] = self.ratio()
         out["runs_with_more_contact_than_basic"] = self.contact_violations()
         out["reached"] = {n: int(sum(r.reached_step is not None for r in self.runs if r.planner == n))
@@ -161,9 +170,10 @@ class InterferenceResult:
             out.append(f"{'#' + str(d):>6}" + cells)
         out.append(f"{'mean':>6}" + "".join(f"{np.mean(stats[n][0]):>22.3f}" for n in names))
         out.append(f"basic / least penetration: {self.ratio():.1f}x (the paper: about 45x)")
-        goal = {n: float(self.values(n, "interference_at_goal").mean()) for n in names}
-        out.append("of which accrued holding at the goal: " + ", ".join(
-            f"{VARIANTS[n].label} {goal[n]:.3f}" for n in names))
+        for part, what in (("interference_at_goal", "holding at the goal"),
+                           ("interference_unrecognised", "before the human's class was recognised (p < 0.5)")):
+            mean = {n: float(self.values(n, part).mean()) for n in names}
+            out.append(f"of which accrued {what}: " + ", ".join(f"{VARIANTS[n].label} {mean[n]:.3f}" for n in names))
         out.append("")
         out.append("the real human: min clearance (m) / time in contact (s) / time within 5 cm (s), mean of seeds")
         out.append(f"{'demo':>6}" + "".join(f"{VARIANTS[n].label:>26}" for n in names))
@@ -213,7 +223,7 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
                     final = rec.final_occupancy
                 if final is None:
                     raise RuntimeError("interference: no final prediction was received")
-                score = score_run(rec, planner.robot, scene, final, demo.index, seed, name)
+                score = score_run(rec, planner.robot, scene, final, demo.index, seed, name, human.label)
                 result.runs.append(score)
                 done += 1
                 progress(f"  [{done}/{total}] demo #{demo.index} seed {seed} {variant.label:<18} interference "

@@ -109,6 +109,11 @@ def _table1_section(res: InterferenceResult, png: Path) -> list[str]:
                  f"{res.ratio():.1f}x (target >= 20x; least penetration below current: {lp < cur}).")
     lines.append("- The absolute values are not comparable with the paper's: its robot points and voxels are "
                  "its own (Move3D's PR2 surface samples); the ratio is.")
+    early = float(np.mean(res.per_demo("least_penetration", "interference_unrecognised")[0]))
+    if lp > 0:
+        lines.append(f"- {100 * early / lp:.0f}% of least penetration's interference was accrued in steps planned "
+                     "before the human's class was recognised (p < 0.5): the robot crosses the human's path while "
+                     "the prediction is still spread over the classes (docs/experiments.md).")
     if basic == 0:
         lines.append("- Basic STOMP never enters the final prediction here: the task does not cross the "
                      "predicted human volume, so there is nothing for the prediction to remove.")
@@ -121,6 +126,11 @@ def _switch_section(res: SwitchResult, png: Path) -> list[str]:
     p, c = res.median_settle("prediction"), res.median_settle("current")
     lines.append(f"- paper: prediction settles at step 4, current at step 13 (9 steps earlier). Measured medians: "
                  f"prediction {p:g}, current {c:g} ({c - p:+g} steps; target >= 5 earlier).")
+    ap, ac = res.median_away("prediction"), res.median_away("current")
+    lines.append(f"- step from which the robot never again goes for the human's cup ({res.config.human_cup}; a run "
+                 f"that ends there counts {res.config.timing.steps}): prediction {ap:g}, current {ac:g} "
+                 f"({ac - ap:+g}); runs ending at the human's cup: prediction {res.conflicts('prediction')}, "
+                 f"current {res.conflicts('current')}.")
     goals = {m: [r.final_goal for r in res.runs if r.method == m] for m in ("prediction", "current")}
     for m, g in goals.items():
         counts = {name: g.count(name) for name in sorted(set(g))}
@@ -173,9 +183,26 @@ def library_section(spec: str, plan: ReportPlan, out: Path, models_dir: Path, n_
     sw = run_switch(SwitchConfig(demos=plan.switch_demos, **common), say, compile=plan.compile)
     png2 = plot_switch(sw, out / f"switch-{tag}.png")
     md += ["### Goal switch (Fig. 8-9)", "", *_switch_section(sw, png2)]
+    first = {r.goals[0] for r in sw.runs if r.goals}
+    mirrored = None
+    if len(first) == 1 and sw.config.human_cup not in first:
+        # the paper's situation: the human reaches for the cup the robot goes for first, so it must switch
+        cup = first.pop()
+        say(f"the robot first goes for {cup}, not {sw.config.human_cup}: the switch again with the human reaching "
+            f"for {cup}")
+        mirrored = run_switch(SwitchConfig(demos=plan.switch_demos, human_cup=cup, **common), say,
+                              compile=plan.compile)
+        png3 = plot_switch(mirrored, out / f"switch-mirrored-{tag}.png")
+        md += [f"### Goal switch, the human reaching for {cup} (the robot's first choice)", "",
+               f"With an empty grid the robot first goes for {cup}, so with the human reaching for "
+               f"{sw.config.human_cup} neither planner has a reason to switch. The paper's Fig. 8-9 has the human "
+               "reach for the cup the robot first goes for; this run does the same here.", "",
+               *_switch_section(mirrored, png3)]
     data = {"recognition": rec, "interference": t1.to_json(), "switch": sw.to_json(),
+            "switch_mirrored": mirrored.to_json() if mirrored is not None else None,
             "prediction_ms": _prediction_ms(lib, models_dir, plan.components),
-            "planning_ms": {"K=1": [r.planning_ms for r in t1.runs], "K=2": [r.planning_ms for r in sw.runs]}}
+            "planning_ms": {"K=1": [r.planning_ms for r in t1.runs],
+                            "K=2": [r.planning_ms for r in sw.runs + (mirrored.runs if mirrored else [])]}}
     return md, data
 
 

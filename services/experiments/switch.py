@@ -37,7 +37,8 @@ from .heldout import (
 from .measures import body_clearance, contact_summary, postures_at
 from .planners import Timing, build_planner
 
-__all__ = ["SWITCH_SCENE", "SwitchConfig", "SwitchRun", "SwitchResult", "settle_step", "run_switch", "plot_switch"]
+__all__ = ["SWITCH_SCENE", "SwitchConfig", "SwitchRun", "SwitchResult", "settle_step", "away_step", "run_switch",
+           "plot_switch"]
 
 SWITCH_SCENE = "pr2_two_cups_facing"
 """The scene of the paper's Fig. 8-9."""
@@ -53,6 +54,18 @@ def settle_step(chosen: list[str]) -> int | None:
     while s > 0 and chosen[s - 1] == chosen[-1]:
         s -= 1
     return s
+
+
+def away_step(chosen: list[str], human_cup: str) -> int | None:
+    """First step from which the robot never again goes for the human's cup (the paper's "switch").
+
+    Returns:
+        The step (0: it never went for it), or None when the run ends going for the human's cup.
+    """
+    if not chosen or chosen[-1] == human_cup:
+        return None
+    last = max((i for i, g in enumerate(chosen) if g == human_cup), default=-1)
+    return last + 1
 
 
 @dataclass(frozen=True)
@@ -81,6 +94,7 @@ class SwitchRun:
     cost_total: tuple[tuple[float, ...], ...]   # (steps, K)
     cost_human: tuple[tuple[float, ...], ...]   # (steps, K)
     settle_step: int | None
+    away_step: int | None
     final_goal: str
     reached_step: int | None
     min_clearance: float
@@ -106,10 +120,26 @@ class SwitchResult:
         v = [s for s in self.settle(method) if s is not None]
         return float(np.median(v)) if v else math.nan
 
+    def away(self, method: str) -> list[int | None]:
+        """:func:`away_step` of each run of ``method`` (None: it ended going for the human's cup)."""
+        return [r.away_step for r in self.runs if r.method == method]
+
+    def median_away(self, method: str) -> float:
+        """Median away step of ``method``, a run that never left the human's cup counting as the run's length."""
+        v = [self.config.timing.steps if s is None else s for s in self.away(method)]
+        return float(np.median(v)) if v else math.nan
+
+    def conflicts(self, method: str) -> int:
+        """Runs of ``method`` that end going for the human's cup."""
+        return sum(r.final_goal == self.config.human_cup for r in self.runs if r.method == method)
+
     def to_json(self) -> dict[str, Any]:
         """``switch_step_prediction``, ``switch_step_current`` (medians), per-run lists and the runs."""
         out: dict[str, Any] = {f"switch_step_{m}": self.median_settle(m) for m in METHODS}
         out.update({f"switch_steps_{m}": self.settle(m) for m in METHODS})
+        out.update({f"away_step_{m}": self.median_away(m) for m in METHODS})
+        out.update({f"away_steps_{m}": self.away(m) for m in METHODS})
+        out.update({f"ends_at_human_cup_{m}": self.conflicts(m) for m in METHODS})
         out.update({f"final_goal_{m}": [r.final_goal for r in self.runs if r.method == m] for m in METHODS})
         out.update({f"reached_step_{m}": [r.reached_step for r in self.runs if r.method == m] for m in METHODS})
         out["earlier_by"] = self.median_settle("current") - self.median_settle("prediction")
@@ -132,6 +162,11 @@ class SwitchResult:
             out.append(f"{'#' + str(d):>6}" + "".join(f"{c:>40}" for c in cells))
         out.append("median settle step: " + ", ".join(f"{m} {self.median_settle(m):g}" for m in METHODS)
                    + "  (the paper: prediction 4, current 13)")
+        out.append(f"median step from which the robot never again goes for {self.config.human_cup} (never = "
+                   f"{self.config.timing.steps}): " + ", ".join(f"{m} {self.median_away(m):g}" for m in METHODS))
+        n = len(self.settle("prediction"))
+        out.append(f"runs ending at the human's cup ({self.config.human_cup}): "
+                   + ", ".join(f"{m} {self.conflicts(m)} of {n}" for m in METHODS))
         return out
 
 
@@ -164,7 +199,7 @@ def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compi
             run = SwitchRun(demo.index, method, tuple(chosen), tuple(rec.plans[0].goal_names) if rec.plans else (),
                             tuple(tuple(float(c) for c in p.cost_total) for p in rec.plans),
                             tuple(tuple(float(c) for c in p.cost_human) for p in rec.plans),
-                            settle_step(chosen), chosen[-1] if chosen else "",
+                            settle_step(chosen), away_step(chosen, cfg.human_cup), chosen[-1] if chosen else "",
                             res.reached_step if res is not None and res.reached and res.reached_step >= 0 else None,
                             contact.min_clearance, contact.time_in_contact,
                             float(np.median([p.planning_ms for p in rec.plans])) if rec.plans else math.nan)

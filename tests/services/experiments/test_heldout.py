@@ -60,3 +60,12 @@ def test_settle_step():
 def test_short_names():
     assert short_name("synthetic:table_8 classes=8") == "synthetic"
     assert short_name("../shared/data/paper-library/") == "paper-library"
+
+
+def test_away_step():
+    from services.experiments.switch import away_step
+
+    assert away_step(["b", "b"], "r") == 0
+    assert away_step(["r", "r", "b", "b"], "r") == 2
+    assert away_step(["r", "b", "r", "b"], "r") == 3
+    assert away_step(["b", "r"], "r") is None and away_step([], "r") is None
