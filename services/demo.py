@@ -29,8 +29,9 @@ from typing import Any
 
 import numpy as np
 
+from services.experiments.measures import interference
 from services.processes import ServiceProcess, free_port
-from services.scenario import RunRecorder, Summary, choose_demonstration, interference_cost, model_for, summarise
+from services.scenario import RunRecorder, Summary, choose_demonstration, model_for, summarise
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, resolve_config
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, Keys, Message, OccupancyGrid, Plan, RobotState
@@ -154,7 +155,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     for name, summary, (_, states, _, _) in runs:
         states = sorted(states, key=lambda st: st.stamp)
         q = np.array([st.q for st in states])
-        cost = interference_cost(robot, q, np.array([st.stamp for st in states]), reference) if reference else 0.0
+        cost = interference(robot, q, np.array([st.stamp for st in states]), reference) if reference else 0.0
         rows.append({"planner": name, "interference_cost": cost, "switch_step": summary.switch_step,
                      "reached_step": summary.reached_step, "chosen_goal_per_step": summary.chosen_goal_per_step,
                      "mcap_path": summary.mcap_path})

@@ -20,13 +20,14 @@ from typing import Any
 
 import numpy as np
 
+from services.experiments.measures import interference
 from shared.library import Demonstration, MotionLibrary
 from shared.protocol import ClassPosterior, Message, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.scene import Scene
 
 __all__ = ["Scenario", "choose_demonstration", "model_for", "RunRecorder", "Summary", "summarise",
-           "interference_cost", "DEFAULT_HUMAN_CLASS"]
+           "DEFAULT_HUMAN_CLASS"]
 
 log = logging.getLogger("foresight.scenario")
 
@@ -165,38 +166,6 @@ class RunRecorder:
             return list(self.plans), list(self.states), self.final_occupancy, dict(self.posteriors)
 
 
-def interference_cost(robot: Any, q: np.ndarray, stamps: np.ndarray, occupancy: OccupancyGrid) -> float:
-    """Integral human-penetration cost of an executed trajectory (the paper's Table I measure).
-
-    At each state the robot's collision-sphere centres look up the voxels of the final (most accurate)
-    occupancy prediction; their probabilities are summed and integrated over time.
-
-    Args:
-        robot: Robot model with ``sphere_centers(q (..., D)) -> (..., S, 3)`` (torch).
-        q: ``(N, D)`` executed configurations.
-        stamps: ``(N,)`` their times (s).
-        occupancy: The final prediction.
-
-    Returns:
-        ``sum_n p(spheres(q_n)) * (t_n - t_{n-1})`` in probability x seconds.
-    """
-    import torch
-
-    if len(q) < 2:
-        return 0.0
-    with torch.no_grad():
-        centers = robot.sphere_centers(torch.as_tensor(q, dtype=robot.lower.dtype, device=robot.lower.device))
-    pts = centers.double().cpu().numpy()  # (N, S, 3)
-    dense = occupancy.to_dense(np.float64)
-    idx = np.floor((pts - occupancy.origin) / occupancy.resolution).astype(np.int64)
-    dims = occupancy.dims.astype(np.int64)
-    inside = np.all((idx >= 0) & (idx < dims), axis=-1)
-    idx = np.clip(idx, 0, dims - 1)
-    p = np.where(inside, dense[idx[..., 0], idx[..., 1], idx[..., 2]], 0.0).sum(-1)  # (N,)
-    dt = np.diff(np.asarray(stamps, dtype=np.float64))
-    return float(np.sum(p[1:] * np.clip(dt, 0.0, None)))
-
-
 @dataclass
 class Summary:
     """The result of a run, as ``foresight demo`` prints it (``--json``: :meth:`to_json`)."""
@@ -284,7 +253,7 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     states = sorted(states, key=lambda s: s.stamp)
     q = np.array([s.q for s in states]) if states else np.zeros((0, 0))
     stamps = np.array([s.stamp for s in states])
-    cost = interference_cost(robot, q, stamps, final_occupancy) if final_occupancy is not None and len(q) else 0.0
+    cost = interference(robot, q, stamps, final_occupancy) if final_occupancy is not None and len(q) else 0.0
     reached_states = [s for s in states if s.reached]
     reached_step = reached_states[0].tick if reached_states and reached_states[0].tick >= 0 else None
     recognised = None

@@ -23,7 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "log": ("shared.logtools", "inspect (info) and draw (render) a run's MCAP log"),
     "predictor": ("services.predictor.__main__", "recognise the human's motion early; publish predicted occupancy"),
     "train": ("services.predictor.train", "train the prediction model (GMMs, GMR motions, swept volumes)"),
-    "eval": ("services.predictor.recognition", "evaluate early recognition (leave-one-out, paper protocol)"),
+    "eval": ("services.experiments.cli", "the paper's experiments: recognition | interference | switch | all"),
     "bench": ("services.bench", "benchmark a component: predictor | planner"),
 }
 

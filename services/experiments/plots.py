@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -10,7 +11,7 @@ from .heldout import short_name
 from .interference import InterferenceResult
 from .planners import VARIANTS
 
-__all__ = ["plot_interference"]
+__all__ = ["plot_interference", "save_figure"]
 
 COLOURS = {"basic": "tab:gray", "least_penetration": "tab:green", "current": "tab:orange"}
 
@@ -49,6 +50,13 @@ def plot_interference(result: InterferenceResult, path: str | Path) -> Path:
     ax2.set_xticks(x, [f"#{d}" for d in result.demos])
     ax2.set_xlabel("held-out demonstration")
     ax2.legend(fontsize=8)
+    return save_figure(fig, path)
+
+
+def save_figure(fig: Any, path: str | Path) -> Path:
+    """Lay out, write (110 dpi PNG, creating the folder) and close a matplotlib figure; returns the path."""
+    import matplotlib.pyplot as plt
+
     fig.tight_layout()
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -243,9 +243,6 @@ def plot_switch(result: SwitchResult, path: str | Path) -> Path:
     axes[-1].set_xlabel("replanning step")
     cfg = result.config
     fig.suptitle(f"Fig. 9: {short_name(result.library)}, scene {cfg.scene}, human -> {cfg.human_cup}", fontsize=10)
-    fig.tight_layout()
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    from .plots import save_figure
+
+    return save_figure(fig, path)

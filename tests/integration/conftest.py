@@ -16,6 +16,7 @@ import pytest
 
 from services.executor.core import ExecutorConfig
 from services.executor.service import ExecutorResult, ExecutorService
+from services.experiments.harness import JOIN_S, ServiceThread
 from services.planner.service import PlannerService, PlannerServiceConfig
 from services.predictor.core import PredictorConfig
 from services.predictor.service import PredictorService
@@ -29,8 +30,6 @@ from shared.protocol import ClassPosterior, Keys, OccupancyGrid, Plan, RobotStat
 from shared.scene import load_scene
 from shared.synthetic import generate_library
 from shared.transport import open_session, subscribe
-
-JOIN_S = 60.0
 
 
 @dataclasses.dataclass
@@ -54,39 +53,6 @@ def system_files(tmp_path_factory: pytest.TempPathFactory) -> SystemFiles:
     human = root / "human.npz"
     save_library(MotionLibrary(list(lib.class_names), [scenario.demo], [], "test human"), human)
     return SystemFiles(lib, human, model, scenario.samples_per_tick, scenario.demo.class_name)
-
-
-class ServiceThread:
-    """Runs a service's blocking ``run`` in a daemon thread with its own stop event."""
-
-    def __init__(self, name: str, target: Callable[[threading.Event], Any]) -> None:
-        self.name = name
-        self.stop_event = threading.Event()
-        self.result: Any = None
-        self.error: BaseException | None = None
-
-        def body() -> None:
-            try:
-                self.result = target(self.stop_event)
-            except BaseException as exc:  # reported by join()
-                self.error = exc
-
-        self.thread = threading.Thread(target=body, name=f"svc-{name}", daemon=True)
-
-    def start(self) -> ServiceThread:
-        self.thread.start()
-        return self
-
-    def stop(self, timeout: float = JOIN_S) -> Any:
-        self.stop_event.set()
-        return self.join(timeout)
-
-    def join(self, timeout: float = JOIN_S) -> Any:
-        self.thread.join(timeout)
-        assert not self.thread.is_alive(), f"{self.name} did not stop within {timeout} s"
-        if self.error is not None:
-            raise self.error
-        return self.result
 
 
 @dataclasses.dataclass

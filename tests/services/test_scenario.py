@@ -1,4 +1,5 @@
-"""The scenario's pure pieces: choosing the human's demonstration, the summary, the interference cost."""
+"""The scenario's pure pieces: choosing the human's demonstration and the summary (its interference measure is
+tested in tests/services/experiments/test_measures.py)."""
 
 from __future__ import annotations
 
@@ -6,16 +7,17 @@ import numpy as np
 import pytest
 import torch
 
-from services.scenario import Summary, choose_demonstration, interference_cost, summarise
+from services.scenario import Summary, choose_demonstration, summarise
 from shared.protocol import OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.synthetic import generate_library
 
 
 class PointRobot:
-    """One sphere at the first three joint values."""
+    """One sphere of radius 0 at the first three joint values."""
 
     lower = torch.zeros(3)
+    sphere_radii = torch.zeros(1)
 
     def sphere_centers(self, q: torch.Tensor) -> torch.Tensor:
         return q[..., None, :3]
@@ -43,14 +45,6 @@ def test_choose_demonstration_is_seeded_and_spreads_the_motion():
     assert choose_demonstration(lib, steps=20, seed=3, human_class="0").demo.label == 0
     with pytest.raises(UserError, match="nope"):
         choose_demonstration(lib, steps=20, seed=0, human_class="nope")
-
-
-def test_interference_integrates_occupancy_at_the_spheres_over_time():
-    q = np.array([[0.15, 0.15, 0.15], [0.15, 0.15, 0.15], [0.35, 0.35, 0.35]])  # inside, inside, outside
-    t = np.array([0.0, 0.5, 1.0])
-    grid = _grid(1.0)
-    assert interference_cost(PointRobot(), q, t, grid) == pytest.approx(0.5)
-    assert interference_cost(PointRobot(), q[:1], t[:1], grid) == 0.0
 
 
 def test_summary_switch_step_and_comparison_table():
