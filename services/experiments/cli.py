@@ -70,13 +70,18 @@ def _timing(args: argparse.Namespace) -> Timing:
     return t
 
 
+def _doc(module: str) -> str:
+    """A module's docstring as ``--help`` prose (reST literals shown plain)."""
+    return (sys.modules[f"services.experiments.{module}"].__doc__ or "").replace("``", "")
+
+
 def _parser(prog: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="what", required=True, metavar="{recognition,interference,switch,all}")
     sub.add_parser("recognition", help="early recognition, leave-one-out (Fig. 6); see its --help", add_help=False)
     p = sub.add_parser("interference", help="Table I: basic STOMP vs least penetration vs current occupancy",
-                       description=sys.modules["services.experiments.interference"].__doc__,
+                       description=_doc("interference"),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     _common(p, TABLE1_SCENE)
     p.add_argument("--demos", type=int, default=5, help="held-out demonstrations (default: 5)")
@@ -84,7 +89,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--robot-cup", default="red_cup", help="the robot's one task (default: red_cup)")
     p.add_argument("--human-cup", default="blue_cup", help="the cup the human reaches for (default: blue_cup)")
     p = sub.add_parser("switch", help="Fig. 8-9: the step at which the robot settles on its goal",
-                       description=sys.modules["services.experiments.switch"].__doc__,
+                       description=_doc("switch"),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     _common(p, SWITCH_SCENE)
     p.add_argument("--human-cup", default="red_cup", help="the cup the human reaches for (default: red_cup)")
@@ -95,7 +100,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     from .report import add_report_arguments
 
     add_report_arguments(sub.add_parser("all", help="every experiment and the timings into one Markdown report",
-                                        description=sys.modules["services.experiments.report"].__doc__,
+                                        description=_doc("report"),
                                         formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
