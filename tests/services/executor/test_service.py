@@ -16,7 +16,7 @@ from shared.logtools import read_log
 from shared.protocol import Keys, RobotState, decode
 from shared.transport import open_session
 
-from .conftest import SCENE, FakeSystem, new_hub
+from .conftest import SCENE, FakeSystem, foxglove_stamps, new_hub
 
 
 def lockstep_config(tmp_path, **kw) -> ExecutorConfig:
@@ -55,6 +55,25 @@ def test_lockstep_ticks_plans_and_goal(zenoh_hub, pr2, tmp_path) -> None:
     assert np.allclose(fake.plans[0].trajectories[0, 0], result.q[5], atol=1e-6)
     goal = fake.plans[-1].trajectories[0, -1]
     assert np.max(np.abs(result.q[-1] - goal)) <= cfg.goal_tolerance
+
+
+def test_lockstep_mcap_has_one_time_base_for_foxglove(zenoh_hub, pr2, tmp_path) -> None:
+    """The robot states and plans of a lock-step run carry simulated time (from 0 s); the Foxglove
+    entities and transforms written for them, and the static scene, are all on the log's clock."""
+    cfg = lockstep_config(tmp_path, steps=4)
+    run_lockstep(zenoh_hub, pr2, cfg)
+    lf = read_log(cfg.mcap, keep=lambda ch: True)
+    keys = Keys()
+    sim = [decode(m.data).stamp for m in lf.topic_messages(keys.robot_state) + lf.topic_messages(keys.plan)]
+    assert sim and max(sim) <= 4 * 0.2 + 1e-9
+    stamps = foxglove_stamps(lf)
+    kinds = {(topic, ident) for topic, ident, *_ in stamps}
+    assert {("/tf", "robot_base"), ("/tf", "end_effector"), ("/viz/scene", "obstacles"),
+            ("/viz/robot", "robot/spheres"), ("/viz/plan", "plan/paths"), ("/viz/occupancy", "occupancy")} <= kinds
+    first = min(m.log_time for m in lf.messages)
+    last = max(m.log_time for m in lf.messages)
+    for topic, ident, ns, log_time, publish_time in stamps:
+        assert first <= log_time <= last and abs(ns - log_time) < 1000 and publish_time == log_time, (topic, ident)
 
 
 def test_lockstep_is_deterministic(zenoh_hub, pr2, tmp_path) -> None:
