@@ -177,7 +177,7 @@ def _free_port() -> int:
 def test_executor_finalises_its_log_on_signals(tmp_path, sig) -> None:
     path = tmp_path / "svc.mcap"
     cmd = [sys.executable, "-m", "services.executor", "--mode", "realtime", "--steps", "0", "--mcap", str(path),
-           "--listen", f"tcp/127.0.0.1:{_free_port()}", "--connect", "", "--state-rate-hz", "20"]
+           "--listen", f"tcp/127.0.0.1:{_free_port()}", "--connect", "", "--state-rate-hz", "20", "--wait-for", ""]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 30

@@ -14,7 +14,7 @@ from services.executor.core import ExecutorConfig
 from services.executor.service import ExecutorService
 from shared.logtools import read_log
 from shared.protocol import Keys, RobotState, decode
-from shared.transport import open_session
+from shared.transport import Presence, open_session
 
 from .conftest import SCENE, FakeSystem, foxglove_stamps, new_hub
 
@@ -135,9 +135,37 @@ def test_mcap_has_every_channel_decodable_with_schemas(zenoh_hub, pr2, tmp_path)
     assert b"pr2_two_cups" in lf.attachments["scene.toml"]
 
 
+def test_realtime_run_starts_its_clock_once_the_wait_for_services_are_there(zenoh_hub, pr2) -> None:
+    exec_z = zenoh_hub()
+    cfg = ExecutorConfig(mode="realtime", steps=0, state_rate_hz=50.0, mcap="none", wait_for=["planner"])
+    service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
+    states: list[RobotState] = []
+    keys = Keys(exec_z.prefix)
+    with open_session(zenoh_hub()) as watch:
+        sub = watch.declare_subscriber(keys.robot_state,
+                                       lambda s: states.append(decode(s.payload.to_bytes(), RobotState)))
+        t = threading.Thread(target=service.run)
+        t.start()
+        try:
+            time.sleep(1.5)
+            assert not states  # no planner yet: the run has not started
+            planner = Presence(watch, keys, "planner")
+            deadline = time.monotonic() + 20
+            while len(states) < 5 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert len(states) >= 5 and states[0].tick == -1
+            planner.close()
+        finally:
+            service.stop.set()
+            t.join(timeout=10)
+            sub.undeclare()
+    assert not t.is_alive()
+
+
 def test_realtime_holds_when_predictor_stops_and_resumes(zenoh_hub, pr2, tmp_path) -> None:
     exec_z = zenoh_hub()
-    cfg = ExecutorConfig(mode="realtime", steps=0, state_rate_hz=50.0, stale_limit_s=0.3, mcap="none")
+    cfg = ExecutorConfig(mode="realtime", steps=0, state_rate_hz=50.0, stale_limit_s=0.3, mcap="none",
+                         wait_for=["predictor", "planner"])
     fake = FakeSystem(zenoh_hub(), waypoints=200)
     service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
     states: list[RobotState] = []
