@@ -11,7 +11,7 @@ DEMO_ARGS ?=
 .PHONY: demo test setup lint clean
 
 demo: $(STAMP)
-	$(VENV)/bin/foresight demo $(DEMO_ARGS)
+	@$(VENV)/bin/foresight demo $(DEMO_ARGS)
 
 test: $(STAMP)
 	$(PY) -m pytest -q

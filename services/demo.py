@@ -8,9 +8,12 @@
 4. Lock-step (default): the executor ticks ``--steps`` replanning steps; the human advances by a fixed
    number of samples per step (the paper's protocol). Real time: the replayer streams at ``--rate-hz``,
    the planner replans every ``--period-s``, the executor runs ``steps x period`` seconds.
-5. Stop everything (SIGTERM, then SIGKILL after a bounded wait) and print the summary: per step the
-   chosen goal, each candidate's cost and the planning time; the step where the robot switched goal;
-   the interference cost of the executed trajectory against the final prediction; the MCAP path.
+   While it runs, print one table: a header, then a row per replanning step as its plan arrives
+   (step, seconds into the run, chosen goal, each candidate's cost, planning time, the predictor's
+   belief); in real time only the plans made during the executor's ``steps x period`` seconds.
+5. Stop everything (SIGTERM, then SIGKILL after a bounded wait) and print the summary: the step where
+   the robot switched goal, the step and time it reached it, the interference cost of the executed
+   trajectory against the final prediction, the MCAP path.
 """
 
 from __future__ import annotations
@@ -31,7 +34,16 @@ import numpy as np
 
 from services.experiments.measures import interference
 from services.processes import ServiceProcess, free_port
-from services.scenario import RunRecorder, Summary, choose_demonstration, model_for, summarise
+from services.scenario import (
+    RunRecorder,
+    Summary,
+    choose_demonstration,
+    model_for,
+    step_entry,
+    summarise,
+    table_header,
+    table_row,
+)
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, resolve_config
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, Keys, Message, OccupancyGrid, Plan, RobotState
@@ -118,14 +130,18 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
     }
 
 
-def _progress_line(msg: Plan, posterior: ClassPosterior | None) -> str:
-    costs = "  ".join(f"{n} {c:8.3f}" if v else f"{n} (invalid)"
-                      for n, c, v in zip(msg.goal_names, msg.cost_total, msg.valid, strict=True))
-    belief = ""
-    if posterior is not None:
-        k = int(posterior.posterior.argmax())
-        belief = f"  human: {posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
-    return f"step {msg.step:>3}: chosen {msg.goal_names[msg.chosen]:<10} {costs}  ({msg.planning_ms:.0f} ms){belief}"
+def _belief(posterior: ClassPosterior | None) -> str:
+    if posterior is None:
+        return ""
+    k = int(posterior.posterior.argmax())
+    return f"{posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
+
+
+def _run_length(cfg: DemoConfig) -> str:
+    if cfg.mode == "lockstep":
+        return f"lockstep mode, {cfg.steps} steps of {cfg.period_s:g} s (simulated time)"
+    return (f"realtime mode, {cfg.steps * cfg.period_s:g} s of wall time ({cfg.steps} periods of {cfg.period_s:g} s; "
+            "a plan per period while the planner keeps up)")
 
 
 VARIANTS = (("prediction", {"method": "prediction", "human_cost": True}),
@@ -186,14 +202,34 @@ def _run_once(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None]
     endpoint = f"tcp/127.0.0.1:{cfg.port or free_port()}"
     keys = Keys(cfg.prefix)
     args = service_args(cfg, endpoint, model, replay_lib, scenario.samples_per_tick, mcap)
-    out(f"foresight demo: router on {endpoint}; {cfg.mode} mode, {cfg.steps} steps; logs in {run_dir}/")
+    out(f"foresight demo: router on {endpoint}; {_run_length(cfg)}; logs in {run_dir}/")
     hub = ZenohConfig(mode="router", listen=[endpoint], connect=[], multicast_scouting=False, prefix=cfg.prefix)
     recorder = RunRecorder()
     latest_posterior: list[ClassPosterior | None] = [None]
+    realtime = cfg.mode == "realtime"
+    lock = threading.Lock()
+    # the run's clock: 0 in lock-step (simulated time); the executor's first state in real time
+    run_start: list[float | None] = [None if realtime else 0.0]
+    header_printed = [False]
+
+    def on_state(msg: RobotState) -> None:
+        with lock:
+            if run_start[0] is None:
+                run_start[0] = msg.stamp
+        recorder.on_message(msg)
 
     def on_plan(msg: Plan) -> None:
-        recorder.on_message(msg)
-        out(_progress_line(msg, latest_posterior[0]))
+        with lock:
+            if run_start[0] is None:
+                run_start[0] = msg.stamp
+            t0 = run_start[0]
+            if realtime and msg.stamp - t0 >= cfg.steps * cfg.period_s:
+                return  # planned after the executor's run ended: never executed, not part of the run
+            recorder.on_message(msg)
+            if not header_printed[0]:
+                out(table_header(list(msg.goal_names)))
+                header_printed[0] = True
+            out(table_row(step_entry(msg, t0), list(msg.goal_names), _belief(latest_posterior[0])))
 
     def on_other(msg: Message) -> None:
         if isinstance(msg, ClassPosterior):
@@ -206,7 +242,7 @@ def _run_once(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None]
     deadline = time.monotonic() + cfg.timeout
     with open_session(hub) as session:
         subs = [subscribe(session, keys.plan, Plan, on_plan),
-                subscribe(session, keys.robot_state, RobotState, recorder.on_message),
+                subscribe(session, keys.robot_state, RobotState, on_state),
                 subscribe(session, keys.occupancy, OccupancyGrid, on_other),
                 subscribe(session, keys.posterior, ClassPosterior, on_other)]
         presence = Presence(session, keys, "demo")
@@ -246,7 +282,7 @@ def _run_once(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None]
     from shared.robot import PR2
 
     summary = summarise(plans, states, final, posteriors, PR2.from_scene(scene), demo.class_name,
-                        str(mcap) if mcap.is_file() else None)
+                        str(mcap) if mcap.is_file() else None, t0=run_start[0])
     summary.extra["mode"] = cfg.mode
     summary.extra["method"] = cfg.method
     summary.extra["human_cost"] = cfg.human_cost
@@ -274,7 +310,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
             if cfg.json:
                 print(json.dumps(summary.to_json()))
             else:
-                for line in summary.lines():
+                for line in summary.lines(table=False):  # the table was printed live, row by row
                     print(line)
         return status
 

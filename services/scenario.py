@@ -27,7 +27,7 @@ from shared.runtime import UserError
 from shared.scene import Scene
 
 __all__ = ["Scenario", "choose_demonstration", "model_for", "RunRecorder", "Summary", "summarise",
-           "DEFAULT_HUMAN_CLASS"]
+           "DEFAULT_HUMAN_CLASS", "step_entry", "table_header", "table_row"]
 
 log = logging.getLogger("foresight.scenario")
 
@@ -166,6 +166,43 @@ class RunRecorder:
             return list(self.plans), list(self.states), self.final_occupancy, dict(self.posteriors)
 
 
+def step_entry(plan: Plan, t0: float) -> dict[str, Any]:
+    """One row of the run's table (and of ``--json``'s ``steps``) for ``plan``.
+
+    Args:
+        plan: The plan.
+        t0: Start of the run on the plans' clock (0 in lock-step; the executor's first state in real time).
+
+    Returns:
+        ``step`` (the planner's step), ``tick`` (-1 in real time), ``t_s`` (seconds into the run the
+        plan was made), ``chosen``, ``planning_ms``, ``occupancy_tick``, and ``cost_total`` /
+        ``cost_human`` by goal name for the valid goals.
+    """
+    names = list(plan.goal_names)
+    return {"step": plan.step, "tick": plan.tick, "t_s": float(plan.stamp - t0), "chosen": names[plan.chosen],
+            "planning_ms": plan.planning_ms, "occupancy_tick": plan.occupancy_tick,
+            "cost_total": {n: float(c) for n, c, v in zip(names, plan.cost_total, plan.valid, strict=True) if v},
+            "cost_human": {n: float(c) for n, c, v in zip(names, plan.cost_human, plan.valid, strict=True) if v}}
+
+
+def table_header(goal_names: list[str]) -> str:
+    """The header of the run's table (one column per goal's total cost)."""
+    return (f"{'step':>4} {'t (s)':>6}  {'chosen':<12}" + "".join(f"{'cost ' + n:>16}" for n in goal_names)
+            + f"{'plan ms':>9}  human (belief)")
+
+
+def table_row(entry: dict[str, Any], goal_names: list[str], belief: str = "") -> str:
+    """One row of the run's table for a :func:`step_entry` (invalid goals: ``invalid``)."""
+    costs = "".join(f"{entry['cost_total'][n]:>16.3f}" if n in entry["cost_total"] else f"{'invalid':>16}"
+                    for n in goal_names)
+    return (f"{entry['step']:>4} {entry['t_s']:>6.2f}  {entry['chosen']:<12}{costs}{entry['planning_ms']:>9.0f}"
+            + (f"  {belief}" if belief else "")).rstrip()
+
+
+def _at(entry: dict[str, Any]) -> str:
+    return f"{entry['step']} (t = {entry['t_s']:.2f} s)"
+
+
 @dataclass
 class Summary:
     """The result of a run, as ``foresight demo`` prints it (``--json``: :meth:`to_json`)."""
@@ -180,6 +217,7 @@ class Summary:
     human_class: str
     recognised_class: str | None
     goal_names: list[str] = field(default_factory=list)
+    reached_t_s: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -187,21 +225,36 @@ class Summary:
         out = {"steps": self.steps, "chosen_goal_per_step": self.chosen_goal_per_step, "switch_step": self.switch_step,
                "interference_cost": self.interference_cost, "mcap_path": self.mcap_path, "reached": self.reached,
                "reached_step": self.reached_step, "human_class": self.human_class,
-               "recognised_class": self.recognised_class, "goal_names": self.goal_names}
+               "recognised_class": self.recognised_class, "goal_names": self.goal_names,
+               "reached_t_s": self.reached_t_s}
         out.update(self.extra)
         return out
 
-    def lines(self) -> list[str]:
-        """Human-readable table."""
+    def lines(self, table: bool = True) -> list[str]:
+        """Human-readable summary.
+
+        Args:
+            table: Start with the table of steps (False when it was printed live, row by row).
+
+        Returns:
+            The lines: the table, then the switch, the goal, the recognition, the interference cost, the log.
+        """
         names = self.goal_names
-        head = f"{'step':>4}  {'chosen':<12}" + "".join(f"{'cost ' + n:>16}" for n in names) + f"{'plan ms':>9}"
-        out = [head]
-        for s in self.steps:
-            costs = "".join(f"{s['cost_total'].get(n, float('nan')):>16.3f}" for n in names)
-            out.append(f"{s['step']:>4}  {s['chosen']:<12}{costs}{s['planning_ms']:>9.0f}")
-        out.append(f"switch step: {self.switch_step if self.switch_step is not None else 'none (never switched)'}")
-        when = f", step {self.reached_step}" if self.reached_step is not None else ""
-        out.append(f"goal reached: {'yes' + when if self.reached else 'no'}")
+        out = [table_header(names), *(table_row(s, names) for s in self.steps)] if table else []
+        by_step = {s["step"]: s for s in self.steps}
+        if self.switch_step is None:
+            out.append("switch step: none (never switched)")
+        else:
+            entry = by_step.get(self.switch_step)
+            out.append(f"switch step: {_at(entry) if entry is not None else self.switch_step}")
+        reached = "no"
+        if self.reached:
+            reached = "yes"
+            if self.reached_step is not None:
+                reached += f", during step {self.reached_step}"
+            if self.reached_t_s is not None:
+                reached += f" (t = {self.reached_t_s:.2f} s)"
+        out.append(f"goal reached: {reached}")
         out.append(f"human class: {self.human_class}; recognised at the end: {self.recognised_class}")
         out.append(f"interference cost of the executed trajectory (final prediction): {self.interference_cost:.4f}")
         out.append(f"MCAP log: {self.mcap_path}")
@@ -219,7 +272,7 @@ class Summary:
 
 def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: OccupancyGrid | None,
               posteriors: dict[int, ClassPosterior], robot: Any, human_class: str, mcap_path: str | None,
-              goal_tolerance: float = 0.02) -> Summary:
+              goal_tolerance: float = 0.02, t0: float | None = None) -> Summary:
     """Summarise a run from its messages.
 
     Args:
@@ -231,31 +284,36 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
         human_class: The true class of the observed demonstration.
         mcap_path: The run's log.
         goal_tolerance: Joint-space tolerance of "goal reached".
+        t0: Start of the run on the messages' clock (default: 0 in lock-step, the first robot state in
+            real time); the ``t_s`` of each step and ``reached_t_s`` count from it.
     """
     by_tick: dict[int, Plan] = {}
     for p in plans:
         by_tick[p.tick if p.tick >= 0 else len(by_tick)] = p
     ordered = [by_tick[t] for t in sorted(by_tick)]
-    steps, chosen = [], []
-    for p in ordered:
-        name = p.goal_names[p.chosen]
-        chosen.append(name)
-        steps.append({"step": p.step, "tick": p.tick, "chosen": name, "planning_ms": p.planning_ms,
-                      "occupancy_tick": p.occupancy_tick,
-                      "cost_total": {n: float(c) for n, c, v in zip(p.goal_names, p.cost_total, p.valid, strict=True)
-                                     if v},
-                      "cost_human": {n: float(c) for n, c, v in zip(p.goal_names, p.cost_human, p.valid, strict=True)
-                                     if v}})
+    states = sorted(states, key=lambda s: s.stamp)
+    realtime = bool(ordered) and all(p.tick < 0 for p in ordered)
+    if t0 is None:
+        t0 = (states[0].stamp if states else ordered[0].stamp) if realtime else 0.0
+    steps = [step_entry(p, t0) for p in ordered]
+    chosen = [s["chosen"] for s in steps]
     switch = None
     for i in range(1, len(chosen)):
         if chosen[i] != chosen[i - 1]:
             switch = steps[i]["step"]
-    states = sorted(states, key=lambda s: s.stamp)
     q = np.array([s.q for s in states]) if states else np.zeros((0, 0))
     stamps = np.array([s.stamp for s in states])
     cost = interference(robot, q, stamps, final_occupancy) if final_occupancy is not None and len(q) else 0.0
     reached_states = [s for s in states if s.reached]
-    reached_step = reached_states[0].tick if reached_states and reached_states[0].tick >= 0 else None
+    reached_step = reached_t = None
+    if reached_states:
+        first = reached_states[0]
+        reached_t = float(first.stamp - t0)
+        if first.tick >= 0:  # lock-step: the step during which it was reached
+            reached_step = first.tick
+        else:  # real time: the step whose plan was the newest when it was reached
+            before = [s for s in steps if s["t_s"] <= reached_t + 1e-9]
+            reached_step = before[-1]["step"] if before else None
     recognised = None
     if posteriors:
         last = posteriors[max(posteriors)]
@@ -263,4 +321,5 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     goal_names = list(ordered[-1].goal_names) if ordered else []
     return Summary(steps=steps, chosen_goal_per_step=chosen, switch_step=switch, interference_cost=cost,
                    mcap_path=mcap_path, reached=bool(reached_states), reached_step=reached_step,
-                   human_class=human_class, recognised_class=recognised, goal_names=goal_names)
+                   human_class=human_class, recognised_class=recognised, goal_names=goal_names,
+                   reached_t_s=reached_t)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import os
 import tomllib
 import types
@@ -75,9 +76,13 @@ class ZenohConfig:
                              help="endpoints to connect to (comma-separated), e.g. the router's")
     multicast_scouting: bool = opt(False, help="enable multicast scouting (off: it leaves the machine)")
     prefix: str = opt("foresight", help="key-expression prefix of every Foresight key")
+    connect_timeout_s: float = opt(60.0, help="client mode: keep retrying to reach the router this long (s, "
+                                   "bounded back-off, logged) before giving up; 0 = fail at once")
 
     def validate(self) -> None:
-        """Check endpoint syntax and the prefix."""
+        """Check endpoint syntax, the prefix and the connect timeout."""
+        if not (self.connect_timeout_s >= 0 and math.isfinite(self.connect_timeout_s)):
+            raise ConfigError(f"zenoh.connect_timeout_s: must be >= 0, got {self.connect_timeout_s}")
         for name in ("listen", "connect"):
             for ep in getattr(self, name):
                 if "/" not in ep or not ep.split("/", 1)[1]:

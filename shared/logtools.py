@@ -37,7 +37,7 @@ from shared.runtime import UserError, cli_errors
 from shared.scene import Scene, load_scene, parse_scene
 
 __all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "format_info", "StepView", "step_views",
-           "render_step", "main"]
+           "step_title", "render_step", "main"]
 
 
 @dataclass
@@ -212,13 +212,18 @@ def format_info(lf: LogFile) -> str:
 
 @dataclass
 class StepView:
-    """Everything drawn for one replanning step (decoded from the log)."""
+    """Everything drawn for one replanning step (decoded from the log).
+
+    ``t0`` is the start of the run on the messages' clock: 0 in lock-step (simulated time), the
+    first robot state's wall-clock stamp in real time; times in titles count from it.
+    """
 
     plan: Plan
     occupancy: OccupancyGrid | None
     pose: HumanPose | None
     first_pose: HumanPose | None
     state: RobotState | None
+    t0: float = 0.0
 
 
 def _decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
@@ -247,6 +252,10 @@ def step_views(lf: LogFile) -> dict[int, StepView]:
     occs = _decode_all(lf, "foresight.OccupancyGrid", OccupancyGrid)
     poses = _decode_all(lf, "foresight.HumanPose", HumanPose)
     states = _decode_all(lf, "foresight.RobotState", RobotState)
+    realtime = bool(plans) and all(p.tick < 0 for _, p in plans)
+    t0 = 0.0
+    if realtime:
+        t0 = min([s.stamp for _, s in states] or [p.stamp for _, p in plans])
     views: dict[int, StepView] = {}
     for lt, plan in plans:
         occ = _latest_before(occs, lt, lambda o, p=plan: o.tick == p.occupancy_tick and o.index == p.occupancy_index)
@@ -259,7 +268,7 @@ def step_views(lf: LogFile) -> dict[int, StepView]:
         if pose is not None:
             same = [h for _, h in poses if h.demo_id == pose.demo_id]
             first = min(same, key=lambda h: h.index) if same else pose
-        views[plan.step] = StepView(plan, occ, pose, first, _latest_before(states, lt))
+        views[plan.step] = StepView(plan, occ, pose, first, _latest_before(states, lt), t0)
     return views
 
 
@@ -313,6 +322,29 @@ def _human_geometry(view: StepView, scene: Scene) -> tuple[np.ndarray, np.ndarra
     feats = place_in_scene(view.pose.features, first, scene)
     ends, radii = HumanModel().capsules(feats)
     return np.asarray(ends), np.asarray(radii)
+
+
+def step_title(view: StepView) -> str:
+    """The two-line title of a rendered step.
+
+    Step, time (simulated in lock-step, seconds into the run in real time, never a raw epoch), choice,
+    costs and planning time; then the occupancy drawn and the robot's state.
+    """
+    plan, occ, t0 = view.plan, view.occupancy, view.t0
+    costs = ", ".join(f"{g}={c:.3g}" for g, c in zip(plan.goal_names, plan.cost_total, strict=True))
+    when = f"tick {plan.tick}, " if plan.tick >= 0 else ""
+    when += f"t = {plan.stamp - t0:.2f} s" + (" simulated" if plan.tick >= 0 else " into the run")
+    if occ is None:
+        occ_txt = "no occupancy logged"
+    elif occ.tick >= 0:
+        occ_txt = f"occupancy of tick {occ.tick} / pose {occ.index} ({occ.method})"
+    else:
+        occ_txt = f"occupancy of pose {occ.index} at t = {occ.stamp - t0:.2f} s ({occ.method})"
+    state_txt = ""
+    if view.state is not None:
+        state_txt = f"; robot {'HOLDING: ' + view.state.reason if view.state.holding else 'moving'}"
+    return (f"Replanning step {plan.step} ({when}): chosen {plan.goal_names[plan.chosen]}; cost {costs}; "
+            f"planning {plan.planning_ms:.0f} ms\n{occ_txt}{state_txt}")
 
 
 def render_step(view: StepView, scene: Scene, out: str | Path, robot: Any = None, min_probability: float = 0.05,
@@ -450,15 +482,7 @@ def render_step(view: StepView, scene: Scene, out: str | Path, robot: Any = None
     ax2.set_ylabel("y (m)")
     ax2.grid(alpha=0.3)
     ax2.legend(loc="upper left", fontsize=8, framealpha=0.85)
-    costs = ", ".join(f"{g}={c:.3g}" for g, c in zip(plan.goal_names, plan.cost_total, strict=True))
-    when = f"tick {plan.tick}" if plan.tick >= 0 else f"t={plan.stamp:.2f}"
-    occ_txt = (f"occupancy of tick {occ.tick} / pose {occ.index} ({occ.method})" if occ is not None
-               else "no occupancy logged")
-    state_txt = ""
-    if view.state is not None:
-        state_txt = f"; robot {'HOLDING: ' + view.state.reason if view.state.holding else 'moving'}"
-    fig.suptitle(f"Replanning step {plan.step} ({when}): chosen {plan.goal_names[plan.chosen]}; cost {costs}; "
-                 f"planning {plan.planning_ms:.0f} ms\n{occ_txt}{state_txt}", fontsize=11)
+    fig.suptitle(step_title(view), fontsize=11)
     fig.tight_layout()
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,8 @@ from __future__ import annotations
 import json
 import logging
 import threading
-from collections.abc import Callable, Iterator, Mapping
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
@@ -27,6 +28,7 @@ __all__ = [
     "TransportError",
     "zenoh_config",
     "open_session",
+    "open_with_retry",
     "TypedPublisher",
     "subscribe",
     "subscribe_ordered",
@@ -57,19 +59,68 @@ class TransportError(ValueError):
     """A Zenoh session could not be opened (e.g. the listen port is taken); the message says where."""
 
 
-@contextmanager
-def open_session(cfg: ZenohConfig) -> Iterator[zenoh.Session]:
-    """Open a Zenoh session for ``cfg`` and close it on exit.
+RETRY_FIRST_S = 0.25
+"""First pause before a client retries to reach its router; it doubles up to :data:`RETRY_MAX_S`."""
+RETRY_MAX_S = 4.0
 
-    Raises:
-        TransportError: If Zenoh refuses to open the session (one-line message with the endpoints).
-    """
+
+def _open(cfg: ZenohConfig) -> zenoh.Session:
     try:
-        session = zenoh.open(zenoh_config(cfg))
+        return zenoh.open(zenoh_config(cfg))
     except zenoh.ZError as exc:
         reason = str(exc).split(" at /")[0].strip()  # drop the Rust source location
         raise TransportError(f"zenoh: cannot open a {cfg.mode} session (listen {','.join(cfg.listen) or '-'}, "
                              f"connect {','.join(cfg.connect) or '-'}): {reason}") from None
+
+
+def open_with_retry(cfg: ZenohConfig, sleep: Callable[[float], None] = time.sleep) -> zenoh.Session:
+    """Open a Zenoh session; a client whose router is not there yet retries with a bounded back-off.
+
+    Zenoh refuses to open a client session when none of its ``connect`` endpoints answers (a router
+    that starts after the service). A client retries every 0.25, 0.5, 1, 2, 4, 4, ... s, logging
+    each attempt, for at most ``cfg.connect_timeout_s``. A peer opens at once (Zenoh keeps trying
+    its ``connect`` endpoints in the background); it logs a warning when none of them answered yet.
+
+    Raises:
+        TransportError: If the session cannot be opened (one line: mode, endpoints, Zenoh's reason;
+            for a client: after the retries).
+    """
+    deadline = time.monotonic() + cfg.connect_timeout_s
+    delay, attempt = RETRY_FIRST_S, 1
+    while True:
+        try:
+            session = _open(cfg)
+            break
+        except TransportError as exc:
+            left = deadline - time.monotonic()
+            if cfg.mode != "client" or not cfg.connect or left <= 0:
+                if attempt > 1:
+                    raise TransportError(f"{exc} (gave up after {attempt} attempts in "
+                                         f"{cfg.connect_timeout_s:g} s)") from None
+                raise
+            pause = min(delay, left)
+            log.warning("zenoh: router %s not reachable yet (attempt %d); retrying in %.2g s, for at most %g s in all",
+                        ",".join(cfg.connect), attempt, pause, cfg.connect_timeout_s)
+            sleep(pause)
+            delay, attempt = min(2 * delay, RETRY_MAX_S), attempt + 1
+    if attempt > 1:
+        log.info("zenoh: connected to %s after %d attempts", ",".join(cfg.connect), attempt)
+    if cfg.mode == "peer" and cfg.connect:
+        info = session.info
+        if not list(info.routers_zid()) and not list(info.peers_zid()):
+            log.warning("zenoh: %s not reachable yet; Zenoh keeps trying in the background (peer mode)",
+                        ",".join(cfg.connect))
+    return session
+
+
+@contextmanager
+def open_session(cfg: ZenohConfig) -> Iterator[zenoh.Session]:
+    """Open a Zenoh session for ``cfg`` (see :func:`open_with_retry`) and close it on exit.
+
+    Raises:
+        TransportError: If Zenoh refuses to open the session (one-line message with the endpoints).
+    """
+    session = open_with_retry(cfg)
     try:
         yield session
     finally:
@@ -238,26 +289,50 @@ class LatestSubscriber(Generic[M]):
 
 
 class Presence:
-    """Declares this service's liveliness token and logs when peer services appear or disappear."""
+    """Declares this service's liveliness token and logs when peer services appear or disappear.
+
+    Args:
+        session: Open Zenoh session.
+        keys: The run's key expressions.
+        service: This service's name (its token is ``<prefix>/alive/<service>``).
+        on_change: Called with ``(peer, appeared)`` on every change.
+        stop_with: Peers whose departure ends this service: once one of them has been seen and its
+            token disappears (it finished, or its process ended), ``stop`` is set.
+        stop: The service's stop event (needed with ``stop_with``).
+    """
 
     def __init__(self, session: zenoh.Session, keys: Keys, service: str,
-                 on_change: Callable[[str, bool], None] | None = None) -> None:
+                 on_change: Callable[[str, bool], None] | None = None, stop_with: Sequence[str] = (),
+                 stop: threading.Event | None = None) -> None:
+        if stop_with and stop is None:
+            raise ValueError("Presence: stop_with needs the stop event")
         self.service = service
         self.alive: set[str] = set()
+        self._seen: set[str] = set()
+        self._stop_with = frozenset(stop_with)
+        self._stop = stop
         self._lock = threading.Lock()
         self._on_change = on_change
         self._token = session.liveliness().declare_token(keys.alive(service))
         self._sub = session.liveliness().declare_subscriber(keys.alive_all, self._handle, history=True)
+        if self._stop_with:
+            log.info("%s: will stop when %s has come and gone", service, ", ".join(sorted(self._stop_with)))
 
     def _handle(self, sample: zenoh.Sample) -> None:
         peer = str(sample.key_expr).rsplit("/", 1)[-1]
         up = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
             (self.alive.add if up else self.alive.discard)(peer)
+            ended = not up and peer in self._seen
+            if up and peer in self._stop_with:
+                self._seen.add(peer)
         if peer != self.service:
             log.info("%s: peer %s %s", self.service, peer, "appeared" if up else "disappeared")
         if self._on_change is not None:
             self._on_change(peer, up)
+        if ended and self._stop is not None:
+            log.info("%s: %s has gone: stopping", self.service, peer)
+            self._stop.set()
 
     def is_alive(self, service: str) -> bool:
         """Whether ``service``'s token is currently seen."""

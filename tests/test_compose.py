@@ -1,5 +1,7 @@
 """compose.yaml and Dockerfile: schema-valid compose file, configuration that the services understand,
-no multicast scouting, and the Dockerfile installing what the Makefile installs (no Docker engine here)."""
+no multicast scouting, a stack that starts in any order, trains what models/ lacks, streams a
+demonstration the model was not trained on and ends with its executor, and the Dockerfile installing
+what the Makefile installs (no Docker engine here)."""
 
 from __future__ import annotations
 
@@ -7,6 +9,8 @@ import contextlib
 import dataclasses
 import importlib
 import io
+import math
+import os
 import re
 import shlex
 import shutil
@@ -19,7 +23,7 @@ import pytest
 from ruamel.yaml import YAML  # comes with check-jsonschema (dev extra), which this test needs anyway
 
 from shared.cli import COMMANDS
-from shared.config import ConfigError, ZenohConfig, parse_value
+from shared.config import ConfigError, ZenohConfig, parse_value, resolve_config
 
 REPO = Path(__file__).resolve().parents[1]
 COMPOSE = REPO / "compose.yaml"
@@ -31,7 +35,7 @@ SECTIONS = {
     "executor": "services.executor.core:ExecutorConfig",
     "replayer": "services.replayer.core:ReplayerConfig",
     "predictor": "services.predictor.core:PredictorConfig",
-    "planner": "services.planner.core:PlannerConfig",
+    "planner": "services.planner.service:PlannerServiceConfig",
 }
 
 
@@ -71,6 +75,130 @@ def test_services_router_volumes_and_dependencies() -> None:
         assert "./models:/app/models" in svc["volumes"] and "./runs:/app/runs" in svc["volumes"]
     assert services["predictor"]["depends_on"]["train"]["condition"] == "service_completed_successfully"
     assert set(services["executor"]["depends_on"]) >= {"router", "replayer", "predictor", "planner"}
+
+
+FORESIGHT_SERVICES = ("replayer", "predictor", "planner", "executor")
+
+
+def service_config(name: str):
+    """``(section config, zenoh config)`` of a compose service, resolved from its environment as the
+    service itself resolves it (defaults < environment)."""
+    module, cls_name = SECTIONS[name].split(":")
+    cls = getattr(importlib.import_module(module), cls_name)
+    env = {k: str(v) for k, v in compose()["services"][name]["environment"].items()}
+    return resolve_config(name, cls, None, env=env)
+
+
+def train_command() -> str:
+    cmd = compose()["services"]["train"]["command"]
+    assert cmd[:2] == ["sh", "-c"]
+    return cmd[2]
+
+
+def test_the_stack_starts_in_any_order() -> None:
+    """Nothing relies on start order: a client retries until the router listens (bounded, logged), the
+    executor waits for the other three's liveliness, and any service_healthy condition has a healthcheck."""
+    services = compose()["services"]
+    for name in FORESIGHT_SERVICES:
+        _, z = service_config(name)
+        assert z.mode == "client" and z.connect == ["tcp/router:7447"], name
+        assert z.connect_timeout_s > 0, f"{name}: a client that starts before the router listens must retry"
+    executor, _ = service_config("executor")
+    assert set(executor.wait_for) == {"replayer", "predictor", "planner"} and executor.startup_timeout_s > 0
+    for name, svc in services.items():
+        for dep, spec in (svc.get("depends_on") or {}).items():
+            if spec["condition"] == "service_healthy":
+                assert "healthcheck" in services[dep], f"{name} waits for {dep} to be healthy; it has no healthcheck"
+
+
+@pytest.fixture(scope="module")
+def trained_dir(tmp_path_factory) -> Path:
+    """A working directory where the train service's command ran with models/ holding the model only."""
+    work = tmp_path_factory.mktemp("compose-train")
+    (work / "models").mkdir()
+    bin_dir = work / "bin"
+    bin_dir.mkdir()
+    tool = bin_dir / "foresight"  # what `pip install .` puts on the image's PATH: the real CLI
+    tool.write_text(f"#!/bin/sh\nexec {shlex.quote(sys.executable)} -m shared.cli \"$@\"\n")
+    tool.chmod(0o755)
+    model = service_config("predictor")[0].model
+    (work / model).write_bytes(b"a model trained earlier")
+    return work
+
+
+def _run_train(work: Path) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PATH": f"{work / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}",
+           "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run(["sh", "-c", train_command()], cwd=work, env=env, capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_train_makes_every_file_the_services_read_and_only_what_is_missing(trained_dir) -> None:
+    library = service_config("replayer")[0].library
+    model = service_config("predictor")[0].model
+    cmd = train_command()
+    for path in (library, model):
+        assert f"test -f {path}" in cmd, f"the train service does not check for {path}"
+    # models/ has the model but not the library: the library is made, the model left alone
+    first = _run_train(trained_dir)
+    assert first.returncode == 0, first.stdout + first.stderr
+    from shared.library import load_library
+
+    assert len(load_library(trained_dir / library).demos) > 0
+    assert (trained_dir / model).read_bytes() == b"a model trained earlier"
+    assert not list((trained_dir / "models").glob("*.tmp*"))
+    # both there: nothing to do
+    stamp = (trained_dir / library).stat().st_mtime_ns
+    again = _run_train(trained_dir)
+    assert again.returncode == 0 and "wrote" not in again.stdout + again.stderr
+    assert (trained_dir / library).stat().st_mtime_ns == stamp
+
+
+def _train_invocation() -> tuple[dict[str, str], str]:
+    """The options of the train service's ``foresight train`` and the final path of its model."""
+    cmd = train_command()
+    part = next(p for p in re.split(r"&&|\|\||;|\{|\}", cmd) if shlex.split(p)[:2] == ["foresight", "train"])
+    tokens = shlex.split(part)[2:]
+    opts = {tokens[i]: tokens[i + 1] for i in range(len(tokens) - 1) if tokens[i].startswith("--")
+            and not tokens[i + 1].startswith("--")}
+    renames = dict(re.findall(r"\bmv\s+([^\s;&|{}]+)\s+([^\s;&|{}]+)", cmd))
+    return opts, renames.get(opts["--out"], opts["--out"])
+
+
+def test_the_streamed_demonstration_is_held_out_of_the_model(trained_dir) -> None:
+    from services.replayer.core import select_demos
+    from shared.library import heldout_split, load_library
+
+    replayer, _ = service_config("replayer")
+    predictor, _ = service_config("predictor")
+    executor, _ = service_config("executor")
+    opts, model_path = _train_invocation()
+    assert opts["--library"] == str(replayer.library) and model_path == str(predictor.model)
+    assert int(opts["--heldout"]) > 0
+    _run_train(trained_dir)  # the library (the model is there already)
+    lib = load_library(trained_dir / replayer.library)
+    streamed = select_demos(lib, replayer)[: replayer.max_demos or None]
+    # what `foresight train --heldout N --seed S` trains on (services/predictor/train.py)
+    training = heldout_split(lib, int(opts["--heldout"]), int(opts.get("--seed", "0")))[0]
+    assert streamed
+    assert not {(d.label, d.index) for d in streamed} & {(d.label, d.index) for d in training}
+    # the scenario of `make demo`: a red-cup reach that lasts the executor's steps
+    assert [d.class_name for d in streamed] == ["red_cup"]
+    assert math.ceil(streamed[0].n_samples / replayer.samples_per_tick) >= executor.steps
+
+
+def test_the_run_ends_cleanly_with_its_executor() -> None:
+    services = compose()["services"]
+    executor, _ = service_config("executor")
+    assert executor.steps > 0 and services["executor"].get("restart", "no") == "no"
+    assert services["train"].get("restart", "no") == "no"
+    for name in ("replayer", "predictor", "planner"):
+        cfg, _ = service_config(name)
+        assert "executor" in cfg.stop_with, f"{name} would run on after the executor ends"
+        assert services[name].get("restart", "no") == "no", f"{name} would be restarted after it ends"
+    # lock-step throughout: a real-time planner never answers the executor's ticks
+    assert executor.mode == "lockstep"
+    assert service_config("planner")[0].mode == service_config("replayer")[0].mode == "lockstep"
 
 
 def _env_items():

@@ -53,9 +53,9 @@ class ExecutorConfig:
     lockstep_timeout_s: float = opt(30.0, help="lockstep: longest wait (wall s) for the plan of a tick before "
                                     "going on without it")
     wait_for: list[str] = opt(default_factory=lambda: ["replayer", "predictor", "planner"],
-                              help="lockstep: services whose liveliness token to wait for (at most "
-                              "startup_timeout_s) before the first tick")
-    startup_timeout_s: float = opt(60.0, help="lockstep: longest wait (wall s) for the wait_for services")
+                              help="services whose liveliness token to wait for (at most startup_timeout_s) "
+                              "before the run starts: the first tick (lockstep) or the clock (realtime)")
+    startup_timeout_s: float = opt(60.0, help="longest wait (wall s) for the wait_for services")
     start_q: list[float] = opt(default_factory=list, help="start configuration, one value per joint in the "
                                "robot model's order (empty: the robot model's start configuration)")
     scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")

@@ -306,8 +306,11 @@ class SceneBuilder:
         lower = self.robot.lower
         return torch.as_tensor(q, dtype=lower.dtype, device=lower.device)
 
-    def robot_spheres(self, state: RobotState) -> dict[str, Any] | None:
-        """The robot's collision spheres at ``state.q`` (grey; orange while holding)."""
+    def robot_spheres(self, state: RobotState, stamp: float | None = None) -> dict[str, Any] | None:
+        """The robot's collision spheres at ``state.q`` (grey; orange while holding).
+
+        Stamped ``stamp`` (default: ``state.stamp``).
+        """
         if self.robot is None:
             return None
         q = self._to_robot_order(state.q, state.joint_names)
@@ -318,20 +321,23 @@ class SceneBuilder:
         rgba = (1.0, 0.6, 0.1, 0.8) if state.holding else (0.75, 0.75, 0.8, 0.8)
         spheres = [{"pose": _pose_at(c), "size": _v([2 * r] * 3), "color": _c(rgba)} for c, r in zip(centers, radii,
                                                                                                          strict=True)]
-        return _update(_entity("robot/spheres", state.stamp, spheres=spheres))
+        return _update(_entity("robot/spheres", state.stamp if stamp is None else stamp, spheres=spheres))
 
-    def end_effector_transform(self, state: RobotState) -> dict[str, Any] | None:
-        """FrameTransforms world -> end_effector at ``state.q``."""
+    def end_effector_transform(self, state: RobotState, stamp: float | None = None) -> dict[str, Any] | None:
+        """FrameTransforms world -> end_effector at ``state.q``, stamped ``stamp`` (default: ``state.stamp``)."""
         if self.robot is None:
             return None
         q = self._to_robot_order(state.q, state.joint_names)
         if q is None:
             return None
         t = self.robot.end_effector(self._torch(q)).detach().cpu().numpy().astype(np.float64)
-        return {"transforms": [self._tf(state.stamp, WORLD_FRAME, "end_effector", t)]}
+        return {"transforms": [self._tf(state.stamp if stamp is None else stamp, WORLD_FRAME, "end_effector", t)]}
 
-    def plan_paths(self, plan: Plan) -> dict[str, Any] | None:
-        """The K candidate end-effector paths; the chosen one thick and green, invalid ones grey."""
+    def plan_paths(self, plan: Plan, stamp: float | None = None) -> dict[str, Any] | None:
+        """The K candidate end-effector paths; the chosen one thick and green, invalid ones grey.
+
+        Stamped ``stamp`` (default: ``plan.stamp``).
+        """
         if self.robot is None:
             return None
         q = self._to_robot_order(plan.trajectories.astype(np.float64), plan.joint_names)
@@ -347,12 +353,15 @@ class SceneBuilder:
             else:
                 rgba, width = (*goal_rgb(plan.goal_names[k], k), 0.8), 0.006
             lines.append(_line(ee[k], rgba, width))
-        return _update(_entity("plan/paths", plan.stamp, lines=lines))
+        return _update(_entity("plan/paths", plan.stamp if stamp is None else stamp, lines=lines))
 
     # -- occupancy -------------------------------------------------------------------------------
 
-    def occupancy_cubes(self, occ: OccupancyGrid) -> dict[str, Any]:
-        """Occupied voxels (p >= min_probability, at most max_voxels) as cubes coloured by probability."""
+    def occupancy_cubes(self, occ: OccupancyGrid, stamp: float | None = None) -> dict[str, Any]:
+        """Occupied voxels (p >= min_probability, at most max_voxels) as cubes coloured by probability.
+
+        Stamped ``stamp`` (default: ``occ.stamp``).
+        """
         p = occ.values.astype(np.float64) / 255.0
         keep = np.flatnonzero(p >= self.min_probability)
         if keep.size > self.max_voxels:
@@ -364,12 +373,15 @@ class SceneBuilder:
         size = _v([occ.resolution] * 3)
         cubes = [{"pose": _pose_at(c), "size": size, "color": _c(tuple(col))} for c, col in zip(centers, colors,
                                                                                                  strict=True)]
-        return _update(_entity("occupancy", occ.stamp, cubes=cubes))
+        return _update(_entity("occupancy", occ.stamp if stamp is None else stamp, cubes=cubes))
 
     # -- human -----------------------------------------------------------------------------------
 
-    def human_body(self, pose: HumanPose) -> dict[str, Any] | None:
-        """The human's body capsules' axes as line segments, in the scene frame."""
+    def human_body(self, pose: HumanPose, stamp: float | None = None) -> dict[str, Any] | None:
+        """The human's body capsules' axes as line segments, in the scene frame.
+
+        Stamped ``stamp`` (default: ``pose.stamp``).
+        """
         if self.human is None or self.place is None:
             return None
         first = self._first_pose.setdefault(pose.demo_id, pose.features.copy())
@@ -381,4 +393,4 @@ class SceneBuilder:
         radii = np.asarray(radii, dtype=np.float64).reshape(-1)
         # one line per capsule, as thick as the limb (metres, not pixels)
         lines = [_line(seg, (0.25, 0.5, 0.95, 0.6), 2.0 * r) for seg, r in zip(ends, radii, strict=True)]
-        return _update(_entity("human/body", pose.stamp, lines=lines))
+        return _update(_entity("human/body", pose.stamp if stamp is None else stamp, lines=lines))

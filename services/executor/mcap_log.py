@@ -9,7 +9,9 @@ Layout (see docs/executor.md):
 * ``/foresight/rejected`` (JSON): one record per payload that failed to decode (key, error, size,
   the first bytes in hex), and per-key reject counts in the ``foresight.rejects`` metadata record
   written when the file is closed;
-* Foxglove channels (JSON, well-known schemas, see :mod:`services.executor.foxglove`);
+* Foxglove channels (JSON, well-known schemas, see :mod:`services.executor.foxglove`), every entity
+  and transform stamped with the record's log time (the receive time), so a log has one time base
+  for Foxglove even in lock-step, where the messages themselves carry simulated time;
 * attachment ``scene.toml`` (the scene the run used) and metadata ``foresight.run`` (the config).
 
 The file is written in chunks straight to the operating system (no user-space buffer) and the open
@@ -186,10 +188,10 @@ class McapLog:
             self._writer.add_attachment(now, now, "scene.toml", "application/toml", scene_text.encode())
         if run_metadata:
             self._writer.add_metadata("foresight.run", {k: str(v) for k, v in run_metadata.items()})
-        if builder is not None:
-            now_s = self._clock() / 1e9
-            self.write_json("/viz/scene", builder.static_scene(now_s))
-            self.write_json("/tf", builder.base_transform(now_s))
+        if builder is not None:  # stamped and logged at the same (receive-time) clock as every later update
+            now = self._clock()
+            self.write_json("/viz/scene", builder.static_scene(now / 1e9), now)
+            self.write_json("/tf", builder.base_transform(now / 1e9), now)
         self._writer.flush()
 
     # -- channels ------------------------------------------------------------------------------
@@ -280,24 +282,28 @@ class McapLog:
         return True
 
     def _visualise(self, msg: Message, log_time: int) -> None:
+        # One time base for everything Foxglove sees: the entities and transforms are stamped with the
+        # receive time (the record's log time), never with the message's own stamp, which is simulated
+        # time (seconds from 0, i.e. 1970) in lock-step runs and wall time in real time.
         b = self.builder
         assert b is not None
+        t = log_time / 1e9
         try:
             if isinstance(msg, Plan):
-                upd = b.plan_paths(msg)
+                upd = b.plan_paths(msg, stamp=t)
                 if upd is not None:
                     self.write_json("/viz/plan", upd, log_time)
             elif isinstance(msg, RobotState) and self._due("/viz/robot", msg.stamp):
-                upd = b.robot_spheres(msg)
+                upd = b.robot_spheres(msg, stamp=t)
                 if upd is not None:
                     self.write_json("/viz/robot", upd, log_time)
-                tf = b.end_effector_transform(msg)
+                tf = b.end_effector_transform(msg, stamp=t)
                 if tf is not None:
                     self.write_json("/tf", tf, log_time)
             elif isinstance(msg, OccupancyGrid) and self._due("/viz/occupancy", msg.stamp):
-                self.write_json("/viz/occupancy", b.occupancy_cubes(msg), log_time)
+                self.write_json("/viz/occupancy", b.occupancy_cubes(msg, stamp=t), log_time)
             elif isinstance(msg, HumanPose) and self._due("/viz/human", msg.stamp):
-                upd = b.human_body(msg)
+                upd = b.human_body(msg, stamp=t)
                 if upd is not None:
                     self.write_json("/viz/human", upd, log_time)
         except Exception:  # a visualisation bug must never cost the raw log

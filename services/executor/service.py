@@ -14,8 +14,9 @@ Lock-step mode (deterministic), replanning step n = 0 .. steps-1, simulated time
 4. publish ClockTick n (stamp ``t_n``, period P);
 5. wait (at most ``lockstep_timeout_s``) for the plan of tick n.
 
-Real-time mode: the arm follows the newest plan from the moment it arrives; RobotState goes out at
-``state_rate_hz`` of wall time; freshness is measured from the arrival time; no clock ticks.
+Real-time mode: after the same wait for the ``wait_for`` services, the arm follows the newest plan
+from the moment it arrives; RobotState goes out at ``state_rate_hz`` of wall time; freshness is
+measured from the arrival time; no clock ticks.
 """
 
 from __future__ import annotations
@@ -233,7 +234,7 @@ class ExecutorService:
                 if cfg.mode == "lockstep":
                     self._run_lockstep(state_pub, clock_pub, presence)
                 else:
-                    self._run_realtime(state_pub)
+                    self._run_realtime(state_pub, presence)
                 time.sleep(0.3)  # let the last messages of the run reach the logger
             finally:
                 presence.close()
@@ -267,6 +268,8 @@ class ExecutorService:
                 time.sleep(0.05)
         if missing:
             log.warning("executor: starting without %s (not seen within %.0f s)", missing, cfg.startup_timeout_s)
+        elif cfg.wait_for:
+            log.info("executor: %s present, starting the run", ", ".join(cfg.wait_for))
 
     def _run_lockstep(self, state_pub: TypedPublisher[Any], clock_pub: TypedPublisher[Any],
                       presence: Presence) -> None:
@@ -321,8 +324,9 @@ class ExecutorService:
                     self.mcap.flush_if_due()
         return False
 
-    def _run_realtime(self, state_pub: TypedPublisher[Any]) -> None:
+    def _run_realtime(self, state_pub: TypedPublisher[Any], presence: Presence) -> None:
         cfg, core = self.config, self.core
+        self._wait_for_peers(presence)  # the run's clock starts once the planner (and the rest) are there
         period = cfg.step_period_s
         h_nom = 1.0 / cfg.state_rate_hz
         end = cfg.steps * period if cfg.steps else float("inf")

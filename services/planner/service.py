@@ -54,6 +54,8 @@ class PlannerServiceConfig(PlannerConfig):
     period_s: float = opt(0.5, help="real-time replanning period (s)")
     input_timeout_s: float = opt(10.0, help="lock-step: longest wait for a tick's robot state / occupancy (s)")
     scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")
+    stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
+                               "disappears after it was seen (comma-separated; how a compose run ends)")
     log_level: str = opt("INFO", help="log level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
     def validate(self) -> None:
@@ -223,7 +225,8 @@ class PlannerService:
                 subscribe(session, self.keys.occupancy, OccupancyGrid, inbox.add_occupancy, self.rejects),
                 subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects),
                 subscribe(session, self.keys.demo, DemoMarker, inbox.add_marker, self.rejects)]
-        presence = Presence(session, self.keys, "planner")  # announce only once subscribed
+        presence = Presence(session, self.keys, "planner",  # announce only once subscribed
+                            stop_with=self.config.stop_with, stop=stop)
         try:
             while not stop.is_set():
                 try:
@@ -259,7 +262,7 @@ class PlannerService:
                 log.info("planner: demonstration %d starts", msg.demo_id)
 
         demo_sub = subscribe(session, self.keys.demo, DemoMarker, on_demo, self.rejects)
-        presence = Presence(session, self.keys, "planner")
+        presence = Presence(session, self.keys, "planner", stop_with=self.config.stop_with, stop=stop)
         try:
             next_t = time.monotonic()
             while not stop.is_set():

@@ -50,6 +50,8 @@ class PredictorConfig:
                       choices=METHODS)
     temperature: float = opt(0.0, help="posterior temperature tau: p(C_m|xi) = softmax(ln p(xi|C_m) / tau); "
                              "1 = the paper's; 0 = the model file's (set by `foresight train --temperature`)")
+    stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
+                               "disappears after it was seen (comma-separated; how a compose run ends)")
     log_level: str = opt("INFO", help="logging level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
     def validate(self) -> None:

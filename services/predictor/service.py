@@ -102,7 +102,7 @@ class PredictorService:
             self._occ_pub = TypedPublisher(session, self.keys.occupancy)
             types = {self.keys.pose: HumanPose, self.keys.demo: DemoMarker}
             sub = subscribe_ordered(session, self.keys.human_all, types, self._on_message, self.rejects)
-            presence = Presence(session, self.keys, "predictor")
+            presence = Presence(session, self.keys, "predictor", stop_with=self.config.stop_with, stop=stop)
             log.info("predictor: model %s (%d classes, grid %s at %g m, features %s), method %s, scene %s, session %s",
                      self.config.model, self.model.n_classes, self.model.grid.dims, self.model.grid.resolution,
                      self.model.feature_variant, self.config.method, self.scene.name, describe(session)["zid"])

@@ -66,7 +66,7 @@ class ReplayerService:
             ticks: queue.Queue[ClockTick] = queue.Queue()
             clock_sub = (subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects)
                          if cfg.mode == "lockstep" else None)
-            presence = Presence(session, self.keys, "replayer")
+            presence = Presence(session, self.keys, "replayer", stop_with=cfg.stop_with, stop=stop)
             total = core.total_poses
             log.info("replayer: %d demonstrations selected from %s (%s poses), mode %s, session %s",
                      len(self.demos), self.library.source, "endless" if total is None else total, cfg.mode,

@@ -11,6 +11,7 @@ import pytest
 from mcap.reader import make_reader
 
 from services.demo import main
+from services.scenario import table_header
 from shared.library import save_library
 from shared.synthetic import generate_library
 
@@ -35,6 +36,16 @@ def test_demo_multiprocess_json(tmp_path: Path) -> None:
     assert "foresight/planner/plan" in topics and "foresight/robot/state" in topics and n > 0
     for name in ("predictor", "planner", "replayer", "executor"):
         assert (tmp_path / "run" / f"{name}.log").is_file()
+    # the live progress (stderr with --json): the run's length, then one table with a header and a row
+    # per step, in order, agreeing with the summary
+    progress = proc.stderr.splitlines()
+    assert any("lockstep mode, 5 steps of 0.2 s" in ln for ln in progress)
+    header = table_header(summary["goal_names"])
+    assert progress.count(header) == 1
+    rows = progress[progress.index(header) + 1:][:5]
+    assert [r.split()[0] for r in rows] == ["0", "1", "2", "3", "4"]
+    assert [r.split()[2] for r in rows] == summary["chosen_goal_per_step"]
+    assert [float(r.split()[1]) for r in rows] == pytest.approx([0.0, 0.2, 0.4, 0.6, 0.8])
 
 
 def test_demo_bad_input_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from services.scenario import Summary, choose_demonstration, summarise
+from services.scenario import Summary, choose_demonstration, summarise, table_header
 from shared.protocol import OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.synthetic import generate_library
@@ -30,8 +30,9 @@ def _grid(p: float) -> OccupancyGrid:
                                     method="prediction")
 
 
-def _plan(tick: int, chosen: int, costs: list[float]) -> Plan:
-    return Plan(stamp=0.0, tick=tick, step=tick, goal_names=["blue_cup", "red_cup"], joint_names=["a", "b", "c"],
+def _plan(tick: int, chosen: int, costs: list[float], stamp: float | None = None, step: int | None = None) -> Plan:
+    return Plan(stamp=0.2 * tick if stamp is None else stamp, tick=tick, step=tick if step is None else step,
+                goal_names=["blue_cup", "red_cup"], joint_names=["a", "b", "c"],
                 dt=0.1, chosen=chosen, planning_ms=10.0, occupancy_tick=tick - 1, occupancy_index=0,
                 trajectories=np.zeros((2, 3, 3), np.float32), cost_smoothness=np.zeros(2), cost_obstacle=np.zeros(2),
                 cost_human=np.zeros(2), cost_total=np.array(costs), valid=np.ones(2, bool))
@@ -58,5 +59,32 @@ def test_summary_switch_step_and_comparison_table():
     assert s.to_json()["switch_step"] == 2
     s.extra["comparison"] = [{"planner": "prediction", "interference_cost": 0.1, "switch_step": 2, "reached_step": 3}]
     text = "\n".join(s.lines())
-    assert "switch step: 2" in text and "prediction" in text and "Table I" in text
+    assert "switch step: 2 (t = 0.40 s)" in text and "prediction" in text and "Table I" in text
+    assert "goal reached: yes, during step 3 (t = 0.30 s)" in text
     assert isinstance(s, Summary)
+
+
+def test_summary_has_one_table_with_a_header_and_a_row_per_step():
+    plans = [_plan(t, 0, [1.0, 2.0]) for t in range(4)]
+    s = summarise(plans, [], None, {}, PointRobot(), "red_cup", None)
+    lines = s.lines()
+    header = table_header(["blue_cup", "red_cup"])
+    assert lines[0] == header and lines.count(header) == 1
+    rows = lines[1:5]
+    assert [r.split()[:3] for r in rows] == [[str(t), f"{0.2 * t:.2f}", "blue_cup"] for t in range(4)]
+    assert not any(ln.startswith(("step", "   0")) for ln in s.lines(table=False))  # table left out: printed live
+
+
+def test_realtime_summary_counts_time_from_the_run_start_and_names_the_step_of_the_goal():
+    """Real time: messages carry wall-clock stamps and tick -1; t counts from the executor's first state
+    and the goal is reached during the step whose plan was the newest at that moment."""
+    t0 = 1_700_000_000.0
+    plans = [_plan(-1, 0, [1.0, 2.0], stamp=t0 + 0.05 + 0.2 * k, step=k) for k in range(5)]
+    states = [RobotState(stamp=t0 + 0.02 * i, tick=-1, joint_names=["a", "b", "c"], goal=0, reached=i >= 33,
+                         holding=False, reason="", q=np.full(3, 0.15), qd=np.zeros(3)) for i in range(50)]
+    s = summarise(plans, states, None, {}, PointRobot(), "red_cup", None)
+    assert [round(e["t_s"], 2) for e in s.steps] == [0.05, 0.25, 0.45, 0.65, 0.85]
+    assert s.reached and s.reached_t_s == pytest.approx(0.66) and s.reached_step == 3
+    assert "goal reached: yes, during step 3 (t = 0.66 s)" in s.lines()
+    assert s.to_json()["reached_t_s"] == pytest.approx(0.66)
+    assert all(str(int(t0)) not in ln for ln in s.lines())  # no raw epoch anywhere

@@ -22,6 +22,7 @@ from shared.transport import (
     TransportError,
     TypedPublisher,
     open_session,
+    open_with_retry,
     subscribe,
     subscribe_ordered,
     zenoh_config,
@@ -141,6 +142,70 @@ def test_presence_sees_peers_come_and_go(zenoh_hub):
         assert ("replayer", True) in changes and ("replayer", False) in changes
         assert watcher.is_alive("executor")
         watcher.close()
+
+
+def test_presence_stop_with_ends_a_service_when_that_peer_has_come_and_gone(zenoh_hub):
+    a = zenoh_hub()
+    keys = Keys("t6")
+    stop = threading.Event()
+    with open_session(a) as sa:
+        watcher = Presence(sa, keys, "planner", stop_with=["executor"], stop=stop)
+        with open_session(zenoh_hub()) as sb:
+            other = Presence(sb, keys, "replayer")  # a peer not in stop_with comes and goes: no effect
+            assert wait_until(lambda: watcher.is_alive("replayer"))
+            other.close()
+            assert wait_until(lambda: not watcher.is_alive("replayer"))
+            assert not stop.is_set()
+            executor = Presence(sb, keys, "executor")
+            assert wait_until(lambda: watcher.is_alive("executor"))
+            assert not stop.is_set()
+            executor.close()
+            assert stop.wait(10.0)
+        watcher.close()
+    with pytest.raises(ValueError, match="stop event"):
+        Presence(None, keys, "planner", stop_with=["executor"])  # type: ignore[arg-type]
+
+
+def test_client_retries_until_its_router_listens(caplog):
+    """A client started before its router retries with a growing pause, logging each attempt."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router_cfg = ZenohConfig(mode="router", listen=[endpoint], connect=[])
+    routers = []
+    pauses: list[float] = []
+
+    def sleep(seconds: float) -> None:  # the router comes up during the second pause
+        pauses.append(seconds)
+        if len(pauses) == 2:
+            routers.append(open_with_retry(router_cfg))
+        time.sleep(seconds)
+
+    client = ZenohConfig(mode="client", listen=[], connect=[endpoint], connect_timeout_s=30.0)
+    try:
+        with caplog.at_level("INFO", logger="shared.transport"):
+            session = open_with_retry(client, sleep=sleep)
+        try:
+            assert session.info is not None and list(session.info.routers_zid())
+        finally:
+            session.close()
+    finally:
+        for r in routers:
+            r.close()
+    assert pauses[:2] == [0.25, 0.5]
+    warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert len(warnings) == len(pauses) and f"router {endpoint} not reachable yet (attempt 1)" in warnings[0]
+    assert any("connected to" in r.getMessage() for r in caplog.records)
+
+
+def test_client_gives_up_after_connect_timeout():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    client = ZenohConfig(mode="client", listen=[], connect=[endpoint], connect_timeout_s=0.5)
+    with pytest.raises(TransportError, match=r"^zenoh: cannot open a client session .*gave up after \d+ attempts in "
+                                             r"0\.5 s\)$"):
+        with open_session(client):
+            pass
+    once = ZenohConfig(mode="client", listen=[], connect=[endpoint], connect_timeout_s=0.0)
+    with pytest.raises(TransportError, match=r"Unable to connect"):
+        open_with_retry(once, sleep=lambda s: pytest.fail("no retry with connect_timeout_s = 0"))
 
 
 def test_open_session_error_is_one_line(zenoh_hub):

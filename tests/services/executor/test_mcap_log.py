@@ -21,7 +21,7 @@ from services.executor.mcap_log import McapLog, message_json_schema
 from shared.logtools import read_log
 from shared.protocol import MESSAGE_TYPES, ClockTick, HumanPose, Keys, RobotState, encode
 
-from .conftest import SCENE, blob, goals_for, straight_plan
+from .conftest import SCENE, blob, foxglove_stamps, goals_for, straight_plan
 
 REPO = Path(__file__).resolve().parents[3]
 KEYS = Keys()
@@ -105,6 +105,27 @@ def test_every_channel_is_written_with_its_schema_and_decodes(tmp_path, pr2) -> 
     assert {x["child_frame_id"] for t in tf for x in t["transforms"]} == {"robot_base", "end_effector"}
 
 
+def test_foxglove_channels_are_stamped_on_the_log_clock_not_the_simulated_one(tmp_path, pr2) -> None:
+    """Lock-step messages carry simulated time (0 s, i.e. 1970); every Foxglove entity and transform,
+    the static scene and world -> robot_base included, is stamped with the record's log time."""
+    from shared.human import HumanModel, place_in_scene
+
+    ticks = iter(range(10**6))
+    clock = lambda: 1_700_000_000_000_000_000 + 1_000_000 * next(ticks)  # noqa: E731 - 1 ms per call
+    path = tmp_path / "a.mcap"
+    log = McapLog(path, KEYS, SceneBuilder(SCENE, pr2, HumanModel(), place_in_scene), clock=clock)
+    for key, data in sample_messages(pr2):  # every stamp is 0.0
+        assert log.on_sample(key, data) is not None
+    log.close()
+    stamps = foxglove_stamps(read_log(path, keep=lambda ch: True))
+    assert {(t, i) for t, i, *_ in stamps} == {
+        ("/viz/scene", "obstacles"), *(("/viz/scene", f"cup/{c.name}") for c in SCENE.cups),
+        ("/tf", "robot_base"), ("/tf", "end_effector"), ("/viz/robot", "robot/spheres"),
+        ("/viz/occupancy", "occupancy"), ("/viz/plan", "plan/paths"), ("/viz/human", "human/body")}
+    for topic, ident, ns, log_time, publish_time in stamps:
+        assert abs(ns - log_time) < 1000 and publish_time == log_time, (topic, ident, ns, log_time)
+
+
 WRITER = textwrap.dedent("""
     import sys, time
     import numpy as np
@@ -156,7 +177,7 @@ def _free_port() -> int:
 def test_executor_finalises_its_log_on_signals(tmp_path, sig) -> None:
     path = tmp_path / "svc.mcap"
     cmd = [sys.executable, "-m", "services.executor", "--mode", "realtime", "--steps", "0", "--mcap", str(path),
-           "--listen", f"tcp/127.0.0.1:{_free_port()}", "--connect", "", "--state-rate-hz", "20"]
+           "--listen", f"tcp/127.0.0.1:{_free_port()}", "--connect", "", "--state-rate-hz", "20", "--wait-for", ""]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 30

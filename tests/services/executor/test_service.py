@@ -14,9 +14,9 @@ from services.executor.core import ExecutorConfig
 from services.executor.service import ExecutorService
 from shared.logtools import read_log
 from shared.protocol import Keys, RobotState, decode
-from shared.transport import open_session
+from shared.transport import Presence, open_session
 
-from .conftest import SCENE, FakeSystem, new_hub
+from .conftest import SCENE, FakeSystem, foxglove_stamps, new_hub
 
 
 def lockstep_config(tmp_path, **kw) -> ExecutorConfig:
@@ -55,6 +55,25 @@ def test_lockstep_ticks_plans_and_goal(zenoh_hub, pr2, tmp_path) -> None:
     assert np.allclose(fake.plans[0].trajectories[0, 0], result.q[5], atol=1e-6)
     goal = fake.plans[-1].trajectories[0, -1]
     assert np.max(np.abs(result.q[-1] - goal)) <= cfg.goal_tolerance
+
+
+def test_lockstep_mcap_has_one_time_base_for_foxglove(zenoh_hub, pr2, tmp_path) -> None:
+    """The robot states and plans of a lock-step run carry simulated time (from 0 s); the Foxglove
+    entities and transforms written for them, and the static scene, are all on the log's clock."""
+    cfg = lockstep_config(tmp_path, steps=4)
+    run_lockstep(zenoh_hub, pr2, cfg)
+    lf = read_log(cfg.mcap, keep=lambda ch: True)
+    keys = Keys()
+    sim = [decode(m.data).stamp for m in lf.topic_messages(keys.robot_state) + lf.topic_messages(keys.plan)]
+    assert sim and max(sim) <= 4 * 0.2 + 1e-9
+    stamps = foxglove_stamps(lf)
+    kinds = {(topic, ident) for topic, ident, *_ in stamps}
+    assert {("/tf", "robot_base"), ("/tf", "end_effector"), ("/viz/scene", "obstacles"),
+            ("/viz/robot", "robot/spheres"), ("/viz/plan", "plan/paths"), ("/viz/occupancy", "occupancy")} <= kinds
+    first = min(m.log_time for m in lf.messages)
+    last = max(m.log_time for m in lf.messages)
+    for topic, ident, ns, log_time, publish_time in stamps:
+        assert first <= log_time <= last and abs(ns - log_time) < 1000 and publish_time == log_time, (topic, ident)
 
 
 def test_lockstep_is_deterministic(zenoh_hub, pr2, tmp_path) -> None:
@@ -116,9 +135,37 @@ def test_mcap_has_every_channel_decodable_with_schemas(zenoh_hub, pr2, tmp_path)
     assert b"pr2_two_cups" in lf.attachments["scene.toml"]
 
 
+def test_realtime_run_starts_its_clock_once_the_wait_for_services_are_there(zenoh_hub, pr2) -> None:
+    exec_z = zenoh_hub()
+    cfg = ExecutorConfig(mode="realtime", steps=0, state_rate_hz=50.0, mcap="none", wait_for=["planner"])
+    service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
+    states: list[RobotState] = []
+    keys = Keys(exec_z.prefix)
+    with open_session(zenoh_hub()) as watch:
+        sub = watch.declare_subscriber(keys.robot_state,
+                                       lambda s: states.append(decode(s.payload.to_bytes(), RobotState)))
+        t = threading.Thread(target=service.run)
+        t.start()
+        try:
+            time.sleep(1.5)
+            assert not states  # no planner yet: the run has not started
+            planner = Presence(watch, keys, "planner")
+            deadline = time.monotonic() + 20
+            while len(states) < 5 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert len(states) >= 5 and states[0].tick == -1
+            planner.close()
+        finally:
+            service.stop.set()
+            t.join(timeout=10)
+            sub.undeclare()
+    assert not t.is_alive()
+
+
 def test_realtime_holds_when_predictor_stops_and_resumes(zenoh_hub, pr2, tmp_path) -> None:
     exec_z = zenoh_hub()
-    cfg = ExecutorConfig(mode="realtime", steps=0, state_rate_hz=50.0, stale_limit_s=0.3, mcap="none")
+    cfg = ExecutorConfig(mode="realtime", steps=0, state_rate_hz=50.0, stale_limit_s=0.3, mcap="none",
+                         wait_for=["predictor", "planner"])
     fake = FakeSystem(zenoh_hub(), waypoints=200)
     service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
     states: list[RobotState] = []

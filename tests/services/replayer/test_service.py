@@ -93,6 +93,29 @@ def test_realtime_every_pose_in_order(zenoh_hub, small_lib):
     assert [(d.label, d.index) for d in service.demos] == [(0, 1), (0, 2), (2, 1), (2, 2)]
 
 
+def test_lockstep_replayer_stops_with_the_executor(zenoh_hub, small_lib):
+    """``stop_with=[executor]``: the run's master ends before the demonstrations do; the replayer ends too."""
+    sub_cfg, rep_cfg = zenoh_hub(), zenoh_hub()
+    keys = Keys(sub_cfg.prefix)
+    service = ReplayerService(ReplayerConfig(mode="lockstep", stop_with=["executor"]), rep_cfg, small_lib)
+    stop = threading.Event()
+    with open_session(sub_cfg) as session:
+        presence = Presence(session, keys, "executor")
+        th = run_in_thread(service, stop)
+        deadline = time.monotonic() + 10
+        while not presence.is_alive("replayer"):
+            assert time.monotonic() < deadline, "replayer never appeared"
+            time.sleep(0.01)
+        TypedPublisher(session, keys.clock).put(ClockTick(stamp=0.0, tick=0, period=0.2))
+        presence.close()  # the executor is done after one tick
+        th.join(timeout=10.0)
+        alive = th.is_alive()
+        ended_by_presence = stop.is_set()
+        stop.set()
+    assert not alive and ended_by_presence
+    assert not service.stats.finished  # ended by the executor's departure, not by the end of the stream
+
+
 def test_lockstep_driven_by_clock_ticks(zenoh_hub, small_lib):
     sub_cfg, rep_cfg = zenoh_hub(), zenoh_hub()
     keys = Keys(sub_cfg.prefix)
