@@ -41,6 +41,8 @@ def _common(p: argparse.ArgumentParser, scene: str) -> None:
     p.add_argument("--robot-speed", type=float, default=Timing.robot_speed, help="fraction of the PR2's joint "
                    "velocity limits (default: 0.25)")
     p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20, the paper's)")
+    p.add_argument("--w-human", type=float, default=-1.0, help="weight of the planner's human cost (negative: the "
+                   "planner's default, 1); for ablations")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
     p.add_argument("--no-compile", action="store_true", help="evaluate the planner's cost eagerly (no "
@@ -123,7 +125,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             (lambda line: print(line, flush=True))
         timing = _timing(args)
         common = {"library": str(args.library), "scene": args.scene, "timing": timing,
-                  "components": args.components, "models_dir": args.models_dir, "work_dir": args.work_dir}
+                  "components": args.components, "models_dir": args.models_dir, "work_dir": args.work_dir,
+                  "w_human": args.w_human}
         if args.what == "interference":
             res = run_interference(InterferenceConfig(robot_cup=args.robot_cup, human_cup=args.human_cup,
                                                       demos=args.demos, seeds=args.seeds, **common),

@@ -52,6 +52,7 @@ class InterferenceConfig:
     seeds: int = 10
     timing: Timing = Timing()
     components: int | None = None
+    w_human: float = -1.0
     selection_seed: int = 0
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
@@ -155,7 +156,8 @@ class InterferenceResult:
         out.update(library=self.library, scene=self.config.scene, human_class=self.human.name,
                    human_class_distance_m=self.human.distance, demos=self.demos, seeds=self.config.seeds,
                    robot_cup=self.config.robot_cup, human_cup=self.config.human_cup,
-                   timing=dataclasses.asdict(self.config.timing), runs=[dataclasses.asdict(r) for r in self.runs])
+                   timing=dataclasses.asdict(self.config.timing), w_human=self.config.w_human,
+                   runs=[dataclasses.asdict(r) for r in self.runs])
         return out
 
     def lines(self) -> list[str]:
@@ -206,7 +208,7 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
              f"class {human.name} (mean reach {human.distance:.3f} m from the cup), demonstrations "
              f"{[d.index for d in demos]} held out")
     model = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components).without(demos)
-    planners = {flag: build_planner(scene, [cfg.robot_cup], flag, cfg.timing, compile=compile)
+    planners = {flag: build_planner(scene, [cfg.robot_cup], flag, cfg.timing, compile=compile, w_human=cfg.w_human)
                 for flag in (False, True)}
     result = InterferenceResult(cfg, lib.source, human, [d.index for d in demos])
     total, done = len(demos) * cfg.seeds * len(VARIANTS), 0

@@ -56,8 +56,18 @@ class Timing:
 
 
 def build_planner(scene: Scene, goals: list[str], human_cost: bool, timing: Timing, compile: bool = True,
-                  device: str = "cpu") -> Planner:
-    """A lock-step planner for ``goals`` (cup names) of ``scene``; ``human_cost=False``: basic STOMP."""
+                  device: str = "cpu", w_human: float = -1.0) -> Planner:
+    """A lock-step planner for ``goals`` (cup names) of ``scene``.
+
+    Args:
+        scene: The scene.
+        goals: Cup names, the robot's tasks.
+        human_cost: False: basic STOMP (no human cost).
+        timing: Iterations and robot speed.
+        compile: torch.compile the fused cost.
+        device: torch device.
+        w_human: Weight of the human cost when ``human_cost`` (negative: the planner's default).
+    """
     cfg = PlannerConfig(goals=list(goals), iterations=timing.iterations, velocity_scale=timing.robot_speed,
-                        lookahead_s=0.0, w_human=-1.0 if human_cost else 0.0, compile=compile, device=device)
+                        lookahead_s=0.0, w_human=w_human if human_cost else 0.0, compile=compile, device=device)
     return Planner(scene, cfg)
