@@ -32,6 +32,7 @@ import numpy as np
 from services.processes import ServiceProcess, free_port
 from services.scenario import RunRecorder, Summary, choose_demonstration, interference_cost, model_for, summarise
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, resolve_config
+from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, Keys, Message, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError, cli_errors, setup_logging, stop_on_signals
@@ -92,7 +93,10 @@ def _library(cfg: DemoConfig) -> MotionLibrary:
         from shared.synthetic import generate_library
 
         return generate_library(seed=0)
-    return load_library(cfg.library)
+    lib = load_library(cfg.library)
+    require_mapping(lib.feature_names, "foresight demo (HumanPose messages, occupancy)",
+                    f"library {lib.source}", exact=LIVE_MAPPING)
+    return lib
 
 
 def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Path, samples_per_tick: int,

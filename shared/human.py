@@ -463,6 +463,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m shared.human") ->
     """
     import argparse
 
+    from shared.feature_sets import require_mapping
     from shared.library import load_library
     from shared.runtime import cli_errors
     from shared.scene import load_scene
@@ -474,8 +475,9 @@ def main(argv: list[str] | None = None, prog: str = "python -m shared.human") ->
     args = parser.parse_args(argv)
     with cli_errors(prog):
         lib = load_library(args.library)
+        mapping = require_mapping(lib.feature_names, prog, f"library {lib.source}")
         scene = load_scene(args.scene)
-        reach, index = reach_points(HumanModel(), [d.features for d in lib.demos], scene)
+        reach, index = reach_points(HumanModel(), [mapping.to_human(d.features) for d in lib.demos], scene)
         labels = np.array([d.label for d in lib.demos])
         for m, name in enumerate(lib.class_names):
             r = reach[labels == m]
