@@ -35,7 +35,7 @@ from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, r
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, Keys, Message, OccupancyGrid, Plan, RobotState
-from shared.runtime import UserError, cli_errors, setup_logging, stop_on_signals
+from shared.runtime import UserError, cli_errors, help_text, setup_logging, stop_on_signals
 from shared.scene import load_scene
 from shared.transport import Presence, open_session, subscribe
 
@@ -254,7 +254,7 @@ def _run_once(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None]
 
 def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
     """Run the demo; returns 0 when the run completed."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
+    parser = argparse.ArgumentParser(prog=prog, description=help_text(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_arguments(parser, "demo", DemoConfig, with_zenoh=False)
     args = parser.parse_args(argv)

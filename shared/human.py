@@ -465,10 +465,10 @@ def main(argv: list[str] | None = None, prog: str = "python -m shared.human") ->
 
     from shared.feature_sets import require_mapping
     from shared.library import load_library
-    from shared.runtime import cli_errors
+    from shared.runtime import cli_errors, help_text
     from shared.scene import load_scene
 
-    parser = argparse.ArgumentParser(prog=prog, description=main.__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog=prog, description=help_text(main.__doc__.splitlines()[0]))
     parser.add_argument("library", help="a directory of compound_*.csv or a .npz library")
     parser.add_argument("--scene", default=None, help="scene file or embedded name (default pr2_two_cups)")
     parser.add_argument("--out", default="runs/plots/human_goals.png", help="output PNG")
