@@ -1,12 +1,23 @@
 # Foresight: two commands on a fresh machine with Python 3.11+.
 #   make demo   set up .venv (if missing) and run the whole system with embedded defaults
 #   make test   set up .venv (if missing) and run the test suite
+#
+# Which torch build `make setup` installs (only when .venv has no torch yet):
+#   TORCH_VERSION  the pinned version (default 2.13.0)
+#   TORCH_INDEX    the package index torch comes from (default: PyTorch's CPU index, a CPU-only build,
+#                  about 190 MB). A CUDA build: TORCH_INDEX=https://download.pytorch.org/whl/cu128 (any
+#                  CUDA index that has this version). TORCH_INDEX= (empty): whatever pip's own indexes
+#                  resolve (from PyPI on Linux: the CUDA build, several GB with its nvidia-* packages).
+#   If TORCH_INDEX cannot be reached, torch comes from pip's own indexes and a note says so (a machine
+#   with a local wheel mirror, like the CI's, still gets its CPU wheel that way).
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.installed
 DEMO_ARGS ?=
+TORCH_VERSION ?= 2.13.0
+TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 
 .PHONY: demo test setup lint clean
 
@@ -25,11 +36,24 @@ $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
 
-# torch first, pinned to the CPU wheel (an unpinned torch pulls a multi-GB CUDA build).
+# torch first, from TORCH_INDEX when it answers (see the top of this file), then the project.
 $(STAMP): pyproject.toml | $(VENV)/bin/python
-	$(PY) -c "import torch" 2>/dev/null || $(PIP) install "torch==2.13.0"
+	@$(PY) -c "import torch" 2>/dev/null || $(MAKE) --no-print-directory torch
 	$(PIP) install --quiet -e ".[dev]"
 	touch $(STAMP)
+
+# Probe the index first: an unreachable index would otherwise cost pip minutes of retries per package.
+.PHONY: torch
+torch: | $(VENV)/bin/python
+	@if [ -n "$(TORCH_INDEX)" ] && $(PY) -c "import sys, urllib.request; \
+	  urllib.request.urlopen(sys.argv[1].rstrip('/') + '/torch/', timeout=10)" "$(TORCH_INDEX)" 2>/dev/null; then \
+	  echo "installing torch==$(TORCH_VERSION) from $(TORCH_INDEX)"; \
+	  $(PIP) install "torch==$(TORCH_VERSION)" --index-url "$(TORCH_INDEX)"; \
+	else \
+	  [ -z "$(TORCH_INDEX)" ] || echo "note: TORCH_INDEX $(TORCH_INDEX) cannot be reached;" \
+	    "installing torch==$(TORCH_VERSION) from pip's own indexes (the build they have)"; \
+	  $(PIP) install "torch==$(TORCH_VERSION)"; \
+	fi
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache *.egg-info

@@ -45,9 +45,10 @@ from services.scenario import (
     table_row,
 )
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, resolve_config
+from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, Keys, Message, OccupancyGrid, Plan, RobotState
-from shared.runtime import UserError, cli_errors, setup_logging, stop_on_signals
+from shared.runtime import UserError, cli_errors, help_text, setup_logging, stop_on_signals
 from shared.scene import Scene, load_scene
 from shared.transport import Presence, open_session, subscribe
 
@@ -107,7 +108,10 @@ def _library(cfg: DemoConfig, scene: Scene) -> MotionLibrary:
         from shared.synthetic import generate_library
 
         return generate_library(seed=0, scene=scene)  # its cup classes reach for this scene's cups
-    return load_library(cfg.library)
+    lib = load_library(cfg.library)
+    require_mapping(lib.feature_names, "foresight demo (HumanPose messages, occupancy)",
+                    f"library {lib.source}", exact=LIVE_MAPPING)
+    return lib
 
 
 def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Path, samples_per_tick: int,
@@ -291,7 +295,7 @@ def _run_once(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None]
 
 def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
     """Run the demo; returns 0 when the run completed."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
+    parser = argparse.ArgumentParser(prog=prog, description=help_text(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_arguments(parser, "demo", DemoConfig, with_zenoh=False)
     args = parser.parse_args(argv)

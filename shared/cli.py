@@ -20,7 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "library": ("shared.library_cli", "inspect/validate/convert motion libraries"),
     "planner": ("services.planner.__main__", "plan for every goal at once around the predicted occupancy"),
     "executor": ("services.executor.__main__", "simulate the PR2 executing the plans; log the run to MCAP"),
-    "log": ("shared.logtools", "inspect (info) and draw (render) a run's MCAP log"),
+    "log": ("shared.logtools", "inspect (info), draw (render) and time (latency) a run's MCAP log"),
     "predictor": ("services.predictor.__main__", "recognise the human's motion early; publish predicted occupancy"),
     "train": ("services.predictor.train", "train the prediction model (GMMs, GMR motions, swept volumes)"),
     "eval": ("services.experiments.cli", "the paper's experiments: recognition | interference | switch | all"),

@@ -463,19 +463,21 @@ def main(argv: list[str] | None = None, prog: str = "python -m shared.human") ->
     """
     import argparse
 
+    from shared.feature_sets import require_mapping
     from shared.library import load_library
-    from shared.runtime import cli_errors
+    from shared.runtime import cli_errors, help_text
     from shared.scene import load_scene
 
-    parser = argparse.ArgumentParser(prog=prog, description=main.__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog=prog, description=help_text(main.__doc__.splitlines()[0]))
     parser.add_argument("library", help="a directory of compound_*.csv or a .npz library")
     parser.add_argument("--scene", default=None, help="scene file or embedded name (default pr2_two_cups)")
     parser.add_argument("--out", default="runs/plots/human_goals.png", help="output PNG")
     args = parser.parse_args(argv)
     with cli_errors(prog):
         lib = load_library(args.library)
+        mapping = require_mapping(lib.feature_names, prog, f"library {lib.source}")
         scene = load_scene(args.scene)
-        reach, index = reach_points(HumanModel(), [d.features for d in lib.demos], scene)
+        reach, index = reach_points(HumanModel(), [mapping.to_human(d.features) for d in lib.demos], scene)
         labels = np.array([d.label for d in lib.demos])
         for m, name in enumerate(lib.class_names):
             r = reach[labels == m]

@@ -3,7 +3,8 @@
 Sub-commands (each is one ``_cmd_<name>`` function registered in :data:`SUBCOMMANDS`; adding one
 means writing its ``add_arguments``/``run`` pair and one entry there):
 
-- ``info PATH``: classes, valid demonstrations per class, sample counts, issues.
+- ``info PATH``: features (and their mapping to the human model), classes, valid demonstrations per
+  class, sample counts, issues.
 - ``validate PATH``: print every malformed demonstration; exit status 1 if there is any.
 - ``convert PATH --out FILE.npz``: write the native npz (valid demonstrations and the issue list).
 - ``generate --classes 8 --demos 25 --seed 0 --out PATH``: a synthetic library (shared/synthetic.py).
@@ -18,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.library import FEATURE_NAMES, LibraryError, MotionLibrary, load_library, save_library
+from shared.feature_sets import describe_features
+from shared.library import LibraryError, MotionLibrary, load_library, save_library
 from shared.runtime import cli_errors
 from shared.synthetic import add_generate_arguments, run_generate
 
@@ -26,9 +28,9 @@ __all__ = ["main", "SUBCOMMANDS", "format_info"]
 
 
 def format_info(lib: MotionLibrary) -> str:
-    """Human-readable summary: one line per class plus the issues."""
+    """Human-readable summary: the features, one line per class, then the issues."""
     lines = [f"library: {lib.source}", f"classes: {lib.n_classes}, valid demonstrations: {len(lib.demos)}, "
-             f"issues: {len(lib.issues)}, features: {len(FEATURE_NAMES)}"]
+             f"issues: {len(lib.issues)}, features: {describe_features(lib.feature_names)}"]
     width = max((len(n) for n in lib.class_names), default=5)
     for label, name in enumerate(lib.class_names):
         demos = lib.by_class(label)
@@ -56,7 +58,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     for issue in lib.issues:
         print(f"issue: {issue}")
     print(f"{lib.source}: {len(lib.demos)} valid demonstrations in {lib.n_classes} classes, "
-          f"{len(lib.issues)} issue(s)")
+          f"{len(lib.issues)} issue(s), features: {describe_features(lib.feature_names)}")
     return 1 if lib.issues else 0
 
 

@@ -13,11 +13,16 @@ from typing import Any
 
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
 
-__all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError", "service_main"]
+__all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError", "service_main", "help_text"]
 
 
 class UserError(Exception):
     """An error caused by the user's input (file, option, data) rather than a bug."""
+
+
+def help_text(doc: str) -> str:
+    """A docstring as ``--help`` text: reST inline literals (double backticks) become single backticks."""
+    return doc.replace("``", "`")
 
 
 def setup_logging(level: str = "INFO") -> None:

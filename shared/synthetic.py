@@ -40,6 +40,7 @@ __all__ = ["SyntheticConfig", "GoalLayout", "load_layout", "generate_library", "
            "add_generate_arguments", "run_generate"]
 
 DEFAULT_LAYOUT = "table_8"
+FEATURE_SETS = ("herakles", "wide16")
 
 # Degrees of freedom the IK moves (feature indices): pelvis x, y, yaw, torso X, Y, Z, shoulder X, Z, Y, elbow.
 IK_DOFS = np.array([0, 1, 3, 4, 5, 6, 7, 8, 9, 11])
@@ -362,7 +363,7 @@ def generate_library(n_classes: int = 8, n_demos: int = 25, seed: int = 0,
 
 
 def write_csv_dir(lib: MotionLibrary, directory: str | Path) -> list[Path]:
-    """Write ``lib`` in the paper's format: ``compound_<m>.csv`` per class (index + 12 features).
+    """Write ``lib`` in the paper's format: ``compound_<m>.csv`` per class (index + its F features).
 
     Args:
         lib: The library.
@@ -377,8 +378,8 @@ def write_csv_dir(lib: MotionLibrary, directory: str | Path) -> list[Path]:
     for m in range(lib.n_classes):
         rows = [np.column_stack([np.arange(d.n_samples), d.features]) for d in lib.by_class(m)]
         path = out / f"compound_{m}.csv"
-        np.savetxt(path, np.concatenate(rows) if rows else np.zeros((0, 13)), delimiter=",",
-                   fmt=["%d"] + ["%.9g"] * 12)
+        np.savetxt(path, np.concatenate(rows) if rows else np.zeros((0, 1 + lib.n_features)), delimiter=",",
+                   fmt=["%d"] + ["%.9g"] * lib.n_features)
         files.append(path)
     return files
 
@@ -396,6 +397,9 @@ def add_generate_arguments(p) -> None:
                    help="bring the hand back to rest after the reach, as the paper's recordings do")
     p.add_argument("--plot", default=None, metavar="PNG",
                    help="also write a top view of the demonstrations' final hand positions in the scene")
+    p.add_argument("--feature-set", choices=FEATURE_SETS, default="herakles",
+                   help="herakles: the paper's 12 features (default); wide16: those plus 4 forearm/wrist channels, "
+                        "16 features without a mapping to the human model (17 CSV columns; shared/synthetic_wide.py)")
 
 
 def run_generate(args) -> int:
@@ -410,7 +414,17 @@ def run_generate(args) -> int:
     lay = load_layout(args.layout, scene)
     cfg = SyntheticConfig(return_to_rest=bool(args.return_to_rest))
     start = time.perf_counter()
-    lib = generate_library(args.classes, args.demos, args.seed, lay, scene, cfg)
+    if getattr(args, "feature_set", "herakles") == "wide16":
+        if args.plot:
+            from shared.feature_sets import require_mapping
+            from shared.synthetic_wide import WIDE_FEATURE_NAMES
+
+            require_mapping(WIDE_FEATURE_NAMES, "--plot (hand positions in the scene)", "--feature-set wide16")
+        from shared.synthetic_wide import generate_wide_library
+
+        lib = generate_wide_library(args.classes, args.demos, args.seed, layout=lay, scene=scene, config=cfg)
+    else:
+        lib = generate_library(args.classes, args.demos, args.seed, lay, scene, cfg)
     took = time.perf_counter() - start
     out = Path(args.out)
     if out.suffix == ".npz":
@@ -422,7 +436,8 @@ def run_generate(args) -> int:
         files = write_csv_dir(lib, out)
         what = f"{out}/ ({len(files)} CSV files)"
     print(f"wrote {what}: {len(lib.demos)} demonstrations in {lib.n_classes} classes "
-          f"({', '.join(lib.class_names)}), {cfg.n_samples} samples each, seed {args.seed}, generated in {took:.2f} s")
+          f"({', '.join(lib.class_names)}), {cfg.n_samples} samples of {lib.n_features} features each, "
+          f"seed {args.seed}, generated in {took:.2f} s")
     if args.plot:
         scene = scene or load_scene(None)
         model = HumanModel()

@@ -272,9 +272,13 @@ def test_dockerfile_installs_what_the_makefile_installs() -> None:
     docker = (REPO / "Dockerfile").read_text()
     make = (REPO / "Makefile").read_text()
     pyproject = tomllib.loads((REPO / "pyproject.toml").read_text())
-    torch_make = set(re.findall(r"torch==([\w.+]+)", make))
+    torch_make = set(re.findall(r"^TORCH_VERSION \?= ([\w.+]+)$", make, re.M))
     torch_docker = set(re.findall(r"torch==([\w.+]+)", docker))
     assert len(torch_make) == 1 and torch_docker == torch_make
+    # the same default build: PyTorch's CPU index
+    index_make = re.search(r"^TORCH_INDEX \?= (\S+)$", make, re.M)
+    index_docker = re.search(r"^ARG TORCH_INDEX_URL=(\S+)$", docker, re.M)
+    assert index_make and index_docker and index_make[1] == index_docker[1] == "https://download.pytorch.org/whl/cpu"
     # base image: python:3.11-slim, which satisfies requires-python
     base = re.search(r"^FROM\s+python:(\d+)\.(\d+)-slim\s*$", docker, re.M)
     assert base is not None
@@ -284,7 +288,9 @@ def test_dockerfile_installs_what_the_makefile_installs() -> None:
     runs = [ln for ln in re.findall(r"^RUN (.*(?:\n .*)*)", docker, re.M)]
     flat = " ".join(runs)
     assert flat.index("torch==") < flat.index("pip install .")
-    assert make.index("torch==") < make.index('install --quiet -e ".[dev]"')
+    stamp = re.search(r"^\$\(STAMP\):.*\n((?:\t.*\n)+)", make, re.M)
+    assert stamp is not None and stamp[1].index("torch") < stamp[1].index('install --quiet -e ".[dev]"')
+    assert '--index-url "$(TORCH_INDEX)"' in make and 'install "torch==$(TORCH_VERSION)"' in make
     copied = re.findall(r"^COPY (\S+)", docker, re.M)
     assert {"pyproject.toml", "shared", "services"} <= set(copied)
     # the build context keeps out what the image must not carry

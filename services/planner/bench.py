@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from shared.runtime import cli_errors
+from shared.runtime import cli_errors, help_text
 from shared.scene import Scene, load_scene
 
 from .core import GoalSet, Planner, PlannerConfig
@@ -297,7 +297,7 @@ def plot_blob(path: str, config: PlannerConfig | None = None, center: tuple[floa
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -> int:
     """Run the planner benchmark; see ``--help``."""
-    p = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog=prog, description=help_text(__doc__.split("\n\n")[0]))
     p.add_argument("--json", action="store_true", help="print one JSON object (keys K, step_ms, fk_ms, ...)")
     p.add_argument("--k", default="1,2,4,8", help="comma-separated goal counts (default 1,2,4,8)")
     p.add_argument("--steps", type=int, default=5, help="timed replanning steps per K (median reported)")

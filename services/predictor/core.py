@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from shared.config import ConfigError, opt
+from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.human import HumanModel, place_in_scene
 from shared.protocol import OccupancyGrid
 from shared.scene import SCENE_HELP, Grid, Scene
@@ -112,6 +113,10 @@ class PredictorCore:
         model: Trained prediction model.
         scene: Scene (must place the human where the model's volumes were computed).
         config: Options (method, temperature).
+
+    Raises:
+        ModelError: If the model has no swept volumes (its features have no mapping to the human model).
+        MappingError: If its features are not the ones ``HumanPose`` carries.
     """
 
     def __init__(self, model: PredictionModel, scene: Scene, config: PredictorConfig | None = None) -> None:
@@ -123,12 +128,15 @@ class PredictorCore:
         tau = float(self.config.temperature or model.temperature)
         if not (tau > 0 and np.isfinite(tau)):
             raise PredictorError(f"temperature must be a finite number > 0, got {tau}")
+        volumes = model.require_volumes("foresight predictor (occupancy)")
+        require_mapping(model.feature_names, "foresight predictor (HumanPose messages)",
+                        f"model of {model.meta.get('library', '?')}", exact=LIVE_MAPPING)
         model.check_scene(scene)
         self.temperature = tau
         self.bank = model.bank()
         self.encoder = model.encoder()
         self.human = HumanModel()
-        flat = model.volumes.reshape(model.n_classes, -1)
+        flat = volumes.reshape(model.n_classes, -1)
         self.support = np.flatnonzero(flat.any(axis=0))                      # (U,) union of the volumes
         self.volumes_u = np.ascontiguousarray(flat[:, self.support], dtype=np.float32)  # (M, U)
         self.demo_id = -1

@@ -1,16 +1,20 @@
-"""Feature vectors the class mixtures are fitted on: time plus the 12 posture features (and variants).
+"""Feature vectors the class mixtures are fitted on: time plus the F posture features (and variants).
 
-Every variant starts with the time (the sample index times ``time_scale``) followed by the 12
-posture features in :data:`shared.library.FEATURE_NAMES` order, so GMR conditioned on column 0
-regresses columns 1..12 back into a posture. Variants:
+Every variant starts with the time (the sample index times ``time_scale``) followed by the
+library's F posture features in its column order (the paper's 12, :data:`shared.library.FEATURE_NAMES`,
+or any other feature set), so GMR conditioned on column 0 regresses columns 1..F back into a
+posture. Variants:
 
-- ``paper``: ``[t, features]`` exactly as recorded (the paper, IV.A).
+- ``paper``: ``[t, features]`` exactly as recorded (the paper, IV.A); any feature set.
 - ``relative``: the pelvis x, y, z and yaw are taken relative to the demonstration's first pelvis
   pose (rotated into its heading), so where the recorder stood does not matter.
 - ``relative_velocity``: ``relative`` plus the per-sample change of the 5 arm features
   (backward differences, 0 at the first sample), times ``velocity_scale``.
 - ``hand``: ``paper`` plus the right hand's position (m) in the frame of the demonstration's first
   pelvis pose (``shared.human.HumanModel.hand_position``), a Euclidean feature of where the reach goes.
+
+``relative``, ``relative_velocity`` and ``hand`` use the paper's columns (pelvis pose, arm joints,
+the human model): they need the paper's 12 features (``shared.feature_sets.HERAKLES``).
 
 The same encoder serves training (:meth:`FeatureEncoder.batch`) and the online query
 (:meth:`FeatureEncoder.step`); both give identical vectors.
@@ -22,10 +26,13 @@ import math
 
 import numpy as np
 
+from shared.feature_sets import HERAKLES, HERAKLES_NAMES, require_mapping
+
 __all__ = ["VARIANTS", "FeatureEncoder", "N_POSTURE"]
 
 VARIANTS = ("paper", "relative", "relative_velocity", "hand")
 N_POSTURE = 12
+"""Posture features of the paper's feature set (the default)."""
 _ARM = slice(7, 12)
 
 
@@ -48,11 +55,23 @@ class FeatureEncoder:
         variant: One of :data:`VARIANTS`.
         time_scale: Time units per sample (1.0: the time feature is the sample index).
         velocity_scale: Multiplier of the velocity features (``relative_velocity``).
+        feature_names: The F posture features (default: the paper's 12).
+        source: The library or model the features come from (for the error message).
+
+    Raises:
+        ValueError: If ``variant`` is unknown.
+        shared.feature_sets.MappingError: If a variant other than ``paper`` is asked of another
+            feature set than the paper's.
     """
 
-    def __init__(self, variant: str = "paper", time_scale: float = 1.0, velocity_scale: float = 10.0) -> None:
+    def __init__(self, variant: str = "paper", time_scale: float = 1.0, velocity_scale: float = 10.0,
+                 feature_names: tuple[str, ...] = HERAKLES_NAMES, source: str = "") -> None:
         if variant not in VARIANTS:
             raise ValueError(f"feature variant {variant!r} is not one of {', '.join(VARIANTS)}")
+        self.feature_names = tuple(feature_names)
+        if variant != "paper":
+            require_mapping(self.feature_names, f"feature variant {variant!r}", source, exact=HERAKLES)
+        self.n_posture = len(self.feature_names)
         self.variant = variant
         self.time_scale = float(time_scale)
         self.velocity_scale = float(velocity_scale)
@@ -63,20 +82,20 @@ class FeatureEncoder:
     @property
     def dim(self) -> int:
         """Feature dimension D (time included)."""
-        return 1 + N_POSTURE + {"relative_velocity": 5, "hand": 3}.get(self.variant, 0)
+        return 1 + self.n_posture + {"relative_velocity": 5, "hand": 3}.get(self.variant, 0)
 
     def batch(self, features: np.ndarray) -> np.ndarray:
         """Encode a whole demonstration.
 
         Args:
-            features: ``(T, 12)`` recorder-frame postures.
+            features: ``(T, F)`` recorder-frame postures.
 
         Returns:
             ``(T, D)`` feature vectors.
         """
         f = np.asarray(features, dtype=np.float64)
-        if f.ndim != 2 or f.shape[1] != N_POSTURE:
-            raise ValueError(f"features: expected shape (T, 12), got {f.shape}")
+        if f.ndim != 2 or f.shape[1] != self.n_posture:
+            raise ValueError(f"features: expected shape (T, {self.n_posture}), got {f.shape}")
         t = np.arange(len(f), dtype=np.float64)[:, None] * self.time_scale
         post = f if self.variant in ("paper", "hand") else _relative(f, f[0])
         cols = [t, post]
@@ -97,7 +116,7 @@ class FeatureEncoder:
         """Encode one posture of the demonstration being observed.
 
         Args:
-            features: ``(12,)`` recorder-frame posture.
+            features: ``(F,)`` recorder-frame posture.
             index: Its sample index in the demonstration (0 for the first).
 
         Returns:
@@ -124,5 +143,5 @@ class FeatureEncoder:
         return self._human.hand_position(_relative(f, first))
 
     def posture_columns(self) -> slice:
-        """Columns of the feature vector that hold the 12 posture features (GMR outputs)."""
-        return slice(1, 1 + N_POSTURE)
+        """Columns of the feature vector that hold the F posture features (GMR outputs)."""
+        return slice(1, 1 + self.n_posture)

@@ -1,6 +1,6 @@
 """The prediction model file: everything the predictor needs, in one versioned ``.npz`` (no pickles).
 
-Contents (M classes, K Gaussians at most per class, D feature dimensions, V voxels):
+Contents (M classes, K Gaussians at most per class, F posture features, D feature dimensions, V voxels):
 
 | key | dtype, shape | meaning |
 |---|---|---|
@@ -12,11 +12,13 @@ Contents (M classes, K Gaussians at most per class, D feature dimensions, V voxe
 | ``weights`` | f8 (M, K) | mixing weights (0: padding) |
 | ``means`` | f8 (M, K, D) | component means |
 | ``covariances`` | f8 (M, K, D, D) | full covariances |
-| ``motions`` | f8 (M, T, 12) | GMR-regressed motion of each class |
+| ``feature_names`` | str (F,) | the library's posture features (optional: files without it have the paper's 12) |
+| ``motions`` | f8 (M, T, F) | GMR-regressed motion of each class |
 | ``motion_lengths`` | i8 (M,) | valid postures of each motion (rest is padding) |
 | ``grid_min``, ``grid_max`` | f8 (3,) | grid bounds (scene frame) |
 | ``grid_resolution`` | float | voxel edge (m) |
-| ``volumes`` | u1 (M, ceil(V/8)) | swept volumes, ``numpy.packbits`` of the C-order bool grids |
+| ``volumes`` | u1 (M, ceil(V/8)) | swept volumes, ``numpy.packbits`` of the C-order bool grids; absent when the
+  features have no mapping to the human model (a recognition-only model, ``shared.feature_sets``) |
 | ``scene_name`` | str | scene the volumes were placed in |
 | ``human_pelvis`` | f8 (4,) | that scene's human placement (x, y, z, yaw) |
 | ``spacing`` | float | surface sample spacing (m) used for the volumes |
@@ -36,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from shared.feature_sets import HERAKLES_NAMES, MAPPINGS, count_features, mapping_for
 from shared.scene import Grid, Scene
 
 from .features import FeatureEncoder
@@ -54,7 +57,11 @@ class ModelError(ValueError):
 
 @dataclass
 class PredictionModel:
-    """Trained per-class mixtures, regressed motions and swept volumes on one voxel grid."""
+    """Trained per-class mixtures, regressed motions and swept volumes on one voxel grid.
+
+    ``volumes`` is None for a model of features without a mapping to the human model: it recognises
+    (mixtures, posteriors) but predicts no occupancy (:meth:`require_volumes`).
+    """
 
     class_names: list[str]
     feature_variant: str
@@ -63,16 +70,17 @@ class PredictionModel:
     weights: np.ndarray        # (M, K)
     means: np.ndarray          # (M, K, D)
     covariances: np.ndarray    # (M, K, D, D)
-    motions: np.ndarray        # (M, T, 12)
+    motions: np.ndarray        # (M, T, F)
     motion_lengths: np.ndarray  # (M,)
     grid: Grid
-    volumes: np.ndarray        # (M, nx, ny, nz) bool
+    volumes: np.ndarray | None  # (M, nx, ny, nz) bool; None without a feature mapping
     scene_name: str
     human_pelvis: np.ndarray   # (4,) x, y, z, yaw
     spacing: float = 0.02
     interior: bool = False
     meta: dict[str, Any] = field(default_factory=dict)
     temperature: float = 1.0
+    feature_names: tuple[str, ...] = HERAKLES_NAMES
 
     @property
     def n_classes(self) -> int:
@@ -85,10 +93,22 @@ class PredictionModel:
 
     def encoder(self) -> FeatureEncoder:
         """A fresh feature encoder matching the training features."""
-        return FeatureEncoder(self.feature_variant, self.time_scale, self.velocity_scale)
+        return FeatureEncoder(self.feature_variant, self.time_scale, self.velocity_scale, self.feature_names)
+
+    def require_volumes(self, what: str) -> np.ndarray:
+        """The ``(M, nx, ny, nz)`` swept volumes, or a one-line :class:`ModelError` saying why there are none.
+
+        Args:
+            what: What needs them, e.g. ``"foresight predictor"``.
+        """
+        if self.volumes is None:
+            raise ModelError(f"{what} needs a model with swept volumes; this one was trained on library "
+                             f"{self.meta.get('library', '?')}, whose {count_features(self.feature_names)} have no "
+                             f"mapping to the human model (known: {', '.join(MAPPINGS)}): it only recognises classes")
+        return self.volumes
 
     def motion(self, m: int) -> np.ndarray:
-        """``(T_m, 12)`` regressed motion of class ``m``."""
+        """``(T_m, F)`` regressed motion of class ``m``."""
         return self.motions[m, : int(self.motion_lengths[m])]
 
     def check_scene(self, scene: Scene) -> None:
@@ -112,11 +132,14 @@ class PredictionModel:
             "weights": self.weights, "means": self.means, "covariances": self.covariances,
             "motions": self.motions, "motion_lengths": self.motion_lengths.astype(np.int64),
             "grid_min": self.grid.min, "grid_max": self.grid.max, "grid_resolution": np.array(self.grid.resolution),
-            "volumes": pack_volumes(self.volumes), "scene_name": np.array(self.scene_name),
+            "scene_name": np.array(self.scene_name),
             "human_pelvis": self.human_pelvis, "spacing": np.array(self.spacing),
             "interior": np.array(self.interior), "meta": np.array(json.dumps(self.meta)),
             "temperature": np.array(float(self.temperature)),
+            "feature_names": np.array(self.feature_names, dtype=np.str_),
         }
+        if self.volumes is not None:
+            arrays["volumes"] = pack_volumes(self.volumes)
         tmp = p.with_name(p.name + ".tmp.npz")
         with tmp.open("wb") as f:
             np.savez_compressed(f, **arrays)
@@ -162,24 +185,29 @@ class PredictionModel:
                 raise ValueError(f"{name} contains NaN or infinity")
         grid = Grid(d["grid_min"].astype(np.float64), d["grid_max"].astype(np.float64), float(d["grid_resolution"]))
         dims = grid.dims
-        packed = d["volumes"]
-        if packed.dtype != np.uint8 or packed.shape != (m, (int(np.prod(dims)) + 7) // 8):
-            raise ValueError(f"volumes of shape {packed.shape} do not fit {m} classes on a {dims} grid")
+        feature_names = (tuple(str(s) for s in d["feature_names"].tolist()) if "feature_names" in d
+                         else HERAKLES_NAMES)
+        volumes = None
+        if mapping_for(feature_names) is not None or "volumes" in d:
+            packed = d["volumes"]
+            if packed.dtype != np.uint8 or packed.shape != (m, (int(np.prod(dims)) + 7) // 8):
+                raise ValueError(f"volumes of shape {packed.shape} do not fit {m} classes on a {dims} grid")
+            volumes = unpack_volumes(packed, dims)
         temperature = float(d["temperature"]) if "temperature" in d else 1.0
         if not (temperature > 0 and np.isfinite(temperature)):
             raise ValueError(f"temperature must be a finite number > 0, got {temperature}")
         motions = d["motions"].astype(np.float64)
         lengths = d["motion_lengths"].astype(np.int64)
-        if motions.shape[0] != m or motions.shape[2] != 12 or lengths.shape != (m,) or np.any(lengths < 1) \
-                or np.any(lengths > motions.shape[1]):
+        if motions.shape[0] != m or motions.shape[2] != len(feature_names) or lengths.shape != (m,) \
+                or np.any(lengths < 1) or np.any(lengths > motions.shape[1]):
             raise ValueError(f"motions {motions.shape} / lengths {lengths.tolist()} do not fit {m} classes")
         model = cls(class_names=names, feature_variant=str(d["feature_variant"]), time_scale=float(d["time_scale"]),
                     velocity_scale=float(d["velocity_scale"]), weights=w.astype(np.float64),
                     means=mu.astype(np.float64), covariances=cov.astype(np.float64), motions=motions,
-                    motion_lengths=lengths, grid=grid, volumes=unpack_volumes(packed, dims),
+                    motion_lengths=lengths, grid=grid, volumes=volumes,
                     scene_name=str(d["scene_name"]), human_pelvis=d["human_pelvis"].astype(np.float64),
                     spacing=float(d["spacing"]), interior=bool(d["interior"]), meta=json.loads(str(d["meta"])),
-                    temperature=temperature)
+                    temperature=temperature, feature_names=feature_names)
         if model.encoder().dim != mu.shape[2]:
             raise ValueError(f"feature variant {model.feature_variant!r} has {model.encoder().dim} dimensions, "
                              f"the mixtures {mu.shape[2]}")

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from shared.feature_sets import require_mapping
 from shared.human import HumanModel, place_in_scene, reach_points
 from shared.library import MotionLibrary, heldout_split, load_library
 from shared.runtime import cli_errors
@@ -74,11 +75,12 @@ def plot_swept_volumes(model: PredictionModel, scene: Scene, library: MotionLibr
     cols = min(4, m)
     rows = (m + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.6 * rows), dpi=100, squeeze=False)
-    share = model.volumes.sum(axis=0)                                   # (nx, ny, nz) classes per voxel
+    volumes = model.require_volumes("the swept-volume plot")
+    share = volumes.sum(axis=0)                                         # (nx, ny, nz) classes per voxel
     ext = _extent(model)
     for c in range(m):
         ax = axes.flat[c]
-        vol = model.volumes[c]
+        vol = volumes[c]
         common = np.any(vol & (share == m), axis=2)
         own = np.where(vol, share, m + 1).min(axis=2).astype(float)     # fewest sharing classes over z
         own[own > m] = np.nan
@@ -92,7 +94,9 @@ def plot_swept_volumes(model: PredictionModel, scene: Scene, library: MotionLibr
         _skeleton_top(ax, human, placed[0])
         ax.plot(hand[:, 0], hand[:, 1], color="cyan", lw=1.5)
         if library is not None:
-            demos = [d.features for d in library.by_class(c)]
+            mapping = require_mapping(library.feature_names, "the reach points of the swept-volume plot",
+                                      f"library {library.source}")
+            demos = [mapping.to_human(d.features) for d in library.by_class(c)]
             reach, _ = reach_points(human, demos, scene)
             ends = np.array([human.hand_position(place_in_scene(f, f[0], scene))[-1] for f in demos])
             ax.scatter(ends[:, 0], ends[:, 1], color="orange", marker="x", s=8, lw=0.8, zorder=5)

@@ -19,6 +19,7 @@ import numpy as np
 from joblib import Parallel, delayed
 from tqdm import tqdm
 
+from shared.feature_sets import describe_features
 from shared.library import MotionLibrary, load_library
 from shared.runtime import UserError, cli_errors
 
@@ -100,7 +101,7 @@ def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAUL
     """Run the leave-one-out protocol.
 
     Args:
-        library: Motion library (at least 2 demonstrations per class).
+        library: Motion library (at least 2 demonstrations per class; any feature set for ``paper``).
         cfg: Mixture options.
         features: Feature variant.
         fractions: Executed fractions to classify at.
@@ -111,7 +112,7 @@ def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAUL
     Returns:
         The recognition rates.
     """
-    enc = FeatureEncoder(features)
+    enc = FeatureEncoder(features, feature_names=library.feature_names, source=f"library {library.source}")
     demos = library.demos
     counts = library.counts()
     if min(counts) < 2:
@@ -307,13 +308,14 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
                    "mean_log_loss_by_temperature": {f"{t:g}": float(main_res.log_loss(t).mean()) for t in grid},
                    "best_temperature": best,
                    "variant": main_res.name, "library": lib.source, "n_demos": len(lib.demos),
+                   "n_features": lib.n_features,
                    "plot": str(png), "calibration_plot": str(cal)}
             if len(results) > 1:
                 out["variants"] = {r.name: r.rates for r in results}
             print(json.dumps(out))
         else:
             print(f"leave-one-out recognition on {lib.source}: {len(lib.demos)} demonstrations, "
-                  f"{lib.n_classes} classes")
+                  f"{lib.n_classes} classes, features {describe_features(lib.feature_names)}")
             print(format_table(results))
             print(f"\nposterior calibration of {main_res.name} (log-loss: mean -ln p(true class | prefix); "
                   f"uniform = {np.log(lib.n_classes):.3f}):")

@@ -4,6 +4,10 @@ Per class m (paper IV.B, IV.D): a Gaussian mixture over ``[time, features]`` of 
 demonstrations; the GMR-regressed motion (conditioned on time, :func:`services.predictor.gmr.gmr`);
 the swept volume of that motion placed in the scene. Everything goes into one model file
 (:class:`services.predictor.model.PredictionModel`).
+
+The mixtures and motions work on any feature set the library declares; the swept volumes need a
+mapping of the features to the human model (``shared.feature_sets``). Without one the model is
+written without volumes: it recognises (posteriors) but the predictor service refuses it.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from shared.feature_sets import FeatureMapping
 from shared.human import HumanModel
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
 from shared.runtime import UserError, cli_errors, setup_logging
@@ -90,7 +95,7 @@ def regress_motions(bank: MixtureBank, lengths: list[int], encoder: FeatureEncod
         oversample: Postures per sample (1: one per sample index).
 
     Returns:
-        M arrays ``((T_m - 1) * oversample + 1, 12)``.
+        M arrays ``((T_m - 1) * oversample + 1, F)``.
     """
     cols = encoder.posture_columns()
     out = []
@@ -118,7 +123,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
             without the cache.
 
     Returns:
-        The trained model.
+        The trained model (``volumes`` None when the library's features have no mapping to the human model).
     """
     cfg = config or TrainConfig()
     cfg.gmm.validate()
@@ -127,7 +132,8 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     if cfg.features not in VARIANTS:
         raise UserError(f"--features {cfg.features!r} is not one of {', '.join(VARIANTS)}")
     demos = list(library.demos) if demos is None else demos
-    encoder = FeatureEncoder(cfg.features, cfg.time_scale)
+    encoder = FeatureEncoder(cfg.features, cfg.time_scale, feature_names=library.feature_names,
+                             source=f"library {library.source}")
     grid = scene.grid if cfg.resolution is None else scene.grid.with_resolution(cfg.resolution)
     if cfg.resolution is not None and not (0.005 <= cfg.resolution <= 0.5):
         raise UserError(f"--resolution must be between 0.005 and 0.5 m, got {cfg.resolution}")
@@ -149,12 +155,10 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     bank = MixtureBank.from_sklearn(mixtures)
     lengths = [int(np.median([d.n_samples for d in ds])) for ds in by_class]
     motions = regress_motions(bank, lengths, encoder)
-    dense = regress_motions(bank, lengths, encoder, oversample=cfg.oversample)
-    human = HumanModel()
-    volumes = np.stack([swept_volume(mot, scene, grid, human, cfg.spacing, cfg.interior)
-                        for mot in tqdm(dense, desc="swept volumes", unit="class", disable=not progress)])
+    mapping = library.mapping
+    volumes = None if mapping is None else _swept_volumes(bank, lengths, encoder, mapping, scene, grid, cfg, progress)
     t_max = max(lengths)
-    padded = np.zeros((library.n_classes, t_max, 12))
+    padded = np.zeros((library.n_classes, t_max, library.n_features))
     for m, mot in enumerate(motions):
         padded[m, : len(mot)] = mot
         padded[m, len(mot):] = mot[-1]
@@ -168,12 +172,24 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
                            motions=padded, motion_lengths=np.array(lengths, dtype=np.int64), grid=grid,
                            volumes=volumes, scene_name=scene.name,
                            human_pelvis=np.array([*scene.human.pelvis_xyz, scene.human.pelvis_yaw]),
-                           spacing=cfg.spacing, interior=cfg.interior, meta=meta, temperature=cfg.temperature)
+                           spacing=cfg.spacing, interior=cfg.interior, meta=meta, temperature=cfg.temperature,
+                           feature_names=tuple(library.feature_names))
 
 
-DESCRIPTION = """Train the prediction model: one Gaussian mixture per motion class over [time, 12 features]
+def _swept_volumes(bank: MixtureBank, lengths: list[int], encoder: FeatureEncoder, mapping: FeatureMapping,
+                   scene: Scene, grid, cfg: TrainConfig, progress: bool) -> np.ndarray:
+    """``(M, nx, ny, nz)`` bool swept volume of each class's densely regressed motion (human model via ``mapping``)."""
+    dense = regress_motions(bank, lengths, encoder, oversample=cfg.oversample)
+    human = HumanModel()
+    return np.stack([swept_volume(mapping.to_human(mot), scene, grid, human, cfg.spacing, cfg.interior)
+                     for mot in tqdm(dense, desc="swept volumes", unit="class", disable=not progress)])
+
+
+DESCRIPTION = """Train the prediction model: one Gaussian mixture per motion class over [time, features]
 (full covariances, k-means initialisation, seeded), the GMR-regressed motion of each class and its swept
-volume in the scene's voxel grid, written to one versioned model file (.npz)."""
+volume in the scene's voxel grid, written to one versioned model file (.npz). Any feature set the library
+declares works for the mixtures; the swept volumes need a mapping of the features to the human model
+(the paper's 12 features have one): without it the model has no volumes and only recognises."""
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
@@ -221,12 +237,17 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
         model = train_model(lib, scene, cfg, demos, progress=not args.quiet)
         model.save(args.out)
         size = Path(args.out).stat().st_size
-        occ = model.volumes.reshape(model.n_classes, -1).sum(1)
+        if model.volumes is None:
+            occupancy = (f"no swept volumes: {lib.n_features} features without a mapping to the human model "
+                         "(recognition only; the predictor service needs a mapping)")
+        else:
+            occ = model.volumes.reshape(model.n_classes, -1).sum(1)
+            occupancy = (f"grid {model.grid.dims} at {model.grid.resolution:g} m, "
+                         f"swept voxels per class {occ.tolist()}")
         print(f"wrote {args.out} ({size / 1e6:.2f} MB): {model.n_classes} classes, "
               f"{len(demos)} demonstrations from {lib.source}, features {cfg.features}, "
               f"temperature {cfg.temperature:g}, "
-              f"components {model.meta['components']}, grid {model.grid.dims} at {model.grid.resolution:g} m, "
-              f"swept voxels per class {occ.tolist()}")
+              f"components {model.meta['components']}, {occupancy}")
     return 0
 
 

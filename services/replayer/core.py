@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from shared.config import ConfigError, opt
+from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
 from shared.protocol import DemoMarker, HumanPose, Message
 
@@ -93,7 +94,10 @@ def select_demos(lib: MotionLibrary, cfg: ReplayerConfig) -> list[Demonstration]
     Raises:
         ConfigError: If a class label is out of range or nothing is selected.
         LibraryError: If the held-out split is impossible.
+        MappingError: If the library's features are not the ones ``HumanPose`` carries.
     """
+    require_mapping(lib.feature_names, "foresight replayer (HumanPose messages)",
+                    f"library {lib.source}", exact=LIVE_MAPPING)
     bad = [c for c in cfg.classes if c >= lib.n_classes]
     if bad:
         raise ConfigError(f"replayer.classes: {bad} out of range, the library has {lib.n_classes} classes "

@@ -1,0 +1,45 @@
+"""`foresight --help` and the commands' help texts say what the commands do, in plain text."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from shared.cli import COMMANDS
+from shared.cli import main as cli_main
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_log_command_lists_its_subcommands(capsys) -> None:
+    from shared.logtools import main as log_main
+
+    with pytest.raises(SystemExit):
+        log_main(["--help"])
+    subcommands = set(re.findall(r"\{([a-z,]+)\}", capsys.readouterr().out)[0].split(","))
+    assert subcommands == {"info", "render", "latency"}
+    for name in subcommands:
+        assert f"({name})" in COMMANDS["log"][1]
+
+
+@pytest.mark.parametrize("argv", [["demo", "--help"], ["bench", "planner", "--help"], ["library", "--help"],
+                                  ["train", "--help"], ["eval", "recognition", "--help"]])
+def test_help_has_no_rest_markup(argv, capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        cli_main(argv)
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: foresight") and "``" not in out
+
+
+def test_protocol_doc_names_every_liveliness_token() -> None:
+    declared = set()
+    for path in [*REPO.glob("services/**/*.py"), *REPO.glob("shared/**/*.py")]:
+        declared |= set(re.findall(r'Presence\([^)]*?"([a-z_]+)"\)', path.read_text()))
+    assert {"replayer", "predictor", "planner", "executor", "demo"} <= declared
+    doc = (REPO / "docs" / "protocol.md").read_text()
+    line = next(ln for ln in doc.splitlines() if ln.startswith("Service names:"))
+    named = set(re.findall(r"`([a-z_]+)`", line))
+    assert declared == named, (declared, named)
