@@ -37,7 +37,8 @@ def test_help_has_no_rest_markup(argv, capsys) -> None:
 def test_protocol_doc_names_every_liveliness_token() -> None:
     declared = set()
     for path in [*REPO.glob("services/**/*.py"), *REPO.glob("shared/**/*.py")]:
-        declared |= set(re.findall(r'Presence\([^)]*?"([a-z_]+)"\)', path.read_text()))
+        # the service name is Presence's third positional argument (keywords may follow)
+        declared |= set(re.findall(r'Presence\(\s*\w+,\s*[\w.]+,\s*"([a-z_]+)"', path.read_text()))
     assert {"replayer", "predictor", "planner", "executor", "demo"} <= declared
     doc = (REPO / "docs" / "protocol.md").read_text()
     line = next(ln for ln in doc.splitlines() if ln.startswith("Service names:"))
