@@ -40,6 +40,7 @@ import torch
 import torch.nn.functional as F
 
 from shared.robot import PR2
+from shared.scene import Grid
 
 from .costs import StateCost, acceleration_cost, hinge_sum
 from .sdf import VoxelTables
@@ -221,8 +222,8 @@ class FusedCost:
             a feature matmul; default: when compiled.
     """
 
-    def __init__(self, robot: Any, cost: Any, w_smooth: float, vmax: torch.Tensor, integrate: bool,
-                 compile: bool = False, grid: Any = None, pair_loop: bool | None = None) -> None:
+    def __init__(self, robot: PR2, cost: StateCost, w_smooth: float, vmax: torch.Tensor, integrate: bool,
+                 compile: bool = False, grid: Grid | None = None, pair_loop: bool | None = None) -> None:
         if not supports(robot, cost):
             raise ValueError("FusedCost needs a PR2 StateCost with lift tables, 1 point per sphere, trilinear")
         self.robot, self.cost = robot, cost

@@ -126,9 +126,7 @@ class PR2:
             q0 = np.concatenate([[scene.robot.torso_lift], np.asarray(arm, dtype=np.float64)])
             robot.q_start = robot.validate_configuration(q0, what=f"scene {scene.name}: robot start")
         else:
-            if not (robot._lower64[0] <= scene.robot.torso_lift <= robot._upper64[0]):
-                raise RobotModelError(f"scene {scene.name}: robot.torso_lift {scene.robot.torso_lift} outside "
-                                      f"[{robot._lower64[0]}, {robot._upper64[0]}]")
+            robot.validate_torso_lift(scene.robot.torso_lift, what=f"scene {scene.name}: robot.torso_lift")
         return robot
 
     def set_base_transform(self, base_transform: np.ndarray) -> None:
@@ -244,6 +242,11 @@ class PR2:
             msg = ", ".join(f"{n}={v:.4f} not in [{lo:.4f}, {hi:.4f}]" for n, v, lo, hi in bad)
             raise RobotModelError(f"{what}: outside joint limits: {msg}")
         return torch.tensor(arr, device=self.device, dtype=self.dtype)
+
+    def validate_torso_lift(self, lift: float, what: str = "torso lift") -> None:
+        """Raise :class:`RobotModelError` unless ``lift`` (m) lies within the torso joint's limits."""
+        if not (self._lower64[0] <= lift <= self._upper64[0]):
+            raise RobotModelError(f"{what} {lift} outside [{self._lower64[0]}, {self._upper64[0]}]")
 
     # ------------------------------------------------------------------------------------------
     # inverse kinematics (shared.robot.ik)
