@@ -20,7 +20,7 @@ import dataclasses
 import logging
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,12 +32,13 @@ from shared.config import ConfigError, opt
 from shared.protocol import OccupancyGrid
 from shared.scene import Grid, Scene
 
+from .costs import acceleration_cost
 from .fused import FusedCost, supports
 from .multigoal import best, init_straight_lines, interpolate_path, project_onto_path, reconnect_previous
+from .protocols import PlannerCost, PlannerGoals, PlannerRobot
 from .stomp import Stomp, StompConfig
 
-__all__ = ["PlannerConfig", "PlannerError", "PlannerInputError", "GoalSet", "PlanResult", "Planner",
-           "acceleration_cost"]
+__all__ = ["PlannerConfig", "PlannerError", "PlannerInputError", "GoalSet", "PlanResult", "Planner"]
 
 log = logging.getLogger("foresight.planner")
 
@@ -172,40 +173,26 @@ class PlanResult:
     reasons: list[str]
 
 
-def acceleration_cost(q: torch.Tensor) -> torch.Tensor:
-    """Squared joint accelerations (finite differences) per waypoint.
-
-    Args:
-        q: ``(..., T, D)`` trajectories.
-
-    Returns:
-        ``(..., T)``: ``|q[t+1] - 2 q[t] + q[t-1]|^2`` at interior waypoints, 0 at both ends; the sum over
-        T is the trajectory's smoothness cost.
-    """
-    acc = q[..., 2:, :] - 2 * q[..., 1:-1, :] + q[..., :-2, :]
-    return F.pad((acc * acc).sum(-1), (1, 1))
-
-
 class Planner:
     """Multi-goal STOMP planner over a scene (Algorithm 1).
 
     Args:
         scene: The scene (robot placement, obstacles, cups, grid).
         config: Planner settings.
-        robot: A robot model (default: ``PR2.from_scene``) with ``lower``, ``upper``,
-            ``velocity_limits``, ``joint_names``.
-        cost: State cost ``q (K, R, T, D) -> (K, R, T, 2)`` (obstacle, human) with
-            ``set_occupancy(occ, origin, resolution)`` (default: the PR2 ``StateCost`` of the scene).
-        goals: Goals with ``names``, ``q (K, D)``, ``valid (K,)`` and ``reasons`` (a :class:`GoalSet`, or
-            by default the ``IKGoals`` of a pre-grasp at each cup of ``config.goals``).
+        robot: A :class:`~services.planner.protocols.PlannerRobot` (default: ``PR2.from_scene``).
+        cost: A :class:`~services.planner.protocols.PlannerCost`, ``q (K, R, T, D) -> (K, R, T, 2)``
+            (obstacle, human) with ``set_occupancy`` (default: the PR2 ``StateCost`` of the scene).
+        goals: A :class:`~services.planner.protocols.PlannerGoals` (a :class:`GoalSet`, or by default the
+            ``IKGoals`` of a pre-grasp at each cup of ``config.goals``).
         w_smooth: Weight of the squared accelerations (default: the cost model's ``config.w_smooth``).
 
     Raises:
         PlannerError: If no goal is valid.
     """
 
-    def __init__(self, scene: Scene, config: PlannerConfig | None = None, *, robot: Any = None, cost: Any = None,
-                 goals: Any = None, w_smooth: float | None = None) -> None:
+    def __init__(self, scene: Scene, config: PlannerConfig | None = None, *, robot: PlannerRobot | None = None,
+                 cost: PlannerCost | None = None, goals: PlannerGoals | None = None,
+                 w_smooth: float | None = None) -> None:
         self.config = config or PlannerConfig()
         self.config.validate()
         c = self.config
@@ -218,10 +205,10 @@ class Planner:
             from shared.robot import PR2
 
             robot = PR2.from_scene(scene, device=self.device, dtype=self.dtype)
-        self.robot = robot
+        self.robot: PlannerRobot = robot
         if cost is None:
             cost = _default_cost(scene, robot, c)
-        self.cost = cost
+        self.cost: PlannerCost = cost
         if w_smooth is None:
             w_smooth = c.w_smooth if c.w_smooth >= 0 else float(getattr(getattr(cost, "config", None), "w_smooth", 1.0))
         self.w_smooth = float(w_smooth)
@@ -230,7 +217,7 @@ class Planner:
         if not bool(goals.valid.any()):
             raise PlannerError("no reachable goal: " + "; ".join(f"{n}: {r}" for n, r in
                                                                  zip(goals.names, goals.reasons, strict=False)))
-        self.goals = goals
+        self.goals: PlannerGoals = goals
         for name, reason in zip(goals.names, goals.reasons, strict=False):
             if reason:
                 log.warning("goal %s dropped: %s", name, reason)
@@ -475,7 +462,7 @@ class Planner:
             reasons=list(self.goals.reasons) or [""] * k)
 
 
-def _default_cost(scene: Scene, robot: Any, config: PlannerConfig) -> Callable[[torch.Tensor], torch.Tensor]:
+def _default_cost(scene: Scene, robot: Any, config: PlannerConfig) -> PlannerCost:
     """The PR2's :class:`~services.planner.costs.StateCost` of the scene, weights overridden by ``config``."""
     from .costs import CostConfig, StateCost
 
@@ -483,7 +470,7 @@ def _default_cost(scene: Scene, robot: Any, config: PlannerConfig) -> Callable[[
     return StateCost.from_scene(scene, robot, dataclasses.replace(CostConfig(), **weights))
 
 
-def _default_goals(scene: Scene, robot: Any, cost: Any, config: PlannerConfig) -> Any:
+def _default_goals(scene: Scene, robot: Any, cost: Any, config: PlannerConfig) -> PlannerGoals:
     """A pre-grasp goal at each cup of ``config.goals`` (default: every cup) by IK (``goals.cup_goals``)."""
     from .goals import cup_goals
 

@@ -9,26 +9,35 @@
   sampled on the robot: the sphere centres (and optionally 6 more points per sphere at
   ``human_point_radius`` x radius along the world axes, averaged per sphere), read from the voxel grid
   trilinearly (smooth, default) or from the containing voxel (``human_interp = "nearest"``, as in the paper).
-* **smoothness**: the sum of squared accelerations (finite differences) of a trajectory.
+* **smoothness**: the sum of squared accelerations (finite differences) of a trajectory
+  (:func:`acceleration_cost`, per waypoint).
 
 :class:`StateCost` maps configurations ``q (K, R, T, D)`` to the weighted per-waypoint terms
 ``(K, R, T, 2)`` = (obstacle, human) that STOMP needs; the smoothness weight is ``CostConfig.w_smooth``.
+It owns the occupancy: :meth:`StateCost.set_occupancy` builds the :class:`OccupancyTables` (the voxel
+lookup tables and the torso lift tables) once per grid. ``StateCost.__call__`` is the reference
+implementation; the planner runs the same cost through :class:`~services.planner.fused.FusedCost`. Both
+read only public tables: the robot's ``ChainTables``/``SphereTables``, the field's ``VoxelTables`` and
+``StateCost.occupancy``; ``tests/services/planner/test_fused.py`` keeps them equal.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from shared.robot import PR2
 from shared.scene import Scene
 
-from .sdf import GridLookupError, SignedDistanceField, _Lookup
+from .sdf import GridLookupError, SignedDistanceField, VoxelTables
 
-__all__ = ["CostConfig", "StateCost", "CostInputError", "smoothness_cost", "smooth_penetration"]
+__all__ = ["CostConfig", "StateCost", "CostInputError", "LiftTables", "OccupancyTables", "hinge_sum",
+           "acceleration_cost"]
 
 
 class CostInputError(ValueError):
@@ -63,29 +72,90 @@ class CostConfig:
                 raise ValueError(f"costs.{name}: bad value {getattr(self, name)!r}")
 
 
-def smooth_penetration(d: torch.Tensor, eps: float) -> torch.Tensor:
-    """CHOMP's smooth hinge of a signed surface distance ``d`` (any shape) with margin ``eps`` > 0."""
-    h = torch.clamp(eps - d, min=0)
-    return torch.where(d < 0, eps / 2 - d, h * h * (0.5 / eps))
+def hinge_sum(e: torch.Tensor, eps: float, dim: int = -1) -> torch.Tensor:
+    """Sum over ``dim`` of CHOMP's smooth hinge of a signed surface distance ``d``, written in ``e = eps - d``.
+
+    Per element: ``e - eps / 2`` (``e > eps``: penetration), ``e^2 / (2 eps)`` (``0 <= e <= eps``: inside the
+    margin), 0 (``e < 0``: clear); continuous with a continuous slope. The one hinge of the obstacle and
+    self-collision terms, in the reference path and in the fused kernel.
+
+    Args:
+        e: ``(...)`` margin violations ``eps - d`` (m), any shape.
+        eps: The margin (> 0, m).
+        dim: The axis summed over (e.g. the spheres).
+
+    Returns:
+        ``e``'s shape without ``dim``.
+    """
+    e = e.clamp(min=0)
+    m = e.clamp(max=eps)
+    return (m * m).sum(dim) * (0.5 / eps) + (e - m).sum(dim)
 
 
-def smoothness_cost(q: torch.Tensor) -> torch.Tensor:
-    """Sum of squared accelerations (second finite differences) of trajectories.
+def acceleration_cost(q: torch.Tensor) -> torch.Tensor:
+    """Squared joint accelerations (second finite differences) per waypoint: the smoothness term.
 
     Args:
         q: ``(..., T, D)`` trajectories, T >= 3.
 
     Returns:
-        ``(...)`` ``sum_t sum_d (q[t+1] - 2 q[t] + q[t-1])^2``.
+        ``(..., T)``: ``|q[t+1] - 2 q[t] + q[t-1]|^2`` at interior waypoints, 0 at both ends; the sum over
+        T is the trajectory's smoothness cost.
+
+    Raises:
+        CostInputError: Fewer than 3 waypoints.
     """
     if q.shape[-2] < 3:
-        raise CostInputError(f"smoothness_cost needs at least 3 waypoints, got shape {tuple(q.shape)}")
+        raise CostInputError(f"acceleration_cost needs at least 3 waypoints, got shape {tuple(q.shape)}")
     acc = q[..., 2:, :] - 2 * q[..., 1:-1, :] + q[..., :-2, :]
-    return (acc * acc).sum(dim=(-1, -2))
+    return F.pad((acc * acc).sum(-1), (1, 1))
+
+
+@dataclass(frozen=True)
+class LiftTables:
+    """Costs of the torso-carried spheres tabulated over the torso lift (those spheres move with ``q[..., 0]`` only).
+
+    Entry i is at lift ``lo + i * step``, ``i < n``; between entries the costs are linear in the lift.
+
+    Attributes:
+        lo: Lowest lift (m).
+        step: Lift step (m).
+        n: Entries (>= 2).
+        values: ``(4, n - 1)`` unweighted sums over the torso-carried spheres; column i is the interval from
+            entry i to i + 1, rows: obstacle at i, obstacle at i + 1, human at i, human at i + 1.
+    """
+
+    lo: float
+    step: float
+    n: int
+    values: torch.Tensor
+
+    def interpolate(self, lift: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``lift`` ``(...)`` (m, clamped to the table) -> ``(obstacle (...), human (...))``."""
+        u = ((lift - self.lo) / self.step).clamp(0, self.n - 1)
+        i = torch.clamp(u.long(), max=self.n - 2)
+        f = u - i
+        v = self.values.index_select(1, i.reshape(-1)).view(4, *lift.shape)
+        return v[0] + (v[1] - v[0]) * f, v[2] + (v[3] - v[2]) * f
+
+
+@dataclass(frozen=True)
+class OccupancyTables:
+    """The predicted occupancy as the costs read it; :meth:`StateCost.set_occupancy` builds one per grid.
+
+    Attributes:
+        voxels: :class:`~services.planner.sdf.VoxelTables` of the occupancy zero-padded by one voxel
+            (``(nx + 2, ny + 2, nz + 2)`` values: 0 beyond the grid), None when no occupancy is set.
+        lift: The torso lift tables on this occupancy (human rows 0 without one); None when the cost
+            evaluates every sphere directly (``torso_table_step = 0`` or spheres not ordered for it).
+    """
+
+    voxels: VoxelTables | None
+    lift: LiftTables | None
 
 
 class StateCost:
-    """Per-waypoint obstacle and human costs of PR2 configurations.
+    """Per-waypoint obstacle and human costs of PR2 configurations (the reference implementation).
 
     Args:
         robot: The PR2 model (device and dtype are taken from it).
@@ -96,6 +166,9 @@ class StateCost:
     Attributes:
         terms: ``("obstacle", "human")``, the order of the last axis of :meth:`__call__`.
         spheres: Slice of the spheres that are costed (those moving with q).
+        radii: ``(S',)`` their radii.
+        has_self: Whether the arm-vs-body self-collision term is on.
+        occupancy: :class:`OccupancyTables`, replaced by :meth:`set_occupancy`.
     """
 
     terms = ("obstacle", "human")
@@ -120,56 +193,51 @@ class StateCost:
         self._offsets = (torch.stack(offs).to(self.device, self.dtype)[None, :, :]
                          * (self.radii[:, None, None] * self.config.human_point_radius))  # (S', P, 3)
         self._offsets[:, 0] = 0.0
-        self._occ: _Lookup | None = None
         self.has_self = bool(self.config.self_clearance >= 0 and robot.arm_spheres.numel() > 0
                              and robot.body_spheres.numel() > 0)
         # Spheres carried by the torso alone (head, left arm, torso) depend on q[..., 0] only: their
         # obstacle and human costs are tabulated over the lift range and interpolated linearly.
         arm_c, torso_c = robot.arm_carried_slice, robot.torso_carried_slice
-        self._use_table = (self.config.torso_table_step > 0 and arm_c.start == self.spheres.start
-                           and arm_c.stop == torso_c.start and torso_c.stop == self.spheres.stop)
-        if self._use_table:
+        self._arm_rel = slice(0, arm_c.stop - self.spheres.start)
+        self._lift: LiftTables | None = None
+        if (self.config.torso_table_step > 0 and arm_c.start == self.spheres.start
+                and arm_c.stop == torso_c.start and torso_c.stop == self.spheres.stop):
             lo, hi = float(robot.lower[0]), float(robot.upper[0])
             n = max(int(np.ceil((hi - lo) / self.config.torso_table_step)) + 1, 2)
-            self._lift_lo, self._lift_step, self._lift_n = lo, (hi - lo) / (n - 1), n
             q_tab = robot.lower.expand(n, -1).clone()
             q_tab[:, 0] = torch.linspace(lo, hi, n, device=self.device, dtype=self.dtype)
-            rel = slice(torso_c.start - self.spheres.start, torso_c.stop - self.spheres.start)
-            self._tab_rel = rel
+            self._tab_rel = slice(torso_c.start - self.spheres.start, torso_c.stop - self.spheres.start)
             self._tab_centers = robot.sphere_centers(q_tab)[:, torso_c]  # (n, St, 3)
-            self._arm_rel = slice(0, arm_c.stop - self.spheres.start)
-            self._tab_obstacle = self._pack(self._obstacle_spheres(self._tab_centers, rel))
-            self._tab_human = self._pack(torch.zeros(n, device=self.device, dtype=self.dtype))
+            obstacle = self._obstacle_spheres(self._tab_centers, self._tab_rel)  # (n,)
+            self._lift = LiftTables(lo, (hi - lo) / (n - 1), n, torch.stack([obstacle[:-1], obstacle[1:]]))
+        self.occupancy = self._tables(None)
 
-    @staticmethod
-    def _pack(values: torch.Tensor) -> torch.Tensor:
-        """``(n,)`` table -> ``(n - 1, 2)`` (value, next value) rows for one index_select per lookup."""
-        return torch.stack([values[:-1], values[1:]], dim=-1).contiguous()
-
-    def _table(self, packed: torch.Tensor, lift: torch.Tensor) -> torch.Tensor:
-        """Linear interpolation of a packed lift table at ``lift`` ``(...)`` -> ``(...)``."""
-        u = ((lift - self._lift_lo) / self._lift_step).clamp(0, self._lift_n - 1)
-        i = torch.clamp(u.long(), max=self._lift_n - 2)
-        f = u - i
-        v = packed.index_select(0, i.reshape(-1)).reshape(*lift.shape, 2)
-        return v[..., 0] + (v[..., 1] - v[..., 0]) * f
+    def _tables(self, voxels: VoxelTables | None) -> OccupancyTables:
+        """The :class:`OccupancyTables` of ``voxels`` (the lift tables' human rows evaluated on it)."""
+        lift = self._lift
+        if lift is not None:
+            human = (self._human_spheres(self._tab_centers, self._tab_rel, voxels) if voxels is not None
+                     else torch.zeros(lift.n, device=self.device, dtype=self.dtype))
+            rows = torch.cat([lift.values[:2], torch.stack([human[:-1], human[1:]])]).contiguous()  # (4, n - 1)
+            lift = dataclasses.replace(lift, values=rows)
+        return OccupancyTables(voxels, lift)
 
     def _obstacle_spheres(self, c: torch.Tensor, rel: slice) -> torch.Tensor:
         """Static-obstacle hinge of spheres ``c`` ``(..., s, 3)`` (``rel``: their slice of the costed spheres)."""
-        return smooth_penetration(self.sdf(c) - self.radii[rel], self.config.clearance).sum(-1)
+        return hinge_sum(self.config.clearance + self.radii[rel] - self.sdf(c), self.config.clearance)
 
-    def _human_spheres(self, c: torch.Tensor, rel: slice) -> torch.Tensor:
-        """Summed occupancy at spheres ``c`` ``(..., s, 3)``."""
-        assert self._occ is not None
+    def _human_spheres(self, c: torch.Tensor, rel: slice, voxels: VoxelTables) -> torch.Tensor:
+        """Summed occupancy ``voxels`` at spheres ``c`` ``(..., s, 3)``."""
         pts = c.unsqueeze(-2) + self._offsets[rel] if self.config.human_points > 1 else c
-        p = self._occ(pts, self.config.human_interp)
+        p = voxels.lookup(pts, self.config.human_interp)
         if self.config.human_points > 1:
             p = p.mean(-1)
         return p.sum(-1)
 
     def _self_term(self, centers: torch.Tensor) -> torch.Tensor:
         ds = self.robot.self_collision_distance(centers).amin(-1)  # (..., A) nearest body sphere per arm sphere
-        return smooth_penetration(ds, max(self.config.self_clearance, 1e-6)).sum(-1)
+        eps = max(self.config.self_clearance, 1e-6)
+        return hinge_sum(eps - ds, eps)
 
     @classmethod
     def from_scene(cls, scene: Scene, robot: PR2, config: CostConfig | None = None) -> StateCost:
@@ -189,9 +257,7 @@ class StateCost:
                 (beyond 1e-4), or a bad origin/resolution.
         """
         if occupancy is None:
-            self._occ = None
-            if self._use_table:
-                self._tab_human = self._pack(torch.zeros(self._lift_n, device=self.device, dtype=self.dtype))
+            self.occupancy = self._tables(None)
             return
         occ = torch.as_tensor(np.asarray(occupancy) if not torch.is_tensor(occupancy) else occupancy)
         occ = occ.to(self.device, self.dtype)
@@ -203,11 +269,10 @@ class StateCost:
             raise CostInputError(f"occupancy values must lie in [0, 1], got [{float(occ.min()):.4g}, "
                                  f"{float(occ.max()):.4g}]")
         try:
-            self._occ = _Lookup(occ.clamp(0, 1), origin, resolution, "zeros", "occupancy")
+            voxels = VoxelTables.from_grid(occ.clamp(0, 1), origin, resolution, "zeros", "occupancy")
         except GridLookupError as exc:
             raise CostInputError(str(exc)) from None
-        if self._use_table:
-            self._tab_human = self._pack(self._human_spheres(self._tab_centers, self._tab_rel))
+        self.occupancy = self._tables(voxels)
 
     def obstacle(self, centers: torch.Tensor) -> torch.Tensor:
         """Unweighted obstacle term, every sphere evaluated directly: ``centers`` ``(..., S, 3)`` -> ``(...)``."""
@@ -221,9 +286,10 @@ class StateCost:
 
         ``centers`` ``(..., S, 3)`` -> ``(...)`` summed occupancy (0 when no occupancy is set).
         """
-        if self._occ is None:
+        voxels = self.occupancy.voxels
+        if voxels is None:
             return torch.zeros(centers.shape[:-2], device=centers.device, dtype=centers.dtype)
-        return self._human_spheres(centers[..., self.spheres, :], slice(None))
+        return self._human_spheres(centers[..., self.spheres, :], slice(None), voxels)
 
     def __call__(self, q: torch.Tensor) -> torch.Tensor:
         """Weighted per-waypoint terms.
@@ -239,18 +305,19 @@ class StateCost:
             ``(K, R, T, 2)``: ``w_obstacle`` x obstacle and ``w_human`` x human, in ``terms`` order.
         """
         centers = self.robot.sphere_centers(q)
-        if not self._use_table:
+        tables = self.occupancy
+        if tables.lift is None:
             obstacle, human = self.obstacle(centers), self.human(centers)
         else:
-            lift = q[..., 0]
+            tab_obstacle, tab_human = tables.lift.interpolate(q[..., 0])
             arm = centers[..., self.robot.arm_carried_slice, :]
-            obstacle = self._obstacle_spheres(arm, self._arm_rel) + self._table(self._tab_obstacle, lift)
+            obstacle = self._obstacle_spheres(arm, self._arm_rel) + tab_obstacle
             if self.has_self:
                 obstacle = obstacle + self._self_term(centers)
-            if self._occ is None:
+            if tables.voxels is None:
                 human = torch.zeros_like(obstacle)
             else:
-                human = self._human_spheres(arm, self._arm_rel) + self._table(self._tab_human, lift)
+                human = self._human_spheres(arm, self._arm_rel, tables.voxels) + tab_human
         return torch.stack([self.config.w_obstacle * obstacle, self.config.w_human * human], dim=-1)
 
     def collision_free(self, q: torch.Tensor, margin: float = 0.0) -> torch.Tensor:

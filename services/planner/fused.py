@@ -11,15 +11,20 @@ as FLOPs), and can be ``torch.compile``-d:
   joint on a batch-last ``(3, 4, B)`` layout; the arm-carried sphere centres are one matmul with a
   ``(S, 7 x 4)`` table. Only the spheres that move with the arm joints are evaluated: the torso-carried
   ones come from ``StateCost``'s lift tables, the base's never move.
-* **Lookups**: trilinear, from corner-major packed cells ``(8, cells)`` (one ``index_select`` per grid, 3
-  ``lerp``); the occupancy is re-packed when ``set_occupancy`` replaced it; the static field is
+* **Lookups**: trilinear, from the corner-major packed cells ``(8, cells)`` of
+  :class:`~services.planner.sdf.VoxelTables` (one ``index_select`` per grid, 3 ``lerp``); the occupancy
+  tables are the ones ``StateCost.set_occupancy`` built (read at every call); the static field is
   **cropped** to the cells where a sphere can pay anything (field value below ``clearance`` + the
   largest arm sphere radius, plus one layer): outside the crop both the
   reference and the crop give a zero hinge, inside they read the same corner values (tested).
 * **Self-collision**: the body spheres are rigid in the base frame up to the torso lift ``l``, so
   ``|x - c_b - l v_b|^2`` is one ``(B_body, 7) x (7, A x B)`` matmul of features
   ``[x, l (x . v), 1, l, l^2]`` plus ``|x|^2`` (exact, every arm/body pair, as the reference).
-* time weights and accelerations on ``(N, T, D)``.
+* time weights and accelerations on ``(N, T, D)``; the hinge and the accelerations are
+  ``costs.hinge_sum`` and ``costs.acceleration_cost``, as in the reference.
+
+Everything is read from public tables: ``PR2.kinematics`` / ``PR2.spheres``, ``SignedDistanceField.tables``
+and ``StateCost.occupancy``.
 
 Tested equal to the reference to 1e-5 relative (``tests/services/planner/test_fused.py``).
 """
@@ -34,6 +39,12 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 
+from shared.robot import PR2
+from shared.scene import Grid
+
+from .costs import StateCost, acceleration_cost, hinge_sum
+from .sdf import VoxelTables
+
 __all__ = ["FusedCost", "supports"]
 
 log = logging.getLogger("foresight.planner")
@@ -45,80 +56,21 @@ def supports(robot: Any, cost: Any) -> bool:
     That is a PR2 ``StateCost`` with lift tables, one point per sphere and trilinear occupancy; otherwise
     the planner keeps the reference path.
     """
-    from shared.robot import PR2
-
-    from .costs import StateCost
-
     if not isinstance(robot, PR2) or not isinstance(cost, StateCost) or cost.robot is not robot:
         return False
     c = cost.config
     arm = robot.arm_carried_slice
     anchors = robot.sphere_anchor[arm].tolist()
-    return (cost._use_table and c.human_points == 1 and c.human_interp == "trilinear" and bool(anchors)
-            and min(anchors) >= 2 and max(anchors) <= len(robot.link_names) - 2
+    return (cost.occupancy.lift is not None and c.human_points == 1 and c.human_interp == "trilinear"
+            and bool(anchors) and min(anchors) >= 2 and max(anchors) <= len(robot.link_names) - 2
             and robot.arm_slice.start >= arm.start and robot.arm_slice.stop <= arm.stop)
 
 
-def _local_transform_basis(robot: Any) -> tuple[torch.Tensor, torch.Tensor]:
-    """Per joint j: ``H_j(q) = A0_j + cos(q) A1_j + sin(q) A2_j + q A3_j`` (4 x 4, float64).
-
-    Returns:
-        ``(A0 (D, 16, 1), A123^T (D, 16, 3))``; joint 0 includes the world-from-root base transform.
-    """
-    d = robot.dof
-    a = torch.zeros(d, 4, 4, 4, dtype=torch.float64)
-    base = torch.as_tensor(robot.base_transform, dtype=torch.float64)
-    for j, (_, k, sign, prismatic, _, _) in enumerate(robot._plan):
-        off = torch.eye(4, dtype=torch.float64)
-        off[:3, :3] = robot._off_r[j].double().cpu()
-        off[:3, 3] = robot._off_p[j].double().cpu()
-        if j == 0:
-            off = base @ off
-        axis = torch.zeros(3, dtype=torch.float64)
-        axis[k] = sign
-        if prismatic:
-            t = torch.zeros(4, 4, dtype=torch.float64)
-            t[:3, 3] = axis
-            a[j, 0], a[j, 3] = off, off @ t
-        else:  # Rodrigues: R = I + sin K + (1 - cos) K^2
-            kx = torch.zeros(3, 3, dtype=torch.float64)
-            kx[0, 1], kx[0, 2], kx[1, 0] = -axis[2], axis[1], axis[2]
-            kx[1, 2], kx[2, 0], kx[2, 1] = -axis[0], -axis[1], axis[0]
-            k2 = kx @ kx
-            c0, c1, c2 = torch.eye(4, dtype=torch.float64), torch.zeros(4, 4, dtype=torch.float64), torch.zeros(
-                4, 4, dtype=torch.float64)
-            c0[:3, :3] += k2
-            c1[:3, :3] = -k2
-            c2[:3, :3] = kx
-            a[j, 0], a[j, 1], a[j, 2] = off @ c0, off @ c1, off @ c2
-    return a[:, 0].reshape(d, 16, 1), a[:, 1:].reshape(d, 3, 16).transpose(1, 2)
-
-
-def _corner_major(volume: torch.Tensor) -> torch.Tensor:
-    """``(nx, ny, nz)`` -> ``(8, (nx-1)(ny-1)(nz-1))``: the 8 corner values of every cell, corner-major."""
-    nx, ny, nz = volume.shape
-    return torch.stack([volume[dx:nx - 1 + dx, dy:ny - 1 + dy, dz:nz - 1 + dz].reshape(-1)
-                        for dx in (0, 1) for dy in (0, 1) for dz in (0, 1)]).contiguous()
-
-
-class _Cells:
-    """Trilinear lookup tables of one voxel volume (values at voxel centres, ``first`` = centre of voxel 0)."""
-
-    def __init__(self, volume: torch.Tensor, first: torch.Tensor, inv_res: float, flat: bool = False) -> None:
-        dev, dt = volume.device, volume.dtype
-        nx, ny, nz = (int(n) for n in volume.shape)
-        self.packed = volume.reshape(-1).contiguous() if flat else _corner_major(volume)
-        self.offsets = torch.tensor([dx * ny * nz + dy * nz + dz for dx in (0, 1) for dy in (0, 1) for dz in (0, 1)],
-                                    device=dev).reshape(8, 1)
-        self.first = first.to(dev, dt).reshape(3, 1, 1)
-        self.inv_res = float(inv_res)
-        self.u_max = torch.tensor([nx - 1, ny - 1, nz - 1], device=dev, dtype=dt).reshape(3, 1, 1)
-        self.cell_max = torch.tensor([nx - 2, ny - 2, nz - 2], device=dev, dtype=dt).reshape(3, 1, 1)
-        strides = [ny * nz, nz, 1] if flat else [(ny - 1) * (nz - 1), nz - 1, 1]
-        self.strides = torch.tensor(strides, device=dev, dtype=dt).reshape(3, 1, 1)
-
-    def args(self) -> tuple[torch.Tensor, ...]:
-        return self.packed, self.first, self.u_max, self.cell_max, self.strides, self.offsets
+def _cell_args(t: VoxelTables, flat: bool) -> tuple[torch.Tensor, ...]:
+    """The lookup arguments of :func:`_trilinear` from ``t``: the packed cells, or the flat volume (compiled)."""
+    if flat:
+        return t.volume.view(-1), t.first, t.u_max, t.cell_max, t.voxel_strides, t.corner_offsets
+    return t.cells, t.first, t.u_max, t.cell_max, t.cell_strides, t.corner_offsets
 
 
 def _crop(volume: torch.Tensor, first: torch.Tensor, res: float,
@@ -144,44 +96,34 @@ def _crop(volume: torch.Tensor, first: torch.Tensor, res: float,
 
 def _trilinear(p: torch.Tensor, inv_res: float, packed: torch.Tensor, first: torch.Tensor, u_max: torch.Tensor,
                cell_max: torch.Tensor, strides: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
-    """Trilinear lookup, border-clamped.
+    """Trilinear lookup, border-clamped (the arguments come from :func:`_cell_args`).
 
     Args:
         p: ``(3, S, B)`` points (coordinate-major).
         inv_res: 1 / voxel edge.
-        packed: ``(8, cells)`` corner values (see :func:`_corner_major`; corner-major beat ``(cells, 8)`` rows by
+        packed: ``(8, cells)`` corner values (``VoxelTables.cells``; corner-major beat ``(cells, 8)`` rows by
             2x eager and compiled), or the ``(voxels,)`` volume itself (compiled: 8x smaller, stays in cache).
-        first: ``(3, 1, 1)`` centre of voxel 0.
-        u_max: ``(3, 1, 1)`` last voxel index (float).
-        cell_max: ``(3, 1, 1)`` last cell index (float).
-        strides: ``(3, 1, 1)`` cell strides, or voxel strides with a flat volume (float).
-        offsets: ``(8, 1)`` flat offsets of a cell's 8 corners (flat volume only).
+        first: ``(3,)`` centre of voxel 0.
+        u_max: ``(3,)`` last voxel index (float).
+        cell_max: ``(3,)`` last cell index (float).
+        strides: ``(3,)`` cell strides, or voxel strides with a flat volume (float).
+        offsets: ``(8,)`` flat offsets of a cell's 8 corners (flat volume only).
 
     Returns:
         ``(S, B)`` values.
     """
-    u = torch.minimum(((p - first) * inv_res).clamp(min=0), u_max)
-    i0 = torch.minimum(u.floor(), cell_max)
+    u = torch.minimum(((p - first.view(3, 1, 1)) * inv_res).clamp(min=0), u_max.view(3, 1, 1))
+    i0 = torch.minimum(u.floor(), cell_max.view(3, 1, 1))
     f = u - i0
-    idx = (i0 * strides).sum(0).long()  # (S, B)
+    idx = (i0 * strides.view(3, 1, 1)).sum(0).long()  # (S, B)
     if packed.dim() == 1:
-        c = packed[idx.reshape(1, -1) + offsets].view(2, 2, 2, -1)
+        c = packed[idx.reshape(1, -1) + offsets.view(8, 1)].view(2, 2, 2, -1)
     else:
         c = packed.index_select(1, idx.reshape(-1)).view(2, 2, 2, -1)
     fx, fy, fz = f.reshape(3, 1, -1)
     c = torch.lerp(c[:, :, 0], c[:, :, 1], fz)
     c = torch.lerp(c[:, 0], c[:, 1], fy)
     return torch.lerp(c[0], c[1], fx[0]).view(idx.shape)
-
-
-def _hinge_sum(e: torch.Tensor, eps: float) -> torch.Tensor:
-    """Sum over dim 0 of CHOMP's smooth hinge, written in ``e = eps - d``.
-
-    ``e - eps/2`` (e > eps), ``e^2 / (2 eps)`` (0 <= e <= eps), 0 (e < 0): ``costs.smooth_penetration(d, eps)``.
-    """
-    e = e.clamp(min=0)
-    m = e.clamp(max=eps)
-    return (m * m).sum(0) * (0.5 / eps) + (e - m).sum(0)
 
 
 def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Tensor, obs_thr: torch.Tensor,  # noqa: D417
@@ -194,12 +136,12 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
 
     Args:
         q: ``(N, T, D)`` trajectories.
-        a0, a123t: ``(D, 16, 1)``, ``(D, 16, 3)`` local transform basis (:func:`_local_transform_basis`).
+        a0, a123t: ``(D, 16, 1)``, ``(D, 16, 3)`` local transform basis (``ChainTables.transform_basis``).
         wt: ``(S, 28)`` homogeneous local centres of the S arm-carried spheres in the 7 arm links' blocks.
         obs_thr: ``(S, 1)`` ``clearance + radius``.
         sdf_*: cropped static field cells; ``sdf_lo``/``sdf_hi`` ``(3, 1, 1)`` the field's grid box.
         occ_*: occupancy cells (zero-padded).
-        tab: ``(4, n - 1)`` lift tables (obstacle, next, human, next) of the torso-carried spheres.
+        tab: ``(4, n - 1)`` ``LiftTables.values`` (obstacle, next, human, next) of the torso-carried spheres.
         psi: ``(B_body, 7)`` self-collision coefficients; v: ``(3, 1)`` world torso axis.
         r_arm: ``(A, 1)`` radii of the arm-group spheres.
         inv_vmax: ``(D,)`` 1 / scaled velocity limits.
@@ -229,7 +171,7 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
     if s["sdf_extend"]:
         out = p - torch.minimum(torch.maximum(p, sdf_lo), sdf_hi)
         sdf = sdf + (out * out).sum(0).sqrt()
-    obstacle = _hinge_sum(obs_thr - sdf, s["eps"])
+    obstacle = hinge_sum(obs_thr - sdf, s["eps"], 0)
     human = _trilinear(p, s["occ_inv"], occ_packed, occ_first, occ_umax, occ_cmax, occ_strides, occ_offs).sum(0)
     # torso-carried spheres: lift tables
     lift = qt[0]
@@ -248,20 +190,19 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
         rb = psi[:, 7:8, None]
         dist = torch.minimum(((dy * dy).sum(0).clamp(min=1e-12).sqrt() - rb[:nt]).amin(0),
                              ((dx * dx).sum(0).clamp(min=1e-12).sqrt() - rb[nt:]).amin(0))  # (A, B)
-        obstacle = obstacle + _hinge_sum(s["self_eps"] - (dist - r_arm), s["self_eps"])
+        obstacle = obstacle + hinge_sum(s["self_eps"] - (dist - r_arm), s["self_eps"], 0)
     elif s["self"]:  # eager: one matmul of features, then 4 passes over the pairs
         x = p[:, s["a0"]:s["a1"]].reshape(3, -1)  # (3, A * B)
         la = lift.repeat(s["a1"] - s["a0"]).view(1, -1)  # lift per (arm sphere, config)
         phi = torch.cat([x, la * (x * v).sum(0, keepdim=True), torch.ones_like(la), la, la * la], 0)  # (7, A*B)
         d2 = torch.addmm((x * x).sum(0, keepdim=True), psi[:, :7], phi)  # (B_body, A * B)
         dist = (d2.clamp(min=1e-12).sqrt() - psi[:, 7:8]).amin(0).view(-1, b)  # (A, B)
-        obstacle = obstacle + _hinge_sum(s["self_eps"] - (dist - r_arm), s["self_eps"])
+        obstacle = obstacle + hinge_sum(s["self_eps"] - (dist - r_arm), s["self_eps"], 0)
     state = torch.stack([s["w_obstacle"] * obstacle, s["w_human"] * human]).view(2, n, t)
     if s["integrate"]:
         seg = ((q[:, 1:] - q[:, :-1]).abs() * inv_vmax).amax(-1)  # (N, T - 1)
         state = state * (0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0))))
-    acc = q[:, 2:] - 2 * q[:, 1:-1] + q[:, :-2]
-    smooth = s["w_smooth"] * F.pad((acc * acc).sum(-1), (1, 1))
+    smooth = s["w_smooth"] * acceleration_cost(q)
     return torch.cat([smooth[None], state], 0)
 
 
@@ -270,33 +211,35 @@ class FusedCost:
 
     Args:
         robot: The PR2.
-        cost: Its :class:`~services.planner.costs.StateCost` (read again whenever its occupancy changes).
+        cost: Its :class:`~services.planner.costs.StateCost` (its ``occupancy`` tables are read at every call).
         w_smooth: Weight of the squared accelerations.
         vmax: ``(D,)`` scaled velocity limits (waypoint times).
         integrate: Weight the state terms by the waypoint times (``PlannerConfig.integrate_costs``).
         compile: ``torch.compile`` the kernel (call :meth:`warm_up` with the batch size to compile for).
         grid: The occupancy grid geometry expected (``shared.scene.Grid``, e.g. the scene's): "no occupancy"
             is then a zero grid of the same shape, so the compiled kernel keeps one shape.
+        pair_loop: Self-collision as one loop over the arm/body sphere pairs (what inductor fuses) instead of
+            a feature matmul; default: when compiled.
     """
 
-    def __init__(self, robot: Any, cost: Any, w_smooth: float, vmax: torch.Tensor, integrate: bool,
-                 compile: bool = False, grid: Any = None) -> None:
+    def __init__(self, robot: PR2, cost: StateCost, w_smooth: float, vmax: torch.Tensor, integrate: bool,
+                 compile: bool = False, grid: Grid | None = None, pair_loop: bool | None = None) -> None:
         if not supports(robot, cost):
             raise ValueError("FusedCost needs a PR2 StateCost with lift tables, 1 point per sphere, trilinear")
         self.robot, self.cost = robot, cost
         dev, dt = robot.device, robot.dtype
         cfg = cost.config
-        a0, a123t = _local_transform_basis(robot)
+        a0, a123t = robot.kinematics.transform_basis(robot.base_transform)
         arm = robot.arm_carried_slice
-        w = robot._sphere_weights[2:len(robot.link_names) - 1, :, arm]  # (7, 4, S) links of the arm joints
+        w = robot.spheres.weights[2:len(robot.link_names) - 1, :, arm]  # (7, 4, S) links of the arm joints
         r_arm_c = robot.sphere_radii[arm]
         # static field, cropped to where some arm-carried sphere can pay (value < clearance + largest radius)
         sdf = cost.sdf
-        lk = sdf._lookup
-        vol = torch.as_tensor(sdf.distance_, device=dev, dtype=dt)
+        field = sdf.tables
+        vol = field.volume
         cap = cfg.clearance + float(r_arm_c.max())
-        sub, first, inside = _crop(vol, lk.first, 1.0 / lk.inv_res, vol < cap)
-        self._sdf_args = (sub, first, lk.inv_res)
+        sub, first, inside = _crop(vol, field.first, 1.0 / field.inv_res, vol < cap)
+        self._sdf = VoxelTables.build(sub, first, field.inv_res)
         # body spheres: centre(l) = c0 + l v (torso-carried) or c0 (fixed base)
         lo = robot.lower.clone()
         up = lo.clone()
@@ -324,24 +267,22 @@ class FusedCost:
                             inv_vmax=(1.0 / vmax).to(dev, dt).contiguous())
         n_torso = int(moving.sum())
         contiguous = bool(moving[:n_torso].all()) and n_torso < len(moving)
-        self._static = dict(n_torso=n_torso if contiguous else -1, sdf_inv=lk.inv_res, sdf_extend=not inside,
+        lift = cost.occupancy.lift
+        self._static = dict(n_torso=n_torso if contiguous else -1, sdf_inv=field.inv_res, sdf_extend=not inside,
                             eps=float(cfg.clearance),
-                            occ_inv=1.0, lift_lo=float(cost._lift_lo), lift_inv=1.0 / float(cost._lift_step),
-                            lift_n=int(cost._lift_n), self=bool(cost.has_self),
+                            occ_inv=1.0, lift_lo=float(lift.lo), lift_inv=1.0 / float(lift.step),
+                            lift_n=int(lift.n), self=bool(cost.has_self),
                             a0=robot.arm_slice.start - arm.start, a1=robot.arm_slice.stop - arm.start,
                             self_eps=max(float(cfg.self_clearance), 1e-6), w_obstacle=float(cfg.w_obstacle),
                             w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate))
-        self._occ_src: Any = object()
-        self._tab_src: Any = object()
-        self._occ: _Cells | None = None
-        self._tab: torch.Tensor | None = None
         if grid is None:
-            self._zero_occ_args = (torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0)
-        else:  # the zero-padded shape and geometry of a real occupancy on `grid` (see costs._Lookup)
+            zeros, first, inv_res = torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0
+        else:  # the zero-padded shape and geometry of a real occupancy on `grid` (see VoxelTables.from_grid)
             res = float(grid.resolution)
-            dims = [int(n) + 2 for n in grid.dims]
-            first = torch.as_tensor(grid.origin, dtype=torch.float64) - res / 2
-            self._zero_occ_args = (torch.zeros(*dims, device=dev, dtype=dt), first, 1.0 / res)
+            zeros = torch.zeros(*[int(n) + 2 for n in grid.dims], device=dev, dtype=dt)
+            first, inv_res = torch.as_tensor(grid.origin, dtype=torch.float64) - res / 2, 1.0 / res
+        self._no_occupancy = VoxelTables.build(zeros, first, inv_res)  # read while no occupancy is set
+        self.pair_loop = pair_loop
         self._set_mode(bool(compile))
         self.batch: int | None = None  # the compiled batch size N (trajectories per call), set by warm_up
         self.compile_s = 0.0
@@ -350,36 +291,21 @@ class FusedCost:
         """Compiled: the pair loop fused by inductor; eager: the self-collision as a feature matmul."""
         self.compiled = compiled
         self._fn: Callable[..., torch.Tensor] = torch.compile(_kernel, dynamic=False) if compiled else _kernel
-        self._static.update(self_pairs=compiled)
+        self._static.update(self_pairs=compiled if self.pair_loop is None else self.pair_loop)
         self._flat = compiled  # compiled: 8 gathers from the volume itself (8x smaller than the packed cells)
-        self._sdf = _Cells(*self._sdf_args, flat=compiled)
-        self._occ_src = object()
-
-    def _refresh(self) -> None:
-        """Re-read the occupancy and the human lift table when ``cost.set_occupancy`` replaced them."""
-        cost = self.cost
-        if cost._occ is not self._occ_src:
-            self._occ_src = cost._occ
-            if cost._occ is None:
-                self._occ = _Cells(*self._zero_occ_args, flat=self._flat)
-            else:
-                lk = cost._occ  # zero-padded volume (not cropped: a fixed shape for the compiled kernel)
-                self._occ = _Cells(lk.flat.view(*lk.dims), lk.first, lk.inv_res, flat=self._flat)
-        if cost._tab_human is not self._tab_src:
-            self._tab_src = cost._tab_human
-            self._tab = torch.cat([cost._tab_obstacle.t(), cost._tab_human.t()], 0).contiguous()  # (4, n - 1)
 
     def _run(self, q3: torch.Tensor, eager: bool = False) -> torch.Tensor:
-        self._refresh()
-        assert self._occ is not None and self._tab is not None
         c = self._consts
-        occ = self._occ
+        tables = self.cost.occupancy  # rebuilt by StateCost.set_occupancy, once per grid
+        occ = tables.voxels if tables.voxels is not None else self._no_occupancy
+        assert tables.lift is not None
         s = dict(self._static, occ_inv=occ.inv_res)
-        fn = self._fn
+        fn, flat = self._fn, self._flat
         if eager:
             fn, s["self_pairs"] = _kernel, False
-        return fn(q3, c["a0"], c["a123t"], c["wt"], c["obs_thr"], *self._sdf.args(), c["sdf_lo"], c["sdf_hi"],
-                        *occ.args(), self._tab, c["psi"], c["v"], c["r_arm"], c["inv_vmax"], s=s)
+        return fn(q3, c["a0"], c["a123t"], c["wt"], c["obs_thr"], *_cell_args(self._sdf, flat), c["sdf_lo"],
+                  c["sdf_hi"], *_cell_args(occ, flat), tables.lift.values, c["psi"], c["v"], c["r_arm"],
+                  c["inv_vmax"], s=s)
 
     def terms(self, q: torch.Tensor) -> torch.Tensor:
         """Per-waypoint terms.

@@ -1,10 +1,10 @@
 """Planning goals: grasp poses at the scene's cups turned into PR2 goal configurations by IK.
 
 A task-space goal is a list of candidate gripper poses (world frame, the ``r_gripper_tool_frame``);
-the first feasible one wins. For a cup, the candidates are pre-grasp poses at ``standoff`` from the
-cup's surface, approaching horizontally from the robot's shoulder side (several yaw offsets and
-downward pitches) and/or from the top. All candidates of all goals are solved in ONE batched IK call
-(pytorch-kinematics, several seeds each, torso held at the start lift); a solution is kept when it
+the first feasible one wins. For a cup, the candidates are the pre-grasp poses of
+:func:`services.planner.grasps.grasp_candidates` (side and/or top approaches). All candidates of all
+goals are solved in ONE batched IK call (pytorch-kinematics, several seeds each, torso held at the
+start lift); a solution is kept when it
 converged, lies within the joint limits and is collision-free (static scene + self-collision). Among
 those the one closest to the start configuration is chosen. Goals that fail are reported (with
 the reason) and marked invalid, never silently replaced: outside the scene's workspace, beyond the
@@ -31,39 +31,11 @@ from shared.robot import PR2
 from shared.scene import Cup, Scene, load_scene
 
 from .costs import CostConfig, StateCost
+from .grasps import GraspConfig, grasp_candidates
 
-__all__ = ["GraspConfig", "IKGoals", "grasp_candidates", "cup_goals", "pose_goals", "joint_goals",
-           "plot_scene", "main"]
+__all__ = ["IKGoals", "cup_goals", "pose_goals", "joint_goals", "plot_scene", "main"]
 
 log = logging.getLogger("foresight.planner.goals")
-
-
-@dataclass
-class GraspConfig:
-    """How grasp poses at cups are generated and solved."""
-
-    approach: str = "any"  # "side", "top" or "any" (side candidates first, then top)
-    standoff: float = 0.05  # tool frame to the cup surface along the approach (m)
-    height_fraction: float = 0.5  # side approach: height on the cup (0 = base, 1 = rim)
-    yaw_offsets_deg: tuple[float, ...] = (0.0, -25.0, 25.0, -50.0, 50.0)  # about the shoulder -> cup bearing
-    pitch_deg: tuple[float, ...] = (0.0, 30.0)  # side approach tilted downwards by these angles
-    n_seeds: int = 12  # IK seeds per candidate (the first is the start configuration)
-    seed: int = 0
-    max_iterations: int = 60
-    pos_tolerance: float = 2e-3  # m
-    rot_tolerance: float = 2e-2  # rad
-    min_clearance: float = 0.0  # every moving sphere at least this far from the static obstacles (m)
-    max_reach: float = 1.1  # shoulder-pan axis to target beyond this (m): unreachable without trying IK
-
-    def validate(self) -> None:
-        """Raise ``ValueError`` naming the first bad value."""
-        checks = [("approach", self.approach in ("side", "top", "any")), ("standoff", self.standoff >= 0),
-                  ("height_fraction", 0 <= self.height_fraction <= 1), ("n_seeds", self.n_seeds >= 1),
-                  ("yaw_offsets_deg", len(self.yaw_offsets_deg) > 0), ("pitch_deg", len(self.pitch_deg) > 0),
-                  ("max_iterations", self.max_iterations >= 1), ("max_reach", self.max_reach > 0)]
-        for name, ok in checks:
-            if not ok:
-                raise ValueError(f"grasp.{name}: bad value {getattr(self, name)!r}")
 
 
 @dataclass
@@ -98,56 +70,6 @@ class IKGoals:
             else:
                 lines.append(f"{n}: DROPPED: {self.reasons[i]}")
         return "\n".join(lines)
-
-
-def _frame(x: np.ndarray, z_hint: np.ndarray) -> np.ndarray:
-    """Rotation with x axis ``x`` and z axis as close to ``z_hint`` as possible."""
-    x = x / np.linalg.norm(x)
-    z = z_hint - np.dot(z_hint, x) * x
-    z = z / np.linalg.norm(z)
-    return np.stack([x, np.cross(z, x), z], axis=1)
-
-
-def grasp_candidates(cup: Cup, shoulder: np.ndarray, config: GraspConfig) -> list[tuple[str, np.ndarray]]:
-    """Candidate world poses of the gripper tool frame for a pre-grasp at ``cup``.
-
-    Side: the tool's x axis (approach) points horizontally from the shoulder towards the cup axis,
-    rotated by each yaw offset and tilted down by each pitch; fingers open horizontally (tool z up);
-    the tool point sits ``standoff`` before the cup wall at ``height_fraction`` of its height.
-    Top: x points down, the fingers open across the shoulder -> cup bearing (rotated by each yaw
-    offset), the tool point ``standoff`` above the rim centre.
-
-    Args:
-        cup: The cup.
-        shoulder: ``(3,)`` world position of the shoulder (sets the approach bearing).
-        config: Grasp settings.
-
-    Returns:
-        ``[(label, (4, 4) pose), ...]`` in preference order.
-    """
-    out: list[tuple[str, np.ndarray]] = []
-    up = np.array([0.0, 0.0, 1.0])
-    d = cup.position[:2] - shoulder[:2]
-    bearing = math.atan2(d[1], d[0])
-    if config.approach in ("side", "any"):
-        for pitch in config.pitch_deg:
-            for yaw in config.yaw_offsets_deg:
-                b, p = bearing + math.radians(yaw), math.radians(pitch)
-                a = np.array([math.cos(b) * math.cos(p), math.sin(b) * math.cos(p), -math.sin(p)])
-                axis_point = cup.position + up * cup.height * config.height_fraction
-                ah = np.array([math.cos(b), math.sin(b), 0.0])
-                t = np.eye(4)
-                t[:3, :3] = _frame(a, up)
-                t[:3, 3] = axis_point - ah * cup.radius - a * config.standoff
-                out.append((f"side yaw {yaw:+.0f} pitch {pitch:.0f}", t))
-    if config.approach in ("top", "any"):
-        for yaw in config.yaw_offsets_deg:
-            b = bearing + math.radians(yaw)
-            t = np.eye(4)
-            t[:3, :3] = _frame(-up, np.array([math.cos(b), math.sin(b), 0.0]))
-            t[:3, 3] = cup.position + up * (cup.height + config.standoff)
-            out.append((f"top yaw {yaw:+.0f}", t))
-    return out
 
 
 def _inside(box: Any, p: np.ndarray) -> bool:

@@ -4,11 +4,13 @@ The scene's boxes and cups are rasterised at the voxel centres of a grid with th
 bounds (at ``resolution``, finer than the occupancy grid by default), then
 ``scipy.ndimage.distance_transform_edt`` gives, per voxel, the distance to the nearest voxel of the
 other kind; the signed field is ``outside - inside`` with a half-voxel correction so that the zero
-level lies on the obstacle surface. Lookups are trilinear (``torch.nn.functional.grid_sample``).
+level lies on the obstacle surface. Lookups are trilinear, from :class:`VoxelTables` (tested equal to
+``torch.nn.functional.grid_sample``).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -18,7 +20,7 @@ from scipy.ndimage import distance_transform_edt
 
 from shared.scene import Grid, Scene
 
-__all__ = ["SignedDistanceField", "rasterize_obstacles", "grid_lookup", "GridLookupError"]
+__all__ = ["SignedDistanceField", "VoxelTables", "rasterize_obstacles", "grid_lookup", "GridLookupError"]
 
 
 class GridLookupError(ValueError):
@@ -60,53 +62,106 @@ def _check_volume(volume: torch.Tensor, origin: Any, resolution: float, name: st
     return o, float(resolution)
 
 
-class _Lookup:
-    """Trilinear (or nearest) lookup in one voxel volume whose values sit at the voxel centres.
+@dataclass(frozen=True)
+class VoxelTables:
+    """Lookup tables of one voxel volume whose values sit at the voxel centres (built once per volume).
 
-    The 8 corner values of every cell are packed next to each other once, so that a lookup is one
-    ``index_select`` of ``(N, 8)`` rows and 7 lerps (no ``.item()``, no host sync).
-    ``padding="zeros"`` pads the volume with one voxel of zeros on every side (0 beyond the volume,
-    fading linearly over the outer half-voxel); ``"border"`` clamps the query to the outer voxel centres.
+    A trilinear lookup of a point reads the 8 corner values of the cell (the box between 8 neighbouring
+    voxel centres) it falls in: ``cells`` holds them packed next to each other, corner-major, so that a
+    lookup is one gather and 7 lerps (no ``.item()``, no host sync); ``volume`` is the same data
+    unpacked (8x smaller; a compiled kernel gathers the corners from it with ``corner_offsets``). The
+    geometry fields are float so that a kernel computes indices without a dtype change; indices are
+    exact below 2^24 voxels in float32.
+
+    Attributes:
+        volume: ``(nx, ny, nz)`` values (contiguous), every size >= 2.
+        cells: ``(8, C)`` corner values of the C = (nx-1)(ny-1)(nz-1) cells; corner ``4 dx + 2 dy + dz``.
+        first: ``(3,)`` position of the centre of voxel (0, 0, 0) (m).
+        inv_res: 1 / voxel edge (1/m).
+        u_max: ``(3,)`` last voxel index per axis (float).
+        cell_max: ``(3,)`` last cell index per axis (float).
+        cell_strides: ``(3,)`` flat-index strides of ``cells`` (float).
+        voxel_strides: ``(3,)`` flat-index strides of ``volume`` (float).
+        corner_offsets: ``(8,)`` long flat offsets of a cell's 8 corners in ``volume``.
     """
 
-    def __init__(self, volume: torch.Tensor, origin: Any, resolution: float, padding: str, name: str) -> None:
+    volume: torch.Tensor
+    cells: torch.Tensor
+    first: torch.Tensor
+    inv_res: float
+    u_max: torch.Tensor
+    cell_max: torch.Tensor
+    cell_strides: torch.Tensor
+    voxel_strides: torch.Tensor
+    corner_offsets: torch.Tensor
+
+    @classmethod
+    def build(cls, volume: torch.Tensor, first: torch.Tensor, inv_res: float) -> VoxelTables:
+        """Tables of ``volume`` ``(nx, ny, nz)`` (sizes >= 2) whose voxel (0, 0, 0) is centred at ``first`` (3,)."""
+        dev, dt = volume.device, volume.dtype
+        nx, ny, nz = (int(n) for n in volume.shape)
+        corners = [volume[dx:nx - 1 + dx, dy:ny - 1 + dy, dz:nz - 1 + dz].reshape(-1)
+                   for dx in (0, 1) for dy in (0, 1) for dz in (0, 1)]
+
+        def vec(values: list[int], dtype: torch.dtype = dt) -> torch.Tensor:
+            return torch.tensor(values, device=dev, dtype=dtype)
+
+        return cls(volume=volume.contiguous(), cells=torch.stack(corners).contiguous(), first=first.to(dev, dt),
+                   inv_res=float(inv_res), u_max=vec([nx - 1, ny - 1, nz - 1]), cell_max=vec([nx - 2, ny - 2, nz - 2]),
+                   cell_strides=vec([(ny - 1) * (nz - 1), nz - 1, 1]), voxel_strides=vec([ny * nz, nz, 1]),
+                   corner_offsets=vec([dx * ny * nz + dy * nz + dz for dx in (0, 1) for dy in (0, 1) for dz in (0, 1)],
+                                      torch.long))
+
+    @classmethod
+    def from_grid(cls, volume: torch.Tensor, origin: Any, resolution: float, padding: str,
+                  name: str = "volume") -> VoxelTables:
+        """Validated tables of a grid's values.
+
+        Args:
+            volume: ``(nx, ny, nz)`` values; voxel (i, j, k) is centred at ``origin + res * ((i, j, k) + 0.5)``.
+            origin: ``(3,)`` lower corner of voxel (0, 0, 0) (m).
+            resolution: Voxel edge (m).
+            padding: ``"zeros"``: one voxel of zeros on every side (0 beyond the volume, fading linearly
+                over the outer half-voxel); ``"border"``: lookups clamp to the outer voxel centres.
+            name: What the volume is, for error messages.
+
+        Raises:
+            GridLookupError: Bad shape (every size >= 2), origin, resolution or padding, or more voxels
+                than float32 indexes exactly.
+        """
         o, res = _check_volume(volume, origin, resolution, name)
         if padding not in ("zeros", "border"):
             raise GridLookupError(f"{name}: padding must be 'zeros' or 'border', got {padding!r}")
-        dev, dt = volume.device, volume.dtype
         first = o + res / 2  # centre of voxel 0
         if padding == "zeros":
             volume = F.pad(volume, (1, 1, 1, 1, 1, 1))
             first = first - res
-        self.dims = tuple(int(n) for n in volume.shape)
-        nx, ny, nz = self.dims
-        corners = [volume[dx:nx - 1 + dx, dy:ny - 1 + dy, dz:nz - 1 + dz]
-                   for dx in (0, 1) for dy in (0, 1) for dz in (0, 1)]
-        self.packed = torch.stack(corners, -1).reshape(-1, 8).contiguous()
-        self.flat = volume.reshape(-1).contiguous()
-        self.first = first.to(dev, dt)
-        self.inv_res = 1.0 / res
-        self.cell_max = torch.tensor([nx - 2, ny - 2, nz - 2], device=dev)
-        self.u_max = torch.tensor([nx - 1, ny - 1, nz - 1], device=dev, dtype=dt)
-        self.cell_strides = torch.tensor([(ny - 1) * (nz - 1), nz - 1, 1], device=dev)
-        self.voxel_strides = torch.tensor([ny * nz, nz, 1], device=dev)
+        if volume.dtype != torch.float64 and volume.numel() >= 2**24:
+            raise GridLookupError(f"{name}: {volume.numel()} voxels are too many for {volume.dtype} lookups "
+                                  "(< 2^24; use float64)")
+        return cls.build(volume, first, 1.0 / res)
 
-    def __call__(self, points: torch.Tensor, mode: str = "trilinear") -> torch.Tensor:
+    def lookup(self, points: torch.Tensor, mode: str = "trilinear") -> torch.Tensor:
+        """Values at ``points`` ``(..., 3)`` -> ``(...)``.
+
+        ``mode``: ``"trilinear"``, or ``"nearest"`` (the voxel whose centre is nearest). Beyond the outer
+        voxel centres the query is clamped to them.
+        """
         lead = points.shape[:-1]
         u = ((points.reshape(-1, 3) - self.first) * self.inv_res).clamp(min=0)
         u = torch.minimum(u, self.u_max)
         if mode == "nearest":
-            idx = (torch.round(u).long() * self.voxel_strides).sum(-1)
-            return self.flat.index_select(0, idx).reshape(lead)
-        i0 = torch.minimum(u.long(), self.cell_max)
+            idx = (torch.round(u) * self.voxel_strides).sum(-1).long()
+            return self.volume.view(-1).index_select(0, idx).reshape(lead)
+        i0 = torch.minimum(u.floor(), self.cell_max)
         f = u - i0
-        c = self.packed.index_select(0, (i0 * self.cell_strides).sum(-1))  # (N, 8) ordered x, y, z bits
-        fx, fy, fz = f[:, 0:1], f[:, 1:2], f[:, 2:3]
-        c = c.view(-1, 4, 2)
-        c = c[..., 0] + (c[..., 1] - c[..., 0]) * fz  # (N, 4)
-        c = c.view(-1, 2, 2)
-        c = c[..., 0] + (c[..., 1] - c[..., 0]) * fy  # (N, 2)
-        return (c[:, 0] + (c[:, 1] - c[:, 0]) * fx[:, 0]).reshape(lead)
+        c = self.cells.index_select(1, (i0 * self.cell_strides).sum(-1).long())  # (8, N) ordered x, y, z bits
+        fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
+        c = c.view(4, 2, -1)
+        c = c[:, 0] + (c[:, 1] - c[:, 0]) * fz  # (4, N)
+        c = c.view(2, 2, -1)
+        c = c[:, 0] + (c[:, 1] - c[:, 0]) * fy  # (2, N)
+        return (c[0] + (c[1] - c[0]) * fx).reshape(lead)
 
 
 def grid_lookup(volume: torch.Tensor, origin: Any, resolution: float, points: torch.Tensor,
@@ -126,7 +181,7 @@ def grid_lookup(volume: torch.Tensor, origin: Any, resolution: float, points: to
     """
     if mode not in ("trilinear", "nearest"):
         raise GridLookupError(f"mode must be 'trilinear' or 'nearest', got {mode!r}")
-    return _Lookup(volume, origin, resolution, padding, "volume")(points, mode)
+    return VoxelTables.from_grid(volume, origin, resolution, padding).lookup(points, mode)
 
 
 class SignedDistanceField:
@@ -141,6 +196,7 @@ class SignedDistanceField:
         grid: The field's voxel grid (scene grid bounds, ``resolution``).
         occupied_: ``(nx, ny, nz)`` bool rasterised obstacles.
         distance_: ``(nx, ny, nz)`` float32 numpy signed distance (m): negative inside obstacles.
+        tables: :class:`VoxelTables` of ``distance_`` (border padding) on ``device`` in ``dtype``.
     """
 
     def __init__(self, scene: Scene, resolution: float | None = 0.02, device: str | torch.device = "cpu",
@@ -157,8 +213,8 @@ class SignedDistanceField:
         sdf = np.where(occ, -(inside - res / 2), outside - res / 2)
         self.distance_ = sdf.astype(np.float32)
         self.device, self.dtype = torch.device(device), dtype
-        self._lookup = _Lookup(torch.as_tensor(self.distance_, device=self.device, dtype=dtype), self.grid.origin,
-                               res, "border", "signed distance field")
+        self.tables = VoxelTables.from_grid(torch.as_tensor(self.distance_, device=self.device, dtype=dtype),
+                                            self.grid.origin, res, "border", "signed distance field")
         lo = torch.as_tensor(self.grid.min, device=self.device, dtype=dtype)
         hi = torch.as_tensor(self.grid.max, device=self.device, dtype=dtype)
         self._lo, self._hi = lo, hi
@@ -169,6 +225,6 @@ class SignedDistanceField:
         Outside the grid: the value at the nearest border voxel centre plus the distance to the grid
         box (the scene's obstacles lie inside the grid, so this stays positive and grows outwards).
         """
-        d = self._lookup(points)
+        d = self.tables.lookup(points)
         out = torch.clamp(self._lo - points, min=0) + torch.clamp(points - self._hi, min=0)
         return d + torch.sqrt((out * out).sum(-1))  # (vector_norm over a size-3 axis is slow on CPU)

@@ -59,7 +59,7 @@ def test_sphere_centres_follow_their_links(robot: PR2) -> None:
     q = _random_q(robot, 64, seed=3)
     centres = robot.sphere_centers(q)
     t = robot.fk_reference(q)[:, robot.sphere_anchor]  # (B, S, 4, 4)
-    expect = torch.einsum("bsij,sj->bsi", t[..., :3, :3], robot._sphere_local) + t[..., :3, 3]
+    expect = torch.einsum("bsij,sj->bsi", t[..., :3, :3], robot.spheres.local) + t[..., :3, 3]
     assert (centres - expect).abs().max() < 1e-5
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from services.planner.costs import CostConfig, CostInputError, StateCost, smooth_penetration, smoothness_cost
+from services.planner.costs import CostConfig, CostInputError, StateCost, acceleration_cost, hinge_sum
 
 
 @pytest.fixture(scope="module")
@@ -14,29 +14,32 @@ def cost(scene, robot):
     return StateCost.from_scene(scene, robot, CostConfig(sdf_resolution=0.03))
 
 
-def test_smooth_penetration_shape() -> None:
+def test_hinge_shape() -> None:
     eps = 0.05
     d = torch.tensor([-0.1, -1e-6, 0.0, 0.025, eps - 1e-7, eps, 0.2])
-    c = smooth_penetration(d, eps)
+    c = hinge_sum((eps - d)[:, None], eps)  # one element per sum: the hinge itself
     assert float(c[0]) == pytest.approx(eps / 2 + 0.1)
     assert float(c[1]) == pytest.approx(eps / 2, abs=1e-5) and float(c[2]) == pytest.approx(eps / 2)  # continuous at 0
     assert float(c[3]) == pytest.approx(0.025**2 / (2 * eps))
     assert float(c[4]) == pytest.approx(0.0, abs=1e-6) and float(c[5]) == 0 and float(c[6]) == 0
     assert torch.all(c[:-1] >= c[1:])  # non-increasing in d
+    assert float(hinge_sum(eps - d, eps)) == pytest.approx(float(c.sum()), rel=1e-6)  # sums over the last axis
 
 
-def test_smoothness_cost() -> None:
+def test_acceleration_cost() -> None:
     t = torch.linspace(0, 1, 20)
     line = torch.stack([t, 2 * t, -t], -1)
-    assert float(smoothness_cost(line)) == pytest.approx(0.0, abs=1e-10)
+    assert float(acceleration_cost(line).sum()) == pytest.approx(0.0, abs=1e-10)
     quad = (t**2)[:, None].repeat(1, 2)
     h = float(t[1] - t[0])
+    per = acceleration_cost(quad)
+    assert per.shape == (20,) and float(per[0]) == float(per[-1]) == 0.0  # ends: no acceleration
     expect = 18 * 2 * (2 * h * h) ** 2  # 18 interior waypoints x 2 joints x (second difference)^2
-    assert float(smoothness_cost(quad)) == pytest.approx(expect, rel=1e-4)
+    assert float(per.sum()) == pytest.approx(expect, rel=1e-4)
     batch = torch.stack([line, quad[:, :1].repeat(1, 3)])
-    assert smoothness_cost(batch).shape == (2,)
-    with pytest.raises(CostInputError):
-        smoothness_cost(torch.zeros(2, 3))
+    assert acceleration_cost(batch).shape == (2, 20)
+    with pytest.raises(CostInputError, match="3 waypoints"):
+        acceleration_cost(torch.zeros(2, 3))
 
 
 def test_state_cost_shape_and_start_is_free(cost, robot) -> None:

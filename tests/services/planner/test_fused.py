@@ -7,9 +7,9 @@ import pytest
 import torch
 
 from services.planner.bench import bench_goals, blob_occupancy
-from services.planner.core import Planner, PlannerConfig
-from services.planner.costs import CostConfig, StateCost
-from services.planner.fused import FusedCost, supports
+from services.planner.core import GoalSet, Planner, PlannerConfig
+from services.planner.costs import CostConfig, StateCost, hinge_sum
+from services.planner.fused import FusedCost, _cell_args, _trilinear, supports
 from shared.robot import PR2
 
 
@@ -26,7 +26,7 @@ def _batch(robot: PR2, shape: tuple[int, ...], seed: int, spread: float = 0.6) -
     g = torch.Generator().manual_seed(seed)
     scale = torch.full((8,), spread)
     scale[0] = 0.1
-    q = robot.q_start + scale * torch.randn(*shape, 8, generator=g)
+    q = robot.q_start + scale.to(robot.dtype) * torch.randn(*shape, 8, generator=g, dtype=robot.dtype)
     return torch.minimum(torch.maximum(q, robot.lower), robot.upper)
 
 
@@ -43,6 +43,24 @@ def test_fused_equals_reference_on_random_batches(planner, scene) -> None:
             assert out.shape == ref.shape == (3, 5, 40)
             assert torch.allclose(out, ref, rtol=1e-5, atol=1e-4), float((out - ref).abs().max())
     planner.cost.set_occupancy(None, grid.origin, grid.resolution)
+
+
+def test_fused_equals_reference_in_float64(scene) -> None:
+    """In float64 the two implementations agree to ~1e-9: the float32 tolerances above are rounding only."""
+    robot = PR2.from_scene(scene, dtype=torch.float64)
+    cost = StateCost.from_scene(scene, robot, CostConfig())
+    goals = GoalSet.joint_space(["start"], robot.q_start[None], robot)
+    planner = Planner(scene, PlannerConfig(dtype="float64", compile=False, iterations=1), robot=robot, cost=cost,
+                      goals=goals)
+    assert planner.fused is not None
+    grid = scene.grid
+    rng = np.random.default_rng(2)
+    for occ in (blob_occupancy(scene), rng.uniform(0, 1, grid.dims), None):
+        cost.set_occupancy(occ, grid.origin, grid.resolution)
+        q = _batch(robot, (4, 6, 40), 9, spread=1.0)
+        ref, out = planner.waypoint_cost_reference(q), planner.waypoint_cost(q)
+        assert float(ref.max()) > 1.0  # obstacle and self-collision terms are exercised
+        assert torch.allclose(out, ref, rtol=1e-9, atol=1e-9), float((out - ref).abs().max())
 
 
 def test_fused_terms_match_each_reference_term(planner, scene) -> None:
@@ -70,7 +88,8 @@ def test_self_collision_and_cropped_field_are_exact(scene) -> None:
     q = _batch(robot, (400,), 3, spread=1.5).reshape(20, 20, 8)  # wide: body contacts, far reaches
     ref = cost(q)[..., 0]
     out = fused.terms(q[:, :, None].expand(20, 20, 3, 8))[1, :, :, 1]  # middle waypoint, obstacle
-    self_term = cost._self_term(robot.sphere_centers(q))
+    eps = cost.config.self_clearance
+    self_term = hinge_sum(eps - robot.self_collision_distance(robot.sphere_centers(q)).amin(-1), eps)
     assert float(self_term.max()) > 0.01 and bool((self_term == 0).any())  # some contacts, some free
     centres = robot.sphere_centers(q)[..., robot.arm_carried_slice, :]
     outside = ((centres < torch.as_tensor(cost.sdf.grid.min, dtype=torch.float32))
@@ -79,8 +98,8 @@ def test_self_collision_and_cropped_field_are_exact(scene) -> None:
     # float32: both sides expand |a - b|^2 = |a|^2 + |b|^2 - 2 a.b in world coordinates (~1 m), so sphere
     # distances agree to ~1e-5 m; weighted (x 10) and summed over 16 spheres that is a few 1e-4
     assert torch.allclose(out, ref, rtol=1e-4, atol=5e-4), float((out - ref).abs().max())
-    fused._static["self_pairs"] = True  # the pair loop the compiled kernel uses (here run eagerly)
-    pairs = fused.terms(q[:, :, None].expand(20, 20, 3, 8))[1, :, :, 1]
+    pairs_kernel = FusedCost(robot, cost, 0.0, robot.velocity_limits, integrate=False, pair_loop=True)
+    pairs = pairs_kernel.terms(q[:, :, None].expand(20, 20, 3, 8))[1, :, :, 1]  # the compiled kernel's loop, eager
     assert torch.allclose(pairs, ref, rtol=1e-4, atol=5e-4), float((pairs - ref).abs().max())
 
 
@@ -88,7 +107,7 @@ def test_chunked_batches_equal_one_call(planner, scene) -> None:
     """The compiled path evaluates fixed-size chunks (the last one padded): same numbers as one call."""
     grid = scene.grid
     planner.cost.set_occupancy(blob_occupancy(scene), grid.origin, grid.resolution)
-    f = FusedCost(planner.robot, planner.cost, planner.w_smooth, planner._vmax, True)
+    f = FusedCost(planner.robot, planner.cost, planner.w_smooth, _vmax(planner), True)
     q = _batch(planner.robot, (3, 7, 40), 5)
     whole = f(q)
     f.compiled, f.batch = True, 4  # chunks of 4 trajectories, eager kernel
@@ -107,16 +126,23 @@ def test_unsupported_costs_keep_the_reference_path(scene) -> None:
         FusedCost(robot, seven, 10.0, robot.velocity_limits, True)
 
 
-def test_flat_volume_lookups_equal_packed_cells(planner, scene) -> None:
-    """The compiled kernel gathers the 8 corners from the volume itself; eager from packed cells."""
-    from services.planner.fused import _Cells
-
+def test_kernel_lookups_equal_the_reference_lookups(planner, scene) -> None:
+    """The kernel reads the same VoxelTables as the reference: its packed cells (eager) or the flat volume
+    (compiled), with lerps instead of the reference's ``a + (b - a) f`` (equal to float32 rounding)."""
     grid = scene.grid
     planner.cost.set_occupancy(blob_occupancy(scene), grid.origin, grid.resolution)
-    f = FusedCost(planner.robot, planner.cost, planner.w_smooth, planner._vmax, True, grid=grid)
-    q = _batch(planner.robot, (2, 6, 40), 11, spread=1.2)
-    packed = f(q)
-    f._flat, f._sdf, f._occ_src = True, _Cells(*f._sdf_args, flat=True), object()
-    assert f._sdf.packed.dim() == 1
-    assert torch.allclose(f(q), packed, rtol=1e-6, atol=1e-6)
+    g = torch.Generator().manual_seed(3)
+    lo, hi = torch.as_tensor(grid.min) - 0.1, torch.as_tensor(grid.max) + 0.1  # some points beyond the grid
+    p = (lo + (hi - lo) * torch.rand(2000, 3, generator=g, dtype=torch.float64)).float()
+    for tables in (planner.cost.occupancy.voxels, planner.cost.sdf.tables):
+        ref = tables.lookup(p)
+        assert float(ref.abs().max()) > 0.1  # the points see the values
+        for flat in (False, True):
+            out = _trilinear(p.t().reshape(3, 1, -1), tables.inv_res, *_cell_args(tables, flat)).reshape(-1)
+            assert torch.allclose(out, ref, rtol=1e-6, atol=1e-6), (flat, float((out - ref).abs().max()))
     planner.cost.set_occupancy(None, grid.origin, grid.resolution)
+
+
+def _vmax(planner: Planner) -> torch.Tensor:
+    """The planner's scaled velocity limits (its waypoint times)."""
+    return planner.robot.velocity_limits * planner.config.velocity_scale

@@ -9,7 +9,8 @@ import pytest
 import torch
 
 from services.planner.costs import StateCost
-from services.planner.goals import GraspConfig, cup_goals, grasp_candidates, joint_goals, pose_goals
+from services.planner.goals import cup_goals, joint_goals, pose_goals
+from services.planner.grasps import GraspConfig, grasp_candidates
 from shared.robot import RobotModelError
 from shared.scene import Cup
 
