@@ -16,7 +16,6 @@ occupancy (latest-only subscription, so a slow planner never works through stale
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import queue
 import threading
@@ -25,9 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from shared.config import ZenohConfig, opt
+from shared.config import ZenohConfig
 from shared.protocol import ClockTick, DemoMarker, Keys, OccupancyGrid, Plan, RobotState
-from shared.scene import SCENE_HELP, Scene, load_scene
+from shared.scene import Scene, load_scene
 from shared.transport import (
     LatestSubscriber,
     Presence,
@@ -38,46 +37,12 @@ from shared.transport import (
     subscribe,
 )
 
-from .core import Planner, PlannerConfig, PlannerError, PlanResult
+from .config import PlannerServiceConfig
+from .core import Planner, PlannerError, PlanResult
 
 __all__ = ["PlannerServiceConfig", "PlannerService", "PlannerStats", "plan_message"]
 
 log = logging.getLogger("foresight.planner")
-
-
-@dataclass
-class PlannerServiceConfig(PlannerConfig):
-    """The ``[planner]`` section: the planner's settings plus how the service runs it."""
-
-    mode: str = opt("realtime", help="replan on a wall-clock period or on every ClockTick (lock-step: no lookahead)",
-                    choices=("realtime", "lockstep"))
-    period_s: float = opt(0.5, help="real-time replanning period (s)")
-    input_timeout_s: float = opt(10.0, help="lock-step: longest wait for a tick's robot state / occupancy (s)")
-    scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")
-    stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
-                               "disappears after it was seen (comma-separated; how a compose run ends)")
-    log_level: str = opt("INFO", help="log level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
-
-    def validate(self) -> None:
-        """Check the planner settings and the service's own."""
-        super().validate()
-        from shared.config import ConfigError
-
-        if not self.period_s > 0:
-            raise ConfigError(f"planner.period_s: must be > 0, got {self.period_s}")
-        if not self.input_timeout_s > 0:
-            raise ConfigError(f"planner.input_timeout_s: must be > 0, got {self.input_timeout_s}")
-
-    def planner_config(self) -> PlannerConfig:
-        """The :class:`PlannerConfig` part.
-
-        In lock-step mode the executor's last RobotState of a tick already is the configuration the plan
-        starts from, so there is no lookahead; in real time the plan starts ``lookahead_s`` ahead.
-        """
-        base = {f.name: getattr(self, f.name) for f in dataclasses.fields(PlannerConfig)}
-        if self.mode == "lockstep":
-            base["lookahead_s"] = 0.0
-        return PlannerConfig(**base)
 
 
 @dataclass

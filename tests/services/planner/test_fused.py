@@ -10,12 +10,13 @@ from services.planner.bench import bench_goals, blob_occupancy
 from services.planner.core import Planner, PlannerConfig
 from services.planner.costs import CostConfig, StateCost
 from services.planner.fused import FusedCost, supports
+from services.planner.stomp import StompConfig
 from shared.robot import PR2
 
 
 @pytest.fixture(scope="module")
 def planner(scene):
-    config = PlannerConfig(iterations=5, compile=False)
+    config = PlannerConfig(stomp=StompConfig(iterations=5), compile=False)
     base = Planner(scene, config)
     goals = bench_goals(base.goals, base.robot, 3, seed=0)
     return Planner(scene, config, robot=base.robot, cost=base.cost, goals=goals)
