@@ -29,7 +29,7 @@ import numpy as np
 
 from shared.config import ZenohConfig
 from shared.lockstep import Adoption, LockstepMaster, PlanInbox, StepClock
-from shared.protocol import DemoMarker, Keys, Message, OccupancyGrid, Plan, ProtocolError, decode
+from shared.protocol import DemoMarker, Keys, Message, OccupancyGrid, Plan, ProtocolError, RobotState, decode
 from shared.scene import Scene, load_scene
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session
 
@@ -187,7 +187,7 @@ class ExecutorService:
                  r.held_steps, sum(r.rejects.values()))
         return r
 
-    def _publish_state(self, pub: TypedPublisher[Any], state: Any) -> None:
+    def _publish_state(self, pub: TypedPublisher[Any], state: RobotState) -> None:
         pub.put(state)
         if self.mcap is not None:
             self.mcap.flush_if_due()
