@@ -125,7 +125,7 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
         "predictor": ["--model", str(model), "--method", cfg.method, *scene, *common],
         "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
                     "--velocity-scale", str(cfg.robot_speed),
-                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--w-human", "0"]), *scene,
+                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--cost.w-human", "0"]), *scene,
                     *common],
         "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
                      "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"]), *common],

@@ -1,17 +1,29 @@
-"""Configuration: one small dataclass per component, loaded file < environment < command line.
+"""Configuration: one dataclass per component, nested like the components, loaded file < environment < flags.
 
-Every service holds one config dataclass of its own plus the common :class:`ZenohConfig`.
-Values are resolved in this order, later wins:
+Every service holds one config dataclass of its own plus the common :class:`ZenohConfig`. A config
+dataclass holds the configs of the components it builds as nested dataclass fields (declared with
+:func:`nested`): the planner service's config holds the planner's (:class:`~services.planner.core.PlannerConfig`),
+which holds STOMP's (``stomp``) and the costs' (``cost``). Every field of that tree has one name,
+and values are resolved in this order, later wins:
 
 1. the dataclass defaults (the embedded defaults: ``make demo`` needs nothing else);
-2. a TOML file (``--config FILE`` or ``FORESIGHT_CONFIG``), with a ``[zenoh]`` table and one
-   table per section, e.g. ``[replayer]``;
-3. environment variables ``FORESIGHT_<SECTION>_<FIELD>``, e.g. ``FORESIGHT_REPLAYER_RATE_HZ=10``
-   or ``FORESIGHT_ZENOH_CONNECT=tcp/127.0.0.1:7447``;
-4. command-line flags ``--<field-name>``, e.g. ``--rate-hz 10``.
+2. a TOML file (``--config FILE`` or ``FORESIGHT_CONFIG``) with a ``[zenoh]`` table, one table per
+   section, e.g. ``[replayer]``, and one sub-table per nested config, e.g. ``[planner.stomp]``;
+3. environment variables ``FORESIGHT_<SECTION>[_<NESTED>...]_<FIELD>``, e.g.
+   ``FORESIGHT_REPLAYER_RATE_HZ=10``, ``FORESIGHT_PLANNER_STOMP_ITERATIONS=20`` or
+   ``FORESIGHT_ZENOH_CONNECT=tcp/127.0.0.1:7447``;
+4. command-line flags: ``--<field-name>`` for the section's own fields (``--rate-hz 10``) and
+   ``--<nested>.<field-name>`` for nested ones (``--stomp.iterations 20``, ``--cost.w-human 0``).
 
-Field help texts, types and choices come from the dataclass, so ``--help`` shows every option.
-A bad value raises :class:`ConfigError` with a one-line message naming the option.
+A nested config declared ``inline`` (the planner's inside the planner service's) shares its parent's
+table, variables and flags: its fields read as the section's own (``[planner] device``,
+``--device``), its own nested configs keep their names (``[planner.stomp]``, ``--stomp.iterations``).
+Fields a parent sets itself (STOMP's device, dtype and seed are the planner's) are hidden with
+``nested(..., hide=...)``.
+
+Help texts, types and choices come from the dataclasses (``opt(help=...)``, else the class docstring's
+``Attributes:`` entry, else the field's trailing comment), so ``--help`` shows every option, grouped
+by table. A bad value raises :class:`ConfigError` with a one-line message naming the option.
 """
 
 from __future__ import annotations
@@ -21,16 +33,31 @@ import dataclasses
 import math
 import os
 import tomllib
-import types
 import typing
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TypeVar
+
+from shared.config_tree import (
+    ENV_PREFIX,
+    ConfigError,
+    Option,
+    base_type,
+    config_options,
+    config_tables,
+    fields_of,
+    is_config,
+    nested,
+    opt,
+    parse_value,
+)
 
 __all__ = [
     "ConfigError",
     "ZenohConfig",
     "opt",
+    "nested",
+    "Option",
+    "config_options",
     "add_config_arguments",
     "resolve_config",
     "load_toml",
@@ -38,31 +65,6 @@ __all__ = [
 ]
 
 T = TypeVar("T")
-
-ENV_PREFIX = "FORESIGHT"
-
-
-class ConfigError(ValueError):
-    """A configuration value is missing, malformed or out of range; the message names it."""
-
-
-def opt(default: Any = dataclasses.MISSING, *, help: str, choices: Sequence[Any] | None = None,
-        default_factory: Any = dataclasses.MISSING) -> Any:
-    """Declare a config field with its help text (and optional choices).
-
-    Args:
-        default: Default value (immutable).
-        help: One-line help shown by ``--help``.
-        choices: Allowed values, checked on load.
-        default_factory: Factory for mutable defaults (lists).
-
-    Returns:
-        A ``dataclasses.field``.
-    """
-    meta = {"help": help, "choices": tuple(choices) if choices is not None else None}
-    if default_factory is not dataclasses.MISSING:
-        return dataclasses.field(default_factory=default_factory, metadata=meta)
-    return dataclasses.field(default=default, metadata=meta)
 
 
 @dataclasses.dataclass
@@ -93,82 +95,6 @@ class ZenohConfig:
 
 
 # ----------------------------------------------------------------------------------------------
-# value parsing
-
-
-def _base_type(tp: Any) -> tuple[Any, bool]:
-    """Return (inner type, is_list) for a field annotation (``X``, ``list[X]``, ``X | None``)."""
-    origin = typing.get_origin(tp)
-    if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        return _base_type(args[0])
-    if origin is list:
-        return typing.get_args(tp)[0], True
-    return tp, False
-
-
-def parse_value(name: str, tp: Any, raw: Any, choices: Sequence[Any] | None = None) -> Any:
-    """Convert ``raw`` (a string from env/CLI, or a TOML value) to the field type ``tp``.
-
-    Args:
-        name: Dotted option name used in error messages, e.g. ``replayer.rate_hz``.
-        tp: The field's annotation (resolved).
-        raw: The value to convert.
-        choices: Allowed values, if any.
-
-    Returns:
-        The converted value.
-
-    Raises:
-        ConfigError: If the value cannot be converted or is not among ``choices``.
-    """
-    inner, is_list = _base_type(tp)
-    if is_list:
-        if isinstance(raw, str):
-            items = [s.strip() for s in raw.split(",") if s.strip()]
-        elif isinstance(raw, list | tuple):
-            items = list(raw)
-        else:
-            raise ConfigError(f"{name}: expected a list, got {raw!r}")
-        return [parse_value(name, inner, item, choices) for item in items]
-    value: Any
-    try:
-        if inner is bool:
-            if isinstance(raw, bool):
-                value = raw
-            elif isinstance(raw, str) and raw.strip().lower() in ("1", "true", "yes", "on"):
-                value = True
-            elif isinstance(raw, str) and raw.strip().lower() in ("0", "false", "no", "off"):
-                value = False
-            else:
-                raise ValueError
-        elif inner is int:
-            if isinstance(raw, bool) or (isinstance(raw, float) and not raw.is_integer()):
-                raise ValueError
-            value = int(raw)
-        elif inner is float:
-            if isinstance(raw, bool):
-                raise ValueError
-            value = float(raw)
-            if value != value or value in (float("inf"), float("-inf")):
-                raise ValueError
-        elif inner is Path:
-            value = Path(str(raw)).expanduser()
-        elif inner is str:
-            if not isinstance(raw, str):
-                raise ValueError
-            value = raw
-        else:  # pragma: no cover - config dataclasses only use the types above
-            raise ConfigError(f"{name}: unsupported option type {inner!r}")
-    except (TypeError, ValueError):
-        kind = getattr(inner, "__name__", str(inner))
-        raise ConfigError(f"{name}: expected {kind}, got {raw!r}") from None
-    if choices is not None and value not in choices:
-        raise ConfigError(f"{name}: {value!r} is not one of {', '.join(map(str, choices))}")
-    return value
-
-
-# ----------------------------------------------------------------------------------------------
 # file / env / CLI
 
 
@@ -188,11 +114,6 @@ def load_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise ConfigError(f"config file {str(p)!r}: {exc}") from None
 
 
-def _fields(cls: type) -> list[tuple[dataclasses.Field[Any], Any]]:
-    hints = typing.get_type_hints(cls)
-    return [(f, hints[f.name]) for f in dataclasses.fields(cls)]
-
-
 ZENOH_FLAG_NAMES = {"mode": "zenoh_mode"}
 """Zenoh options whose flag differs from the field name in every command (``--mode`` is the services' own)."""
 
@@ -201,66 +122,128 @@ def _flag(field_name: str) -> str:
     return "--" + field_name.replace("_", "-")
 
 
+def _zenoh_flags(section_flags: set[str]) -> dict[str, str]:
+    """Flag of each Zenoh field: ``--zenoh-mode``, and ``--zenoh-<name>`` where a section field has the flag."""
+    out = {}
+    for f in dataclasses.fields(ZenohConfig):
+        flag = _flag(ZENOH_FLAG_NAMES.get(f.name, f.name))
+        out[f.name] = _flag(f"zenoh_{f.name}") if flag in section_flags else flag
+    return out
+
+
 def add_config_arguments(parser: argparse.ArgumentParser, section: str, cls: type,
                          with_zenoh: bool = True) -> None:
-    """Add ``--config``, the Zenoh flags and one flag per field of ``cls`` to ``parser``.
+    """Add ``--config``, one flag per field of ``cls``'s tree and the Zenoh flags to ``parser``.
 
-    Flags default to ``None`` (argparse.SUPPRESS) so that only given flags override file and env.
-    The Zenoh session mode is always ``--zenoh-mode``; any other Zenoh field whose flag a section
-    field already uses is offered as ``--zenoh-<name>`` instead.
+    Flags default to ``argparse.SUPPRESS`` so that only given flags override file and env. Options
+    are grouped by TOML table (``[planner]``, ``[planner.stomp]``, ...), each group naming its
+    environment variables. The Zenoh session mode is always ``--zenoh-mode``; any other Zenoh field
+    whose flag a section field already uses is offered as ``--zenoh-<name>`` instead.
     """
     if not any(a.dest == "config" for a in parser._actions):
         parser.add_argument("--config", metavar="FILE", default=None,
                             help=f"TOML config file (or ${ENV_PREFIX}_CONFIG)")
-    groups: list[tuple[str, type]] = [(section, cls)]
+    options = config_options(section, cls)
+    tables = config_tables(section, cls)
+    groups: dict[tuple[str, ...], argparse._ArgumentGroup] = {}
+    for table, (text, _) in tables.items():
+        if not any(o.table == table for o in options):
+            continue
+        env = "_".join((ENV_PREFIX, *table)).upper()
+        flags = "" if len(table) == 1 else f", flags --{'.'.join(table[1:])}.<name>"
+        groups[table] = parser.add_argument_group(f"[{'.'.join(table)}] options (env {env}_<NAME>{flags})",
+                                                  text or None)
+    for o in options:
+        _add_flag(groups[o.table], o.flag, o)
     if with_zenoh:
-        groups.append(("zenoh", ZenohConfig))
-    for sec, kls in groups:
-        group = parser.add_argument_group(f"[{sec}] options (env {ENV_PREFIX}_{sec.upper()}_<NAME>)")
-        defaults = kls()
-        for f, tp in _fields(kls):
-            inner, is_list = _base_type(tp)
-            default = getattr(defaults, f.name)
-            shown = ",".join(map(str, default)) if is_list else default
-            text = f"{f.metadata.get('help', '')} (default: {shown})"
-            dest = f"{sec}__{f.name}"
-            flag = _flag(ZENOH_FLAG_NAMES.get(f.name, f.name) if sec == "zenoh" else f.name)
-            if flag in parser._option_string_actions:
-                # a section field of the same name (e.g. the replayer's --mode) keeps the short flag
-                flag = _flag(f"{sec}_{f.name}")
-            if inner is bool and not is_list:
-                group.add_argument(flag, dest=dest,
-                                   action=argparse.BooleanOptionalAction, default=argparse.SUPPRESS, help=text)
-            else:
-                choices = f.metadata.get("choices")
-                metavar = "{" + ",".join(map(str, choices)) + "}" if choices else f.name.upper()
-                group.add_argument(flag, dest=dest, metavar=metavar,
-                                   default=argparse.SUPPRESS, help=text)
+        names = _zenoh_flags({o.flag for o in options})
+        group = parser.add_argument_group(f"[zenoh] options (env {ENV_PREFIX}_ZENOH_<NAME>)")
+        for o in config_options("zenoh", ZenohConfig):
+            _add_flag(group, names[o.field], o)
+
+
+def _add_flag(group: argparse._ArgumentGroup, flag: str, o: Option) -> None:
+    inner, is_list = base_type(o.tp)
+    shown = ",".join(map(str, o.default)) if is_list else o.default
+    text = f"{o.help} (default: {shown})".replace("%", "%%")
+    if inner is bool and not is_list:
+        group.add_argument(flag, dest=o.dest, action=argparse.BooleanOptionalAction, default=argparse.SUPPRESS,
+                           help=text)
+    else:
+        metavar = "{" + ",".join(map(str, o.choices)) + "}" if o.choices else o.field.upper()
+        group.add_argument(flag, dest=o.dest, metavar=metavar, default=argparse.SUPPRESS, help=text)
+
+
+def _check_tables(section: str, cls: type, data: dict[str, Any]) -> None:
+    """Raise ConfigError for unknown keys and non-table values of sub-tables in ``data`` (the section's table)."""
+    for table, (_, allowed) in config_tables(section, cls).items():
+        values: Any = data
+        for step in table[1:]:
+            values = values.get(step, {}) if isinstance(values, dict) else {}
+        if not isinstance(values, dict):
+            raise ConfigError(f"[{'.'.join(table)}]: must be a table, got {values!r}")
+        unknown = set(values) - allowed
+        if unknown:
+            raise ConfigError(f"[{'.'.join(table)}]: unknown option(s) {', '.join(sorted(unknown))}")
+
+
+def _file_value(data: dict[str, Any], o: Option) -> Any:
+    values: Any = data
+    for step in o.table[1:]:
+        values = values.get(step, {})
+    return values.get(o.field, dataclasses.MISSING)
+
+
+def _apply(obj: Any, changes: dict[tuple[str, ...], Any]) -> Any:
+    """``obj`` with the values of ``changes`` (attribute path -> value) set, nested configs replaced too."""
+    direct = {path[0]: v for path, v in changes.items() if len(path) == 1}
+    subs: dict[str, dict[tuple[str, ...], Any]] = {}
+    for path, v in changes.items():
+        if len(path) > 1:
+            subs.setdefault(path[0], {})[path[1:]] = v
+    for name, sub in subs.items():
+        direct[name] = _apply(getattr(obj, name), sub)
+    return dataclasses.replace(obj, **direct) if direct else obj
+
+
+def _validate(obj: Any, name: str) -> None:
+    """Run ``obj.validate`` (which validates its nested configs), else validate each nested config.
+
+    A plain ValueError is named by its table (``name``).
+    """
+    validate = getattr(obj, "validate", None)
+    if not callable(validate):
+        for f, tp in fields_of(type(obj)):
+            if is_config(tp):
+                _validate(getattr(obj, f.name), name if f.metadata.get("inline") else f"{name}.{f.name}")
+        return
+    try:
+        validate()
+    except ConfigError:
+        raise
+    except ValueError as exc:
+        raise ConfigError(f"{name}: {exc}") from None
 
 
 def _resolve_section(section: str, cls: type[T], file_values: dict[str, Any],
                      env: typing.Mapping[str, str], cli: dict[str, Any], base: T | None = None,
                      cli_names: dict[str, str] | None = None) -> T:
-    cli_names = cli_names or {}
-    unknown = set(file_values) - {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    if unknown:
-        raise ConfigError(f"[{section}]: unknown option(s) {', '.join(sorted(unknown))}")
-    kwargs: dict[str, Any] = {}
-    for f, tp in _fields(cls):
-        name = f"{section}.{f.name}"
-        choices = f.metadata.get("choices")
-        env_key = f"{ENV_PREFIX}_{section.upper()}_{f.name.upper()}"
-        if f"{section}__{f.name}" in cli:
-            kwargs[f.name] = parse_value(cli_names.get(f.name, _flag(f.name)), tp, cli[f"{section}__{f.name}"],
-                                         choices)
-        elif env_key in env:
-            kwargs[f.name] = parse_value(env_key, tp, env[env_key], choices)
-        elif f.name in file_values:
-            kwargs[f.name] = parse_value(name, tp, file_values[f.name], choices)
-    obj = dataclasses.replace(base, **kwargs) if base is not None else cls(**kwargs)  # type: ignore[type-var]
-    validate = getattr(obj, "validate", None)
-    if callable(validate):
-        validate()
+    if not isinstance(file_values, dict):
+        raise ConfigError(f"config file: [{section}] must be a table")
+    _check_tables(section, cls, file_values)
+    changes: dict[tuple[str, ...], Any] = {}
+    for o in config_options(section, cls):
+        flag = (cli_names or {}).get(o.field, o.flag)
+        if o.dest in cli:
+            changes[o.attrs] = parse_value(flag, o.tp, cli[o.dest], o.choices)
+        elif o.env in env:
+            changes[o.attrs] = parse_value(o.env, o.tp, env[o.env], o.choices)
+        else:
+            raw = _file_value(file_values, o)
+            if raw is not dataclasses.MISSING:
+                changes[o.attrs] = parse_value(o.name, o.tp, raw, o.choices)
+    obj = _apply(base if base is not None else cls(), changes)
+    _validate(obj, section)
     return obj
 
 
@@ -268,7 +251,7 @@ def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None =
                    env: typing.Mapping[str, str] | None = None,
                    config_file: str | os.PathLike[str] | None = None,
                    with_zenoh: bool = True, zenoh_base: ZenohConfig | None = None) -> tuple[T, ZenohConfig]:
-    """Resolve a section's config and the Zenoh config from defaults, file, env and CLI.
+    """Resolve a section's config tree and the Zenoh config from defaults, file, env and CLI.
 
     Args:
         section: Section name, e.g. ``"replayer"``.
@@ -293,9 +276,7 @@ def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None =
         if not isinstance(value, dict):
             raise ConfigError(f"config file: top-level key {key!r} must be a table like [{key}]")
     sec = _resolve_section(section, cls, data.get(section, {}), env, cli)
-    shadowed = {f.name for f in dataclasses.fields(ZenohConfig)} & {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    names = {n: _flag(f"zenoh_{n}" if n in shadowed else ZENOH_FLAG_NAMES.get(n, n))
-             for n in (f.name for f in dataclasses.fields(ZenohConfig))}
+    names = _zenoh_flags({o.flag for o in config_options(section, cls)})
     zen = (_resolve_section("zenoh", ZenohConfig, data.get("zenoh", {}), env, cli, zenoh_base, names)
            if with_zenoh else ZenohConfig())
     return sec, zen

@@ -339,6 +339,33 @@ class Presence:
         with self._lock:
             return service in self.alive
 
+    def wait_for(self, services: Sequence[str], timeout: float, stop: threading.Event | None = None) -> list[str]:
+        """Wait until every one of ``services`` is alive, at most ``timeout`` seconds (or until ``stop``).
+
+        How a run waits for its peers before it starts (the executor before its first tick, a real-time
+        replayer before streaming); both outcomes are logged.
+
+        Returns:
+            The services still missing (empty when all are present).
+        """
+        wanted = list(services)
+        if not wanted:
+            return []
+        stop = stop or threading.Event()
+        deadline = time.monotonic() + timeout
+        while True:
+            missing = [s for s in wanted if not self.is_alive(s)]
+            if not missing:
+                log.info("%s: %s present, starting", self.service, ", ".join(wanted))
+                return []
+            if stop.is_set():
+                return missing
+            if time.monotonic() >= deadline:
+                log.warning("%s: starting without %s (not seen within %.1f s)", self.service, ", ".join(missing),
+                            timeout)
+                return missing
+            stop.wait(0.02)
+
     def close(self) -> None:
         """Undeclare the token and the subscriber."""
         self._sub.undeclare()

@@ -6,7 +6,6 @@ what the Makefile installs (no Docker engine here)."""
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import importlib
 import io
 import math
@@ -23,7 +22,7 @@ import pytest
 from ruamel.yaml import YAML  # comes with check-jsonschema (dev extra), which this test needs anyway
 
 from shared.cli import COMMANDS
-from shared.config import ConfigError, ZenohConfig, parse_value, resolve_config
+from shared.config import ConfigError, ZenohConfig, config_options, parse_value, resolve_config
 
 REPO = Path(__file__).resolve().parents[1]
 COMPOSE = REPO / "compose.yaml"
@@ -35,7 +34,7 @@ SECTIONS = {
     "executor": "services.executor.core:ExecutorConfig",
     "replayer": "services.replayer.core:ReplayerConfig",
     "predictor": "services.predictor.core:PredictorConfig",
-    "planner": "services.planner.service:PlannerServiceConfig",
+    "planner": "services.planner.config:PlannerServiceConfig",
 }
 
 
@@ -210,7 +209,7 @@ def _env_items():
 
 @pytest.mark.parametrize("service, key, value", list(_env_items()))
 def test_environment_variables_name_real_options(service, key, value) -> None:
-    section, _, field = key[len("FORESIGHT_"):].lower().partition("_")
+    section = key[len("FORESIGHT_"):].lower().partition("_")[0]
     target = SECTIONS.get(section)
     assert target is not None, f"{service}: {key} names no known section"
     module, cls_name = target.split(":")
@@ -218,13 +217,10 @@ def test_environment_variables_name_real_options(service, key, value) -> None:
         cls = getattr(importlib.import_module(module), cls_name)
     except (ImportError, AttributeError):
         pytest.skip(f"{module}.{cls_name} does not exist yet")
-    import typing
-
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    assert field in fields, f"{service}: {key}: {cls_name} has no option {field!r} (has {sorted(fields)})"
+    options = {o.env: o for o in config_options(section, cls)}
+    assert key in options, f"{service}: {key}: {cls_name} has no such option (has {sorted(options)})"
     try:
-        parse_value(key, hints[field], str(value), fields[field].metadata.get("choices"))
+        parse_value(key, options[key].tp, str(value), options[key].choices)
     except ConfigError as exc:
         pytest.fail(f"{service}: {exc}")
 

@@ -17,7 +17,6 @@ where it stopped when fresh data arrives.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from shared.config import ConfigError, opt
+from shared.lockstep import FIRST_PLAN
 from shared.protocol import Plan, RobotState
 from shared.scene import SCENE_HELP
 
@@ -216,7 +216,7 @@ class ExecutorCore:
         self.tau = 0.0  # progress along the reference (stops while holding)
         self.goal = -1
         self.holding = True
-        self.reason = "waiting for the first plan"
+        self.reason = FIRST_PLAN
         self.reached = False
         self.fresh = _Freshness()
         self.plans_adopted = 0
@@ -273,7 +273,7 @@ class ExecutorCore:
         t = self.t if t is None else t
         limit = self.config.stale_limit_s
         if self.reference is None or self.fresh.plan is None:
-            return "waiting for the first plan"
+            return FIRST_PLAN
         age = t - self.fresh.plan
         if age > limit + 1e-9:
             return f"plan is {age:.2f} s old (limit {limit:.2f} s)"
@@ -297,7 +297,7 @@ class ExecutorCore:
             raise ExecutorError(f"step: h must be > 0, got {h}")
         reason = self.stale_reason() if hold_reason is None else hold_reason
         if reason or self.reference is None:
-            self.holding, self.reason = True, reason or "waiting for the first plan"
+            self.holding, self.reason = True, reason or FIRST_PLAN
             self.qd = np.zeros(self.limits.dof)
         else:
             self.holding, self.reason = False, ""
@@ -325,7 +325,3 @@ class ExecutorCore:
         return RobotState(stamp=self.t if stamp is None else float(stamp), tick=int(tick),
                           joint_names=list(self.limits.joint_names), goal=self.goal, reached=self.reached,
                           holding=self.holding, reason=self.reason, q=self.q.copy(), qd=self.qd.copy())
-
-    def replace_config(self, **changes: object) -> None:
-        """Change options of the running core (e.g. ``stale_limit_s``)."""
-        self.config = dataclasses.replace(self.config, **changes)

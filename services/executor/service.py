@@ -4,15 +4,10 @@ One Zenoh subscriber on ``<prefix>/**`` receives every message of the run (its o
 payload is logged (:class:`services.executor.mcap_log.McapLog`) and plans and occupancy grids are
 passed to the pure :class:`services.executor.core.ExecutorCore`.
 
-Lock-step mode (deterministic), replanning step n = 0 .. steps-1, simulated time ``t_n = n * P``:
-
-1. adopt the newest plan of tick <= n-1 (Fig. 4: plan n-1 is executed during step n);
-2. decide once whether to hold (plan or occupancy older than ``stale_limit_s``, ages measured in
-   simulated time from the message's tick: a message of tick k counts as received at ``k * P``);
-3. simulate the step: ``substeps`` RobotState messages with tick n, stamps ``t_n + h .. t_n + P``
-   (the last one is the configuration at which plan n will start executing);
-4. publish ClockTick n (stamp ``t_n``, period P);
-5. wait (at most ``lockstep_timeout_s``) for the plan of tick n.
+Lock-step mode (deterministic), replanning step n = 0 .. steps-1: the rules (plan adoption, the hold
+decided once per step, the substeps and the tick) are :class:`shared.lockstep.LockstepMaster`'s; this
+loop publishes the step's ``substeps`` RobotState messages and ClockTick n, then waits (at most
+``lockstep_timeout_s``) for the plan of tick n in its :class:`shared.lockstep.PlanInbox`.
 
 Real-time mode: after the same wait for the ``wait_for`` services, the arm follows the newest plan
 from the moment it arrives; RobotState goes out at ``state_rate_hz`` of wall time; freshness is
@@ -33,15 +28,17 @@ from typing import Any
 import numpy as np
 
 from shared.config import ZenohConfig
-from shared.protocol import ClockTick, DemoMarker, Keys, Message, OccupancyGrid, Plan, ProtocolError, decode
+from shared.lockstep import Adoption, LockstepMaster, PlanInbox, StepClock
+from shared.protocol import DemoMarker, Keys, Message, OccupancyGrid, Plan, ProtocolError, RobotState, decode
 from shared.scene import Scene, load_scene
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session
 
 from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError
 from .foxglove import SceneBuilder
 from .mcap_log import McapLog
+from .models import HumanBody, PlaceInScene, RobotModel, load_models, start_configuration
 
-__all__ = ["ExecutorResult", "ExecutorService", "load_models", "start_configuration"]
+__all__ = ["ExecutorResult", "ExecutorService", "load_models", "start_configuration"]  # the last two: .models
 
 log = logging.getLogger("foresight.executor")
 
@@ -74,56 +71,6 @@ class ExecutorResult:
     q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
-def load_models(scene: Scene, device: str = "cpu") -> tuple[Any, Any, Any]:
-    """The robot model placed in ``scene`` and the human model (``(robot, human, place_in_scene)``).
-
-    The human model is optional for the executor (only the Foxglove view uses it): when it cannot
-    be loaded, ``(robot, None, None)`` is returned with a warning.
-    """
-    import torch
-
-    from shared.robot import PR2
-
-    robot = PR2.from_scene(scene, device=device, dtype=torch.float32)
-    try:
-        from shared.human import HumanModel, place_in_scene
-
-        return robot, HumanModel(), place_in_scene
-    except Exception as exc:  # noqa: BLE001 - visualisation only
-        log.warning("executor: human model unavailable (%s); the log will have no human body", exc)
-        return robot, None, None
-
-
-def start_configuration(limits: ArmLimits, config: ExecutorConfig, robot: Any = None,
-                        scene: Scene | None = None) -> np.ndarray:
-    """The start configuration of the arm.
-
-    ``config.start_q`` if given, else the robot model's ``q_start``, else the scene's torso lift with
-    every other joint at 0 (clamped into the limits).
-
-    Raises:
-        ExecutorError: If ``config.start_q`` has the wrong length or leaves the joint limits.
-    """
-    if config.start_q:
-        q = np.asarray(config.start_q, dtype=np.float64)
-        if q.shape != (limits.dof,):
-            raise ExecutorError(f"executor.start_q: expected {limits.dof} values {list(limits.joint_names)}, "
-                                f"got {len(config.start_q)}")
-        bad = [n for n, v, lo, hi in zip(limits.joint_names, q, limits.lower, limits.upper, strict=True)
-               if not lo - 1e-9 <= v <= hi + 1e-9]
-        if bad:
-            raise ExecutorError(f"executor.start_q: outside the joint limits for {bad}")
-        return q
-    q_start = getattr(robot, "q_start", None)
-    if q_start is not None:
-        arr = q_start.detach().cpu().numpy() if hasattr(q_start, "detach") else q_start
-        return limits.clamp(np.asarray(arr, dtype=np.float64))
-    q = np.zeros(limits.dof)
-    if scene is not None and "torso_lift_joint" in limits.joint_names:
-        q[limits.joint_names.index("torso_lift_joint")] = scene.robot.torso_lift
-    return limits.clamp(q)
-
-
 class ExecutorService:
     """The executor process: simulation master, safety hold, RobotState and clock publisher, MCAP logger.
 
@@ -137,7 +84,8 @@ class ExecutorService:
     """
 
     def __init__(self, config: ExecutorConfig, zenoh: ZenohConfig, stop: threading.Event | None = None,
-                 robot: Any = None, human: tuple[Any, Any] | None = None, scene: Scene | None = None) -> None:
+                 robot: RobotModel | None = None, human: tuple[HumanBody | None, PlaceInScene | None] | None = None,
+                 scene: Scene | None = None) -> None:
         config.validate()
         self.config = config
         self.zenoh = zenoh
@@ -149,19 +97,14 @@ class ExecutorService:
             if human is None:
                 human = (human_model, place)
         self.robot = robot
-        self.human = human or (None, None)
+        self.human: tuple[HumanBody | None, PlaceInScene | None] = human or (None, None)
         self.limits = ArmLimits.from_robot(robot)
         q0 = start_configuration(self.limits, config, robot, self.scene)
         self.core = ExecutorCore(self.limits, q0, config)
         self.rejects = RejectCounter("executor")
         self._expected = self.keys.data_keys()
         self.result = ExecutorResult()
-        self._cond = threading.Condition()
-        self._latest_plan: Plan | None = None     # newest valid plan received
-        self._plan_seq = 0
-        self._occ_tick = -1                        # newest occupancy tick (lock-step)
-        self._occ_time: float | None = None        # arrival (monotonic) of the newest occupancy (real time)
-        self._t0 = time.monotonic()
+        self.inbox = PlanInbox()
         self.mcap: McapLog | None = None
         self._times: list[float] = []
         self._qs: list[np.ndarray] = []
@@ -188,18 +131,11 @@ class ExecutorService:
                 self.result.plans_rejected += 1
                 self.rejects.reject(key, exc)
                 return
-            with self._cond:
-                self._latest_plan = msg
-                self._plan_seq += 1
-                self._cond.notify_all()
+            self.inbox.put_plan(msg)
         elif key == self.keys.demo and isinstance(msg, DemoMarker):
-            with self._cond:
-                self.core.note_demonstration(msg.event)
+            self.core.note_demonstration(msg.event)
         elif key == self.keys.occupancy and isinstance(msg, OccupancyGrid):
-            with self._cond:
-                self._occ_tick = max(self._occ_tick, msg.tick)
-                self._occ_time = time.monotonic()
-                self._cond.notify_all()
+            self.inbox.put_occupancy(msg.tick, time.monotonic())
 
     # -- run -------------------------------------------------------------------------------------
 
@@ -251,78 +187,44 @@ class ExecutorService:
                  r.held_steps, sum(r.rejects.values()))
         return r
 
-    def _publish_state(self, pub: TypedPublisher[Any], tick: int, stamp: float) -> None:
-        pub.put(self.core.state(tick, stamp))
+    def _publish_state(self, pub: TypedPublisher[Any], state: RobotState) -> None:
+        pub.put(state)
         if self.mcap is not None:
             self.mcap.flush_if_due()
-        self._times.append(stamp)
-        self._qs.append(self.core.q.copy())
+        self._times.append(state.stamp)
+        self._qs.append(state.q)
 
     def _wait_for_peers(self, presence: Presence) -> None:
         cfg = self.config
-        deadline = time.monotonic() + cfg.startup_timeout_s
-        missing = [s for s in ("replayer", "predictor", "planner") if s in cfg.wait_for]
-        while missing and not self.stop.is_set() and time.monotonic() < deadline:
-            missing = [s for s in missing if not presence.is_alive(s)]
-            if missing:
-                time.sleep(0.05)
-        if missing:
-            log.warning("executor: starting without %s (not seen within %.0f s)", missing, cfg.startup_timeout_s)
-        elif cfg.wait_for:
-            log.info("executor: %s present, starting the run", ", ".join(cfg.wait_for))
+        presence.wait_for(cfg.wait_for, cfg.startup_timeout_s, self.stop)
 
     def _run_lockstep(self, state_pub: TypedPublisher[Any], clock_pub: TypedPublisher[Any],
                       presence: Presence) -> None:
-        cfg, core = self.config, self.core
-        period, sub = cfg.step_period_s, cfg.substeps
-        h = period / sub
+        cfg, r = self.config, self.result
+        master = LockstepMaster(self.core, StepClock(cfg.step_period_s, cfg.substeps))
         self._wait_for_peers(presence)
-        self._publish_state(state_pub, -1, 0.0)
-        adopted_seq = 0
+        self._publish_state(state_pub, master.initial_state())
         n = 0
         while (cfg.steps == 0 or n < cfg.steps) and not self.stop.is_set():
-            t_n = n * period
-            with self._cond:
-                plan, seq, occ_tick = self._latest_plan, self._plan_seq, self._occ_tick
-            if plan is not None and seq != adopted_seq and plan.tick <= n - 1:
-                core.adopt(plan, stamp=plan.tick * period)
-                adopted_seq = seq
-            if occ_tick >= 0:
-                core.note_occupancy(occ_tick * period)
-            reason = core.stale_reason(t_n)
-            if reason:
-                self.result.held_steps += 1
-                if reason != "waiting for the first plan" or n > 0:
-                    log.info("executor: holding during step %d: %s", n, reason)
-            for i in range(sub):
-                core.step(h, hold_reason=reason)
-                core.t = t_n + (i + 1) * h  # no drift from summing h
-                self._publish_state(state_pub, n, core.t)
-            self.result.goal_per_step.append(core.goal)
-            self.result.steps = n + 1
-            if core.reached and self.result.reached_step < 0:
-                self.result.reached, self.result.reached_step = True, n
-                log.info("executor: goal %d reached during step %d", core.goal, n)
-            clock_pub.put(ClockTick(stamp=t_n, tick=n, period=period))
-            if cfg.stop_on_goal and core.reached:
+            step = master.step(n, self.inbox.latest())
+            if step.held:
+                r.held_steps += 1
+            if step.hold_news:
+                log.info("executor: holding during step %d: %s", n, step.reason)
+            for state in step.states:
+                self._publish_state(state_pub, state)
+            r.goal_per_step.append(step.goal)
+            r.steps = n + 1
+            if step.reached and r.reached_step < 0:
+                r.reached, r.reached_step = True, n
+                log.info("executor: goal %d reached during step %d", step.goal, n)
+            clock_pub.put(step.clock)
+            if cfg.stop_on_goal and step.reached:
                 break
-            if not self._wait_plan(n):
+            flush = self.mcap.flush_if_due if self.mcap is not None else None
+            if not self.inbox.wait_plan(n, cfg.lockstep_timeout_s, self.stop, idle=flush):
                 log.warning("executor: no plan for tick %d within %.1f s; going on", n, cfg.lockstep_timeout_s)
             n += 1
-
-    def _wait_plan(self, tick: int) -> bool:
-        deadline = time.monotonic() + self.config.lockstep_timeout_s
-        with self._cond:
-            while not self.stop.is_set():
-                if self._latest_plan is not None and self._latest_plan.tick >= tick:
-                    return True
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self._cond.wait(min(left, 0.1))
-                if self.mcap is not None:
-                    self.mcap.flush_if_due()
-        return False
 
     def _run_realtime(self, state_pub: TypedPublisher[Any], presence: Presence) -> None:
         cfg, core = self.config, self.core
@@ -330,8 +232,8 @@ class ExecutorService:
         period = cfg.step_period_s
         h_nom = 1.0 / cfg.state_rate_hz
         end = cfg.steps * period if cfg.steps else float("inf")
-        self._t0 = t0 = time.monotonic()
-        adopted_seq = 0
+        t0 = time.monotonic()
+        adoption = Adoption()
         next_wake = t0
         last_reason = None
         while not self.stop.is_set() and core.t < end:
@@ -340,13 +242,12 @@ class ExecutorService:
             if delay > 0:
                 self.stop.wait(delay)
             elapsed = time.monotonic() - t0
-            with self._cond:
-                plan, seq, occ_time = self._latest_plan, self._plan_seq, self._occ_time
-            if plan is not None and seq != adopted_seq:
+            received = self.inbox.latest()
+            plan = adoption.realtime(received)
+            if plan is not None:
                 core.adopt(plan)  # starts now; counts as received now
-                adopted_seq = seq
-            if occ_time is not None:
-                core.note_occupancy(occ_time - t0)
+            if received.occupancy_time is not None:
+                core.note_occupancy(received.occupancy_time - t0)
             h = max(elapsed - core.t, 1e-6)
             core.step(h)
             if core.holding:
@@ -357,7 +258,7 @@ class ExecutorService:
                 elif last_reason is not None:
                     log.info("executor: resuming at t=%.2f s", core.t)
                 last_reason = core.reason
-            self._publish_state(state_pub, -1, time.time())
+            self._publish_state(state_pub, core.state(-1, time.time()))
             step = int(core.t // period)
             while len(self.result.goal_per_step) < step:
                 self.result.goal_per_step.append(core.goal)

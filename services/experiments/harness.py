@@ -10,7 +10,6 @@ planning, not the IK of its goals.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import threading
 from collections.abc import Callable
@@ -204,9 +203,8 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
     collect = _Collector()
     planner.reset(seed=spec.seed)
     scene_ref = spec.scene.ref
-    svc_cfg = PlannerServiceConfig(**{**dataclasses.asdict(planner.config), "mode": "lockstep",
-                                      "period_s": spec.period_s, "input_timeout_s": min(60.0, spec.timeout_s),
-                                      "scene": scene_ref})
+    svc_cfg = PlannerServiceConfig(mode="lockstep", period_s=spec.period_s, input_timeout_s=min(60.0, spec.timeout_s),
+                                   scene=scene_ref, planner=planner.config)
     predictor = PredictorService(PredictorConfig(model=spec.model, method=spec.method, scene=scene_ref), peer)
     planner_svc = PlannerService(svc_cfg, peer, planner=planner, scene=spec.scene)
     replayer = ReplayerService(ReplayerConfig(library=spec.human, mode="lockstep",

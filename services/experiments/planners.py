@@ -12,9 +12,12 @@ reset with the seed of each run.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from services.planner.core import Planner, PlannerConfig
+from services.planner.costs import CostConfig
+from services.planner.stomp import StompConfig
 from shared.scene import Scene
 
 __all__ = ["Variant", "VARIANTS", "Timing", "build_planner"]
@@ -68,6 +71,9 @@ def build_planner(scene: Scene, goals: list[str], human_cost: bool, timing: Timi
         device: torch device.
         w_human: Weight of the human cost when ``human_cost`` (negative: the planner's default).
     """
-    cfg = PlannerConfig(goals=list(goals), iterations=timing.iterations, velocity_scale=timing.robot_speed,
-                        lookahead_s=0.0, w_human=w_human if human_cost else 0.0, compile=compile, device=device)
+    cost = CostConfig()
+    if not human_cost or w_human >= 0:
+        cost = dataclasses.replace(cost, w_human=w_human if human_cost else 0.0)
+    cfg = PlannerConfig(goals=list(goals), stomp=StompConfig(iterations=timing.iterations),
+                        velocity_scale=timing.robot_speed, lookahead_s=0.0, cost=cost, compile=compile, device=device)
     return Planner(scene, cfg)

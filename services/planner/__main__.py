@@ -16,8 +16,9 @@ __all__ = ["main"]
 DESCRIPTION = """Plan the robot's motion to every goal (a grasp at each cup) at once with batched STOMP,
 around the predicted human occupancy, and publish the K candidates with the least-cost one chosen
 (Algorithm 1 of Mainprice & Berenson 2013). Real-time: one plan every --period-s; lock-step: one plan
-per ClockTick. Options come from the dataclass defaults < --config FILE ([planner], [zenoh]) < env
-FORESIGHT_PLANNER_<NAME> / FORESIGHT_ZENOH_<NAME> < flags."""
+per ClockTick. Options come from the dataclass defaults < --config FILE ([planner], [planner.stomp],
+[planner.cost], [zenoh]) < env FORESIGHT_PLANNER_<NAME>, FORESIGHT_PLANNER_STOMP_<NAME>,
+FORESIGHT_PLANNER_COST_<NAME>, FORESIGHT_ZENOH_<NAME> < flags (--<name>, --stomp.<name>, --cost.<name>)."""
 
 
 def _make(cfg: PlannerServiceConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:

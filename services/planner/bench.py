@@ -29,6 +29,7 @@ from shared.scene import Scene, load_scene
 
 from .core import GoalSet, Planner, PlannerConfig
 from .fk_bench import fk_time_ms
+from .stomp import StompConfig
 
 __all__ = ["main", "bench_goals", "blob_occupancy", "run_bench"]
 
@@ -122,8 +123,8 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
     q0 = start_configuration(base.robot)
     out: dict[str, Any] = {"K": [], "step_ms": [], "step_ms_min": [], "step_cpu_ms": [], "fk_ms": [],
                            "fk_cpu_ms": [], "pk_fk_ms": [], "ratio": [], "construct_s": [], "compiled": False,
-                           "rollouts": config.rollouts, "waypoints": config.waypoints,
-                           "iterations": config.iterations, "threads": torch.get_num_threads(),
+                           "rollouts": config.stomp.rollouts, "waypoints": config.stomp.waypoints,
+                           "iterations": config.stomp.iterations, "threads": torch.get_num_threads(),
                            "device": config.device, "dtype": config.dtype, "steps": steps,
                            "load_avg_1min": os.getloadavg()[0]}
     for k in tqdm(ks, desc="bench planner", unit="K", disable=not progress, file=sys.stderr):
@@ -138,7 +139,8 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
             res = planner.step(res.start, occ)  # the robot is where the last plan starts
             cpu.append((time.process_time() - c0) * 1e3)
             times.append(res.planning_ms)
-        fk, fk_cpu = _time_fk(base.robot, k * config.rollouts * config.waypoints, config.iterations, 3, config.seed)
+        st = config.stomp
+        fk, fk_cpu = _time_fk(base.robot, k * st.rollouts * st.waypoints, st.iterations, 3, config.seed)
         step_ms = statistics.median(times)
         out["K"].append(k)
         out["step_ms"].append(round(step_ms, 2))
@@ -146,8 +148,9 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
         out["step_cpu_ms"].append(round(statistics.median(cpu), 2))
         out["fk_ms"].append(round(fk, 2))
         out["fk_cpu_ms"].append(round(fk_cpu, 2))
-        pk = fk_time_ms(k * config.rollouts * config.waypoints, "pk", robot=base.robot, repeats=3, seed=config.seed)
-        out["pk_fk_ms"].append(round(pk * config.iterations, 2))
+        pk = fk_time_ms(k * config.stomp.rollouts * config.stomp.waypoints, "pk", robot=base.robot, repeats=3,
+                        seed=config.seed)
+        out["pk_fk_ms"].append(round(pk * config.stomp.iterations, 2))
         out["ratio"].append(round(step_ms / fk, 2))
     out["load_avg_1min_end"] = os.getloadavg()[0]
     return out
@@ -179,7 +182,7 @@ def profile_step(config: PlannerConfig, k: int = 2, rows: int = 15) -> str:
     lines = [ln for ln in text.getvalue().splitlines() if ln.strip() and "function calls" not in ln]
     with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU]) as tprof:
         res = planner.step(res.start, occ)
-    return (f"one replanning step, K={k}, R={config.rollouts}, T={config.waypoints}: cProfile "
+    return (f"one replanning step, K={k}, R={config.stomp.rollouts}, T={config.stomp.waypoints}: cProfile "
             "(cumulative, repository functions)\n" + "\n".join(lines) + "\n\ntorch.profiler (self CPU):\n"
             + tprof.key_averages().table(sort_by="self_cpu_time_total", row_limit=rows))
 
@@ -188,15 +191,15 @@ def peak_memory_mb(k: int, config: PlannerConfig, steps: int = 3) -> float:
     """Peak RSS (MB) of a fresh process that builds the planner and runs ``steps`` steps with ``k`` goals."""
     code = ("import json, resource, sys; from services.planner.bench import _memory_probe; "
             f"_memory_probe({k}, {steps}, json.loads(sys.argv[1]))")
-    cfg = {f: getattr(config, f) for f in ("device", "dtype", "threads", "seed", "rollouts", "waypoints",
-                                           "iterations", "compile", "fused_cost")}
+    cfg = {f: getattr(config, f) for f in ("device", "dtype", "threads", "seed", "compile", "fused_cost")}
+    cfg["stomp"] = {f: getattr(config.stomp, f) for f in ("rollouts", "waypoints", "iterations")}
     done = subprocess.run([sys.executable, "-c", code, json.dumps(cfg)], capture_output=True, text=True,
                           timeout=600, check=True)
     return float(done.stdout.strip().splitlines()[-1])
 
 
 def _memory_probe(k: int, steps: int, cfg: dict[str, Any]) -> None:
-    config = PlannerConfig(**cfg)
+    config = PlannerConfig(**{**cfg, "stomp": StompConfig(**cfg.get("stomp", {}))})
     scene = load_scene()
     planner = k_goal_planner(scene, config, k)
     occ = blob_occupancy(scene)
@@ -322,7 +325,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
             p.error(f"--k: expected comma-separated integers, got {args.k!r}")
         if not ks or min(ks) < 1 or args.steps < 1:
             p.error("--k values and --steps must be >= 1")
-        config = PlannerConfig(rollouts=args.rollouts, waypoints=args.waypoints, iterations=args.iterations,
+        config = PlannerConfig(stomp=StompConfig(rollouts=args.rollouts, waypoints=args.waypoints,
+                                                 iterations=args.iterations),
                                threads=args.threads, device=args.device, compile=args.compile)
         report = run_bench(ks, config, steps=args.steps, progress=not args.json)
         if args.baseline:
@@ -337,7 +341,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
         if args.json:
             print(json.dumps(report))
         else:
-            print(f"planner step ({config.iterations} STOMP iterations, R={config.rollouts}, T={config.waypoints}, "
+            print(f"planner step ({config.stomp.iterations} STOMP iterations, R={config.stomp.rollouts}, "
+                  f"T={config.stomp.waypoints}, "
                   f"{report['threads']} threads, {config.device}, {config.dtype}, fused cost"
                   f"{', compiled' if report['compiled'] else ', eager'}); load avg "
                   f"{report['load_avg_1min']:.2f} -> {report['load_avg_1min_end']:.2f} (other processes share the CPU)")

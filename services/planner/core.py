@@ -10,7 +10,7 @@ distance + predicted human occupancy) and a batched :class:`~services.planner.st
    previous tau_best from the robot's projection onto it (or the robot's configuration itself on the
    first step or when it has left tau_best);
 4. reconnectPrevious for every goal (initStraightLines on the first step);
-5. STOMP for all valid goals in one batch (``iterations`` iterations);
+5. STOMP for all valid goals in one batch (``stomp.iterations`` iterations);
 6. getBestTrajectory: the least total cost (smoothness + obstacle + human) among valid goals.
 """
 
@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -28,85 +27,19 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from shared.config import ConfigError, opt
-from shared.protocol import OccupancyGrid
 from shared.scene import Grid, Scene
 
+from .config import PlannerConfig
 from .costs import acceleration_cost
 from .fused import FusedCost, supports
+from .inputs import PlannerError, PlannerInputError, check_configuration, check_occupancy
 from .multigoal import best, init_straight_lines, interpolate_path, project_onto_path, reconnect_previous
 from .protocols import PlannerCost, PlannerGoals, PlannerRobot
-from .stomp import Stomp, StompConfig
+from .stomp import Stomp
 
 __all__ = ["PlannerConfig", "PlannerError", "PlannerInputError", "GoalSet", "PlanResult", "Planner"]
 
 log = logging.getLogger("foresight.planner")
-
-
-class PlannerError(ValueError):
-    """The planner cannot plan (e.g. no reachable goal); the message says why."""
-
-
-class PlannerInputError(PlannerError):
-    """A replanning step's input (configuration, occupancy grid) is malformed; the message names it."""
-
-
-@dataclass
-class PlannerConfig:
-    """The ``[planner]`` config section: STOMP, costs, timing and device."""
-
-    device: str = opt("cpu", help="torch device (cpu, cuda, cuda:1, ...)")
-    dtype: str = opt("float32", help="torch float dtype", choices=("float32", "float64"))
-    threads: int = opt(1, help="torch intra-op threads of the process (0: torch's default; >1 is slow on shared cores)")
-    fused_cost: bool = opt(True, help="evaluate the PR2 cost with the fused kernel (same numbers as the reference "
-                           "StateCost path, fewer ops)")
-    compile: bool = opt(True, help="torch.compile the fused cost (once at construction for the STOMP batch "
-                        "shape: ~10 s, ~1 s with inductor's disk cache; falls back to eager if it fails)")
-    seed: int = opt(0, help="base seed of STOMP's exploration noise (per step and goal)")
-    goals: list[str] = opt(default_factory=list, help="cup names to plan for, in order (empty: every cup)")
-    rollouts: int = opt(16, help="STOMP noisy rollouts R per goal and iteration")
-    waypoints: int = opt(40, help="STOMP waypoints T per trajectory")
-    iterations: int = opt(50, help="STOMP iterations per replanning step")
-    noise_std: float = opt(0.1, help="STOMP exploration noise std (rad, m for the torso) mid-trajectory")
-    joint_noise_scale: list[float] = opt(default_factory=list,
-                                         help="per-joint factors on noise_std (empty: velocity limits / their max)")
-    noise_decay: float = opt(1.0, help="STOMP noise factor per iteration (1: constant)")
-    sensitivity: float = opt(10.0, help="STOMP sensitivity h of the per-waypoint probabilities")
-    cost_to_go: bool = opt(True, help="rank rollouts by cost-to-go (else by the waypoint's own cost)")
-    w_smooth: float = opt(-1.0, help="weight of the squared joint accelerations (per waypoint step, rad^2); "
-                          "negative: the cost model's default (CostConfig.w_smooth = 10)")
-    w_obstacle: float = opt(-1.0, help="weight of the obstacle cost (negative: the cost model's default)")
-    w_human: float = opt(-1.0, help="weight of the human occupancy cost (negative: the cost model's default)")
-    integrate_costs: bool = opt(True, help="weight obstacle/human costs by each waypoint's time at the velocity "
-                                "limits (else sum them per waypoint)")
-    lookahead_s: float = opt(0.5, help="time the robot executes tau_best while a step is planned (s)")
-    velocity_scale: float = opt(0.5, help="fraction of the joint velocity limits used to time trajectories")
-    min_dt: float = opt(0.01, help="smallest time between waypoints (s)")
-    goal_tol: float = opt(1e-3, help="a goal this close (joint-space norm) to q_t is reached: its trajectory holds it")
-    off_path_tol: float = opt(0.05, help="joint-space distance beyond which the robot is taken as off tau_best")
-    limit_tol: float = opt(1e-3, help="start configurations this far outside the limits are clamped, not refused")
-
-    def validate(self) -> None:
-        """Raise :class:`ConfigError` naming the first bad value."""
-        try:
-            self.stomp().validate()
-        except ValueError as exc:
-            raise ConfigError(str(exc).replace("stomp.", "planner.")) from None
-        checks = [("threads", self.threads >= 0), ("lookahead_s", self.lookahead_s >= 0),
-                  ("velocity_scale", 0 < self.velocity_scale <= 1), ("min_dt", self.min_dt > 0),
-                  ("off_path_tol", self.off_path_tol >= 0), ("limit_tol", self.limit_tol >= 0),
-                  ("goal_tol", self.goal_tol >= 0)]
-        for name, ok in checks:
-            if not ok:
-                raise ConfigError(f"planner.{name}: bad value {getattr(self, name)!r}")
-
-    def stomp(self, joint_noise_scale: Sequence[float] | None = None) -> StompConfig:
-        """The :class:`StompConfig` these settings describe (``joint_noise_scale`` if not configured)."""
-        scale = list(self.joint_noise_scale or joint_noise_scale or [])
-        return StompConfig(rollouts=self.rollouts, waypoints=self.waypoints, iterations=self.iterations,
-                           noise_std=self.noise_std, joint_noise_scale=scale, noise_decay=self.noise_decay,
-                           sensitivity=self.sensitivity, cost_to_go=self.cost_to_go, seed=self.seed,
-                           device=self.device, dtype=self.dtype)
 
 
 @dataclass
@@ -184,7 +117,7 @@ class Planner:
             (obstacle, human) with ``set_occupancy`` (default: the PR2 ``StateCost`` of the scene).
         goals: A :class:`~services.planner.protocols.PlannerGoals` (a :class:`GoalSet`, or by default the
             ``IKGoals`` of a pre-grasp at each cup of ``config.goals``).
-        w_smooth: Weight of the squared accelerations (default: the cost model's ``config.w_smooth``).
+        w_smooth: Weight of the squared accelerations (default: ``config.cost.w_smooth``).
 
     Raises:
         PlannerError: If no goal is valid.
@@ -209,9 +142,7 @@ class Planner:
         if cost is None:
             cost = _default_cost(scene, robot, c)
         self.cost: PlannerCost = cost
-        if w_smooth is None:
-            w_smooth = c.w_smooth if c.w_smooth >= 0 else float(getattr(getattr(cost, "config", None), "w_smooth", 1.0))
-        self.w_smooth = float(w_smooth)
+        self.w_smooth = float(c.cost.w_smooth if w_smooth is None else w_smooth)
         if goals is None:
             goals = _default_goals(scene, robot, cost, c)
         if not bool(goals.valid.any()):
@@ -224,14 +155,14 @@ class Planner:
         self.lower, self.upper = robot.lower.to(self.device, self.dtype), robot.upper.to(self.device, self.dtype)
         self._vmax = robot.velocity_limits.to(self.device, self.dtype) * c.velocity_scale  # (D,)
         vel = robot.velocity_limits.double().cpu()
-        self.stomp = Stomp(c.stomp((vel / vel.max()).tolist()), (self.lower, self.upper))
+        self.stomp = Stomp(c.stomp_config((vel / vel.max()).tolist()), (self.lower, self.upper))
         self.valid_index = torch.nonzero(goals.valid.cpu()).flatten().tolist()
         self.goal_q = goals.q.to(self.device, self.dtype)[self.valid_index]  # (Kv, D)
         self.fused: FusedCost | None = None
         if c.fused_cost and supports(robot, cost):
             self.fused = FusedCost(robot, cost, self.w_smooth, self._vmax, c.integrate_costs, compile=c.compile,
                                    grid=scene.grid)
-            self.fused.warm_up(len(self.valid_index) * (c.rollouts + 1), c.waypoints)
+            self.fused.warm_up(len(self.valid_index) * (c.stomp.rollouts + 1), c.stomp.waypoints)
         self.step_index = 0
         self._prev: torch.Tensor | None = None  # (Kv, T, D) previous optimised trajectories
         self._prev_best: int | None = None  # index into the valid goals
@@ -304,68 +235,30 @@ class Planner:
         return out
 
     # ------------------------------------------------------------------------------------------
-    # input checks
+    # input checks (services.planner.inputs)
 
     def check_configuration(self, q: Any) -> torch.Tensor:
-        """Validate a robot configuration ``(D,)``; returns it as a tensor clamped into the limits.
+        """A robot configuration ``(D,)`` checked (:func:`~services.planner.inputs.check_configuration`).
 
-        Raises:
-            PlannerInputError: Wrong shape, not finite, or more than ``limit_tol`` outside the limits.
+        Returns:
+            ``(D,)`` tensor on the planner's device, clamped into the limits.
         """
-        d = self.lower.shape[0]
-        try:
-            arr = np.asarray(q, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise PlannerInputError(f"robot configuration must be {d} numbers, got {q!r}") from None
-        if arr.shape != (d,):
-            raise PlannerInputError(f"robot configuration must have shape ({d},), got {arr.shape}")
-        if not np.all(np.isfinite(arr)):
-            raise PlannerInputError(f"robot configuration contains NaN or inf: {arr.tolist()}")
         lo, hi = self.lower.double().cpu().numpy(), self.upper.double().cpu().numpy()
-        bad = np.nonzero((arr < lo - self.config.limit_tol) | (arr > hi + self.config.limit_tol))[0]
-        if bad.size:
-            names = getattr(self.robot, "joint_names", [str(i) for i in range(d)])
-            what = ", ".join(f"{names[i]}={arr[i]:.4f} not in [{lo[i]:.4f}, {hi[i]:.4f}]" for i in bad)
-            raise PlannerInputError(f"robot configuration outside the joint limits: {what}")
-        return torch.as_tensor(np.clip(arr, lo, hi), device=self.device, dtype=self.dtype)
+        names = getattr(self.robot, "joint_names", None)
+        arr = check_configuration(q, lo, hi, self.config.limit_tol, names)
+        return torch.as_tensor(arr, device=self.device, dtype=self.dtype)
 
     def check_occupancy(self, occupancy: Any, grid: Grid | None = None) -> tuple[torch.Tensor, np.ndarray, float]:
-        """Validate an occupancy grid: an ``OccupancyGrid`` message or a dense ``(nx, ny, nz)`` array.
+        """An occupancy grid checked (:func:`~services.planner.inputs.check_occupancy`).
 
         Args:
-            occupancy: The message, or a dense array of probabilities in [0, 1].
+            occupancy: An ``OccupancyGrid`` message or a dense ``(nx, ny, nz)`` array.
             grid: Geometry of a dense array (default: the scene's grid).
 
         Returns:
             ``(occ (nx, ny, nz) tensor, origin (3,), resolution)``.
-
-        Raises:
-            PlannerInputError: Wrong shape or geometry, NaN, values outside [0, 1].
         """
-        if isinstance(occupancy, OccupancyGrid):
-            try:
-                occupancy.check()
-            except ValueError as exc:
-                raise PlannerInputError(f"occupancy grid: {exc}") from None
-            dense, origin, res = occupancy.to_dense(), np.asarray(occupancy.origin, float), float(occupancy.resolution)
-        else:
-            grid = grid or self.scene.grid
-            try:
-                dense = np.asarray(occupancy, dtype=np.float32)
-            except (TypeError, ValueError):
-                raise PlannerInputError("occupancy grid is not a numeric array") from None
-            if dense.shape != tuple(grid.dims):
-                raise PlannerInputError(f"occupancy grid has shape {dense.shape}, expected {tuple(grid.dims)} "
-                                        f"for the grid {grid.min.tolist()}..{grid.max.tolist()} at {grid.resolution} m")
-            origin, res = np.asarray(grid.origin, float), float(grid.resolution)
-        if dense.ndim != 3:
-            raise PlannerInputError(f"occupancy grid must be 3-D, got shape {dense.shape}")
-        if not np.all(np.isfinite(dense)):
-            raise PlannerInputError(f"occupancy grid contains {int(np.sum(~np.isfinite(dense)))} NaN/inf values")
-        if dense.size and (dense.min() < 0 or dense.max() > 1):
-            raise PlannerInputError(f"occupancy values must be in [0, 1], got [{dense.min()}, {dense.max()}]")
-        if not (math.isfinite(res) and res > 0) or not np.all(np.isfinite(origin)):
-            raise PlannerInputError(f"occupancy grid geometry invalid: origin {origin}, resolution {res}")
+        dense, origin, res = check_occupancy(occupancy, grid or self.scene.grid)
         return torch.as_tensor(dense, device=self.device, dtype=self.dtype), origin, res
 
     # ------------------------------------------------------------------------------------------
@@ -432,7 +325,7 @@ class Planner:
         c = self.config
         q_t, s_t = self.start_configuration(q)
         if self._prev is None:
-            init = init_straight_lines(q_t, self.goal_q, c.waypoints)
+            init = init_straight_lines(q_t, self.goal_q, c.stomp.waypoints)
         else:
             init = reconnect_previous(self._prev, self._prev_best, q_t, s_t, self.waypoint_cost)
         result = self.stomp.optimize(init, self.waypoint_cost, seeds=self._seeds())
@@ -446,7 +339,7 @@ class Planner:
         self._prev, self._prev_best, self._prev_dt = trajs, chosen_v, float(dts[chosen_v])
 
         k = len(self.goals.names)
-        out_traj = q_t.expand(k, c.waypoints, -1).clone()
+        out_traj = q_t.expand(k, c.stomp.waypoints, -1).clone()
         out_traj[self.valid_index] = trajs
         costs = {name: np.full(k, np.inf) for name in ("smoothness", "obstacle", "human", "total")}
         for name in costs:
@@ -463,11 +356,10 @@ class Planner:
 
 
 def _default_cost(scene: Scene, robot: Any, config: PlannerConfig) -> PlannerCost:
-    """The PR2's :class:`~services.planner.costs.StateCost` of the scene, weights overridden by ``config``."""
-    from .costs import CostConfig, StateCost
+    """The PR2's :class:`~services.planner.costs.StateCost` of the scene with ``config.cost``."""
+    from .costs import StateCost
 
-    weights = {n: getattr(config, n) for n in ("w_smooth", "w_obstacle", "w_human") if getattr(config, n) >= 0}
-    return StateCost.from_scene(scene, robot, dataclasses.replace(CostConfig(), **weights))
+    return StateCost.from_scene(scene, robot, config.cost)
 
 
 def _default_goals(scene: Scene, robot: Any, cost: Any, config: PlannerConfig) -> PlannerGoals:

@@ -1,6 +1,7 @@
 """The planner's Zenoh loop: occupancy + robot state in, one Plan per replanning step out.
 
-Lock-step mode (deterministic; see docs/protocol.md): on ClockTick n the planner takes
+Lock-step mode (deterministic; see docs/protocol.md): on ClockTick n the planner takes what its
+:class:`shared.lockstep.TickInbox` pairs with the tick,
 
 * the robot configuration at the end of step n, i.e. the last RobotState of tick n (stamp
   ``tick.stamp + tick.period``), which is where plan n starts executing, and
@@ -16,18 +17,17 @@ occupancy (latest-only subscription, so a slow planner never works through stale
 
 from __future__ import annotations
 
-import dataclasses
 import logging
-import queue
 import threading
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from shared.config import ZenohConfig, opt
+from shared.config import ZenohConfig
+from shared.lockstep import TickInbox
 from shared.protocol import ClockTick, DemoMarker, Keys, OccupancyGrid, Plan, RobotState
-from shared.scene import SCENE_HELP, Scene, load_scene
+from shared.scene import Scene, load_scene
 from shared.transport import (
     LatestSubscriber,
     Presence,
@@ -38,46 +38,12 @@ from shared.transport import (
     subscribe,
 )
 
-from .core import Planner, PlannerConfig, PlannerError, PlanResult
+from .config import PlannerServiceConfig
+from .core import Planner, PlannerError, PlanResult
 
 __all__ = ["PlannerServiceConfig", "PlannerService", "PlannerStats", "plan_message"]
 
 log = logging.getLogger("foresight.planner")
-
-
-@dataclass
-class PlannerServiceConfig(PlannerConfig):
-    """The ``[planner]`` section: the planner's settings plus how the service runs it."""
-
-    mode: str = opt("realtime", help="replan on a wall-clock period or on every ClockTick (lock-step: no lookahead)",
-                    choices=("realtime", "lockstep"))
-    period_s: float = opt(0.5, help="real-time replanning period (s)")
-    input_timeout_s: float = opt(10.0, help="lock-step: longest wait for a tick's robot state / occupancy (s)")
-    scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")
-    stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
-                               "disappears after it was seen (comma-separated; how a compose run ends)")
-    log_level: str = opt("INFO", help="log level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
-
-    def validate(self) -> None:
-        """Check the planner settings and the service's own."""
-        super().validate()
-        from shared.config import ConfigError
-
-        if not self.period_s > 0:
-            raise ConfigError(f"planner.period_s: must be > 0, got {self.period_s}")
-        if not self.input_timeout_s > 0:
-            raise ConfigError(f"planner.input_timeout_s: must be > 0, got {self.input_timeout_s}")
-
-    def planner_config(self) -> PlannerConfig:
-        """The :class:`PlannerConfig` part.
-
-        In lock-step mode the executor's last RobotState of a tick already is the configuration the plan
-        starts from, so there is no lookahead; in real time the plan starts ``lookahead_s`` ahead.
-        """
-        base = {f.name: getattr(self, f.name) for f in dataclasses.fields(PlannerConfig)}
-        if self.mode == "lockstep":
-            base["lookahead_s"] = 0.0
-        return PlannerConfig(**base)
 
 
 @dataclass
@@ -107,64 +73,6 @@ def plan_message(result: PlanResult, tick: int, stamp: float, occupancy: Occupan
                 trajectories=result.trajectories.astype(np.float32), cost_smoothness=result.cost_smoothness,
                 cost_obstacle=result.cost_obstacle, cost_human=result.cost_human, cost_total=result.cost_total,
                 valid=result.valid.astype(bool))
-
-
-class _Inbox:
-    """Robot states and final occupancy grids by tick (lock-step), with waiting."""
-
-    def __init__(self, keep: int = 8) -> None:
-        self.cond = threading.Condition()
-        self.states: dict[int, RobotState] = {}
-        self.occupancy: dict[int, OccupancyGrid] = {}
-        self.end_tick: int | None = None  # tick of the observed demonstration's last pose, once it ended
-        self.keep = keep
-
-    def _trim(self, d: dict[int, object]) -> None:
-        while len(d) > self.keep:
-            d.pop(min(d))
-
-    def add_state(self, msg: RobotState) -> None:
-        with self.cond:
-            old = self.states.get(msg.tick)
-            if old is None or msg.stamp >= old.stamp:
-                self.states[msg.tick] = msg
-                self._trim(self.states)
-            self.cond.notify_all()
-
-    def add_occupancy(self, msg: OccupancyGrid) -> None:
-        if not msg.tick_last:
-            return
-        with self.cond:
-            self.occupancy[msg.tick] = msg
-            self._trim(self.occupancy)
-            self.cond.notify_all()
-
-    def add_marker(self, msg: DemoMarker) -> None:
-        with self.cond:
-            self.end_tick = msg.tick if msg.event == "end" else None
-            self.cond.notify_all()
-
-    def wait_state(self, tick: int, stamp: float, timeout: float) -> RobotState | None:
-        """The state of ``tick`` stamped at least ``stamp`` (else the newest of that tick after the timeout)."""
-        with self.cond:
-            self.cond.wait_for(lambda: tick in self.states and self.states[tick].stamp >= stamp - 1e-9, timeout)
-            return self.states.get(tick)
-
-    def wait_occupancy(self, tick: int, timeout: float) -> OccupancyGrid | None:
-        """The final grid of ``tick``, else the newest final grid of an earlier tick after the timeout.
-
-        Once the observed demonstration has ended (its end marker carries the tick of its last pose),
-        no grid comes after that tick: the grid of the last pose's tick is the prediction to use.
-        """
-
-        def target() -> int:
-            return tick if self.end_tick is None else min(tick, self.end_tick)
-
-        with self.cond:
-            if self.cond.wait_for(lambda: target() in self.occupancy, timeout):
-                return self.occupancy[target()]
-            earlier = [t for t in self.occupancy if t < tick]
-            return self.occupancy[max(earlier)] if earlier else None
 
 
 class PlannerService:
@@ -219,35 +127,31 @@ class PlannerService:
         return self.stats
 
     def _run_lockstep(self, session: object, pub: TypedPublisher[Plan], stop: threading.Event) -> None:
-        inbox = _Inbox()
-        ticks: queue.Queue[ClockTick] = queue.Queue()
+        inbox = TickInbox()
         subs = [subscribe(session, self.keys.robot_state, RobotState, inbox.add_state, self.rejects),
                 subscribe(session, self.keys.occupancy, OccupancyGrid, inbox.add_occupancy, self.rejects),
-                subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects),
+                subscribe(session, self.keys.clock, ClockTick, inbox.add_tick, self.rejects),
                 subscribe(session, self.keys.demo, DemoMarker, inbox.add_marker, self.rejects)]
         presence = Presence(session, self.keys, "planner",  # announce only once subscribed
                             stop_with=self.config.stop_with, stop=stop)
         try:
             while not stop.is_set():
-                try:
-                    tick = ticks.get(timeout=0.2)
-                except queue.Empty:
+                tick = inbox.ticks.get(timeout=0.2)
+                if tick is None:
                     continue
                 if tick.tick == 0:
                     self.planner.reset()
                 wait = self.config.input_timeout_s
-                state = inbox.wait_state(tick.tick, tick.stamp + tick.period, wait)
-                if state is None:
+                got = inbox.inputs(tick, wait)
+                if got.state is None:
                     log.error("planner: no robot state for tick %d within %.1f s; skipping it", tick.tick, wait)
                     self.stats.failures += 1
                     continue
-                occ = inbox.wait_occupancy(tick.tick - 1, wait) if tick.tick > 0 else None
-                end = inbox.end_tick
-                expected = tick.tick - 1 if end is None else min(tick.tick - 1, end)
-                if tick.tick > 0 and (occ is None or occ.tick != expected):
+                occ = got.occupancy
+                if got.prediction_missing:
                     log.warning("planner: prediction of tick %d missing; planning tick %d with %s", tick.tick - 1,
                                 tick.tick, "an empty grid" if occ is None else f"the one of tick {occ.tick}")
-                self._plan(state.q, occ, tick.tick, tick.stamp, pub)
+                self._plan(got.state.q, occ, tick.tick, tick.stamp, pub)
         finally:
             presence.close()
             for s in subs:

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from dataclasses import dataclass
 
 from shared.config import ZenohConfig
 from shared.library import MotionLibrary
+from shared.lockstep import TickOrder, TickQueue
 from shared.protocol import ClockTick, DemoMarker, HumanPose, Keys, Message
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe
 
@@ -63,7 +63,7 @@ class ReplayerService:
             demo_pub: TypedPublisher[DemoMarker] = TypedPublisher(session, self.keys.demo, block=True)
             # lock-step: listen to the clock before announcing ourselves, so no tick sent after our
             # liveliness token appears is missed
-            ticks: queue.Queue[ClockTick] = queue.Queue()
+            ticks = TickQueue()
             clock_sub = (subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects)
                          if cfg.mode == "lockstep" else None)
             presence = Presence(session, self.keys, "replayer", stop_with=cfg.stop_with, stop=stop)
@@ -75,7 +75,7 @@ class ReplayerService:
                 if clock_sub is not None:
                     self._run_lockstep(ticks, core, pose_pub, demo_pub, stop)
                 else:
-                    self._wait_for_peers(presence, stop)
+                    presence.wait_for(cfg.wait_for, cfg.wait_timeout, stop)
                     self._run_realtime(core, pose_pub, demo_pub, stop)
                 self.stats.finished = core.done
                 if core.done:
@@ -110,22 +110,6 @@ class ReplayerService:
         d = self.demos[m.demo_id % len(self.demos)]
         return d.source
 
-    def _wait_for_peers(self, presence: Presence, stop: threading.Event) -> None:
-        wanted = list(self.config.wait_for)
-        if not wanted:
-            return
-        deadline = time.monotonic() + self.config.wait_timeout
-        while not stop.is_set():
-            missing = [s for s in wanted if not presence.is_alive(s)]
-            if not missing:
-                log.info("replayer: %s present, streaming", ", ".join(wanted))
-                return
-            if time.monotonic() >= deadline:
-                log.warning("replayer: %s not present after %.1f s, streaming anyway", ", ".join(missing),
-                            self.config.wait_timeout)
-                return
-            stop.wait(0.02)
-
     def _run_realtime(self, core: ReplayerCore, pose_pub: TypedPublisher[HumanPose],
                       demo_pub: TypedPublisher[DemoMarker], stop: threading.Event) -> None:
         period = 1.0 / self.config.rate_hz
@@ -139,20 +123,18 @@ class ReplayerService:
             elif delay < -1.0:  # fell far behind (suspended?): do not burst to catch up
                 next_t = time.monotonic()
 
-    def _run_lockstep(self, ticks: queue.Queue[ClockTick], core: ReplayerCore, pose_pub: TypedPublisher[HumanPose],
+    def _run_lockstep(self, ticks: TickQueue, core: ReplayerCore, pose_pub: TypedPublisher[HumanPose],
                       demo_pub: TypedPublisher[DemoMarker], stop: threading.Event) -> None:
-        last = -1
+        order = TickOrder()
         n = self.config.samples_per_tick
         while not stop.is_set() and not core.done:
-            try:
-                tick = ticks.get(timeout=0.1)
-            except queue.Empty:
+            tick = ticks.get(timeout=0.1)
+            if tick is None:
                 continue
-            if tick.tick <= last:
-                log.warning("replayer: ignoring clock tick %d (already at tick %d)", tick.tick, last)
+            take, note = order.accept(tick.tick)
+            if note:
+                log.warning("replayer: %s", note)
+            if not take:
                 continue
-            if tick.tick != last + 1 and last >= 0:
-                log.warning("replayer: clock jumped from tick %d to %d", last, tick.tick)
-            last = tick.tick
             self.stats.ticks += 1
             self._publish(core.step(n, stamp=tick.stamp, tick=tick.tick, dt=tick.period / n), pose_pub, demo_pub)

@@ -17,7 +17,9 @@ import pytest
 from services.executor.core import ExecutorConfig
 from services.executor.service import ExecutorResult, ExecutorService
 from services.experiments.harness import JOIN_S, ServiceThread
+from services.planner.config import PlannerConfig
 from services.planner.service import PlannerService, PlannerServiceConfig
+from services.planner.stomp import StompConfig
 from services.predictor.core import PredictorConfig
 from services.predictor.service import PredictorService
 from services.processes import free_port
@@ -92,9 +94,10 @@ def run_system(system_files: SystemFiles, tmp_path: Path) -> Iterator[Callable[.
                 subscribe(session, keys.posterior, ClassPosterior, recorder.on_message)]
         sessions.append(subs)
         predictor = PredictorService(PredictorConfig(model=system_files.model), peer)
-        planner_cfg = PlannerServiceConfig(mode=mode, seed=seed, period_s=period, lookahead_s=period,
-                                           iterations=20, input_timeout_s=20.0,
-                                           **{"compile": False, **(planner_overrides or {})})
+        planner_cfg = PlannerServiceConfig(mode=mode, period_s=period, input_timeout_s=20.0,
+                                           planner=PlannerConfig(seed=seed, lookahead_s=period, compile=False,
+                                                                 stomp=StompConfig(iterations=20),
+                                                                 **(planner_overrides or {})))
         planner = PlannerService(planner_cfg, peer)
         replayer = ReplayerService(ReplayerConfig(library=system_files.human, mode=mode,
                                                   samples_per_tick=system_files.samples_per_tick,

@@ -8,7 +8,16 @@ from pathlib import Path
 
 import pytest
 
-from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, parse_value, resolve_config
+from shared.config import (
+    ConfigError,
+    ZenohConfig,
+    add_config_arguments,
+    config_options,
+    nested,
+    opt,
+    parse_value,
+    resolve_config,
+)
 
 
 @dataclasses.dataclass
@@ -115,3 +124,98 @@ def test_parse_value_types():
         parse_value("x", float, True)
     assert parse_value("x", Path | None, "~/a") == Path("~/a").expanduser()
     assert parse_value("x", list[str], "a, b,") == ["a", "b"]
+
+
+# ----------------------------------------------------------------------------------------------
+# nested component configs
+
+
+@dataclasses.dataclass
+class Inner:
+    """A component.
+
+    Attributes:
+        steps: How many steps.
+        device: Set by the parent.
+    """
+
+    steps: int = 5
+    gain: float = 1.0  # the component's gain
+    device: str = "cpu"
+
+    def validate(self) -> None:
+        if self.steps < 1:
+            raise ValueError(f"inner.steps must be >= 1, got {self.steps}")
+
+
+@dataclasses.dataclass
+class Core:
+    device: str = opt("cpu", help="device")
+    inner: Inner = nested(Inner, help="the inner component", hide=("device",))
+
+    def validate(self) -> None:
+        self.inner.validate()
+
+
+@dataclasses.dataclass
+class Service:
+    period_s: float = opt(0.5, help="period")
+    core: Core = nested(Core, inline=True)
+
+
+def test_nested_options_have_one_name_each() -> None:
+    opts = {o.name: o for o in config_options("svc", Service)}
+    assert list(opts) == ["svc.period_s", "svc.device", "svc.inner.steps", "svc.inner.gain"]  # device hidden
+    steps = opts["svc.inner.steps"]
+    assert (steps.attrs, steps.env, steps.flag) == (("core", "inner", "steps"), "FORESIGHT_SVC_INNER_STEPS",
+                                                    "--inner.steps")
+    assert opts["svc.device"].attrs == ("core", "device") and opts["svc.device"].flag == "--device"
+    assert steps.help == "How many steps" and opts["svc.inner.gain"].help == "the component's gain"
+
+
+def test_nested_precedence_file_env_flag(tmp_path) -> None:
+    p = argparse.ArgumentParser()
+    add_config_arguments(p, "svc", Service)
+    f = write(tmp_path, "[svc]\ndevice = 'cuda'\nperiod_s = 2\n[svc.inner]\nsteps = 7\ngain = 3\n")
+    cfg, _ = resolve_config("svc", Service, p.parse_args(["--config", str(f)]), env={})
+    assert cfg == Service(period_s=2.0, core=Core(device="cuda", inner=Inner(steps=7, gain=3.0)))
+    env = {"FORESIGHT_SVC_INNER_STEPS": "8", "FORESIGHT_SVC_DEVICE": "cpu"}
+    cfg, _ = resolve_config("svc", Service, p.parse_args(["--config", str(f), "--inner.gain", "4"]), env=env)
+    assert (cfg.core.device, cfg.core.inner.steps, cfg.core.inner.gain, cfg.period_s) == ("cpu", 8, 4.0, 2.0)
+
+
+@pytest.mark.parametrize(("text", "argv", "env", "pattern"), [
+    ("[svc.inner]\nsteps = 0\n", [], {}, r"^svc: inner\.steps must be >= 1, got 0$"),
+    ("[svc.inner]\nspeed = 1\n", [], {}, r"^\[svc\.inner\]: unknown option\(s\) speed$"),
+    ("[svc.inner]\ndevice = 'cuda'\n", [], {}, r"^\[svc\.inner\]: unknown option\(s\) device$"),  # hidden
+    ("[svc]\ninner = 3\n", [], {}, r"^\[svc\.inner\]: must be a table"),
+    ("[svc]\ncore = {}\n", [], {}, r"^\[svc\]: unknown option\(s\) core$"),  # inline: no table of its own
+    ("", ["--inner.steps", "x"], {}, r"^--inner\.steps: expected int, got 'x'$"),
+    ("", [], {"FORESIGHT_SVC_INNER_GAIN": "fast"}, r"^FORESIGHT_SVC_INNER_GAIN: expected float"),
+])
+def test_nested_bad_values_are_named(tmp_path, text, argv, env, pattern) -> None:
+    p = argparse.ArgumentParser()
+    add_config_arguments(p, "svc", Service)
+    with pytest.raises(ConfigError, match=pattern):
+        resolve_config("svc", Service, p.parse_args(["--config", str(write(tmp_path, text)), *argv]), env=env)
+
+
+def test_help_groups_nested_tables(capsys) -> None:
+    p = argparse.ArgumentParser()
+    add_config_arguments(p, "svc", Service)
+    with pytest.raises(SystemExit):
+        p.parse_args(["--help"])
+    out = capsys.readouterr().out
+    assert "[svc] options (env FORESIGHT_SVC_<NAME>)" in out
+    assert "[svc.inner] options (env FORESIGHT_SVC_INNER_<NAME>, flags --inner.<name>)" in out
+    assert "the inner component" in out and "--inner.steps STEPS" in out and "--device" in out
+
+
+def test_clashing_names_are_a_config_bug() -> None:
+    @dataclasses.dataclass
+    class Clash:
+        inner_steps: int = opt(1, help="clashes with inner.steps in the environment")
+        inner: Inner = nested(Inner)
+
+    with pytest.raises(ValueError, match="share env FORESIGHT_X_INNER_STEPS"):
+        config_options("x", Clash)

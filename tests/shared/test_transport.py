@@ -166,6 +166,21 @@ def test_presence_stop_with_ends_a_service_when_that_peer_has_come_and_gone(zeno
         Presence(None, keys, "planner", stop_with=["executor"])  # type: ignore[arg-type]
 
 
+def test_presence_waits_for_peers_until_present_or_timeout(zenoh_hub):
+    keys = Keys("t7")
+    stop = threading.Event()
+    with open_session(zenoh_hub()) as sa, open_session(zenoh_hub()) as sb:
+        executor = Presence(sa, keys, "executor")
+        assert executor.wait_for([], 0.0) == []
+        assert executor.wait_for(["planner", "replayer"], 0.0) == ["planner", "replayer"]  # gave up at once
+        planner = Presence(sb, keys, "planner")
+        assert executor.wait_for(["planner"], 30.0, stop) == []
+        stop.set()
+        assert executor.wait_for(["planner", "replayer"], 30.0, stop) == ["replayer"]  # stopped: no wait
+        planner.close()
+        executor.close()
+
+
 def test_client_retries_until_its_router_listens(caplog):
     """A client started before its router retries with a growing pause, logging each attempt."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"

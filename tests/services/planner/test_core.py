@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
 
 from services.planner.core import GoalSet, Planner, PlannerConfig, PlannerError, PlannerInputError
+from services.planner.costs import CostConfig
 from services.planner.multigoal import init_straight_lines
+from services.planner.stomp import StompConfig
 from shared.protocol import OccupancyGrid
 from shared.scene import load_scene
 
@@ -46,7 +50,8 @@ def blob_grid(scene, center=(0.5, -0.2, 1.0), sigma=0.12) -> np.ndarray:
 
 def toy_planner(scene, **cfg) -> Planner:
     goals = GoalSet.joint_space(["a", "b"], [[1.0, -0.2], [0.9, 0.2]], ToyRobot)
-    config = PlannerConfig(**{"noise_std": 0.1, **cfg})
+    stomp = {k: cfg.pop(k) for k in list(cfg) if k in {f.name for f in dataclasses.fields(StompConfig)}}
+    config = PlannerConfig(**cfg, stomp=StompConfig(**{"noise_std": 0.1, **stomp}))
     return Planner(scene, config, robot=ToyRobot(), cost=ToyCost(), goals=goals, w_smooth=5.0)
 
 
@@ -127,7 +132,8 @@ def test_occupancy_message_equals_dense(scene) -> None:
 def test_invalid_goals_are_reported_and_never_chosen(scene) -> None:
     goals = GoalSet.joint_space(["in", "out", "nan"], [[1.0, -0.2], [2.0, 0.0], [np.nan, 0.0]], ToyRobot)
     assert goals.valid.tolist() == [True, False, False] and "outside the joint limits" in goals.reasons[1]
-    planner = Planner(scene, PlannerConfig(iterations=5), robot=ToyRobot(), cost=ToyCost(), goals=goals)
+    config = PlannerConfig(stomp=StompConfig(iterations=5))
+    planner = Planner(scene, config, robot=ToyRobot(), cost=ToyCost(), goals=goals)
     res = planner.step([0.0, -0.2], blob_grid(scene))
     assert res.valid.tolist() == [True, False, False] and res.chosen == 0
     assert np.isinf(res.cost_total[1:]).all() and np.allclose(res.trajectories[1:], [0.0, -0.2])
@@ -190,7 +196,7 @@ def test_pr2_unreachable_cup_is_dropped_and_reported() -> None:
     scene = load_scene()
     far = dataclasses.replace(scene.cup("red_cup"), position=np.array([-1.8, -2.8, 0.73]))  # far end of the room
     scene = dataclasses.replace(scene, cups=(scene.cup("blue_cup"), far))
-    planner = Planner(scene, PlannerConfig(iterations=5, compile=False))
+    planner = Planner(scene, PlannerConfig(stomp=StompConfig(iterations=5), compile=False))
     assert planner.goals.valid.tolist() == [True, False]
     res = planner.step(planner.robot.q_start.numpy(), np.zeros(scene.grid.dims, dtype=np.float32))
     assert res.valid.tolist() == [True, False] and res.chosen == 0 and res.reasons[1]
@@ -200,18 +206,24 @@ def test_pr2_unreachable_cup_is_dropped_and_reported() -> None:
 def test_config_resolves_and_names_bad_values() -> None:
     import argparse
 
+    from services.planner.config import PlannerServiceConfig
     from shared.config import ConfigError, add_config_arguments, resolve_config
 
     parser = argparse.ArgumentParser()
-    add_config_arguments(parser, "planner", PlannerConfig)
-    args = parser.parse_args(["--rollouts", "24", "--goals", "red_cup,blue_cup"])
-    cfg, _ = resolve_config("planner", PlannerConfig, args, env={"FORESIGHT_PLANNER_W_SMOOTH": "50"})
-    assert (cfg.rollouts, cfg.goals, cfg.w_smooth) == (24, ["red_cup", "blue_cup"], 50.0)
-    assert cfg.stomp().rollouts == 24
-    with pytest.raises(ConfigError, match="planner.rollouts"):
-        PlannerConfig(rollouts=1).validate()
+    add_config_arguments(parser, "planner", PlannerServiceConfig)
+    args = parser.parse_args(["--stomp.rollouts", "24", "--goals", "red_cup,blue_cup", "--mode", "lockstep"])
+    cfg, _ = resolve_config("planner", PlannerServiceConfig, args, env={"FORESIGHT_PLANNER_COST_W_SMOOTH": "50"})
+    p = cfg.planner
+    assert (p.stomp.rollouts, p.goals, p.cost.w_smooth, cfg.mode) == (24, ["red_cup", "blue_cup"], 50.0, "lockstep")
+    assert p.stomp_config().rollouts == 24 and cfg.planner_config().lookahead_s == 0.0 and p.lookahead_s == 0.5
+    with pytest.raises(ConfigError, match=r"planner\.stomp\.rollouts must be >= 2"):
+        PlannerConfig(stomp=StompConfig(rollouts=1)).validate()
+    with pytest.raises(ConfigError, match=r"planner\.cost\.w_human"):
+        PlannerConfig(cost=CostConfig(w_human=-1)).validate()
     with pytest.raises(ConfigError, match="planner.velocity_scale"):
         PlannerConfig(velocity_scale=0).validate()
+    with pytest.raises(ConfigError, match=r"^--stomp\.iterations: expected int"):
+        resolve_config("planner", PlannerServiceConfig, parser.parse_args(["--stomp.iterations", "x"]), env={})
 
 
 def test_bench_json_prints_one_object(capsys) -> None:

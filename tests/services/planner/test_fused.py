@@ -10,12 +10,13 @@ from services.planner.bench import bench_goals, blob_occupancy
 from services.planner.core import GoalSet, Planner, PlannerConfig
 from services.planner.costs import CostConfig, StateCost, hinge_sum
 from services.planner.fused import FusedCost, _cell_args, _trilinear, supports
+from services.planner.stomp import StompConfig
 from shared.robot import PR2
 
 
 @pytest.fixture(scope="module")
 def planner(scene):
-    config = PlannerConfig(iterations=5, compile=False)
+    config = PlannerConfig(stomp=StompConfig(iterations=5), compile=False)
     base = Planner(scene, config)
     goals = bench_goals(base.goals, base.robot, 3, seed=0)
     return Planner(scene, config, robot=base.robot, cost=base.cost, goals=goals)
@@ -50,7 +51,7 @@ def test_fused_equals_reference_in_float64(scene) -> None:
     robot = PR2.from_scene(scene, dtype=torch.float64)
     cost = StateCost.from_scene(scene, robot, CostConfig())
     goals = GoalSet.joint_space(["start"], robot.q_start[None], robot)
-    planner = Planner(scene, PlannerConfig(dtype="float64", compile=False, iterations=1), robot=robot, cost=cost,
+    planner = Planner(scene, PlannerConfig(dtype="float64", compile=False, stomp=StompConfig(iterations=1)), robot=robot, cost=cost,
                       goals=goals)
     assert planner.fused is not None
     grid = scene.grid
