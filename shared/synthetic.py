@@ -34,9 +34,9 @@ import numpy as np
 
 from shared.data_files import finite_vector, read_toml
 from shared.human import HumanModel
-from shared.library import Demonstration, LibraryError, MotionLibrary
+from shared.library import Demonstration, LibraryError, MotionLibrary, write_csv_dir
 
-__all__ = ["SyntheticConfig", "GoalLayout", "load_layout", "generate_library", "write_csv_dir", "DEFAULT_LAYOUT",
+__all__ = ["SyntheticConfig", "GoalLayout", "load_layout", "generate_library", "DEFAULT_LAYOUT",
            "add_generate_arguments", "run_generate"]
 
 DEFAULT_LAYOUT = "table_8"
@@ -359,29 +359,7 @@ def generate_library(n_classes: int = 8, n_demos: int = 25, seed: int = 0,
 
 
 # ----------------------------------------------------------------------------------------------
-# output and the `foresight library generate` sub-command
-
-
-def write_csv_dir(lib: MotionLibrary, directory: str | Path) -> list[Path]:
-    """Write ``lib`` in the paper's format: ``compound_<m>.csv`` per class (index + its F features).
-
-    Args:
-        lib: The library.
-        directory: Output directory (created).
-
-    Returns:
-        The files written.
-    """
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    files = []
-    for m in range(lib.n_classes):
-        rows = [np.column_stack([np.arange(d.n_samples), d.features]) for d in lib.by_class(m)]
-        path = out / f"compound_{m}.csv"
-        np.savetxt(path, np.concatenate(rows) if rows else np.zeros((0, 1 + lib.n_features)), delimiter=",",
-                   fmt=["%d"] + ["%.9g"] * lib.n_features)
-        files.append(path)
-    return files
+# the `foresight library generate` sub-command
 
 
 def add_generate_arguments(p) -> None:

@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 from shared.feature_sets import HERAKLES, MappingError, generic_names, mapping_for, require_mapping
-from shared.library import FEATURE_NAMES, LibraryError, load_library, save_library, validate_block
+from shared.library import FEATURE_NAMES, LibraryError, load_library, save_library, validate_block, write_csv_dir
 from shared.library_cli import main as library_main
-from shared.synthetic import write_csv_dir
 from shared.synthetic_wide import WIDE_FEATURE_NAMES, generate_wide_library
 
 
