@@ -3,18 +3,15 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import pytest
 
-from shared.cli import COMMANDS
-from shared.cli import main as cli_main
-
-REPO = Path(__file__).resolve().parents[2]
+from tools.foresight import COMMANDS
+from tools.foresight import main as cli_main
 
 
 def test_log_command_lists_its_subcommands(capsys) -> None:
-    from shared.logtools import main as log_main
+    from tools.log.cli import main as log_main
 
     with pytest.raises(SystemExit):
         log_main(["--help"])
@@ -32,15 +29,3 @@ def test_help_has_no_rest_markup(argv, capsys) -> None:
     assert exc.value.code == 0
     out = capsys.readouterr().out
     assert out.startswith("usage: foresight") and "``" not in out
-
-
-def test_protocol_doc_names_every_liveliness_token() -> None:
-    declared = set()
-    for path in [*REPO.glob("services/**/*.py"), *REPO.glob("shared/**/*.py")]:
-        # the service name is Presence's third positional argument (keywords may follow)
-        declared |= set(re.findall(r'Presence\(\s*\w+,\s*[\w.]+,\s*"([a-z_]+)"', path.read_text()))
-    assert {"replayer", "predictor", "planner", "executor", "demo"} <= declared
-    doc = (REPO / "docs" / "protocol.md").read_text()
-    line = next(ln for ln in doc.splitlines() if ln.startswith("Service names:"))
-    named = set(re.findall(r"`([a-z_]+)`", line))
-    assert declared == named, (declared, named)
