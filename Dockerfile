@@ -29,6 +29,7 @@ RUN python -m pip install --upgrade pip \
 COPY pyproject.toml README.md ./
 COPY shared ./shared
 COPY services ./services
+COPY tools ./tools
 RUN python -m pip install . \
  && mkdir -p /app/models /app/runs
 

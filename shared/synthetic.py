@@ -36,8 +36,7 @@ from shared.data_files import finite_vector, read_toml
 from shared.human import HumanModel
 from shared.library import Demonstration, LibraryError, MotionLibrary
 
-__all__ = ["SyntheticConfig", "GoalLayout", "load_layout", "generate_library", "write_csv_dir", "DEFAULT_LAYOUT",
-           "add_generate_arguments", "run_generate"]
+__all__ = ["SyntheticConfig", "GoalLayout", "load_layout", "generate_library", "DEFAULT_LAYOUT", "pelvis_frame"]
 
 DEFAULT_LAYOUT = "table_8"
 FEATURE_SETS = ("herakles", "wide16")
@@ -129,7 +128,8 @@ class GoalLayout:
     source: str
 
 
-def _pelvis_frame(scene) -> tuple[np.ndarray, np.ndarray]:
+def pelvis_frame(scene) -> tuple[np.ndarray, np.ndarray]:
+    """``(rotation (3, 3), origin (3,))`` of the scene's pelvis frame (the layouts' goals are in it)."""
     yaw = scene.human.pelvis_yaw
     rot = np.array([[math.cos(yaw), -math.sin(yaw), 0.0], [math.sin(yaw), math.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
     return rot, np.asarray(scene.human.pelvis_xyz, dtype=np.float64)
@@ -160,7 +160,7 @@ def load_layout(layout: str | Path | None = None, scene=None) -> GoalLayout:
         raise LibraryError(f"goal layout {source!r}: no [[goals]] entries")
     if scene is None:
         scene = load_scene(data.get("scene"))
-    rot, origin = _pelvis_frame(scene)
+    rot, origin = pelvis_frame(scene)
     names, goals = [], []
     for i, g in enumerate(entries):
         where = f"goal layout {source!r}: goals[{i}]"
@@ -356,100 +356,3 @@ def generate_library(n_classes: int = 8, n_demos: int = 25, seed: int = 0,
                                    f"synthetic:{lay.name} seed={seed} class {m} demo {i - m * n_demos}"))
     source = f"synthetic:{lay.name} classes={n_classes} demos={n_demos} seed={seed}"
     return MotionLibrary(list(lay.goal_names[:n_classes]), demos, [], source)
-
-
-# ----------------------------------------------------------------------------------------------
-# output and the `foresight library generate` sub-command
-
-
-def write_csv_dir(lib: MotionLibrary, directory: str | Path) -> list[Path]:
-    """Write ``lib`` in the paper's format: ``compound_<m>.csv`` per class (index + its F features).
-
-    Args:
-        lib: The library.
-        directory: Output directory (created).
-
-    Returns:
-        The files written.
-    """
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    files = []
-    for m in range(lib.n_classes):
-        rows = [np.column_stack([np.arange(d.n_samples), d.features]) for d in lib.by_class(m)]
-        path = out / f"compound_{m}.csv"
-        np.savetxt(path, np.concatenate(rows) if rows else np.zeros((0, 1 + lib.n_features)), delimiter=",",
-                   fmt=["%d"] + ["%.9g"] * lib.n_features)
-        files.append(path)
-    return files
-
-
-def add_generate_arguments(p) -> None:
-    """Options of ``foresight library generate`` (an ``argparse`` parser)."""
-    p.add_argument("--classes", type=int, default=8, help="number of classes (first goals of the layout)")
-    p.add_argument("--demos", type=int, default=25, help="demonstrations per class")
-    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same library)")
-    p.add_argument("--out", required=True, metavar="PATH",
-                   help="output: FILE.npz (native) or a directory of compound_<m>.csv (paper format)")
-    p.add_argument("--layout", default=None, help="goal layout TOML or embedded name (default table_8)")
-    p.add_argument("--scene", default=None, help="scene the layout's cups refer to (default: the layout's)")
-    p.add_argument("--return-to-rest", action="store_true",
-                   help="bring the hand back to rest after the reach, as the paper's recordings do")
-    p.add_argument("--plot", default=None, metavar="PNG",
-                   help="also write a top view of the demonstrations' final hand positions in the scene")
-    p.add_argument("--feature-set", choices=FEATURE_SETS, default="herakles",
-                   help="herakles: the paper's 12 features (default); wide16: those plus 4 forearm/wrist channels, "
-                        "16 features without a mapping to the human model (17 CSV columns; shared/synthetic_wide.py)")
-
-
-def run_generate(args) -> int:
-    """Run ``foresight library generate`` with parsed ``args``; returns the exit status."""
-    import time
-
-    from shared.human import plot_reach_points, reach_points
-    from shared.library import save_library
-    from shared.scene import load_scene
-
-    scene = load_scene(args.scene) if args.scene else None
-    lay = load_layout(args.layout, scene)
-    cfg = SyntheticConfig(return_to_rest=bool(args.return_to_rest))
-    start = time.perf_counter()
-    if getattr(args, "feature_set", "herakles") == "wide16":
-        if args.plot:
-            from shared.feature_sets import require_mapping
-            from shared.synthetic_wide import WIDE_FEATURE_NAMES
-
-            require_mapping(WIDE_FEATURE_NAMES, "--plot (hand positions in the scene)", "--feature-set wide16")
-        from shared.synthetic_wide import generate_wide_library
-
-        lib = generate_wide_library(args.classes, args.demos, args.seed, layout=lay, scene=scene, config=cfg)
-    else:
-        lib = generate_library(args.classes, args.demos, args.seed, lay, scene, cfg)
-    took = time.perf_counter() - start
-    out = Path(args.out)
-    if out.suffix == ".npz":
-        save_library(lib, out)
-        what = f"{out}"
-    elif out.suffix:
-        raise LibraryError(f"--out {str(out)!r}: give a .npz file or a directory (no extension)")
-    else:
-        files = write_csv_dir(lib, out)
-        what = f"{out}/ ({len(files)} CSV files)"
-    print(f"wrote {what}: {len(lib.demos)} demonstrations in {lib.n_classes} classes "
-          f"({', '.join(lib.class_names)}), {cfg.n_samples} samples of {lib.n_features} features each, "
-          f"seed {args.seed}, generated in {took:.2f} s")
-    if args.plot:
-        scene = scene or load_scene(None)
-        model = HumanModel()
-        if cfg.return_to_rest:
-            hand, _ = reach_points(model, [d.features for d in lib.demos], scene)
-        else:
-            from shared.human import place_in_scene
-            hand = np.array([model.hand_position(place_in_scene(d.features[-1], d.features[0], scene))
-                             for d in lib.demos])
-        rot, origin = _pelvis_frame(scene)
-        goals = origin + lay.goals[:lib.n_classes] @ rot.T
-        plot_reach_points(hand, np.array([d.label for d in lib.demos]), scene, args.plot,
-                          f"synthetic library ({lay.name}, seed {args.seed}): hand at the reach, x = goals", goals)
-        print(f"wrote {args.plot}")
-    return 0

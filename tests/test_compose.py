@@ -21,8 +21,8 @@ from pathlib import Path
 import pytest
 from ruamel.yaml import YAML  # comes with check-jsonschema (dev extra), which this test needs anyway
 
-from shared.cli import COMMANDS
 from shared.config import ConfigError, ZenohConfig, config_options, parse_value, resolve_config
+from tools.foresight import COMMANDS
 
 REPO = Path(__file__).resolve().parents[1]
 COMPOSE = REPO / "compose.yaml"
@@ -118,7 +118,7 @@ def trained_dir(tmp_path_factory) -> Path:
     bin_dir = work / "bin"
     bin_dir.mkdir()
     tool = bin_dir / "foresight"  # what `pip install .` puts on the image's PATH: the real CLI
-    tool.write_text(f"#!/bin/sh\nexec {shlex.quote(sys.executable)} -m shared.cli \"$@\"\n")
+    tool.write_text(f"#!/bin/sh\nexec {shlex.quote(sys.executable)} -m tools \"$@\"\n")
     tool.chmod(0o755)
     model = service_config("predictor")[0].model
     (work / model).write_bytes(b"a model trained earlier")
@@ -288,8 +288,8 @@ def test_dockerfile_installs_what_the_makefile_installs() -> None:
     assert stamp is not None and stamp[1].index("torch") < stamp[1].index('install --quiet -e ".[dev]"')
     assert '--index-url "$(TORCH_INDEX)"' in make and 'install "torch==$(TORCH_VERSION)"' in make
     copied = re.findall(r"^COPY (\S+)", docker, re.M)
-    assert {"pyproject.toml", "shared", "services"} <= set(copied)
+    assert {"pyproject.toml", "shared", "services", "tools"} <= set(copied)
     # the build context keeps out what the image must not carry
     ignored = (REPO / ".dockerignore").read_text().split()
     assert {".venv", ".git", "models", "runs"} <= set(ignored)
-    assert "shared" not in ignored and "services" not in ignored
+    assert not {"shared", "services", "tools"} & set(ignored)

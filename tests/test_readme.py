@@ -2,7 +2,7 @@
 
 Deviations from pasting the lines into a shell, each because of where the test runs:
 
-* ``.venv/bin/foresight`` / ``.venv/bin/python`` are this interpreter (``python -m shared.cli`` /
+* ``.venv/bin/foresight`` / ``.venv/bin/python`` are this interpreter (``python -m tools`` /
   ``python``), with the repository on ``PYTHONPATH``: the test may run from a checkout without
   ``.venv``, in a fresh working directory so that it neither reads nor writes the repo's ``models/``;
 * the router listens on a free loopback port instead of 7447 (which another run may hold), given to
@@ -30,8 +30,8 @@ import pytest
 
 from services.processes import free_port
 from shared.config import ZenohConfig
-from shared.logtools import read_log
 from shared.protocol import Keys, Plan
+from shared.recording.reader import read_log
 from shared.transport import open_session, subscribe
 
 REPO = Path(__file__).resolve().parents[1]
@@ -80,7 +80,7 @@ def parse(line: str) -> Step:
 def command(argv: list[str]) -> list[str]:
     tool, args = argv[0], argv[1:]
     if tool == ".venv/bin/foresight":
-        return [sys.executable, "-m", "shared.cli", *args]
+        return [sys.executable, "-m", "tools", *args]
     if tool == ".venv/bin/python":
         return [sys.executable, *args]
     raise AssertionError(f"README line does not start with .venv/bin/foresight or .venv/bin/python: {argv}")

@@ -1,7 +1,7 @@
 """The executor service: the simulation master of a run and its MCAP logger.
 
 One Zenoh subscriber on ``<prefix>/**`` receives every message of the run (its own included): each
-payload is logged (:class:`services.executor.mcap_log.McapLog`) and plans and occupancy grids are
+payload is logged (:class:`shared.recording.writer.McapLog`) and plans and occupancy grids are
 passed to the pure :class:`services.executor.core.ExecutorCore`.
 
 Lock-step mode (deterministic), replanning step n = 0 .. steps-1: the rules (plan adoption, the hold
@@ -30,12 +30,12 @@ import numpy as np
 from shared.config import ZenohConfig
 from shared.lockstep import Adoption, LockstepMaster, PlanInbox, StepClock
 from shared.protocol import DemoMarker, Keys, Message, OccupancyGrid, Plan, ProtocolError, RobotState, decode
+from shared.recording.foxglove import SceneBuilder
+from shared.recording.writer import McapLog
 from shared.scene import Scene, load_scene
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session
 
 from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError
-from .foxglove import SceneBuilder
-from .mcap_log import McapLog
 from .models import HumanBody, PlaceInScene, RobotModel, load_models, start_configuration
 
 __all__ = ["ExecutorResult", "ExecutorService", "load_models", "start_configuration"]  # the last two: .models

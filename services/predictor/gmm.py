@@ -3,8 +3,9 @@
 Training uses scikit-learn's ``GaussianMixture`` (full covariances, k-means initialisation, seeded);
 the fitted parameters of all M classes are then stacked into one :class:`MixtureBank` whose
 :meth:`MixtureBank.log_likelihood` scores a posture under every class at once. The query of the
-paper, ``ln p(xi|C_m) = sum_t ln p(xi_t|C_m)``, is kept incrementally: each new posture adds its
-own term only (:class:`IncrementalLogLikelihood`), so the work per pose is constant.
+paper, ``ln p(xi|C_m) = sum_t ln p(xi_t|C_m)``, is kept incrementally by the predictor core
+(``services.predictor.core.PredictorCore``): each new posture adds its own term only, so the work per
+pose is constant.
 """
 
 from __future__ import annotations
@@ -18,8 +19,7 @@ from scipy.special import logsumexp
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.mixture import GaussianMixture
 
-__all__ = ["DEFAULT_TEMPERATURE", "GMMConfig", "fit_class_gmm", "MixtureBank", "IncrementalLogLikelihood",
-           "posterior_from_log_likelihood"]
+__all__ = ["DEFAULT_TEMPERATURE", "GMMConfig", "fit_class_gmm", "MixtureBank", "posterior_from_log_likelihood"]
 
 DEFAULT_TEMPERATURE = 150.0
 """Default posterior temperature tau (see :func:`posterior_from_log_likelihood`): the least mean log-loss
@@ -124,16 +124,6 @@ class MixtureBank:
         self._flat_prec = self.prec_chol_.reshape(m * k, d, d)
         self._flat_means = self.means_.reshape(m * k, d)
 
-    @property
-    def n_classes(self) -> int:
-        """Number of classes M."""
-        return int(self.means_.shape[0])
-
-    @property
-    def n_features(self) -> int:
-        """Dimension D of the feature vectors (time included)."""
-        return int(self.means_.shape[2])
-
     @classmethod
     def from_sklearn(cls, mixtures: list[GaussianMixture]) -> MixtureBank:
         """Stack fitted scikit-learn mixtures (one per class), padding to the largest K."""
@@ -197,27 +187,3 @@ def posterior_from_log_likelihood(log_likelihood: np.ndarray, log_prior: np.ndar
     if not np.any(np.isfinite(ll)):
         return np.full(ll.shape, 1.0 / ll.shape[-1])
     return np.exp(ll - logsumexp(ll, axis=-1, keepdims=True))
-
-
-class IncrementalLogLikelihood:
-    """Running ``ln p(xi_1..t | C_m) = sum_t ln p(xi_t | C_m)``: one bank evaluation per new sample.
-
-    Args:
-        bank: The class mixtures.
-    """
-
-    def __init__(self, bank: MixtureBank) -> None:
-        self.bank = bank
-        self.total = np.zeros(bank.n_classes)
-        self.count = 0
-
-    def reset(self) -> None:
-        """Forget the observed samples."""
-        self.total = np.zeros(self.bank.n_classes)
-        self.count = 0
-
-    def add(self, x: np.ndarray) -> np.ndarray:
-        """Add one sample ``x (D,)``; returns the updated ``(M,)`` log-likelihoods."""
-        self.total = self.total + self.bank.log_likelihood(x[None])[0]
-        self.count += 1
-        return self.total.copy()

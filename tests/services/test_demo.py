@@ -19,7 +19,7 @@ from shared.synthetic import generate_library
 def test_demo_multiprocess_json(tmp_path: Path) -> None:
     lib = tmp_path / "lib.npz"
     save_library(generate_library(8, 6, seed=3), lib)
-    cmd = [sys.executable, "-m", "shared.cli", "demo", "--steps", "5", "--library", str(lib), "--components", "4",
+    cmd = [sys.executable, "-m", "tools", "demo", "--steps", "5", "--library", str(lib), "--components", "4",
            "--models-dir", str(tmp_path / "models"), "--run-dir", str(tmp_path / "run"), "--json", "--timeout", "400"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=480, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0, proc.stderr[-3000:]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 from pathlib import Path
 
 import pytest
@@ -219,3 +220,37 @@ def test_clashing_names_are_a_config_bug() -> None:
 
     with pytest.raises(ValueError, match="share env FORESIGHT_X_INNER_STEPS"):
         config_options("x", Clash)
+
+
+SERVICE_CONFIGS = {
+    "replayer": "services.replayer.core:ReplayerConfig",
+    "predictor": "services.predictor.core:PredictorConfig",
+    "planner": "services.planner.config:PlannerServiceConfig",
+    "executor": "services.executor.core:ExecutorConfig",
+}
+
+
+@pytest.mark.parametrize("service", sorted(SERVICE_CONFIGS))
+def test_service_help_shows_every_option_of_its_config_tree(service, capsys) -> None:
+    """One flag per field of the section's tree (nested configs as --<table>.<name>), each with a help text."""
+    import importlib
+
+    from shared.config import config_options
+
+    module, cls_name = SERVICE_CONFIGS[service].split(":")
+    options = config_options(service, getattr(importlib.import_module(module), cls_name))
+    main = importlib.import_module(f"services.{service}.__main__").main
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for o in options:
+        assert o.help, f"{o.name} has no help text"
+        assert re.search(rf"^\s+{re.escape(o.flag)}\b", out, re.M), f"{o.flag} ({o.name}) missing from --help"
+    tables = {o.table for o in options}
+    for table in tables:
+        assert f"[{'.'.join(table)}] options (env FORESIGHT_{'_'.join(table).upper()}_<NAME>" in out
+    if service == "planner":
+        assert {("planner",), ("planner", "stomp"), ("planner", "cost")} == tables
+        assert "--stomp.iterations" in out and "--cost.w-human" in out
+    assert ":meth:" not in out and "``" not in out  # docstring markup is made plain

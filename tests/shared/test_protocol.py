@@ -27,7 +27,8 @@ from shared.protocol import (
     encode,
 )
 
-DOC = Path(__file__).resolve().parents[2] / "docs" / "protocol.md"
+REPO = Path(__file__).resolve().parents[2]
+DOC = REPO / "docs" / "protocol.md"
 
 
 def samples() -> dict[str, Message]:
@@ -232,3 +233,15 @@ def test_protocol_doc_mentions_every_key_type_and_field():
         assert section, f"no section for {name}"
         for f in dataclasses.fields(cls):
             assert f"`{f.name}`" in section.group(1), f"{name}.{f.name} not documented"
+
+
+def test_protocol_doc_names_every_liveliness_token() -> None:
+    declared = set()
+    for path in [*REPO.glob("services/**/*.py"), *REPO.glob("shared/**/*.py")]:
+        # the service name is Presence's third positional argument (keywords may follow)
+        declared |= set(re.findall(r'Presence\(\s*\w+,\s*[\w.]+,\s*"([a-z_]+)"', path.read_text()))
+    assert {"replayer", "predictor", "planner", "executor", "demo"} <= declared
+    doc = DOC.read_text()
+    line = next(ln for ln in doc.splitlines() if ln.startswith("Service names:"))
+    named = set(re.findall(r"`([a-z_]+)`", line))
+    assert declared == named, (declared, named)

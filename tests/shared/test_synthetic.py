@@ -1,4 +1,4 @@
-"""Synthetic library: shapes, determinism, goals reached, early overlap of the classes, CLI."""
+"""Synthetic library: shapes, determinism, goals reached, early overlap of the classes."""
 
 from __future__ import annotations
 
@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from shared.human import HumanModel, place_in_scene
-from shared.library import LibraryError, MotionLibrary, load_library
-from shared.library_cli import main as library_main
+from shared.library import LibraryError, MotionLibrary
 from shared.scene import load_scene
 from shared.synthetic import SyntheticConfig, generate_library, load_layout
 
@@ -147,19 +146,3 @@ def test_bad_layout(tmp_path: Path) -> None:
     p.write_text('[[goals]]\nname = "a"\nposition = [0.4, 0.0, 0.0]\nxy = [0.4, 0.1]\n')
     with pytest.raises(LibraryError, match="exactly one"):
         load_layout(p)
-
-
-def test_cli_generate_npz_and_csv(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    npz = tmp_path / "syn.npz"
-    assert library_main(["generate", "--classes", "3", "--demos", "4", "--seed", "2", "--out", str(npz)]) == 0
-    csv_dir = tmp_path / "csv"
-    assert library_main(["generate", "--classes", "3", "--demos", "4", "--seed", "2", "--out", str(csv_dir)]) == 0
-    a, b = load_library(npz), load_library(csv_dir)
-    assert a.class_names == ["blue_cup", "red_cup", "near_left"] and a.n_classes == b.n_classes == 3
-    for x, y in zip(a.demos, b.demos, strict=True):
-        np.testing.assert_allclose(x.features, y.features, rtol=1e-8, atol=1e-9)
-    direct = generate_library(3, 4, seed=2)
-    np.testing.assert_array_equal(a.demos[5].features, direct.demos[5].features)
-    assert "wrote" in capsys.readouterr().out
-    with pytest.raises(SystemExit):
-        library_main(["generate", "--classes", "12", "--out", str(tmp_path / "x.npz")])

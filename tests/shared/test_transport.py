@@ -234,7 +234,7 @@ def test_open_session_error_is_one_line(zenoh_hub):
 def test_router_process_relays_between_clients(tmp_path):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     log = (tmp_path / "router.log").open("wb")
-    proc = subprocess.Popen([sys.executable, "-m", "shared.router", "--listen", endpoint], stdout=log,
+    proc = subprocess.Popen([sys.executable, "-m", "tools.router", "--listen", endpoint], stdout=log,
                             stderr=subprocess.STDOUT, cwd=Path(__file__).resolve().parents[2])
     try:
         client = ZenohConfig(mode="client", listen=[], connect=[endpoint])

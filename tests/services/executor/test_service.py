@@ -12,8 +12,8 @@ import pytest
 
 from services.executor.core import ExecutorConfig
 from services.executor.service import ExecutorService
-from shared.logtools import read_log
 from shared.protocol import Keys, RobotState, decode
+from shared.recording.reader import read_log
 from shared.transport import Presence, open_session
 
 from .conftest import SCENE, FakeSystem, foxglove_stamps, new_hub

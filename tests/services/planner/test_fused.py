@@ -51,8 +51,8 @@ def test_fused_equals_reference_in_float64(scene) -> None:
     robot = PR2.from_scene(scene, dtype=torch.float64)
     cost = StateCost.from_scene(scene, robot, CostConfig())
     goals = GoalSet.joint_space(["start"], robot.q_start[None], robot)
-    planner = Planner(scene, PlannerConfig(dtype="float64", compile=False, stomp=StompConfig(iterations=1)), robot=robot, cost=cost,
-                      goals=goals)
+    config = PlannerConfig(dtype="float64", compile=False, stomp=StompConfig(iterations=1))
+    planner = Planner(scene, config, robot=robot, cost=cost, goals=goals)
     assert planner.fused is not None
     grid = scene.grid
     rng = np.random.default_rng(2)

@@ -4,14 +4,7 @@ import numpy as np
 import pytest
 from sklearn.mixture import GaussianMixture
 
-from services.predictor.features import VARIANTS, FeatureEncoder
-from services.predictor.gmm import (
-    GMMConfig,
-    IncrementalLogLikelihood,
-    MixtureBank,
-    fit_class_gmm,
-    posterior_from_log_likelihood,
-)
+from services.predictor.gmm import GMMConfig, MixtureBank, fit_class_gmm, posterior_from_log_likelihood
 from services.predictor.gmr import gmr
 
 
@@ -53,21 +46,6 @@ def test_bank_matches_sklearn_and_posterior_sums_to_one() -> None:
     # extreme log-likelihoods (thousands apart) still normalise
     post = posterior_from_log_likelihood(np.array([-1e5, -2e5, -1e5 - 3]))
     assert np.isclose(post.sum(), 1.0) and post[0] > 0.9
-
-
-@pytest.mark.parametrize("variant", VARIANTS)
-def test_incremental_equals_batch_log_likelihood(small_library, variant: str) -> None:
-    enc = FeatureEncoder(variant)
-    data = np.vstack([enc.batch(d.features) for d in small_library.by_class(0)])
-    bank = MixtureBank.from_sklearn([fit_class_gmm(data, GMMConfig(n_components=3, max_iter=30))])
-    demo = small_library.by_class(1)[0].features
-    batch = bank.log_likelihood(enc.batch(demo)).sum(axis=0)
-    inc = IncrementalLogLikelihood(bank)
-    enc.reset()
-    for i, f in enumerate(demo):
-        total = inc.add(enc.step(f, i))
-    assert inc.count == len(demo)
-    assert np.allclose(total, batch, rtol=1e-10, atol=1e-8)
 
 
 def test_tempered_posterior() -> None:

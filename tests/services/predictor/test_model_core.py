@@ -1,9 +1,13 @@
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from services.predictor.core import PredictorConfig, PredictorCore, PredictorError
+from services.predictor.features import VARIANTS, FeatureEncoder
+from services.predictor.gmm import GMMConfig, MixtureBank, fit_class_gmm
 from services.predictor.model import PredictionModel
 from shared.human import HumanModel, place_in_scene
 from shared.protocol import OccupancyGrid, decode, encode
@@ -177,3 +181,25 @@ def test_temperature_from_model_and_config(small_model: PredictionModel, small_l
         PredictionModel.load(old)
     with pytest.raises(PredictorError, match="temperature"):
         PredictorCore(small_model, scene, PredictorConfig(temperature=-2.0))
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_core_log_likelihood_is_the_batch_sum(small_library, small_model: PredictionModel, scene, variant) -> None:
+    """One bank evaluation per pose adds up to the batch ln p(xi | C_m) of the whole demonstration."""
+    enc = FeatureEncoder(variant, small_model.time_scale, small_model.velocity_scale)
+    fits = [fit_class_gmm(np.vstack([enc.batch(d.features) for d in small_library.by_class(m)]),
+                          GMMConfig(n_components=3, max_iter=30)) for m in range(small_library.n_classes)]
+    bank = MixtureBank.from_sklearn(fits)
+    model = dataclasses.replace(small_model, feature_variant=variant, weights=bank.weights_, means=bank.means_,
+                                covariances=bank.covariances_)
+    core = PredictorCore(model, scene)
+    demo = small_library.by_class(1)[0].features
+    core.reset(7)
+    for i, f in enumerate(demo):
+        result = core.update(f, i)
+    batch = bank.log_likelihood(enc.batch(demo)).sum(axis=0)
+    assert core.n_observed == len(demo)
+    assert np.allclose(core.log_likelihood(), batch, rtol=1e-10, atol=1e-8)
+    assert np.array_equal(result.log_likelihood, core.log_likelihood())
+    core.reset(8)  # a new demonstration starts from nothing
+    assert core.n_observed == 0 and np.array_equal(core.log_likelihood(), np.zeros(small_library.n_classes))

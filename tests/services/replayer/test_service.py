@@ -16,10 +16,10 @@ import pytest
 from services.replayer.__main__ import main as replayer_main
 from services.replayer.core import ReplayerConfig
 from services.replayer.service import ReplayerService
-from shared.cli import main as foresight_main
 from shared.library import save_library
 from shared.protocol import ClockTick, DemoMarker, HumanPose, Keys
 from shared.transport import Presence, TypedPublisher, open_session, subscribe_ordered
+from tools.foresight import main as foresight_main
 
 REPO = Path(__file__).resolve().parents[3]
 

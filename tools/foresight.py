@@ -1,7 +1,9 @@
 """The ``foresight`` command: one entry point that dispatches to each component's own CLI.
 
-Every sub-command lives in the module that implements it and exposes ``main(argv) -> int``;
-``foresight <command> --help`` documents all of its options.
+Every sub-command lives in the module that implements it and exposes ``main(argv, prog) -> int``
+(the services' ``__main__`` modules, :mod:`tools.router`, :mod:`tools.library`, :mod:`tools.log.cli`,
+...), imported only when its command runs; ``foresight <command> --help`` documents all of its
+options. ``python -m tools`` runs this dispatcher too.
 """
 
 from __future__ import annotations
@@ -16,11 +18,11 @@ __all__ = ["COMMANDS", "main"]
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("services.demo", "run the whole system on this machine and show it live (make demo)"),
     "replayer": ("services.replayer.__main__", "stream recorded human poses over Zenoh"),
-    "router": ("shared.router", "run a Zenoh router on loopback for local multi-process runs"),
-    "library": ("shared.library_cli", "inspect/validate/convert motion libraries"),
+    "router": ("tools.router", "run a Zenoh router on loopback for local multi-process runs"),
+    "library": ("tools.library", "inspect/validate/convert motion libraries"),
     "planner": ("services.planner.__main__", "plan for every goal at once around the predicted occupancy"),
     "executor": ("services.executor.__main__", "simulate the PR2 executing the plans; log the run to MCAP"),
-    "log": ("shared.logtools", "inspect (info), draw (render) and time (latency) a run's MCAP log"),
+    "log": ("tools.log.cli", "inspect (info), draw (render) and time (latency) a run's MCAP log"),
     "predictor": ("services.predictor.__main__", "recognise the human's motion early; publish predicted occupancy"),
     "train": ("services.predictor.train", "train the prediction model (GMMs, GMR motions, swept volumes)"),
     "eval": ("services.experiments.cli", "the paper's experiments: recognition | interference | switch | all"),

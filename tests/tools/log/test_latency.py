@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shared.latency import Stat, format_latencies, run_latencies
 from shared.protocol import HumanPose, OccupancyGrid, Plan, encode
+from tools.log.latency import Stat, format_latencies, run_latencies
 
 
 @dataclass

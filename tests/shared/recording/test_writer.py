@@ -1,11 +1,10 @@
-"""McapLog: schemas from the protocol dataclasses, Foxglove channels, rejects, and files that stay
-readable when the writer is killed (SIGKILL) or finalised when it is stopped (SIGTERM/SIGINT)."""
+"""McapLog: every channel with its schema, Foxglove channels, rejects, and files that stay readable when
+the writer is killed (SIGKILL)."""
 
 from __future__ import annotations
 
 import json
 import signal
-import socket
 import subprocess
 import sys
 import textwrap
@@ -14,44 +13,16 @@ from pathlib import Path
 
 import jsonschema
 import numpy as np
-import pytest
 
-from services.executor.foxglove import SCHEMAS, SceneBuilder
-from services.executor.mcap_log import McapLog, message_json_schema
-from shared.logtools import read_log
-from shared.protocol import MESSAGE_TYPES, ClockTick, HumanPose, Keys, RobotState, encode
+from shared.protocol import ClockTick, Keys
+from shared.recording.foxglove import SceneBuilder
+from shared.recording.reader import read_log
+from shared.recording.writer import McapLog
 
-from .conftest import SCENE, blob, foxglove_stamps, goals_for, straight_plan
+from .conftest import SCENE, blob, foxglove_stamps, sample_messages
 
 REPO = Path(__file__).resolve().parents[3]
 KEYS = Keys()
-
-
-def sample_messages(pr2) -> list[tuple[str, bytes]]:
-    q0 = pr2.q_start.numpy().astype(np.float64)
-    feats = np.array([0.0, 0.0, 0.95, 0.0, 0.0, 0.0, 0.0, 0.2, 0.1, 0.3, 0.0, 0.5])
-    return [
-        (KEYS.pose, encode(HumanPose(stamp=0.0, tick=0, tick_last=True, demo_id=1, index=0, features=feats))),
-        (KEYS.occupancy, encode(blob(0, 0, 0.0))),
-        (KEYS.robot_state, encode(RobotState(stamp=0.0, tick=0, joint_names=pr2.joint_names, goal=-1, reached=False,
-                                             holding=True, reason="waiting", q=q0, qd=np.zeros(8)))),
-        (KEYS.plan, encode(straight_plan(q0, goals_for(q0), pr2.joint_names, 0, 0, chosen=1))),
-        (KEYS.clock, encode(ClockTick(stamp=0.0, tick=0, period=0.2))),
-    ]
-
-
-def test_schemas_describe_every_field_of_every_message_type() -> None:
-    for cls in MESSAGE_TYPES.values():
-        schema = message_json_schema(cls)
-        jsonschema.Draft202012Validator.check_schema(schema)
-        assert schema["title"] == f"foresight.{cls.TYPE}"
-        import dataclasses
-
-        assert set(schema["properties"]) == {"_type", "_v"} | {f.name for f in dataclasses.fields(cls)}
-    plan = message_json_schema(MESSAGE_TYPES["Plan"])["properties"]["trajectories"]
-    assert plan["x-dtype"] == "float32" and plan["x-shape"] == ["K", "T", "D"]
-    for schema in SCHEMAS.values():
-        jsonschema.Draft202012Validator.check_schema(schema)
 
 
 def test_every_channel_is_written_with_its_schema_and_decodes(tmp_path, pr2) -> None:
@@ -129,7 +100,7 @@ def test_foxglove_channels_are_stamped_on_the_log_clock_not_the_simulated_one(tm
 WRITER = textwrap.dedent("""
     import sys, time
     import numpy as np
-    from services.executor.mcap_log import McapLog
+    from shared.recording.writer import McapLog
     from shared.protocol import ClockTick, Keys, encode
     keys = Keys()
     log = McapLog(sys.argv[1], keys, None, chunk_size=4096, flush_period_s=0.05)
@@ -165,45 +136,3 @@ def test_killed_writer_leaves_a_readable_file(tmp_path) -> None:
 
     ticks = [decode(m.data, ClockTick).tick for m in msgs]
     assert ticks == list(range(len(ticks)))  # nothing lost or garbled up to the last whole chunk
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_executor_finalises_its_log_on_signals(tmp_path, sig) -> None:
-    path = tmp_path / "svc.mcap"
-    cmd = [sys.executable, "-m", "services.executor", "--mode", "realtime", "--steps", "0", "--mcap", str(path),
-           "--listen", f"tcp/127.0.0.1:{_free_port()}", "--connect", "", "--state-rate-hz", "20", "--wait-for", ""]
-    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and proc.poll() is None:
-            if path.exists() and path.stat().st_size > 0:
-                break
-            time.sleep(0.05)
-        time.sleep(1.0)  # some robot states
-        proc.send_signal(sig)
-        out, err = proc.communicate(timeout=20)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
-    assert proc.returncode == 0, err
-    assert f"mcap: {path}" in out
-    lf = read_log(path)
-    assert lf.complete and not lf.error
-    counts = {c.topic: c.count for c in lf.channels.values()}
-    assert counts[KEYS.robot_state] >= 5
-    assert "foresight.rejects" in lf.metadata
-
-
-def test_executor_bad_option_is_one_line(tmp_path) -> None:
-    proc = subprocess.run([sys.executable, "-m", "services.executor", "--stale-limit-s", "-1"], cwd=REPO,
-                          capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 2
-    assert proc.stderr.strip().splitlines() == [
-        "python -m services.executor: error: executor.stale_limit_s: must be > 0, got -1.0"]

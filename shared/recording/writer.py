@@ -1,27 +1,27 @@
-"""MCAP log of a run: every message on every key under the prefix, plus Foxglove scene channels.
+"""The MCAP writer of a run: every message on every key under the prefix, plus Foxglove scene channels.
 
-Layout (see docs/executor.md):
+Layout (see docs/executor.md; the channels' schemas are in :mod:`shared.recording.schemas`):
 
 * one channel per Zenoh key expression (topic = the key, e.g. ``foresight/planner/plan``), message
   encoding ``msgpack`` (the raw payload, byte for byte), schema = the message type's JSON Schema
-  (encoding ``jsonschema``, generated from the :mod:`shared.protocol` dataclasses by
-  :func:`message_json_schema`); only payloads that decode are written there;
+  (encoding ``jsonschema``, :func:`shared.recording.schemas.message_json_schema`); only payloads
+  that decode are written there;
 * ``/foresight/rejected`` (JSON): one record per payload that failed to decode (key, error, size,
   the first bytes in hex), and per-key reject counts in the ``foresight.rejects`` metadata record
   written when the file is closed;
-* Foxglove channels (JSON, well-known schemas, see :mod:`services.executor.foxglove`), every entity
-  and transform stamped with the record's log time (the receive time), so a log has one time base
-  for Foxglove even in lock-step, where the messages themselves carry simulated time;
+* Foxglove channels (JSON, well-known schemas), built by a :class:`FoxgloveScene` (the conversion is
+  :class:`shared.recording.foxglove.SceneBuilder`), every entity and transform stamped with the
+  record's log time (the receive time), so a log has one time base for Foxglove even in lock-step,
+  where the messages themselves carry simulated time;
 * attachment ``scene.toml`` (the scene the run used) and metadata ``foresight.run`` (the config).
 
 The file is written in chunks straight to the operating system (no user-space buffer) and the open
 chunk is flushed every ``flush_period_s``; if the process is killed, everything up to the last
-complete chunk stays readable (with a non-seeking reader, see :func:`shared.logtools.read_messages`).
+complete chunk stays readable (with a non-seeking reader, see :func:`shared.recording.reader.read_log`).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import json
 import logging
@@ -31,13 +31,12 @@ import time
 import typing
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from mcap.writer import CompressionType, Writer
 
 from shared.protocol import (
     MESSAGE_TYPES,
-    SCHEMA_VERSION,
     HumanPose,
     Keys,
     Message,
@@ -48,62 +47,47 @@ from shared.protocol import (
     decode,
 )
 
-from .foxglove import SCHEMAS, TOPICS, SceneBuilder
+from .schemas import PROFILE, REJECTED_SCHEMA, REJECTED_TOPIC, SCHEMAS, TOPICS, message_json_schema
 
-__all__ = ["McapLog", "message_json_schema", "REJECTED_TOPIC", "REJECTED_SCHEMA", "PROFILE"]
+__all__ = ["McapLog", "FoxgloveScene"]
 
 log = logging.getLogger(__name__)
 
-PROFILE = "foresight"
-REJECTED_TOPIC = "/foresight/rejected"
-REJECTED_SCHEMA: dict[str, Any] = {
-    "title": "foresight.Rejected",
-    "description": "A payload on a Foresight key that failed to decode; it was not logged on the key's channel",
-    "type": "object",
-    "properties": {
-        "key": {"type": "string", "description": "Zenoh key expression the payload arrived on"},
-        "error": {"type": "string", "description": "The decoder's error, naming the offending field"},
-        "size": {"type": "integer", "description": "Payload size in bytes"},
-        "head_hex": {"type": "string", "description": "The first (at most 64) payload bytes, hex"},
-    },
-}
 
+class FoxgloveScene(Protocol):
+    """What the writer asks of the Foxglove conversion (:class:`shared.recording.foxglove.SceneBuilder`).
 
-def message_json_schema(cls: type[Message]) -> dict[str, Any]:
-    """JSON Schema of a message type's msgpack map (one property per dataclass field).
-
-    Arrays are described as maps ``{dtype, shape, data}`` with ``data`` the raw little-endian bytes
-    (msgpack ``bin``); ``x-dtype`` / ``x-shape`` give the expected dtype and shape (symbols such as
-    ``"K"`` must agree across the fields of one message).
+    Each method returns a JSON-ready ``foxglove.SceneUpdate`` or ``foxglove.FrameTransforms`` object
+    stamped ``stamp`` (seconds), or None when it has nothing to draw (e.g. no robot model).
     """
-    hints = typing.get_type_hints(cls)
-    props: dict[str, Any] = {
-        "_type": {"const": cls.TYPE, "description": "message type name"},
-        "_v": {"const": SCHEMA_VERSION, "description": "schema version"},
-    }
-    scalar = {float: {"type": "number"}, int: {"type": "integer"}, bool: {"type": "boolean"},
-              str: {"type": "string"}}
-    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
-        spec = f.metadata.get("array")
-        if spec is not None:
-            props[f.name] = {
-                "type": "object",
-                "description": f"numpy array, dtype {spec.dtype}, shape {list(spec.shape)}",
-                "x-dtype": spec.dtype,
-                "x-shape": list(spec.shape),
-                "properties": {"dtype": {"type": "string"},
-                               "shape": {"type": "array", "items": {"type": "integer", "minimum": 0}},
-                               "data": {"type": "string", "contentEncoding": "binary",
-                                        "description": "raw little-endian bytes (msgpack bin)"}},
-                "required": ["dtype", "shape", "data"],
-            }
-        else:
-            tp = hints[f.name]
-            props[f.name] = ({"type": "array", "items": {"type": "string"}} if typing.get_origin(tp) is list
-                             else dict(scalar[tp]))
-    doc = (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
-    return {"title": f"foresight.{cls.TYPE}", "description": doc, "type": "object", "properties": props,
-            "required": list(props)}
+
+    def static_scene(self, stamp: float) -> dict[str, Any]:
+        """Table and cups (``/viz/scene``)."""
+        ...
+
+    def base_transform(self, stamp: float) -> dict[str, Any]:
+        """The transform world -> robot base (``/tf``)."""
+        ...
+
+    def plan_paths(self, plan: Plan, stamp: float | None = None) -> dict[str, Any] | None:
+        """The candidate end-effector paths (``/viz/plan``)."""
+        ...
+
+    def robot_spheres(self, state: RobotState, stamp: float | None = None) -> dict[str, Any] | None:
+        """The robot's collision spheres (``/viz/robot``)."""
+        ...
+
+    def end_effector_transform(self, state: RobotState, stamp: float | None = None) -> dict[str, Any] | None:
+        """The transform world -> end effector (``/tf``)."""
+        ...
+
+    def occupancy_cubes(self, occ: OccupancyGrid, stamp: float | None = None) -> dict[str, Any]:
+        """The occupied voxels (``/viz/occupancy``)."""
+        ...
+
+    def human_body(self, pose: HumanPose, stamp: float | None = None) -> dict[str, Any] | None:
+        """The human's body (``/viz/human``)."""
+        ...
 
 
 class _DirectFile:
@@ -124,11 +108,6 @@ class _DirectFile:
     def tell(self) -> int:
         return self._pos
 
-    def flush_if_due(self) -> None:
-        """Write the open chunk if it is older than ``flush_period_s`` (call it periodically)."""
-        if time.monotonic() - self._last_flush >= self.flush_period_s:
-            self.flush()
-
     def flush(self) -> None:
         """Nothing is buffered here."""
 
@@ -147,7 +126,7 @@ class McapLog:
     Args:
         path: Output file (parent directories are created).
         keys: The key expressions of the run (its prefix).
-        builder: Builds the Foxglove scene channels (None: no Foxglove channels).
+        builder: Builds the Foxglove scene channels (e.g. a SceneBuilder; None: no Foxglove channels).
         viz_period_s: Smallest time (message stamps) between two Foxglove updates of the robot, the
             human or the occupancy (plans are drawn every time).
         chunk_size: Chunk size in bytes.
@@ -157,7 +136,7 @@ class McapLog:
         clock: Log-time source in nanoseconds (default ``time.time_ns``).
     """
 
-    def __init__(self, path: str | os.PathLike[str], keys: Keys, builder: SceneBuilder | None = None,
+    def __init__(self, path: str | os.PathLike[str], keys: Keys, builder: FoxgloveScene | None = None,
                  viz_period_s: float = 0.2, chunk_size: int = 256 * 1024, flush_period_s: float = 1.0,
                  scene_text: str | None = None, run_metadata: dict[str, str] | None = None,
                  clock: Callable[[], int] = time.time_ns) -> None:

@@ -1,4 +1,4 @@
-"""Human kinematic model of the paper's 12 posture features, its body volumes, and scene placement.
+"""Human kinematic model of the paper's 12 posture features and its body volumes.
 
 The kinematic tree is written from the joint figures of the paper's Move3D "HERAKLES" model
 (``p3d_set_pos_axe x y z ax ay az``: each joint's position and axis in the zero pose, metres, body
@@ -36,10 +36,7 @@ __all__ = [
     "HumanError",
     "Segment",
     "HumanModel",
-    "place_in_scene",
-    "voxelize",
-    "reach_points",
-    "plot_reach_points",
+    "check_features",
 ]
 
 N_FEATURES = 12
@@ -124,7 +121,12 @@ JOINTS: tuple[tuple[str, int, np.ndarray], ...] = (
 )
 
 
-def _check_features(features: np.ndarray, what: str = "features") -> np.ndarray:
+def check_features(features: np.ndarray, what: str = "features") -> np.ndarray:
+    """``features`` as a float64 ``(..., 12)`` array of finite values.
+
+    Raises:
+        HumanError: If the last axis is not 12 long or a value is NaN or infinite (the message names ``what``).
+    """
     f = np.asarray(features, dtype=np.float64)
     if f.ndim < 1 or f.shape[-1] != N_FEATURES:
         raise HumanError(f"{what}: expected shape (..., {N_FEATURES}), got {f.shape}")
@@ -211,7 +213,7 @@ class HumanModel:
     """Forward kinematics and body volumes of the 12-feature human (batched numpy).
 
     All methods take ``features (..., 12)`` in any frame (the recorder's or, after
-    :func:`place_in_scene`, the scene's) and return positions in that same frame.
+    :func:`shared.human.placement.place_in_scene`, the scene's) and return positions in that same frame.
     """
 
     JOINT_NAMES: tuple[str, ...] = tuple(name for name, _, _ in JOINTS)
@@ -233,7 +235,7 @@ class HumanModel:
             ``(R (..., L, 3, 3), t (..., L, 3))`` with ``L = 5`` links (``LINK_NAMES``): a point at
             zero-pose position ``p`` on link ``l`` is at ``R[..., l] @ p + t[..., l]``.
         """
-        f = _check_features(features)
+        f = check_features(features)
         r0 = _rot("z", f[..., 3])
         t0 = f[..., 0:3]
         r_torso = _rot("x", f[..., 4]) @ _rot("y", f[..., 5]) @ _rot("z", f[..., 6])
@@ -322,175 +324,3 @@ class HumanModel:
                    + off @ np.swapaxes(rot, -1, -2))
             out.append(pts)
         return np.concatenate(out, axis=-2)
-
-
-def place_in_scene(features: np.ndarray, first_pose: np.ndarray, scene) -> np.ndarray:
-    """Move recorder-frame postures into a scene, relative to a demonstration's first pelvis pose.
-
-    The pelvis pose (x, y, z, yaw) of ``first_pose`` goes to ``scene.human`` (pelvis_xyz,
-    pelvis_yaw); every posture's pelvis moves rigidly with it (rotation about z by
-    ``scene yaw - first yaw``, then translation); the joint angles are unchanged. Yaw is not
-    wrapped, so a continuous recording stays continuous.
-
-    Args:
-        features: ``(..., 12)`` recorder-frame postures.
-        first_pose: ``(12,)`` (or at least its first 4 entries) the reference posture, usually the
-            first sample of the demonstration.
-        scene: A :class:`shared.scene.Scene` (or anything with ``human.pelvis_xyz``/``pelvis_yaw``).
-
-    Returns:
-        ``(..., 12)`` scene-frame postures.
-    """
-    f = _check_features(features)
-    ref = _check_features(first_pose, "first_pose")
-    if ref.ndim != 1:
-        raise HumanError(f"first_pose: expected shape (12,), got {ref.shape}")
-    dyaw = float(scene.human.pelvis_yaw) - ref[3]
-    c, s = math.cos(dyaw), math.sin(dyaw)
-    d = f[..., 0:3] - ref[0:3]
-    out = f.copy()
-    out[..., 0] = c * d[..., 0] - s * d[..., 1] + scene.human.pelvis_xyz[0]
-    out[..., 1] = s * d[..., 0] + c * d[..., 1] + scene.human.pelvis_xyz[1]
-    out[..., 2] = d[..., 2] + scene.human.pelvis_xyz[2]
-    out[..., 3] = f[..., 3] + dyaw
-    return out
-
-
-def voxelize(points: np.ndarray, grid) -> np.ndarray:
-    """Mark the voxels that contain at least one point.
-
-    Args:
-        points: ``(N, 3)`` (or ``(..., 3)``) positions in the grid's frame; points outside the
-            grid are ignored.
-        grid: A :class:`shared.scene.Grid`.
-
-    Returns:
-        ``(nx, ny, nz)`` bool occupancy.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    if p.shape[-1:] != (3,):
-        raise HumanError(f"points: expected shape (..., 3), got {p.shape}")
-    p = p.reshape(-1, 3)
-    p = p[np.all(np.isfinite(p), axis=1)]
-    dims = grid.dims
-    out = np.zeros(dims, dtype=bool)
-    if len(p) == 0:
-        return out
-    idx = np.floor((p - grid.min) / grid.resolution).astype(np.int64)
-    inside = np.all((idx >= 0) & (idx < np.asarray(dims)), axis=1)
-    idx = idx[inside]
-    out[idx[:, 0], idx[:, 1], idx[:, 2]] = True
-    return out
-
-
-def reach_points(model: HumanModel, demos: list[np.ndarray], scene) -> tuple[np.ndarray, np.ndarray]:
-    """Where each demonstration's hand reaches, placed in a scene.
-
-    A demonstration may end at its goal or return to rest (the paper's recordings do): the reach
-    point is the sample whose hand position is farthest from the first sample's.
-
-    Args:
-        model: The human model.
-        demos: Demonstrations, each ``(T, 12)`` recorder-frame features.
-        scene: Scene to place each one in (relative to its first posture).
-
-    Returns:
-        ``(reach (N, 3), index (N,))``: scene-frame hand positions and their sample indices.
-    """
-    reach, index = [], []
-    for f in demos:
-        hand = model.hand_position(place_in_scene(f, f[0], scene))
-        k = int(np.argmax(np.linalg.norm(hand - hand[0], axis=-1)))
-        reach.append(hand[k])
-        index.append(k)
-    return np.array(reach).reshape(-1, 3), np.array(index, dtype=np.int64)
-
-
-def plot_reach_points(reach: np.ndarray, labels: np.ndarray, scene, path, title: str = "",
-                      goals: np.ndarray | None = None) -> None:
-    """Top view PNG: table, cups, the human's pelvis and heading, reach points coloured by class.
-
-    Args:
-        reach: ``(N, 3)`` scene-frame hand positions.
-        labels: ``(N,)`` class of each.
-        scene: The scene they are placed in.
-        path: Output PNG.
-        title: Figure title.
-        goals: Optional ``(M, 3)`` scene-frame goal positions, drawn as crosses.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from pathlib import Path
-
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 6))
-    for b in scene.boxes:
-        ax.add_patch(plt.Rectangle(tuple(b.lower[:2]), b.size[0], b.size[1], fill=False, lw=1.5,
-                                   label=f"{b.name} (top z={b.upper[2]:.2f})"))
-    for c in scene.cups:
-        colour = c.name.split("_")[0] if c.name.split("_")[0] in ("red", "blue", "green") else "grey"
-        ax.add_patch(plt.Circle(tuple(c.position[:2]), c.radius, color=colour, alpha=0.6, label=c.name))
-    px, yaw = scene.human.pelvis_xyz, scene.human.pelvis_yaw
-    ax.plot(px[0], px[1], "ks", ms=8, label="human pelvis")
-    ax.annotate("", xy=(px[0] + 0.25 * math.cos(yaw), px[1] + 0.25 * math.sin(yaw)), xytext=(px[0], px[1]),
-                arrowprops={"arrowstyle": "->", "lw": 2})
-    labels = np.asarray(labels)
-    cmap = plt.get_cmap("tab10")
-    for m in np.unique(labels):
-        p = reach[labels == m]
-        ax.scatter(p[:, 0], p[:, 1], s=14, color=cmap(int(m) % 10),
-                   label=f"class {int(m)} (z {p[:, 2].mean():.2f})")
-        if goals is not None:
-            ax.plot(goals[m, 0], goals[m, 1], "x", color=cmap(int(m) % 10), ms=12, mew=2.5)
-    ax.set_aspect("equal")
-    ax.set_xlabel("world x (m)")
-    ax.set_ylabel("world y (m)")
-    ax.set_title(title or "hand reach points, top view")
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    ax.grid(alpha=0.3)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100, bbox_inches="tight")
-    plt.close(fig)
-
-
-def main(argv: list[str] | None = None, prog: str = "python -m shared.human") -> int:
-    """``python -m shared.human LIBRARY --out PNG``: plot a library's reach points placed in a scene.
-
-    Prints each class's mean reach point and spread; the top view shows whether the model's
-    conventions put the hand over the table (see docs/human-model.md).
-    """
-    import argparse
-
-    from shared.feature_sets import require_mapping
-    from shared.library import load_library
-    from shared.runtime import cli_errors, help_text
-    from shared.scene import load_scene
-
-    parser = argparse.ArgumentParser(prog=prog, description=help_text(main.__doc__.splitlines()[0]))
-    parser.add_argument("library", help="a directory of compound_*.csv or a .npz library")
-    parser.add_argument("--scene", default=None, help="scene file or embedded name (default pr2_two_cups)")
-    parser.add_argument("--out", default="runs/plots/human_goals.png", help="output PNG")
-    args = parser.parse_args(argv)
-    with cli_errors(prog):
-        lib = load_library(args.library)
-        mapping = require_mapping(lib.feature_names, prog, f"library {lib.source}")
-        scene = load_scene(args.scene)
-        reach, index = reach_points(HumanModel(), [mapping.to_human(d.features) for d in lib.demos], scene)
-        labels = np.array([d.label for d in lib.demos])
-        for m, name in enumerate(lib.class_names):
-            r = reach[labels == m]
-            if len(r):
-                spread = np.linalg.norm(r - r.mean(axis=0), axis=1).mean()
-                print(f"{m:>2} {name:<14} reach mean ({r[:, 0].mean():+.3f}, {r[:, 1].mean():+.3f}, "
-                      f"{r[:, 2].mean():+.3f}) m  spread {spread:.3f} m  at sample {index[labels == m].mean():.0f}")
-        plot_reach_points(reach, labels, scene, args.out, f"{lib.source}: hand at its reach point, in {scene.name}")
-        print(f"wrote {args.out}")
-    return 0
-
-
-if __name__ == "__main__":
-    import sys
-
-    sys.exit(main())

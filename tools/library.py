@@ -7,22 +7,29 @@ means writing its ``add_arguments``/``run`` pair and one entry there):
   class, sample counts, issues.
 - ``validate PATH``: print every malformed demonstration; exit status 1 if there is any.
 - ``convert PATH --out FILE.npz``: write the native npz (valid demonstrations and the issue list).
-- ``generate --classes 8 --demos 25 --seed 0 --out PATH``: a synthetic library (shared/synthetic.py).
+- ``generate --classes 8 --demos 25 --seed 0 --out PATH``: a synthetic library (shared/synthetic.py),
+  as the native npz or the paper's CSV files.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from shared.feature_sets import describe_features
-from shared.library import LibraryError, MotionLibrary, load_library, save_library
+from shared.feature_sets import describe_features, require_mapping
+from shared.human import HumanModel, place_in_scene, reach_points
+from shared.library import LibraryError, MotionLibrary, load_library, save_library, write_csv_dir
 from shared.runtime import cli_errors
-from shared.synthetic import add_generate_arguments, run_generate
+from shared.scene import load_scene
+from shared.synthetic import FEATURE_SETS, SyntheticConfig, generate_library, load_layout, pelvis_frame
+from shared.synthetic_wide import WIDE_FEATURE_NAMES, generate_wide_library
+
+from .reach import plot_reach_points
 
 __all__ = ["main", "SUBCOMMANDS", "format_info"]
 
@@ -78,13 +85,73 @@ def _cmd_convert(args: argparse.Namespace) -> int:
     return 0
 
 
+def _generate_args(p: argparse.ArgumentParser) -> None:
+    """Options of ``foresight library generate`` (an ``argparse`` parser)."""
+    p.add_argument("--classes", type=int, default=8, help="number of classes (first goals of the layout)")
+    p.add_argument("--demos", type=int, default=25, help="demonstrations per class")
+    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same library)")
+    p.add_argument("--out", required=True, metavar="PATH",
+                   help="output: FILE.npz (native) or a directory of compound_<m>.csv (paper format)")
+    p.add_argument("--layout", default=None, help="goal layout TOML or embedded name (default table_8)")
+    p.add_argument("--scene", default=None, help="scene the layout's cups refer to (default: the layout's)")
+    p.add_argument("--return-to-rest", action="store_true",
+                   help="bring the hand back to rest after the reach, as the paper's recordings do")
+    p.add_argument("--plot", default=None, metavar="PNG",
+                   help="also write a top view of the demonstrations' final hand positions in the scene")
+    p.add_argument("--feature-set", choices=FEATURE_SETS, default="herakles",
+                   help="herakles: the paper's 12 features (default); wide16: those plus 4 forearm/wrist channels, "
+                        "16 features without a mapping to the human model (17 CSV columns; shared/synthetic_wide.py)")
+
+
+def _cmd_generate(args: argparse.Namespace) -> int:
+    """Run ``foresight library generate`` with parsed ``args``; returns the exit status."""
+    scene = load_scene(args.scene) if args.scene else None
+    lay = load_layout(args.layout, scene)
+    cfg = SyntheticConfig(return_to_rest=bool(args.return_to_rest))
+    start = time.perf_counter()
+    if getattr(args, "feature_set", "herakles") == "wide16":
+        if args.plot:
+            require_mapping(WIDE_FEATURE_NAMES, "--plot (hand positions in the scene)", "--feature-set wide16")
+
+        lib = generate_wide_library(args.classes, args.demos, args.seed, layout=lay, scene=scene, config=cfg)
+    else:
+        lib = generate_library(args.classes, args.demos, args.seed, lay, scene, cfg)
+    took = time.perf_counter() - start
+    out = Path(args.out)
+    if out.suffix == ".npz":
+        save_library(lib, out)
+        what = f"{out}"
+    elif out.suffix:
+        raise LibraryError(f"--out {str(out)!r}: give a .npz file or a directory (no extension)")
+    else:
+        files = write_csv_dir(lib, out)
+        what = f"{out}/ ({len(files)} CSV files)"
+    print(f"wrote {what}: {len(lib.demos)} demonstrations in {lib.n_classes} classes "
+          f"({', '.join(lib.class_names)}), {cfg.n_samples} samples of {lib.n_features} features each, "
+          f"seed {args.seed}, generated in {took:.2f} s")
+    if args.plot:
+        scene = scene or load_scene(None)
+        model = HumanModel()
+        if cfg.return_to_rest:
+            hand, _ = reach_points(model, [d.features for d in lib.demos], scene)
+        else:
+            hand = np.array([model.hand_position(place_in_scene(d.features[-1], d.features[0], scene))
+                             for d in lib.demos])
+        rot, origin = pelvis_frame(scene)
+        goals = origin + lay.goals[:lib.n_classes] @ rot.T
+        plot_reach_points(hand, np.array([d.label for d in lib.demos]), scene, args.plot,
+                          f"synthetic library ({lay.name}, seed {args.seed}): hand at the reach, x = goals", goals)
+        print(f"wrote {args.plot}")
+    return 0
+
+
 # name -> (help, add_arguments(parser), run(args) -> exit code)
 SUBCOMMANDS: dict[str, tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {
     "info": ("classes, demonstrations per class and issues of a library", _info_args, _cmd_info),
     "validate": ("report malformed demonstrations; exit status 1 if any", _info_args, _cmd_validate),
     "convert": ("convert a library (e.g. the paper's CSVs) to the native .npz", _convert_args, _cmd_convert),
     "generate": ("generate a synthetic library of table reaches (IK on the human model; shared/synthetic.py)",
-                 add_generate_arguments, run_generate),
+                 _generate_args, _cmd_generate),
 }
 
 

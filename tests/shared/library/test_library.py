@@ -18,7 +18,6 @@ from shared.library import (
     save_library,
     validate_block,
 )
-from shared.library_cli import main as library_main
 
 
 def plausible_demo(rng: np.random.Generator, t: int = 40) -> np.ndarray:
@@ -218,30 +217,6 @@ def test_heldout_split(tmp_path):
 def test_issue_str():
     assert str(LibraryIssue("c", 2, "why")) == "c block 2: why"
     assert str(LibraryIssue("c", -1, "why")) == "c whole file: why"
-
-
-def test_cli(tmp_path, capsys):
-    make_lib(tmp_path / "csv")
-    assert library_main(["info", str(tmp_path / "csv")]) == 0
-    out = capsys.readouterr().out
-    assert "classes: 3, valid demonstrations: 12, issues: 0" in out
-    assert library_main(["validate", str(tmp_path / "csv")]) == 0
-    assert library_main(["convert", str(tmp_path / "csv"), "--out", str(tmp_path / "l.npz")]) == 0
-    assert load_library(tmp_path / "l.npz").counts() == [4, 4, 4]
-    b = blocks()
-    b[0][:, 11] = 0.0
-    write_class(tmp_path / "csv" / "compound_0.csv", b)
-    assert library_main(["validate", str(tmp_path / "csv")]) == 1
-    out = capsys.readouterr().out
-    assert "issue: compound_0 block 0:" in out and "dead channel(s): r_elbow_z" in out
-    with pytest.raises(SystemExit) as e:
-        library_main(["info", str(tmp_path / "missing")])
-    assert e.value.code == 2
-    err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "missing' not found" in err
-    with pytest.raises(SystemExit) as e:
-        library_main(["convert", str(tmp_path / "csv"), "--out", str(tmp_path / "l.txt")])
-    assert e.value.code == 2
 
 
 def test_paper_library(paper_library, tmp_path):

@@ -1,0 +1,99 @@
+"""Human-motion libraries: the paper's CSV format, a compact native npz format, and validation.
+
+A *library* holds M motion classes, each with several *demonstrations* (recorded motions of T
+samples of F joint features). The library declares its features (``MotionLibrary.feature_names``):
+the paper's 12 (:data:`FEATURE_NAMES`, the HERAKLES human model's joints) or any other fixed set
+(``shared.feature_sets``: recognition works on any set, the occupancy needs a mapping to the human
+model).
+
+Paper format (a directory of ``compound_<m>.csv``, one file per class, see
+``../shared/data/paper-library/README.md``): comma-separated, no header, one posture per row,
+demonstrations one after another; column 0 is the sample index within its demonstration (it
+returns to 0 where a new demonstration starts), columns 1..F are the features. The column count
+declares F: 13 columns are the paper's 12 features; any other count C gives C - 1 features named
+``feature_1 .. feature_<C-1>`` without a mapping. The count is the one most of the class files have
+(each file by its most common line length); a file with another count is left out with one issue
+line saying how many lines of which counts it has.
+
+Every demonstration (a *block* of rows) is validated by general rules before it is used:
+the row has the library's column count of numeric values, every value is finite and not
+subnormal, the index column counts 0, 1, 2, ... without gaps, the block has at least
+:data:`MIN_SAMPLES` samples and is not much shorter than its file's other blocks
+(:data:`TRUNCATED_FRACTION`), no feature is identically zero over the block (a dead channel) and,
+for a feature set with a mapping, every feature stays within its plausible range
+(:data:`PLAUSIBLE_RANGES` for the paper's). A block that breaks a rule is left out and reported as
+a :class:`LibraryIssue` (class, block index, reason); it never reaches training.
+
+Native format (written by :func:`save_library`): one ``.npz`` without pickles holding the
+concatenated features, per-demonstration labels, lengths, indices and sources, the class names
+and the issues found when the library was read.
+
+Modules: :mod:`~shared.library.motions` (the library's types, held-out splits),
+:mod:`~shared.library.validation` (the rules every demonstration passes),
+:mod:`~shared.library.paper_csv` (the paper's CSV format, read and written),
+:mod:`~shared.library.npz` (the native format); :func:`load_library` (here) reads either.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .motions import (
+    FEATURE_NAMES,
+    FEATURE_UNITS,
+    PLAUSIBLE_RANGES,
+    Demonstration,
+    LibraryError,
+    LibraryIssue,
+    MotionLibrary,
+    heldout_split,
+)
+from .npz import NPZ_FORMAT, load_npz, save_library
+from .paper_csv import TRUNCATED_FRACTION, load_csv_class, load_csv_dir, write_csv_dir
+from .validation import MIN_SAMPLES, validate_block
+
+__all__ = [
+    "FEATURE_NAMES",
+    "FEATURE_UNITS",
+    "PLAUSIBLE_RANGES",
+    "MIN_SAMPLES",
+    "TRUNCATED_FRACTION",
+    "NPZ_FORMAT",
+    "LibraryError",
+    "Demonstration",
+    "LibraryIssue",
+    "MotionLibrary",
+    "load_library",
+    "load_csv_class",
+    "validate_block",
+    "save_library",
+    "write_csv_dir",
+    "heldout_split",
+]
+
+
+def load_library(path: str | Path) -> MotionLibrary:
+    """Read a library: a directory of ``compound_*.csv`` (paper format) or an ``.npz`` from :func:`save_library`.
+
+    Malformed demonstrations are reported in ``issues`` and left out of ``demos``.
+
+    Args:
+        path: Directory or ``.npz`` file.
+
+    Returns:
+        The library.
+
+    Raises:
+        LibraryError: If the path does not exist, holds no class files, or is not a valid npz.
+    """
+    p = Path(path).expanduser()
+    if p.is_dir():
+        return load_csv_dir(p)
+    if p.is_file():
+        if p.suffix == ".npz":
+            return load_npz(p)
+        if p.suffix == ".csv":
+            raise LibraryError(f"library {str(p)!r} is a single CSV file; pass the directory holding the "
+                               "class files")
+        raise LibraryError(f"library {str(p)!r} is neither a directory of CSV files nor a .npz file")
+    raise LibraryError(f"library {str(p)!r} not found")

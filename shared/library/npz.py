@@ -1,0 +1,113 @@
+"""The native format of a motion library: one compact ``.npz`` without pickles.
+
+It holds the concatenated features, per-demonstration labels, lengths, indices and sources, the
+class names, the feature names and the issues found when the library was read
+(:data:`NPZ_FORMAT` is the layout's version). A stored demonstration is validated again on reading.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from .motions import Demonstration, LibraryError, LibraryIssue, MotionLibrary
+from .validation import validate_block
+
+__all__ = ["NPZ_FORMAT", "save_library", "load_npz"]
+
+NPZ_FORMAT = 1
+"""Version of the native npz layout written by :func:`save_library`."""
+
+
+def save_library(lib: MotionLibrary, path: str | Path) -> None:
+    """Write ``lib`` as a compact native ``.npz`` (no pickled objects).
+
+    Args:
+        lib: The library.
+        path: Output file; ``.npz`` is appended by numpy if missing. Parent directories are created.
+    """
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    feats = (np.concatenate([d.features for d in lib.demos]).astype(np.float64)
+             if lib.demos else np.zeros((0, lib.n_features)))
+
+    def strings(items: list[str]) -> np.ndarray:
+        return np.array(items, dtype=np.str_) if items else np.zeros(0, dtype="<U1")
+
+    np.savez_compressed(
+        p,
+        format_version=np.int64(NPZ_FORMAT),
+        feature_names=strings(list(lib.feature_names)),
+        class_names=strings(list(lib.class_names)),
+        features=feats,
+        demo_label=np.array([d.label for d in lib.demos], dtype=np.int64),
+        demo_index=np.array([d.index for d in lib.demos], dtype=np.int64),
+        demo_length=np.array([d.n_samples for d in lib.demos], dtype=np.int64),
+        demo_source=strings([d.source for d in lib.demos]),
+        issue_class=strings([i.class_name for i in lib.issues]),
+        issue_block=np.array([i.block for i in lib.issues], dtype=np.int64),
+        issue_reason=strings([i.reason for i in lib.issues]),
+        source=np.array(lib.source, dtype=np.str_),
+    )
+
+
+_NPZ_KEYS = ("format_version", "feature_names", "class_names", "features", "demo_label", "demo_index",
+             "demo_length", "demo_source", "issue_class", "issue_block", "issue_reason", "source")
+
+
+def load_npz(path: Path) -> MotionLibrary:
+    """Read a library written by :func:`save_library`.
+
+    Raises:
+        LibraryError: If the file is unreadable, not a Foresight library npz, or of another format version.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            missing = [k for k in _NPZ_KEYS if k not in z.files]
+            if missing:
+                raise LibraryError(f"library file {str(path)!r}: not a Foresight library npz "
+                                   f"(missing {', '.join(missing)})")
+            data = {k: z[k] for k in _NPZ_KEYS}
+    except LibraryError:
+        raise
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+        raise LibraryError(f"library file {str(path)!r}: unreadable npz ({type(exc).__name__}: {exc})") from None
+    where = f"library file {str(path)!r}"
+    if int(data["format_version"]) != NPZ_FORMAT:
+        raise LibraryError(f"{where}: format_version {int(data['format_version'])}, this build reads {NPZ_FORMAT}")
+    feature_names = tuple(str(s) for s in data["feature_names"].tolist())
+    if not feature_names or len(set(feature_names)) != len(feature_names):
+        raise LibraryError(f"{where}: feature_names must be unique names of at least one feature, got "
+                           f"{len(feature_names)} names ({len(set(feature_names))} distinct)")
+    names = [str(s) for s in data["class_names"].tolist()]
+    feats = np.asarray(data["features"], dtype=np.float64)
+    labels, indices, lengths = data["demo_label"], data["demo_index"], data["demo_length"]
+    sources = [str(s) for s in data["demo_source"].tolist()]
+    n = len(labels)
+    if feats.ndim != 2 or feats.shape[1] != len(feature_names):
+        raise LibraryError(f"{where}: features has shape {feats.shape}, expected (N, {len(feature_names)}) for its "
+                           f"{len(feature_names)} feature_names")
+    if not (len(indices) == len(lengths) == len(sources) == n):
+        raise LibraryError(f"{where}: demo_label/demo_index/demo_length/demo_source lengths differ")
+    if n and (lengths.min() < 1 or int(lengths.sum()) != feats.shape[0]):
+        raise LibraryError(f"{where}: demo_length does not add up to the {feats.shape[0]} feature rows")
+    if n and (labels.min() < 0 or labels.max() >= len(names)):
+        raise LibraryError(f"{where}: demo_label outside 0..{len(names) - 1}")
+    issues = [LibraryIssue(str(c), int(b), str(r)) for c, b, r in
+              zip(data["issue_class"].tolist(), data["issue_block"].tolist(), data["issue_reason"].tolist(),
+                  strict=False)]
+    demos: list[Demonstration] = []
+    offsets = np.concatenate([[0], np.cumsum(lengths)])
+    for k in range(n):
+        f = feats[offsets[k]:offsets[k + 1]].copy()
+        reasons = validate_block(f, feature_names)
+        label = int(labels[k])
+        if reasons:  # a hand-edited npz gets the same scrutiny as a CSV
+            issues.append(LibraryIssue(names[label], k, f"npz demonstration {k}: " + "; ".join(reasons)))
+            continue
+        f.setflags(write=False)
+        demos.append(Demonstration(label, names[label], int(indices[k]), f, sources[k]))
+    demos.sort(key=lambda d: (d.label, d.index))
+    return MotionLibrary(names, demos, issues, str(data["source"]) or str(path), feature_names)

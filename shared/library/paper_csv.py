@@ -1,0 +1,281 @@
+"""The paper's CSV format of a motion library: reading (with its format rules) and writing.
+
+A directory of ``compound_<m>.csv``, one file per class (see ``../shared/data/paper-library/README.md``):
+comma-separated, no header, one posture per row, demonstrations one after another; column 0 is the
+sample index within its demonstration (it returns to 0 where a new demonstration starts), columns
+1..F are the features. The column count declares F: 13 columns are the paper's 12 features; any
+other count C gives C - 1 features named ``feature_1 .. feature_<C-1>`` without a mapping. The count
+is the one most of the class files have (each file by its most common line length); a file with
+another count is left out with one issue line saying how many lines of which counts it has.
+
+On top of :func:`shared.library.validation.validate_block`, a block (demonstration) must have the
+library's column count of numeric values in every row, an index column counting 0, 1, 2, ... without
+gaps, and must not be much shorter than its file's other blocks (:data:`TRUNCATED_FRACTION`). A block
+that breaks a rule is left out and reported as a :class:`LibraryIssue` (class, block index, reason).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from shared.feature_sets import generic_names
+
+from .motions import FEATURE_NAMES, Demonstration, LibraryError, LibraryIssue, MotionLibrary
+from .validation import line_ranges, validate_block
+
+__all__ = ["TRUNCATED_FRACTION", "load_csv_class", "load_csv_dir", "write_csv_dir"]
+
+TRUNCATED_FRACTION = 0.5
+"""A block shorter than this fraction of its file's median block length is reported as truncated."""
+
+_PAPER_COLS = 1 + len(FEATURE_NAMES)
+
+
+@dataclass
+class _Block:
+    first_line: int
+    rows: list[list[float]] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    columns: dict[int, list[int]] = field(default_factory=dict)  # wrong column count -> its line numbers
+    text: list[tuple[int, str]] = field(default_factory=list)  # (line, problem) of non-numeric rows
+    order: dict[str, None] = field(default_factory=dict)  # kinds of problem in order of first occurrence
+    last_index: int = -1
+    last_line: int = 0
+
+    @property
+    def bad(self) -> bool:
+        return bool(self.order)
+
+    def reasons(self, n_cols: int) -> list[str]:
+        """The block's problems, one entry per kind (never one per line)."""
+        out: list[str] = []
+        for kind in self.order:
+            if kind == "index":
+                out.extend(self.problems)
+            elif kind == "text":
+                (line, problem), n = self.text[0], len(self.text)
+                out.append(f"line {line}: {problem}" if n == 1 else
+                           f"{n} lines with non-numeric values (lines {line_ranges(t[0] for t in self.text)}; "
+                           f"line {line}: {problem})")
+            else:
+                for count, lines in self.columns.items():
+                    what = (f"line {lines[0]}: {count} columns" if len(lines) == 1 else
+                            f"{len(lines)} lines (lines {line_ranges(lines)}) have {count} columns")
+                    out.append(f"{what}, expected {n_cols} (sample index + {n_cols - 1} features)")
+        return out
+
+
+def _parse_row(line: str) -> tuple[list[float] | None, str | None]:
+    parts = line.split(",")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        bad = next(p for p in parts if not _is_float(p))
+        return None, f"non-numeric value {bad.strip()[:20]!r}"
+    return values, None
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _read_lines(p: Path) -> list[tuple[int, str]]:
+    """The non-blank lines of a class file with their 1-based line numbers."""
+    try:
+        text = p.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise LibraryError(f"cannot read library file {str(p)!r}: {exc.strerror or exc}") from None
+    return [(n, line) for n, line in enumerate(text.splitlines(), start=1) if line.strip()]
+
+
+def _column_counts(lines: list[tuple[int, str]]) -> Counter[int]:
+    """How many lines have each column count (comma-separated fields)."""
+    return Counter(line.count(",") + 1 for _, line in lines)
+
+
+def _count_summary(counts: Counter[int]) -> str:
+    """How many lines of which column counts.
+
+    ``{17: 2500}`` -> ``"2500 lines of 17 columns"``; ``{17: 2400, 13: 100}`` ->
+    ``"2500 lines (2400 of 17 columns, 100 of 13)"``.
+    """
+    ranked = counts.most_common()
+    if len(ranked) == 1:
+        return f"{ranked[0][1]} lines of {ranked[0][0]} columns"
+    parts = [f"{n} of {c} columns" if i == 0 else f"{n} of {c}" for i, (c, n) in enumerate(ranked)]
+    return f"{sum(counts.values())} lines ({', '.join(parts)})"
+
+
+def _feature_names_for(n_cols: int) -> tuple[str, ...]:
+    """Feature names a CSV of ``n_cols`` columns declares: the paper's for 13, ``feature_1..`` otherwise."""
+    return FEATURE_NAMES if n_cols == _PAPER_COLS else generic_names(n_cols - 1)
+
+
+def load_csv_class(path: str | Path, label: int, class_name: str | None = None, n_columns: int | None = None
+                   ) -> tuple[list[Demonstration], list[LibraryIssue]]:
+    """Read one class file of the paper's CSV format.
+
+    Args:
+        path: The ``.csv`` file.
+        label: Class index given to its demonstrations.
+        class_name: Class name (default: the file's stem).
+        n_columns: Columns every row must have (sample index + F features); default: the file's most
+            common line length. 13 columns are the paper's 12 features, others ``feature_1 ..``.
+
+    Returns:
+        ``(demos, issues)``: the valid demonstrations (``index`` counts valid ones only) and the
+        malformed blocks.
+
+    Raises:
+        LibraryError: If the file cannot be read.
+    """
+    p = Path(path)
+    lines = _read_lines(p)
+    if n_columns is None:
+        counts = _column_counts(lines)
+        n_columns = counts.most_common(1)[0][0] if counts else _PAPER_COLS
+    return _parse_class(p, lines, label, class_name or p.stem, n_columns)
+
+
+def _parse_class(p: Path, lines: list[tuple[int, str]], label: int, name: str, n_cols: int
+                 ) -> tuple[list[Demonstration], list[LibraryIssue]]:
+    feature_names = _feature_names_for(n_cols)
+    blocks: list[_Block] = []
+    for lineno, line in lines:
+        values, problem = _parse_row(line)
+        idx: float | None = values[0] if values else None
+        starts = idx == 0.0 or not blocks
+        if starts:
+            blocks.append(_Block(first_line=lineno))
+        blk = blocks[-1]
+        blk.last_line = lineno
+        if values is None:
+            blk.order["text"] = None
+            blk.text.append((lineno, str(problem)))
+            continue
+        if len(values) != n_cols:
+            blk.order["columns"] = None
+            blk.columns.setdefault(len(values), []).append(lineno)
+            continue
+        expected = blk.last_index + 1
+        if idx != expected and not blk.bad:
+            blk.order["index"] = None
+            blk.problems.append(f"line {lineno}: sample index {values[0]:g} where {expected} was expected "
+                                "(index column must count 0, 1, 2, ...)")
+        if idx is not None and math.isfinite(idx) and float(idx).is_integer():
+            blk.last_index = int(idx)
+        else:
+            blk.last_index = expected
+        blk.rows.append(values[1:])
+    demos: list[Demonstration] = []
+    issues: list[LibraryIssue] = []
+    typical = float(np.median([len(b.rows) for b in blocks])) if blocks else 0.0
+    for b, blk in enumerate(blocks):
+        where = f"lines {blk.first_line}-{blk.last_line}"
+        reasons = blk.reasons(n_cols)
+        if not reasons and len(blk.rows) < TRUNCATED_FRACTION * typical:
+            reasons.append(f"truncated: {len(blk.rows)} samples where the file's blocks typically have "
+                           f"{typical:g}")
+        if not reasons:
+            reasons = validate_block(np.asarray(blk.rows, dtype=np.float64).reshape(-1, n_cols - 1), feature_names)
+        if reasons:
+            issues.append(LibraryIssue(name, b, f"{where}: " + "; ".join(reasons)))
+            continue
+        feats = np.asarray(blk.rows, dtype=np.float64)
+        feats.setflags(write=False)
+        demos.append(Demonstration(label, name, len(demos), feats, f"{p.name}#block {b}"))
+    if not demos:
+        issues.append(LibraryIssue(name, -1, f"{p.name} holds no valid demonstration"))
+    return demos, issues
+
+
+def _class_files(directory: Path) -> list[Path]:
+    files = list(directory.glob("compound_*.csv"))
+    if files:
+        def key(p: Path) -> tuple[int, str]:
+            m = re.fullmatch(r"compound_(\d+)", p.stem)
+            return (int(m.group(1)) if m else 1 << 30, p.name)
+        return sorted(files, key=key)
+    return sorted(directory.glob("*.csv"))
+
+
+def _library_columns(directory: Path, files: list[Path], counts: list[Counter[int]]) -> int:
+    """The column count most class files have (each file voting with its most common line length).
+
+    Raises:
+        LibraryError: If no count has more files than every other (one line naming each file's counts).
+    """
+    votes = Counter(c.most_common(1)[0][0] for c in counts if c)
+    ranked = votes.most_common()
+    if not ranked:
+        return _PAPER_COLS
+    if len(ranked) > 1 and ranked[0][1] == ranked[1][1]:
+        per_file = "; ".join(f"{f.name}: {_count_summary(c)}" for f, c in zip(files, counts, strict=True) if c)
+        raise LibraryError(f"library {str(directory)!r}: its class files disagree on the column count and no "
+                           f"count has a majority ({per_file}); every class file needs the same columns (sample "
+                           "index + the same features)")
+    n_cols = ranked[0][0]
+    if n_cols < 2:
+        raise LibraryError(f"library {str(directory)!r}: its class files have {n_cols} column; the format is a "
+                           "sample index followed by the features, comma-separated")
+    return n_cols
+
+
+def load_csv_dir(directory: Path) -> MotionLibrary:
+    """Read a directory of class files (one class per ``compound_<m>.csv``, in their numeric order).
+
+    Raises:
+        LibraryError: If it holds no class files or they disagree on the column count.
+    """
+    files = _class_files(directory)
+    if not files:
+        raise LibraryError(f"library directory {str(directory)!r} holds no .csv class files")
+    lines = [_read_lines(f) for f in files]
+    counts = [_column_counts(ls) for ls in lines]
+    n_cols = _library_columns(directory, files, counts)
+    names: list[str] = []
+    demos: list[Demonstration] = []
+    issues: list[LibraryIssue] = []
+    for label, (f, ls, c) in enumerate(zip(files, lines, counts, strict=True)):
+        names.append(f.stem)
+        if c and c.most_common(1)[0][0] != n_cols:  # a file of another shape: one line, not one per sample
+            issues.append(LibraryIssue(f.stem, -1, f"{f.name} has {_count_summary(c)} where the library's other "
+                                       f"class files have {n_cols} columns (sample index + {n_cols - 1} features); "
+                                       "no demonstration read"))
+            continue
+        d, i = _parse_class(f, ls, label, f.stem, n_cols)
+        demos.extend(d)
+        issues.extend(i)
+    return MotionLibrary(names, demos, issues, str(directory), _feature_names_for(n_cols))
+
+
+def write_csv_dir(lib: MotionLibrary, directory: str | Path) -> list[Path]:
+    """Write ``lib`` in the paper's format: ``compound_<m>.csv`` per class (index + its F features).
+
+    Args:
+        lib: The library.
+        directory: Output directory (created).
+
+    Returns:
+        The files written.
+    """
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    files = []
+    for m in range(lib.n_classes):
+        rows = [np.column_stack([np.arange(d.n_samples), d.features]) for d in lib.by_class(m)]
+        path = out / f"compound_{m}.csv"
+        np.savetxt(path, np.concatenate(rows) if rows else np.zeros((0, 1 + lib.n_features)), delimiter=",",
+                   fmt=["%d"] + ["%.9g"] * lib.n_features)
+        files.append(path)
+    return files

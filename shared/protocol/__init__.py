@@ -1,0 +1,48 @@
+"""The wire contract: key expressions and message schemas (documented in docs/protocol.md).
+
+Every message is a msgpack map with ``_type`` (the message type name), ``_v`` (the schema version,
+:data:`SCHEMA_VERSION`) and one entry per field. Numeric arrays travel as maps
+``{"dtype": "<f8", "shape": [..], "data": <raw little-endian bytes>}``.
+
+:func:`decode` validates everything (type, version, field presence, scalar types, array dtypes,
+shapes and finiteness, and per-message invariants) and raises :class:`ProtocolError`, whose message
+names the offending field.
+
+Modules: :mod:`~shared.protocol.schema` (the base class, array fields, the version),
+:mod:`~shared.protocol.messages` (the message types), :mod:`~shared.protocol.keys` (key
+expressions), :mod:`~shared.protocol.codec` (encode / decode). Import the names from here
+(``from shared.protocol import Plan, decode``).
+"""
+
+from .codec import decode, encode
+from .keys import SERVICES, Keys
+from .messages import (
+    MESSAGE_TYPES,
+    ClassPosterior,
+    ClockTick,
+    DemoMarker,
+    HumanPose,
+    OccupancyGrid,
+    Plan,
+    RobotState,
+)
+from .schema import SCHEMA_VERSION, ArraySpec, Message, ProtocolError
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "ProtocolError",
+    "ArraySpec",
+    "Message",
+    "HumanPose",
+    "DemoMarker",
+    "ClassPosterior",
+    "OccupancyGrid",
+    "Plan",
+    "RobotState",
+    "ClockTick",
+    "MESSAGE_TYPES",
+    "Keys",
+    "SERVICES",
+    "encode",
+    "decode",
+]

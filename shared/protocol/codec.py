@@ -1,0 +1,160 @@
+"""Encoding and decoding: msgpack maps, arrays as dtype + shape + raw little-endian bytes.
+
+:func:`decode` validates everything (type, version, field presence, scalar types, array dtypes,
+shapes and finiteness, and per-message invariants) and raises :class:`ProtocolError`, whose message
+names the offending field; :func:`encode` runs the same validation on what it produced, so bad data
+never leaves.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from typing import Any, TypeVar
+
+import msgpack
+import numpy as np
+
+from .messages import MESSAGE_TYPES
+from .schema import SCHEMA_VERSION, ArraySpec, Message, ProtocolError
+from .schema import field_error as _err
+
+__all__ = ["encode", "decode"]
+
+M = TypeVar("M", bound=Message)
+
+
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def encode(msg: Message) -> bytes:
+    """Encode a message to msgpack bytes (validating it first, so bad data never leaves).
+
+    Raises:
+        ProtocolError: If the message does not satisfy its own schema.
+    """
+    out: dict[str, Any] = {"_type": msg.TYPE, "_v": SCHEMA_VERSION}
+    for f in dataclasses.fields(msg):  # type: ignore[arg-type]
+        value = getattr(msg, f.name)
+        spec = f.metadata.get("array")
+        if spec is not None:
+            arr = np.ascontiguousarray(value, dtype=np.dtype(spec.dtype).newbyteorder("<"))
+            out[f.name] = {"dtype": arr.dtype.str, "shape": list(arr.shape), "data": arr.tobytes()}
+        elif isinstance(value, np.generic):
+            out[f.name] = value.item()
+        else:
+            out[f.name] = value
+    data = msgpack.packb(out, use_bin_type=True)
+    decode(data, type(msg))  # one validation path for both directions
+    return data
+
+
+def _decode_array(t: str, name: str, raw: Any, spec: ArraySpec, dims: dict[str, int]) -> np.ndarray:
+    if not isinstance(raw, dict) or set(raw) != {"dtype", "shape", "data"}:
+        raise _err(t, name, "array must be a map with keys dtype, shape, data")
+    try:
+        dtype = np.dtype(raw["dtype"])
+    except (TypeError, ValueError):
+        raise _err(t, name, f"unknown dtype {raw['dtype']!r}") from None
+    want = np.dtype(spec.dtype)
+    if dtype.kind != want.kind or dtype.itemsize != want.itemsize:
+        raise _err(t, name, f"dtype {dtype.name} where {want.name} is required")
+    shape = raw["shape"]
+    if not isinstance(shape, list) or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0
+                                              for s in shape):
+        raise _err(t, name, f"shape {shape!r} is not a list of non-negative ints")
+    if len(shape) != len(spec.shape):
+        raise _err(t, name, f"shape {tuple(shape)} has {len(shape)} axes, expected {len(spec.shape)} "
+                   f"{spec.shape}")
+    for axis, (got, exp) in enumerate(zip(shape, spec.shape, strict=True)):
+        if isinstance(exp, int):
+            if got != exp:
+                raise _err(t, name, f"shape {tuple(shape)} axis {axis} must be {exp}")
+        elif exp in dims and dims[exp] != got:
+            raise _err(t, name, f"shape {tuple(shape)} axis {axis} ({exp}) must be {dims[exp]} "
+                       "like the other fields")
+        else:
+            dims[exp] = got
+    data = raw["data"]
+    if not isinstance(data, bytes | bytearray):
+        raise _err(t, name, "data must be bytes")
+    n = int(np.prod(shape, dtype=np.int64))
+    if len(data) != n * dtype.itemsize:
+        raise _err(t, name, f"data has {len(data)} bytes, shape {tuple(shape)} of {dtype.name} needs "
+                   f"{n * dtype.itemsize}")
+    arr = np.frombuffer(data, dtype=dtype).reshape(shape).astype(want, copy=True)
+    if spec.finite and arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        raise _err(t, name, "contains NaN or infinity")
+    return arr
+
+
+def _check_scalar(t: str, name: str, tp: Any, value: Any) -> Any:
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise _err(t, name, f"expected a number, got {type(value).__name__}")
+        if not math.isfinite(value):
+            raise _err(t, name, f"must be finite, got {value}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise _err(t, name, f"expected an integer, got {type(value).__name__}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise _err(t, name, f"expected a boolean, got {type(value).__name__}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise _err(t, name, f"expected a string, got {type(value).__name__}")
+        return value
+    if typing.get_origin(tp) is list:
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise _err(t, name, "expected a list of strings")
+        return list(value)
+    raise _err(t, name, f"unsupported field type {tp!r}")  # pragma: no cover
+
+
+def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None) -> M:
+    """Decode and validate msgpack bytes into a message.
+
+    Args:
+        data: The payload.
+        expected: If given, the message must be of this type.
+
+    Returns:
+        The message dataclass instance.
+
+    Raises:
+        ProtocolError: On truncated/malformed bytes, unknown type, wrong version, a missing or
+            ill-typed field, wrong dtype or shape, non-finite values or a broken invariant.
+    """
+    try:
+        raw = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True)
+    except Exception as exc:  # msgpack raises several unrelated types for bad input
+        raise ProtocolError(f"message: not valid msgpack ({type(exc).__name__}: {exc})") from None
+    if not isinstance(raw, dict):
+        raise ProtocolError(f"message: expected a map, got {type(raw).__name__}")
+    t = raw.get("_type")
+    if t not in MESSAGE_TYPES:
+        raise ProtocolError(f"message._type: unknown message type {t!r}")
+    cls = MESSAGE_TYPES[t]
+    if expected is not None and cls is not expected:
+        raise ProtocolError(f"message._type: got {t}, expected {expected.TYPE}")
+    if raw.get("_v") != SCHEMA_VERSION:
+        raise ProtocolError(f"{t}._v: schema version {raw.get('_v')!r}, this build speaks {SCHEMA_VERSION}")
+    hints = _hints(cls)
+    kwargs: dict[str, Any] = {}
+    dims: dict[str, int] = {}
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+        if f.name not in raw:
+            raise _err(t, f.name, "missing")
+        spec = f.metadata.get("array")
+        if spec is not None:
+            kwargs[f.name] = _decode_array(t, f.name, raw[f.name], spec, dims)
+        else:
+            kwargs[f.name] = _check_scalar(t, f.name, hints[f.name], raw[f.name])
+    msg = cls(**kwargs)
+    msg.check()
+    return msg  # type: ignore[return-value]

@@ -1,0 +1,241 @@
+"""The message types of the wire contract, one dataclass each (fields, dtypes, shapes, invariants).
+
+docs/protocol.md documents every field with its unit and who publishes and subscribes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .schema import Message, array
+from .schema import field_error as _err
+
+__all__ = ["N_FEATURES", "HumanPose", "DemoMarker", "ClassPosterior", "OccupancyGrid", "Plan", "RobotState",
+           "ClockTick", "MESSAGE_TYPES"]
+
+N_FEATURES = 12
+
+
+@dataclass
+class HumanPose(Message):
+    """One posture of the human (the replayer publishes one per sample).
+
+    ``features`` are the paper's 12 joint features in the recorder's frame, in this order:
+    pelvis x, y, z (m), pelvis yaw, torso X, Y, Z, right shoulder X, Z, Y (rad), right arm
+    translation (m), right elbow Z (rad). ``tick_last`` is true on the last pose the replayer
+    publishes for lock-step tick ``tick`` (always true in real-time mode, where ``tick`` is -1).
+    """
+
+    TYPE: ClassVar[str] = "HumanPose"
+    stamp: float
+    tick: int
+    tick_last: bool
+    demo_id: int
+    index: int
+    features: np.ndarray = array("float64", N_FEATURES)
+
+    def check(self) -> None:
+        """Validate this message's invariants (see the class docstring)."""
+        if self.index < 0:
+            raise _err(self.TYPE, "index", f"must be >= 0, got {self.index}")
+
+
+@dataclass
+class DemoMarker(Message):
+    """Start or end of a streamed demonstration. ``true_class`` is for evaluation only."""
+
+    TYPE: ClassVar[str] = "DemoMarker"
+    stamp: float
+    tick: int
+    demo_id: int
+    event: str
+    true_class: int
+    class_name: str
+    n_samples: int
+
+    def check(self) -> None:
+        """Validate this message's invariants (see the class docstring)."""
+        if self.event not in ("start", "end"):
+            raise _err(self.TYPE, "event", f"must be 'start' or 'end', got {self.event!r}")
+        if self.n_samples < 0:
+            raise _err(self.TYPE, "n_samples", f"must be >= 0, got {self.n_samples}")
+
+
+@dataclass
+class ClassPosterior(Message):
+    """The predictor's belief over the M motion classes after pose ``index`` of ``demo_id``."""
+
+    TYPE: ClassVar[str] = "ClassPosterior"
+    stamp: float
+    tick: int
+    demo_id: int
+    index: int
+    class_names: list[str]
+    posterior: np.ndarray = array("float64", "M")
+    log_likelihood: np.ndarray = array("float64", "M", finite=False)
+
+    def check(self) -> None:
+        """Validate this message's invariants (see the class docstring)."""
+        if len(self.class_names) != self.posterior.shape[0]:
+            raise _err(self.TYPE, "class_names", f"has {len(self.class_names)} names for "
+                       f"{self.posterior.shape[0]} classes")
+        if np.any(self.posterior < 0) or abs(float(self.posterior.sum()) - 1.0) > 1e-6:
+            raise _err(self.TYPE, "posterior", "must be non-negative and sum to 1")
+        if np.any(np.isnan(self.log_likelihood)) or np.any(self.log_likelihood == np.inf):
+            raise _err(self.TYPE, "log_likelihood", "contains NaN or +inf")
+
+
+@dataclass
+class OccupancyGrid(Message):
+    """Predicted workspace occupancy p(x|xi), sparse and quantised.
+
+    The grid has ``dims`` = (nx, ny, nz) voxels of edge ``resolution`` (m); voxel (i, j, k) has its
+    lower corner at ``origin + resolution * (i, j, k)`` in the scene frame. Only voxels with
+    non-zero probability are sent: ``indices`` are C-order flat indices ``(i * ny + j) * nz + k`` and
+    ``values`` their probability quantised as ``round(255 * p)``. ``tick``, ``tick_last``,
+    ``demo_id`` and ``index`` are copied from the pose the prediction was made from.
+    """
+
+    TYPE: ClassVar[str] = "OccupancyGrid"
+    stamp: float
+    tick: int
+    tick_last: bool
+    demo_id: int
+    index: int
+    method: str
+    resolution: float
+    origin: np.ndarray = array("float64", 3)
+    dims: np.ndarray = array("int32", 3)
+    indices: np.ndarray = array("uint32", "N")
+    values: np.ndarray = array("uint8", "N")
+
+    def check(self) -> None:
+        """Validate this message's invariants (see the class docstring)."""
+        if self.method not in ("prediction", "current"):
+            raise _err(self.TYPE, "method", f"must be 'prediction' or 'current', got {self.method!r}")
+        if not (self.resolution > 0 and math.isfinite(self.resolution)):
+            raise _err(self.TYPE, "resolution", f"must be > 0, got {self.resolution}")
+        if np.any(self.dims <= 0):
+            raise _err(self.TYPE, "dims", f"must be positive, got {self.dims.tolist()}")
+        n = int(np.prod(self.dims.astype(np.int64)))
+        if self.indices.size and int(self.indices.max()) >= n:
+            raise _err(self.TYPE, "indices", f"index {int(self.indices.max())} outside a grid of {n} voxels")
+
+    @classmethod
+    def from_dense(cls, grid: np.ndarray, origin: np.ndarray, resolution: float, **meta: Any) -> OccupancyGrid:
+        """Quantise and sparsify a dense probability grid.
+
+        Args:
+            grid: ``(nx, ny, nz)`` probabilities in [0, 1].
+            origin: ``(3,)`` lower corner of voxel (0, 0, 0), metres.
+            resolution: Voxel edge, metres.
+            **meta: The remaining fields (stamp, tick, demo_id, index, method).
+        """
+        q = np.rint(np.clip(grid, 0.0, 1.0) * 255.0).astype(np.uint8).ravel()
+        idx = np.flatnonzero(q).astype(np.uint32)
+        return cls(resolution=float(resolution), origin=np.asarray(origin, dtype=np.float64),
+                   dims=np.asarray(grid.shape, dtype=np.int32), indices=idx, values=q[idx], **meta)
+
+    def to_dense(self, dtype: Any = np.float32) -> np.ndarray:
+        """Return the ``(nx, ny, nz)`` probability grid (values ``q / 255``)."""
+        out = np.zeros(int(np.prod(self.dims.astype(np.int64))), dtype=dtype)
+        out[self.indices.astype(np.int64)] = self.values.astype(dtype) / dtype(255.0)
+        return out.reshape(tuple(int(d) for d in self.dims))
+
+
+@dataclass
+class Plan(Message):
+    """One replanning step: all K candidate trajectories, their cost terms and the chosen goal.
+
+    ``trajectories[k]`` has T waypoints of the D joints in ``joint_names``, ``dt`` seconds apart,
+    starting at the configuration the robot will have when this plan starts executing. Goals that
+    could not be planned (e.g. IK failed) have ``valid[k] = False``, cost ``+inf`` and are never
+    chosen; valid goals have finite costs. ``occupancy_tick`` / ``occupancy_index`` identify the
+    prediction the costs were computed on.
+    """
+
+    TYPE: ClassVar[str] = "Plan"
+    stamp: float
+    tick: int
+    step: int
+    goal_names: list[str]
+    joint_names: list[str]
+    dt: float
+    chosen: int
+    planning_ms: float
+    occupancy_tick: int
+    occupancy_index: int
+    trajectories: np.ndarray = array("float32", "K", "T", "D")
+    cost_smoothness: np.ndarray = array("float64", "K", finite=False)
+    cost_obstacle: np.ndarray = array("float64", "K", finite=False)
+    cost_human: np.ndarray = array("float64", "K", finite=False)
+    cost_total: np.ndarray = array("float64", "K", finite=False)
+    valid: np.ndarray = array("bool", "K")
+
+    def check(self) -> None:
+        """Validate this message's invariants (see the class docstring)."""
+        k, _, d = self.trajectories.shape
+        if len(self.goal_names) != k:
+            raise _err(self.TYPE, "goal_names", f"has {len(self.goal_names)} names for {k} trajectories")
+        if len(self.joint_names) != d:
+            raise _err(self.TYPE, "joint_names", f"has {len(self.joint_names)} names for {d} joints")
+        if not (0 <= self.chosen < k) or not bool(self.valid[self.chosen]):
+            raise _err(self.TYPE, "chosen", f"{self.chosen} is not a valid goal index")
+        for name in ("cost_smoothness", "cost_obstacle", "cost_human", "cost_total"):
+            cost = getattr(self, name)
+            if np.any(np.isnan(cost)) or not np.all(np.isfinite(cost[self.valid])) or np.any(cost == -np.inf):
+                raise _err(self.TYPE, name, "must be finite for valid goals (+inf allowed for invalid ones), no NaN")
+        if not (self.dt > 0 and math.isfinite(self.dt)):
+            raise _err(self.TYPE, "dt", f"must be > 0, got {self.dt}")
+
+
+@dataclass
+class RobotState(Message):
+    """The simulated robot's state, published by the executor at a fixed rate.
+
+    ``goal`` is the index of the goal being executed (-1 before the first plan); ``holding`` is true
+    when the executor holds the robot still because its inputs are stale, with ``reason`` saying why.
+    """
+
+    TYPE: ClassVar[str] = "RobotState"
+    stamp: float
+    tick: int
+    joint_names: list[str]
+    goal: int
+    reached: bool
+    holding: bool
+    reason: str
+    q: np.ndarray = array("float64", "D")
+    qd: np.ndarray = array("float64", "D")
+
+    def check(self) -> None:
+        """Validate this message's invariants (see the class docstring)."""
+        if len(self.joint_names) != self.q.shape[0]:
+            raise _err(self.TYPE, "joint_names", f"has {len(self.joint_names)} names for {self.q.shape[0]} joints")
+
+
+@dataclass
+class ClockTick(Message):
+    """Lock-step clock: tick n starts replanning step n at simulated time ``stamp``."""
+
+    TYPE: ClassVar[str] = "ClockTick"
+    stamp: float
+    tick: int
+    period: float
+
+    def check(self) -> None:
+        """Validate this message's invariants (see the class docstring)."""
+        if self.tick < 0:
+            raise _err(self.TYPE, "tick", f"must be >= 0, got {self.tick}")
+        if not (self.period > 0 and math.isfinite(self.period)):
+            raise _err(self.TYPE, "period", f"must be > 0, got {self.period}")
+
+
+MESSAGE_TYPES: dict[str, type[Message]] = {
+    cls.TYPE: cls
+    for cls in (HumanPose, DemoMarker, ClassPosterior, OccupancyGrid, Plan, RobotState, ClockTick)
+}

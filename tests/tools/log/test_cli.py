@@ -1,0 +1,57 @@
+"""``foresight log info / render``: what they print and draw, and one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from shared.protocol import Keys
+from tools.log.cli import main
+
+KEYS = Keys()
+
+
+def test_info_lists_channels_schemas_and_counts(run_log, capsys) -> None:
+    assert main(["info", str(run_log)]) == 0
+    out = capsys.readouterr().out
+    assert "complete" in out and "TRUNCATED" not in out
+    lines = {ln.split()[0]: ln.split() for ln in out.splitlines() if ln.startswith("  ") and "/" in ln}
+    assert lines[KEYS.plan][1:] == ["foresight.Plan", "jsonschema", "msgpack", "2"]
+    assert lines[KEYS.robot_state][-1] == "2" and lines[KEYS.occupancy][-1] == "2"
+    assert lines["/viz/plan"][1:] == ["foxglove.SceneUpdate", "jsonschema", "json", "2"]
+    assert lines["/foresight/rejected"][-1] == "1"
+    assert "scene.toml" in out and f"rejected:  {KEYS.plan}: 1" in out and "mode=lockstep" in out
+    assert main(["info", str(run_log), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["complete"] and d["rejected"] == {KEYS.plan: 1}
+    assert {c["topic"]: c["messages"] for c in d["channels"]}[KEYS.clock] == 2
+
+
+def test_render_writes_pngs(run_log, tmp_path, capsys) -> None:
+    out = tmp_path / "step1.png"
+    assert main(["render", str(run_log), "--step", "1", "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+    import matplotlib.image as mpimg
+
+    img = mpimg.imread(out)
+    assert img.shape[0] > 500 and img.shape[1] > 1000
+    assert main(["render", str(run_log), "--all", "--out", str(tmp_path / "all")]) == 0
+    assert sorted(p.name for p in (tmp_path / "all").iterdir()) == ["step_000.png", "step_001.png"]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["info", "/nonexistent.mcap"], "not found"),
+    (["render", "{log}", "--step", "7", "--out", "x.png"], "no plan for step 7"),
+    (["render", "{log}", "--out", "x.png"], "--step N or --all"),
+    (["info", "{bad}"], "not an MCAP file"),
+])
+def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"hello, this is not mcap at all")
+    argv = [a.format(log=run_log, bad=bad) for a in argv]
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]

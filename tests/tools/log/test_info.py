@@ -1,0 +1,16 @@
+"""The summary of a log: a truncated file says so and still lists what was written."""
+
+from __future__ import annotations
+
+from shared.recording.reader import read_log
+from tools.log.info import format_info
+
+
+def test_info_on_a_truncated_file(run_log, tmp_path) -> None:
+    data = run_log.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) - 300])  # footer and part of the summary gone
+    lf = read_log(cut)
+    assert not lf.complete
+    assert "TRUNCATED" in format_info(lf)
+    assert lf.channels  # what was written before is still listed

@@ -1,0 +1,54 @@
+"""Replanning steps of a log: plans paired with the messages they were made from, and their titles."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shared.protocol import Keys, OccupancyGrid, Plan, RobotState, encode
+from shared.recording.reader import read_log
+from shared.recording.writer import McapLog
+from shared.scene import load_scene
+from tools.log.steps import step_title, step_views
+
+KEYS = Keys()
+
+
+def test_step_views_pair_plans_with_their_occupancy(run_log) -> None:
+    lf = read_log(run_log, keep=lambda ch: ch.message_encoding == "msgpack")
+    views = step_views(lf)
+    assert sorted(views) == [0, 1]
+    assert views[1].plan.chosen == 1
+    assert views[1].occupancy is not None and views[1].occupancy.tick == 0  # the prediction plan 1 used
+    assert views[1].pose is not None and views[1].pose.index == 0 and views[1].first_pose.index == 0
+    assert views[1].state is not None and views[1].state.tick == 1
+
+
+def test_step_titles_lockstep_and_realtime(run_log, tmp_path, robot) -> None:
+    lf = read_log(run_log, keep=lambda ch: ch.message_encoding == "msgpack")
+    title = step_title(step_views(lf)[1])
+    assert "Replanning step 1 (tick 1, t = 0.20 s simulated)" in title
+    assert "occupancy of tick 0 / pose 0 (prediction)" in title
+    # real time: wall-clock stamps, tick -1; the title counts seconds from the first robot state
+    t0 = 1_700_000_000.0
+    scene = load_scene(None)
+    q0 = robot.q_start.numpy().astype(np.float64)
+    path = tmp_path / "rt.mcap"
+    log = McapLog(path, KEYS, None)
+    grid = np.zeros(scene.grid.dims, np.float32)
+    grid[18:24, 10:18, 14:20] = 0.5
+    log.on_sample(KEYS.robot_state, encode(RobotState(stamp=t0, tick=-1, joint_names=robot.joint_names, goal=-1,
+                                                      reached=False, holding=False, reason="", q=q0, qd=np.zeros(8))))
+    log.on_sample(KEYS.occupancy, encode(OccupancyGrid.from_dense(grid, scene.grid.origin, scene.grid.resolution,
+                                                                  stamp=t0 + 1.0, tick=-1, tick_last=True, demo_id=0,
+                                                                  index=30, method="prediction")))
+    traj = np.stack([np.linspace(q0, q0 + 0.1, 5)] * 2).astype(np.float32)
+    log.on_sample(KEYS.plan, encode(Plan(stamp=t0 + 1.25, tick=-1, step=6, goal_names=["blue_cup", "red_cup"],
+                                         joint_names=robot.joint_names, dt=0.1, chosen=0, planning_ms=12.0,
+                                         occupancy_tick=-1, occupancy_index=30, trajectories=traj,
+                                         cost_smoothness=np.ones(2), cost_obstacle=np.zeros(2), cost_human=np.zeros(2),
+                                         cost_total=np.ones(2), valid=np.ones(2, bool))))
+    log.close()
+    title = step_title(step_views(read_log(path, keep=lambda ch: ch.message_encoding == "msgpack"))[6])
+    assert "Replanning step 6 (t = 1.25 s into the run)" in title
+    assert "occupancy of pose 30 at t = 1.00 s (prediction)" in title
+    assert "tick -1" not in title and "1700000000" not in title

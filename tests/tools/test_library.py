@@ -1,0 +1,102 @@
+"""``foresight library``: info, validate, convert and generate, with one-line errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shared.library import load_library, write_csv_dir
+from shared.synthetic import generate_library
+from shared.synthetic_wide import WIDE_FEATURE_NAMES, generate_wide_library
+from tools.library import main as library_main
+
+
+@pytest.fixture(scope="module")
+def wide():
+    return generate_wide_library(n_classes=4, n_demos=5, seed=1)
+
+
+def make_lib(directory: Path) -> Path:
+    """3 classes of 4 valid demonstrations in the paper's CSV format."""
+    write_csv_dir(generate_library(3, 4, seed=0), directory)
+    return directory
+
+
+def kill_last_feature_of_first_block(path: Path) -> None:
+    """Zero the last feature (r_elbow_z) of the file's first demonstration: a dead channel."""
+    rows = np.loadtxt(path, delimiter=",")
+    first = np.flatnonzero(rows[:, 0] == 0)[1]
+    rows[:first, -1] = 0.0
+    np.savetxt(path, rows, delimiter=",", fmt=["%d"] + ["%.9g"] * (rows.shape[1] - 1))
+
+
+def test_cli(tmp_path, capsys):
+    make_lib(tmp_path / "csv")
+    assert library_main(["info", str(tmp_path / "csv")]) == 0
+    out = capsys.readouterr().out
+    assert "classes: 3, valid demonstrations: 12, issues: 0" in out
+    assert library_main(["validate", str(tmp_path / "csv")]) == 0
+    assert library_main(["convert", str(tmp_path / "csv"), "--out", str(tmp_path / "l.npz")]) == 0
+    assert load_library(tmp_path / "l.npz").counts() == [4, 4, 4]
+    kill_last_feature_of_first_block(tmp_path / "csv" / "compound_0.csv")
+    assert library_main(["validate", str(tmp_path / "csv")]) == 1
+    out = capsys.readouterr().out
+    assert "issue: compound_0 block 0:" in out and "dead channel(s): r_elbow_z" in out
+    with pytest.raises(SystemExit) as e:
+        library_main(["info", str(tmp_path / "missing")])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "missing' not found" in err
+    with pytest.raises(SystemExit) as e:
+        library_main(["convert", str(tmp_path / "csv"), "--out", str(tmp_path / "l.txt")])
+    assert e.value.code == 2
+
+
+def test_info_of_a_16_feature_csv(wide, tmp_path, capsys) -> None:
+    write_csv_dir(wide, tmp_path / "w")
+    assert library_main(["info", str(tmp_path / "w")]) == 0
+    out = capsys.readouterr().out
+    assert "features: 16 (feature_1 .. feature_16; no mapping to the human model" in out
+    assert "issue" not in out.replace("issues", "")
+
+
+def test_info_names_a_file_of_another_column_count_once(wide, tmp_path, capsys) -> None:
+    write_csv_dir(generate_library(4, 5, seed=2), tmp_path / "mixed")
+    write_csv_dir(wide, tmp_path / "w")
+    (tmp_path / "mixed" / "compound_2.csv").write_bytes((tmp_path / "w" / "compound_2.csv").read_bytes())
+    assert library_main(["info", str(tmp_path / "mixed")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    about_2 = [line for line in out if "compound_2" in line]
+    assert len(about_2) == 2  # its row in the class table and its one issue line
+    assert not any("line 1:" in line or "line 2:" in line for line in out)
+
+
+def test_cli_generate_npz_and_csv(tmp_path, capsys) -> None:
+    npz = tmp_path / "syn.npz"
+    assert library_main(["generate", "--classes", "3", "--demos", "4", "--seed", "2", "--out", str(npz)]) == 0
+    csv_dir = tmp_path / "csv"
+    assert library_main(["generate", "--classes", "3", "--demos", "4", "--seed", "2", "--out", str(csv_dir)]) == 0
+    a, b = load_library(npz), load_library(csv_dir)
+    assert a.class_names == ["blue_cup", "red_cup", "near_left"] and a.n_classes == b.n_classes == 3
+    for x, y in zip(a.demos, b.demos, strict=True):
+        np.testing.assert_allclose(x.features, y.features, rtol=1e-8, atol=1e-9)
+    direct = generate_library(3, 4, seed=2)
+    np.testing.assert_array_equal(a.demos[5].features, direct.demos[5].features)
+    assert "wrote" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        library_main(["generate", "--classes", "12", "--out", str(tmp_path / "x.npz")])
+
+
+def test_generate_cli_wide(tmp_path, capsys) -> None:
+    assert library_main(["generate", "--feature-set", "wide16", "--classes", "4", "--demos", "3",
+                         "--out", str(tmp_path / "w.npz")]) == 0
+    assert "100 samples of 16 features each" in capsys.readouterr().out
+    assert load_library(tmp_path / "w.npz").feature_names == WIDE_FEATURE_NAMES
+    with pytest.raises(SystemExit) as exc:
+        library_main(["generate", "--feature-set", "wide16", "--classes", "2", "--demos", "2",
+                      "--out", str(tmp_path / "x.npz"), "--plot", str(tmp_path / "p.png")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--plot (hand positions in the scene) needs a mapping" in err[0]

@@ -1,0 +1,69 @@
+"""``foresight log info``: a run's MCAP log in a few lines (or one JSON object).
+
+Header, time range, channels (topic, schema, encodings, message counts), attachments, metadata and
+rejected payloads; a file whose writer was killed is read up to its last complete chunk and the
+summary says it is truncated.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+from shared.recording.reader import LogFile
+
+__all__ = ["info_dict", "format_info"]
+
+
+def _fmt_time(ns: int | None) -> str:
+    if ns is None:
+        return "-"
+    return datetime.fromtimestamp(ns / 1e9, UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3] + "Z"
+
+
+def info_dict(lf: LogFile) -> dict[str, Any]:
+    """The summary :func:`format_info` prints, as a JSON-ready dict."""
+    firsts = [c.first_time for c in lf.channels.values() if c.first_time is not None]
+    lasts = [c.last_time for c in lf.channels.values() if c.last_time is not None]
+    rejects = {k: int(v) for k, v in lf.metadata.get("foresight.rejects", {}).items()}
+    return {
+        "path": lf.path, "size_bytes": lf.size, "complete": lf.complete, "error": lf.error,
+        "profile": lf.profile, "library": lf.library,
+        "start": _fmt_time(min(firsts)) if firsts else None, "end": _fmt_time(max(lasts)) if lasts else None,
+        "duration_s": (max(lasts) - min(firsts)) / 1e9 if firsts else 0.0,
+        "messages": lf.message_count,
+        "channels": [{"topic": c.topic, "schema": c.schema_name, "schema_encoding": c.schema_encoding,
+                      "message_encoding": c.message_encoding, "messages": c.count}
+                     for c in sorted(lf.channels.values(), key=lambda c: c.topic)],
+        "attachments": {k: len(v) for k, v in lf.attachments.items()},
+        "metadata": lf.metadata,
+        "rejected": rejects,
+    }
+
+
+def format_info(lf: LogFile) -> str:
+    """Human-readable summary: file state, time range, one line per channel, attachments, metadata."""
+    d = info_dict(lf)
+    state = "complete" if lf.complete else f"TRUNCATED ({lf.error or 'no footer'}): read up to the last whole chunk"
+    lines = [f"file:      {lf.path} ({lf.size / 1e6:.2f} MB, {state})",
+             f"profile:   {lf.profile or '-'}   library: {lf.library or '-'}",
+             f"time:      {d['start']} .. {d['end']} ({d['duration_s']:.2f} s)",
+             f"messages:  {d['messages']} on {len(lf.channels)} channels", ""]
+    w = max([len(c["topic"]) for c in d["channels"]] + [5])
+    ws = max([len(c["schema"]) for c in d["channels"]] + [6])
+    lines.append(f"  {'topic':<{w}}  {'schema':<{ws}}  {'schema enc':<10}  {'msg enc':<8}  {'messages':>8}")
+    for c in d["channels"]:
+        lines.append(f"  {c['topic']:<{w}}  {c['schema']:<{ws}}  {c['schema_encoding']:<10}  "
+                     f"{c['message_encoding']:<8}  {c['messages']:>8}")
+    if lf.attachments:
+        lines += ["", "attachments: " + ", ".join(f"{k} ({v} B)" for k, v in d["attachments"].items())]
+    run = lf.metadata.get("foresight.run")
+    if run:
+        keys = ("mode", "steps", "step_period_s", "stale_limit_s", "prefix")
+        lines += ["", "run:       " + "  ".join(f"{k}={run[k]}" for k in keys if k in run)]
+    if "foresight.rejects" in lf.metadata:
+        rej = d["rejected"]
+        lines += ["rejected:  " + (", ".join(f"{k}: {v}" for k, v in sorted(rej.items())) if rej else "none")]
+    elif not lf.complete:
+        lines += ["rejected:  (counts are written when the file is closed)"]
+    return "\n".join(lines)

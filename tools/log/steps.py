@@ -1,0 +1,112 @@
+"""What one replanning step of a logged run shows: the plan and the messages it was made from.
+
+:func:`step_views` pairs every ``Plan`` in a log with the occupancy it was computed on, the pose that
+occupancy was predicted from (and its demonstration's first pose, to place the body in the scene)
+and the robot's state; :func:`step_title` says in two lines what a rendered step shows.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from shared.protocol import HumanPose, OccupancyGrid, Plan, ProtocolError, RobotState, decode
+from shared.recording.reader import LogFile
+from shared.scene import Scene, load_scene, parse_scene
+
+__all__ = ["StepView", "step_views", "step_title", "scene_of"]
+
+
+@dataclass
+class StepView:
+    """Everything drawn for one replanning step (decoded from the log).
+
+    ``t0`` is the start of the run on the messages' clock: 0 in lock-step (simulated time), the
+    first robot state's wall-clock stamp in real time; times in titles count from it.
+    """
+
+    plan: Plan
+    occupancy: OccupancyGrid | None
+    pose: HumanPose | None
+    first_pose: HumanPose | None
+    state: RobotState | None
+    t0: float = 0.0
+
+
+def _decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
+    topics = {c.topic for c in lf.channels.values() if c.schema_name == schema and c.message_encoding == "msgpack"}
+    out = []
+    for m in lf.messages:
+        if m.topic in topics:
+            try:
+                out.append((m.log_time, decode(m.data, cls)))
+            except ProtocolError:
+                continue  # only valid payloads are on these channels; be tolerant anyway
+    return out
+
+
+def _latest_before(items: list[tuple[int, Any]], t: int, pred: Callable[[Any], bool] = lambda _: True) -> Any:
+    best = None
+    for lt, msg in items:
+        if lt <= t and pred(msg):
+            best = msg
+    return best
+
+
+def step_views(lf: LogFile) -> dict[int, StepView]:
+    """One :class:`StepView` per replanning step (``Plan.step``) in the log (the last plan of a step wins)."""
+    plans = _decode_all(lf, "foresight.Plan", Plan)
+    occs = _decode_all(lf, "foresight.OccupancyGrid", OccupancyGrid)
+    poses = _decode_all(lf, "foresight.HumanPose", HumanPose)
+    states = _decode_all(lf, "foresight.RobotState", RobotState)
+    realtime = bool(plans) and all(p.tick < 0 for _, p in plans)
+    t0 = 0.0
+    if realtime:
+        t0 = min([s.stamp for _, s in states] or [p.stamp for _, p in plans])
+    views: dict[int, StepView] = {}
+    for lt, plan in plans:
+        occ = _latest_before(occs, lt, lambda o, p=plan: o.tick == p.occupancy_tick and o.index == p.occupancy_index)
+        occ = occ or _latest_before(occs, lt)
+        pose = None
+        if occ is not None:
+            pose = _latest_before(poses, lt, lambda h, o=occ: h.demo_id == o.demo_id and h.index == o.index)
+        pose = pose or _latest_before(poses, lt)
+        first = None
+        if pose is not None:
+            same = [h for _, h in poses if h.demo_id == pose.demo_id]
+            first = min(same, key=lambda h: h.index) if same else pose
+        views[plan.step] = StepView(plan, occ, pose, first, _latest_before(states, lt), t0)
+    return views
+
+
+def scene_of(lf: LogFile) -> Scene:
+    """The scene the run used: the log's ``scene.toml`` attachment, else the default scene."""
+    text = lf.attachments.get("scene.toml")
+    if text is None:
+        return load_scene(None)
+    return parse_scene(tomllib.loads(text.decode()), "scene.toml (attached)")
+
+
+def step_title(view: StepView) -> str:
+    """The two-line title of a rendered step.
+
+    Step, time (simulated in lock-step, seconds into the run in real time, never a raw epoch), choice,
+    costs and planning time; then the occupancy drawn and the robot's state.
+    """
+    plan, occ, t0 = view.plan, view.occupancy, view.t0
+    costs = ", ".join(f"{g}={c:.3g}" for g, c in zip(plan.goal_names, plan.cost_total, strict=True))
+    when = f"tick {plan.tick}, " if plan.tick >= 0 else ""
+    when += f"t = {plan.stamp - t0:.2f} s" + (" simulated" if plan.tick >= 0 else " into the run")
+    if occ is None:
+        occ_txt = "no occupancy logged"
+    elif occ.tick >= 0:
+        occ_txt = f"occupancy of tick {occ.tick} / pose {occ.index} ({occ.method})"
+    else:
+        occ_txt = f"occupancy of pose {occ.index} at t = {occ.stamp - t0:.2f} s ({occ.method})"
+    state_txt = ""
+    if view.state is not None:
+        state_txt = f"; robot {'HOLDING: ' + view.state.reason if view.state.holding else 'moving'}"
+    return (f"Replanning step {plan.step} ({when}): chosen {plan.goal_names[plan.chosen]}; cost {costs}; "
+            f"planning {plan.planning_ms:.0f} ms\n{occ_txt}{state_txt}")
