@@ -35,7 +35,7 @@ import os
 import tomllib
 import typing
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from shared.config_tree import (
     ENV_PREFIX,
@@ -118,6 +118,12 @@ ZENOH_FLAG_NAMES = {"mode": "zenoh_mode"}
 """Zenoh options whose flag differs from the field name in every command (``--mode`` is the services' own)."""
 
 
+class ArgumentGroup(Protocol):
+    """What :func:`add_config_arguments` needs of an argparse group (``parser.add_argument_group(...)``)."""
+
+    def add_argument(self, *names: str, **kwargs: Any) -> argparse.Action: ...
+
+
 def _flag(field_name: str) -> str:
     return "--" + field_name.replace("_", "-")
 
@@ -140,12 +146,14 @@ def add_config_arguments(parser: argparse.ArgumentParser, section: str, cls: typ
     environment variables. The Zenoh session mode is always ``--zenoh-mode``; any other Zenoh field
     whose flag a section field already uses is offered as ``--zenoh-<name>`` instead.
     """
-    if not any(a.dest == "config" for a in parser._actions):
+    try:
         parser.add_argument("--config", metavar="FILE", default=None,
                             help=f"TOML config file (or ${ENV_PREFIX}_CONFIG)")
+    except argparse.ArgumentError:  # the parser has its --config already (a tool with several sections)
+        pass
     options = config_options(section, cls)
     tables = config_tables(section, cls)
-    groups: dict[tuple[str, ...], argparse._ArgumentGroup] = {}
+    groups: dict[tuple[str, ...], ArgumentGroup] = {}
     for table, (text, _) in tables.items():
         if not any(o.table == table for o in options):
             continue
@@ -162,7 +170,7 @@ def add_config_arguments(parser: argparse.ArgumentParser, section: str, cls: typ
             _add_flag(group, names[o.field], o)
 
 
-def _add_flag(group: argparse._ArgumentGroup, flag: str, o: Option) -> None:
+def _add_flag(group: ArgumentGroup, flag: str, o: Option) -> None:
     inner, is_list = base_type(o.tp)
     shown = ",".join(map(str, o.default)) if is_list else o.default
     text = f"{o.help} (default: {shown})".replace("%", "%%")
