@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -41,8 +42,8 @@ def _common(p: argparse.ArgumentParser, scene: str) -> None:
     p.add_argument("--robot-speed", type=float, default=Timing.robot_speed, help="fraction of the PR2's joint "
                    "velocity limits (default: 0.25)")
     p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20, the paper's)")
-    p.add_argument("--w-human", type=float, default=-1.0, help="weight of the planner's human cost (negative: the "
-                   "planner's default, 1); for ablations")
+    p.add_argument("--w-human", type=float, default=None, help="weight of the planner's human cost (default: the "
+                   "planner's, 1); for ablations")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
     p.add_argument("--no-compile", action="store_true", help="evaluate the planner's cost eagerly (no "
@@ -69,6 +70,8 @@ def _timing(args: argparse.Namespace) -> Timing:
         raise UserError("--steps and --iterations must be >= 1, --period-s > 0, --robot-speed in (0, 1]")
     if args.components < 1:
         raise UserError(f"--components must be >= 1, got {args.components}")
+    if args.w_human is not None and not (math.isfinite(args.w_human) and args.w_human >= 0):
+        raise UserError(f"--w-human must be a finite weight >= 0, got {args.w_human}")
     return t
 
 

@@ -52,7 +52,7 @@ class InterferenceConfig:
     seeds: int = 10
     timing: Timing = Timing()
     components: int | None = None
-    w_human: float = -1.0
+    w_human: float | None = None  # None: the planner's default
     selection_seed: int = 0
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")

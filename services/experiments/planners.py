@@ -59,7 +59,7 @@ class Timing:
 
 
 def build_planner(scene: Scene, goals: list[str], human_cost: bool, timing: Timing, compile: bool = True,
-                  device: str = "cpu", w_human: float = -1.0) -> Planner:
+                  device: str = "cpu", w_human: float | None = None) -> Planner:
     """A lock-step planner for ``goals`` (cup names) of ``scene``.
 
     Args:
@@ -69,10 +69,10 @@ def build_planner(scene: Scene, goals: list[str], human_cost: bool, timing: Timi
         timing: Iterations and robot speed.
         compile: torch.compile the fused cost.
         device: torch device.
-        w_human: Weight of the human cost when ``human_cost`` (negative: the planner's default).
+        w_human: Weight of the human cost when ``human_cost`` (None: ``CostConfig``'s default).
     """
     cost = CostConfig()
-    if not human_cost or w_human >= 0:
+    if not human_cost or w_human is not None:
         cost = dataclasses.replace(cost, w_human=w_human if human_cost else 0.0)
     cfg = PlannerConfig(goals=list(goals), stomp=StompConfig(iterations=timing.iterations),
                         velocity_scale=timing.robot_speed, lookahead_s=0.0, cost=cost, compile=compile, device=device)

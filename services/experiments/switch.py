@@ -79,7 +79,7 @@ class SwitchConfig:
     seed: int = 0
     timing: Timing = Timing()
     components: int | None = None
-    w_human: float = -1.0
+    w_human: float | None = None  # None: the planner's default
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
 
