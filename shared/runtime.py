@@ -12,6 +12,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
+from shared.native_threads import limit_blas_threads
 
 __all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError", "service_main", "help_text"]
 
@@ -93,6 +94,7 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
     args = parser.parse_args(argv)
     stop = threading.Event()
     with cli_errors(prog):
+        limit_blas_threads()  # python -m services.X does not pass through tools.foresight
         cfg, zcfg = resolve_config(section, config_cls, args)
         setup_logging(cfg.log_level)
         restore = stop_on_signals(stop)

@@ -9,6 +9,9 @@ import pytest
 
 from services.processes import free_port
 from shared.config import ZenohConfig
+from shared.native_threads import limit_blas_threads
+
+limit_blas_threads()  # as every foresight process does (shared/native_threads.py)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"  # read-only reference material beside the clone

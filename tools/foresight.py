@@ -55,6 +55,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"foresight: error: unknown command {command!r} (choose from {', '.join(COMMANDS)})",
               file=sys.stderr)
         return 2
+    from shared.config import ConfigError
+    from shared.native_threads import limit_blas_threads
+
+    try:
+        limit_blas_threads()
+    except ConfigError as exc:
+        print(f"foresight: error: {exc}", file=sys.stderr)
+        return 2
     module = importlib.import_module(COMMANDS[command][0])
     try:
         return int(module.main(rest, prog=f"foresight {command}") or 0)

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from shared.library import MotionLibrary
+from shared.native_threads import limit_blas_threads
 from shared.scene import load_scene
 
 from .heldout import SYNTHETIC, load_experiment_library
@@ -230,7 +231,7 @@ def run_report(args: argparse.Namespace) -> int:
     workers = min(len(libs), max(1, (os.cpu_count() or 1)))
     if workers > 1:
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=limit_blas_threads) as pool:
             futures = [pool.submit(library_section, spec, plan, out, Path(args.models_dir), 1) for spec in libs]
             sections = [f.result() for f in futures]
     else:

@@ -31,7 +31,7 @@ from .core import GoalSet, Planner, PlannerConfig
 from .fk_bench import fk_time_ms
 from .stomp import StompConfig
 
-__all__ = ["main", "bench_goals", "blob_occupancy", "run_bench"]
+__all__ = ["main", "bench_goals", "blob_occupancy", "run_bench", "convergence"]
 
 
 def blob_occupancy(scene: Scene, center: tuple[float, float, float] | None = None, sigma: float = 0.12) -> np.ndarray:
@@ -83,17 +83,46 @@ def bench_goals(base: GoalSet, robot: Any, k: int, seed: int = 0, spread: float 
     return GoalSet.joint_space(names, q.numpy(), robot)
 
 
+CHECKPOINTS = (0, 5, 10, 20, 30, 40, 50)
+"""Iterations at which ``foresight bench planner`` reports the cost reached."""
+
+
+def convergence(histories: list[np.ndarray], checkpoints: tuple[int, ...] = CHECKPOINTS) -> list[float]:
+    """Cost reached against iterations: the best cost so far, summed over the goals, over the final one.
+
+    Args:
+        histories: Per step, ``(I + 1, K)`` ``PlanResult.cost_history``.
+        checkpoints: Iteration counts (those beyond I are dropped).
+
+    Returns:
+        Per checkpoint, the median over the steps of sum_k min_{i' <= i} cost_k(i') / sum_k min_i' cost_k(i').
+    """
+    ratios = []
+    for h in histories:
+        best = np.minimum.accumulate(np.asarray(h, dtype=np.float64), axis=0).sum(-1)  # (I + 1,)
+        ratios.append([best[i] / max(best[-1], 1e-12) for i in checkpoints if i < len(best)])
+    n = min(len(r) for r in ratios)
+    return [round(float(np.median([r[j] for r in ratios])), 3) for j in range(n)]
+
+
+def _sync(device: Any) -> None:
+    if torch.device(device).type == "cuda":
+        torch.cuda.synchronize(device)
+
+
 def _time_fk(robot: Any, n: int, iterations: int, repeats: int, seed: int) -> tuple[float, float]:
     """Median wall and process-CPU ms of ``iterations`` calls of ``robot.fk_links`` on ``n`` configurations."""
     gen = torch.Generator(device=robot.lower.device).manual_seed(seed)
     q = robot.lower + (robot.upper - robot.lower) * torch.rand(n, robot.lower.shape[0], generator=gen,
                                                                device=robot.lower.device, dtype=robot.lower.dtype)
     robot.fk_links(q)
+    _sync(q.device)
     times, cpu = [], []
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
         for _ in range(iterations):
             robot.fk_links(q)
+        _sync(q.device)
         times.append((time.perf_counter() - t0) * 1e3)
         cpu.append((time.process_time() - c0) * 1e3)
     return statistics.median(times), statistics.median(cpu)
@@ -123,6 +152,7 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
     q0 = start_configuration(base.robot)
     out: dict[str, Any] = {"K": [], "step_ms": [], "step_ms_min": [], "step_cpu_ms": [], "fk_ms": [],
                            "fk_cpu_ms": [], "pk_fk_ms": [], "ratio": [], "construct_s": [], "compiled": False,
+                           "checkpoints": list(CHECKPOINTS), "cost_cold": [], "cost_warm": [],
                            "rollouts": config.stomp.rollouts, "waypoints": config.stomp.waypoints,
                            "iterations": config.stomp.iterations, "threads": torch.get_num_threads(),
                            "device": config.device, "dtype": config.dtype, "steps": steps,
@@ -133,12 +163,16 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
         out["construct_s"].append(round(time.perf_counter() - t0, 2))
         out["compiled"] = bool(planner.fused is not None and planner.fused.compiled)
         res = planner.step(q0, occ)  # warm-up (first step: straight lines)
-        times, cpu = [], []
+        cold = res.cost_history
+        times, cpu, warm = [], [], []
         for _ in range(steps):
             c0 = time.process_time()
             res = planner.step(res.start, occ)  # the robot is where the last plan starts
             cpu.append((time.process_time() - c0) * 1e3)
             times.append(res.planning_ms)
+            warm.append(res.cost_history)
+        out["cost_cold"].append(convergence([cold]))
+        out["cost_warm"].append(convergence(warm))
         st = config.stomp
         fk, fk_cpu = _time_fk(base.robot, k * st.rollouts * st.waypoints, st.iterations, 3, config.seed)
         step_ms = statistics.median(times)
@@ -152,6 +186,9 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
                         seed=config.seed)
         out["pk_fk_ms"].append(round(pk * config.stomp.iterations, 2))
         out["ratio"].append(round(step_ms / fk, 2))
+    if 1 in out["K"]:
+        one = out["step_ms"][out["K"].index(1)]
+        out["time_vs_k1"] = [round(t / one, 2) for t in out["step_ms"]]
     out["load_avg_1min_end"] = os.getloadavg()[0]
     return out
 
@@ -209,100 +246,11 @@ def _memory_probe(k: int, steps: int, cfg: dict[str, Any]) -> None:
     print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)  # Linux: KiB
 
 
-def _box_edges(lo: np.ndarray, hi: np.ndarray) -> list[np.ndarray]:
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    pairs = [(a, b) for a in range(8) for b in range(a + 1, 8) if np.sum(corners[a] != corners[b]) == 1]
-    return [corners[[a, b]] for a, b in pairs]
-
-
-def plot_blob(path: str, config: PlannerConfig | None = None, center: tuple[float, float, float] | None = None,
-              steps: int = 1) -> dict[str, Any]:
-    """Plan for the scene's goals around a synthetic blob and draw the end-effector paths (PNG).
-
-    Three panels: top view (x-y), side view (x-z) and 3-D; the optimised paths (solid), the straight
-    lines they started from (dashed), the blob (voxels with p > 0.3), the table and the cups.
-
-    Returns:
-        Per-goal human cost of the straight lines and of the optimised trajectories.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    config = config or PlannerConfig()
-    scene = load_scene()
-    planner = Planner(scene, config)
-    occ = blob_occupancy(scene, center)
-    q0 = planner.robot.q_start.double().cpu().numpy()
-    res = planner.step(q0, occ)
-    for _ in range(steps - 1):
-        res = planner.step(res.start, occ)
-    dev, dt = planner.device, planner.dtype
-    trajs = torch.as_tensor(res.trajectories, device=dev, dtype=dt)
-    from .multigoal import init_straight_lines
-
-    lines = init_straight_lines(trajs[:, 0], trajs[:, -1], trajs.shape[1])
-    t_opt, t_line = planner.cost_terms(trajs), planner.cost_terms(lines)
-    ee = planner.robot.end_effector(trajs)[..., :3, 3].cpu().numpy()  # (K, T, 3)
-    ee_line = planner.robot.end_effector(lines)[..., :3, 3].cpu().numpy()
-    blob = scene.grid.centers()[occ > 0.3]
-    fig = plt.figure(figsize=(16, 5.5))
-    axes = [fig.add_subplot(1, 3, 1), fig.add_subplot(1, 3, 2), fig.add_subplot(1, 3, 3, projection="3d")]
-    colors = ["tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown", "tab:pink", "tab:gray"]
-    for ax, (i, j), title in zip(axes[:2], [(0, 1), (0, 2)], ["top view (x-y)", "side view (x-z)"], strict=True):
-        ax.scatter(blob[:, i], blob[:, j], s=4, c="orange", alpha=0.15, label="occupancy p > 0.3")
-        for b in scene.boxes:
-            ax.add_patch(plt.Rectangle((b.lower[i], b.lower[j]), b.size[i], b.size[j], fill=False, color="k",
-                                       label=b.name))
-        for cup in scene.cups:
-            ax.add_patch(plt.Circle((cup.center[i], cup.center[j]), cup.radius, color="saddlebrown", alpha=0.7))
-            ax.annotate(cup.name, (cup.center[i], cup.center[j]), fontsize=8, xytext=(4, 4), textcoords="offset points")
-        for k in range(ee.shape[0]):
-            col = colors[k % len(colors)]
-            ax.plot(ee_line[k, :, i], ee_line[k, :, j], "--", color=col, alpha=0.6)
-            ax.plot(ee[k, :, i], ee[k, :, j], "-o", ms=2, color=col,
-                    label=f"{res.goal_names[k]}{' (chosen)' if k == res.chosen else ''}")
-        ax.plot(ee[0, 0, i], ee[0, 0, j], "k*", ms=10, label="start")
-        ax.set_xlabel("xyz"[i] + " (m)")
-        ax.set_ylabel("xyz"[j] + " (m)")
-        ax.set_aspect("equal")
-        ax.set_title(title)
-    axes[0].legend(fontsize=7, loc="best")
-    ax3 = axes[2]
-    ax3.scatter(blob[:, 0], blob[:, 1], blob[:, 2], s=3, c="orange", alpha=0.08)
-    for b in scene.boxes:
-        for e in _box_edges(b.lower, b.upper):
-            ax3.plot(e[:, 0], e[:, 1], e[:, 2], "k-", lw=0.8)
-    for cup in scene.cups:
-        ax3.plot([cup.position[0]] * 2, [cup.position[1]] * 2, [cup.position[2], cup.position[2] + cup.height],
-                 color="saddlebrown", lw=5)
-    for k in range(ee.shape[0]):
-        col = colors[k % len(colors)]
-        ax3.plot(ee_line[k, :, 0], ee_line[k, :, 1], ee_line[k, :, 2], "--", color=col, alpha=0.6)
-        ax3.plot(ee[k, :, 0], ee[k, :, 1], ee[k, :, 2], "-", color=col, lw=2)
-    ax3.set_xlabel("x")
-    ax3.set_ylabel("y")
-    ax3.set_zlabel("z")
-    ax3.set_title("3-D (dashed: straight lines in joint space)")
-    human_line = t_line["human"].double().cpu().numpy()
-    human_opt = t_opt["human"].double().cpu().numpy()
-    fig.suptitle("STOMP around a predicted-occupancy blob: end-effector paths; human cost straight -> optimised: "
-                 + ", ".join(f"{n} {a:.2f} -> {b:.3f}" for n, a, b in zip(res.goal_names, human_line, human_opt,
-                                                                           strict=True)), fontsize=10)
-    fig.tight_layout()
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return {"goal_names": res.goal_names, "human_straight": human_line.tolist(), "human_optimised": human_opt.tolist(),
-            "chosen": res.chosen, "png": path}
-
-
 def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -> int:
     """Run the planner benchmark; see ``--help``."""
     p = argparse.ArgumentParser(prog=prog, description=help_text(__doc__.split("\n\n")[0]))
     p.add_argument("--json", action="store_true", help="print one JSON object (keys K, step_ms, fk_ms, ...)")
-    p.add_argument("--k", default="1,2,4,8", help="comma-separated goal counts (default 1,2,4,8)")
+    p.add_argument("--k", default="1,2,4,8,16", help="comma-separated goal counts (default 1,2,4,8,16)")
     p.add_argument("--steps", type=int, default=5, help="timed replanning steps per K (median reported)")
     p.add_argument("--rollouts", type=int, default=16)
     p.add_argument("--waypoints", type=int, default=40)
@@ -346,12 +294,21 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
                   f"{report['threads']} threads, {config.device}, {config.dtype}, fused cost"
                   f"{', compiled' if report['compiled'] else ', eager'}); load avg "
                   f"{report['load_avg_1min']:.2f} -> {report['load_avg_1min_end']:.2f} (other processes share the CPU)")
+            vs1 = report.get("time_vs_k1")
             print(f"{'K':>3} {'step ms':>9} {'min ms':>8} {'cpu ms':>8} {'FK ms':>8} {'FK cpu':>8} {'step/FK':>8} "
-                  f"{'pk FK ms':>9}")
+                  f"{'pk FK ms':>9}" + (f" {'t(K)/t(1)':>10}" if vs1 else ""))
             for i, k in enumerate(report["K"]):
                 print(f"{k:>3} {report['step_ms'][i]:>9.1f} {report['step_ms_min'][i]:>8.1f} "
                       f"{report['step_cpu_ms'][i]:>8.1f} {report['fk_ms'][i]:>8.1f} {report['fk_cpu_ms'][i]:>8.1f} "
-                      f"{report['ratio'][i]:>8.2f} {report['pk_fk_ms'][i]:>9.1f}")
+                      f"{report['ratio'][i]:>8.2f} {report['pk_fk_ms'][i]:>9.1f}"
+                      + (f" {vs1[i]:>10.2f}" if vs1 else ""))
+            marks = report["checkpoints"][:len(report["cost_warm"][0])]
+            print("cost reached against STOMP iterations (best so far / final, summed over the goals; median of the "
+                  "timed steps, warm-started from the previous tau_best; cold = the first step, straight lines):")
+            print(f"{'K':>3} {'start':>6} " + " ".join(f"{'it ' + str(m):>7}" for m in marks))
+            for i, k in enumerate(report["K"]):
+                for name in ("cold", "warm"):
+                    print(f"{k:>3} {name:>6} " + " ".join(f"{v:>7.3f}" for v in report[f"cost_{name}"][i]))
             if args.baseline:
                 print("unfused reference path (StateCost, eager), same process: "
                       + ", ".join(f"K={k}: {b:.1f} ms ({x:.2f}x)" for k, b, x in
@@ -366,6 +323,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
         if args.profile:
             print(profile_step(config), file=sys.stderr if args.json else sys.stdout)
         if args.plot:
+            from .blob_plot import plot_blob
+
             info = plot_blob(args.plot, config)
             print(f"wrote {info['png']}: human cost straight -> optimised "
                   + ", ".join(f"{n} {a:.2f} -> {b:.3f}" for n, a, b in zip(info["goal_names"], info["human_straight"],

@@ -21,6 +21,7 @@ from shared.config import ConfigError, nested, opt
 from shared.scene import SCENE_HELP
 
 from .costs import CostConfig
+from .replan import TRIGGERS
 from .stomp import StompConfig
 
 __all__ = ["PlannerConfig", "PlannerServiceConfig"]
@@ -50,6 +51,8 @@ class PlannerConfig:
     velocity_scale: float = opt(0.5, help="fraction of the joint velocity limits used to time trajectories")
     min_dt: float = opt(0.01, help="smallest time between waypoints (s)")
     goal_tol: float = opt(1e-3, help="a goal this close (joint-space norm) to q_t is reached: its trajectory holds it")
+    anytime_min_iterations: int = opt(0, help="anytime: with a newer input waiting, stop STOMP after this many "
+                                      "iterations (0: always run stomp.iterations; real-time event mode only)")
     off_path_tol: float = opt(0.05, help="joint-space distance beyond which the robot is taken as off tau_best")
     limit_tol: float = opt(1e-3, help="start configurations this far outside the limits are clamped, not refused")
     stomp: StompConfig = nested(
@@ -70,12 +73,14 @@ class PlannerConfig:
         except ValueError as exc:
             raise ConfigError(f"planner.cost.{str(exc).removeprefix('costs.')}") from None
         checks = [("threads", self.threads >= 0), ("lookahead_s", self.lookahead_s >= 0),
+                  ("anytime_min_iterations", self.anytime_min_iterations >= 0),
                   ("velocity_scale", 0 < self.velocity_scale <= 1), ("min_dt", self.min_dt > 0),
                   ("off_path_tol", self.off_path_tol >= 0), ("limit_tol", self.limit_tol >= 0),
                   ("goal_tol", self.goal_tol >= 0)]
         for name, ok in checks:
             if not ok:
                 raise ConfigError(f"planner.{name}: bad value {getattr(self, name)!r}")
+        check_device(self.device)
 
     def stomp_config(self, joint_noise_scale: Sequence[float] | None = None) -> StompConfig:
         """``stomp`` with the planner's seed, device and dtype (``joint_noise_scale`` if not configured)."""
@@ -90,7 +95,10 @@ class PlannerServiceConfig:
 
     mode: str = opt("realtime", help="replan on a wall-clock period or on every ClockTick (lock-step: no lookahead)",
                     choices=("realtime", "lockstep"))
-    period_s: float = opt(0.5, help="real-time replanning period (s)")
+    period_s: float = opt(0.5, help="real-time: longest time between two replanning steps (s)")
+    trigger: str = opt("event", help="real-time: 'event' starts a step as soon as a new prediction arrives or the "
+                       "robot leaves its plan (period_s as the upper bound); 'period' replans on period_s only",
+                       choices=TRIGGERS)
     input_timeout_s: float = opt(10.0, help="lock-step: longest wait for a tick's robot state / occupancy (s)")
     scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")
     stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
@@ -115,3 +123,21 @@ class PlannerServiceConfig:
         if self.mode == "lockstep":
             return dataclasses.replace(self.planner, lookahead_s=0.0)
         return self.planner
+
+
+def check_device(device: str) -> None:
+    """Raise :class:`ConfigError` if ``device`` is not a torch device this machine has (e.g. ``cuda`` without a GPU)."""
+    import torch
+
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, ValueError) as exc:
+        raise ConfigError(f"planner.device: {device!r} is not a torch device ({exc})") from None
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ConfigError(f"planner.device: {device!r} asked for, but torch sees no CUDA device here "
+                              f"(torch {torch.__version__}, CUDA build: {torch.version.cuda or 'no'})")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ConfigError(f"planner.device: {device!r}: only {torch.cuda.device_count()} CUDA device(s)")
+    elif dev.type != "cpu":
+        raise ConfigError(f"planner.device: {device!r}: only cpu and cuda are supported")

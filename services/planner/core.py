@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -88,6 +88,9 @@ class PlanResult:
         start: ``(D,)`` the configuration the trajectories start at (q_t).
         planning_ms: Wall time of :meth:`Planner.step`.
         reasons: Why each invalid goal is invalid.
+        iterations: STOMP iterations run (``stomp.iterations``, fewer when the anytime option stopped early).
+        cost_history: ``(iterations + 1, Kv)`` total cost of each valid goal's current trajectory before each
+            iteration and after the last (``StompResult.history``; how fast the step converged).
     """
 
     step: int
@@ -104,6 +107,8 @@ class PlanResult:
     start: np.ndarray
     planning_ms: float
     reasons: list[str]
+    iterations: int = 0
+    cost_history: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 class Planner:
@@ -283,11 +288,13 @@ class Planner:
         step = ((traj[:, 1:] - traj[:, :-1]).abs() / self._vmax).amax(dim=(1, 2))
         return step.clamp_min(self.config.min_dt)
 
-    def start_configuration(self, q_current: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+    def start_configuration(self, q_current: torch.Tensor, lookahead_s: float | None = None
+                            ) -> tuple[torch.Tensor, torch.Tensor | None]:
         """``q_t``: where the robot will be when the new plan starts, and its index on tau_best.
 
         Args:
             q_current: ``(D,)`` the robot's configuration now.
+            lookahead_s: Time until the plan is executed (default ``config.lookahead_s``).
 
         Returns:
             ``(q_t (D,), s_t)``: ``s_t`` is the fractional waypoint index on the previous tau_best, or
@@ -300,10 +307,23 @@ class Planner:
         if float(dist) > self.config.off_path_tol:
             log.info("robot %.3f from tau_best: reconnecting every goal from its configuration", float(dist))
             return q_current, None
-        s_t = (s_cur + self.config.lookahead_s / self._prev_dt).clamp(max=tau.shape[0] - 1)
+        ahead = self.config.lookahead_s if lookahead_s is None else lookahead_s
+        s_t = (s_cur + ahead / self._prev_dt).clamp(max=tau.shape[0] - 1)
         return interpolate_path(tau, s_t), s_t
 
-    def step(self, q_current: Any, occupancy: Any, grid: Grid | None = None) -> PlanResult:
+    def departure(self, q_current: Any) -> float | None:
+        """Distance (rad, the max-norm of :func:`project_onto_path`) of ``q_current`` ``(D,)`` from tau_best.
+
+        None before the first step. Beyond ``off_path_tol`` the robot has left the plan (the real-time
+        service replans at once, ``services.planner.replan``).
+        """
+        if self._prev is None or self._prev_best is None:
+            return None
+        q = torch.as_tensor(np.asarray(q_current, dtype=np.float64), device=self.device, dtype=self.dtype)
+        return float(project_onto_path(self._prev[self._prev_best], q)[1])
+
+    def step(self, q_current: Any, occupancy: Any, grid: Grid | None = None,
+             interrupt: Callable[[], bool] | None = None, lookahead_s: float | None = None) -> PlanResult:
         """One replanning step of Algorithm 1.
 
         Args:
@@ -311,6 +331,9 @@ class Planner:
             occupancy: Predicted occupancy: an ``OccupancyGrid`` message or a dense ``(nx, ny, nz)``
                 array of probabilities on ``grid``.
             grid: Geometry of a dense ``occupancy`` (default: the scene's grid).
+            interrupt: Anytime: STOMP stops early when this returns True, after at least
+                ``anytime_min_iterations`` iterations (ignored while that is 0).
+            lookahead_s: Time until the plan will be executed (default ``config.lookahead_s``).
 
         Returns:
             The K trajectories, their cost terms and the chosen goal.
@@ -323,12 +346,14 @@ class Planner:
         occ, origin, res = self.check_occupancy(occupancy, grid)
         self.cost.set_occupancy(occ, origin, res)
         c = self.config
-        q_t, s_t = self.start_configuration(q)
+        q_t, s_t = self.start_configuration(q, lookahead_s)
         if self._prev is None:
             init = init_straight_lines(q_t, self.goal_q, c.stomp.waypoints)
         else:
             init = reconnect_previous(self._prev, self._prev_best, q_t, s_t, self.waypoint_cost)
-        result = self.stomp.optimize(init, self.waypoint_cost, seeds=self._seeds())
+        anytime = interrupt if c.anytime_min_iterations > 0 else None
+        result = self.stomp.optimize(init, self.waypoint_cost, seeds=self._seeds(), interrupt=anytime,
+                                     min_iterations=c.anytime_min_iterations)
         # a reached goal holds still: STOMP would trade a tiny cost at the goal for a loop away and back
         reached = (init[:, -1] - init[:, 0]).norm(dim=-1) <= c.goal_tol  # (Kv,)
         trajs = torch.where(reached[:, None, None], init[:, -1:].expand_as(init), result.trajectories)  # (Kv, T, D)
@@ -352,7 +377,8 @@ class Planner:
             cost_obstacle=costs["obstacle"], cost_human=costs["human"], cost_total=costs["total"],
             valid=self.goals.valid.cpu().numpy().astype(bool), chosen=self.valid_index[chosen_v],
             dt=self._prev_dt, start=q_t.double().cpu().numpy(), planning_ms=(time.perf_counter() - t0) * 1e3,
-            reasons=list(self.goals.reasons) or [""] * k)
+            reasons=list(self.goals.reasons) or [""] * k, iterations=result.history.shape[0] - 1,
+            cost_history=result.history.double().cpu().numpy())
 
 
 def _default_cost(scene: Scene, robot: Any, config: PlannerConfig) -> PlannerCost:

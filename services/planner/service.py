@@ -10,9 +10,14 @@ Lock-step mode (deterministic; see docs/protocol.md): on ClockTick n the planner
 
 waiting for each at most ``input_timeout_s``, runs :meth:`Planner.step` and publishes Plan(tick=n).
 
-Real-time mode: every ``period_s`` the planner plans from the newest robot state with the newest
-occupancy (latest-only subscription, so a slow planner never works through stale grids), looking
-``period_s`` ahead along the previous tau_best.
+Real-time mode: the planner plans from the newest robot state with the newest occupancy (latest-only
+subscriptions, so a slow planner never works through stale grids). With ``trigger = "event"`` (default)
+a step starts as soon as the planner is idle and a new prediction has arrived or the robot has left its
+plan, ``period_s`` being the longest gap (:mod:`services.planner.replan`); the plan starts one recent
+planning time (at most ``lookahead_s``) ahead along the previous tau_best, where the robot will be when
+it arrives. With ``trigger = "period"`` it plans every ``period_s``, ``lookahead_s`` ahead. Each Plan
+carries the inputs it used: ``stamp`` is the RobotState's stamp, ``occupancy_tick``/``occupancy_index``
+the prediction's.
 """
 
 from __future__ import annotations
@@ -20,6 +25,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,8 +47,9 @@ from shared.transport import (
 
 from .config import PlannerServiceConfig
 from .core import Planner, PlannerError, PlanResult
+from .replan import ReplanTrigger
 
-__all__ = ["PlannerServiceConfig", "PlannerService", "PlannerStats", "plan_message"]
+__all__ = ["PlannerServiceConfig", "PlannerService", "PlannerStats", "plan_message", "occupancy_identity"]
 
 log = logging.getLogger("foresight.planner")
 
@@ -96,22 +104,26 @@ class PlannerService:
         self.rejects = RejectCounter("planner")
         self.stats = PlannerStats()
         self._empty = np.zeros(self.scene.grid.dims, dtype=np.float32)
+        self.trigger: ReplanTrigger | None = None  # real-time mode: when steps start (and why, counted)
 
     def _plan(self, q: np.ndarray, occupancy: OccupancyGrid | None, tick: int, stamp: float,
-              pub: TypedPublisher[Plan]) -> None:
+              pub: TypedPublisher[Plan], interrupt: Callable[[], bool] | None = None,
+              lookahead_s: float | None = None) -> PlanResult | None:
         try:
-            result = self.planner.step(q, occupancy if occupancy is not None else self._empty)
+            result = self.planner.step(q, occupancy if occupancy is not None else self._empty, interrupt=interrupt,
+                                       lookahead_s=lookahead_s)
             pub.put(plan_message(result, tick, stamp, occupancy))
         except (PlannerError, ValueError) as exc:  # bad input or no plan: log, keep serving
             self.stats.failures += 1
             self.stats.last_error = str(exc)
             log.error("planner: step at tick %d failed: %s", tick, exc)
-            return
+            return None
         self.stats.plans += 1
         self.stats.planning_ms.append(result.planning_ms)
         costs = ", ".join(f"{n}={c:.3g}" for n, c in zip(result.goal_names, result.cost_total, strict=True))
         log.info("planner: tick %d step %d chose %s (%s) in %.0f ms", tick, result.step,
                  result.goal_names[result.chosen], costs, result.planning_ms)
+        return result
 
     def run(self, stop: threading.Event | None = None) -> PlannerStats:
         """Serve until ``stop`` is set."""
@@ -158,8 +170,13 @@ class PlannerService:
                 s.undeclare()
 
     def _run_realtime(self, session: object, pub: TypedPublisher[Plan], stop: threading.Event) -> None:
-        occupancy = LatestSubscriber(session, self.keys.occupancy, OccupancyGrid, self.rejects)
-        state = LatestSubscriber(session, self.keys.robot_state, RobotState, self.rejects)
+        wake = threading.Event()  # set by every new input: the loop re-checks its trigger at once
+
+        def on_input(_msg: object) -> None:
+            wake.set()
+
+        occupancy = LatestSubscriber(session, self.keys.occupancy, OccupancyGrid, self.rejects, on_message=on_input)
+        state = LatestSubscriber(session, self.keys.robot_state, RobotState, self.rejects, on_message=on_input)
 
         def on_demo(msg: DemoMarker) -> None:
             if msg.event == "start":
@@ -167,21 +184,50 @@ class PlannerService:
 
         demo_sub = subscribe(session, self.keys.demo, DemoMarker, on_demo, self.rejects)
         presence = Presence(session, self.keys, "planner", stop_with=self.config.stop_with, stop=stop)
+        trigger = self.trigger = ReplanTrigger(self.config.period_s, self.config.trigger)
+        tol = self.planner.config.off_path_tol
+        recent: deque[float] = deque(maxlen=5)  # the last steps' planning times (s): the event mode's lookahead
+
+        def newer_waiting() -> bool:  # anytime: a prediction newer than the one being planned against
+            return trigger.newer_than_planned(occupancy_identity(occupancy.latest))
+
         try:
-            next_t = time.monotonic()
             while not stop.is_set():
+                wake.clear()
                 robot = state.latest
                 if robot is None:
-                    stop.wait(0.05)
+                    wake.wait(0.05)
                     continue
-                self._plan(robot.q, occupancy.latest, -1, time.time(), pub)
-                next_t += self.config.period_s
-                delay = next_t - time.monotonic()
-                if delay < 0:  # overran the period: start the next step now, do not pile up
-                    next_t = time.monotonic()
-                stop.wait(max(delay, 0.0))
+                occ = occupancy.latest
+                ident = occupancy_identity(occ)
+                departed = False
+                if trigger.mode == "event":
+                    dist = self.planner.departure(robot.q)
+                    departed = dist is not None and dist > tol
+                now = time.monotonic()
+                reason = trigger.reason(now, ident, departed)
+                if reason is None:
+                    wake.wait(trigger.wait_s(now))
+                    continue
+                trigger.start(now, ident, reason)
+                lookahead = None  # period mode: the configured lookahead (the demo sets it to the period)
+                if trigger.mode == "event" and recent:  # the plan is executed about one planning time from now
+                    lookahead = min(self.planner.config.lookahead_s, float(np.median(recent)))
+                result = self._plan(robot.q, occ, -1, robot.stamp, pub, interrupt=newer_waiting,
+                                    lookahead_s=lookahead)
+                if result is not None:
+                    recent.append(result.planning_ms / 1e3)
         finally:
+            log.info("planner: real-time steps by trigger: %s", ", ".join(f"{k} {v}" for k, v in
+                                                                          trigger.counts.items()))
             presence.close()
             for s in (occupancy, state):
                 s.undeclare()
             demo_sub.undeclare()
+
+
+def occupancy_identity(msg: OccupancyGrid | None) -> tuple[int, int, int, float] | None:
+    """What tells two predictions apart: ``(demo_id, tick, index, stamp)`` (None: no prediction)."""
+    if msg is None:
+        return None
+    return (msg.demo_id, msg.tick, msg.index, msg.stamp)

@@ -100,8 +100,8 @@ class StompResult:
     Attributes:
         trajectories: ``(K, T, D)`` the least-cost trajectory seen per goal (within the bounds).
         cost: ``(K,)`` its total cost (sum over waypoints of the cost callable).
-        history: ``(I + 1, K)`` total cost of the current (noise-free) trajectory before each
-            iteration and after the last one.
+        history: ``(I' + 1, K)`` total cost of the current (noise-free) trajectory before each of the
+            I' iterations run (``config.iterations``, fewer when interrupted) and after the last one.
     """
 
     trajectories: torch.Tensor
@@ -206,8 +206,9 @@ class Stomp:
             raise StompError("start or goal configuration outside the joint limits")
         return torch.clamp(q0, self.lower, self.upper)
 
-    def optimize(self, q0: torch.Tensor, cost_fn: CostFn, seeds: Sequence[int] | None = None) -> StompResult:
-        """Run ``config.iterations`` STOMP iterations on K trajectories at once.
+    def optimize(self, q0: torch.Tensor, cost_fn: CostFn, seeds: Sequence[int] | None = None,
+                 interrupt: Callable[[], bool] | None = None, min_iterations: int = 0) -> StompResult:
+        """Run ``config.iterations`` STOMP iterations on K trajectories at once (fewer when interrupted).
 
         Args:
             q0: ``(K, T, D)`` initial trajectories; ``q0[:, 0]`` and ``q0[:, -1]`` (start and goal)
@@ -216,6 +217,10 @@ class Stomp:
                 with R' = R + 1 (the current trajectory first, then the R noisy rollouts) and once at
                 the end with R' = 1. Goals must not interact (row k depends only on ``q[k]``).
             seeds: K noise seeds (default ``config.seed + k``).
+            interrupt: Anytime: asked after each iteration from ``min_iterations`` on; True stops the
+                loop there (the result is the best so far). A host-side callable (e.g. "is a newer input
+                waiting?"): it never reads a tensor, so it adds no device synchronisation.
+            min_iterations: Iterations always run before ``interrupt`` is asked.
 
         Returns:
             The least-cost trajectory per goal, its cost and the cost history.
@@ -262,6 +267,8 @@ class Stomp:
             # 4. update: probability-weighted noise, smoothed by M, kept within the limits
             delta = torch.matmul(self.M, (p[..., None] * eps).sum(1))  # (K, N, D)
             theta = torch.clamp(theta + delta, self.lower, self.upper)
+            if interrupt is not None and it + 1 >= min_iterations and it + 1 < c.iterations and interrupt():
+                break
 
         total = self._cost(cost_fn, full(theta[:, None]), k, 1)[:, 0].sum(-1)
         history.append(total)

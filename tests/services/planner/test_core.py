@@ -12,6 +12,7 @@ from services.planner.core import GoalSet, Planner, PlannerConfig, PlannerError,
 from services.planner.costs import CostConfig
 from services.planner.multigoal import init_straight_lines
 from services.planner.stomp import StompConfig
+from shared.config import ConfigError
 from shared.protocol import OccupancyGrid
 from shared.scene import load_scene
 
@@ -90,6 +91,19 @@ def test_next_step_starts_ahead_on_tau_best(scene) -> None:
     # off the path: restart from the robot's own configuration
     third = planner.step([0.0, 0.25], occ)
     assert np.allclose(third.start, [0.0, 0.25]) and np.allclose(third.trajectories[:, 0], [0.0, 0.25])
+
+
+def test_departure_lookahead_override_and_anytime_step(scene) -> None:
+    planner = toy_planner(scene, lookahead_s=0.3, iterations=20, anytime_min_iterations=5)
+    occ = blob_grid(scene)
+    assert planner.departure([0.0, -0.2]) is None  # no plan yet
+    first = planner.step([0.0, -0.2], occ, interrupt=lambda: True)
+    assert first.iterations == 5  # a newer input was always waiting: stopped after the minimum
+    tau = first.trajectories[first.chosen]
+    assert planner.departure(tau[3]) == pytest.approx(0.0, abs=1e-5)
+    assert planner.departure([0.0, 0.25]) > planner.config.off_path_tol
+    second = planner.step(tau[3], occ, lookahead_s=0.0, interrupt=lambda: False)
+    assert second.iterations == 20 and np.allclose(second.start, tau[3], atol=1e-5)  # no lookahead: starts there
 
 
 def test_bad_input_is_refused_and_the_planner_keeps_working(scene) -> None:
@@ -277,3 +291,12 @@ def test_pr2_algorithm1_loop_reaches_the_chosen_goal(pr2_planner) -> None:
             break
     assert np.allclose(res.start, res.trajectories[res.chosen, -1], atol=1e-5), "goal not reached in 8 steps"
     assert np.allclose(res.trajectories[res.chosen], res.start)  # a reached goal holds still
+
+
+@pytest.mark.parametrize(("device", "match"), [("tpu", "not a torch device|only cpu and cuda"),
+                                                ("cuda:7", "CUDA")])
+def test_device_the_machine_lacks_is_named(device: str, match: str) -> None:
+    if device.startswith("cuda") and torch.cuda.device_count() > 7:
+        pytest.skip("this machine has 8 GPUs")
+    with pytest.raises(ConfigError, match=match):
+        PlannerConfig(device=device).validate()

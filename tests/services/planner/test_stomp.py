@@ -131,3 +131,27 @@ def test_nan_costs_do_not_poison_the_trajectory() -> None:
     q0 = init_straight_lines(torch.zeros(2), torch.tensor([[1.0, 0.0]]), T)
     res = Stomp(StompConfig(iterations=20), (-torch.ones(2), torch.ones(2))).optimize(q0, cost)
     assert torch.isfinite(res.trajectories).all()
+
+
+def test_anytime_interrupt_stops_after_min_iterations_with_the_same_prefix() -> None:
+    target = _bump_target()
+    q0 = init_straight_lines(target[0], target[-1:], T)
+
+    def cost(q: torch.Tensor) -> torch.Tensor:
+        return ((q - target) ** 2).sum(-1)
+
+    stomp = Stomp(StompConfig(iterations=30, seed=3), (-2 * torch.ones(3), 2 * torch.ones(3)))
+    full = stomp.optimize(q0, cost)
+    asked: list[int] = []
+
+    def waiting() -> bool:  # a newer input is always waiting
+        asked.append(1)
+        return True
+
+    cut = stomp.optimize(q0, cost, interrupt=waiting, min_iterations=10)
+    assert full.history.shape[0] == 31 and cut.history.shape[0] == 11 and len(asked) == 1
+    assert torch.equal(cut.history[:10], full.history[:10])  # the same iterations, stopped early
+    assert float(cut.cost[0]) > float(full.cost[0])  # fewer iterations: a higher cost, still better than q0
+    assert float(cut.cost[0]) < float(cost(q0).sum())
+    never = stomp.optimize(q0, cost, interrupt=lambda: False, min_iterations=1)
+    assert torch.equal(never.trajectories, full.trajectories)

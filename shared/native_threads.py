@@ -1,0 +1,57 @@
+"""The native BLAS thread pools of numpy, scipy and scikit-learn: one thread per process unless asked.
+
+Foresight's numpy work is many small products (the 13 x 13 covariances of the class mixtures, a pose's
+features against 20 Gaussians, ...). A multi-threaded BLAS gains nothing on such sizes and, on a machine
+whose cores are already busy (the four services, two experiment workers, joblib workers), its threads
+spin and wait for each other. Measured on this project's 2-core machine with the other cores loaded:
+fitting one class mixture of the paper's library (2,500 x 13 samples, 20 Gaussians, 47 EM iterations)
+took 7-16 s with OpenBLAS's default 2 threads and 0.6-0.7 s with 1 (the same fit to 3e-13). So every
+``foresight`` command, every ``python -m services.X`` and every experiment worker process starts with
+one BLAS thread; ``FORESIGHT_BLAS_THREADS`` overrides it (``0``: the libraries' own default).
+
+torch's intra-op threads are separate (``PlannerConfig.threads``) and not touched here.
+"""
+
+from __future__ import annotations
+
+import os
+
+from threadpoolctl import threadpool_limits
+
+from shared.config import ConfigError
+
+__all__ = ["ENV", "blas_threads", "limit_blas_threads"]
+
+ENV = "FORESIGHT_BLAS_THREADS"
+"""Environment variable: BLAS threads per process (default 1; 0 leaves the libraries' default)."""
+
+
+def blas_threads() -> int:
+    """The BLAS threads per process asked for: ``FORESIGHT_BLAS_THREADS`` or 1.
+
+    Raises:
+        ConfigError: If the variable is not an integer >= 0.
+    """
+    raw = os.environ.get(ENV, "1").strip() or "1"
+    try:
+        n = int(raw)
+    except ValueError:
+        raise ConfigError(f"{ENV} must be an integer >= 0 (0: the libraries' default), got {raw!r}") from None
+    if n < 0:
+        raise ConfigError(f"{ENV} must be an integer >= 0 (0: the libraries' default), got {raw!r}")
+    return n
+
+
+def limit_blas_threads(threads: int | None = None) -> int:
+    """Limit the BLAS pools of the libraries loaded in this process (numpy, scipy) for the rest of its life.
+
+    Args:
+        threads: Threads per pool (None: :func:`blas_threads`; 0: leave the pools as they are).
+
+    Returns:
+        The limit applied (0: none).
+    """
+    n = blas_threads() if threads is None else int(threads)
+    if n > 0:
+        threadpool_limits(limits=n, user_api="blas")
+    return n
