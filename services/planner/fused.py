@@ -12,7 +12,7 @@ as FLOPs), and can be ``torch.compile``-d:
   ``(S, 7 x 4)`` table. Only the spheres that move with the arm joints are evaluated: the torso-carried
   ones come from ``StateCost``'s lift tables, the base's never move.
 * **Lookups**: trilinear, from the corner-major packed cells ``(8, cells)`` of
-  :class:`~services.planner.sdf.VoxelTables` (one ``index_select`` per grid, 3 ``lerp``); the occupancy
+  :class:`~services.planner.sdf.VoxelTables` (one gather per grid, 3 linear blends); the occupancy
   tables are the ones ``StateCost.set_occupancy`` built (read at every call); the static field is
   **cropped** to the cells where a sphere can pay anything (field value below ``clearance`` + the
   largest arm sphere radius, plus one layer): outside the crop both the
@@ -117,13 +117,15 @@ def _trilinear(p: torch.Tensor, inv_res: float, packed: torch.Tensor, first: tor
     f = u - i0
     idx = (i0 * strides.view(3, 1, 1)).sum(0).long()  # (S, B)
     if packed.dim() == 1:
-        c = packed[idx.reshape(1, -1) + offsets.view(8, 1)].view(2, 2, 2, -1)
+        # in range by construction (u clamped to [0, u_max], i0 <= cell_max): no wrap-around or bounds check,
+        # which inductor would otherwise emit per gathered lane (-15% of the compiled kernel's time)
+        c = torch.ops.aten._unsafe_index(packed, [idx.reshape(1, -1) + offsets.view(8, 1)]).view(2, 2, 2, -1)
     else:
         c = packed.index_select(1, idx.reshape(-1)).view(2, 2, 2, -1)
     fx, fy, fz = f.reshape(3, 1, -1)
-    c = torch.lerp(c[:, :, 0], c[:, :, 1], fz)
-    c = torch.lerp(c[:, 0], c[:, 1], fy)
-    return torch.lerp(c[0], c[1], fx[0]).view(idx.shape)
+    c = c[:, :, 0] + fz * (c[:, :, 1] - c[:, :, 0])  # a + w (b - a): torch.lerp's two-sided form costs a select
+    c = c[:, 0] + fy * (c[:, 1] - c[:, 0])
+    return (c[0] + fx[0] * (c[1] - c[0])).view(idx.shape)
 
 
 def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Tensor, obs_thr: torch.Tensor,  # noqa: D417
@@ -290,7 +292,10 @@ class FusedCost:
     def _set_mode(self, compiled: bool) -> None:
         """Compiled: the pair loop fused by inductor; eager: the self-collision as a feature matmul."""
         self.compiled = compiled
-        self._fn: Callable[..., torch.Tensor] = torch.compile(_kernel, dynamic=False) if compiled else _kernel
+        # the lookups' indices are clamped into range (see _trilinear): inductor's per-lane index asserts are moot
+        self._fn: Callable[..., torch.Tensor] = (
+            torch.compile(_kernel, dynamic=False, options={"assert_indirect_indexing": False}) if compiled
+            else _kernel)
         self._static.update(self_pairs=compiled if self.pair_loop is None else self.pair_loop)
         self._flat = compiled  # compiled: 8 gathers from the volume itself (8x smaller than the packed cells)
 
