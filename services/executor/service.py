@@ -150,7 +150,7 @@ class ExecutorService:
         cfg = self.config
         now = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
         path = cfg.mcap_path(now)
-        with open_session(self.zenoh) as session:
+        with open_session(self.zenoh, self.stop, "executor") as session:
             if path is not None:
                 builder = SceneBuilder(self.scene, self.robot, *self.human)
                 text = Path(self.scene.source).read_text() if Path(self.scene.source).is_file() else None
