@@ -20,6 +20,7 @@ import dataclasses
 import logging
 import threading
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -29,7 +30,17 @@ import numpy as np
 
 from shared.config import ZenohConfig
 from shared.lockstep import FIRST_PLAN, Adoption, LockstepMaster, PlanInbox, StepClock
-from shared.protocol import DemoMarker, Keys, Message, OccupancyGrid, Plan, ProtocolError, RobotState, decode
+from shared.protocol import (
+    DemoMarker,
+    HumanPose,
+    Keys,
+    Message,
+    OccupancyGrid,
+    Plan,
+    ProtocolError,
+    RobotState,
+    decode,
+)
 from shared.recording.foxglove import SceneBuilder
 from shared.recording.writer import McapLog
 from shared.scene import Scene, load_scene
@@ -41,6 +52,9 @@ from .models import HumanBody, PlaceInScene, RobotModel, load_models, start_conf
 __all__ = ["ExecutorResult", "ExecutorService", "load_models", "start_configuration"]  # the last two: .models
 
 log = logging.getLogger("foresight.executor")
+
+POSES_KEPT = 4096
+"""Arrival times of the newest poses kept to date the occupancy grids made from them (real time)."""
 
 
 @dataclass
@@ -105,6 +119,7 @@ class ExecutorService:
         self._expected = self.keys.data_keys()
         self.result = ExecutorResult()
         self.inbox = PlanInbox()
+        self._pose_arrival: OrderedDict[tuple[int, int], float] = OrderedDict()  # (demo_id, index) -> arrival
         self.mcap: McapLog | None = None
         self._times: list[float] = []
         self._qs: list[np.ndarray] = []
@@ -134,9 +149,16 @@ class ExecutorService:
             self.inbox.put_plan(msg)
         elif key == self.keys.demo and isinstance(msg, DemoMarker):
             self.core.note_demonstration(msg.event, msg.demo_id, msg.n_samples)
+        elif key == self.keys.pose and isinstance(msg, HumanPose):
+            self._pose_arrival[(msg.demo_id, msg.index)] = time.monotonic()
+            if len(self._pose_arrival) > POSES_KEPT:
+                self._pose_arrival.popitem(last=False)
         elif key == self.keys.occupancy and isinstance(msg, OccupancyGrid):
             self.core.note_occupancy_of(msg.demo_id, msg.index)
-            self.inbox.put_occupancy(msg.tick, time.monotonic())
+            # a prediction is as old as the pose it was made from: a predictor draining a backlog (or
+            # after the human's stream died) publishes grids that arrive now but describe the past
+            now = time.monotonic()
+            self.inbox.put_occupancy(msg.tick, min(now, self._pose_arrival.get((msg.demo_id, msg.index), now)))
 
     def _on_peer(self, service: str, alive: bool) -> None:
         if service in self.config.hold_without and (service in self.core.gone) == alive:
