@@ -1,4 +1,4 @@
-"""``foresight bench {predictor,planner}``: dispatch to each component's benchmark script.
+"""``foresight bench {predictor,planner,faults,soak}``: dispatch to each component's benchmark script.
 
 Each benchmark lives beside the code it measures and exposes ``main(argv, prog) -> int``; it is
 imported only when asked for.
@@ -14,6 +14,8 @@ __all__ = ["BENCHES", "main"]
 BENCHES: dict[str, tuple[str, str]] = {
     "predictor": ("services.predictor.bench", "one pose -> encoded occupancy message (64^3 grid)"),
     "planner": ("services.planner.bench", "one replanning step (STOMP over all goals)"),
+    "faults": ("tools.faults", "kill -9 each service of a moving robot's run: hold and resume latency, MCAP recovery"),
+    "soak": ("tools.soak", "poses at 300 Hz for 60 s: predictor latency and drops, replanning period, RSS"),
 }
 
 

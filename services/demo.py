@@ -44,11 +44,12 @@ from services.scenario import (
     table_header,
     table_row,
 )
+from services.supervisor import Supervisor
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, resolve_config
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, Keys, Message, OccupancyGrid, Plan, RobotState
-from shared.runtime import UserError, cli_errors, help_text, setup_logging, stop_on_signals
+from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
 from shared.scene import Scene, load_scene
 from shared.transport import Presence, open_session, subscribe
 
@@ -58,6 +59,9 @@ log = logging.getLogger("foresight.demo")
 
 SERVICES_IN_ORDER = ("predictor", "planner", "replayer", "executor")
 """Start order: the executor (simulation master) last, once the others listen."""
+
+STOP_GRACE_S = 90.0
+"""Seconds ``foresight demo`` may take to stop its services after SIGINT/SIGTERM (each has a bounded stop)."""
 
 
 @dataclasses.dataclass
@@ -88,6 +92,8 @@ class DemoConfig:
     port: int = opt(0, help="loopback TCP port of the demo's Zenoh router (0 = a free port)")
     prefix: str = opt("foresight", help="key-expression prefix")
     timeout: float = opt(900.0, help="give up after this many seconds")
+    restart: bool = opt(False, help="start a service that dies during the run again (at most 3 times); without "
+                        "it the run carries on without the service (the executor holds the robot)")
     json: bool = opt(False, help="print one JSON object with the summary (progress goes to stderr)")
     log_level: str = opt("WARNING", choices=("DEBUG", "INFO", "WARNING", "ERROR"), help="log level of the demo")
 
@@ -256,14 +262,13 @@ def _run_once(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None]
                 if name != "executor":
                     procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout))
             executor = procs["executor"]
+            supervisor = Supervisor(procs, out, restart=cfg.restart)
             while not stop.is_set() and executor.running:
                 if time.monotonic() > deadline:
                     out(f"foresight demo: timeout after {cfg.timeout:g} s")
                     status = 1
                     break
-                for name, proc in procs.items():
-                    if name != "replayer" and not proc.running:
-                        raise UserError(f"{name} exited with status {proc.returncode}: {proc.tail(1)}")
+                supervisor.check()  # a dead service is reported (and restarted), the run goes on
                 stop.wait(0.1)
             if stop.is_set():
                 out("foresight demo: interrupted")
@@ -271,6 +276,10 @@ def _run_once(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None]
             elif executor.returncode not in (0, None):
                 out(f"foresight demo: executor exited with status {executor.returncode}: {executor.tail(2)}")
                 status = 1
+            if supervisor.faults:
+                out("foresight demo: faults during the run: " + ", ".join(
+                    f"{name} ({'killed' if code is not None and code < 0 else code})"
+                    for name, code in supervisor.faults))
         finally:
             for name in reversed(SERVICES_IN_ORDER):
                 code = procs[name].stop(timeout=10.0)
@@ -303,7 +312,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
         cfg, _ = resolve_config("demo", DemoConfig, args, with_zenoh=False)
         setup_logging(cfg.log_level)
         stop = threading.Event()
-        restore = stop_on_signals(stop)
+        restore = stop_on_signals(stop, grace_s=STOP_GRACE_S)  # the services' own bounded stops come first
         progress = (lambda line: print(line, file=sys.stderr, flush=True)) if cfg.json else \
             (lambda line: print(line, flush=True))
         try:

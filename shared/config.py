@@ -80,6 +80,9 @@ class ZenohConfig:
     prefix: str = opt("foresight", help="key-expression prefix of every Foresight key")
     connect_timeout_s: float = opt(60.0, help="client mode: keep retrying to reach the router this long (s, "
                                    "bounded back-off, logged) before giving up; 0 = fail at once")
+    require_connection: bool = opt(False, help="any mode: give up (one line, exit status 2) when no router or peer "
+                                   "answered within connect_timeout_s; default: log it within seconds and keep "
+                                   "retrying")
 
     def validate(self) -> None:
         """Check endpoint syntax, the prefix and the connect timeout."""

@@ -43,7 +43,10 @@ def blas_threads() -> int:
 
 
 def limit_blas_threads(threads: int | None = None) -> int:
-    """Limit the BLAS pools of the libraries loaded in this process (numpy, scipy) for the rest of its life.
+    """Limit the BLAS pools of numpy and scipy in this process for the rest of its life.
+
+    The pools already loaded are limited at once (threadpoolctl); ``OPENBLAS_NUM_THREADS`` (unless set)
+    limits the OpenBLAS builds loaded afterwards and in child processes.
 
     Args:
         threads: Threads per pool (None: :func:`blas_threads`; 0: leave the pools as they are).
@@ -53,5 +56,8 @@ def limit_blas_threads(threads: int | None = None) -> int:
     """
     n = blas_threads() if threads is None else int(threads)
     if n > 0:
-        threadpool_limits(limits=n, user_api="blas")
+        # libraries loaded later (scipy's own OpenBLAS comes with scikit-learn) and child processes read the
+        # variable when they load; a value the user set is kept
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", str(n))
+        threadpool_limits(limits=n, user_api="blas")  # the ones already loaded
     return n

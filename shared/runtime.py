@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import logging
+import os
 import signal
 import sys
 import threading
@@ -14,7 +16,13 @@ from typing import Any
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
 from shared.native_threads import limit_blas_threads
 
-__all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError", "service_main", "help_text"]
+__all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError", "service_main", "help_text",
+           "SHUTDOWN_GRACE_S", "FORCED_EXIT"]
+
+SHUTDOWN_GRACE_S = 10.0
+"""Seconds a process may take to stop after SIGINT/SIGTERM before it exits anyway (:func:`stop_on_signals`)."""
+FORCED_EXIT = 3
+"""Exit status of a process that did not stop within :data:`SHUTDOWN_GRACE_S` (or got a second signal)."""
 
 
 class UserError(Exception):
@@ -54,19 +62,46 @@ def cli_errors(prog: str) -> Iterator[None]:
         raise
 
 
-def stop_on_signals(stop: threading.Event) -> Callable[[], None]:
-    """Set ``stop`` on SIGINT/SIGTERM (main thread only); returns a function restoring the old handlers."""
+def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Callable[[], None]:
+    """Set ``stop`` on SIGINT/SIGTERM (main thread only); returns a function restoring the old handlers.
+
+    A process must obey the signal even when a call it is in blocks (a Zenoh call whose router went
+    away, a library that ignores the stop event): ``grace_s`` (default :data:`SHUTDOWN_GRACE_S`) after
+    the first signal, unless the restore function has been called by then, it prints one line and the
+    stacks of every thread (where it was stuck) to stderr and exits with :data:`FORCED_EXIT`; a second
+    signal does so at once. What the stop had finished by then (the executor's MCAP, closed before its
+    session) is kept.
+    """
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
     old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    restored = threading.Event()
+    grace = SHUTDOWN_GRACE_S if grace_s is None else grace_s
+
+    def force(why: str) -> None:
+        if restored.is_set():
+            return
+        print(f"{os.path.basename(sys.argv[0]) or 'foresight'}: {why}; exiting with status {FORCED_EXIT} "
+              "(stacks of every thread follow)", file=sys.stderr, flush=True)
+        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+        os._exit(FORCED_EXIT)
+
+    def watchdog(signame: str) -> None:
+        if not restored.wait(grace):
+            force(f"did not stop within {grace:g} s of {signame}")
 
     def handler(signum: int, frame: object) -> None:
+        name = signal.Signals(signum).name
+        if stop.is_set():
+            force(f"second {name} while stopping")
         stop.set()
+        threading.Thread(target=watchdog, args=(name,), name="shutdown-watchdog", daemon=True).start()
 
     for s in old:
         signal.signal(s, handler)
 
     def restore() -> None:
+        restored.set()
         for s, h in old.items():
             signal.signal(s, h)
 

@@ -22,6 +22,7 @@ from typing import Any, Generic, TypeVar
 import zenoh
 
 from shared.config import ZenohConfig
+from shared.connectivity import retry_config, watched
 from shared.protocol import Keys, Message, ProtocolError, decode, encode
 
 __all__ = [
@@ -49,6 +50,7 @@ def zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
     conf.insert_json5("listen/endpoints", json.dumps(list(cfg.listen)))
     conf.insert_json5("connect/endpoints", json.dumps(list(cfg.connect)))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(bool(cfg.multicast_scouting)))
+    conf.insert_json5("connect/retry", json.dumps(retry_config()))  # unreachable endpoints: retried 1, 2, 4, 4 ... s
     # Shared memory leaves segments in /dev/shm; our large messages are compact, so TCP on loopback is
     # enough (measured ~2.5 ms for 1 MB).
     conf.insert_json5("transport/shared_memory/enabled", "false")
@@ -73,18 +75,22 @@ def _open(cfg: ZenohConfig) -> zenoh.Session:
                              f"connect {','.join(cfg.connect) or '-'}): {reason}") from None
 
 
-def open_with_retry(cfg: ZenohConfig, sleep: Callable[[float], None] = time.sleep) -> zenoh.Session:
+def open_with_retry(cfg: ZenohConfig, sleep: Callable[[float], None] | None = None,
+                    stop: threading.Event | None = None) -> zenoh.Session:
     """Open a Zenoh session; a client whose router is not there yet retries with a bounded back-off.
 
     Zenoh refuses to open a client session when none of its ``connect`` endpoints answers (a router
     that starts after the service). A client retries every 0.25, 0.5, 1, 2, 4, 4, ... s, logging
     each attempt, for at most ``cfg.connect_timeout_s``. A peer opens at once (Zenoh keeps trying
     its ``connect`` endpoints in the background); it logs a warning when none of them answered yet.
+    ``stop`` (SIGTERM) ends the retries at once.
 
     Raises:
         TransportError: If the session cannot be opened (one line: mode, endpoints, Zenoh's reason;
-            for a client: after the retries).
+            for a client: after the retries, or when ``stop`` is set).
     """
+    stop = stop or threading.Event()
+    sleep = sleep or stop.wait
     deadline = time.monotonic() + cfg.connect_timeout_s
     delay, attempt = RETRY_FIRST_S, 1
     while True:
@@ -93,10 +99,11 @@ def open_with_retry(cfg: ZenohConfig, sleep: Callable[[float], None] = time.slee
             break
         except TransportError as exc:
             left = deadline - time.monotonic()
-            if cfg.mode != "client" or not cfg.connect or left <= 0:
+            if cfg.mode != "client" or not cfg.connect or left <= 0 or stop.is_set():
                 if attempt > 1:
-                    raise TransportError(f"{exc} (gave up after {attempt} attempts in "
-                                         f"{cfg.connect_timeout_s:g} s)") from None
+                    why = ("stopped" if stop.is_set() else
+                           f"gave up after {attempt} attempts in {cfg.connect_timeout_s:g} s")
+                    raise TransportError(f"{exc} ({why})") from None
                 raise
             pause = min(delay, left)
             log.warning("zenoh: router %s not reachable yet (attempt %d); retrying in %.2g s, for at most %g s in all",
@@ -114,15 +121,19 @@ def open_with_retry(cfg: ZenohConfig, sleep: Callable[[float], None] = time.slee
 
 
 @contextmanager
-def open_session(cfg: ZenohConfig) -> Iterator[zenoh.Session]:
-    """Open a Zenoh session for ``cfg`` (see :func:`open_with_retry`) and close it on exit.
+def open_session(cfg: ZenohConfig, stop: threading.Event | None = None, name: str = "zenoh") -> Iterator[zenoh.Session]:
+    """Open a Zenoh session for ``cfg`` (see :func:`open_with_retry`), watch it, close it on exit.
+
+    While open, :class:`shared.connectivity.ConnectionWatch` logs (as ``name``) when no router or peer
+    answers; with ``cfg.require_connection`` it gives up by setting ``stop``.
 
     Raises:
-        TransportError: If Zenoh refuses to open the session (one-line message with the endpoints).
+        TransportError: If Zenoh refuses to open the session, or (on exit) the watch gave up (one line).
     """
-    session = open_with_retry(cfg)
+    session = open_with_retry(cfg, stop=stop)
     try:
-        yield session
+        with watched(session, cfg, name, stop):
+            yield session
     finally:
         session.close()
 

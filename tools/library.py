@@ -56,12 +56,12 @@ def _info_args(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    print(format_info(load_library(args.path)))
+    print(format_info(load_library(args.path, report=False)))
     return 0
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    lib = load_library(args.path)
+    lib = load_library(args.path, report=False)
     for issue in lib.issues:
         print(f"issue: {issue}")
     print(f"{lib.source}: {len(lib.demos)} valid demonstrations in {lib.n_classes} classes, "
@@ -78,7 +78,7 @@ def _cmd_convert(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix != ".npz":
         raise LibraryError(f"--out {str(out)!r}: the native format is a .npz file")
-    lib = load_library(args.path)
+    lib = load_library(args.path, report=False)
     save_library(lib, out)
     print(f"wrote {out}: {len(lib.demos)} demonstrations in {lib.n_classes} classes "
           f"({len(lib.issues)} issue(s) recorded, malformed demonstrations left out)")

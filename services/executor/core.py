@@ -10,14 +10,17 @@ Timing follows the paper's Fig. 4: the robot executes the plan of replanning ste
 The core keeps its own clock ``t`` (seconds of simulated time); the service decides when a plan is
 adopted (:meth:`ExecutorCore.adopt`) and at which time a message counts as received
 (:meth:`ExecutorCore.note_occupancy`). Safety: :meth:`ExecutorCore.stale_reason` says why the robot
-must hold (zero velocity) -- no plan yet, or the latest plan or occupancy older than
-``stale_limit_s`` -- and the reference's own clock stops while the robot holds, so execution resumes
-where it stopped when fresh data arrives.
+must hold (zero velocity) -- no plan yet, the latest plan or occupancy older than ``stale_limit_s``,
+or a service it depends on gone (:meth:`ExecutorCore.note_peer`) -- and the reference's own clock
+stops while the robot holds, so execution resumes where it stopped when fresh data arrives.
+:func:`reason_kind` tells a change of hold reason from the same reason with another age (what the
+service logs once).
 """
 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,7 +31,15 @@ from shared.lockstep import FIRST_PLAN
 from shared.protocol import Plan, RobotState
 from shared.scene import SCENE_HELP
 
-__all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "Reference"]
+__all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "Reference", "reason_kind"]
+
+
+def reason_kind(reason: str) -> str:
+    """A hold reason without its numbers: ``"plan is 0.61 s old (limit 0.50 s)"`` -> ``"plan is # s old (limit # s)"``.
+
+    Two reasons of one kind differ only in the ages they quote; a change of kind is what gets logged.
+    """
+    return re.sub(r"\d+(?:\.\d+)?", "#", reason)
 
 
 class ExecutorError(ValueError):
@@ -47,6 +58,9 @@ class ExecutorConfig:
     state_rate_hz: float = opt(50.0, help="RobotState publishing rate (per simulated second in lockstep)")
     stale_limit_s: float = opt(0.5, help="hold the robot when the latest plan or occupancy is older than this")
     require_occupancy: bool = opt(True, help="also hold when the occupancy prediction is missing or stale")
+    hold_without: list[str] = opt(default_factory=lambda: ["predictor", "planner"],
+                                  help="hold while one of these services, once seen, is gone (its liveliness "
+                                  "token lost: stopped or killed), before its inputs are stale; empty = never")
     goal_tolerance: float = opt(0.02, help="goal reached when every joint is within this of the goal (rad or m)")
     velocity_scale: float = opt(1.0, help="fraction of the robot's joint velocity limits the simulation may use")
     stop_on_goal: bool = opt(False, help="end the run at the end of the step in which the goal is reached")
@@ -76,9 +90,10 @@ class ExecutorConfig:
             raise ConfigError(f"executor.steps: must be >= 0, got {self.steps}")
         if self.velocity_scale > 1.0:
             raise ConfigError(f"executor.velocity_scale: must be <= 1, got {self.velocity_scale}")
-        unknown = set(self.wait_for) - {"replayer", "predictor", "planner"}
-        if unknown:
-            raise ConfigError(f"executor.wait_for: unknown service(s) {sorted(unknown)}")
+        for name in ("wait_for", "hold_without"):
+            unknown = set(getattr(self, name)) - {"replayer", "predictor", "planner"}
+            if unknown:
+                raise ConfigError(f"executor.{name}: unknown service(s) {sorted(unknown)}")
         if not all(math.isfinite(v) for v in self.start_q):
             raise ConfigError(f"executor.start_q: values must be finite, got {self.start_q}")
 
@@ -181,6 +196,8 @@ class Reference:
 class _Freshness:
     plan: float | None = None       # time (core clock) of the latest plan
     occupancy: float | None = None  # time (core clock) of the latest occupancy
+    occupancy_of: tuple[int, int] | None = None  # (demo_id, index) of the pose the latest occupancy predicts from
+    demo_end: tuple[int, int] | None = None      # (demo_id, last index) of the demonstration that ended
 
 
 class ExecutorCore:
@@ -220,7 +237,8 @@ class ExecutorCore:
         self.reached = False
         self.fresh = _Freshness()
         self.plans_adopted = 0
-        self.human_ended = False
+        self.gone: frozenset[str] = frozenset()  # services of hold_without whose token was lost (replaced, never
+        # mutated: the transport's thread writes it while the loop reads it)
 
     # ------------------------------------------------------------------------------------------
     # inputs
@@ -251,19 +269,43 @@ class ExecutorCore:
         self.plans_adopted += 1
         self._update_reached()
 
-    def note_demonstration(self, event: str) -> None:
-        """Record a DemoMarker event (``"start"`` or ``"end"``).
+    def note_demonstration(self, event: str, demo_id: int = -1, n_samples: int = 0) -> None:
+        """Record a DemoMarker event (``"start"`` or ``"end"``) of demonstration ``demo_id``.
 
-        After the end of the observed demonstration the human stands still: the last prediction stays
-        valid and its age no longer holds the robot. A start requires fresh predictions again.
+        After the end of the observed demonstration the human stands still: the prediction made from its
+        last pose (index ``n_samples - 1``) stays valid and its age no longer holds the robot, once that
+        prediction has arrived (:attr:`human_ended`). A start requires fresh predictions again.
         """
-        self.human_ended = event == "end"
+        self.fresh.demo_end = (int(demo_id), int(n_samples) - 1) if event == "end" else None
 
     def note_occupancy(self, stamp: float | None = None) -> None:
         """Record that an occupancy prediction was received at ``stamp`` (core clock; default now)."""
         stamp = self.t if stamp is None else float(stamp)
         if self.fresh.occupancy is None or stamp > self.fresh.occupancy:
             self.fresh.occupancy = stamp
+
+    def note_occupancy_of(self, demo_id: int, index: int) -> None:
+        """Record the pose (``demo_id``, sample ``index``) the newest occupancy prediction was made from."""
+        self.fresh.occupancy_of = (int(demo_id), int(index))
+
+    @property
+    def human_ended(self) -> bool:
+        """Whether the demonstration ended and the latest occupancy is the one of its last pose.
+
+        An end marker alone does not do (the predictor may be dead or behind: its latest prediction
+        then describes an earlier posture, and its age must hold the robot).
+        """
+        end = self.fresh.demo_end
+        return end is not None and self.fresh.occupancy_of == end
+
+    def note_peer(self, service: str, alive: bool) -> None:
+        """Record that ``service``'s liveliness token appeared (``alive``) or was lost.
+
+        While a service of ``hold_without`` is gone the robot holds, whatever the age of its last output.
+        """
+        if service not in self.config.hold_without:
+            return
+        self.gone = self.gone - {service} if alive else self.gone | {service}
 
     # ------------------------------------------------------------------------------------------
     # simulation
@@ -274,6 +316,9 @@ class ExecutorCore:
         limit = self.config.stale_limit_s
         if self.reference is None or self.fresh.plan is None:
             return FIRST_PLAN
+        gone = sorted(self.gone)
+        if gone:
+            return f"{' and '.join(gone)} gone (liveliness token lost)"
         age = t - self.fresh.plan
         if age > limit + 1e-9:
             return f"plan is {age:.2f} s old (limit {limit:.2f} s)"

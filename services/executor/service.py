@@ -20,6 +20,7 @@ import dataclasses
 import logging
 import threading
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -28,19 +29,32 @@ from typing import Any
 import numpy as np
 
 from shared.config import ZenohConfig
-from shared.lockstep import Adoption, LockstepMaster, PlanInbox, StepClock
-from shared.protocol import DemoMarker, Keys, Message, OccupancyGrid, Plan, ProtocolError, RobotState, decode
+from shared.lockstep import FIRST_PLAN, Adoption, LockstepMaster, PlanInbox, StepClock
+from shared.protocol import (
+    DemoMarker,
+    HumanPose,
+    Keys,
+    Message,
+    OccupancyGrid,
+    Plan,
+    ProtocolError,
+    RobotState,
+    decode,
+)
 from shared.recording.foxglove import SceneBuilder
 from shared.recording.writer import McapLog
 from shared.scene import Scene, load_scene
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session
 
-from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError
+from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, reason_kind
 from .models import HumanBody, PlaceInScene, RobotModel, load_models, start_configuration
 
 __all__ = ["ExecutorResult", "ExecutorService", "load_models", "start_configuration"]  # the last two: .models
 
 log = logging.getLogger("foresight.executor")
+
+POSES_KEPT = 4096
+"""Arrival times of the newest poses kept to date the occupancy grids made from them (real time)."""
 
 
 @dataclass
@@ -105,6 +119,7 @@ class ExecutorService:
         self._expected = self.keys.data_keys()
         self.result = ExecutorResult()
         self.inbox = PlanInbox()
+        self._pose_arrival: OrderedDict[tuple[int, int], float] = OrderedDict()  # (demo_id, index) -> arrival
         self.mcap: McapLog | None = None
         self._times: list[float] = []
         self._qs: list[np.ndarray] = []
@@ -133,9 +148,22 @@ class ExecutorService:
                 return
             self.inbox.put_plan(msg)
         elif key == self.keys.demo and isinstance(msg, DemoMarker):
-            self.core.note_demonstration(msg.event)
+            self.core.note_demonstration(msg.event, msg.demo_id, msg.n_samples)
+        elif key == self.keys.pose and isinstance(msg, HumanPose):
+            self._pose_arrival[(msg.demo_id, msg.index)] = time.monotonic()
+            if len(self._pose_arrival) > POSES_KEPT:
+                self._pose_arrival.popitem(last=False)
         elif key == self.keys.occupancy and isinstance(msg, OccupancyGrid):
-            self.inbox.put_occupancy(msg.tick, time.monotonic())
+            self.core.note_occupancy_of(msg.demo_id, msg.index)
+            # a prediction is as old as the pose it was made from: a predictor draining a backlog (or
+            # after the human's stream died) publishes grids that arrive now but describe the past
+            now = time.monotonic()
+            self.inbox.put_occupancy(msg.tick, min(now, self._pose_arrival.get((msg.demo_id, msg.index), now)))
+
+    def _on_peer(self, service: str, alive: bool) -> None:
+        if service in self.config.hold_without and (service in self.core.gone) == alive:
+            log.warning("executor: %s %s", service, "is back" if alive else "is gone: holding the robot")
+        self.core.note_peer(service, alive)
 
     # -- run -------------------------------------------------------------------------------------
 
@@ -144,7 +172,7 @@ class ExecutorService:
         cfg = self.config
         now = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
         path = cfg.mcap_path(now)
-        with open_session(self.zenoh) as session:
+        with open_session(self.zenoh, self.stop, "executor") as session:
             if path is not None:
                 builder = SceneBuilder(self.scene, self.robot, *self.human)
                 text = Path(self.scene.source).read_text() if Path(self.scene.source).is_file() else None
@@ -163,7 +191,7 @@ class ExecutorService:
             # block (never drop) under congestion: lock-step consumers count on every state and tick
             state_pub: TypedPublisher[Any] = TypedPublisher(session, self.keys.robot_state, block=True)
             clock_pub: TypedPublisher[Any] = TypedPublisher(session, self.keys.clock, block=True)
-            presence = Presence(session, self.keys, "executor")
+            presence = Presence(session, self.keys, "executor", on_change=self._on_peer)
             log.info("executor: %s mode, %d steps of %.3f s, log %s, session %s", cfg.mode, cfg.steps,
                      cfg.step_period_s, path, describe(session)["zid"])
             try:
@@ -204,13 +232,17 @@ class ExecutorService:
         master = LockstepMaster(self.core, StepClock(cfg.step_period_s, cfg.substeps))
         self._wait_for_peers(presence)
         self._publish_state(state_pub, master.initial_state())
-        n = 0
+        n, last_kind = 0, None
         while (cfg.steps == 0 or n < cfg.steps) and not self.stop.is_set():
             step = master.step(n, self.inbox.latest())
             if step.held:
                 r.held_steps += 1
-            if step.hold_news:
-                log.info("executor: holding during step %d: %s", n, step.reason)
+            if reason_kind(step.reason) != last_kind:  # each change once, not every step
+                if step.hold_news:
+                    log.info("executor: holding from step %d: %s", n, step.reason)
+                elif not step.held and last_kind not in (None, FIRST_PLAN):
+                    log.info("executor: resuming at step %d", n)
+                last_kind = reason_kind(step.reason)
             for state in step.states:
                 self._publish_state(state_pub, state)
             r.goal_per_step.append(step.goal)
@@ -235,7 +267,7 @@ class ExecutorService:
         t0 = time.monotonic()
         adoption = Adoption()
         next_wake = t0
-        last_reason = None
+        last_kind = None
         while not self.stop.is_set() and core.t < end:
             next_wake += h_nom
             delay = next_wake - time.monotonic()
@@ -252,12 +284,12 @@ class ExecutorService:
             core.step(h)
             if core.holding:
                 self.result.held_steps += 1
-            if core.reason != last_reason:
+            if reason_kind(core.reason) != last_kind:  # each change once, not every state (the ages change)
                 if core.reason:
                     log.info("executor: holding at t=%.2f s: %s", core.t, core.reason)
-                elif last_reason is not None:
+                elif last_kind is not None:
                     log.info("executor: resuming at t=%.2f s", core.t)
-                last_reason = core.reason
+                last_kind = reason_kind(core.reason)
             self._publish_state(state_pub, core.state(-1, time.time()))
             step = int(core.t // period)
             while len(self.result.goal_per_step) < step:

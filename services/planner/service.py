@@ -128,7 +128,7 @@ class PlannerService:
     def run(self, stop: threading.Event | None = None) -> PlannerStats:
         """Serve until ``stop`` is set."""
         stop = stop or threading.Event()
-        with open_session(self.zenoh) as session:
+        with open_session(self.zenoh, stop, "planner") as session:
             pub: TypedPublisher[Plan] = TypedPublisher(session, self.keys.plan, block=True)
             log.info("planner: %s mode, %d goals %s, session %s", self.config.mode, len(self.planner.goals.names),
                      self.planner.goals.names, describe(session)["zid"])

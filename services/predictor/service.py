@@ -97,7 +97,7 @@ class PredictorService:
     def run(self, stop: threading.Event | None = None, ready: threading.Event | None = None) -> PredictorStats:
         """Serve until ``stop`` is set; ``ready`` is set once subscribed and announced."""
         stop = stop or threading.Event()
-        with open_session(self.zenoh_config) as session:
+        with open_session(self.zenoh_config, stop, "predictor") as session:
             self._post_pub = TypedPublisher(session, self.keys.posterior)
             self._occ_pub = TypedPublisher(session, self.keys.occupancy)
             types = {self.keys.pose: HumanPose, self.keys.demo: DemoMarker}

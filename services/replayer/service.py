@@ -58,7 +58,7 @@ class ReplayerService:
         stop = stop or threading.Event()
         cfg = self.config
         core = ReplayerCore(self.demos, loop=cfg.loop, max_demos=cfg.max_demos)
-        with open_session(self.zenoh_config) as session:
+        with open_session(self.zenoh_config, stop, "replayer") as session:
             pose_pub: TypedPublisher[HumanPose] = TypedPublisher(session, self.keys.pose, block=True)
             demo_pub: TypedPublisher[DemoMarker] = TypedPublisher(session, self.keys.demo, block=True)
             # lock-step: listen to the clock before announcing ourselves, so no tick sent after our

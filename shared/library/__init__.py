@@ -31,7 +31,8 @@ and the issues found when the library was read.
 Modules: :mod:`~shared.library.motions` (the library's types, held-out splits),
 :mod:`~shared.library.validation` (the rules every demonstration passes),
 :mod:`~shared.library.paper_csv` (the paper's CSV format, read and written),
-:mod:`~shared.library.npz` (the native format); :func:`load_library` (here) reads either.
+:mod:`~shared.library.npz` (the native format), :mod:`~shared.library.report` (what reading dropped,
+one line per file); :func:`load_library` (here) reads either and says what it dropped.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from .motions import (
 )
 from .npz import NPZ_FORMAT, load_npz, save_library
 from .paper_csv import TRUNCATED_FRACTION, load_csv_class, load_csv_dir, write_csv_dir
+from .report import drop_lines, report_drops
 from .validation import MIN_SAMPLES, validate_block
 
 __all__ = [
@@ -69,16 +71,20 @@ __all__ = [
     "save_library",
     "write_csv_dir",
     "heldout_split",
+    "drop_lines",
+    "report_drops",
 ]
 
 
-def load_library(path: str | Path) -> MotionLibrary:
+def load_library(path: str | Path, report: bool = True) -> MotionLibrary:
     """Read a library: a directory of ``compound_*.csv`` (paper format) or an ``.npz`` from :func:`save_library`.
 
-    Malformed demonstrations are reported in ``issues`` and left out of ``demos``.
+    Malformed demonstrations are reported in ``issues`` and left out of ``demos``; with ``report``
+    what was dropped is also logged, one WARNING line per file (:func:`report_drops`).
 
     Args:
         path: Directory or ``.npz`` file.
+        report: Log the dropped demonstrations (off for tools that print the issues themselves).
 
     Returns:
         The library.
@@ -86,7 +92,13 @@ def load_library(path: str | Path) -> MotionLibrary:
     Raises:
         LibraryError: If the path does not exist, holds no class files, or is not a valid npz.
     """
-    p = Path(path).expanduser()
+    lib = _read(Path(path).expanduser())
+    if report:
+        report_drops(lib)
+    return lib
+
+
+def _read(p: Path) -> MotionLibrary:
     if p.is_dir():
         return load_csv_dir(p)
     if p.is_file():

@@ -44,6 +44,7 @@ class _Block:
     problems: list[str] = field(default_factory=list)
     columns: dict[int, list[int]] = field(default_factory=dict)  # wrong column count -> its line numbers
     text: list[tuple[int, str]] = field(default_factory=list)  # (line, problem) of non-numeric rows
+    nonfinite: list[tuple[int, str]] = field(default_factory=list)  # (line, problem) of rows with nan/inf
     order: dict[str, None] = field(default_factory=dict)  # kinds of problem in order of first occurrence
     last_index: int = -1
     last_line: int = 0
@@ -58,10 +59,12 @@ class _Block:
         for kind in self.order:
             if kind == "index":
                 out.extend(self.problems)
-            elif kind == "text":
-                (line, problem), n = self.text[0], len(self.text)
+            elif kind in ("text", "nonfinite"):
+                rows = self.text if kind == "text" else self.nonfinite
+                what = "non-numeric" if kind == "text" else "non-finite"
+                (line, problem), n = rows[0], len(rows)
                 out.append(f"line {line}: {problem}" if n == 1 else
-                           f"{n} lines with non-numeric values (lines {line_ranges(t[0] for t in self.text)}; "
+                           f"{n} lines with {what} values (lines {line_ranges(t[0] for t in rows)}; "
                            f"line {line}: {problem})")
             else:
                 for count, lines in self.columns.items():
@@ -166,6 +169,14 @@ def _parse_class(p: Path, lines: list[tuple[int, str]], label: int, name: str, n
         if len(values) != n_cols:
             blk.order["columns"] = None
             blk.columns.setdefault(len(values), []).append(lineno)
+            continue
+        bad = [j for j, v in enumerate(values) if not math.isfinite(v)]
+        if bad:
+            j = bad[0]
+            name_j = "sample index" if j == 0 else feature_names[j - 1]
+            more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+            blk.order["nonfinite"] = None
+            blk.nonfinite.append((lineno, f"{values[j]} in column {j + 1} ({name_j}){more}"))
             continue
         expected = blk.last_index + 1
         if idx != expected and not blk.bad:

@@ -44,7 +44,9 @@ def info_dict(lf: LogFile) -> dict[str, Any]:
 def format_info(lf: LogFile) -> str:
     """Human-readable summary: file state, time range, one line per channel, attachments, metadata."""
     d = info_dict(lf)
-    state = "complete" if lf.complete else f"TRUNCATED ({lf.error or 'no footer'}): read up to the last whole chunk"
+    state = "complete" if lf.complete else (
+        f"TRUNCATED ({lf.error or 'no footer'}): recovered {lf.message_count} messages, {d['duration_s']:.2f} s, "
+        "up to the last whole chunk")
     lines = [f"file:      {lf.path} ({lf.size / 1e6:.2f} MB, {state})",
              f"profile:   {lf.profile or '-'}   library: {lf.library or '-'}",
              f"time:      {d['start']} .. {d['end']} ({d['duration_s']:.2f} s)",

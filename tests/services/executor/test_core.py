@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.executor.core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, Reference
+from services.executor.core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, Reference, reason_kind
 from shared.config import ConfigError
 from shared.protocol import Plan
 
@@ -200,8 +200,72 @@ def test_last_prediction_stays_valid_after_the_demonstration_ends():
     core.reference = object()  # a plan is being executed
     assert "occupancy" in core.stale_reason(1.0) or "plan" in core.stale_reason(1.0)
     core.fresh.plan = 1.0
+    core.note_occupancy_of(4, 99)  # the prediction of demonstration 4's last pose (100 samples)
     assert "occupancy is 1.00 s old" in core.stale_reason(1.0)
-    core.note_demonstration("end")
-    assert core.stale_reason(1.0) == ""
-    core.note_demonstration("start")
+    core.note_demonstration("end", demo_id=4, n_samples=100)
+    assert core.human_ended and core.stale_reason(1.0) == ""
+    core.note_demonstration("start", demo_id=5, n_samples=100)
     assert "occupancy" in core.stale_reason(1.0)
+
+
+def test_an_end_marker_does_not_release_a_prediction_of_an_earlier_pose():
+    """The predictor died mid-demonstration: its last occupancy is of pose 40, the demonstration ends at
+    pose 99. The end marker must not let the robot move on that old prediction (issue 12)."""
+    limits = ArmLimits(("a",), np.array([-1.0]), np.array([1.0]), np.array([1.0]))
+    core = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=0.5))
+    core.adopt(_one_joint_plan())
+    core.note_occupancy()
+    core.note_occupancy_of(4, 40)
+    moved = []
+    for i in range(100):  # 2 s; the plan stays fresh, the occupancy is never renewed
+        core.fresh.plan = core.t
+        if i == 40:
+            core.note_demonstration("end", demo_id=4, n_samples=100)
+        core.step(0.02)
+        moved.append((core.t, not core.holding))
+    assert any(m for _, m in moved[:10]), "the robot was moving"
+    stale_since = 0.5 + 0.02 + 1e-6  # the state after the first step that starts with a stale occupancy
+    assert not any(m for t, m in moved if t > stale_since), "released while the occupancy was stale"
+    assert "occupancy is" in core.reason and not core.human_ended
+    core.note_occupancy_of(4, 99)  # the prediction of the last pose arrives (late)
+    core.step(0.02)
+    assert not core.holding
+
+
+def _one_joint_plan() -> Plan:
+    traj = np.linspace(0.0, 0.9, 51)[None, :, None].astype(np.float32)
+    return Plan(stamp=0.0, tick=-1, step=0, goal_names=["g"], joint_names=["a"], dt=0.1, chosen=0, planning_ms=1.0,
+                occupancy_tick=-1, occupancy_index=0, trajectories=traj, cost_smoothness=np.zeros(1),
+                cost_obstacle=np.zeros(1), cost_human=np.zeros(1), cost_total=np.zeros(1), valid=np.ones(1, bool))
+
+
+def test_holds_while_a_service_it_depends_on_is_gone_and_not_after():
+    limits = ArmLimits(("a",), np.array([-1.0]), np.array([1.0]), np.array([1.0]))
+    core = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=10.0))
+    core.adopt(_one_joint_plan())
+    core.note_occupancy()
+    core.step(0.02)
+    assert not core.holding
+    core.note_peer("replayer", False)  # not in hold_without: the human's stream may end
+    core.step(0.02)
+    assert not core.holding
+    core.note_peer("predictor", False)
+    core.step(0.02)
+    assert core.holding and core.reason == "predictor gone (liveliness token lost)"
+    core.note_peer("planner", False)
+    assert core.stale_reason() == "planner and predictor gone (liveliness token lost)"
+    core.note_peer("predictor", True)
+    core.note_peer("planner", True)
+    core.step(0.02)
+    assert not core.holding
+    quiet = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=10.0, hold_without=[]))
+    quiet.adopt(_one_joint_plan())
+    quiet.note_occupancy()
+    quiet.note_peer("planner", False)
+    assert quiet.stale_reason() == ""
+
+
+def test_reason_kind_ignores_the_ages():
+    assert reason_kind("plan is 0.61 s old (limit 0.50 s)") == reason_kind("plan is 12.00 s old (limit 0.50 s)")
+    assert reason_kind("plan is 0.61 s old (limit 0.50 s)") != reason_kind("occupancy is 0.61 s old (limit 0.50 s)")
+    assert reason_kind("") == ""

@@ -3,6 +3,7 @@ during step n, determinism, safety hold and resume, bad input, MCAP contents."""
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 
@@ -162,7 +163,8 @@ def test_realtime_run_starts_its_clock_once_the_wait_for_services_are_there(zeno
     assert not t.is_alive()
 
 
-def test_realtime_holds_when_predictor_stops_and_resumes(zenoh_hub, pr2, tmp_path) -> None:
+def test_realtime_holds_when_predictor_stops_and_resumes(zenoh_hub, pr2, tmp_path, caplog) -> None:
+    caplog.set_level(logging.INFO, logger="foresight.executor")
     exec_z = zenoh_hub()
     cfg = ExecutorConfig(mode="realtime", steps=0, state_rate_hz=50.0, stale_limit_s=0.3, mcap="none",
                          wait_for=["predictor", "planner"])
@@ -196,6 +198,10 @@ def test_realtime_holds_when_predictor_stops_and_resumes(zenoh_hub, pr2, tmp_pat
             sub.undeclare()
     assert not t.is_alive()
     assert service.result.held_steps > 0
+    # each change is logged once, not on every 20 ms state (the quoted age changes every time)
+    lines = [r.getMessage() for r in caplog.records if r.name == "foresight.executor"]
+    assert sum(1 for m in lines if "holding at" in m and "occupancy is" in m) == 1, lines
+    assert sum(1 for m in lines if "resuming at" in m) == 2, lines  # after the first plan, after the hold
 
 
 @pytest.mark.parametrize("bad", [dict(start_q=[0.0] * 3), dict(start_q=[9.0] * 8)])

@@ -100,7 +100,8 @@ def test_nan_block(tmp_path):
     b = blocks()
     b[2][5, 3] = np.nan
     write_class(tmp_path / "compound_1.csv", b)
-    check_one_issue(tmp_path, "compound_1", 2, r"non-finite values in pelvis_yaw at samples 5")
+    # block 2 starts at line 81; sample 5 is line 86; feature 3 (pelvis_yaw) is column 5 of the CSV
+    check_one_issue(tmp_path, "compound_1", 2, r"lines 81-120: line 86: nan in column 5 \(pelvis_yaw\)")
 
 
 def test_out_of_range_block(tmp_path):

@@ -13,4 +13,5 @@ def test_info_on_a_truncated_file(run_log, tmp_path) -> None:
     lf = read_log(cut)
     assert not lf.complete
     assert "TRUNCATED" in format_info(lf)
+    assert f"recovered {lf.message_count} messages" in format_info(lf) and lf.message_count > 0
     assert lf.channels  # what was written before is still listed

@@ -1,0 +1,74 @@
+"""Watching a run's service processes: a service that dies is reported once and the run carries on.
+
+The executor holds the robot while the predictor or the planner is gone (its ``hold_without``) or its
+inputs are stale, so one dead service is a fault to report, not a reason to abort the run. With
+``restart`` the supervisor starts it again (at most ``max_restarts`` times per service), and the
+executor resumes once the service's outputs are fresh.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+from collections.abc import Callable, Mapping
+
+from services.processes import ServiceProcess
+
+__all__ = ["Supervisor", "describe_exit"]
+
+log = logging.getLogger("foresight.supervisor")
+
+
+def describe_exit(code: int | None) -> str:
+    """``-9`` -> ``"was killed (SIGKILL)"``, ``1`` -> ``"exited with status 1"``."""
+    if code is not None and code < 0:
+        try:
+            return f"was killed ({signal.Signals(-code).name})"
+        except ValueError:
+            return f"was killed (signal {-code})"
+    return f"exited with status {code}"
+
+
+class Supervisor:
+    """Reports (and optionally restarts) the services of a run that exit before it ends.
+
+    Args:
+        procs: The run's processes by service name.
+        out: Where to say it (one line per event).
+        restart: Start a dead service again.
+        max_restarts: Restarts per service at most.
+        expected: Services whose exit with status 0 is their normal end (the replayer's stream ends).
+    """
+
+    def __init__(self, procs: Mapping[str, ServiceProcess], out: Callable[[str], None], restart: bool = False,
+                 max_restarts: int = 3, expected: tuple[str, ...] = ("replayer",)) -> None:
+        self.procs = procs
+        self.out = out
+        self.restart = restart
+        self.max_restarts = max_restarts
+        self.expected = expected
+        self.faults: list[tuple[str, int | None]] = []
+        self.restarts: dict[str, int] = {}
+        self._reported: set[str] = set()
+
+    def check(self, skip: tuple[str, ...] = ("executor",)) -> None:
+        """Look at every process once (the ``skip`` ones are the caller's to watch)."""
+        for name, proc in self.procs.items():
+            if name in skip or proc.proc is None or proc.running or name in self._reported:
+                continue
+            code = proc.returncode
+            if code == 0 and name in self.expected:
+                self._reported.add(name)
+                continue
+            self.faults.append((name, code))
+            done = self.restarts.get(name, 0)
+            if self.restart and done < self.max_restarts:
+                self.restarts[name] = done + 1
+                self.out(f"foresight demo: {name} {describe_exit(code)}: {proc.tail(1) or '(no output)'}; "
+                         f"restarting it ({done + 1} of {self.max_restarts}); the executor holds until its "
+                         "outputs are fresh")
+                proc.start()
+                continue
+            self._reported.add(name)
+            self.out(f"foresight demo: {name} {describe_exit(code)}: {proc.tail(1) or '(no output)'}; carrying on "
+                     "without it (the executor holds while its outputs are missing)")

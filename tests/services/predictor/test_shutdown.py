@@ -1,0 +1,87 @@
+"""A predictor obeys SIGTERM promptly after its router went away (issue 12, item 5c)."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from services.processes import ServiceProcess, free_port
+
+REPO = Path(__file__).resolve().parents[3]
+
+
+def test_predictor_stops_on_sigterm_after_its_router_was_killed(small_model, tmp_path):
+    model = tmp_path / "model.npz"
+    small_model.save(model)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = ServiceProcess("router", "tools", ["router", "--listen", endpoint], tmp_path / "router.log")
+    predictor = ServiceProcess("predictor", "services.predictor",
+                               ["--model", str(model), "--connect", endpoint, "--listen", "tcp/127.0.0.1:0"],
+                               tmp_path / "predictor.log")
+    try:
+        router.start()
+        predictor.start()
+        deadline = time.monotonic() + 120
+        while "predictor: model" not in predictor.tail(20) and time.monotonic() < deadline:
+            assert predictor.running, predictor.tail(5)
+            time.sleep(0.1)
+        time.sleep(1.0)  # connected to the router
+        router.proc.kill()
+        router.proc.wait(timeout=10)
+        time.sleep(2.0)  # the router has gone
+        predictor.proc.send_signal(signal.SIGTERM)
+        code = predictor.proc.wait(timeout=60)  # bounded: the shutdown watchdog forces an exit after 10 s
+    finally:
+        predictor.stop(timeout=5)
+        router.stop(timeout=5)
+    assert code == 0, predictor.tail(10)  # stopped by itself, not forced (status 3)
+    assert "predictor: stopped after" in predictor.tail(5)
+
+
+BLOCKED = """
+import sys, threading, time
+from shared import runtime
+stop = threading.Event()
+runtime.stop_on_signals(stop, grace_s=1.0)
+print("ready", flush=True)
+while True:
+    time.sleep(600)  # a call that does not look at the stop event
+"""
+
+
+def _blocked_process() -> subprocess.Popen[str]:
+    proc = subprocess.Popen([sys.executable, "-c", BLOCKED], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+    return proc
+
+
+def test_a_process_stuck_in_a_call_exits_after_the_grace_and_says_where():
+    proc = _blocked_process()
+    try:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 3, err
+    assert "did not stop within 1 s of SIGTERM; exiting with status 3" in err
+    assert 'File "<string>", line 8' in err  # the stack says where it was stuck
+
+
+def test_a_second_signal_exits_at_once():
+    proc = _blocked_process()
+    try:
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.2)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 3 and "second SIGTERM while stopping" in err, err

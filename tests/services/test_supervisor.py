@@ -1,0 +1,58 @@
+"""foresight demo's supervisor: a dead service is reported once and the run carries on, or it is restarted."""
+
+from __future__ import annotations
+
+from services.supervisor import Supervisor, describe_exit
+
+
+class FakeProcess:
+    """What the supervisor uses of a ServiceProcess."""
+
+    def __init__(self, code: int | None = None) -> None:
+        self.code = code
+        self.proc = object()
+        self.started = 0
+
+    @property
+    def running(self) -> bool:
+        return self.code is None
+
+    @property
+    def returncode(self) -> int | None:
+        return self.code
+
+    def tail(self, lines: int = 3) -> str:
+        return "last words"
+
+    def start(self) -> FakeProcess:
+        self.started += 1
+        self.code = None
+        return self
+
+
+def test_a_killed_service_is_reported_once_and_the_run_goes_on():
+    lines: list[str] = []
+    procs = {"predictor": FakeProcess(), "planner": FakeProcess(), "replayer": FakeProcess(), "executor": FakeProcess()}
+    sup = Supervisor(procs, lines.append)
+    sup.check()
+    assert lines == []
+    procs["predictor"].code = -9
+    procs["replayer"].code = 0  # the human's stream ended: normal
+    for _ in range(3):
+        sup.check()
+    assert lines == ["foresight demo: predictor was killed (SIGKILL): last words; carrying on without it (the "
+                     "executor holds while its outputs are missing)"]
+    assert sup.faults == [("predictor", -9)]
+
+
+def test_restart_brings_a_dead_service_back_a_bounded_number_of_times():
+    lines: list[str] = []
+    procs = {"planner": FakeProcess(), "executor": FakeProcess()}
+    sup = Supervisor(procs, lines.append, restart=True, max_restarts=2)
+    for _ in range(4):
+        procs["planner"].code = 1
+        sup.check()
+    assert procs["planner"].started == 2
+    assert "restarting it (1 of 2)" in lines[0] and "restarting it (2 of 2)" in lines[1]
+    assert "carrying on without it" in lines[2] and len(lines) == 3
+    assert describe_exit(-15) == "was killed (SIGTERM)" and describe_exit(2) == "exited with status 2"

@@ -1,0 +1,179 @@
+"""``foresight bench faults``: kill -9 each service (and the router) of a moving robot's run, measure the hold.
+
+A real-time run as processes (:mod:`tools.system`; the replayer loops, the executor runs until
+stopped). For each victim in turn, once the robot moves: SIGKILL it, record when the robot's state
+first says ``holding`` (and why), start it again after ``--down-s``, record when its liveliness token
+is back and when the robot moves again. Over the whole run, every state that is not holding is checked
+against the inputs the watcher saw: the newest plan and occupancy must be younger than the stale
+limit (plus ``SLACK_S`` for the watcher's own delivery). Last, SIGKILL the executor and read its MCAP
+back with the reader ``foresight log info`` uses (how much it recovered).
+
+Prints one line per victim (hold latency after the kill, resume latency after the service's return),
+the release check and the MCAP recovery; ``--json`` prints one object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from shared.recording.reader import read_log
+from shared.runtime import cli_errors, setup_logging
+
+from .system import ProcessSystem, SystemSpec, Watcher
+
+__all__ = ["measure_kill", "stale_releases", "recover_after_kill", "demo_model", "main", "SLACK_S"]
+
+SLACK_S = 0.1
+"""Allowance (s) for the watcher seeing a message later or earlier than the executor does."""
+
+
+def demo_model(models_dir: Path, components: int = 4) -> Path:
+    """The prediction model of the embedded synthetic library (cached in ``models_dir``)."""
+    from services.scenario import choose_demonstration, model_for
+    from shared.scene import load_scene
+    from shared.synthetic import generate_library
+
+    scene = load_scene(None)
+    lib = generate_library(seed=0, scene=scene)
+    demo = choose_demonstration(lib, 20, 0).demo
+    return model_for(lib, scene, demo, models_dir, components=components, progress=False)
+
+
+def _first(items: list, after: float, pred: Any) -> tuple[float, Any] | None:
+    return next(((t, m) for t, m in items if t > after and pred(m)), None)
+
+
+def measure_kill(system: ProcessSystem, watcher: Watcher, victim: str, down_s: float = 3.0,
+                 timeout: float = 240.0) -> dict[str, Any]:
+    """Kill ``victim`` while the robot moves, start it again after ``down_s``; what the robot did.
+
+    Returns:
+        ``victim``; ``hold_s`` (kill -> first holding state, None: never held) and ``hold_reason``;
+        ``moved_while_down`` (states not holding between the hold and the restart); ``back_s``
+        (restart -> liveliness token back; the router has none: 0); ``resume_s`` (token back -> first
+        state not holding after the restart), ``resume_after_start_s`` and ``resume_after_output_s``
+        (its first plan or occupancy after its return -> moving); ``events`` in order.
+    """
+    if not watcher.wait(watcher.moving, timeout):
+        raise RuntimeError(f"the robot did not move within {timeout:g} s before killing {victim}")
+    t_kill = time.monotonic()
+    system.kill(victim)
+    watcher.wait(lambda: _first(watcher.snapshot(watcher.states), t_kill, lambda m: m.holding) is not None,
+                 min(down_s, 10.0))
+    time.sleep(max(0.0, down_s - (time.monotonic() - t_kill)))
+    t_start = time.monotonic()
+    system.start(victim)
+    if victim != "router":
+        watcher.wait(lambda: any(t > t_start and s == victim and up for t, s, up in watcher.snapshot(watcher.tokens)),
+                     timeout)
+    back = next((t for t, s, up in watcher.snapshot(watcher.tokens) if t > t_start and s == victim and up), t_start)
+    watcher.wait(lambda: _first(watcher.snapshot(watcher.states), back, lambda m: not m.holding) is not None, timeout)
+    states = watcher.snapshot(watcher.states)
+    hold = _first(states, t_kill, lambda m: m.holding)
+    resume = _first(states, max(back, hold[0] if hold else t_kill), lambda m: not m.holding)
+    moved = sum(1 for t, m in states if hold and hold[0] < t < t_start and not m.holding)
+    outputs = {"predictor": watcher.occupancy, "planner": watcher.plans}.get(victim)
+    first_out = next((t for t, _ in watcher.snapshot(outputs) if t > back), None) if outputs is not None else None
+    events = [("kill", 0.0)]
+    if hold:
+        events.append(("hold", hold[0] - t_kill))
+    events += [("restart", t_start - t_kill), ("back", back - t_kill)]
+    if resume:
+        events.append(("resume", resume[0] - t_kill))
+    return {"victim": victim, "hold_s": hold[0] - t_kill if hold else None,
+            "hold_reason": hold[1].reason if hold else "", "moved_while_down": moved,
+            "back_s": back - t_start, "resume_s": resume[0] - back if resume else None,
+            "resume_after_start_s": resume[0] - t_start if resume else None,
+            "resume_after_output_s": resume[0] - first_out if resume and first_out else None,
+            "events": sorted(events, key=lambda e: e[1])}
+
+
+def stale_releases(watcher: Watcher, limit: float, slack: float = SLACK_S) -> list[dict[str, Any]]:
+    """States that were not holding although the newest plan or occupancy the watcher had seen was stale.
+
+    A state counts at its stamp (the executor's wall clock when it published it), the inputs at their
+    arrival at the watcher; ``slack`` allows for the two deliveries differing.
+    """
+    plans = [t for t, _ in watcher.snapshot(watcher.plans)]
+    occ = [t for t, _ in watcher.snapshot(watcher.occupancy)]
+    out = []
+    for _, st in watcher.snapshot(watcher.states):
+        if st.holding:
+            continue
+        t = st.stamp - watcher.wall_offset  # when the executor published it (its wall clock, this machine's)
+        last_plan = max((p for p in plans if p <= t), default=None)
+        last_occ = max((o for o in occ if o <= t), default=None)
+        ages = {"plan": None if last_plan is None else t - last_plan,
+                "occupancy": None if last_occ is None else t - last_occ}
+        stale = {k: a for k, a in ages.items() if a is not None and a > limit + slack}
+        if stale:
+            out.append({"t": t, **stale})
+    return out
+
+
+def recover_after_kill(system: ProcessSystem) -> dict[str, Any]:
+    """SIGKILL the executor and read its MCAP back (up to the last complete chunk)."""
+    system.kill("executor")
+    lf = read_log(system.spec.mcap_path)
+    lasts = [c.last_time for c in lf.channels.values() if c.last_time is not None]
+    firsts = [c.first_time for c in lf.channels.values() if c.first_time is not None]
+    return {"path": str(system.spec.mcap_path), "size_bytes": lf.size, "complete": lf.complete, "error": lf.error,
+            "messages": lf.message_count, "channels": len(lf.channels),
+            "duration_s": (max(lasts) - min(firsts)) / 1e9 if lasts else 0.0}
+
+
+def _line(r: dict[str, Any]) -> str:
+    def f(x: float | None) -> str:
+        return "-" if x is None else f"{x:.2f} s"
+
+    return (f"  {r['victim']:<9}  hold {f(r['hold_s'])} after kill ({r['hold_reason'] or 'never held'}); "
+            f"moved while down: {r['moved_while_down']} states; back {f(r['back_s'])} after restart; "
+            f"resume {f(r['resume_s'])} after its return ({f(r['resume_after_start_s'])} after its start, "
+            f"{f(r.get('resume_after_output_s'))} after its first output)")
+
+
+def main(argv: list[str] | None = None, prog: str = "foresight bench faults") -> int:
+    """Run the fault injection; returns 0 when it ran (the numbers are the result)."""
+    p = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--victims", default="predictor,planner,replayer,router", help="what to kill, in order")
+    p.add_argument("--down-s", type=float, default=3.0, help="seconds each victim stays dead")
+    p.add_argument("--run-dir", type=Path, default=Path("runs/faults"), help="logs and the MCAP")
+    p.add_argument("--models-dir", type=Path, default=Path("models"), help="model cache")
+    p.add_argument("--timeout", type=float, default=240.0, help="longest wait for any one event (s)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    args = p.parse_args(argv)
+    setup_logging("WARNING")
+    with cli_errors(prog):
+        spec = SystemSpec(run_dir=args.run_dir, model=demo_model(args.models_dir))
+        system = ProcessSystem(spec)
+        results: dict[str, Any] = {"kills": []}
+        try:
+            with Watcher(system.endpoint) as watcher:
+                system.start_all()
+                for victim in [v for v in args.victims.split(",") if v]:
+                    r = measure_kill(system, watcher, victim, args.down_s, args.timeout)
+                    results["kills"].append(r)
+                    if not args.json:
+                        print(_line(r), flush=True)
+                results["stale_releases"] = stale_releases(watcher, spec.stale_limit_s)
+                results["mcap"] = recover_after_kill(system)
+        finally:
+            results["exit"] = system.close()
+    if args.json:
+        print(json.dumps(results))
+        return 0
+    print(f"  releases with an input older than {spec.stale_limit_s:g} + {SLACK_S:g} s: "
+          f"{len(results['stale_releases'])}")
+    m = results["mcap"]
+    print(f"  executor SIGKILLed: {m['path']} {m['size_bytes'] / 1e6:.2f} MB, complete={m['complete']}, recovered "
+          f"{m['messages']} messages on {m['channels']} channels, {m['duration_s']:.1f} s ({m['error'] or 'no error'})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

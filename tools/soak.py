@@ -1,0 +1,125 @@
+"""``foresight bench soak``: human poses at 300 Hz for 60 s through the real-time system, as processes.
+
+Once the robot moves (the planner is up), for ``--duration-s`` seconds the watcher (:mod:`tools.system`)
+records every pose, occupancy grid, plan and robot state. It prints:
+
+* the predictor's latency, pose received -> its occupancy grid received (p50 / p99 / max, and p50 of
+  the first and the last tenth of the window: a growing latency is a growing backlog), and how many
+  poses of the window got no occupancy by its end (dropped or still queued);
+* the replanning period (between plans received: p50 / p99 / max) and the plans' planning time;
+* the share of robot states that held, and why;
+* the resident memory (RSS) of every process at the start and the end of the window.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from services.executor.core import reason_kind
+from shared.runtime import cli_errors, setup_logging
+
+from .faults import demo_model
+from .system import ProcessSystem, SystemSpec, Watcher
+
+__all__ = ["soak", "summarise", "main"]
+
+
+def _pct(values: list[float]) -> dict[str, float | None]:
+    if not values:
+        return {"p50": None, "p99": None, "max": None}
+    a = np.asarray(values)
+    return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+
+
+def summarise(watcher: Watcher, t0: float, t1: float) -> dict[str, Any]:
+    """The window ``[t0, t1]`` (monotonic s) of what the watcher recorded."""
+    poses = [(t, m) for t, m in watcher.snapshot(watcher.poses) if t0 <= t <= t1]
+    grids = [(t, m) for t, m in watcher.snapshot(watcher.occupancy) if t >= t0]
+    occ = {(m.demo_id, m.index): t for t, m in grids}
+    lat = [(t, occ[(m.demo_id, m.index)] - t) for t, m in poses if (m.demo_id, m.index) in occ]
+    n = len(lat)
+    tenth = max(1, n // 10)
+    plans = [(t, m) for t, m in watcher.snapshot(watcher.plans) if t0 <= t <= t1]
+    periods = [b[0] - a[0] for a, b in zip(plans, plans[1:], strict=False)]
+    states = [m for t, m in watcher.snapshot(watcher.states) if t0 <= t <= t1]
+    held = Counter(reason_kind(s.reason) for s in states if s.holding)
+    return {
+        "window_s": t1 - t0, "poses": len(poses), "pose_rate_hz": len(poses) / (t1 - t0) if t1 > t0 else 0.0,
+        "occupancy_received": sum(1 for t, _ in grids if t <= t1), "occupancy_for_poses": n,
+        "dropped": len(poses) - n,
+        "latency_s": _pct([x for _, x in lat]),
+        "latency_first_tenth_p50_s": _pct([x for _, x in lat[:tenth]])["p50"],
+        "latency_last_tenth_p50_s": _pct([x for _, x in lat[-tenth:]])["p50"],
+        "plans": len(plans), "replan_period_s": _pct(periods),
+        "planning_ms": _pct([m.planning_ms for _, m in plans]),
+        "states": len(states), "held_share": sum(held.values()) / len(states) if states else 0.0,
+        "held_reasons": dict(held),
+    }
+
+
+def soak(system: ProcessSystem, watcher: Watcher, duration_s: float, timeout: float = 240.0) -> dict[str, Any]:
+    """Wait for the robot to move, then measure ``duration_s`` seconds; RSS at both ends."""
+    if not watcher.wait(watcher.moving, timeout):
+        raise RuntimeError(f"the robot did not move within {timeout:g} s")
+    t0 = time.monotonic()
+    rss0 = system.rss()
+    time.sleep(duration_s)
+    t1 = time.monotonic()
+    rss1 = system.rss()
+    out = summarise(watcher, t0, t1)
+    out["rss_mb"] = {n: {"start": rss0.get(n, 0.0), "end": rss1.get(n, 0.0)} for n in system.procs}
+    out["running"] = {n: p.running for n, p in system.procs.items()}
+    return out
+
+
+def _fmt(d: dict[str, float | None], scale: float = 1e3, unit: str = "ms") -> str:
+    return " / ".join("-" if d[k] is None else f"{d[k] * scale:.0f}" for k in ("p50", "p99", "max")) + f" {unit}"
+
+
+def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> int:
+    """Run the soak; returns 0 when every process was still running at the end."""
+    p = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--rate-hz", type=float, default=300.0, help="poses per second")
+    p.add_argument("--duration-s", type=float, default=60.0, help="measured window")
+    p.add_argument("--run-dir", type=Path, default=Path("runs/soak"), help="logs and the MCAP")
+    p.add_argument("--models-dir", type=Path, default=Path("models"), help="model cache")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    args = p.parse_args(argv)
+    setup_logging("WARNING")
+    with cli_errors(prog):
+        spec = SystemSpec(run_dir=args.run_dir, model=demo_model(args.models_dir), rate_hz=args.rate_hz)
+        system = ProcessSystem(spec)
+        try:
+            with Watcher(system.endpoint, poses=True) as watcher:
+                system.start_all()
+                r = soak(system, watcher, args.duration_s)
+        finally:
+            r_exit = system.close()
+    r["exit"] = r_exit
+    if args.json:
+        print(json.dumps(r))
+    else:
+        print(f"window {r['window_s']:.1f} s: {r['poses']} poses ({r['pose_rate_hz']:.0f} Hz), "
+              f"{r['occupancy_received']} occupancy grids received, of them for the window's poses "
+              f"{r['occupancy_for_poses']}; poses without a grid by the end: {r['dropped']}")
+        print(f"predictor latency p50/p99/max {_fmt(r['latency_s'])}; p50 first tenth "
+              f"{(r['latency_first_tenth_p50_s'] or 0) * 1e3:.0f} ms, last tenth "
+              f"{(r['latency_last_tenth_p50_s'] or 0) * 1e3:.0f} ms")
+        print(f"plans {r['plans']}: period p50/p99/max {_fmt(r['replan_period_s'])}, planning "
+              f"{_fmt(r['planning_ms'], 1.0)}")
+        print(f"states {r['states']}, held {100 * r['held_share']:.1f}% {r['held_reasons']}")
+        for n, m in r["rss_mb"].items():
+            print(f"rss {n:<9} {m['start']:.0f} MB -> {m['end']:.0f} MB")
+    return 0 if all(r["running"].values()) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
