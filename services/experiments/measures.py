@@ -93,8 +93,9 @@ def penetration_per_state(points: np.ndarray, occupancy: OccupancyGrid) -> np.nd
     inside = np.all((idx >= 0) & (idx < dims), axis=-1)  # (N, P)
     flat = np.ravel_multi_index(tuple(np.clip(idx, 0, dims - 1).reshape(-1, 3).T), tuple(dims)).reshape(idx.shape[:2])
     n_states, n_vox = points.shape[0], int(np.prod(dims))
+    hit = inside & (dense.reshape(-1)[flat] > 0)  # voxels of zero probability add nothing: skip them before unique
     state = np.broadcast_to(np.arange(n_states)[:, None], flat.shape)
-    keys = np.unique(state[inside].astype(np.int64) * n_vox + flat[inside])
+    keys = np.unique(state[hit].astype(np.int64) * n_vox + flat[hit])
     return np.bincount(keys // n_vox, weights=dense.reshape(-1)[keys % n_vox], minlength=n_states)
 
 
