@@ -46,6 +46,8 @@ def _common(p: argparse.ArgumentParser, scene: str) -> None:
     p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20, the paper's)")
     p.add_argument("--w-human", type=float, default=None, help="weight of the planner's human cost (default: the "
                    "planner's, 1); for ablations")
+    p.add_argument("--volume", choices=VOLUMES, default=None, help="volume method of the held-out prediction "
+                   "models (foresight train --volume; default: the trainer's)")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
     p.add_argument("--no-compile", action="store_true", help="evaluate the planner's cost eagerly (no "
@@ -174,7 +176,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
         timing = _timing(args)
         common = {"library": str(args.library), "scene": args.scene, "timing": timing,
                   "components": args.components, "models_dir": args.models_dir, "work_dir": args.work_dir,
-                  "w_human": args.w_human}
+                  "w_human": args.w_human, "volume": args.volume}
         if args.what == "interference":
             res = run_interference(InterferenceConfig(robot_cup=args.robot_cup, human_cup=args.human_cup,
                                                       demos=args.demos, seeds=args.seeds, **common),
