@@ -91,7 +91,7 @@ def _library_digest(library: MotionLibrary) -> str:
 
 def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Sequence[Demonstration],
               models_dir: Path, components: int | None = None, progress: bool = True,
-              fit_cache: dict[str, Any] | None = None) -> Path:
+              fit_cache: dict[str, Any] | None = None, volume: str | None = None) -> Path:
     """The prediction model for a run: trained on ``library`` without ``held_out``, cached in ``models_dir``.
 
     The cache key covers the library's data, the held-out demonstrations, the scene and the training
@@ -106,18 +106,21 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
         progress: Show progress bars while training.
         fit_cache: Shared fitted class mixtures (``train_model``'s ``fit_cache``): with one model per
             held-out demonstration, only the held-out demonstration's class is refitted.
+        volume: Volume method (``foresight train --volume``; None: the trainer's default).
 
     Returns:
         Path of the model file (trained now if it was not cached).
     """
+    from dataclasses import replace
+
     from services.predictor.model import MODEL_VERSION
     from services.predictor.train import TrainConfig, train_model
 
     cfg = TrainConfig()
     if components is not None:
-        from dataclasses import replace
-
         cfg = replace(cfg, gmm=replace(cfg.gmm, n_components=components))
+    if volume is not None:
+        cfg = replace(cfg, volume=volume)
     out = [held_out] if isinstance(held_out, Demonstration) else list(held_out)
     left = sorted((d.label, d.index) for d in out)
     key = hashlib.sha256(json.dumps([_library_digest(library), left, repr(scene), repr(cfg),

@@ -3,6 +3,7 @@
     foresight eval recognition   early recognition, leave-one-out (Fig. 6)
     foresight eval interference  one robot task against a human reaching across it (Table I)
     foresight eval switch        two robot tasks, when the robot settles on its goal (Fig. 8-9)
+    foresight eval occupancy     does the predicted occupancy hold where the human really goes (leave-one-out)
     foresight eval all           all of them and the timings, one Markdown report with PNGs
 
 Every run goes through the four services (in-process, loopback Zenoh, lock-step, seeded): the same
@@ -19,6 +20,7 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+from services.predictor.volumes import VOLUMES
 from shared.runtime import UserError, cli_errors, setup_logging
 from shared.scene import SCENE_HELP
 
@@ -44,6 +46,8 @@ def _common(p: argparse.ArgumentParser, scene: str) -> None:
     p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20, the paper's)")
     p.add_argument("--w-human", type=float, default=None, help="weight of the planner's human cost (default: the "
                    "planner's, 1); for ablations")
+    p.add_argument("--volume", choices=VOLUMES, default=None, help="volume method of the held-out prediction "
+                   "models (foresight train --volume; default: the trainer's)")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
     p.add_argument("--no-compile", action="store_true", help="evaluate the planner's cost eagerly (no "
@@ -77,13 +81,15 @@ def _timing(args: argparse.Namespace) -> Timing:
 
 def _doc(module: str) -> str:
     """A module's docstring as ``--help`` prose (reST literals shown plain)."""
-    return (sys.modules[f"services.experiments.{module}"].__doc__ or "").replace("``", "")
+    import importlib
+
+    return (importlib.import_module(f"services.experiments.{module}").__doc__ or "").replace("``", "")
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="what", required=True, metavar="{recognition,interference,switch,all}")
+    sub = parser.add_subparsers(dest="what", required=True, metavar="{recognition,interference,switch,occupancy,all}")
     sub.add_parser("recognition", help="early recognition, leave-one-out (Fig. 6); see its --help", add_help=False)
     p = sub.add_parser("interference", help="Table I: basic STOMP vs least penetration vs current occupancy",
                        description=_doc("interference"),
@@ -102,12 +108,51 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                    "(default 0: all)")
     p.add_argument("--seed", type=int, default=0, help="STOMP seed of every run (default: 0)")
     p.add_argument("--plot", type=Path, default=Path("runs/plots/switch.png"), help="Fig. 9 PNG")
+    p = sub.add_parser("occupancy", help="leave-one-out: predicted occupancy against where the human really goes",
+                       description=_doc("occupancy"), formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--library", default="synthetic", help="motion library: 'synthetic' (the embedded synthetic "
+                   "library) or a path (dir of compound_*.csv or .npz); default: synthetic")
+    p.add_argument("--scene", default="", help=f"{SCENE_HELP} (default: pr2_two_cups)")
+    p.add_argument("--methods", default=",".join(VOLUMES), help="volume methods compared, comma-separated "
+                   f"(default: {','.join(VOLUMES)})")
+    p.add_argument("--per-class", type=int, default=0, help="held-out demonstrations per class, evenly spread "
+                   "(default 0: every one)")
+    p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20)")
+    p.add_argument("--resolution", type=float, default=None, help="voxel edge in metres (default: the scene's)")
+    p.add_argument("--n-jobs", type=int, default=2, help="worker processes (default: 2)")
+    p.add_argument("--example", type=int, default=0, help="held-out demonstration drawn in the PNG (its position "
+                   "in the held-out order; default 0)")
+    p.add_argument("--out", type=Path, default=Path("runs/occupancy"), help="directory of the PNG "
+                   "(default: runs/occupancy)")
+    p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
     from .report import add_report_arguments
 
     add_report_arguments(sub.add_parser("all", help="every experiment and the timings into one Markdown report",
                                         description=_doc("report"),
                                         formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
+
+
+def _occupancy(args: argparse.Namespace, out) -> int:
+    from shared.scene import load_scene
+
+    from .heldout import load_experiment_library, short_name
+    from .occupancy import OccupancyConfig, plot_occupancy, run_occupancy
+
+    if args.per_class < 0 or args.components < 1 or args.n_jobs < 1:
+        raise UserError("--per-class must be >= 0, --components and --n-jobs >= 1")
+    scene = load_scene(args.scene or None)
+    lib = load_experiment_library(args.library, scene)
+    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    res = run_occupancy(lib, scene, OccupancyConfig(methods=methods, per_class=args.per_class,
+                                                    components=args.components, resolution=args.resolution,
+                                                    n_jobs=args.n_jobs, example=args.example), out)
+    png = plot_occupancy(res, Path(args.out) / f"occupancy-{short_name(lib.source)}.png")
+    if args.json:
+        print(json.dumps({**res.to_json(), "plot": str(png)}))
+    else:
+        print("\n".join([*res.lines(), f"plot: {png}"]))
+    return 0
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
@@ -126,10 +171,12 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             return run_report(args)
         out = (lambda line: print(line, file=sys.stderr, flush=True)) if args.json else \
             (lambda line: print(line, flush=True))
+        if args.what == "occupancy":
+            return _occupancy(args, out)
         timing = _timing(args)
         common = {"library": str(args.library), "scene": args.scene, "timing": timing,
                   "components": args.components, "models_dir": args.models_dir, "work_dir": args.work_dir,
-                  "w_human": args.w_human}
+                  "w_human": args.w_human, "volume": args.volume}
         if args.what == "interference":
             res = run_interference(InterferenceConfig(robot_cup=args.robot_cup, human_cup=args.human_cup,
                                                       demos=args.demos, seeds=args.seeds, **common),

@@ -110,15 +110,17 @@ class HeldOutModels:
         scene: The scene the swept volumes are placed in.
         models_dir: Cache directory.
         components: Gaussians per class (None: the trainer's default, 20 as in the paper).
+        volume: Volume method (None: the trainer's default).
     """
 
     library: MotionLibrary
     scene: Scene
     models_dir: Path
     components: int | None = None
+    volume: str | None = None
     _fits: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def without(self, demos: list[Demonstration]) -> Path:
         """The model file trained on every demonstration but ``demos``."""
         return model_for(self.library, self.scene, demos, self.models_dir, self.components, progress=False,
-                         fit_cache=self._fits)
+                         fit_cache=self._fits, volume=self.volume)

@@ -53,6 +53,7 @@ class InterferenceConfig:
     timing: Timing = Timing()
     components: int | None = None
     w_human: float | None = None  # None: the planner's default
+    volume: str | None = None  # None: the trainer's default
     selection_seed: int = 0
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
@@ -157,6 +158,7 @@ class InterferenceResult:
                    human_class_distance_m=self.human.distance, demos=self.demos, seeds=self.config.seeds,
                    robot_cup=self.config.robot_cup, human_cup=self.config.human_cup,
                    timing=dataclasses.asdict(self.config.timing), w_human=self.config.w_human,
+                   volume=self.config.volume,
                    runs=[dataclasses.asdict(r) for r in self.runs])
         return out
 
@@ -207,7 +209,7 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
     progress(f"interference: {lib.source}, scene {scene.name}; robot -> {cfg.robot_cup}; human -> {cfg.human_cup}: "
              f"class {human.name} (mean reach {human.distance:.3f} m from the cup), demonstrations "
              f"{[d.index for d in demos]} held out")
-    model = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components).without(demos)
+    model = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components, cfg.volume).without(demos)
     planners = {flag: build_planner(scene, [cfg.robot_cup], flag, cfg.timing, compile=compile, w_human=cfg.w_human)
                 for flag in (False, True)}
     result = InterferenceResult(cfg, lib.source, human, [d.index for d in demos])

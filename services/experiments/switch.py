@@ -80,6 +80,7 @@ class SwitchConfig:
     timing: Timing = Timing()
     components: int | None = None
     w_human: float | None = None  # None: the planner's default
+    volume: str | None = None  # None: the trainer's default
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
 
@@ -146,7 +147,7 @@ class SwitchResult:
         out["earlier_by"] = self.median_settle("current") - self.median_settle("prediction")
         out.update(library=self.library, scene=self.config.scene, human_class=self.human.name,
                    human_class_distance_m=self.human.distance, timing=dataclasses.asdict(self.config.timing),
-                   w_human=self.config.w_human,
+                   w_human=self.config.w_human, volume=self.config.volume,
                    runs=[dataclasses.asdict(r) for r in self.runs])
         return out
 
@@ -183,7 +184,7 @@ def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compi
     progress(f"switch: {lib.source}, scene {scene.name}; robot -> {', '.join(cups)}; human -> {cfg.human_cup}: class "
              f"{human.name} (mean reach {human.distance:.3f} m from the cup); {len(demos)} demonstrations, each "
              f"held out in turn")
-    models = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components)
+    models = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components, cfg.volume)
     planner = build_planner(scene, cups, True, cfg.timing, compile=compile, w_human=cfg.w_human)
     result = SwitchResult(cfg, lib.source, human)
     total = len(demos) * len(METHODS)

@@ -25,6 +25,7 @@ from .core import PredictorConfig, PredictorCore
 from .gmm import GMMConfig, posterior_from_log_likelihood
 from .model import PredictionModel
 from .train import TrainConfig, default_library, train_model
+from .volumes import DEFAULT_VOLUME, VOLUMES
 
 __all__ = ["bench_grid", "run_bench", "main"]
 
@@ -67,7 +68,7 @@ def run_bench(model: PredictionModel, scene: Scene, poses: list[np.ndarray], rep
                 t3 = time.perf_counter()
                 post = posterior_from_log_likelihood(core.log_likelihood())
                 t4 = time.perf_counter()
-                core.occupancy_for(post)
+                core.occupancy_for(post, i)
                 t5 = time.perf_counter()
                 t_ll.append((t1 - t0) - (t5 - t4))
                 t_occ.append(t5 - t4)
@@ -93,7 +94,7 @@ def run_bench(model: PredictionModel, scene: Scene, poses: list[np.ndarray], rep
         "likelihood_ms_median": ms(t_ll), "occupancy_ms_median": ms(t_occ), "encode_ms_median": ms(t_enc),
         "dense_baseline_ms_median": ms(t_dense), "speedup_vs_dense": ms(t_dense) / ms(t_all),
         "current_method_ms_median": ms(t_cur), "message_bytes_median": float(np.median(sizes)),
-        "nonzero_voxels_median": float(np.median(nnz)),
+        "nonzero_voxels_median": float(np.median(nnz)), "volume": model.volume_method,
     }
 
 
@@ -110,6 +111,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench predictor")
     parser.add_argument("--grid", type=int, default=64, help="voxels per axis of the quick model's grid (default 64)")
     parser.add_argument("--demos", type=int, default=8, help="demonstrations streamed (default 8, 100 poses each)")
     parser.add_argument("--repeats", type=int, default=2, help="passes over the demonstrations (default 2)")
+    parser.add_argument("--volume", choices=VOLUMES, default=DEFAULT_VOLUME,
+                        help=f"volume method of the quick model (default: {DEFAULT_VOLUME})")
     parser.add_argument("--json", action="store_true", help="print one JSON object (key update_ms_median, ...)")
     args = parser.parse_args(argv)
     with cli_errors(prog):
@@ -122,7 +125,9 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench predictor")
             grid = bench_grid(scene, args.grid)
             sc = Scene(scene.name, scene.human, scene.robot, scene.boxes, scene.cups, grid, scene.workspace,
                        scene.source)
-            cfg = TrainConfig(gmm=GMMConfig(n_components=20, max_iter=20), resolution=None)
+            # tau does not change the cost of an update: a fixed one spares the cross-validation
+            cfg = TrainConfig(gmm=GMMConfig(n_components=20, max_iter=20), resolution=None, temperature=150.0,
+                              volume=args.volume)
             model = train_model(lib, sc, cfg, progress=not args.json)
         step = max(1, len(lib.demos) // max(args.demos, 1))
         poses = [d.features for d in lib.demos[::step][: args.demos]]
@@ -130,7 +135,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench predictor")
         if args.json:
             print(json.dumps(res))
         else:
-            print(f"predictor update on a {'x'.join(map(str, res['grid_dims']))} grid at {res['resolution']:.4f} m, "
+            print(f"{model.volume_method} volumes: predictor update on a {'x'.join(map(str, res['grid_dims']))} "
+                  f"grid at {res['resolution']:.4f} m, "
                   f"{res['classes']} classes x {res['gaussians']} Gaussians, {res['union_voxels']} voxels in the "
                   f"union of the swept volumes, {res['updates']} updates (shared machine: timings are noisy)")
             rows = [("update: pose -> encoded OccupancyGrid (median)", res["update_ms_median"], "ms"),

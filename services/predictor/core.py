@@ -7,7 +7,9 @@ For the demonstration being observed (paper IV.C, IV.E):
 - ``p(C_m | xi) = p(xi | C_m)^(1/tau) / sum_j p(xi | C_j)^(1/tau)`` by log-sum-exp normalisation, with
   the temperature tau of the model file (or ``PredictorConfig.temperature``); tau = 1 is the paper's
   posterior, tau > 1 deflates the over-counted evidence of correlated samples (calibration);
-- ``p(x | xi) = sum_m p(x | C_m) p(C_m | xi)``, with ``p(x | C_m)`` the class's swept volume (0/1).
+- ``p(x | xi) = sum_m p(x | C_m) p(C_m | xi)``, with ``p(x | C_m)`` the class's volume of the model
+  file (the paper's swept mean motion, 0/1, or a volume with the motion's spread, in [0, 1]:
+  ``services.predictor.volumes``); the result stays in [0, 1].
 
 Only voxels inside the union of the swept volumes can be non-zero, so the occupancy is one
 ``(M,) @ (M, U)`` float32 product over those U voxels. The baseline ``current`` method returns
@@ -139,6 +141,10 @@ class PredictorCore:
         flat = volumes.reshape(model.n_classes, -1)
         self.support = np.flatnonzero(flat.any(axis=0))                      # (U,) union of the volumes
         self.volumes_u = np.ascontiguousarray(flat[:, self.support], dtype=np.float32)  # (M, U)
+        self.timed_u: np.ndarray | None = None                               # (B, M, U): p(x|C_m, t) per time bin
+        if model.timed is not None:
+            pos = np.searchsorted(model.timed.support, self.support)
+            self.timed_u = np.ascontiguousarray(np.swapaxes(model.timed.values[:, :, pos], 0, 1), dtype=np.float32)
         self.demo_id = -1
         self._ll = np.zeros(model.n_classes)
         self._first: np.ndarray | None = None
@@ -161,17 +167,20 @@ class PredictorCore:
         """``(M,)`` running ln p(xi | C_m)."""
         return self._ll.copy()
 
-    def occupancy_for(self, posterior: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def occupancy_for(self, posterior: np.ndarray, index: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Predicted occupancy ``sum_m p(x|C_m) p(C_m|xi)`` for given class posteriors.
 
         Args:
             posterior: ``(M,)`` class probabilities.
+            index: The observed sample index t (a ``timed`` model gives ``p(x|C_m, t)``: what is still to
+                come; other models ignore it).
 
         Returns:
             ``(indices (U,), values (U,) float32)``: flat voxel indices (the union of the swept
             volumes) and their probabilities.
         """
-        val = np.asarray(posterior, dtype=np.float32) @ self.volumes_u
+        vol = self.volumes_u if self.timed_u is None else self.timed_u[self.model.timed.bin(index)]  # type: ignore
+        val = np.asarray(posterior, dtype=np.float32) @ vol
         return self.support, np.minimum(val, np.float32(1.0))
 
     def update(self, features: np.ndarray, index: int | None = None) -> PredictionResult:
@@ -201,7 +210,7 @@ class PredictorCore:
         self._count += 1
         post = posterior_from_log_likelihood(self._ll, temperature=self.temperature)
         if self.config.method == "prediction":
-            idx, val = self.occupancy_for(post)
+            idx, val = self.occupancy_for(post, t)
         else:
             placed = place_in_scene(f, self._first, self.scene)
             idx = posture_voxels(self.human.surface_points(placed, spacing=self.model.spacing,

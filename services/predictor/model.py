@@ -17,14 +17,22 @@ Contents (M classes, K Gaussians at most per class, F posture features, D featur
 | ``motion_lengths`` | i8 (M,) | valid postures of each motion (rest is padding) |
 | ``grid_min``, ``grid_max`` | f8 (3,) | grid bounds (scene frame) |
 | ``grid_resolution`` | float | voxel edge (m) |
-| ``volumes`` | u1 (M, ceil(V/8)) | swept volumes, ``numpy.packbits`` of the C-order bool grids; absent when the
+| ``volumes`` | u1 (M, ceil(V/8)) | ``paper`` volumes: ``numpy.packbits`` of the C-order bool grids; absent when the
   features have no mapping to the human model (a recognition-only model, ``shared.feature_sets``) |
+| ``volume_probabilities`` | u1 (M, V) | other volume methods: ``p(x|C_m)`` quantised as ``round(255 p)`` (C order) |
+| ``timed_support`` | i4 (U,) | ``timed`` volumes: flat indices of the voxels any class may occupy |
+| ``timed_values`` | u1 (M, B, U) | ``timed``: ``p(x|C_m, t)`` per time bin, quantised as ``round(255 p)`` |
+| ``time_bin`` | int | ``timed``: samples per time bin (bin b starts at sample ``b * time_bin``) |
+| ``volume_method`` | str | ``services.predictor.volumes.VOLUMES`` (optional: files without it are ``paper``) |
 | ``scene_name`` | str | scene the volumes were placed in |
 | ``human_pelvis`` | f8 (4,) | that scene's human placement (x, y, z, yaw) |
 | ``spacing`` | float | surface sample spacing (m) used for the volumes |
 | ``interior`` | bool | whether the body's inside was sampled too |
 | ``meta`` | str | JSON: library source, demonstrations per class, options, timestamp |
 | ``temperature`` | float | posterior temperature tau (optional: files without it use 1, the paper's) |
+
+Version 2 added ``volume_method``, ``volume_probabilities`` and the ``timed_*`` arrays; version 1 files
+(paper volumes) still load.
 """
 
 from __future__ import annotations
@@ -44,23 +52,46 @@ from shared.scene import Grid, Scene
 from .features import FeatureEncoder
 from .gmm import MixtureBank
 from .swept_volume import pack_volumes, unpack_volumes
+from .volumes import VOLUMES
 
-__all__ = ["MODEL_FORMAT", "MODEL_VERSION", "ModelError", "PredictionModel"]
+__all__ = ["MODEL_FORMAT", "MODEL_VERSION", "ModelError", "PredictionModel", "TimedVolumes"]
 
 MODEL_FORMAT = "foresight-prediction-model"
-MODEL_VERSION = 1
+MODEL_VERSION = 2
+READABLE_VERSIONS = (1, 2)
 
 
 class ModelError(ValueError):
     """A model file is missing, corrupt, of another version or inconsistent; the message says which."""
 
 
+@dataclass(frozen=True)
+class TimedVolumes:
+    """Time-indexed class volumes ``p(x|C_m, t)`` (the ``timed`` method) over the voxels U any class may occupy.
+
+    Attributes:
+        support: ``(U,)`` flat C-order voxel indices.
+        values: ``(M, B, U)`` float32: the probability that a demonstration of class m occupies the voxel at a
+            sample index >= ``b * time_bin``.
+        time_bin: Samples per bin.
+    """
+
+    support: np.ndarray
+    values: np.ndarray
+    time_bin: int
+
+    def bin(self, index: int) -> int:
+        """The bin of sample ``index`` (the last one for indices past the longest demonstration)."""
+        return min(max(int(index), 0) // self.time_bin, self.values.shape[1] - 1)
+
+
 @dataclass
 class PredictionModel:
     """Trained per-class mixtures, regressed motions and swept volumes on one voxel grid.
 
-    ``volumes`` is None for a model of features without a mapping to the human model: it recognises
-    (mixtures, posteriors) but predicts no occupancy (:meth:`require_volumes`).
+    ``volumes`` (``p(x|C_m)`` in [0, 1]; 0/1 for the paper's method) is None for a model of features
+    without a mapping to the human model: it recognises (mixtures, posteriors) but predicts no
+    occupancy (:meth:`require_volumes`).
     """
 
     class_names: list[str]
@@ -73,7 +104,7 @@ class PredictionModel:
     motions: np.ndarray        # (M, T, F)
     motion_lengths: np.ndarray  # (M,)
     grid: Grid
-    volumes: np.ndarray | None  # (M, nx, ny, nz) bool; None without a feature mapping
+    volumes: np.ndarray | None  # (M, nx, ny, nz) float32 in [0, 1]; None without a feature mapping
     scene_name: str
     human_pelvis: np.ndarray   # (4,) x, y, z, yaw
     spacing: float = 0.02
@@ -81,6 +112,8 @@ class PredictionModel:
     meta: dict[str, Any] = field(default_factory=dict)
     temperature: float = 1.0
     feature_names: tuple[str, ...] = HERAKLES_NAMES
+    volume_method: str = "paper"
+    timed: TimedVolumes | None = None
 
     @property
     def n_classes(self) -> int:
@@ -137,9 +170,17 @@ class PredictionModel:
             "interior": np.array(self.interior), "meta": np.array(json.dumps(self.meta)),
             "temperature": np.array(float(self.temperature)),
             "feature_names": np.array(self.feature_names, dtype=np.str_),
+            "volume_method": np.array(self.volume_method),
         }
-        if self.volumes is not None:
-            arrays["volumes"] = pack_volumes(self.volumes)
+        if self.timed is not None:
+            arrays["timed_support"] = self.timed.support.astype(np.int32)
+            arrays["timed_values"] = np.rint(np.clip(self.timed.values, 0.0, 1.0) * 255.0).astype(np.uint8)
+            arrays["time_bin"] = np.array(int(self.timed.time_bin), dtype=np.int64)
+        elif self.volumes is not None and self.volume_method == "paper":
+            arrays["volumes"] = pack_volumes(self.volumes > 0.5)
+        elif self.volumes is not None:
+            q = np.rint(np.clip(self.volumes, 0.0, 1.0) * 255.0).astype(np.uint8)
+            arrays["volume_probabilities"] = q.reshape(self.n_classes, -1)
         tmp = p.with_name(p.name + ".tmp.npz")
         with tmp.open("wb") as f:
             np.savez_compressed(f, **arrays)
@@ -165,9 +206,9 @@ class PredictionModel:
             raise ModelError(f"model file {str(p)!r} is not a Foresight prediction model (format "
                              f"{str(data.get('format', 'missing'))!r})")
         version = int(data["version"]) if "version" in data else None
-        if version != MODEL_VERSION:
-            raise ModelError(f"model file {str(p)!r} has version {version}, this build reads version {MODEL_VERSION}; "
-                             "retrain with `foresight train`")
+        if version not in READABLE_VERSIONS:
+            raise ModelError(f"model file {str(p)!r} has version {version}, this build reads versions "
+                             f"{', '.join(map(str, READABLE_VERSIONS))}; retrain with `foresight train`")
         try:
             return cls._from_arrays(data)
         except (KeyError, ValueError, TypeError, IndexError) as exc:
@@ -187,12 +228,32 @@ class PredictionModel:
         dims = grid.dims
         feature_names = (tuple(str(s) for s in d["feature_names"].tolist()) if "feature_names" in d
                          else HERAKLES_NAMES)
+        method = str(d["volume_method"]) if "volume_method" in d else "paper"
+        if method not in VOLUMES:
+            raise ValueError(f"volume method {method!r} is not one of {', '.join(VOLUMES)}")
         volumes = None
-        if mapping_for(feature_names) is not None or "volumes" in d:
+        timed = None
+        if "timed_values" in d:
+            support, q = d["timed_support"].astype(np.int64), d["timed_values"]
+            n = int(np.prod(dims))
+            if q.dtype != np.uint8 or q.ndim != 3 or q.shape[0] != m or q.shape[2] != support.shape[0] \
+                    or (support.size and (support.min() < 0 or support.max() >= n)) or int(d["time_bin"]) < 1:
+                raise ValueError(f"timed volumes {q.shape} / support {support.shape} do not fit {m} classes on a "
+                                 f"{dims} grid")
+            timed = TimedVolumes(support, q.astype(np.float32) / np.float32(255.0), int(d["time_bin"]))
+            volumes = np.zeros((m, n), np.float32)
+            volumes[:, support] = timed.values[:, 0]
+            volumes = volumes.reshape(m, *dims)
+        elif "volume_probabilities" in d:
+            q = d["volume_probabilities"]
+            if q.dtype != np.uint8 or q.shape != (m, int(np.prod(dims))):
+                raise ValueError(f"volume probabilities of shape {q.shape} do not fit {m} classes on a {dims} grid")
+            volumes = (q.astype(np.float32) / np.float32(255.0)).reshape(m, *dims)
+        elif mapping_for(feature_names) is not None or "volumes" in d:
             packed = d["volumes"]
             if packed.dtype != np.uint8 or packed.shape != (m, (int(np.prod(dims)) + 7) // 8):
                 raise ValueError(f"volumes of shape {packed.shape} do not fit {m} classes on a {dims} grid")
-            volumes = unpack_volumes(packed, dims)
+            volumes = unpack_volumes(packed, dims).astype(np.float32)
         temperature = float(d["temperature"]) if "temperature" in d else 1.0
         if not (temperature > 0 and np.isfinite(temperature)):
             raise ValueError(f"temperature must be a finite number > 0, got {temperature}")
@@ -207,7 +268,8 @@ class PredictionModel:
                     motion_lengths=lengths, grid=grid, volumes=volumes,
                     scene_name=str(d["scene_name"]), human_pelvis=d["human_pelvis"].astype(np.float64),
                     spacing=float(d["spacing"]), interior=bool(d["interior"]), meta=json.loads(str(d["meta"])),
-                    temperature=temperature, feature_names=feature_names)
+                    temperature=temperature, feature_names=feature_names, volume_method=method,
+                    timed=timed)
         if model.encoder().dim != mu.shape[2]:
             raise ValueError(f"feature variant {model.feature_variant!r} has {model.encoder().dim} dimensions, "
                              f"the mixtures {mu.shape[2]}")

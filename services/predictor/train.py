@@ -2,8 +2,10 @@
 
 Per class m (paper IV.B, IV.D): a Gaussian mixture over ``[time, features]`` of all its
 demonstrations; the GMR-regressed motion (conditioned on time, :func:`services.predictor.gmr.gmr`);
-the swept volume of that motion placed in the scene. Everything goes into one model file
-(:class:`services.predictor.model.PredictionModel`).
+its occupancy volume ``p(x|C_m)`` in the scene (``--volume``, :mod:`services.predictor.volumes`:
+the paper's swept mean motion, or the motion with its spread). The posterior temperature tau is
+chosen by cross-validation on the library (:mod:`services.predictor.calibration`) unless given.
+Everything goes into one model file (:class:`services.predictor.model.PredictionModel`).
 
 The mixtures and motions work on any feature set the library declares; the swept volumes need a
 mapping of the features to the human model (``shared.feature_sets``). Without one the model is
@@ -22,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from shared.feature_sets import FeatureMapping
@@ -30,13 +33,15 @@ from shared.library import Demonstration, MotionLibrary, heldout_split, load_lib
 from shared.runtime import UserError, cli_errors, setup_logging
 from shared.scene import SCENE_HELP, Scene, load_scene
 
+from .calibration import DEFAULT_FOLDS, TemperatureChoice, choose_temperature
 from .features import VARIANTS, FeatureEncoder
-from .gmm import DEFAULT_TEMPERATURE, GMMConfig, MixtureBank, fit_class_gmm
+from .gmm import GMMConfig, MixtureBank, fit_class_gmm
 from .gmr import gmr
-from .model import PredictionModel
+from .model import PredictionModel, TimedVolumes
 from .swept_volume import swept_volume
+from .volumes import DEFAULT_VOLUME, VOLUMES, Sweep, demos_volume, digest, spread_volume, sweep, timed_volume
 
-__all__ = ["TrainConfig", "train_model", "regress_motions", "default_library", "main"]
+__all__ = ["TrainConfig", "train_model", "regress_motions", "default_library", "demo_sweep_key", "main"]
 
 log = logging.getLogger("foresight.train")
 
@@ -55,7 +60,11 @@ class TrainConfig:
         spacing: Body surface sample spacing (m).
         interior: Also sample the inside of the body.
         oversample: Regressed postures per library sample used for the swept volumes.
-        temperature: Posterior temperature tau stored in the model (1: the paper's posterior).
+        temperature: Posterior temperature tau stored in the model (1: the paper's posterior);
+            ``None``: chosen by ``folds``-fold cross-validation on the training demonstrations.
+        volume: How the per-class occupancy is built (:data:`services.predictor.volumes.VOLUMES`).
+        folds: Folds of the temperature's cross-validation.
+        time_bin: Samples per time bin of the ``timed`` volumes.
     """
 
     gmm: GMMConfig = GMMConfig()
@@ -65,7 +74,10 @@ class TrainConfig:
     spacing: float = 0.02
     interior: bool = False
     oversample: int = 4
-    temperature: float = DEFAULT_TEMPERATURE
+    temperature: float | None = None
+    volume: str = DEFAULT_VOLUME
+    folds: int = DEFAULT_FOLDS
+    time_bin: int = 5
 
 
 def default_library(scene: Scene | None = None) -> MotionLibrary:
@@ -113,11 +125,11 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
 
     Args:
         library: Motion library (classes and demonstrations).
-        scene: Scene the swept volumes are placed in (its ``[grid]`` unless ``config.resolution``).
+        scene: Scene the volumes are placed in (its ``[grid]`` unless ``config.resolution``).
         config: Options.
         demos: Demonstrations to train on (default: all of ``library``).
         progress: Show tqdm bars.
-        fit_cache: Fitted class mixtures by a digest of their training data and mixture options. Pass
+        fit_cache: Fitted class mixtures (and swept volumes) by a digest of their data and options. Pass
             the same dict to several calls (e.g. one model per held-out demonstration) and only the
             classes whose data changed are refitted; the fits are seeded, so the model is the same as
             without the cache.
@@ -127,10 +139,14 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     """
     cfg = config or TrainConfig()
     cfg.gmm.validate()
-    if not (cfg.temperature > 0 and np.isfinite(cfg.temperature)):
-        raise UserError(f"--temperature must be a finite number > 0, got {cfg.temperature}")
+    if cfg.temperature is not None and not (cfg.temperature > 0 and np.isfinite(cfg.temperature)):
+        raise UserError(f"--temperature must be a finite number > 0 or 'auto', got {cfg.temperature}")
     if cfg.features not in VARIANTS:
         raise UserError(f"--features {cfg.features!r} is not one of {', '.join(VARIANTS)}")
+    if cfg.volume not in VOLUMES:
+        raise UserError(f"--volume {cfg.volume!r} is not one of {', '.join(VOLUMES)}")
+    if cfg.folds < 2:
+        raise UserError(f"--folds must be >= 2, got {cfg.folds}")
     demos = list(library.demos) if demos is None else demos
     encoder = FeatureEncoder(cfg.features, cfg.time_scale, feature_names=library.feature_names,
                              source=f"library {library.source}")
@@ -141,22 +157,33 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     empty = [library.class_names[m] for m, ds in enumerate(by_class) if not ds]
     if empty:
         raise UserError(f"library {library.source}: no demonstrations for class(es) {', '.join(empty)}")
-    mixtures = []
-    for m in tqdm(range(library.n_classes), desc="GMM per class", unit="class", disable=not progress):
-        data = class_data(by_class[m], encoder)
+    cache: dict[str, Any] = {} if fit_cache is None else fit_cache
+
+    def fit(data: np.ndarray) -> Any:
         key = hashlib.sha256(np.ascontiguousarray(data).tobytes() + repr(cfg.gmm).encode()).hexdigest()
-        if fit_cache is not None and key in fit_cache:
-            mixture = fit_cache[key]
-        else:
-            mixture = fit_class_gmm(data, cfg.gmm)
-            if fit_cache is not None:
-                fit_cache[key] = mixture
-        mixtures.append(mixture)
+        if key not in cache:
+            cache[key] = fit_class_gmm(data, cfg.gmm)
+        return cache[key]
+
+    feats = [[encoder.batch(d.features) for d in ds] for ds in by_class]
+    mixtures = [fit(np.vstack(f)) for f in tqdm(feats, desc="GMM per class", unit="class", disable=not progress)]
+    if cfg.temperature is None:
+        with threadpool_limits(1):  # many small fits: one BLAS thread each is several times faster
+            choice = choose_temperature(feats, fit, folds=cfg.folds)
+    else:
+        choice = TemperatureChoice(float(cfg.temperature), "given")
     bank = MixtureBank.from_sklearn(mixtures)
     lengths = [int(np.median([d.n_samples for d in ds])) for ds in by_class]
     motions = regress_motions(bank, lengths, encoder)
     mapping = library.mapping
-    volumes = None if mapping is None else _swept_volumes(bank, lengths, encoder, mapping, scene, grid, cfg, progress)
+    volumes = timed = None
+    if mapping is not None and cfg.volume == "timed":
+        timed = _timed_volumes(mapping, scene, grid, cfg, by_class, cache, progress)
+        volumes = np.zeros((library.n_classes, int(np.prod(grid.dims))), np.float32)
+        volumes[:, timed.support] = timed.values[:, 0]
+        volumes = volumes.reshape(library.n_classes, *grid.dims)
+    elif mapping is not None:
+        volumes = _class_volumes(bank, lengths, encoder, mapping, scene, grid, cfg, by_class, cache, progress)
     t_max = max(lengths)
     padded = np.zeros((library.n_classes, t_max, library.n_features))
     for m, mot in enumerate(motions):
@@ -164,7 +191,9 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
         padded[m, len(mot):] = mot[-1]
     meta = {"library": library.source, "demos_per_class": [len(ds) for ds in by_class],
             "components": [int(g.n_components) for g in mixtures], "gmm": asdict(cfg.gmm),
-            "oversample": cfg.oversample, "temperature": cfg.temperature,
+            "oversample": cfg.oversample, "temperature": choice.temperature, "temperature_choice": choice.method,
+            "temperature_log_loss": {f"{t:g}": v for t, v in choice.mean_log_loss.items()},
+            "volume": cfg.volume,
             "trained_at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")}
     return PredictionModel(class_names=list(library.class_names), feature_variant=cfg.features,
                            time_scale=cfg.time_scale, velocity_scale=encoder.velocity_scale,
@@ -172,17 +201,101 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
                            motions=padded, motion_lengths=np.array(lengths, dtype=np.int64), grid=grid,
                            volumes=volumes, scene_name=scene.name,
                            human_pelvis=np.array([*scene.human.pelvis_xyz, scene.human.pelvis_yaw]),
-                           spacing=cfg.spacing, interior=cfg.interior, meta=meta, temperature=cfg.temperature,
-                           feature_names=tuple(library.feature_names))
+                           spacing=cfg.spacing, interior=cfg.interior, meta=meta, temperature=choice.temperature,
+                           feature_names=tuple(library.feature_names), volume_method=cfg.volume,
+                           timed=timed)
 
 
-def _swept_volumes(bank: MixtureBank, lengths: list[int], encoder: FeatureEncoder, mapping: FeatureMapping,
-                   scene: Scene, grid, cfg: TrainConfig, progress: bool) -> np.ndarray:
-    """``(M, nx, ny, nz)`` bool swept volume of each class's densely regressed motion (human model via ``mapping``)."""
-    dense = regress_motions(bank, lengths, encoder, oversample=cfg.oversample)
+def _volume_key_parts(scene: Scene, grid, cfg: TrainConfig) -> tuple:
+    pelvis = np.array([*scene.human.pelvis_xyz, scene.human.pelvis_yaw])
+    return grid.min, grid.max, grid.resolution, pelvis, cfg.spacing, cfg.interior, cfg.oversample
+
+
+def demo_sweep_key(features: np.ndarray, scene: Scene, grid, cfg: TrainConfig) -> str:
+    """The ``fit_cache`` key of a demonstration's :class:`~services.predictor.volumes.Sweep` (``demos`` volumes).
+
+    Args:
+        features: ``(T, F)`` the demonstration's features.
+        scene: The scene it is placed in.
+        grid: The voxel grid.
+        cfg: Training options (spacing, interior, oversample).
+    """
+    return "sweep:" + digest(np.asarray(features, dtype=np.float64), *_volume_key_parts(scene, grid, cfg))
+
+
+def _sweeps(demos: list[Demonstration], mapping: FeatureMapping, scene: Scene, grid, cfg: TrainConfig,
+            cache: dict[str, Any], human: HumanModel) -> list[Sweep]:
+    """The (cached) sweep of every demonstration of ``demos``."""
+    out = []
+    for d in demos:
+        key = demo_sweep_key(d.features, scene, grid, cfg)
+        if key not in cache:
+            cache[key] = sweep(mapping.to_human(d.features), scene, grid, human, cfg.spacing, cfg.interior,
+                               cfg.oversample)
+        out.append(cache[key])
+    return out
+
+
+def _timed_volumes(mapping: FeatureMapping, scene: Scene, grid, cfg: TrainConfig, by_class: list[list[Demonstration]],
+                   cache: dict[str, Any], progress: bool) -> TimedVolumes:
+    """The ``timed`` volumes of every class on the union of their supports."""
+    if cfg.time_bin < 1:
+        raise UserError(f"time bin must be >= 1 sample, got {cfg.time_bin}")
     human = HumanModel()
-    return np.stack([swept_volume(mapping.to_human(mot), scene, grid, human, cfg.spacing, cfg.interior)
-                     for mot in tqdm(dense, desc="swept volumes", unit="class", disable=not progress)])
+    n_bins = -(-max(d.n_samples for ds in by_class for d in ds) // cfg.time_bin)
+    parts = [timed_volume(_sweeps(ds, mapping, scene, grid, cfg, cache, human), grid, cfg.time_bin, n_bins)
+             for ds in tqdm(by_class, desc="timed volumes", unit="class", disable=not progress)]
+    support = np.unique(np.concatenate([p[0] for p in parts]))
+    values = np.zeros((len(parts), n_bins, len(support)), np.float32)
+    for m, (sup, val) in enumerate(parts):
+        values[m][:, np.searchsorted(support, sup)] = val
+    return TimedVolumes(support, values, cfg.time_bin)
+
+
+def _class_volumes(bank: MixtureBank, lengths: list[int], encoder: FeatureEncoder, mapping: FeatureMapping,
+                   scene: Scene, grid, cfg: TrainConfig, by_class: list[list[Demonstration]], cache: dict[str, Any],
+                   progress: bool) -> np.ndarray:
+    """``(M, nx, ny, nz)`` float32 ``p(x|C_m)`` of each class by ``cfg.volume`` (human model via ``mapping``).
+
+    Volumes are cached in ``cache`` by a digest of what they depend on (the class mixture or the
+    demonstration, the grid, the placement and the sampling options).
+    """
+    human = HumanModel()
+    common = _volume_key_parts(scene, grid, cfg)
+    cols = encoder.posture_columns()
+    out = []
+    for m in tqdm(range(len(lengths)), desc=f"{cfg.volume} volumes", unit="class", disable=not progress):
+        w, mu, cov = bank.weights_[m], bank.means_[m], bank.covariances_[m]
+        if cfg.volume == "demos":
+            out.append(demos_volume(_sweeps(by_class[m], mapping, scene, grid, cfg, cache, human), grid))
+            continue
+        key = f"volume:{cfg.volume}:" + digest(w, mu, cov, lengths[m], encoder.time_scale, *common)
+        if key not in cache:
+            n = lengths[m]
+            t = np.arange((n - 1) * cfg.oversample + 1) / cfg.oversample * encoder.time_scale
+            if cfg.volume == "paper":
+                y = np.asarray(gmr(w, mu, cov, t))[:, cols.start - 1: cols.stop - 1]
+                cache[key] = swept_volume(mapping.to_human(y), scene, grid, human, cfg.spacing,
+                                          cfg.interior).astype(np.float32)
+            else:
+                y, c = gmr(w, mu, cov, t, return_covariance=True)
+                o = slice(cols.start - 1, cols.stop - 1)
+                cache[key] = spread_volume(y[:, o], c[:, o, o], scene, grid, human, cfg.spacing, cfg.interior,
+                                           to_human=mapping.to_human)
+        out.append(cache[key])
+    return np.stack(out)
+
+
+def _temperature(text: str) -> float | None:
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        tau = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not 'auto' or a number") from None
+    if not (tau > 0 and np.isfinite(tau)):
+        raise argparse.ArgumentTypeError(f"must be 'auto' or a finite number > 0, got {text!r}")
+    return tau
 
 
 DESCRIPTION = """Train the prediction model: one Gaussian mixture per motion class over [time, features]
@@ -210,10 +323,17 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
                         help=f"feature variant (default: {DEFAULT_FEATURES})")
     parser.add_argument("--reg-covar", type=float, default=GMMConfig.reg_covar,
                         help=f"covariance regularisation (default: {GMMConfig.reg_covar})")
-    parser.add_argument("--temperature", type=float, default=DEFAULT_TEMPERATURE,
+    parser.add_argument("--temperature", type=_temperature, default=None, metavar="auto|TAU",
                         help="posterior temperature tau stored in the model: p(C_m|xi) = softmax(ln p(xi|C_m) / "
-                             f"tau); 1 = the paper's (default: {DEFAULT_TEMPERATURE:g}, chosen by "
-                             "`foresight eval recognition`)")
+                             "tau); 1 = the paper's; auto (default) = the tau of 1 ... 1000 with the least "
+                             "cross-validated log-loss on the training demonstrations")
+    parser.add_argument("--folds", type=int, default=DEFAULT_FOLDS,
+                        help=f"folds of the temperature's cross-validation (default: {DEFAULT_FOLDS})")
+    parser.add_argument("--volume", choices=VOLUMES, default=DEFAULT_VOLUME,
+                        help="per-class occupancy p(x|C_m): paper = body swept along the mean motion (0/1); "
+                             "spread = trajectories drawn within the GMR covariance; demos = the training "
+                             "demonstrations themselves (share that hit a voxel); timed = demos counting only "
+                             f"what is still to come at the observed sample; default: {DEFAULT_VOLUME}")
     parser.add_argument("--seed", type=int, default=0, help="random seed of the k-means initialisation and of "
                         "--heldout (default: 0)")
     parser.add_argument("--heldout", type=int, default=0, help="leave out N random demonstrations per class "
@@ -233,7 +353,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
         except ValueError as exc:
             raise UserError(str(exc)) from None
         cfg = TrainConfig(gmm=gcfg, features=args.features, resolution=args.resolution, interior=args.interior,
-                          temperature=args.temperature)
+                          temperature=args.temperature, volume=args.volume, folds=args.folds)
         model = train_model(lib, scene, cfg, demos, progress=not args.quiet)
         model.save(args.out)
         size = Path(args.out).stat().st_size
@@ -241,13 +361,17 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
             occupancy = (f"no swept volumes: {lib.n_features} features without a mapping to the human model "
                          "(recognition only; the predictor service needs a mapping)")
         else:
-            occ = model.volumes.reshape(model.n_classes, -1).sum(1)
+            occ = (model.volumes.reshape(model.n_classes, -1) > 0).sum(1)
             occupancy = (f"grid {model.grid.dims} at {model.grid.resolution:g} m, "
-                         f"swept voxels per class {occ.tolist()}")
+                         f"{model.volume_method} volumes, voxels per class {occ.tolist()}")
         print(f"wrote {args.out} ({size / 1e6:.2f} MB): {model.n_classes} classes, "
               f"{len(demos)} demonstrations from {lib.source}, features {cfg.features}, "
-              f"temperature {cfg.temperature:g}, "
+              f"temperature {model.temperature:g} ({model.meta['temperature_choice']}), "
               f"components {model.meta['components']}, {occupancy}")
+        losses = model.meta["temperature_log_loss"]
+        if losses:
+            print(f"temperature {model.temperature:g}: least mean log-loss of {cfg.folds}-fold cross-validation; "
+                  "by tau: " + ", ".join(f"{t}: {v:.3f}" for t, v in losses.items()))
     return 0
 
 

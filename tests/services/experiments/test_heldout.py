@@ -26,14 +26,18 @@ def test_the_synthetic_cup_classes_are_found_at_their_cups(name):
 def test_a_fit_cache_refits_only_the_changed_class_and_changes_nothing(tmp_path):
     scene = load_scene()
     lib = generate_library(8, 4, seed=1, scene=scene)
-    cfg = TrainConfig(gmm=GMMConfig(n_components=2))
+    cfg = TrainConfig(gmm=GMMConfig(n_components=2), temperature=150.0)
     out = lib.by_class(3)[0]
     demos = [d for d in lib.demos if d is not out]
     cache: dict = {}
+
+    def count(kind: str) -> int:
+        return sum(k.startswith("volume:") == (kind == "volume") for k in cache)
+
     train_model(lib, scene, cfg, progress=False, fit_cache=cache)
-    assert len(cache) == 8
+    assert count("fit") == 8 and count("volume") == 8
     cached = train_model(lib, scene, cfg, demos=demos, progress=False, fit_cache=cache)
-    assert len(cache) == 9  # one refit: class 3
+    assert count("fit") == 9 and count("volume") == 9  # one refit and one new volume: class 3
     plain = train_model(lib, scene, cfg, demos=demos, progress=False)
     for field in ("weights", "means", "covariances", "motions", "volumes"):
         np.testing.assert_array_equal(getattr(cached, field), getattr(plain, field))
@@ -47,7 +51,9 @@ def test_held_out_models_are_cached_per_held_out_set(tmp_path):
     b = models.without([lib.by_class(0)[1]])
     assert a != b and models.without([lib.by_class(0)[0]]) == a
     model = PredictionModel.load(a)
-    assert model.meta["demos_per_class"][0] == 2
+    assert model.meta["demos_per_class"][0] == 2 and model.volume_method == "paper"
+    demos = HeldOutModels(lib, scene, tmp_path, components=2, volume="demos").without([lib.by_class(0)[0]])
+    assert demos != a and PredictionModel.load(demos).volume_method == "demos"
 
 
 def test_settle_step():

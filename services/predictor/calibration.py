@@ -1,0 +1,97 @@
+"""The posterior temperature tau chosen for a library by cross-validation (``foresight train``).
+
+``p(C_m | xi) = softmax_m(ln p(xi | C_m) / tau)`` (:func:`services.predictor.gmm.posterior_from_log_likelihood`).
+The summed log-likelihood of ~100 strongly correlated samples counts the same evidence many times;
+how many depends on the library (its size, class count, demonstration length), so tau is picked
+per library: the demonstrations of every class are dealt round-robin into ``folds`` folds; for each
+fold every class's mixture is refitted without that fold's demonstrations and the fold's
+demonstrations are scored at executed fractions 10%, 20%, ..., 100%; the tau of a grid with the
+least mean log-loss of the true class (``-ln p(true class | prefix)``, averaged over the
+demonstrations and the fractions) is chosen.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from sklearn.mixture import GaussianMixture
+
+from .gmm import DEFAULT_TEMPERATURE, MixtureBank, posterior_from_log_likelihood
+
+__all__ = ["TEMPERATURE_GRID", "CV_FRACTIONS", "TemperatureChoice", "choose_temperature", "log_loss"]
+
+TEMPERATURE_GRID = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 150.0, 200.0, 300.0, 500.0, 1000.0)
+CV_FRACTIONS = tuple(round(0.1 * i, 1) for i in range(1, 11))
+DEFAULT_FOLDS = 3
+
+
+@dataclass(frozen=True)
+class TemperatureChoice:
+    """The chosen tau and how it was chosen.
+
+    Attributes:
+        temperature: The chosen tau.
+        method: ``"cross-validated"`` or why not (too few demonstrations, a fixed value).
+        folds: Folds used (0: none).
+        mean_log_loss: Mean log-loss of the true class for every tau of the grid.
+    """
+
+    temperature: float
+    method: str
+    folds: int = 0
+    mean_log_loss: dict[float, float] = field(default_factory=dict)
+
+    def describe(self) -> str:
+        """One line for ``foresight train``'s output."""
+        if not self.mean_log_loss:
+            return f"temperature {self.temperature:g} ({self.method})"
+        best = self.mean_log_loss[self.temperature]
+        return (f"temperature {self.temperature:g} ({self.method}, {self.folds}-fold, mean log-loss {best:.3f}; "
+                f"tau = 1: {self.mean_log_loss.get(1.0, float('nan')):.3f})")
+
+
+def log_loss(cum: np.ndarray, labels: np.ndarray, temperature: float) -> float:
+    """Mean ``-ln p(true class | prefix)`` over ``cum (N, F, M)`` summed log-likelihoods (floored at 1e-12)."""
+    p = posterior_from_log_likelihood(cum, temperature=temperature)
+    true = np.take_along_axis(p, labels[:, None, None], axis=2)[..., 0]
+    return float(-np.log(np.maximum(true, 1e-12)).mean())
+
+
+def choose_temperature(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], GaussianMixture],
+                       folds: int = DEFAULT_FOLDS, grid: tuple[float, ...] = TEMPERATURE_GRID,
+                       fractions: tuple[float, ...] = CV_FRACTIONS) -> TemperatureChoice:
+    """Pick tau by ``folds``-fold cross-validation of the mean log-loss.
+
+    Args:
+        feats: Per class, the encoded ``(T, D)`` feature vectors of each training demonstration.
+        fit: Fits one class mixture to stacked ``(N, D)`` vectors (the trainer's, possibly cached).
+        folds: Number of folds (>= 2).
+        grid: Candidate temperatures.
+        fractions: Executed fractions each held-out demonstration is scored at.
+
+    Returns:
+        The choice; :data:`services.predictor.gmm.DEFAULT_TEMPERATURE` when a class has fewer than 2
+        demonstrations (nothing to hold out).
+    """
+    if min(len(f) for f in feats) < 2 or folds < 2:
+        return TemperatureChoice(DEFAULT_TEMPERATURE, "default: a class has fewer than 2 demonstrations")
+    cums, labels = [], []
+    for k in range(folds):
+        held = [[j for j in range(len(f)) if j % folds == k] for f in feats]
+        if not any(held):
+            continue
+        mixtures = [fit(np.vstack([f[j] for j in range(len(f)) if j % folds != k])) for f in feats]
+        bank = MixtureBank.from_sklearn(mixtures)
+        for m, js in enumerate(held):
+            for j in js:
+                ll = np.cumsum(bank.log_likelihood(feats[m][j]), axis=0)           # (T, M)
+                n = len(ll)
+                ends = np.clip(np.rint(np.asarray(fractions) * n).astype(int), 1, n) - 1
+                cums.append(ll[ends])
+                labels.append(m)
+    cum, lab = np.array(cums), np.array(labels)
+    losses = {float(t): log_loss(cum, lab, t) for t in grid}
+    best = min(grid, key=lambda t: losses[float(t)])
+    return TemperatureChoice(float(best), "cross-validated", folds, losses)
