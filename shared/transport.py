@@ -179,7 +179,7 @@ def subscribe(session: zenoh.Session, key: str, cls: type[M], callback: Callable
         key: Key expression (one key, no wildcard).
         cls: Expected message type.
         callback: Called on Zenoh's thread with each valid message.
-        rejects: Where to count rejections (default: log only).
+        rejects: Where to count rejections (default: a counter of the subscription's own).
         receipt: The receiving service's checks (values against its expectations, per-sender
             order); default: decoding only.
     """
@@ -201,9 +201,10 @@ def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str,
         key_expr: Wildcard key expression covering the keys of ``types``.
         types: Key -> expected message type.
         callback: Called on one Zenoh thread with each valid message, in arrival order.
-        rejects: Where to count rejections (default: log only).
+        rejects: Where to count rejections (default: a counter of this subscription's own).
         receipt: As in :func:`subscribe`.
     """
+    default_rejects = RejectCounter("subscriber")
 
     def handler(sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -217,10 +218,7 @@ def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str,
         except Exception as exc:  # ProtocolError; anything else is a decoder bug, refused all the same
             if not isinstance(exc, ProtocolError):
                 log.exception("decoding a message on %s failed unexpectedly", key)
-            if rejects is not None:
-                rejects.reject(key, exc)
-            else:
-                log.warning("rejected message on %s: %s", key, exc)
+            (rejects or default_rejects).reject(key, exc)  # counted, one log line per key per second
             return
         try:
             callback(msg)

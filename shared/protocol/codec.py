@@ -100,10 +100,7 @@ def _check_scalar(t: str, name: str, tp: Any, value: Any) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise _err(t, name, f"expected a number, got {type(value).__name__}", "malformed")
-        try:
-            value = float(value)
-        except OverflowError:  # an int too large for a float
-            raise _err(t, name, "number too large", "non-finite") from None
+        value = float(value)  # msgpack ints are at most 2^64: always a finite float
         if not math.isfinite(value):
             raise _err(t, name, f"must be finite, got {value}", "non-finite")
         return value
