@@ -40,10 +40,12 @@ class Case:
     payload: bytes
     must_refuse: bool
     reason: str | None = None
+    sha1: bytes = b""
 
     @property
     def digest(self) -> bytes:
-        return hashlib.sha1(self.payload).digest()
+        """SHA-1 of the payload (kept when the payload itself is dropped)."""
+        return self.sha1 or hashlib.sha1(self.payload).digest()
 
 
 def raw_map(msg: Message) -> dict[str, Any]:

@@ -1,20 +1,22 @@
 """Fuzz of the running system on every key (issue 12): no crash, every refusal counted, none logged as data.
 
-The four services run in-process over loopback Zenoh in real time (the replayer looping), as in
-``test_system.py``. A fuzzer session publishes, on every data key, ``FORESIGHT_FUZZ_COUNT`` rounds
-(default 240) of random, truncated, bit-flipped, wrong-schema, oversized (declared and real) and
-well-formed-but-absurd payloads (see ``fuzzing.py``). Then:
+The four services run in-process over loopback Zenoh, as in ``test_system.py``. A fuzzer session
+publishes, on every data key, rounds of random, truncated, bit-flipped, wrong-schema, oversized
+(declared and real) and well-formed-but-absurd payloads (``fuzzing.py``). In real time (replayer
+looping), ``FORESIGHT_FUZZ_COUNT`` rounds (default 240):
 
 * every service is still running;
 * the executor refused every payload that is not a plausible message, each counted under its key
   with a reason (the deterministic ones under the expected reason), and wrote it to the MCAP's
-  rejects channel, never to the key's data channel; what it accepted from the fuzzer are only bit
-  flips and order anchors that are plausible messages;
+  rejects channel, never to the key's data channel; only bit flips and order anchors that are
+  plausible messages were accepted from the fuzzer;
 * the planner and the predictor refused at least the payloads any receiver must refuse;
-* genuine traffic flows on every key afterwards (accepted and logged after the fuzz);
+* genuine traffic is accepted on every key after the fuzz;
 * the process's resident memory (all four services) is reported, and loosely bounded.
 
-``FORESIGHT_FUZZ_COUNT=10000`` runs the long version (outside CI).
+During a lock-step run, the payloads every receiver refuses whatever its clock: the run completes
+with a plan per tick, every service refused each payload on its keys, and clock ticks flow after
+the fuzz. ``test_fuzz_processes.py`` runs the real-time fuzz against separate processes.
 """
 
 from __future__ import annotations
@@ -23,52 +25,27 @@ import hashlib
 import json
 import os
 import time
-from collections import Counter
 
 import pytest
-import zenoh
 
-from shared.protocol import REASONS, Expectations, ProtocolError, Receipt
+from shared.protocol import Expectations, decode
 from shared.recording.reader import read_log
-from shared.recording.schemas import REJECTED_TOPIC
-from shared.transport import open_session, sender_of
+from shared.transport import open_session
 
-from .fuzzing import Fuzzer, clock_template
+from .fuzz_checks import (
+    Watcher,
+    check_executor_log,
+    must_refuse_anywhere,
+    publish_fuzz,
+    rss_mb,
+    settle,
+    wait_until,
+)
+from .fuzzing import Case, clock_template
 
 COUNT = int(os.environ.get("FORESIGHT_FUZZ_COUNT", "240"))
 RSS_GROWTH_LIMIT_MB = 1024.0
 """A loose bound: the fuzz must not leave the process (four services) this much larger."""
-
-
-def rss_mb() -> float:
-    """Resident memory of this process (MB), from /proc."""
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    return float("nan")  # pragma: no cover - Linux only
-
-
-def wait_until(pred, timeout: float, step: float = 0.05) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(step)
-    return bool(pred())
-
-
-def settle(total, timeout: float = 300.0, quiet_s: float = 2.0) -> None:
-    """Wait until ``total()`` has not changed for ``quiet_s`` seconds."""
-    end = time.monotonic() + timeout
-    last, since = total(), time.monotonic()
-    while time.monotonic() < end:
-        time.sleep(0.2)
-        now = total()
-        if now != last:
-            last, since = now, time.monotonic()
-        elif time.monotonic() - since >= quiet_s:
-            return
 
 
 @pytest.mark.slow
@@ -78,90 +55,28 @@ def test_fuzz_every_key_of_a_running_system(run_system, record_property):
                         replayer_overrides={"loop": True, "rate_hz": 30.0})
     keys = system.keys
     executor, planner, predictor = (system.services[n] for n in ("executor", "planner", "predictor"))
-    genuine: dict[str, object] = {}
-    accepted_at: dict[str, float] = {}  # arrival of the newest genuine message per key, checked as a service would
-    checks = Receipt(Expectations(clock="realtime", robot=planner.receipt.expect.robot,
-                                  grid=planner.receipt.expect.grid))
-
-    def watch(sample) -> None:
-        key, sender = str(sample.key_expr), sender_of(sample)
-        if key not in keys.data_keys() or not sender:  # the fuzzer publishes without a sender id
-            return
-        try:
-            msg = checks.accept(key, sample.payload.to_bytes(), keys.data_keys()[key], sender)
-        except ProtocolError:
-            return
-        genuine[key] = msg
-        accepted_at[key] = time.time()
-
+    flowing = set(keys.data_keys()) - {keys.clock}  # the clock ticks only in lock-step
     with open_session(planner.zenoh) as session:
-        watcher = session.declare_subscriber(f"{keys.prefix}/**", watch)
-        flowing = {keys.pose, keys.demo, keys.posterior, keys.occupancy, keys.plan, keys.robot_state}
-        assert wait_until(lambda: flowing <= set(genuine), 120.0), f"the system runs: {sorted(genuine)}"
-        templates = {k: genuine[k] for k in flowing} | {keys.clock: clock_template()}
-        assert set(templates) == set(keys.data_keys())
-        fuzzers = {k: Fuzzer(m, [o for kk, o in templates.items() if kk != k], seed=i)
-                   for i, (k, m) in enumerate(templates.items())}
-        pubs = {k: session.declare_publisher(k, congestion_control=zenoh.CongestionControl.BLOCK) for k in templates}
+        watch = Watcher(session, keys, Expectations(clock="realtime", robot=planner.receipt.expect.robot,
+                                                     grid=planner.receipt.expect.grid))
+        assert wait_until(lambda: flowing <= set(watch.latest), 120.0), f"the system runs: {sorted(watch.latest)}"
+        templates = {k: watch.latest[k] for k in flowing} | {keys.clock: clock_template()}
         time.sleep(1.0)
         rss_before = rss_mb()
-        sent: dict[str, list] = {k: [] for k in templates}
-        for i in range(COUNT):
-            for k, fz in fuzzers.items():
-                for case in fz.cases(i):
-                    pubs[k].put(case.payload)
-                    sent[k].append((case.digest, case.must_refuse, case.category, case.name, case.reason))
-            if i % 20 == 19:
-                time.sleep(0.02)  # the genuine traffic keeps flowing in between
+        sent = publish_fuzz(session, templates, COUNT)
         t_fuzz_end = time.time()
         settle(lambda: executor.rejects.total)
-        # genuine traffic accepted on every key after the fuzz (the clock ticks only in lock-step)
-        assert wait_until(lambda: all(accepted_at[k] > t_fuzz_end + 1.0 for k in flowing), 60.0), \
-            f"genuine traffic after the fuzz (s after its end): { {k: accepted_at[k] - t_fuzz_end for k in flowing} }"
+        assert wait_until(lambda: all(watch.accepted_at[k] > t_fuzz_end + 1.0 for k in flowing), 60.0), \
+            f"genuine traffic after the fuzz (end + s): { {k: watch.accepted_at[k] - t_fuzz_end for k in flowing} }"
         time.sleep(4.0)  # a loop of the demonstration: markers too
         rss_after = rss_mb()
         alive = {name: t.thread.is_alive() and t.error is None for name, t in system.threads.items()}
-        watcher.undeclare()
-        for p in pubs.values():
-            p.undeclare()
+        watch.close()
     assert all(alive.values()), f"services alive after the fuzz: {alive}"
     result = system.threads["executor"].stop(timeout=60.0)
-
-    log = read_log(result.mcap_path, keep=lambda c: True)
-    data = {k: {} for k in templates}
-    after = Counter()
-    for m in log.messages:
-        if m.topic in data:
-            data[m.topic][hashlib.sha1(m.data).digest()] = m.log_time
-            if m.log_time / 1e9 > t_fuzz_end:
-                after[m.topic] += 1
-    records = [json.loads(m.data) for m in log.messages if m.topic == REJECTED_TOPIC]
-
-    by_reason = executor.rejects.by_reason
-    report = {}
-    for k, cases in sent.items():
-        accepted = [c for c in cases if c[0] in data[k]]
-        refused_by_design = [c for c in cases if c[1]]
-        assert not [c for c in accepted if c[1]], f"{k}: a payload that must be refused was logged as data"
-        assert {c[2] for c in accepted} <= {"bitflip", "order"}, f"{k}: only bit flips and anchors may pass"
-        n_rej = executor.rejects.counts.get(k, 0)
-        expected = len(cases) - len(accepted)
-        if k in (keys.posterior, keys.occupancy):
-            # the predictor has no clock mode: a lock-step-stamped pose it accepted from the fuzzer comes
-            # out as a lock-step-stamped prediction, which the real-time executor refuses (mismatch)
-            assert expected <= n_rej <= expected + by_reason.get((k, "mismatch"), 0), k
-        else:
-            assert n_rej == expected, f"{k}: {n_rej} refused, {len(cases)} sent, {len(accepted)} logged as data"
-        want = Counter(c[4] for c in refused_by_design if c[4])
-        for reason, n in want.items():
-            assert by_reason.get((k, reason), 0) >= n, f"{k}: {reason} counted {by_reason.get((k, reason), 0)} < {n}"
-        assert sum(1 for r in records if r["key"] == k) == n_rej, f"{k}: rejects channel"
-        assert after[k] > 0 or k == keys.clock, f"{k}: no genuine message logged after the fuzz"
-        report[k] = {"sent": len(cases), "refused": n_rej, "accepted_from_fuzzer": len(accepted),
-                     "reasons": {r: n for (kk, r), n in sorted(by_reason.items()) if kk == k}}
-    assert {r["reason"] for r in records} <= set(REASONS)
-    # the other receivers refused at least what any receiver must refuse
-    must = {k: sum(1 for c in cases if c[1] and c[4] not in (None, "mismatch")) for k, cases in sent.items()}
+    report = check_executor_log(result.mcap_path, keys, sent, t_fuzz_end, executor.rejects.counts,
+                                executor.rejects.by_reason)
+    must = must_refuse_anywhere(sent)
     for svc, ks in ((planner, (keys.robot_state, keys.occupancy, keys.demo)), (predictor, (keys.pose, keys.demo))):
         for k in ks:
             assert svc.rejects.counts.get(k, 0) >= must[k], f"{svc.rejects.service} on {k}"
@@ -170,3 +85,46 @@ def test_fuzz_every_key_of_a_running_system(run_system, record_property):
     record_property("fuzz", info)
     print("FUZZ", json.dumps(info, indent=1))
     assert rss_after - rss_before < RSS_GROWTH_LIMIT_MB, f"RSS grew {rss_after - rss_before:.0f} MB"
+
+
+LOCKSTEP_ROUNDS = 60
+"""Rounds per key of the lock-step fuzz (it runs while the lock-step run goes on)."""
+
+
+def refused_in_any_mode(case: Case) -> bool:
+    """Cases every receiver refuses whatever its clock: no bit flips or anchors, no mode-dependent stamps."""
+    return (case.must_refuse and case.category not in ("bitflip", "order") and case.name != "16 MiB"
+            and case.reason not in ("mismatch", "stamp-past"))
+
+
+@pytest.mark.slow
+def test_fuzz_every_key_during_a_lockstep_run(run_system):
+    steps = 12
+    system = run_system(mode="lockstep", steps=steps)
+    keys, rec = system.keys, system.recorder
+    genuine: dict[str, bytes] = {}
+    with open_session(system.services["planner"].zenoh) as session:
+        watcher = session.declare_subscriber(
+            f"{keys.prefix}/**", lambda s: genuine.setdefault(str(s.key_expr), s.payload.to_bytes()))
+        assert wait_until(lambda: set(keys.data_keys()) <= set(genuine) and len(rec.snapshot()[0]) >= 2, 240.0), \
+            f"the run goes: {sorted(genuine)}"
+        templates = {k: decode(genuine[k], cls) for k, cls in keys.data_keys().items()}
+        sent = publish_fuzz(session, templates, LOCKSTEP_ROUNDS, seed=10, keep=refused_in_any_mode)
+        t_fuzz_end = time.time()
+        result = system.executor_result()
+        watcher.undeclare()
+    assert {p.tick for p in rec.snapshot()[0]} == set(range(steps)), "the run completes with a plan per step"
+    assert result.reached
+    executor = system.services["executor"]
+    for k, cases in sent.items():
+        assert executor.rejects.counts.get(k, 0) == len(cases), f"{k}: every fuzz payload refused, nothing else"
+    log = read_log(result.mcap_path, keep=lambda c: True)
+    logged = {(m.topic, hashlib.sha1(m.data).digest()) for m in log.messages if m.topic in sent}
+    assert not logged & {(k, c.digest) for k, cases in sent.items() for c in cases}, "a fuzz payload was logged"
+    assert [m for m in log.messages if m.topic == keys.clock and m.log_time / 1e9 > t_fuzz_end], \
+        "clock ticks flow (and are answered) after the fuzz"
+    for name, keys_of in (("planner", (keys.robot_state, keys.occupancy, keys.clock, keys.demo)),
+                          ("predictor", (keys.pose, keys.demo)), ("replayer", (keys.clock,))):
+        counts = system.services[name].rejects.counts
+        for k in keys_of:
+            assert counts.get(k, 0) == len(sent[k]), f"{name} on {k}: {counts.get(k, 0)} of {len(sent[k])}"

@@ -1,0 +1,149 @@
+"""What the fuzz tests share: publishing the fuzz, watching genuine traffic, checking the executor's log, RSS."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from shared.protocol import REASONS, Expectations, Keys, Message, ProtocolError, Receipt
+from shared.recording.reader import read_log
+from shared.recording.schemas import REJECTED_TOPIC
+from shared.transport import sender_of
+
+from .fuzzing import Case, Fuzzer
+
+
+def rss_mb(pid: int | str = "self") -> float:
+    """Resident memory of a process (MB), from /proc."""
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")  # pragma: no cover - Linux only
+
+
+def wait_until(pred: Callable[[], bool], timeout: float, step: float = 0.05) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(step)
+    return bool(pred())
+
+
+def settle(total: Callable[[], int], timeout: float = 300.0, quiet_s: float = 2.0) -> None:
+    """Wait until ``total()`` has not changed for ``quiet_s`` seconds (at most ``timeout``)."""
+    end = time.monotonic() + timeout
+    last, since = total(), time.monotonic()
+    while time.monotonic() < end:
+        time.sleep(0.2)
+        now = total()
+        if now != last:
+            last, since = now, time.monotonic()
+        elif time.monotonic() - since >= quiet_s:
+            return
+
+
+class Watcher:
+    """Genuine traffic (a sender id, accepted by a real-time receipt like the planner's), newest per key."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, expect: Expectations) -> None:
+        self.keys = keys
+        self.receipt = Receipt(expect)
+        self.latest: dict[str, Message] = {}
+        self.accepted_at: dict[str, float] = {}
+        self._sub = session.declare_subscriber(f"{keys.prefix}/**", self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        key, sender = str(sample.key_expr), sender_of(sample)
+        types = self.keys.data_keys()
+        if key not in types or not sender:  # the fuzzer publishes without a sender id
+            return
+        try:
+            msg = self.receipt.accept(key, sample.payload.to_bytes(), types[key], sender)
+        except ProtocolError:
+            return
+        self.latest[key] = msg
+        self.accepted_at[key] = time.time()
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+Sent = dict[str, list[Case]]
+
+
+def publish_fuzz(session: zenoh.Session, templates: dict[str, Message], rounds: int, seed: int = 0,
+                 keep: Callable[[Case], bool] | None = None) -> Sent:
+    """Publish ``rounds`` rounds of fuzz on every key of ``templates``; the cases sent, per key.
+
+    The payloads themselves are not kept (only their digests, in :class:`Case`), so memory stays small.
+    """
+    fuzzers = {k: Fuzzer(m, [o for kk, o in templates.items() if kk != k], seed=seed + i)
+               for i, (k, m) in enumerate(templates.items())}
+    pubs = {k: session.declare_publisher(k, congestion_control=zenoh.CongestionControl.BLOCK) for k in templates}
+    sent: Sent = {k: [] for k in templates}
+    try:
+        for i in range(rounds):
+            for k, fz in fuzzers.items():
+                for case in fz.cases(i):
+                    if keep is None or keep(case):
+                        pubs[k].put(case.payload)
+                        sent[k].append(Case(case.category, case.name, b"", case.must_refuse, case.reason,
+                                            case.digest))
+            if i % 20 == 19:
+                time.sleep(0.02)  # the genuine traffic keeps flowing in between
+    finally:
+        for p in pubs.values():
+            p.undeclare()
+    return sent
+
+
+def check_executor_log(mcap: str, keys: Keys, sent: Sent, t_fuzz_end: float, counts: dict[str, int],
+                       by_reason: dict[tuple[str, str], int]) -> dict[str, Any]:
+    """Check the executor's refusals and its MCAP log against what was sent; returns a per-key report.
+
+    Every payload that must be refused is not on its key's data channel; only bit flips and anchors
+    may be; the executor refused exactly what it did not log (on the prediction keys, plus the
+    predictor's lock-step-stamped answers to anchors it accepted: mismatch); each deterministic
+    reason was counted at least as often as sent; the rejects channel holds one record per refusal;
+    a genuine message is logged on every key after the fuzz (but the clock, which ticks in lock-step).
+    """
+    log = read_log(mcap, keep=lambda c: True)
+    data: dict[str, set[bytes]] = {k: set() for k in sent}
+    after: Counter[str] = Counter()
+    for m in log.messages:
+        if m.topic in data:
+            data[m.topic].add(hashlib.sha1(m.data).digest())
+            after[m.topic] += m.log_time / 1e9 > t_fuzz_end
+    records = [json.loads(m.data) for m in log.messages if m.topic == REJECTED_TOPIC]
+    assert {r["reason"] for r in records} <= set(REASONS)
+    report = {}
+    for k, cases in sent.items():
+        accepted = [c for c in cases if c.digest in data[k]]
+        assert not [c.name for c in accepted if c.must_refuse], f"{k}: a payload that must be refused was logged"
+        assert {c.category for c in accepted} <= {"bitflip", "order"}, f"{k}: only bit flips and anchors may pass"
+        n_rej, expected = counts.get(k, 0), len(cases) - len(accepted)
+        if k in (keys.posterior, keys.occupancy):
+            assert expected <= n_rej <= expected + by_reason.get((k, "mismatch"), 0), f"{k}: {n_rej} vs {expected}"
+        else:
+            assert n_rej == expected, f"{k}: {n_rej} refused, {len(cases)} sent, {len(accepted)} logged as data"
+        for reason, n in Counter(c.reason for c in cases if c.must_refuse and c.reason).items():
+            assert by_reason.get((k, reason), 0) >= n, f"{k}: {reason} counted {by_reason.get((k, reason), 0)} < {n}"
+        assert sum(1 for r in records if r["key"] == k) == n_rej, f"{k}: rejects channel"
+        assert after[k] > 0 or k == keys.clock, f"{k}: no genuine message logged after the fuzz"
+        report[k] = {"sent": len(cases), "refused": n_rej, "accepted_from_fuzzer": len(accepted),
+                     "reasons": {r: n for (kk, r), n in sorted(by_reason.items()) if kk == k}}
+    return report
+
+
+def must_refuse_anywhere(sent: Sent) -> dict[str, int]:
+    """Per key, the cases any receiver refuses whatever its clock and model (a lower bound for the others)."""
+    return {k: sum(1 for c in cases if c.must_refuse and c.reason not in (None, "mismatch"))
+            for k, cases in sent.items()}
