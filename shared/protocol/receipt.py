@@ -57,6 +57,11 @@ class SenderOrder:
         self._last: dict[tuple[str, str], _Last] = {}
         self._lock = threading.Lock()
 
+    def __len__(self) -> int:
+        """The (key, sender) records held (at most :data:`MAX_SENDERS`)."""
+        with self._lock:
+            return len(self._last)
+
     def check(self, key: str, sender: str, msg: Message) -> None:
         """Accept ``msg`` (and remember it) or raise.
 
@@ -68,7 +73,7 @@ class SenderOrder:
         with self._lock:
             last = self._last.get((key, sender))
             if last is None:
-                if len(self._last) >= MAX_SENDERS:
+                if len(self._last) >= MAX_SENDERS:  # read at call time, so tests can lower it
                     self._last.pop(next(iter(self._last)))
                 last = self._last[(key, sender)] = _Last()
             elif tick == 0 and last.tick > 0:  # a new lock-step run

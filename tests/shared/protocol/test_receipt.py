@@ -93,7 +93,7 @@ def test_sender_memory_is_bounded(monkeypatch):
     order = SenderOrder()
     for i in range(50):
         order.check("k", f"s{i}", pose(5, 0, 0))
-    assert len(order._last) == 4  # noqa: SLF001 - the bound is what this test is about
+    assert len(order) == 4
 
 
 def test_receipt_decodes_checks_values_then_order():
