@@ -155,7 +155,7 @@ class ExecutorService:
                 self.core.check_plan(msg)
             except ExecutorError as exc:
                 self.result.plans_rejected += 1
-                self.rejects.reject(key, exc)
+                self.rejects.reject(key, exc, reason="mismatch")
                 return
             self.inbox.put_plan(msg)
         elif key == self.keys.demo and isinstance(msg, DemoMarker):

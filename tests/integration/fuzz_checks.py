@@ -6,15 +6,17 @@ import hashlib
 import json
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import zenoh
 from mcap.reader import make_reader
 
+from shared.config import ZenohConfig
 from shared.protocol import REASONS, Expectations, Keys, Message, ProtocolError, Receipt
 from shared.recording.schemas import REJECTED_TOPIC
-from shared.transport import sender_of
+from shared.transport import sender_of, zenoh_config
 
 from .fuzzing import Case, Fuzzer
 
@@ -79,17 +81,51 @@ class Watcher:
 Sent = dict[str, list[Case]]
 
 
+@contextmanager
+def fuzz_session(cfg: ZenohConfig) -> Iterator[zenoh.Session]:
+    """A session whose blocked publications wait (up to 10 min) instead of closing the link after 5 s.
+
+    Zenoh's default (``transport/link/tx/queue/congestion_control/block/wait_before_close``, 5 s)
+    closes the link to a subscriber that falls that far behind; the fuzzer, publishing with congestion
+    control *block*, then simply waits for the slowest receiver (the executor).
+    """
+    conf = zenoh_config(cfg)
+    conf.insert_json5("transport/link/tx/queue/congestion_control/block/wait_before_close", "600000000")
+    session = zenoh.open(conf)
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+PACE_WINDOW = 32
+"""Rounds the fuzzer may run ahead of the executor's progress (see :func:`publish_fuzz`)."""
+
+
 def publish_fuzz(session: zenoh.Session, templates: dict[str, Message], rounds: int, seed: int = 0,
-                 keep: Callable[[Case], bool] | None = None) -> Sent:
+                 keep: Callable[[Case], bool] | None = None, progress: Callable[[], int] | None = None,
+                 pace_key: str = "") -> Sent:
     """Publish ``rounds`` rounds of fuzz on every key of ``templates``; the cases sent, per key.
 
     The payloads themselves are not kept (only their digests, in :class:`Case`), so memory stays small.
+    With ``progress`` (how many payloads on ``pace_key`` the executor has handled, exactly), the
+    fuzzer stays within :data:`PACE_WINDOW` payloads of it (waiting at most 60 s at a time). Publish
+    from a :func:`fuzz_session`: the fuzzer outruns the executor (one subscription that decodes,
+    checks and logs every key), and by default Zenoh closes a link whose blocked messages wait more
+    than 5 s, so the rest of the fuzz would never reach it.
     """
     fuzzers = {k: Fuzzer(m, [o for kk, o in templates.items() if kk != k], seed=seed + i)
                for i, (k, m) in enumerate(templates.items())}
     pubs = {k: session.declare_publisher(k, congestion_control=zenoh.CongestionControl.BLOCK) for k in templates}
     sent: Sent = {k: [] for k in templates}
     try:
+        if progress is not None:  # Zenoh does not buffer: wait until the route to the executor exists
+            start = progress()
+            while progress() == start:
+                probe = Case("random", "route probe", b"route probe", True, "malformed")
+                pubs[pace_key].put(probe.payload)
+                sent[pace_key].append(probe)
+                wait_until(lambda s=start: progress() > s, 0.5)
         for i in range(rounds):
             for k, fz in fuzzers.items():
                 for case in fz.cases(i):
@@ -99,6 +135,8 @@ def publish_fuzz(session: zenoh.Session, templates: dict[str, Message], rounds: 
                                             case.digest))
             if i % 20 == 19:
                 time.sleep(0.02)  # the genuine traffic keeps flowing in between
+            if progress is not None:
+                wait_until(lambda: len(sent[pace_key]) - progress() <= PACE_WINDOW, 60.0, step=0.02)
     finally:
         for p in pubs.values():
             p.undeclare()

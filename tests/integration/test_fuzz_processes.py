@@ -21,9 +21,18 @@ from shared.config import ZenohConfig
 from shared.protocol import Expectations, GridSpec, Keys, RobotSpec
 from shared.recording.reader import read_log
 from shared.scene import load_scene
-from shared.transport import Presence, open_session
+from shared.transport import Presence
 
-from .fuzz_checks import Watcher, check_executor_log, must_refuse_anywhere, publish_fuzz, rss_mb, settle, wait_until
+from .fuzz_checks import (
+    Watcher,
+    check_executor_log,
+    fuzz_session,
+    must_refuse_anywhere,
+    publish_fuzz,
+    rss_mb,
+    settle,
+    wait_until,
+)
 from .fuzzing import clock_template
 
 COUNT = int(os.environ.get("FORESIGHT_FUZZ_COUNT", "240"))
@@ -72,7 +81,7 @@ def test_fuzz_against_service_processes(system_files, tmp_path: Path):
     expect = Expectations(clock="realtime", robot=RobotSpec.from_robot(PR2.from_scene(scene)),
                           grid=GridSpec.from_grid(scene.grid))
     flowing = set(keys.data_keys()) - {keys.clock}
-    with open_session(hub) as session:
+    with fuzz_session(hub) as session:  # the hub (the services connect to it) publishes the fuzz, too
         presence = Presence(session, keys, "fuzzer")
         watch = Watcher(session, keys, expect)
         try:
