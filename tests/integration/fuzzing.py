@@ -41,6 +41,7 @@ class Case:
     must_refuse: bool
     reason: str | None = None
     sha1: bytes = b""
+    head: bytes = b""
 
     @property
     def digest(self) -> bytes:

@@ -37,6 +37,7 @@ from .fuzz_checks import (
     check_executor_log,
     fuzz_session,
     must_refuse_anywhere,
+    problems_of,
     publish_fuzz,
     rss_mb,
     settle,
@@ -79,14 +80,15 @@ def test_fuzz_every_key_of_a_running_system(run_system, record_property):
     result = system.threads["executor"].stop(timeout=60.0)
     report = check_executor_log(result.mcap_path, keys, sent, t_fuzz_end, executor.rejects.counts,
                                 executor.rejects.by_reason)
-    must = must_refuse_anywhere(sent)
-    for svc, ks in ((planner, (keys.robot_state, keys.occupancy, keys.demo)), (predictor, (keys.pose, keys.demo))):
-        for k in ks:
-            assert svc.rejects.counts.get(k, 0) >= must[k], f"{svc.rejects.service} on {k}"
     info = {"count_per_key": COUNT, "rss_before_mb": round(rss_before, 1), "rss_after_mb": round(rss_after, 1),
             "per_key": report, "planner": planner.rejects.summary(), "predictor": predictor.rejects.summary()}
     record_property("fuzz", info)
     print("FUZZ", json.dumps(info, indent=1))
+    assert not problems_of(report), problems_of(report)
+    must = must_refuse_anywhere(sent)
+    for svc, ks in ((planner, (keys.robot_state, keys.occupancy, keys.demo)), (predictor, (keys.pose, keys.demo))):
+        for k in ks:
+            assert svc.rejects.counts.get(k, 0) >= must[k], f"{svc.rejects.service} on {k}"
     assert rss_after - rss_before < RSS_GROWTH_LIMIT_MB, f"RSS grew {rss_after - rss_before:.0f} MB"
 
 

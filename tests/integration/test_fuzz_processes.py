@@ -28,6 +28,7 @@ from .fuzz_checks import (
     check_executor_log,
     fuzz_session,
     must_refuse_anywhere,
+    problems_of,
     publish_fuzz,
     rss_mb,
     settle,
@@ -107,22 +108,23 @@ def test_fuzz_against_service_processes(system_files, tmp_path: Path):
             codes = {n: procs[n].stop(timeout=30.0) for n in ("executor", "replayer", "planner", "predictor")}
             watch.close()
             presence.close()
-    assert all(alive.values()), f"services alive after the fuzz: {alive}"
-    assert all(c == 0 for c in codes.values()), f"exit status after SIGTERM: {codes}"
     lf = read_log(mcap)
     counts = {k: int(v) for k, v in lf.metadata["foresight.rejects"].items()}
     by_reason = {tuple(k.rsplit(" ", 1)): int(v) for k, v in lf.metadata["foresight.rejects.reasons"].items()}
     report = check_executor_log(str(mcap), keys, sent, t_fuzz_end, counts, by_reason)
     must = must_refuse_anywhere(sent)
     others = {n: parse_summary(procs[n].log_path.read_text(errors="replace")) for n in ("planner", "predictor")}
+    info = {"count_per_key": COUNT, "fuzz_s": round(t_fuzz_end - t0, 1), "rss_before_mb": rss_before,
+            "rss_after_mb": rss_after, "alive": alive, "exit": codes, "per_key": report,
+            "planner": {f"{k} {r}": n for (k, r), n in sorted(others["planner"].items())},
+            "predictor": {f"{k} {r}": n for (k, r), n in sorted(others["predictor"].items())}}
+    print("FUZZ", json.dumps(info, indent=1))
+    assert all(alive.values()), f"services alive after the fuzz: {alive}"
+    assert all(c == 0 for c in codes.values()), f"exit status after SIGTERM: {codes}"
+    assert not problems_of(report), problems_of(report)
     for name, ks in (("planner", (keys.robot_state, keys.occupancy, keys.demo)), ("predictor", (keys.pose, keys.demo))):
         for k in ks:
             got = sum(n for (kk, _), n in others[name].items() if kk == k)
             assert got >= must[k], f"{name} on {k}: {got} < {must[k]}"
-    info = {"count_per_key": COUNT, "fuzz_s": round(t_fuzz_end - t0, 1), "rss_before_mb": rss_before,
-            "rss_after_mb": rss_after, "per_key": report,
-            "planner": {f"{k} {r}": n for (k, r), n in sorted(others["planner"].items())},
-            "predictor": {f"{k} {r}": n for (k, r), n in sorted(others["predictor"].items())}}
-    print("FUZZ", json.dumps(info, indent=1))
     for n in procs:
         assert rss_after[n] - rss_before[n] < RSS_GROWTH_LIMIT_MB, f"{n}: RSS {rss_before[n]} -> {rss_after[n]} MB"
