@@ -111,7 +111,8 @@ def test_fuzz_against_service_processes(system_files, tmp_path: Path):
     lf = read_log(mcap)
     counts = {k: int(v) for k, v in lf.metadata["foresight.rejects"].items()}
     by_reason = {tuple(k.rsplit(" ", 1)): int(v) for k, v in lf.metadata["foresight.rejects.reasons"].items()}
-    report = check_executor_log(str(mcap), keys, sent, t_fuzz_end, counts, by_reason)
+    # unpaced against separate processes, the executor can fall minutes behind (reported as "late")
+    report = check_executor_log(str(mcap), keys, sent, t_fuzz_end, counts, by_reason, late_ok=True)
     must = must_refuse_anywhere(sent)
     others = {n: parse_summary(procs[n].log_path.read_text(errors="replace")) for n in ("planner", "predictor")}
     info = {"count_per_key": COUNT, "fuzz_s": round(t_fuzz_end - t0, 1), "rss_before_mb": rss_before,
