@@ -16,14 +16,14 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
 import zenoh
 
 from shared.config import ZenohConfig
 from shared.connectivity import retry_config, watched
-from shared.protocol import Keys, Message, ProtocolError, decode, encode
+from shared.protocol import Keys, Message, ProtocolError, Receipt, decode, encode
+from shared.rejects import RejectCounter
 
 __all__ = [
     "TransportError",
@@ -35,6 +35,7 @@ __all__ = [
     "subscribe_ordered",
     "LatestSubscriber",
     "RejectCounter",
+    "sender_of",
     "Presence",
     "describe",
 ]
@@ -138,8 +139,18 @@ def open_session(cfg: ZenohConfig, stop: threading.Event | None = None, name: st
         session.close()
 
 
+def sender_of(sample: zenoh.Sample) -> str:
+    """Who published a sample: the session id :class:`TypedPublisher` attaches ("" when none)."""
+    att = sample.attachment
+    return att.to_bytes()[:64].decode("ascii", "replace") if att is not None else ""
+
+
 class TypedPublisher(Generic[M]):
-    """Publisher of one message type on one key; encodes (and so validates) before sending."""
+    """Publisher of one message type on one key; encodes (and so validates) before sending.
+
+    Every sample carries the publishing session's id as its Zenoh attachment (see :func:`sender_of`),
+    so receivers check ticks and sequence numbers per sender (:class:`shared.protocol.Receipt`).
+    """
 
     def __init__(self, session: zenoh.Session, key: str, block: bool = False) -> None:
         """Declare the publisher.
@@ -151,13 +162,14 @@ class TypedPublisher(Generic[M]):
                 (Zenoh's default is to drop); use it for streams where every message counts.
         """
         self.key = key
+        self.sender = str(session.zid())
         cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         self._pub = session.declare_publisher(key, congestion_control=cc)
 
     def put(self, msg: M) -> bytes:
         """Encode and publish ``msg``; returns the bytes sent (for logging)."""
         data = encode(msg)
-        self._pub.put(data)
+        self._pub.put(data, attachment=self.sender.encode())
         return data
 
     def undeclare(self) -> None:
@@ -165,53 +177,29 @@ class TypedPublisher(Generic[M]):
         self._pub.undeclare()
 
 
-@dataclass
-class RejectCounter:
-    """Counts and logs rejected messages per key, rate-limited to one log line per key per second."""
-
-    service: str
-    counts: dict[str, int] = field(default_factory=dict)
-    _last_log: dict[str, float] = field(default_factory=dict)
-    _lock: threading.Lock = field(default_factory=threading.Lock)
-
-    def reject(self, key: str, error: Exception) -> None:
-        """Record one rejected message on ``key``."""
-        import time
-
-        with self._lock:
-            self.counts[key] = self.counts.get(key, 0) + 1
-            now = time.monotonic()
-            if now - self._last_log.get(key, -1e9) >= 1.0:
-                self._last_log[key] = now
-                log.warning("%s: rejected message on %s (%d so far): %s", self.service, key,
-                            self.counts[key], error)
-
-    @property
-    def total(self) -> int:
-        """Total rejected messages."""
-        with self._lock:
-            return sum(self.counts.values())
-
-
 def subscribe(session: zenoh.Session, key: str, cls: type[M], callback: Callable[[M], None],
-              rejects: RejectCounter | None = None) -> zenoh.Subscriber:
+              rejects: RejectCounter | None = None, receipt: Receipt | None = None) -> zenoh.Subscriber:
     """Subscribe to ``key``, decode each payload as ``cls`` and call ``callback`` with it.
 
-    Malformed payloads are counted and logged by ``rejects`` and never reach ``callback``; an
-    exception raised by ``callback`` itself is logged and does not stop the subscription.
+    Malformed payloads (and, with ``receipt``, messages whose values or order it refuses) are
+    counted and logged by ``rejects`` and never reach ``callback``; an exception raised by
+    ``callback`` itself is logged and does not stop the subscription.
 
     Args:
         session: Open Zenoh session.
         key: Key expression (one key, no wildcard).
         cls: Expected message type.
         callback: Called on Zenoh's thread with each valid message.
-        rejects: Where to count rejections (default: log only).
+        rejects: Where to count rejections (default: a counter of the subscription's own).
+        receipt: The receiving service's checks (values against its expectations, per-sender
+            order); default: decoding only.
     """
-    return subscribe_ordered(session, key, {key: cls}, callback, rejects)  # type: ignore[arg-type]
+    return subscribe_ordered(session, key, {key: cls}, callback, rejects, receipt)  # type: ignore[arg-type]
 
 
 def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str, type[Message]],
-                      callback: Callable[[Message], None], rejects: RejectCounter | None = None) -> zenoh.Subscriber:
+                      callback: Callable[[Message], None], rejects: RejectCounter | None = None,
+                      receipt: Receipt | None = None) -> zenoh.Subscriber:
     """One subscription over several keys that delivers their messages in publishing order.
 
     Zenoh runs each subscriber's callback on its own thread, so two :func:`subscribe` calls (e.g. on
@@ -224,21 +212,24 @@ def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str,
         key_expr: Wildcard key expression covering the keys of ``types``.
         types: Key -> expected message type.
         callback: Called on one Zenoh thread with each valid message, in arrival order.
-        rejects: Where to count rejections (default: log only).
+        rejects: Where to count rejections (default: a counter of this subscription's own).
+        receipt: As in :func:`subscribe`.
     """
+    default_rejects = RejectCounter("subscriber")
 
     def handler(sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
         try:
             cls = types.get(key)
             if cls is None:
-                raise ProtocolError(f"message: unexpected key {key}")
-            msg = decode(sample.payload.to_bytes(), cls)
-        except ProtocolError as exc:
-            if rejects is not None:
-                rejects.reject(key, exc)
-            else:
-                log.warning("rejected message on %s: %s", key, exc)
+                raise ProtocolError(f"message: unexpected key {key}", "wrong-type")
+            payload = sample.payload.to_bytes()
+            msg = (receipt.accept(key, payload, cls, sender_of(sample)) if receipt is not None
+                   else decode(payload, cls))
+        except Exception as exc:  # ProtocolError; anything else is a decoder bug, refused all the same
+            if not isinstance(exc, ProtocolError):
+                log.exception("decoding a message on %s failed unexpectedly", key)
+            (rejects or default_rejects).reject(key, exc)  # counted, one log line per key per second
             return
         try:
             callback(msg)
@@ -257,13 +248,13 @@ class LatestSubscriber(Generic[M]):
 
     def __init__(self, session: zenoh.Session, key: str, cls: type[M],
                  rejects: RejectCounter | None = None,
-                 on_message: Callable[[M], None] | None = None) -> None:
+                 on_message: Callable[[M], None] | None = None, receipt: Receipt | None = None) -> None:
         self._cond = threading.Condition()
         self._latest: M | None = None
         self._seq = 0
         self._taken = 0
         self._on_message = on_message
-        self._sub = subscribe(session, key, cls, self._store, rejects)
+        self._sub = subscribe(session, key, cls, self._store, rejects, receipt)
 
     def _store(self, msg: M) -> None:
         with self._cond:

@@ -1,8 +1,11 @@
 """The executor service: the simulation master of a run and its MCAP logger.
 
 One Zenoh subscriber on ``<prefix>/**`` receives every message of the run (its own included): each
-payload is logged (:class:`shared.recording.writer.McapLog`) and plans and occupancy grids are
-passed to the pure :class:`services.executor.core.ExecutorCore`.
+payload is checked (:class:`shared.protocol.Receipt`: decoded, its values against this robot, scene
+grid and clock, its ticks and sequence numbers per sender); a payload that passes is logged
+(:class:`shared.recording.writer.McapLog`) and plans and occupancy grids are passed to the pure
+:class:`services.executor.core.ExecutorCore`; one that fails is counted per key and reason and goes
+to the log's rejects channel only.
 
 Lock-step mode (deterministic), replanning step n = 0 .. steps-1: the rules (plan adoption, the hold
 decided once per step, the substeps and the tick) are :class:`shared.lockstep.LockstepMaster`'s; this
@@ -32,19 +35,22 @@ from shared.config import ZenohConfig
 from shared.lockstep import FIRST_PLAN, Adoption, LockstepMaster, PlanInbox, StepClock
 from shared.protocol import (
     DemoMarker,
+    Expectations,
+    GridSpec,
     HumanPose,
     Keys,
     Message,
     OccupancyGrid,
     Plan,
     ProtocolError,
+    Receipt,
+    RobotSpec,
     RobotState,
-    decode,
 )
 from shared.recording.foxglove import SceneBuilder
 from shared.recording.writer import McapLog
 from shared.scene import Scene, load_scene
-from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session
+from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, sender_of
 
 from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, reason_kind
 from .models import HumanBody, PlaceInScene, RobotModel, load_models, start_configuration
@@ -67,7 +73,8 @@ class ExecutorResult:
         goal_per_step: Goal index executed during each step (-1: none yet).
         held_steps: Steps (lock-step) or state samples (real time) during which the robot held.
         plans: Plans adopted; ``plans_rejected``: plans with the wrong joints.
-        rejects: Payloads that failed to decode, per key.
+        rejects: Payloads refused (decoding, values, order), per key; ``reject_reasons`` per
+            ``"key reason"``.
         mcap_path: The log, or None.
         times: ``(N,)`` stamps of the published states; ``q``: ``(N, D)`` their configurations.
     """
@@ -80,6 +87,7 @@ class ExecutorResult:
     plans: int = 0
     plans_rejected: int = 0
     rejects: dict[str, int] = field(default_factory=dict)
+    reject_reasons: dict[str, int] = field(default_factory=dict)
     mcap_path: str | None = None
     times: np.ndarray = field(default_factory=lambda: np.zeros(0))
     q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
@@ -116,6 +124,13 @@ class ExecutorService:
         q0 = start_configuration(self.limits, config, robot, self.scene)
         self.core = ExecutorCore(self.limits, q0, config)
         self.rejects = RejectCounter("executor")
+        lim = self.limits
+        lockstep = config.mode == "lockstep"
+        self.receipt = Receipt(Expectations(
+            clock=config.mode, period_s=config.step_period_s if lockstep else None,
+            max_tick=(lambda: self.result.steps) if lockstep else None,  # no tick beyond the one in progress
+            robot=RobotSpec(tuple(lim.joint_names), lim.lower, lim.upper, lim.velocity),
+            grid=GridSpec.from_grid(self.scene.grid)))
         self._expected = self.keys.data_keys()
         self.result = ExecutorResult()
         self.inbox = PlanInbox()
@@ -126,13 +141,15 @@ class ExecutorService:
 
     # -- inputs (Zenoh threads) ------------------------------------------------------------------
 
-    def _on_sample(self, key: str, payload: bytes) -> None:
+    def _on_sample(self, key: str, payload: bytes, sender: str = "") -> None:
         try:
-            msg = decode(payload, self._expected.get(key))
-        except ProtocolError as exc:
-            self.rejects.reject(key, exc)  # counted, logged (rate-limited) with the decoder's message
-            if self.mcap is not None:
-                self.mcap.reject(key, payload, str(exc), quiet=True)
+            msg = self.receipt.accept(key, payload, self._expected.get(key), sender)
+        except Exception as exc:  # ProtocolError; anything else is a decoder bug, refused all the same
+            if not isinstance(exc, ProtocolError):
+                log.exception("executor: checking a message on %s failed unexpectedly", key)
+            self.rejects.reject(key, exc)  # counted per reason, logged (rate-limited)
+            if self.mcap is not None:  # never on the key's data channel: the rejects channel only
+                self.mcap.reject(key, payload, str(exc), quiet=True, reason=getattr(exc, "reason", "malformed"))
             return
         if self.mcap is not None:
             self.mcap.log_message(key, payload, msg)
@@ -144,7 +161,7 @@ class ExecutorService:
                 self.core.check_plan(msg)
             except ExecutorError as exc:
                 self.result.plans_rejected += 1
-                self.rejects.reject(key, exc)
+                self.rejects.reject(key, exc, reason="mismatch")
                 return
             self.inbox.put_plan(msg)
         elif key == self.keys.demo and isinstance(msg, DemoMarker):
@@ -186,8 +203,8 @@ class ExecutorService:
                 self.mcap = McapLog(path, self.keys, builder, viz_period_s=1.0 / cfg.viz_rate_hz,
                                     scene_text=text, run_metadata=meta)
                 self.result.mcap_path = str(path)
-            sub = session.declare_subscriber(f"{self.zenoh.prefix}/**",
-                                             lambda s: self._on_sample(str(s.key_expr), s.payload.to_bytes()))
+            sub = session.declare_subscriber(f"{self.zenoh.prefix}/**", lambda s: self._on_sample(
+                str(s.key_expr), s.payload.to_bytes(), sender_of(s)))
             # block (never drop) under congestion: lock-step consumers count on every state and tick
             state_pub: TypedPublisher[Any] = TypedPublisher(session, self.keys.robot_state, block=True)
             clock_pub: TypedPublisher[Any] = TypedPublisher(session, self.keys.clock, block=True)
@@ -207,12 +224,13 @@ class ExecutorService:
                     self.mcap.close()
         r = self.result
         r.rejects = dict(self.rejects.counts)
+        r.reject_reasons = {f"{k} {why}": n for (k, why), n in sorted(self.rejects.by_reason.items())}
         r.plans = self.core.plans_adopted
         r.times = np.asarray(self._times)
         r.q = np.asarray(self._qs).reshape(len(self._qs), self.limits.dof)
-        log.info("executor: done after %d steps, goal %s, reached=%s (step %d), %d plans, %d held, %d rejected",
+        log.info("executor: done after %d steps, goal %s, reached=%s (step %d), %d plans, %d held, %d rejected: %s",
                  r.steps, r.goal_per_step[-1] if r.goal_per_step else -1, r.reached, r.reached_step, r.plans,
-                 r.held_steps, sum(r.rejects.values()))
+                 r.held_steps, sum(r.rejects.values()), self.rejects.summary())
         return r
 
     def _publish_state(self, pub: TypedPublisher[Any], state: RobotState) -> None:

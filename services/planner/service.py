@@ -33,7 +33,18 @@ import numpy as np
 
 from shared.config import ZenohConfig
 from shared.lockstep import TickInbox
-from shared.protocol import ClockTick, DemoMarker, Keys, OccupancyGrid, Plan, RobotState
+from shared.protocol import (
+    ClockTick,
+    DemoMarker,
+    Expectations,
+    GridSpec,
+    Keys,
+    OccupancyGrid,
+    Plan,
+    Receipt,
+    RobotSpec,
+    RobotState,
+)
 from shared.scene import Scene, load_scene
 from shared.transport import (
     LatestSubscriber,
@@ -102,6 +113,9 @@ class PlannerService:
         self.planner = planner or Planner(self.scene, config.planner_config())
         self.keys = Keys(zenoh.prefix)
         self.rejects = RejectCounter("planner")
+        # what arrives is checked against this planner's robot and scene grid (shared.protocol.receipt)
+        self.receipt = Receipt(Expectations(clock=config.mode, robot=RobotSpec.from_robot(self.planner.robot),
+                                            grid=GridSpec.from_grid(self.scene.grid)))
         self.stats = PlannerStats()
         self._empty = np.zeros(self.scene.grid.dims, dtype=np.float32)
         self.trigger: ReplanTrigger | None = None  # real-time mode: when steps start (and why, counted)
@@ -136,14 +150,17 @@ class PlannerService:
                 self._run_lockstep(session, pub, stop)
             else:
                 self._run_realtime(session, pub, stop)
+        log.info("planner: stopped after %d plans (%d failed), rejected: %s", self.stats.plans, self.stats.failures,
+                 self.rejects.summary())
         return self.stats
 
     def _run_lockstep(self, session: object, pub: TypedPublisher[Plan], stop: threading.Event) -> None:
         inbox = TickInbox()
-        subs = [subscribe(session, self.keys.robot_state, RobotState, inbox.add_state, self.rejects),
-                subscribe(session, self.keys.occupancy, OccupancyGrid, inbox.add_occupancy, self.rejects),
-                subscribe(session, self.keys.clock, ClockTick, inbox.add_tick, self.rejects),
-                subscribe(session, self.keys.demo, DemoMarker, inbox.add_marker, self.rejects)]
+        r, rc = self.rejects, self.receipt
+        subs = [subscribe(session, self.keys.robot_state, RobotState, inbox.add_state, r, rc),
+                subscribe(session, self.keys.occupancy, OccupancyGrid, inbox.add_occupancy, r, rc),
+                subscribe(session, self.keys.clock, ClockTick, inbox.add_tick, r, rc),
+                subscribe(session, self.keys.demo, DemoMarker, inbox.add_marker, r, rc)]
         presence = Presence(session, self.keys, "planner",  # announce only once subscribed
                             stop_with=self.config.stop_with, stop=stop)
         try:
@@ -175,14 +192,16 @@ class PlannerService:
         def on_input(_msg: object) -> None:
             wake.set()
 
-        occupancy = LatestSubscriber(session, self.keys.occupancy, OccupancyGrid, self.rejects, on_message=on_input)
-        state = LatestSubscriber(session, self.keys.robot_state, RobotState, self.rejects, on_message=on_input)
+        occupancy = LatestSubscriber(session, self.keys.occupancy, OccupancyGrid, self.rejects, on_message=on_input,
+                                     receipt=self.receipt)
+        state = LatestSubscriber(session, self.keys.robot_state, RobotState, self.rejects, on_message=on_input,
+                                 receipt=self.receipt)
 
         def on_demo(msg: DemoMarker) -> None:
             if msg.event == "start":
                 log.info("planner: demonstration %d starts", msg.demo_id)
 
-        demo_sub = subscribe(session, self.keys.demo, DemoMarker, on_demo, self.rejects)
+        demo_sub = subscribe(session, self.keys.demo, DemoMarker, on_demo, self.rejects, self.receipt)
         presence = Presence(session, self.keys, "planner", stop_with=self.config.stop_with, stop=stop)
         trigger = self.trigger = ReplanTrigger(self.config.period_s, self.config.trigger)
         tol = self.planner.config.off_path_tol

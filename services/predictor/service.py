@@ -8,7 +8,7 @@ import time
 from dataclasses import dataclass
 
 from shared.config import ZenohConfig
-from shared.protocol import ClassPosterior, DemoMarker, HumanPose, Keys, Message, OccupancyGrid
+from shared.protocol import ClassPosterior, DemoMarker, Expectations, HumanPose, Keys, Message, OccupancyGrid, Receipt
 from shared.scene import load_scene
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe_ordered
 
@@ -52,6 +52,8 @@ class PredictorService:
         self.core = PredictorCore(self.model, self.scene, config)
         self.keys = Keys(zenoh_config.prefix)
         self.rejects = RejectCounter("predictor")
+        # values and per-sender order of what arrives; stamps by the message's tick (either mode)
+        self.receipt = Receipt(Expectations(clock="auto"))
         self.stats = PredictorStats()
         self._lock = threading.Lock()
         self._post_pub: TypedPublisher[ClassPosterior] | None = None
@@ -101,7 +103,8 @@ class PredictorService:
             self._post_pub = TypedPublisher(session, self.keys.posterior)
             self._occ_pub = TypedPublisher(session, self.keys.occupancy)
             types = {self.keys.pose: HumanPose, self.keys.demo: DemoMarker}
-            sub = subscribe_ordered(session, self.keys.human_all, types, self._on_message, self.rejects)
+            sub = subscribe_ordered(session, self.keys.human_all, types, self._on_message, self.rejects,
+                                    self.receipt)
             presence = Presence(session, self.keys, "predictor", stop_with=self.config.stop_with, stop=stop)
             log.info("predictor: model %s (%d classes, grid %s at %g m, features %s), method %s, scene %s, session %s",
                      self.config.model, self.model.n_classes, self.model.grid.dims, self.model.grid.resolution,
@@ -116,6 +119,6 @@ class PredictorService:
                 self._post_pub.undeclare()
                 self._occ_pub.undeclare()
                 self._post_pub = self._occ_pub = None
-        log.info("predictor: stopped after %d poses (%d published, %d resets, %d rejected)", self.stats.poses,
-                 self.stats.published, self.stats.resets, self.rejects.total)
+        log.info("predictor: stopped after %d poses (%d published, %d resets, %d rejected: %s)", self.stats.poses,
+                 self.stats.published, self.stats.resets, self.rejects.total, self.rejects.summary())
         return self.stats

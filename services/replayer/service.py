@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from shared.config import ZenohConfig
 from shared.library import MotionLibrary
 from shared.lockstep import TickOrder, TickQueue
-from shared.protocol import ClockTick, DemoMarker, HumanPose, Keys, Message
+from shared.protocol import ClockTick, DemoMarker, Expectations, HumanPose, Keys, Message, Receipt
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe
 
 from .core import ReplayerConfig, ReplayerCore, load_replay_library, select_demos
@@ -64,7 +64,8 @@ class ReplayerService:
             # lock-step: listen to the clock before announcing ourselves, so no tick sent after our
             # liveliness token appears is missed
             ticks = TickQueue()
-            clock_sub = (subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects)
+            receipt = Receipt(Expectations(clock="lockstep"))
+            clock_sub = (subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects, receipt)
                          if cfg.mode == "lockstep" else None)
             presence = Presence(session, self.keys, "replayer", stop_with=cfg.stop_with, stop=stop)
             total = core.total_poses
@@ -84,9 +85,9 @@ class ReplayerService:
                 presence.close()
                 if clock_sub is not None:
                     clock_sub.undeclare()
-        log.info("replayer: %s after %d demonstrations, %d poses, %d ticks",
+        log.info("replayer: %s after %d demonstrations, %d poses, %d ticks, rejected: %s",
                  "finished" if self.stats.finished else "stopped", self.stats.demos, self.stats.poses,
-                 self.stats.ticks)
+                 self.stats.ticks, self.rejects.summary())
         return self.stats
 
     # ------------------------------------------------------------------------------------------

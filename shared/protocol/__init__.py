@@ -8,10 +8,12 @@ Every message is a msgpack map with ``_type`` (the message type name), ``_v`` (t
 shapes and finiteness, and per-message invariants) and raises :class:`ProtocolError`, whose message
 names the offending field.
 
-Modules: :mod:`~shared.protocol.schema` (the base class, array fields, the version),
-:mod:`~shared.protocol.messages` (the message types), :mod:`~shared.protocol.keys` (key
-expressions), :mod:`~shared.protocol.codec` (encode / decode). Import the names from here
-(``from shared.protocol import Plan, decode``).
+Modules: :mod:`~shared.protocol.schema` (the base class, array fields, the version, the rejection
+reasons), :mod:`~shared.protocol.messages` (the message types), :mod:`~shared.protocol.keys` (key
+expressions), :mod:`~shared.protocol.codec` (encode / decode), :mod:`~shared.protocol.limits` (every
+size and value bound), :mod:`~shared.protocol.validation` (values checked on receipt against the
+receiver's expectations), :mod:`~shared.protocol.receipt` (decode + values + per-sender order, what
+the services call). Import the names from here (``from shared.protocol import Plan, decode``).
 """
 
 from .codec import decode, encode
@@ -26,11 +28,14 @@ from .messages import (
     Plan,
     RobotState,
 )
-from .schema import SCHEMA_VERSION, ArraySpec, Message, ProtocolError
+from .receipt import Receipt, SenderOrder
+from .schema import REASONS, SCHEMA_VERSION, ArraySpec, Message, ProtocolError
+from .validation import Expectations, GridSpec, RobotSpec, check_values
 
 __all__ = [
     "SCHEMA_VERSION",
     "ProtocolError",
+    "REASONS",
     "ArraySpec",
     "Message",
     "HumanPose",
@@ -45,4 +50,10 @@ __all__ = [
     "SERVICES",
     "encode",
     "decode",
+    "Expectations",
+    "RobotSpec",
+    "GridSpec",
+    "check_values",
+    "Receipt",
+    "SenderOrder",
 ]

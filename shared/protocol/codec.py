@@ -16,6 +16,7 @@ from typing import Any, TypeVar
 import msgpack
 import numpy as np
 
+from .limits import AXIS_LIMITS, MAX_PAYLOAD_BYTES, MAX_STRING_CHARS
 from .messages import MESSAGE_TYPES
 from .schema import SCHEMA_VERSION, ArraySpec, Message, ProtocolError
 from .schema import field_error as _err
@@ -53,65 +54,76 @@ def encode(msg: Message) -> bytes:
 
 def _decode_array(t: str, name: str, raw: Any, spec: ArraySpec, dims: dict[str, int]) -> np.ndarray:
     if not isinstance(raw, dict) or set(raw) != {"dtype", "shape", "data"}:
-        raise _err(t, name, "array must be a map with keys dtype, shape, data")
+        raise _err(t, name, "array must be a map with keys dtype, shape, data", "malformed")
+    if not isinstance(raw["dtype"], str) or len(raw["dtype"]) > 16:
+        raise _err(t, name, f"dtype must be a short string, got {type(raw['dtype']).__name__}", "malformed")
     try:
         dtype = np.dtype(raw["dtype"])
     except (TypeError, ValueError):
-        raise _err(t, name, f"unknown dtype {raw['dtype']!r}") from None
+        raise _err(t, name, f"unknown dtype {raw['dtype']!r}", "shape") from None
     want = np.dtype(spec.dtype)
     if dtype.kind != want.kind or dtype.itemsize != want.itemsize:
-        raise _err(t, name, f"dtype {dtype.name} where {want.name} is required")
+        raise _err(t, name, f"dtype {dtype.name} where {want.name} is required", "shape")
     shape = raw["shape"]
     if not isinstance(shape, list) or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0
                                               for s in shape):
-        raise _err(t, name, f"shape {shape!r} is not a list of non-negative ints")
+        raise _err(t, name, f"shape {str(shape)[:80]} is not a list of non-negative ints", "malformed")
     if len(shape) != len(spec.shape):
         raise _err(t, name, f"shape {tuple(shape)} has {len(shape)} axes, expected {len(spec.shape)} "
-                   f"{spec.shape}")
+                   f"{spec.shape}", "shape")
     for axis, (got, exp) in enumerate(zip(shape, spec.shape, strict=True)):
         if isinstance(exp, int):
             if got != exp:
-                raise _err(t, name, f"shape {tuple(shape)} axis {axis} must be {exp}")
+                raise _err(t, name, f"shape {tuple(shape)} axis {axis} must be {exp}", "shape")
+        elif got > AXIS_LIMITS[exp]:  # bounded before any product or allocation
+            raise _err(t, name, f"shape {tuple(shape)} axis {axis} ({exp}) exceeds the limit "
+                       f"{AXIS_LIMITS[exp]}", "too-large")
         elif exp in dims and dims[exp] != got:
             raise _err(t, name, f"shape {tuple(shape)} axis {axis} ({exp}) must be {dims[exp]} "
-                       "like the other fields")
+                       "like the other fields", "shape")
         else:
             dims[exp] = got
     data = raw["data"]
     if not isinstance(data, bytes | bytearray):
-        raise _err(t, name, "data must be bytes")
-    n = int(np.prod(shape, dtype=np.int64))
+        raise _err(t, name, "data must be bytes", "malformed")
+    n = math.prod(shape)  # exact (Python ints); every axis is bounded above
     if len(data) != n * dtype.itemsize:
         raise _err(t, name, f"data has {len(data)} bytes, shape {tuple(shape)} of {dtype.name} needs "
-                   f"{n * dtype.itemsize}")
+                   f"{n * dtype.itemsize}", "shape")
     arr = np.frombuffer(data, dtype=dtype).reshape(shape).astype(want, copy=True)
     if spec.finite and arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-        raise _err(t, name, "contains NaN or infinity")
+        raise _err(t, name, "contains NaN or infinity", "non-finite")
     return arr
 
 
 def _check_scalar(t: str, name: str, tp: Any, value: Any) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise _err(t, name, f"expected a number, got {type(value).__name__}")
+            raise _err(t, name, f"expected a number, got {type(value).__name__}", "malformed")
+        value = float(value)  # msgpack ints are at most 2^64: always a finite float
         if not math.isfinite(value):
-            raise _err(t, name, f"must be finite, got {value}")
-        return float(value)
+            raise _err(t, name, f"must be finite, got {value}", "non-finite")
+        return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise _err(t, name, f"expected an integer, got {type(value).__name__}")
+            raise _err(t, name, f"expected an integer, got {type(value).__name__}", "malformed")
         return value
     if tp is bool:
         if not isinstance(value, bool):
-            raise _err(t, name, f"expected a boolean, got {type(value).__name__}")
+            raise _err(t, name, f"expected a boolean, got {type(value).__name__}", "malformed")
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise _err(t, name, f"expected a string, got {type(value).__name__}")
+            raise _err(t, name, f"expected a string, got {type(value).__name__}", "malformed")
+        if len(value) > MAX_STRING_CHARS:
+            raise _err(t, name, f"string of {len(value)} characters exceeds the limit {MAX_STRING_CHARS}",
+                       "too-large")
         return value
     if typing.get_origin(tp) is list:
         if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise _err(t, name, "expected a list of strings")
+            raise _err(t, name, "expected a list of strings", "malformed")
+        if any(len(v) > MAX_STRING_CHARS for v in value):
+            raise _err(t, name, f"an entry exceeds the limit of {MAX_STRING_CHARS} characters", "too-large")
         return list(value)
     raise _err(t, name, f"unsupported field type {tp!r}")  # pragma: no cover
 
@@ -127,29 +139,34 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
         The message dataclass instance.
 
     Raises:
-        ProtocolError: On truncated/malformed bytes, unknown type, wrong version, a missing or
-            ill-typed field, wrong dtype or shape, non-finite values or a broken invariant.
+        ProtocolError: On a payload over :data:`~shared.protocol.limits.MAX_PAYLOAD_BYTES`,
+            truncated/malformed bytes, unknown type, wrong version, a missing or ill-typed field, a
+            declared size over its limit, wrong dtype or shape, non-finite values or a broken
+            invariant; its ``reason`` says which (:data:`~shared.protocol.schema.REASONS`).
     """
+    if len(data) > MAX_PAYLOAD_BYTES:
+        raise ProtocolError(f"message: {len(data)} bytes exceed the limit of {MAX_PAYLOAD_BYTES}", "too-large")
     try:
         raw = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True)
     except Exception as exc:  # msgpack raises several unrelated types for bad input
-        raise ProtocolError(f"message: not valid msgpack ({type(exc).__name__}: {exc})") from None
+        raise ProtocolError(f"message: not valid msgpack ({type(exc).__name__}: {str(exc)[:120]})") from None
     if not isinstance(raw, dict):
         raise ProtocolError(f"message: expected a map, got {type(raw).__name__}")
     t = raw.get("_type")
-    if t not in MESSAGE_TYPES:
-        raise ProtocolError(f"message._type: unknown message type {t!r}")
+    if not isinstance(t, str) or t not in MESSAGE_TYPES:
+        raise ProtocolError(f"message._type: unknown message type {str(t)[:80]!r}", "wrong-type")
     cls = MESSAGE_TYPES[t]
     if expected is not None and cls is not expected:
-        raise ProtocolError(f"message._type: got {t}, expected {expected.TYPE}")
+        raise ProtocolError(f"message._type: got {t}, expected {expected.TYPE}", "wrong-type")
     if raw.get("_v") != SCHEMA_VERSION:
-        raise ProtocolError(f"{t}._v: schema version {raw.get('_v')!r}, this build speaks {SCHEMA_VERSION}")
+        raise ProtocolError(f"{t}._v: schema version {str(raw.get('_v'))[:40]}, this build speaks "
+                            f"{SCHEMA_VERSION}", "version")
     hints = _hints(cls)
     kwargs: dict[str, Any] = {}
     dims: dict[str, int] = {}
     for f in dataclasses.fields(cls):  # type: ignore[arg-type]
         if f.name not in raw:
-            raise _err(t, f.name, "missing")
+            raise _err(t, f.name, "missing", "malformed")
         spec = f.metadata.get("array")
         if spec is not None:
             kwargs[f.name] = _decode_array(t, f.name, raw[f.name], spec, dims)

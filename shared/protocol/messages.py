@@ -11,6 +11,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from .limits import MAX_GRID_CELLS, MAX_GRID_DIM
 from .schema import Message, array
 from .schema import field_error as _err
 
@@ -119,11 +120,25 @@ class OccupancyGrid(Message):
             raise _err(self.TYPE, "method", f"must be 'prediction' or 'current', got {self.method!r}")
         if not (self.resolution > 0 and math.isfinite(self.resolution)):
             raise _err(self.TYPE, "resolution", f"must be > 0, got {self.resolution}")
-        if np.any(self.dims <= 0):
-            raise _err(self.TYPE, "dims", f"must be positive, got {self.dims.tolist()}")
-        n = int(np.prod(self.dims.astype(np.int64)))
+        n = self.cells()
+        if self.indices.size > n:
+            raise _err(self.TYPE, "indices", f"{self.indices.size} voxels sent for a grid of {n}")
         if self.indices.size and int(self.indices.max()) >= n:
             raise _err(self.TYPE, "indices", f"index {int(self.indices.max())} outside a grid of {n} voxels")
+
+    def cells(self) -> int:
+        """``nx * ny * nz``, after checking the declared dims against the limits (nothing allocated).
+
+        Raises:
+            ProtocolError: A dim <= 0, over ``MAX_GRID_DIM``, or more than ``MAX_GRID_CELLS`` voxels.
+        """
+        dims = [int(d) for d in np.asarray(self.dims).reshape(-1)]
+        if len(dims) != 3 or any(d <= 0 for d in dims):
+            raise _err(self.TYPE, "dims", f"must be 3 positive sizes, got {dims}")
+        if max(dims) > MAX_GRID_DIM or math.prod(dims) > MAX_GRID_CELLS:
+            raise _err(self.TYPE, "dims", f"{dims} exceeds the limits ({MAX_GRID_DIM} per axis, "
+                       f"{MAX_GRID_CELLS} voxels)", "too-large")
+        return math.prod(dims)
 
     @classmethod
     def from_dense(cls, grid: np.ndarray, origin: np.ndarray, resolution: float, **meta: Any) -> OccupancyGrid:
@@ -141,8 +156,17 @@ class OccupancyGrid(Message):
                    dims=np.asarray(grid.shape, dtype=np.int32), indices=idx, values=q[idx], **meta)
 
     def to_dense(self, dtype: Any = np.float32) -> np.ndarray:
-        """Return the ``(nx, ny, nz)`` probability grid (values ``q / 255``)."""
-        out = np.zeros(int(np.prod(self.dims.astype(np.int64))), dtype=dtype)
+        """Return the ``(nx, ny, nz)`` probability grid (values ``q / 255``).
+
+        The declared size is checked against the limits before anything is allocated.
+
+        Raises:
+            ProtocolError: If the dims exceed the limits or an index lies outside the grid.
+        """
+        n = self.cells()
+        if self.indices.size and int(self.indices.max()) >= n:
+            raise _err(self.TYPE, "indices", f"index {int(self.indices.max())} outside a grid of {n} voxels")
+        out = np.zeros(n, dtype=dtype)
         out[self.indices.astype(np.int64)] = self.values.astype(dtype) / dtype(255.0)
         return out.reshape(tuple(int(d) for d in self.dims))
 

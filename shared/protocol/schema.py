@@ -13,13 +13,42 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-__all__ = ["SCHEMA_VERSION", "ProtocolError", "ArraySpec", "array", "Message", "field_error"]
+__all__ = ["SCHEMA_VERSION", "REASONS", "ProtocolError", "ArraySpec", "array", "Message", "field_error"]
 
 SCHEMA_VERSION = 1
 
+REASONS: dict[str, str] = {
+    # decoding (shared.protocol.codec, Message.check)
+    "too-large": "the payload, or a size it declares, exceeds a limit of shared.protocol.limits",
+    "malformed": "not msgpack, not a map, a missing or ill-typed field, an array that is not {dtype, shape, data}",
+    "wrong-type": "an unknown message type, or another type than the key carries",
+    "version": "another schema version",
+    "shape": "a dtype, shape or data length that does not match the field or the other fields",
+    "non-finite": "NaN or infinity where the field must be finite",
+    "invariant": "a broken per-message invariant (an index out of its range, names that do not match, ...)",
+    # receipt (shared.protocol.validation)
+    "out-of-range": "a value outside its meaning (probability, geometry, period, feature, counter)",
+    "joint-limits": "a joint position outside the receiver's joint limits plus the tolerance",
+    "velocity": "a joint velocity above the receiver's velocity limits plus the tolerance",
+    "stamp-future": "a stamp ahead of the receiver's clock (or a tick ahead of the lock-step clock)",
+    "stamp-past": "a stamp older than the tolerance, or not the time of its tick in lock-step",
+    "tick-order": "a tick lower than the same sender's previous one on that key",
+    "sequence-order": "a sequence number (demo_id, index, step) not after the same sender's previous one",
+    "mismatch": "not what the receiver is built for (its robot's joints, its scene's grid, its classes)",
+}
+"""Why a message is rejected: each :class:`ProtocolError` carries one of these keys as ``reason``."""
+
 
 class ProtocolError(ValueError):
-    """A message failed to decode or validate; the text names the offending field."""
+    """A message failed to decode or validate; the text names the offending field.
+
+    Attributes:
+        reason: One key of :data:`REASONS` (what rejections are counted by).
+    """
+
+    def __init__(self, text: str, reason: str = "malformed") -> None:
+        super().__init__(text)
+        self.reason = reason if reason in REASONS else "malformed"
 
 
 @dataclass(frozen=True)
@@ -52,6 +81,6 @@ class Message:
         """Per-message invariants beyond field types and shapes; raise ProtocolError."""
 
 
-def field_error(msg_type: str, field: str, text: str) -> ProtocolError:
-    """The error for ``msg_type.field``: ``ProtocolError("Type.field: text")``."""
-    return ProtocolError(f"{msg_type}.{field}: {text}")
+def field_error(msg_type: str, field: str, text: str, reason: str = "invariant") -> ProtocolError:
+    """The error for ``msg_type.field``: ``ProtocolError("Type.field: text", reason)``."""
+    return ProtocolError(f"{msg_type}.{field}: {text}", reason)

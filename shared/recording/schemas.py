@@ -29,11 +29,13 @@ PROFILE = "foresight"
 REJECTED_TOPIC = "/foresight/rejected"
 REJECTED_SCHEMA: dict[str, Any] = {
     "title": "foresight.Rejected",
-    "description": "A payload on a Foresight key that failed to decode; it was not logged on the key's channel",
+    "description": "A payload on a Foresight key that was refused (decoding, values or order); it was not "
+                   "logged on the key's channel",
     "type": "object",
     "properties": {
         "key": {"type": "string", "description": "Zenoh key expression the payload arrived on"},
-        "error": {"type": "string", "description": "The decoder's error, naming the offending field"},
+        "reason": {"type": "string", "description": "Why, one of shared.protocol.REASONS (e.g. joint-limits)"},
+        "error": {"type": "string", "description": "The decoder's or the validation's error, naming the field"},
         "size": {"type": "integer", "description": "Payload size in bytes"},
         "head_hex": {"type": "string", "description": "The first (at most 64) payload bytes, hex"},
     },

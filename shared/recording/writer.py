@@ -6,8 +6,10 @@ Layout (see docs/executor.md; the channels' schemas are in :mod:`shared.recordin
   encoding ``msgpack`` (the raw payload, byte for byte), schema = the message type's JSON Schema
   (encoding ``jsonschema``, :func:`shared.recording.schemas.message_json_schema`); only payloads
   that decode are written there;
-* ``/foresight/rejected`` (JSON): one record per payload that failed to decode (key, error, size,
-  the first bytes in hex), and per-key reject counts in the ``foresight.rejects`` metadata record
+* ``/foresight/rejected`` (JSON): one record per payload that was refused (failed to decode, or its
+  values or order were refused on receipt: key, reason, error, size, the first bytes in hex); such a
+  payload never goes on its key's channel. Reject counts per key (``foresight.rejects``) and per key
+  and reason (``foresight.rejects.reasons``, entries ``"<key> <reason>"``) are metadata records
   written when the file is closed;
 * Foxglove channels (JSON, well-known schemas), built by a :class:`FoxgloveScene` (the conversion is
   :class:`shared.recording.foxglove.SceneBuilder`), every entity and transform stamped with the
@@ -160,6 +162,7 @@ class McapLog:
         self._closed = False
         self.counts: dict[str, int] = {}
         self.rejects: dict[str, int] = {}
+        self.reject_reasons: dict[str, int] = {}
         self.viz_errors = 0
         self._expected = keys.data_keys()
         if scene_text is not None:
@@ -216,7 +219,7 @@ class McapLog:
         try:
             msg: Message = decode(payload, self._expected.get(key))
         except ProtocolError as exc:
-            self.reject(key, payload, str(exc), log_time)
+            self.reject(key, payload, str(exc), log_time, reason=exc.reason)
             return None
         self.log_message(key, payload, msg, log_time)
         return msg
@@ -235,22 +238,25 @@ class McapLog:
         if self.builder is not None:
             self._visualise(msg, log_time)
 
-    def reject(self, key: str, payload: bytes, error: str, log_time: int | None = None, quiet: bool = False) -> None:
-        """Count a payload that failed to decode and write it to the rejects channel.
+    def reject(self, key: str, payload: bytes, error: str, log_time: int | None = None, quiet: bool = False,
+               reason: str = "malformed") -> None:
+        """Count a refused payload and write it to the rejects channel (never to the key's channel).
 
         Args:
             key: Key it arrived on.
             payload: The bytes.
-            error: The decoder's message.
+            error: Why (the decoder's or the validation's message).
             log_time: Receive time (ns; default now).
             quiet: Do not log a warning (the caller already did).
+            reason: The category (``shared.protocol.REASONS``).
         """
         with self._lock:
             self.rejects[key] = self.rejects.get(key, 0) + 1
+            self.reject_reasons[f"{key} {reason}"] = self.reject_reasons.get(f"{key} {reason}", 0) + 1
             n = self.rejects[key]
         if not quiet and (n == 1 or n % 100 == 0):
-            log.warning("mcap log: rejected payload #%d on %s: %s", n, key, error)
-        self.write_json(REJECTED_TOPIC, {"key": key, "error": error, "size": len(payload),
+            log.warning("mcap log: rejected payload #%d on %s (%s): %s", n, key, reason, error)
+        self.write_json(REJECTED_TOPIC, {"key": key, "reason": reason, "error": error[:500], "size": len(payload),
                                          "head_hex": bytes(payload[:64]).hex()}, log_time)
 
     def _due(self, topic: str, stamp: float) -> bool:
@@ -310,6 +316,8 @@ class McapLog:
             if self._closed:
                 return
             self._writer.add_metadata("foresight.rejects", {k: str(v) for k, v in sorted(self.rejects.items())})
+            self._writer.add_metadata("foresight.rejects.reasons",
+                                      {k: str(v) for k, v in sorted(self.reject_reasons.items())})
             self._writer.finish()
             self._file.fsync()
             self._file.close()

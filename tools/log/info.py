@@ -2,7 +2,8 @@
 
 Header, time range, channels (topic, schema, encodings, message counts), attachments, metadata and
 rejected payloads; a file whose writer was killed is read up to its last complete chunk and the
-summary says it is truncated.
+summary says it is truncated. Refused payloads (the ``/foresight/rejected`` channel) are not data:
+they are left out of the message count and reported on their own, per key and reason.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from shared.recording.reader import LogFile
+from shared.recording.schemas import REJECTED_TOPIC
 
 __all__ = ["info_dict", "format_info"]
 
@@ -26,18 +28,22 @@ def info_dict(lf: LogFile) -> dict[str, Any]:
     firsts = [c.first_time for c in lf.channels.values() if c.first_time is not None]
     lasts = [c.last_time for c in lf.channels.values() if c.last_time is not None]
     rejects = {k: int(v) for k, v in lf.metadata.get("foresight.rejects", {}).items()}
+    reasons = {k: int(v) for k, v in lf.metadata.get("foresight.rejects.reasons", {}).items()}
+    refused = sum(c.count for c in lf.channels.values() if c.topic == REJECTED_TOPIC)
     return {
         "path": lf.path, "size_bytes": lf.size, "complete": lf.complete, "error": lf.error,
         "profile": lf.profile, "library": lf.library,
         "start": _fmt_time(min(firsts)) if firsts else None, "end": _fmt_time(max(lasts)) if lasts else None,
         "duration_s": (max(lasts) - min(firsts)) / 1e9 if firsts else 0.0,
-        "messages": lf.message_count,
+        "messages": lf.message_count - refused,
+        "rejected_records": refused,
         "channels": [{"topic": c.topic, "schema": c.schema_name, "schema_encoding": c.schema_encoding,
                       "message_encoding": c.message_encoding, "messages": c.count}
                      for c in sorted(lf.channels.values(), key=lambda c: c.topic)],
         "attachments": {k: len(v) for k, v in lf.attachments.items()},
         "metadata": lf.metadata,
         "rejected": rejects,
+        "rejected_reasons": reasons,
     }
 
 
@@ -50,7 +56,9 @@ def format_info(lf: LogFile) -> str:
     lines = [f"file:      {lf.path} ({lf.size / 1e6:.2f} MB, {state})",
              f"profile:   {lf.profile or '-'}   library: {lf.library or '-'}",
              f"time:      {d['start']} .. {d['end']} ({d['duration_s']:.2f} s)",
-             f"messages:  {d['messages']} on {len(lf.channels)} channels", ""]
+             f"messages:  {d['messages']} on {len(lf.channels) - (d['rejected_records'] > 0)} channels"
+             + (f" (and {d['rejected_records']} refused payloads on {REJECTED_TOPIC}, not counted)"
+                if d["rejected_records"] else ""), ""]
     w = max([len(c["topic"]) for c in d["channels"]] + [5])
     ws = max([len(c["schema"]) for c in d["channels"]] + [6])
     lines.append(f"  {'topic':<{w}}  {'schema':<{ws}}  {'schema enc':<10}  {'msg enc':<8}  {'messages':>8}")
@@ -66,6 +74,8 @@ def format_info(lf: LogFile) -> str:
     if "foresight.rejects" in lf.metadata:
         rej = d["rejected"]
         lines += ["rejected:  " + (", ".join(f"{k}: {v}" for k, v in sorted(rej.items())) if rej else "none")]
+        if d["rejected_reasons"]:
+            lines += ["  by reason: " + ", ".join(f"{k}: {v}" for k, v in sorted(d["rejected_reasons"].items()))]
     elif not lf.complete:
         lines += ["rejected:  (counts are written when the file is closed)"]
     return "\n".join(lines)

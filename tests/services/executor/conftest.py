@@ -105,7 +105,8 @@ class FakeSystem:
         if self._goals is None:
             self._goals = goals_for(state.q)
         chosen = 0 if step < self.switch_at else 1
-        return straight_plan(state.q, self._goals, state.joint_names, tick, step, chosen, occupancy_tick=tick - 1,
+        return straight_plan(state.q, self._goals, state.joint_names, tick, step, chosen,
+                             occupancy_tick=max(tick - 1, -1),
                              t=self.waypoints)
 
     @contextmanager

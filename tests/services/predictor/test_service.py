@@ -31,7 +31,8 @@ class Inbox:
 
 
 def _pose(demo_id: int, i: int, f: np.ndarray, tick: int = -1) -> HumanPose:
-    return HumanPose(stamp=float(i), tick=tick, tick_last=True, demo_id=demo_id, index=i, features=f)
+    stamp = float(i) if tick >= 0 else time.time()  # lock-step: simulated time; real time: the wall clock
+    return HumanPose(stamp=stamp, tick=tick, tick_last=True, demo_id=demo_id, index=i, features=f)
 
 
 def test_service_publishes_grid_per_pose_and_survives_bad_input(zenoh_hub, small_model, small_library) -> None:
@@ -58,7 +59,7 @@ def test_service_publishes_grid_per_pose_and_survives_bad_input(zenoh_hub, small
             raw = session.declare_publisher(keys.pose)
             demo = small_library.by_class(1)[0]
             n = 30
-            demo_pub.put(DemoMarker(stamp=0.0, tick=-1, demo_id=5, event="start", true_class=1, class_name="x",
+            demo_pub.put(DemoMarker(stamp=time.time(), tick=-1, demo_id=5, event="start", true_class=1, class_name="x",
                                     n_samples=demo.n_samples))
             for i in range(n):
                 pose_pub.put(_pose(5, i, demo.features[i], tick=i))
@@ -76,7 +77,7 @@ def test_service_publishes_grid_per_pose_and_survives_bad_input(zenoh_hub, small
             assert all(np.isclose(p.posterior.sum(), 1.0) for p in posts.items)
             assert service.rejects.total == 2
             # a new demonstration after a start marker starts from scratch
-            demo_pub.put(DemoMarker(stamp=0.0, tick=-1, demo_id=6, event="start", true_class=1, class_name="x",
+            demo_pub.put(DemoMarker(stamp=time.time(), tick=-1, demo_id=6, event="start", true_class=1, class_name="x",
                                     n_samples=demo.n_samples))
             pose_pub.put(_pose(6, 0, demo.features[0]))
             assert posts.wait(n + 1)

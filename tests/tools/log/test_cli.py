@@ -28,6 +28,18 @@ def test_info_lists_channels_schemas_and_counts(run_log, capsys) -> None:
     assert {c["topic"]: c["messages"] for c in d["channels"]}[KEYS.clock] == 2
 
 
+def test_info_does_not_count_refused_payloads_as_data(run_log, capsys) -> None:
+    assert main(["info", str(run_log), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    data = sum(c["messages"] for c in d["channels"] if c["topic"] != "/foresight/rejected")
+    assert d["messages"] == data and d["rejected_records"] == 1
+    assert d["rejected_reasons"] == {f"{KEYS.plan} malformed": 1}
+    assert main(["info", str(run_log)]) == 0
+    out = capsys.readouterr().out
+    assert f"messages:  {data} on " in out and "(and 1 refused payloads on /foresight/rejected, not counted)" in out
+    assert f"by reason: {KEYS.plan} malformed: 1" in out
+
+
 def test_render_writes_pngs(run_log, tmp_path, capsys) -> None:
     out = tmp_path / "step1.png"
     assert main(["render", str(run_log), "--step", "1", "--out", str(out)]) == 0

@@ -1,0 +1,287 @@
+"""Value-level validation on receipt: what a decoded message's values must mean, and what the receiver expects.
+
+:func:`~shared.protocol.codec.decode` checks the form (types, shapes, sizes, finiteness, invariants).
+:func:`check_values` checks the meaning, against :class:`Expectations` the receiving service builds
+from what it knows (its clock mode, its robot's joints and limits, its scene's grid):
+
+* stamps: real time, a wall-clock stamp within ``STAMP_PAST_S`` before and ``STAMP_FUTURE_S`` after
+  the receiver's clock, and ``tick == -1``; lock-step, a simulated stamp in ``[tick P, (tick + 1) P]``
+  when the receiver knows the period P (the executor), else in ``[0, (tick + 1) MAX_PERIOD_S]``, and
+  no tick beyond the lock-step clock (``max_tick``);
+* ranges: features within their plausible human range, grid geometry (resolution, origin, the
+  scene's grid), periods, waypoint spacing, planning time, costs, counters;
+* the robot: joint names equal to the receiver's, positions within its limits plus
+  ``JOINT_LIMIT_TOL``, velocities within its limits plus ``VELOCITY_LIMIT_TOL`` (without a model:
+  ``MAX_ABS_JOINT`` / ``MAX_ABS_JOINT_VELOCITY``).
+
+Per-sender order (ticks, sequence numbers) is :mod:`shared.protocol.receipt`'s. Every failure is a
+:class:`~shared.protocol.schema.ProtocolError` with its ``reason``. No Zenoh here.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from shared.feature_sets import HERAKLES_NAMES, HERAKLES_RANGES
+
+from . import limits as L
+from .messages import ClassPosterior, ClockTick, DemoMarker, HumanPose, OccupancyGrid, Plan, RobotState
+from .schema import Message
+from .schema import field_error as _err
+
+__all__ = ["RobotSpec", "GridSpec", "Expectations", "check_values"]
+
+_FEATURE_LOW = np.array([HERAKLES_RANGES[n][0] for n in HERAKLES_NAMES])
+_FEATURE_HIGH = np.array([HERAKLES_RANGES[n][1] for n in HERAKLES_NAMES])
+
+
+def _numpy(x: Any) -> np.ndarray:
+    x = x.detach().cpu().numpy() if hasattr(x, "detach") else x
+    return np.asarray(x, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """The receiver's robot: its joints in order and their limits.
+
+    Attributes:
+        joint_names: The D joint names.
+        lower, upper: ``(D,)`` position limits (rad or m).
+        velocity: ``(D,)`` positive velocity limits (rad/s or m/s).
+    """
+
+    joint_names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+
+    @classmethod
+    def from_robot(cls, robot: Any) -> RobotSpec:
+        """From a model with ``joint_names``, ``lower``, ``upper``, ``velocity_limits`` (torch or numpy)."""
+        return cls(tuple(robot.joint_names), _numpy(robot.lower), _numpy(robot.upper),
+                   _numpy(robot.velocity_limits))
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """The receiver's scene grid: occupancy must cover exactly these bounds, at any allowed resolution.
+
+    Attributes:
+        lower: ``(3,)`` the grid's lower corner (the origin of voxel (0, 0, 0)), m.
+        upper: ``(3,)`` its upper corner, m.
+    """
+
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @classmethod
+    def from_grid(cls, grid: Any) -> GridSpec:
+        """From a ``shared.scene.Grid`` (``min``, ``max``)."""
+        return cls(np.asarray(grid.min, dtype=np.float64), np.asarray(grid.max, dtype=np.float64))
+
+    def dims_at(self, resolution: float) -> tuple[int, ...]:
+        """The voxel counts of these bounds at ``resolution`` (as ``shared.scene.Grid.dims``)."""
+        n = np.ceil((self.upper - self.lower) / resolution - 1e-9).astype(int)
+        return tuple(int(v) for v in n)
+
+
+@dataclass
+class Expectations:
+    """What a receiving service knows and checks messages against.
+
+    Attributes:
+        clock: ``"realtime"`` (wall-clock stamps, ``tick == -1``), ``"lockstep"`` (simulated stamps)
+            or ``"auto"`` (by the message: ``tick == -1`` real time, else lock-step).
+        period_s: The lock-step period P, when the receiver knows it (the executor).
+        max_tick: Returns the highest tick that may arrive now (the executor: its clock + 1).
+        robot: The receiver's robot, or None.
+        grid: The receiver's scene grid, or None.
+        n_classes: The number of motion classes the receiver expects, or None.
+        now: Wall clock (s) for real-time stamps.
+    """
+
+    clock: str = "auto"
+    period_s: float | None = None
+    max_tick: Callable[[], int] | None = None
+    robot: RobotSpec | None = None
+    grid: GridSpec | None = None
+    n_classes: int | None = None
+    now: Callable[[], float] = field(default=time.time)
+
+    def __post_init__(self) -> None:
+        if self.clock not in ("realtime", "lockstep", "auto"):
+            raise ValueError(f"Expectations.clock: 'realtime', 'lockstep' or 'auto', got {self.clock!r}")
+
+
+def _stamp(msg: Any, exp: Expectations) -> None:
+    t, tick, stamp = msg.TYPE, msg.tick, msg.stamp
+    if not -1 <= tick <= L.MAX_TICK:
+        raise _err(t, "tick", f"{tick} not in [-1, {L.MAX_TICK}]", "out-of-range")
+    realtime = exp.clock == "realtime" or (exp.clock == "auto" and tick == -1)
+    if realtime:
+        if tick != -1:
+            raise _err(t, "tick", f"{tick} in a real-time run (must be -1)", "mismatch")
+        now = exp.now()
+        if stamp > now + L.STAMP_FUTURE_S:
+            raise _err(t, "stamp", f"{stamp:.3f} is {stamp - now:.3g} s in the future", "stamp-future")
+        if stamp < now - L.STAMP_PAST_S:
+            raise _err(t, "stamp", f"{stamp:.3f} is {now - stamp:.3g} s old (limit {L.STAMP_PAST_S:g} s)",
+                       "stamp-past")
+        return
+    if exp.max_tick is not None and tick > exp.max_tick():
+        raise _err(t, "tick", f"{tick} is ahead of the lock-step clock (at most {exp.max_tick()} now)",
+                   "stamp-future")
+    if not 0.0 <= stamp <= L.MAX_LOGICAL_STAMP_S:
+        raise _err(t, "stamp", f"{stamp:.6g} is no simulated time (lock-step: 0 .. {L.MAX_LOGICAL_STAMP_S:g})",
+                   "stamp-past" if stamp < 0 else "stamp-future")
+    period = exp.period_s if exp.period_s else L.MAX_PERIOD_S
+    lo = tick * period - L.LOGICAL_STAMP_TOL_S if exp.period_s else -math.inf
+    hi = (tick + 1) * period + L.LOGICAL_STAMP_TOL_S
+    if stamp > hi:
+        raise _err(t, "stamp", f"{stamp:.6g} s is after tick {tick} (ends at {hi:.6g} s)", "stamp-future")
+    if stamp < lo:
+        raise _err(t, "stamp", f"{stamp:.6g} s is before tick {tick} (starts at {lo:.6g} s)", "stamp-past")
+
+
+def _counter(t: str, name: str, value: int, low: int, high: int) -> None:
+    if not low <= value <= high:
+        raise _err(t, name, f"{value} not in [{low}, {high}]", "out-of-range")
+
+
+def _joints(t: str, names: Sequence[str], q: np.ndarray, exp: Expectations, what: str) -> None:
+    """``q (..., D)`` positions: the receiver's joints and limits (or the generic bound)."""
+    robot = exp.robot
+    if robot is None:
+        if q.size and float(np.max(np.abs(q))) > L.MAX_ABS_JOINT:
+            raise _err(t, what, f"|q| up to {float(np.max(np.abs(q))):.4g} (limit {L.MAX_ABS_JOINT:g})",
+                       "joint-limits")
+        return
+    if tuple(names) != robot.joint_names:
+        raise _err(t, "joint_names", f"{list(names)[:8]} are not this robot's joints {list(robot.joint_names)}",
+                   "mismatch")
+    flat = q.reshape(-1, len(robot.joint_names))
+    low, high = robot.lower - L.JOINT_LIMIT_TOL, robot.upper + L.JOINT_LIMIT_TOL
+    bad = np.nonzero(np.any((flat < low) | (flat > high), axis=0))[0]
+    if bad.size:
+        j = int(bad[0])
+        worst = flat[:, j][np.argmax(np.maximum(flat[:, j] - robot.upper[j], robot.lower[j] - flat[:, j]))]
+        raise _err(t, what, f"{robot.joint_names[j]} = {worst:.6g} outside [{robot.lower[j]:.4g}, "
+                   f"{robot.upper[j]:.4g}] (+/- {L.JOINT_LIMIT_TOL:g}); {bad.size} joint(s) out", "joint-limits")
+
+
+def _velocity(t: str, qd: np.ndarray, exp: Expectations) -> None:
+    robot = exp.robot
+    limit = (robot.velocity * (1.0 + L.VELOCITY_LIMIT_TOL) + 1e-9 if robot is not None
+             else np.full(qd.shape, L.MAX_ABS_JOINT_VELOCITY))
+    over = np.nonzero(np.abs(qd) > limit)[0]
+    if over.size:
+        j = int(over[0])
+        name = robot.joint_names[j] if robot is not None else str(j)
+        raise _err(t, "qd", f"{name} velocity {qd[j]:.6g} above its limit {limit[j]:.4g}", "velocity")
+
+
+def _pose(msg: HumanPose, exp: Expectations) -> None:
+    _counter(msg.TYPE, "demo_id", msg.demo_id, 0, L.MAX_DEMO_ID)
+    _counter(msg.TYPE, "index", msg.index, 0, L.MAX_SAMPLES)
+    out = np.nonzero((msg.features < _FEATURE_LOW) | (msg.features > _FEATURE_HIGH))[0]
+    if out.size:
+        j = int(out[0])
+        raise _err(msg.TYPE, "features", f"{HERAKLES_NAMES[j]} = {msg.features[j]:.6g} outside its plausible "
+                   f"range [{_FEATURE_LOW[j]:.4g}, {_FEATURE_HIGH[j]:.4g}]", "out-of-range")
+
+
+def _marker(msg: DemoMarker, exp: Expectations) -> None:
+    _counter(msg.TYPE, "demo_id", msg.demo_id, 0, L.MAX_DEMO_ID)
+    _counter(msg.TYPE, "n_samples", msg.n_samples, 0, L.MAX_SAMPLES)
+    _counter(msg.TYPE, "true_class", msg.true_class, -1, L.MAX_CLASSES - 1)
+
+
+def _posterior(msg: ClassPosterior, exp: Expectations) -> None:
+    _counter(msg.TYPE, "demo_id", msg.demo_id, 0, L.MAX_DEMO_ID)
+    _counter(msg.TYPE, "index", msg.index, 0, L.MAX_SAMPLES)
+    if np.any(msg.posterior > 1.0 + 1e-9):
+        raise _err(msg.TYPE, "posterior", f"probability {float(msg.posterior.max()):.6g} above 1", "out-of-range")
+    if exp.n_classes is not None and msg.posterior.shape[0] != exp.n_classes:
+        raise _err(msg.TYPE, "posterior", f"{msg.posterior.shape[0]} classes, the receiver has {exp.n_classes}",
+                   "mismatch")
+
+
+def _occupancy(msg: OccupancyGrid, exp: Expectations) -> None:
+    t = msg.TYPE
+    _counter(t, "demo_id", msg.demo_id, 0, L.MAX_DEMO_ID)
+    _counter(t, "index", msg.index, 0, L.MAX_SAMPLES)
+    if not L.MIN_RESOLUTION_M <= msg.resolution <= L.MAX_RESOLUTION_M:
+        raise _err(t, "resolution", f"{msg.resolution:.6g} m not in [{L.MIN_RESOLUTION_M:g}, "
+                   f"{L.MAX_RESOLUTION_M:g}]", "out-of-range")
+    if float(np.max(np.abs(msg.origin))) > L.MAX_COORDINATE_M:
+        raise _err(t, "origin", f"{msg.origin.tolist()} beyond {L.MAX_COORDINATE_M:g} m", "out-of-range")
+    # occupancy in [0, 1] holds by construction: values are uint8 q, p = q / 255
+    if exp.grid is not None:
+        g = exp.grid
+        if not np.allclose(msg.origin, g.lower, rtol=0.0, atol=1e-6):
+            raise _err(t, "origin", f"{msg.origin.tolist()} is not the scene grid's {g.lower.tolist()}", "mismatch")
+        want = g.dims_at(msg.resolution)
+        if tuple(int(d) for d in msg.dims) != want:
+            raise _err(t, "dims", f"{msg.dims.tolist()} at {msg.resolution:g} m do not cover the scene grid "
+                       f"{g.lower.tolist()}..{g.upper.tolist()} (expected {list(want)})", "mismatch")
+
+
+def _plan(msg: Plan, exp: Expectations) -> None:
+    t = msg.TYPE
+    _counter(t, "step", msg.step, 0, L.MAX_TICK)
+    _counter(t, "occupancy_tick", msg.occupancy_tick, -1, L.MAX_TICK)
+    _counter(t, "occupancy_index", msg.occupancy_index, -1, L.MAX_SAMPLES)
+    if not L.MIN_DT_S <= msg.dt <= L.MAX_DT_S:
+        raise _err(t, "dt", f"{msg.dt:.6g} s not in [{L.MIN_DT_S:g}, {L.MAX_DT_S:g}]", "out-of-range")
+    if not 0.0 <= msg.planning_ms <= L.MAX_PLANNING_MS:
+        raise _err(t, "planning_ms", f"{msg.planning_ms:.6g} not in [0, {L.MAX_PLANNING_MS:g}]", "out-of-range")
+    for name in ("cost_smoothness", "cost_obstacle", "cost_human", "cost_total"):
+        cost = getattr(msg, name)[msg.valid]
+        if cost.size and float(np.max(np.abs(cost))) > L.MAX_ABS_COST:
+            raise _err(t, name, f"|cost| {float(np.max(np.abs(cost))):.4g} above {L.MAX_ABS_COST:g}", "out-of-range")
+    _joints(t, msg.joint_names, msg.trajectories[msg.valid].astype(np.float64), exp, "trajectories")
+
+
+def _state(msg: RobotState, exp: Expectations) -> None:
+    _counter(msg.TYPE, "goal", msg.goal, -1, L.MAX_GOALS - 1)
+    _joints(msg.TYPE, msg.joint_names, msg.q, exp, "q")
+    _velocity(msg.TYPE, msg.qd, exp)
+
+
+def _clock(msg: ClockTick, exp: Expectations) -> None:
+    t = msg.TYPE
+    if not L.MIN_PERIOD_S <= msg.period <= L.MAX_PERIOD_S:
+        raise _err(t, "period", f"{msg.period:.6g} s not in [{L.MIN_PERIOD_S:g}, {L.MAX_PERIOD_S:g}]", "out-of-range")
+    if exp.period_s and abs(msg.period - exp.period_s) > 1e-9 * exp.period_s:
+        raise _err(t, "period", f"{msg.period:.6g} s, this run's period is {exp.period_s:.6g} s", "mismatch")
+    if abs(msg.stamp - msg.tick * msg.period) > L.CLOCK_STAMP_RTOL * max(1.0, msg.stamp) + 1e-12:
+        raise _err(t, "stamp", f"{msg.stamp:.9g} is not tick x period = {msg.tick * msg.period:.9g}", "stamp-past"
+                   if msg.stamp < msg.tick * msg.period else "stamp-future")
+
+
+_RULES: dict[type, Callable[[Any, Expectations], None]] = {
+    HumanPose: _pose, DemoMarker: _marker, ClassPosterior: _posterior, OccupancyGrid: _occupancy, Plan: _plan,
+    RobotState: _state, ClockTick: _clock,
+}
+
+
+def check_values(msg: Message, exp: Expectations | None = None) -> None:
+    """Check a decoded message's values against their meaning and the receiver's expectations.
+
+    Args:
+        msg: A message returned by :func:`~shared.protocol.codec.decode`.
+        exp: What the receiver knows (default: nothing beyond the generic bounds, clock ``auto``).
+
+    Raises:
+        ProtocolError: With ``reason`` out-of-range, joint-limits, velocity, stamp-future,
+            stamp-past or mismatch, and a text naming the field and the value.
+    """
+    exp = exp or Expectations()
+    _stamp(msg, exp)
+    _RULES[type(msg)](msg, exp)
