@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import os
 import resource
 import statistics
@@ -100,7 +101,9 @@ def convergence(histories: list[np.ndarray], checkpoints: tuple[int, ...] = CHEC
     ratios = []
     for h in histories:
         best = np.minimum.accumulate(np.asarray(h, dtype=np.float64), axis=0).sum(-1)  # (I + 1,)
-        ratios.append([best[i] / max(best[-1], 1e-12) for i in checkpoints if i < len(best)])
+        final = best[-1]  # 0 when every goal is reached (a reached goal's trajectory holds still, cost 0)
+        ratios.append([best[i] / final if final > 0 else (1.0 if best[i] == 0 else math.inf)
+                       for i in checkpoints if i < len(best)])
     n = min(len(r) for r in ratios)
     return [round(float(np.median([r[j] for r in ratios])), 3) for j in range(n)]
 

@@ -35,3 +35,4 @@ def test_period_mode_ignores_new_input() -> None:
 def test_bad_settings_are_named(period: float, mode: str) -> None:
     with pytest.raises(ValueError, match="period_s|trigger"):
         ReplanTrigger(period, mode)
+
