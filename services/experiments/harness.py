@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from services.executor.core import ExecutorConfig
-from services.executor.service import ExecutorResult, ExecutorService
+from services.executor.service import ExecutorResult, ExecutorService, load_models
 from services.planner.core import Planner
 from services.planner.service import PlannerService, PlannerServiceConfig
 from services.predictor.core import PredictorConfig
@@ -181,6 +181,18 @@ class ServiceThread:
         return self.result
 
 
+_EXECUTOR_MODELS: dict[int, tuple[Scene, Any, Any]] = {}
+
+
+def _executor_models(scene: Scene) -> tuple[Any, Any]:
+    """The executor's robot and human models for ``scene``, loaded once per scene object (runs are sequential)."""
+    cached = _EXECUTOR_MODELS.get(id(scene))
+    if cached is None or cached[0] is not scene:
+        robot, human, place = load_models(scene)
+        cached = _EXECUTOR_MODELS[id(scene)] = (scene, robot, (human, place))
+    return cached[1], cached[2]
+
+
 def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None) -> RunRecord:
     """Run the four services in lock-step for ``spec.steps`` steps and record what they publish.
 
@@ -210,10 +222,11 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
     replayer = ReplayerService(ReplayerConfig(library=spec.human, mode="lockstep",
                                               samples_per_tick=spec.samples_per_tick), peer)
     ex_stop = threading.Event()
+    robot, human = _executor_models(spec.scene)
     executor = ExecutorService(ExecutorConfig(mode="lockstep", steps=spec.steps, step_period_s=spec.period_s,
                                               mcap=str(mcap) if mcap else "none", scene=scene_ref,
                                               lockstep_timeout_s=min(60.0, spec.timeout_s)),
-                               peer, stop=ex_stop)
+                               peer, stop=ex_stop, robot=robot, human=human, scene=spec.scene)
     threads = [ServiceThread("predictor", predictor.run), ServiceThread("planner", planner_svc.run),
                ServiceThread("replayer", replayer.run),
                ServiceThread("executor", lambda _stop: executor.run(), stop_event=ex_stop)]

@@ -22,11 +22,13 @@ from typing import Any
 
 import numpy as np
 import torch
+from scipy.ndimage import distance_transform_edt
 
 from shared.human import HumanModel
 from shared.protocol import OccupancyGrid
 
-__all__ = ["sphere_surface_offsets", "robot_points", "penetration_per_state", "interference", "interference_over_time",
+__all__ = ["sphere_surface_offsets", "robot_points", "penetration_per_state", "spheres_near_occupancy", "interference",
+           "interference_over_time",
            "ContactSummary",
            "postures_at", "body_clearance", "contact_summary", "NEAR_M"]
 
@@ -52,6 +54,14 @@ def sphere_surface_offsets(radius: float, spacing: float) -> np.ndarray:
     return np.vstack([np.zeros((1, 3)), pts])
 
 
+def _sphere_centres(robot: Any, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(N, S, 3)`` collision-sphere centres of ``q (N, D)`` and their ``(S,)`` radii (float64)."""
+    qt = torch.as_tensor(np.asarray(q, dtype=np.float64), dtype=robot.lower.dtype, device=robot.lower.device)
+    with torch.no_grad():
+        centres = robot.sphere_centers(qt).double().cpu().numpy()
+    return centres, robot.sphere_radii.double().cpu().numpy()
+
+
 def robot_points(robot: Any, q: np.ndarray, spacing: float) -> np.ndarray:
     """Points sampled on the robot's structure (every collision sphere: centre and surface).
 
@@ -63,10 +73,7 @@ def robot_points(robot: Any, q: np.ndarray, spacing: float) -> np.ndarray:
     Returns:
         ``(N, P, 3)`` world points (float64).
     """
-    qt = torch.as_tensor(np.asarray(q, dtype=np.float64), dtype=robot.lower.dtype, device=robot.lower.device)
-    with torch.no_grad():
-        centres = robot.sphere_centers(qt).double().cpu().numpy()  # (N, S, 3)
-    radii = robot.sphere_radii.double().cpu().numpy()
+    centres, radii = _sphere_centres(robot, q)
     offsets = [sphere_surface_offsets(float(r), spacing) for r in radii]
     owner = np.concatenate([np.full(len(o), s) for s, o in enumerate(offsets)])  # (P,)
     return centres[:, owner, :] + np.vstack(offsets)[None]
@@ -74,6 +81,32 @@ def robot_points(robot: Any, q: np.ndarray, spacing: float) -> np.ndarray:
 
 def _dense(occupancy: OccupancyGrid | np.ndarray) -> np.ndarray:
     return occupancy.to_dense(np.float64) if isinstance(occupancy, OccupancyGrid) else np.asarray(occupancy, float)
+
+
+def _voxel_sums(state: np.ndarray, points: np.ndarray, dense: np.ndarray, origin: np.ndarray, resolution: float,
+                n_states: int) -> np.ndarray:
+    """Per state, the sum of ``dense`` over the distinct voxels holding at least one of its points.
+
+    Args:
+        state: ``(M,)`` the state each point belongs to.
+        points: ``(M, 3)`` world points.
+        dense: ``(X, Y, Z)`` voxel values.
+        origin: ``(3,)`` the grid's corner (m).
+        resolution: Voxel edge (m).
+        n_states: Number of states (the length of the result).
+
+    Returns:
+        ``(n_states,)`` sums (points outside the grid add nothing).
+    """
+    dims = np.asarray(dense.shape, dtype=np.int64)
+    idx = np.floor((points - origin) / resolution).astype(np.int64)
+    inside = np.all((idx >= 0) & (idx < dims), axis=-1)
+    flat = np.ravel_multi_index(tuple(np.clip(idx, 0, dims - 1).T), tuple(dims))
+    values = dense.reshape(-1)
+    hit = inside & (values[flat] > 0)  # voxels of zero probability add nothing: skip them before unique
+    n_vox = int(np.prod(dims))
+    keys = np.unique(state[hit].astype(np.int64) * n_vox + flat[hit])
+    return np.bincount(keys // n_vox, weights=values[keys % n_vox], minlength=n_states)
 
 
 def penetration_per_state(points: np.ndarray, occupancy: OccupancyGrid) -> np.ndarray:
@@ -87,21 +120,47 @@ def penetration_per_state(points: np.ndarray, occupancy: OccupancyGrid) -> np.nd
         ``(N,)`` sum over the distinct voxels containing at least one point (points outside the grid
         add nothing).
     """
+    n, p = points.shape[:2]
+    state = np.repeat(np.arange(n), p)
+    return _voxel_sums(state, points.reshape(-1, 3), _dense(occupancy), np.asarray(occupancy.origin, np.float64),
+                       float(occupancy.resolution), n)
+
+
+def spheres_near_occupancy(centres: np.ndarray, radii: np.ndarray, occupancy: OccupancyGrid) -> np.ndarray:
+    """Which spheres may put a point into a voxel of non-zero probability (a conservative test).
+
+    A point ``p`` of a sphere ``(c, r)`` lies within ``r`` of ``c``, and any point lies within
+    ``sqrt(3)/2`` voxel edges of its voxel's centre, so the sphere can reach a non-zero voxel only if
+    the distance from ``c``'s voxel centre to the nearest non-zero voxel centre is at most
+    ``r + sqrt(3) * resolution``. Spheres whose centre lies outside the grid are kept.
+
+    Args:
+        centres: ``(N, S, 3)`` sphere centres.
+        radii: ``(S,)`` their radii.
+        occupancy: The grid.
+
+    Returns:
+        ``(N, S)`` bool: False where the sphere certainly touches no non-zero voxel.
+    """
     dense = _dense(occupancy)
+    if not np.any(dense > 0):
+        return np.zeros(centres.shape[:2], dtype=bool)
+    res = float(occupancy.resolution)
+    to_nonzero = distance_transform_edt(dense <= 0) * res  # (X, Y, Z) m between voxel centres
     dims = np.asarray(dense.shape, dtype=np.int64)
-    idx = np.floor((points - np.asarray(occupancy.origin)) / float(occupancy.resolution)).astype(np.int64)
-    inside = np.all((idx >= 0) & (idx < dims), axis=-1)  # (N, P)
-    flat = np.ravel_multi_index(tuple(np.clip(idx, 0, dims - 1).reshape(-1, 3).T), tuple(dims)).reshape(idx.shape[:2])
-    n_states, n_vox = points.shape[0], int(np.prod(dims))
-    hit = inside & (dense.reshape(-1)[flat] > 0)  # voxels of zero probability add nothing: skip them before unique
-    state = np.broadcast_to(np.arange(n_states)[:, None], flat.shape)
-    keys = np.unique(state[hit].astype(np.int64) * n_vox + flat[hit])
-    return np.bincount(keys // n_vox, weights=dense.reshape(-1)[keys % n_vox], minlength=n_states)
+    idx = np.floor((centres - np.asarray(occupancy.origin, np.float64)) / res).astype(np.int64)
+    inside = np.all((idx >= 0) & (idx < dims), axis=-1)
+    ci = np.clip(idx, 0, dims - 1)
+    reach = radii[None, :] + math.sqrt(3.0) * res + 1e-9
+    return ~inside | (to_nonzero[ci[..., 0], ci[..., 1], ci[..., 2]] <= reach)
 
 
 def interference_over_time(robot: Any, q: np.ndarray, stamps: np.ndarray, occupancy: OccupancyGrid,
                            spacing: float | None = None) -> np.ndarray:
     """Each executed state's share of :func:`interference`: ``cost(q_n) * (t_n - t_{n-1})``, 0 for the first.
+
+    Only the spheres that can reach a non-zero voxel (:func:`spheres_near_occupancy`) are sampled:
+    the others add nothing, so the value equals that of every point of :func:`robot_points`.
 
     Args:
         robot: Robot model (:func:`robot_points`).
@@ -116,8 +175,17 @@ def interference_over_time(robot: Any, q: np.ndarray, stamps: np.ndarray, occupa
     q = np.asarray(q, dtype=np.float64)
     if len(q) < 2:
         return np.zeros(len(q))
-    pts = robot_points(robot, q, spacing or float(occupancy.resolution) / 2)
-    cost = penetration_per_state(pts, occupancy)
+    centres, radii = _sphere_centres(robot, q)
+    near = spheres_near_occupancy(centres, radii, occupancy)  # (N, S)
+    spacing = spacing or float(occupancy.resolution) / 2
+    states, points = [np.zeros(0, np.int64)], [np.zeros((0, 3))]
+    for s in np.flatnonzero(near.any(axis=0)):
+        rows = np.flatnonzero(near[:, s])
+        offsets = sphere_surface_offsets(float(radii[s]), spacing)  # (O, 3)
+        states.append(np.repeat(rows, len(offsets)))
+        points.append((centres[rows, s, None, :] + offsets[None]).reshape(-1, 3))
+    cost = _voxel_sums(np.concatenate(states), np.concatenate(points), _dense(occupancy),
+                       np.asarray(occupancy.origin, np.float64), float(occupancy.resolution), len(q))
     dt = np.clip(np.diff(np.asarray(stamps, dtype=np.float64)), 0.0, None)
     return np.concatenate([[0.0], cost[1:] * dt])
 

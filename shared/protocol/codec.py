@@ -9,6 +9,7 @@ never leaves.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import typing
 from typing import Any, TypeVar
@@ -26,7 +27,9 @@ __all__ = ["encode", "decode"]
 M = TypeVar("M", bound=Message)
 
 
+@functools.cache
 def _hints(cls: type) -> dict[str, Any]:
+    """The resolved field types of a message class (resolved once: every decode needs them)."""
     return typing.get_type_hints(cls)
 
 

@@ -119,3 +119,29 @@ def test_postures_follow_the_stream_and_hold_at_the_ends():
     x0 = scene.human.pelvis_xyz[0]
     c = np.cos(scene.human.pelvis_yaw)
     np.testing.assert_allclose(out[:, 0], x0 + c * np.array([0.0, 0.05, 0.15, 0.2]), atol=1e-12)
+
+
+def test_culled_interference_equals_every_point_on_the_pr2():
+    """Sampling only the spheres that can reach a non-zero voxel gives the same sums as every sphere."""
+    from services.experiments.measures import interference_over_time, spheres_near_occupancy
+    from shared.robot.pr2 import PR2
+
+    robot = PR2(dtype=torch.float64)
+    lo, hi = robot.lower.numpy(), robot.upper.numpy()
+    q = lo + (hi - lo) * np.linspace(0.2, 0.8, 12)[:, None]  # (12, D) a sweep through the joint ranges
+    centres = robot.sphere_centers(torch.as_tensor(q)).numpy()
+    # a blob of probabilities around the arm's reach at mid-sweep, 4 cm voxels
+    mid = centres[6].mean(axis=0)
+    origin = mid - 0.4
+    idx = np.stack(np.meshgrid(*[np.arange(20)] * 3, indexing="ij"), -1)
+    d = np.linalg.norm(origin + (idx + 0.5) * 0.04 - mid, axis=-1)
+    dense = np.where(d < 0.25, 1.0 - d / 0.25, 0.0).astype(np.float32)
+    occ = OccupancyGrid.from_dense(dense, origin=origin, resolution=0.04, method="prediction", stamp=0.0,
+                                   tick=0, tick_last=True, demo_id=0, index=0)
+    t = np.arange(12) * 0.1
+    every = penetration_per_state(robot_points(robot, q, 0.02), occ)
+    culled = interference_over_time(robot, q, t, occ)
+    np.testing.assert_allclose(culled[1:], every[1:] * 0.1, rtol=1e-12)
+    assert every.max() > 0
+    near = spheres_near_occupancy(centres, robot.sphere_radii.numpy(), occ)
+    assert 0 < near.sum() < near.size  # some spheres are skipped, some are kept
