@@ -5,7 +5,10 @@ records every pose, occupancy grid, plan and robot state. It prints:
 
 * the predictor's latency, pose received -> its occupancy grid received (p50 / p99 / max, and p50 of
   the first and the last tenth of the window: a growing latency is a growing backlog), and how many
-  poses of the window got no occupancy by its end (dropped or still queued);
+  poses of the window got no grid of their own by its end (coalesced when the predictor was behind,
+  dropped, or still queued);
+* the reaction latency: pose received -> the first grid received for it or a later pose of its
+  demonstration (what the planner waits for when the predictor grids only the newest pose);
 * the replanning period (between plans received: p50 / p99 / max) and the plans' planning time;
 * the share of robot states that held, and why;
 * the resident memory (RSS) of every process at the start and the end of the window.
@@ -39,12 +42,31 @@ def _pct(values: list[float]) -> dict[str, float | None]:
     return {"p50": float(np.percentile(a, 50)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
 
 
+def _cover_latency(poses: list[tuple[float, Any]], grids: list[tuple[float, Any]]) -> list[float]:
+    """Per pose, seconds until a grid for it or a later pose of its demonstration was received (if one was)."""
+    by_demo: dict[int, list[tuple[float, int]]] = {}
+    for t, g in grids:
+        by_demo.setdefault(g.demo_id, []).append((t, g.index))
+    arrays = {d: np.array(sorted(v)).T for d, v in by_demo.items()}  # (2, G): receive times, indices
+    out = []
+    for t, m in poses:
+        if m.demo_id not in arrays:
+            continue
+        tg, ig = arrays[m.demo_id]
+        start = int(np.searchsorted(tg, t))
+        hit = np.flatnonzero(ig[start:] >= m.index)
+        if len(hit):
+            out.append(float(tg[start + hit[0]] - t))
+    return out
+
+
 def summarise(watcher: Watcher, t0: float, t1: float) -> dict[str, Any]:
     """The window ``[t0, t1]`` (monotonic s) of what the watcher recorded."""
     poses = [(t, m) for t, m in watcher.snapshot(watcher.poses) if t0 <= t <= t1]
     grids = [(t, m) for t, m in watcher.snapshot(watcher.occupancy) if t >= t0]
     occ = {(m.demo_id, m.index): t for t, m in grids}
     lat = [(t, occ[(m.demo_id, m.index)] - t) for t, m in poses if (m.demo_id, m.index) in occ]
+    cover = _cover_latency(poses, grids)
     n = len(lat)
     tenth = max(1, n // 10)
     plans = [(t, m) for t, m in watcher.snapshot(watcher.plans) if t0 <= t <= t1]
@@ -57,6 +79,7 @@ def summarise(watcher: Watcher, t0: float, t1: float) -> dict[str, Any]:
         "dropped": len(poses) - n,
         "latency_s": _pct([x for _, x in lat]),
         "latency_first_tenth_p50_s": _pct([x for _, x in lat[:tenth]])["p50"],
+        "reaction_latency_s": _pct(cover), "poses_never_covered": len(poses) - len(cover),
         "latency_last_tenth_p50_s": _pct([x for _, x in lat[-tenth:]])["p50"],
         "plans": len(plans), "replan_period_s": _pct(periods),
         "planning_ms": _pct([m.planning_ms for _, m in plans]),
@@ -109,10 +132,12 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> i
     else:
         print(f"window {r['window_s']:.1f} s: {r['poses']} poses ({r['pose_rate_hz']:.0f} Hz), "
               f"{r['occupancy_received']} occupancy grids received, of them for the window's poses "
-              f"{r['occupancy_for_poses']}; poses without a grid by the end: {r['dropped']}")
+              f"{r['occupancy_for_poses']}; poses without a grid of their own by the end: {r['dropped']}")
         print(f"predictor latency p50/p99/max {_fmt(r['latency_s'])}; p50 first tenth "
               f"{(r['latency_first_tenth_p50_s'] or 0) * 1e3:.0f} ms, last tenth "
               f"{(r['latency_last_tenth_p50_s'] or 0) * 1e3:.0f} ms")
+        print(f"reaction latency (pose -> a grid for it or a later pose) p50/p99/max "
+              f"{_fmt(r['reaction_latency_s'])}; poses never covered: {r['poses_never_covered']}")
         print(f"plans {r['plans']}: period p50/p99/max {_fmt(r['replan_period_s'])}, planning "
               f"{_fmt(r['planning_ms'], 1.0)}")
         print(f"states {r['states']}, held {100 * r['held_share']:.1f}% {r['held_reasons']}")

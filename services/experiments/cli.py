@@ -4,6 +4,7 @@
     foresight eval interference  one robot task against a human reaching across it (Table I)
     foresight eval switch        two robot tasks, when the robot settles on its goal (Fig. 8-9)
     foresight eval occupancy     does the predicted occupancy hold where the human really goes (leave-one-out)
+    foresight eval volumes       each occupancy volume in the loop (Table I + switch) against the real human
     foresight eval all           all of them and the timings, one Markdown report with PNGs
 
 Every run goes through the four services (in-process, loopback Zenoh, lock-step, seeded): the same
@@ -89,7 +90,8 @@ def _doc(module: str) -> str:
 def _parser(prog: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="what", required=True, metavar="{recognition,interference,switch,occupancy,all}")
+    sub = parser.add_subparsers(dest="what", required=True,
+                                metavar="{recognition,interference,switch,occupancy,volumes,all}")
     sub.add_parser("recognition", help="early recognition, leave-one-out (Fig. 6); see its --help", add_help=False)
     p = sub.add_parser("interference", help="Table I: basic STOMP vs least penetration vs current occupancy",
                        description=_doc("interference"),
@@ -125,6 +127,21 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("runs/occupancy"), help="directory of the PNG "
                    "(default: runs/occupancy)")
     p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
+    p = sub.add_parser("volumes", help="each occupancy volume in the loop (Table I + switch), scored against the "
+                       "real human", description=_doc("volumes"), formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--library", default="synthetic", help="motion library: 'synthetic' (the embedded synthetic "
+                   "library) or a path (dir of compound_*.csv or .npz); default: synthetic")
+    p.add_argument("--volumes", default=",".join(VOLUMES), help=f"volume methods, comma-separated (default: "
+                   f"{','.join(VOLUMES)})")
+    p.add_argument("--demos", type=int, default=5, help="Table I held-out demonstrations (default: 5)")
+    p.add_argument("--seeds", type=int, default=10, help="Table I runs per demonstration (default: 10)")
+    p.add_argument("--switch-demos", type=int, default=0, help="switch demonstrations, each held out in turn "
+                   "(default 0: all)")
+    p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20, the paper's)")
+    p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
+    p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
+    p.add_argument("--no-compile", action="store_true", help="evaluate the planner's cost eagerly")
+    p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
     from .report import add_report_arguments
 
     add_report_arguments(sub.add_parser("all", help="every experiment and the timings into one Markdown report",
@@ -155,6 +172,26 @@ def _occupancy(args: argparse.Namespace, out) -> int:
     return 0
 
 
+def _volumes(args: argparse.Namespace, out) -> int:
+    from .volumes import VolumesConfig, run_volumes
+
+    volumes = tuple(v.strip() for v in args.volumes.split(",") if v.strip())
+    bad = [v for v in volumes if v not in VOLUMES]
+    if bad or not volumes:
+        raise UserError(f"--volumes: {', '.join(bad) or 'none given'}; choose from {', '.join(VOLUMES)}")
+    if args.demos < 1 or args.seeds < 1 or args.switch_demos < 0 or args.components < 1:
+        raise UserError("--demos, --seeds and --components must be >= 1, --switch-demos >= 0")
+    res = run_volumes(VolumesConfig(library=str(args.library), volumes=volumes, demos=args.demos, seeds=args.seeds,
+                                    switch_demos=args.switch_demos, components=args.components,
+                                    models_dir=args.models_dir, work_dir=args.work_dir), out,
+                      compile=not args.no_compile)
+    if args.json:
+        print(json.dumps(res.to_json()))
+    else:
+        print("\n".join(res.lines()))
+    return 0
+
+
 def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
     """``foresight eval ...``; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -173,6 +210,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             (lambda line: print(line, flush=True))
         if args.what == "occupancy":
             return _occupancy(args, out)
+        if args.what == "volumes":
+            return _volumes(args, out)
         timing = _timing(args)
         common = {"library": str(args.library), "scene": args.scene, "timing": timing,
                   "components": args.components, "models_dir": args.models_dir, "work_dir": args.work_dir,

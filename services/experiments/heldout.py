@@ -6,7 +6,9 @@
   point (where the hand gets farthest from its start) lies nearest the cup, horizontally. The paper's
   recorded library was not made in these scenes, so the distance is reported with the choice.
 * :class:`HeldOutModels` trains (and caches) prediction models without given demonstrations; with
-  one model per held-out demonstration only that demonstration's class is refitted.
+  one model per held-out demonstration only that demonstration's class is refitted. Every instance
+  shares one process-wide fit cache (:data:`SHARED_FITS`): its entries are keyed by their data and
+  options, so Table I, the switch, its mirror and the timing reuse each other's class fits.
 """
 
 from __future__ import annotations
@@ -26,6 +28,9 @@ from shared.scene import Scene
 
 __all__ = ["SYNTHETIC", "load_experiment_library", "short_name", "CupClass", "cup_class", "HeldOutModels", "human_file",
            "samples_per_tick"]
+
+SHARED_FITS: dict[str, Any] = {}
+"""``train_model``'s fit cache shared by every :class:`HeldOutModels` of this process (fits keyed by data + options)."""
 
 SYNTHETIC = "synthetic"
 """Library name of the embedded synthetic library (generated for the experiment's scene)."""
@@ -118,7 +123,7 @@ class HeldOutModels:
     models_dir: Path
     components: int | None = None
     volume: str | None = None
-    _fits: dict[str, Any] = field(default_factory=dict, repr=False)
+    _fits: dict[str, Any] = field(default_factory=lambda: SHARED_FITS, repr=False)
 
     def without(self, demos: list[Demonstration]) -> Path:
         """The model file trained on every demonstration but ``demos``."""

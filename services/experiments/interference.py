@@ -54,6 +54,7 @@ class InterferenceConfig:
     components: int | None = None
     w_human: float | None = None  # None: the planner's default
     volume: str | None = None  # None: the trainer's default
+    variants: tuple[str, ...] = tuple(VARIANTS)  # the planners run (``eval volumes``: least_penetration only)
     selection_seed: int = 0
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
@@ -199,6 +200,10 @@ class InterferenceResult:
 def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = print,
                      compile: bool = True) -> InterferenceResult:
     """Run the experiment (every run in lock-step through the four services)."""
+    unknown = [v for v in cfg.variants if v not in VARIANTS]
+    if unknown or not cfg.variants:
+        raise ValueError(f"interference: variants must be some of {', '.join(VARIANTS)}, got {cfg.variants}")
+    variants = {name: v for name, v in VARIANTS.items() if name in cfg.variants}
     scene = load_scene(cfg.scene)
     lib = load_experiment_library(cfg.library, scene)
     human = cup_class(lib, scene, cfg.human_cup)
@@ -211,14 +216,14 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
              f"{[d.index for d in demos]} held out")
     model = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components, cfg.volume).without(demos)
     planners = {flag: build_planner(scene, [cfg.robot_cup], flag, cfg.timing, compile=compile, w_human=cfg.w_human)
-                for flag in (False, True)}
+                for flag in sorted({v.human_cost for v in variants.values()})}
     result = InterferenceResult(cfg, lib.source, human, [d.index for d in demos])
-    total, done = len(demos) * cfg.seeds * len(VARIANTS), 0
+    total, done = len(demos) * cfg.seeds * len(variants), 0
     for demo in demos:
         path = human_file(lib, demo, Path(cfg.work_dir) / "humans")
         final = None
         for seed in range(cfg.seeds):
-            for name, variant in VARIANTS.items():  # basic first: a prediction run gives the final grid
+            for name, variant in variants.items():  # basic first: a prediction run gives the final grid
                 spec = RunSpec(scene, model, path, samples_per_tick(demo, cfg.timing.steps), method=variant.method,
                                steps=cfg.timing.steps, period_s=cfg.timing.period_s, seed=seed)
                 planner = planners[variant.human_cost]

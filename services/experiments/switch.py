@@ -81,6 +81,7 @@ class SwitchConfig:
     components: int | None = None
     w_human: float | None = None  # None: the planner's default
     volume: str | None = None  # None: the trainer's default
+    methods: tuple[str, ...] = METHODS  # the occupancies compared (``eval volumes``: prediction only)
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
 
@@ -175,6 +176,8 @@ class SwitchResult:
 
 def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compile: bool = True) -> SwitchResult:
     """Run the experiment (every run in lock-step through the four services)."""
+    if not cfg.methods or any(m not in METHODS for m in cfg.methods):
+        raise ValueError(f"switch: methods must be some of {', '.join(METHODS)}, got {cfg.methods}")
     scene = load_scene(cfg.scene)
     lib = load_experiment_library(cfg.library, scene)
     human = cup_class(lib, scene, cfg.human_cup)
@@ -187,11 +190,11 @@ def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compi
     models = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components, cfg.volume)
     planner = build_planner(scene, cups, True, cfg.timing, compile=compile, w_human=cfg.w_human)
     result = SwitchResult(cfg, lib.source, human)
-    total = len(demos) * len(METHODS)
+    total = len(demos) * len(cfg.methods)
     for i, demo in enumerate(demos):
         model = models.without([demo])
         path = human_file(lib, demo, Path(cfg.work_dir) / "humans")
-        for j, method in enumerate(METHODS):
+        for j, method in enumerate(cfg.methods):
             spec = RunSpec(scene, model, path, samples_per_tick(demo, cfg.timing.steps), method=method,
                            steps=cfg.timing.steps, period_s=cfg.timing.period_s, seed=cfg.seed)
             rec = run_lockstep(spec, planner)
@@ -207,7 +210,7 @@ def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compi
                             contact.min_clearance, contact.time_in_contact,
                             float(np.median([p.planning_ms for p in rec.plans])) if rec.plans else math.nan)
             result.runs.append(run)
-            progress(f"  [{2 * i + j + 1}/{total}] demo #{demo.index} {method:<10} goals "
+            progress(f"  [{len(cfg.methods) * i + j + 1}/{total}] demo #{demo.index} {method:<10} goals "
                      f"{''.join(g[0] for g in chosen)}  settle step {run.settle_step}  final {run.final_goal}  "
                      f"reached step {run.reached_step}")
     return result

@@ -53,6 +53,8 @@ class PredictorConfig:
                       choices=METHODS)
     temperature: float = opt(0.0, help="posterior temperature tau: p(C_m|xi) = softmax(ln p(xi|C_m) / tau); "
                              "1 = the paper's; 0 = the model file's (set by `foresight train --temperature`)")
+    backlog: int = opt(3000, help="most messages waiting to be processed (about 10 s at 300 Hz); beyond it the "
+                       "oldest are dropped and counted")
     stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
                                "disappears after it was seen (comma-separated; how a compose run ends)")
     log_level: str = opt("INFO", help="logging level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
@@ -63,6 +65,8 @@ class PredictorConfig:
             raise ConfigError("predictor.model: must name a model file")
         if not (self.temperature >= 0 and np.isfinite(self.temperature)):
             raise ConfigError(f"predictor.temperature: must be >= 0 (0 = the model's), got {self.temperature}")
+        if not (isinstance(self.backlog, int) and 1 <= self.backlog <= 1_000_000):
+            raise ConfigError(f"predictor.backlog: must be an integer in [1, 1000000], got {self.backlog!r}")
 
 
 @dataclass
@@ -148,6 +152,7 @@ class PredictorCore:
         self.demo_id = -1
         self._ll = np.zeros(model.n_classes)
         self._first: np.ndarray | None = None
+        self._last: tuple[np.ndarray, int] | None = None  # the last observed posture and its index
         self._count = 0
 
     @property
@@ -160,6 +165,7 @@ class PredictorCore:
         self.demo_id = int(demo_id)
         self._ll = np.zeros(self.model.n_classes)
         self._first = None
+        self._last = None
         self._count = 0
         self.encoder.reset()
 
@@ -183,15 +189,18 @@ class PredictorCore:
         val = np.asarray(posterior, dtype=np.float32) @ vol
         return self.support, np.minimum(val, np.float32(1.0))
 
-    def update(self, features: np.ndarray, index: int | None = None) -> PredictionResult:
-        """Observe one posture and predict.
+    def observe(self, features: np.ndarray, index: int | None = None) -> np.ndarray:
+        """Observe one posture: update the recognition only (the cheap part of :meth:`update`).
+
+        A service that falls behind its pose stream observes every pose (no evidence is lost) and
+        calls :meth:`predict` for the newest one only.
 
         Args:
             features: ``(12,)`` recorder-frame posture.
             index: Its sample index in the demonstration (default: the number observed so far).
 
         Returns:
-            The updated prediction.
+            ``(M,)`` the class posterior p(C_m | xi) after it.
 
         Raises:
             PredictorError: If ``features`` is not 12 finite numbers or ``index`` is negative.
@@ -208,6 +217,18 @@ class PredictorCore:
         x = self.encoder.step(f, t)
         self._ll = self._ll + self.bank.log_likelihood(x[None])[0]
         self._count += 1
+        self._last = (f, t)
+        return posterior_from_log_likelihood(self._ll, temperature=self.temperature)
+
+    def predict(self) -> PredictionResult:
+        """The prediction after the last observed posture (:meth:`observe`).
+
+        Raises:
+            PredictorError: If nothing was observed since the last reset.
+        """
+        if self._last is None or self._first is None:
+            raise PredictorError("predict: no posture observed since the last reset")
+        f, t = self._last
         post = posterior_from_log_likelihood(self._ll, temperature=self.temperature)
         if self.config.method == "prediction":
             idx, val = self.occupancy_for(post, t)
@@ -217,3 +238,19 @@ class PredictorCore:
                                                            interior=self.model.interior), self.model.grid)
             val = np.ones(len(idx), dtype=np.float32)
         return PredictionResult(post, self._ll.copy(), self.model.grid, self.config.method, idx, val, self._count)
+
+    def update(self, features: np.ndarray, index: int | None = None) -> PredictionResult:
+        """Observe one posture and predict (:meth:`observe` then :meth:`predict`).
+
+        Args:
+            features: ``(12,)`` recorder-frame posture.
+            index: Its sample index in the demonstration (default: the number observed so far).
+
+        Returns:
+            The updated prediction.
+
+        Raises:
+            PredictorError: If ``features`` is not 12 finite numbers or ``index`` is negative.
+        """
+        self.observe(features, index)
+        return self.predict()

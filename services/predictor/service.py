@@ -12,6 +12,7 @@ from shared.protocol import ClassPosterior, DemoMarker, Expectations, HumanPose,
 from shared.scene import load_scene
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe_ordered
 
+from .backlog import Backlog, occupancy_due
 from .core import PredictorConfig, PredictorCore, PredictorError
 from .model import PredictionModel
 
@@ -28,14 +29,21 @@ class PredictorStats:
     published: int = 0
     resets: int = 0
     rejected: int = 0
+    coalesced: int = 0
+    dropped: int = 0
 
 
 class PredictorService:
-    """Subscribes to HumanPose/DemoMarker, publishes ClassPosterior and OccupancyGrid for every pose.
+    """Subscribes to HumanPose/DemoMarker, publishes a ClassPosterior for every pose and its OccupancyGrid.
 
     A start marker resets the core; a pose of another ``demo_id`` than the current one also does
     (so a predictor started mid-stream recovers). ``tick``, ``tick_last``, ``demo_id`` and
     ``index`` are copied from the pose into both outputs.
+
+    Messages go through a bounded :class:`~services.predictor.backlog.Backlog` drained by one worker
+    thread. Every pose is observed and gets its posterior; in real time, when poses arrive faster
+    than grids are built, only the newest waiting pose gets a grid (``stats.coalesced`` counts the
+    others); in lock-step every pose gets one.
 
     Args:
         config: Predictor options.
@@ -55,46 +63,78 @@ class PredictorService:
         # values and per-sender order of what arrives; stamps by the message's tick (either mode)
         self.receipt = Receipt(Expectations(clock="auto"))
         self.stats = PredictorStats()
+        self.backlog: Backlog[Message] = Backlog(config.backlog)
         self._lock = threading.Lock()
+        self._behind_logged = -1e9
         self._post_pub: TypedPublisher[ClassPosterior] | None = None
         self._occ_pub: TypedPublisher[OccupancyGrid] | None = None
 
     def handle(self, msg: Message) -> tuple[ClassPosterior, OccupancyGrid] | None:
         """Process one incoming message; returns the outputs for a pose (None for a marker or a reject)."""
         with self._lock:
-            if isinstance(msg, DemoMarker):
-                if msg.event == "start":
-                    self.core.reset(msg.demo_id)
-                    self.stats.resets += 1
-                    log.info("predictor: demo %d start (%s)", msg.demo_id, msg.class_name)
-                return None
-            assert isinstance(msg, HumanPose)
-            if msg.demo_id != self.core.demo_id:
+            out = self._process(msg, grid=True)
+        return (out[0], out[1]) if len(out) == 2 else None  # type: ignore[return-value]
+
+    def handle_batch(self, batch: list[Message]) -> list[ClassPosterior | OccupancyGrid]:
+        """Process messages in arrival order, a grid only where :func:`occupancy_due` says; the outputs, in order."""
+        out: list[ClassPosterior | OccupancyGrid] = []
+        with self._lock:
+            for msg, grid in zip(batch, occupancy_due(batch), strict=True):
+                out.extend(self._process(msg, grid))
+        return out
+
+    def _process(self, msg: Message, grid: bool) -> list[ClassPosterior | OccupancyGrid]:
+        if isinstance(msg, DemoMarker):
+            if msg.event == "start":
                 self.core.reset(msg.demo_id)
                 self.stats.resets += 1
-            try:
-                res = self.core.update(msg.features, msg.index)
-            except PredictorError as exc:
-                self.rejects.reject(self.keys.pose, exc)
-                self.stats.rejected += 1
-                return None
-            self.stats.poses += 1
-            stamp = time.time() if msg.tick < 0 else msg.stamp
-            post = ClassPosterior(stamp=stamp, tick=msg.tick, demo_id=msg.demo_id, index=msg.index,
-                                  class_names=list(self.model.class_names), posterior=res.posterior,
-                                  log_likelihood=res.log_likelihood)
-            occ = res.to_message(stamp=stamp, tick=msg.tick, tick_last=msg.tick_last, demo_id=msg.demo_id,
-                                 index=msg.index)
-            return post, occ
+                log.info("predictor: demo %d start (%s)", msg.demo_id, msg.class_name)
+            return []
+        assert isinstance(msg, HumanPose)
+        if msg.demo_id != self.core.demo_id:
+            self.core.reset(msg.demo_id)
+            self.stats.resets += 1
+        try:
+            posterior = self.core.observe(msg.features, msg.index)
+        except PredictorError as exc:
+            self.rejects.reject(self.keys.pose, exc)
+            self.stats.rejected += 1
+            return []
+        self.stats.poses += 1
+        stamp = time.time() if msg.tick < 0 else msg.stamp
+        out: list[ClassPosterior | OccupancyGrid] = [
+            ClassPosterior(stamp=stamp, tick=msg.tick, demo_id=msg.demo_id, index=msg.index,
+                           class_names=list(self.model.class_names), posterior=posterior,
+                           log_likelihood=self.core.log_likelihood())]
+        if grid:
+            out.append(self.core.predict().to_message(stamp=stamp, tick=msg.tick, tick_last=msg.tick_last,
+                                                      demo_id=msg.demo_id, index=msg.index))
+        else:
+            self.stats.coalesced += 1
+        return out
 
     def _on_message(self, msg: Message) -> None:
-        out = self.handle(msg)
-        if out is None or self._post_pub is None or self._occ_pub is None:
-            return
-        post, occ = out
-        self._post_pub.put(post)
-        self._occ_pub.put(occ)
-        self.stats.published += 1
+        self.backlog.put(msg)  # on Zenoh's thread: never block it
+
+    def _drain(self, stop: threading.Event) -> None:
+        """The worker: process what waits, publish the outputs, until ``stop``."""
+        while not stop.is_set():
+            batch = self.backlog.take_all(0.1)
+            if not batch:
+                continue
+            waiting = len(batch)
+            for out in self.handle_batch(batch):
+                pub = self._post_pub if isinstance(out, ClassPosterior) else self._occ_pub
+                if pub is not None:
+                    pub.put(out)
+                    self.stats.published += isinstance(out, OccupancyGrid)
+            self.stats.dropped = self.backlog.dropped
+            now = time.monotonic()
+            if waiting > 1 and now - self._behind_logged > 5.0:  # behind: said at most every 5 s
+                self._behind_logged = now
+                log.warning("predictor: %d messages were waiting; occupancy for the newest pose only "
+                            "(%d poses without their own grid so far, %d dropped from a full backlog)",
+                            waiting, self.stats.coalesced, self.stats.dropped)
 
     def run(self, stop: threading.Event | None = None, ready: threading.Event | None = None) -> PredictorStats:
         """Serve until ``stop`` is set; ``ready`` is set once subscribed and announced."""
@@ -109,6 +149,8 @@ class PredictorService:
             log.info("predictor: model %s (%d classes, grid %s at %g m, features %s), method %s, scene %s, session %s",
                      self.config.model, self.model.n_classes, self.model.grid.dims, self.model.grid.resolution,
                      self.model.feature_variant, self.config.method, self.scene.name, describe(session)["zid"])
+            worker = threading.Thread(target=self._drain, args=(stop,), name="predictor-worker", daemon=True)
+            worker.start()
             if ready is not None:
                 ready.set()
             try:
@@ -116,9 +158,13 @@ class PredictorService:
             finally:
                 presence.close()
                 sub.undeclare()
+                self.backlog.wake()
+                worker.join(10.0)
                 self._post_pub.undeclare()
                 self._occ_pub.undeclare()
                 self._post_pub = self._occ_pub = None
-        log.info("predictor: stopped after %d poses (%d published, %d resets, %d rejected: %s)", self.stats.poses,
-                 self.stats.published, self.stats.resets, self.rejects.total, self.rejects.summary())
+        log.info("predictor: stopped after %d poses (%d grids published, %d poses without their own grid while "
+                 "behind, %d dropped from a full backlog, %d resets, %d rejected: %s)", self.stats.poses,
+                 self.stats.published, self.stats.coalesced, self.stats.dropped, self.stats.resets,
+                 self.rejects.total, self.rejects.summary())
         return self.stats

@@ -33,6 +33,7 @@ def test_soak_then_kill_the_predictor_then_the_executor(tmp_path):
             assert all(r["running"].values()), r["running"]
             assert r["poses"] > 0 and r["occupancy_received"] > 0 and r["plans"] > 0
             assert all(v is None or math.isfinite(v) for v in r["latency_s"].values())
+            assert r["reaction_latency_s"]["p50"] is not None and math.isfinite(r["reaction_latency_s"]["p50"])
             assert all(m["end"] > 0 for m in r["rss_mb"].values())
 
             k = measure_kill(system, watcher, "predictor", down_s=2.0, timeout=300.0)

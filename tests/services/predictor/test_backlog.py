@@ -1,0 +1,130 @@
+"""The predictor's backlog: bounded, ordered, and a grid only for the newest real-time pose when behind."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from services.predictor.backlog import Backlog, occupancy_due
+from services.predictor.core import PredictorConfig
+from services.predictor.service import PredictorService
+from shared.config import ZenohConfig
+from shared.protocol import ClassPosterior, DemoMarker, HumanPose, Keys, OccupancyGrid
+from shared.transport import Presence, TypedPublisher, open_session, subscribe
+
+_NO_ZENOH = ZenohConfig(mode="peer", listen=[], connect=[], multicast_scouting=False)  # never opened by handle()
+
+
+def _pose(demo_id: int, i: int, f: np.ndarray, tick: int = -1) -> HumanPose:
+    return HumanPose(stamp=time.time() if tick < 0 else float(i), tick=tick, tick_last=True, demo_id=demo_id, index=i,
+                     features=f)
+
+
+def _marker(demo_id: int) -> DemoMarker:
+    return DemoMarker(stamp=time.time(), tick=-1, demo_id=demo_id, event="start", true_class=0, class_name="x",
+                      n_samples=10)
+
+
+def test_backlog_keeps_order_drops_the_oldest_beyond_its_limit_and_counts():
+    b: Backlog[int] = Backlog(3)
+    assert b.take_all(0.01) == []
+    for i in range(5):
+        b.put(i)
+    assert len(b) == 3 and b.dropped == 2 and b.peak == 3
+    assert b.take_all(0.01) == [2, 3, 4]
+    assert len(b) == 0
+    with pytest.raises(ValueError, match="limit"):
+        Backlog(0)
+
+
+def test_backlog_wakes_a_waiting_consumer():
+    b: Backlog[str] = Backlog(10)
+    got: list[list[str]] = []
+    th = threading.Thread(target=lambda: got.append(b.take_all(5.0)))
+    th.start()
+    time.sleep(0.05)
+    b.put("x")
+    th.join(5.0)
+    assert got == [["x"]]
+
+
+def test_occupancy_due_marks_the_newest_real_time_pose_of_each_run_and_every_lockstep_pose():
+    f = np.zeros(12)
+    batch = [_pose(1, 0, f), _pose(1, 1, f), _pose(1, 2, f),   # a run of three: the last one
+             _marker(2), _pose(2, 0, f),                        # a marker ends a run; a run of one
+             _pose(3, 0, f), _pose(3, 1, f),                    # another demonstration: a new run
+             _pose(4, 0, f, tick=0), _pose(4, 1, f, tick=0)]    # lock-step: every pose
+    assert occupancy_due(batch) == [False, False, True, False, True, False, True, True, True]
+    assert occupancy_due([]) == []
+
+
+def test_a_batch_observes_every_pose_and_predicts_the_newest(small_model, small_library):
+    demo = small_library.by_class(1)[0]
+    poses = [_pose(7, i, demo.features[i]) for i in range(40)]
+    one_by_one = PredictorService(PredictorConfig(), _NO_ZENOH, model=small_model)
+    each = [one_by_one.handle(p) for p in poses]
+    batched = PredictorService(PredictorConfig(), _NO_ZENOH, model=small_model)
+    out = batched.handle_batch(list(poses))
+    posts = [m for m in out if isinstance(m, ClassPosterior)]
+    grids = [m for m in out if isinstance(m, OccupancyGrid)]
+    assert len(posts) == 40 and len(grids) == 1 and grids[0].index == 39
+    assert batched.stats.coalesced == 39 and batched.stats.poses == 40
+    # no evidence lost: the same posteriors pose by pose, and the same grid for the newest pose
+    for p, (q, _) in zip(posts, each, strict=True):
+        np.testing.assert_array_equal(p.posterior, q.posterior)
+        np.testing.assert_array_equal(p.log_likelihood, q.log_likelihood)
+    last = each[-1][1]
+    np.testing.assert_array_equal(grids[0].indices, last.indices)
+    np.testing.assert_array_equal(grids[0].values, last.values)
+
+
+def test_a_slow_predictor_publishes_every_posterior_and_grids_for_the_newest_poses(zenoh_hub, small_model,
+                                                                                 small_library, monkeypatch):
+    svc_cfg, cli_cfg = zenoh_hub(), zenoh_hub()
+    keys = Keys(cli_cfg.prefix)
+    service = PredictorService(PredictorConfig(), svc_cfg, model=small_model)
+    predict = service.core.predict
+
+    def slow_predict():  # a grid costs 20 ms: 300 poses sent at once are far ahead of it
+        time.sleep(0.02)
+        return predict()
+
+    monkeypatch.setattr(service.core, "predict", slow_predict)
+    stop, ready = threading.Event(), threading.Event()
+    th = threading.Thread(target=service.run, args=(stop, ready), daemon=True)
+    th.start()
+    grids: list[OccupancyGrid] = []
+    posts: list[ClassPosterior] = []
+    demo = small_library.by_class(0)[0]
+    n = min(300, demo.n_samples)
+    try:
+        assert ready.wait(15.0)
+        with open_session(cli_cfg) as session:
+            subs = [subscribe(session, keys.occupancy, OccupancyGrid, grids.append),
+                    subscribe(session, keys.posterior, ClassPosterior, posts.append)]
+            presence = Presence(session, keys, "tester")
+            deadline = time.monotonic() + 10
+            while not presence.is_alive("predictor") and time.monotonic() < deadline:
+                time.sleep(0.02)
+            time.sleep(0.3)
+            pub = TypedPublisher(session, keys.pose, block=True)
+            for i in range(n):
+                pub.put(_pose(3, i, demo.features[i]))
+            deadline = time.monotonic() + 20
+            while (len(posts) < n or not grids or grids[-1].index != n - 1) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            for s in subs:
+                s.undeclare()
+            presence.close()
+    finally:
+        stop.set()
+        th.join(10.0)
+    assert not th.is_alive()
+    assert [p.index for p in posts] == list(range(n))      # every pose observed, in order
+    assert grids and grids[-1].index == n - 1                # the newest pose has its grid
+    assert len(grids) < n / 2                                # the others were coalesced, not queued
+    assert service.stats.coalesced == n - len(grids)
+    assert service.stats.dropped == 0
