@@ -9,6 +9,10 @@ to a :class:`Backlog` and one worker drains it in batches:
 * the occupancy grid, the expensive part, is built only for the poses :func:`occupancy_due` marks:
   in real time the newest pose of a run of consecutive poses of one demonstration, in lock-step
   every pose (the planner and the experiments count on each tick's grids);
+* in real time a :class:`GridPacer` also spaces the grids at least ``grid_interval_s`` apart: a grid
+  per pose at 300 Hz is 300 grids a second for the planner, the executor and its log to decode,
+  validate and store, though the next plan can use only the newest; the newest pose still gets its
+  grid within one interval;
 * the backlog holds at most ``limit`` messages; beyond it the oldest are dropped and counted.
 
 Pure (no Zenoh): unit-tested in ``tests/services/predictor/test_backlog.py``.
@@ -23,7 +27,7 @@ from typing import Generic, TypeVar
 
 from shared.protocol import HumanPose
 
-__all__ = ["Backlog", "occupancy_due"]
+__all__ = ["Backlog", "GridPacer", "occupancy_due"]
 
 T = TypeVar("T")
 
@@ -96,3 +100,39 @@ def occupancy_due(batch: Sequence[object]) -> list[bool]:
             nxt = batch[i + 1] if i + 1 < len(batch) else None
             out.append(not (isinstance(nxt, HumanPose) and nxt.tick < 0 and nxt.demo_id == msg.demo_id))
     return out
+
+
+class GridPacer:
+    """Spaces real-time grids at least ``interval_s`` apart; a skipped newest pose is owed its grid.
+
+    Args:
+        interval_s: Shortest time between two grids (0: no spacing).
+    """
+
+    def __init__(self, interval_s: float) -> None:
+        if not interval_s >= 0:
+            raise ValueError(f"grid interval must be >= 0 s, got {interval_s}")
+        self.interval_s = float(interval_s)
+        self.last = -float("inf")
+        self.owed = False
+
+    def due(self, now: float) -> bool:
+        """Whether a grid may be published at ``now`` (monotonic s)."""
+        return now - self.last >= self.interval_s
+
+    def skipped(self) -> None:
+        """The newest pose got no grid: it is owed one."""
+        self.owed = True
+
+    def sent(self, now: float) -> None:
+        """A grid was published at ``now``: nothing is owed."""
+        self.last = now
+        self.owed = False
+
+    def forget(self) -> None:
+        """A new demonstration started: what was owed to the old one is void."""
+        self.owed = False
+
+    def wait_s(self, now: float) -> float | None:
+        """Seconds until the owed grid is due (None: nothing owed)."""
+        return max(0.0, self.last + self.interval_s - now) if self.owed else None

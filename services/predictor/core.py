@@ -53,6 +53,8 @@ class PredictorConfig:
                       choices=METHODS)
     temperature: float = opt(0.0, help="posterior temperature tau: p(C_m|xi) = softmax(ln p(xi|C_m) / tau); "
                              "1 = the paper's; 0 = the model file's (set by `foresight train --temperature`)")
+    grid_interval_s: float = opt(0.02, help="real time: at least this long between two occupancy grids (the "
+                                 "newest pose's grid is owed and sent once due; 0: a grid for every pose)")
     backlog: int = opt(3000, help="most messages waiting to be processed (about 10 s at 300 Hz); beyond it the "
                        "oldest are dropped and counted")
     stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
@@ -65,6 +67,8 @@ class PredictorConfig:
             raise ConfigError("predictor.model: must name a model file")
         if not (self.temperature >= 0 and np.isfinite(self.temperature)):
             raise ConfigError(f"predictor.temperature: must be >= 0 (0 = the model's), got {self.temperature}")
+        if not (0 <= self.grid_interval_s <= 10 and np.isfinite(self.grid_interval_s)):
+            raise ConfigError(f"predictor.grid_interval_s: must be in [0, 10] s, got {self.grid_interval_s}")
         if not (isinstance(self.backlog, int) and 1 <= self.backlog <= 1_000_000):
             raise ConfigError(f"predictor.backlog: must be an integer in [1, 1000000], got {self.backlog!r}")
 

@@ -12,7 +12,7 @@ from shared.protocol import ClassPosterior, DemoMarker, Expectations, HumanPose,
 from shared.scene import load_scene
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe_ordered
 
-from .backlog import Backlog, occupancy_due
+from .backlog import Backlog, GridPacer, occupancy_due
 from .core import PredictorConfig, PredictorCore, PredictorError
 from .model import PredictionModel
 
@@ -42,8 +42,9 @@ class PredictorService:
 
     Messages go through a bounded :class:`~services.predictor.backlog.Backlog` drained by one worker
     thread. Every pose is observed and gets its posterior; in real time, when poses arrive faster
-    than grids are built, only the newest waiting pose gets a grid (``stats.coalesced`` counts the
-    others); in lock-step every pose gets one.
+    than grids are built, only the newest waiting pose gets a grid, and grids are spaced at least
+    ``config.grid_interval_s`` apart (a skipped newest pose gets its grid once due); ``stats.coalesced``
+    counts the poses that never got their own. In lock-step every pose gets one.
 
     Args:
         config: Predictor options.
@@ -64,6 +65,8 @@ class PredictorService:
         self.receipt = Receipt(Expectations(clock="auto"))
         self.stats = PredictorStats()
         self.backlog: Backlog[Message] = Backlog(config.backlog)
+        self.pacer = GridPacer(config.grid_interval_s)
+        self._owed: HumanPose | None = None  # the newest real-time pose, skipped by the pacer
         self._lock = threading.Lock()
         self._behind_logged = -1e9
         self._post_pub: TypedPublisher[ClassPosterior] | None = None
@@ -72,27 +75,51 @@ class PredictorService:
     def handle(self, msg: Message) -> tuple[ClassPosterior, OccupancyGrid] | None:
         """Process one incoming message; returns the outputs for a pose (None for a marker or a reject)."""
         with self._lock:
-            out = self._process(msg, grid=True)
+            out = self._process(msg, grid=True, now=None)
         return (out[0], out[1]) if len(out) == 2 else None  # type: ignore[return-value]
 
-    def handle_batch(self, batch: list[Message]) -> list[ClassPosterior | OccupancyGrid]:
-        """Process messages in arrival order, a grid only where :func:`occupancy_due` says; the outputs, in order."""
+    def handle_batch(self, batch: list[Message], now: float | None = None) -> list[ClassPosterior | OccupancyGrid]:
+        """Process messages in arrival order; the outputs, in order.
+
+        Real-time grids only where :func:`occupancy_due` says and the pacer allows at ``now``
+        (monotonic s; None: no pacing).
+        """
         out: list[ClassPosterior | OccupancyGrid] = []
         with self._lock:
             for msg, grid in zip(batch, occupancy_due(batch), strict=True):
-                out.extend(self._process(msg, grid))
+                out.extend(self._process(msg, grid, now))
         return out
 
-    def _process(self, msg: Message, grid: bool) -> list[ClassPosterior | OccupancyGrid]:
+    def flush(self, now: float) -> list[OccupancyGrid]:
+        """The grid owed to the newest real-time pose, once the pacer says it is due ([] otherwise)."""
+        with self._lock:
+            msg = self._owed
+            if msg is None or not self.pacer.due(now) or msg.demo_id != self.core.demo_id:
+                return []
+            self._owed = None
+            self.pacer.sent(now)
+            self.stats.coalesced -= 1  # it gets its own grid after all
+            return [self._grid(msg)]
+
+    def _grid(self, msg: HumanPose) -> OccupancyGrid:
+        stamp = time.time() if msg.tick < 0 else msg.stamp
+        return self.core.predict().to_message(stamp=stamp, tick=msg.tick, tick_last=msg.tick_last,
+                                              demo_id=msg.demo_id, index=msg.index)
+
+    def _process(self, msg: Message, grid: bool, now: float | None) -> list[ClassPosterior | OccupancyGrid]:
         if isinstance(msg, DemoMarker):
             if msg.event == "start":
                 self.core.reset(msg.demo_id)
+                self._owed = None
+                self.pacer.forget()
                 self.stats.resets += 1
                 log.info("predictor: demo %d start (%s)", msg.demo_id, msg.class_name)
             return []
         assert isinstance(msg, HumanPose)
         if msg.demo_id != self.core.demo_id:
             self.core.reset(msg.demo_id)
+            self._owed = None
+            self.pacer.forget()
             self.stats.resets += 1
         try:
             posterior = self.core.observe(msg.features, msg.index)
@@ -106,9 +133,17 @@ class PredictorService:
             ClassPosterior(stamp=stamp, tick=msg.tick, demo_id=msg.demo_id, index=msg.index,
                            class_names=list(self.model.class_names), posterior=posterior,
                            log_likelihood=self.core.log_likelihood())]
+        realtime = msg.tick < 0
+        if realtime:
+            self._owed = None  # a newer pose supersedes the owed one
+        if grid and realtime and now is not None and not self.pacer.due(now):
+            grid = False
+            self._owed = msg
+            self.pacer.skipped()
         if grid:
-            out.append(self.core.predict().to_message(stamp=stamp, tick=msg.tick, tick_last=msg.tick_last,
-                                                      demo_id=msg.demo_id, index=msg.index))
+            out.append(self._grid(msg))
+            if realtime and now is not None:
+                self.pacer.sent(now)
         else:
             self.stats.coalesced += 1
         return out
@@ -119,19 +154,22 @@ class PredictorService:
     def _drain(self, stop: threading.Event) -> None:
         """The worker: process what waits, publish the outputs, until ``stop``."""
         while not stop.is_set():
-            batch = self.backlog.take_all(0.1)
-            if not batch:
-                continue
-            waiting = len(batch)
-            for out in self.handle_batch(batch):
+            owed = self.pacer.wait_s(time.monotonic())
+            batch = self.backlog.take_all(0.1 if owed is None else min(0.1, owed))
+            now = time.monotonic()
+            outs = self.handle_batch(batch, now) if batch else []
+            if not any(isinstance(m, HumanPose) and m.tick < 0 for m in batch):
+                outs += self.flush(now)  # the stream paused: the newest pose gets its grid once due
+            for out in outs:
                 pub = self._post_pub if isinstance(out, ClassPosterior) else self._occ_pub
                 if pub is not None:
                     pub.put(out)
                     self.stats.published += isinstance(out, OccupancyGrid)
             self.stats.dropped = self.backlog.dropped
-            now = time.monotonic()
-            if waiting > 1 and now - self._behind_logged > 5.0:  # behind: said at most every 5 s
-                self._behind_logged = now
+            waiting = len(batch)
+            if waiting > 1 and now - self._behind_logged > 5.0 and any(isinstance(m, HumanPose) and m.tick < 0
+                                                                       for m in batch):
+                self._behind_logged = now  # behind: said at most every 5 s
                 log.warning("predictor: %d messages were waiting; occupancy for the newest pose only "
                             "(%d poses without their own grid so far, %d dropped from a full backlog)",
                             waiting, self.stats.coalesced, self.stats.dropped)

@@ -232,8 +232,10 @@ class McapLog:
         with self._lock:
             if self._closed:
                 return
-            cls = MESSAGE_TYPES[msg.TYPE]
-            cid = self._channel_id(key, f"foresight.{msg.TYPE}", message_json_schema(cls), "msgpack")
+            cid = self._channels.get(key)
+            if cid is None:  # the schema is built once per channel, not per message
+                cid = self._channel_id(key, f"foresight.{msg.TYPE}", message_json_schema(MESSAGE_TYPES[msg.TYPE]),
+                                       "msgpack")
             self._add(cid, key, bytes(payload), log_time, publish)
         if self.builder is not None:
             self._visualise(msg, log_time)

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from services.predictor.backlog import Backlog, occupancy_due
+from services.predictor.backlog import Backlog, GridPacer, occupancy_due
 from services.predictor.core import PredictorConfig
 from services.predictor.service import PredictorService
 from shared.config import ZenohConfig
@@ -128,3 +128,47 @@ def test_a_slow_predictor_publishes_every_posterior_and_grids_for_the_newest_pos
     assert len(grids) < n / 2                                # the others were coalesced, not queued
     assert service.stats.coalesced == n - len(grids)
     assert service.stats.dropped == 0
+
+
+def test_the_pacer_spaces_grids_and_owes_the_newest_pose_its_grid():
+    pacer = GridPacer(0.02)
+    assert pacer.due(0.0) and pacer.wait_s(0.0) is None
+    pacer.sent(1.0)
+    assert not pacer.due(1.01) and pacer.due(1.02)
+    pacer.skipped()
+    assert pacer.wait_s(1.005) == pytest.approx(0.015)
+    pacer.forget()
+    assert pacer.wait_s(1.005) is None
+    with pytest.raises(ValueError, match="interval"):
+        GridPacer(-1.0)
+
+
+def test_real_time_grids_are_spaced_and_the_last_pose_still_gets_one(small_model, small_library):
+    """300 Hz for 0.3 s (simulated clock): a grid at most every 20 ms, each for the newest pose; the last is flushed."""
+    demo = small_library.by_class(2)[0]
+    svc = PredictorService(PredictorConfig(grid_interval_s=0.02), _NO_ZENOH, model=small_model)
+    grids: list[tuple[float, OccupancyGrid]] = []
+    n = min(90, demo.n_samples)
+    for i in range(n):
+        now = i / 300.0
+        grids += [(now, m) for m in svc.handle_batch([_pose(4, i, demo.features[i])], now)
+                  if isinstance(m, OccupancyGrid)]
+    last_pose_time = (n - 1) / 300.0
+    assert not grids or grids[-1][1].index != n - 1  # the last pose came too soon after the previous grid
+    assert svc.flush(last_pose_time + 0.001) == [] or len(grids) == 0
+    flushed = svc.flush(last_pose_time + 0.02)
+    assert len(flushed) == 1 and flushed[0].index == n - 1
+    times = [t for t, _ in grids]
+    assert all(b - a >= 0.02 - 1e-9 for a, b in zip(times, times[1:], strict=False))
+    assert len(grids) + 1 <= n / 6 + 2  # about one grid per 6 poses
+    assert svc.stats.coalesced == n - len(grids) - 1 and svc.stats.poses == n
+    # the flushed grid is the one a grid per pose would have given for the last pose
+    every = PredictorService(PredictorConfig(grid_interval_s=0.0), _NO_ZENOH, model=small_model)
+    for i in range(n):
+        out = every.handle(_pose(4, i, demo.features[i]))
+    np.testing.assert_array_equal(flushed[0].values, out[1].values)
+    np.testing.assert_array_equal(flushed[0].indices, out[1].indices)
+    # lock-step poses are never paced
+    lock = PredictorService(PredictorConfig(grid_interval_s=0.02), _NO_ZENOH, model=small_model)
+    outs = lock.handle_batch([_pose(5, i, demo.features[i], tick=0) for i in range(10)], now=0.0)
+    assert sum(isinstance(m, OccupancyGrid) for m in outs) == 10
