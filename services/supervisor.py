@@ -1,9 +1,9 @@
 """Watching a run's service processes: a service that dies is reported once and the run carries on.
 
-The executor holds the robot while the predictor or the planner is gone (its ``hold_without``) or its
-inputs are stale, so one dead service is a fault to report, not a reason to abort the run. With
-``restart`` the supervisor starts it again (at most ``max_restarts`` times per service), and the
-executor resumes once the service's outputs are fresh.
+The executor holds the robot while the predictor, the planner or (mid-demonstration) the replayer is
+gone (its ``hold_without``) or its inputs are stale, so one dead service is a fault to report, not a
+reason to abort the run. With ``restart`` the supervisor starts it again (at most ``max_restarts``
+times per service), and the executor resumes once the service's outputs are fresh.
 """
 
 from __future__ import annotations

@@ -31,7 +31,10 @@ from shared.lockstep import FIRST_PLAN
 from shared.protocol import Plan, RobotState
 from shared.scene import SCENE_HELP
 
-__all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "Reference", "reason_kind"]
+__all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "Reference", "reason_kind", "HUMAN_SOURCE"]
+
+HUMAN_SOURCE = "replayer"
+"""The service that streams the human's poses (its liveliness token holds the robot only mid-demonstration)."""
 
 
 def reason_kind(reason: str) -> str:
@@ -58,9 +61,10 @@ class ExecutorConfig:
     state_rate_hz: float = opt(50.0, help="RobotState publishing rate (per simulated second in lockstep)")
     stale_limit_s: float = opt(0.5, help="hold the robot when the latest plan or occupancy is older than this")
     require_occupancy: bool = opt(True, help="also hold when the occupancy prediction is missing or stale")
-    hold_without: list[str] = opt(default_factory=lambda: ["predictor", "planner"],
+    hold_without: list[str] = opt(default_factory=lambda: ["predictor", "planner", "replayer"],
                                   help="hold while one of these services, once seen, is gone (its liveliness "
-                                  "token lost: stopped or killed), before its inputs are stale; empty = never")
+                                  "token lost: stopped or killed), before its inputs are stale; the replayer only "
+                                  "when it goes in the middle of a demonstration; empty = never")
     goal_tolerance: float = opt(0.02, help="goal reached when every joint is within this of the goal (rad or m)")
     velocity_scale: float = opt(1.0, help="fraction of the robot's joint velocity limits the simulation may use")
     stop_on_goal: bool = opt(False, help="end the run at the end of the step in which the goal is reached")
@@ -302,9 +306,13 @@ class ExecutorCore:
         """Record that ``service``'s liveliness token appeared (``alive``) or was lost.
 
         While a service of ``hold_without`` is gone the robot holds, whatever the age of its last output.
+        The human's source (:data:`HUMAN_SOURCE`) counts as gone only when it goes in the middle of a
+        demonstration: after its end marker the human stands still and its stream may end.
         """
         if service not in self.config.hold_without:
             return
+        if service == HUMAN_SOURCE and not alive and self.fresh.demo_end is not None:
+            return  # the human's stream ended (its end marker came first): the human stands still, no fault
         self.gone = self.gone - {service} if alive else self.gone | {service}
 
     # ------------------------------------------------------------------------------------------

@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -97,8 +98,14 @@ def samples_per_tick(demo: Demonstration, steps: int) -> int:
 
 
 def human_file(library: MotionLibrary, demo: Demonstration, directory: Path) -> Path:
-    """A one-demonstration library file for the replayer (written once per demonstration)."""
-    path = Path(directory) / f"human-{demo.label}-{demo.index}.npz"
+    """A one-demonstration library file for the replayer (written once per demonstration).
+
+    The name carries a digest of the demonstration's data and class: two libraries (the report runs
+    them side by side in one work directory) never share a file for their own class ``label`` / ``index``.
+    """
+    tag = hashlib.sha256(np.ascontiguousarray(demo.features, dtype=np.float64).tobytes()
+                         + f"{demo.class_name}|{demo.label}|{demo.index}".encode()).hexdigest()[:12]
+    path = Path(directory) / f"human-{demo.label}-{demo.index}-{tag}.npz"
     if not path.is_file():
         path.parent.mkdir(parents=True, exist_ok=True)
         save_library(MotionLibrary(class_names=list(library.class_names), demos=[demo], issues=[],

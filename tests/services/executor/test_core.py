@@ -246,7 +246,16 @@ def test_holds_while_a_service_it_depends_on_is_gone_and_not_after():
     core.note_occupancy()
     core.step(0.02)
     assert not core.holding
-    core.note_peer("replayer", False)  # not in hold_without: the human's stream may end
+    core.note_demonstration("end", 3, 100)
+    core.note_peer("replayer", False)  # after its end marker: the human's stream may end
+    core.step(0.02)
+    assert not core.holding
+    core.note_peer("replayer", True)
+    core.note_demonstration("start", 4, 100)
+    core.note_peer("replayer", False)  # in the middle of a demonstration: the human is unobserved
+    core.step(0.02)
+    assert core.holding and core.reason == "replayer gone (liveliness token lost)"
+    core.note_peer("replayer", True)
     core.step(0.02)
     assert not core.holding
     core.note_peer("predictor", False)

@@ -5,11 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.experiments.heldout import HeldOutModels, cup_class, load_experiment_library, short_name
+from services.experiments.heldout import HeldOutModels, cup_class, human_file, load_experiment_library, short_name
 from services.experiments.switch import settle_step
 from services.predictor.gmm import GMMConfig
 from services.predictor.model import PredictionModel
 from services.predictor.train import TrainConfig, train_model
+from shared.library import load_library
 from shared.scene import load_scene
 from shared.synthetic import generate_library
 
@@ -75,3 +76,15 @@ def test_away_step():
     assert away_step(["r", "r", "b", "b"], "r") == 2
     assert away_step(["r", "b", "r", "b"], "r") == 3
     assert away_step(["b", "r"], "r") is None and away_step([], "r") is None
+
+
+def test_human_files_of_two_libraries_never_collide(tmp_path):
+    """Both libraries of a report write into one work directory; class 1 demo 0 of each is its own file."""
+    a, b = generate_library(n_classes=3, n_demos=2, seed=1), generate_library(n_classes=3, n_demos=2, seed=2)
+    da, db = a.by_class(1)[0], b.by_class(1)[0]
+    assert (da.label, da.index) == (db.label, db.index)
+    pa, pb = human_file(a, da, tmp_path), human_file(b, db, tmp_path)
+    assert pa != pb
+    assert human_file(a, da, tmp_path) == pa  # written once, found again
+    np.testing.assert_array_equal(load_library(pb).demos[0].features, db.features)
+    np.testing.assert_array_equal(load_library(pa).demos[0].features, da.features)
