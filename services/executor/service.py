@@ -178,6 +178,8 @@ class ExecutorService:
             self.inbox.put_occupancy(msg.tick, min(now, self._pose_arrival.get((msg.demo_id, msg.index), now)))
 
     def _on_peer(self, service: str, alive: bool) -> None:
+        if self.config.mode == "lockstep":
+            return  # the clock protocol decides; a liveliness event's timing must not change a lock-step run
         if service in self.config.hold_without and (service in self.core.gone) == alive:
             log.warning("executor: %s %s", service, "is back" if alive else "is gone: holding the robot")
         self.core.note_peer(service, alive)

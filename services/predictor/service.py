@@ -178,8 +178,9 @@ class PredictorService:
         """Serve until ``stop`` is set; ``ready`` is set once subscribed and announced."""
         stop = stop or threading.Event()
         with open_session(self.zenoh_config, stop, "predictor") as session:
-            self._post_pub = TypedPublisher(session, self.keys.posterior)
-            self._occ_pub = TypedPublisher(session, self.keys.occupancy)
+            # reliable: a lock-step tick's last grid must never be dropped (the worker publishes in bursts)
+            self._post_pub = TypedPublisher(session, self.keys.posterior, block=True)
+            self._occ_pub = TypedPublisher(session, self.keys.occupancy, block=True)
             types = {self.keys.pose: HumanPose, self.keys.demo: DemoMarker}
             sub = subscribe_ordered(session, self.keys.human_all, types, self._on_message, self.rejects,
                                     self.receipt)
