@@ -14,7 +14,8 @@ Each run is scored against the human who was really there: time in contact with 
 minimum clearance, and whether the robot reached its goal; the switch also by its settle step.
 The paper's own integral cost is not compared across volumes: each volume scores against its own
 prediction. The rule that picks a default (:meth:`VolumesResult.choice`): among the volumes with
-which the robot reaches its goal in every run and settles no later (median) than with ``paper``, the
+which the robot reaches its goal in every run and leaves the human's cup for good no later (median
+away step, :func:`services.experiments.switch.away_step`) than with ``paper``, the
 fewest seconds in contact over all runs; ties by the larger median minimum clearance.
 """
 
@@ -66,6 +67,7 @@ class VolumeScore:
         time_near_s: Seconds within 5 cm in Table I, summed.
         reached: Runs that reached their goal.
         settle_step: Median settle step of the switch (the step from which the robot keeps its final goal).
+        away_step: Median step from which the robot never again goes for the human's cup (never: the run's steps).
         ends_at_human_cup: Switch runs that end going for the human's cup.
         planning_ms: Median planning time of a step.
     """
@@ -78,6 +80,7 @@ class VolumeScore:
     time_near_s: float
     reached: int
     settle_step: float
+    away_step: float
     ends_at_human_cup: int
     planning_ms: float
 
@@ -96,14 +99,14 @@ class VolumesResult:
         by = {s.volume: s for s in self.scores}
         ref = by.get("paper")
         ok = [s for s in self.scores if s.reached == s.runs
-              and (ref is None or math.isnan(ref.settle_step) or s.settle_step <= ref.settle_step)]
+              and (ref is None or math.isnan(ref.away_step) or s.away_step <= ref.away_step)]
         if not ok:
-            return None, "no volume reached the goal in every run without settling later than paper"
+            return None, "no volume reached the goal in every run without leaving the human's cup later than paper"
         best = min(ok, key=lambda s: (round(s.contact_s, 6), -s.median_min_clearance))
         rest = ", ".join(sorted(s.volume for s in self.scores if s not in ok)) or "none"
         return best.volume, (f"{best.volume}: {best.contact_s:.2f} s in contact over {best.runs} runs, median min "
-                             f"clearance {best.median_min_clearance:+.3f} m, settle step {best.settle_step:g} "
-                             f"(excluded for missing a goal or settling later than paper: {rest})")
+                             f"clearance {best.median_min_clearance:+.3f} m, away step {best.away_step:g} "
+                             f"(excluded for missing a goal or leaving the human's cup later than paper: {rest})")
 
     def lines(self) -> list[str]:
         """A table, one row per volume, then the choice."""
@@ -111,11 +114,11 @@ class VolumesResult:
                f"({self.config.demos} demonstrations x {self.config.seeds} seeds) + the switch (every "
                f"demonstration held out in turn); scored against the real human",
                f"{'volume':<8}{'runs':>6}{'contact s':>11}{'runs touching':>15}{'median min clear.':>19}"
-               f"{'near s':>8}{'reached':>9}{'settle':>8}{'at human cup':>14}{'plan ms':>9}"]
+               f"{'near s':>8}{'reached':>9}{'settle':>8}{'away':>6}{'at human cup':>14}{'plan ms':>9}"]
         for s in self.scores:
             out.append(f"{s.volume:<8}{s.runs:>6}{s.contact_s:>11.2f}{s.runs_in_contact:>15}"
                        f"{s.median_min_clearance:>+18.3f}m{s.time_near_s:>8.2f}{s.reached:>5} of {s.runs:<3}"
-                       f"{s.settle_step:>6g}{s.ends_at_human_cup:>14}{s.planning_ms:>9.0f}")
+                       f"{s.settle_step:>6g}{s.away_step:>6g}{s.ends_at_human_cup:>14}{s.planning_ms:>9.0f}")
         best, why = self.choice()
         out.append(f"rule's choice: {why}" if best else f"rule's choice: none ({why})")
         return out
@@ -155,7 +158,8 @@ def run_volumes(cfg: VolumesConfig, progress: Callable[[str], None] = print, com
             runs_in_contact=int(np.sum(np.asarray(contact) > 0)), median_min_clearance=float(np.median(clear)),
             time_near_s=float(sum(r.time_near for r in lp)),
             reached=sum(r.reached_step is not None for r in lp) + sum(r.reached_step is not None for r in sw),
-            settle_step=switch.median_settle("prediction"), ends_at_human_cup=switch.conflicts("prediction"),
+            settle_step=switch.median_settle("prediction"), away_step=switch.median_away("prediction"),
+            ends_at_human_cup=switch.conflicts("prediction"),
             planning_ms=float(np.median(plan))))
         result.raw[volume] = {"interference_runs": [dataclasses.asdict(r) for r in lp],
                               "switch_runs": [dataclasses.asdict(r) for r in sw]}

@@ -10,10 +10,10 @@ from services.experiments.cli import main as eval_main
 from services.experiments.volumes import VolumesConfig, VolumeScore, VolumesResult, run_volumes
 
 
-def _score(volume: str, contact: float, clearance: float, reached: int = 10, settle: float = 2.0) -> VolumeScore:
+def _score(volume: str, contact: float, clearance: float, reached: int = 10, away: float = 2.0) -> VolumeScore:
     return VolumeScore(volume=volume, runs=10, contact_s=contact, runs_in_contact=int(contact > 0),
-                       median_min_clearance=clearance, time_near_s=0.0, reached=reached, settle_step=settle,
-                       ends_at_human_cup=0, planning_ms=100.0)
+                       median_min_clearance=clearance, time_near_s=0.0, reached=reached, settle_step=1.0,
+                       away_step=away, ends_at_human_cup=0, planning_ms=100.0)
 
 
 def test_the_rule_picks_the_fewest_contacts_then_the_largest_clearance():
@@ -24,11 +24,11 @@ def test_the_rule_picks_the_fewest_contacts_then_the_largest_clearance():
     assert "rule's choice: demos" in res.lines()[-1]
 
 
-def test_the_rule_excludes_a_volume_that_misses_a_goal_or_settles_later():
-    res = VolumesResult(VolumesConfig(), scores=[_score("paper", 0.5, 0.10, settle=2.0),
+def test_the_rule_excludes_a_volume_that_misses_a_goal_or_leaves_the_human_later():
+    res = VolumesResult(VolumesConfig(), scores=[_score("paper", 0.5, 0.10, away=2.0),
                                                  _score("spread", 0.0, 0.20, reached=9),
-                                                 _score("demos", 0.0, 0.20, settle=3.0),
-                                                 _score("timed", 0.2, 0.11, settle=1.0)])
+                                                 _score("demos", 0.0, 0.20, away=3.0),
+                                                 _score("timed", 0.2, 0.11, away=1.0)])
     best, why = res.choice()
     assert best == "timed"
     assert "demos, spread" in why
@@ -37,8 +37,8 @@ def test_the_rule_excludes_a_volume_that_misses_a_goal_or_settles_later():
 
 
 def test_the_rule_without_paper_compares_only_contacts():
-    res = VolumesResult(VolumesConfig(), scores=[_score("spread", 0.3, 0.2, settle=math.nan),
-                                                 _score("timed", 0.1, 0.1, settle=math.nan)])
+    res = VolumesResult(VolumesConfig(), scores=[_score("spread", 0.3, 0.2, away=math.nan),
+                                                 _score("timed", 0.1, 0.1, away=math.nan)])
     assert res.choice()[0] == "timed"
 
 
