@@ -83,6 +83,14 @@ def _dense(occupancy: OccupancyGrid | np.ndarray) -> np.ndarray:
     return occupancy.to_dense(np.float64) if isinstance(occupancy, OccupancyGrid) else np.asarray(occupancy, float)
 
 
+def _voxel_of(points: np.ndarray, origin: np.ndarray, resolution: float, dims: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """``(..., 3)`` voxel indices of ``points (..., 3)``, clipped into the grid; ``(...)`` whether each was inside."""
+    idx = np.floor((points - origin) / resolution).astype(np.int64)
+    inside = np.all((idx >= 0) & (idx < dims), axis=-1)
+    return np.clip(idx, 0, dims - 1), inside
+
+
 def _voxel_sums(state: np.ndarray, points: np.ndarray, dense: np.ndarray, origin: np.ndarray, resolution: float,
                 n_states: int) -> np.ndarray:
     """Per state, the sum of ``dense`` over the distinct voxels holding at least one of its points.
@@ -99,9 +107,8 @@ def _voxel_sums(state: np.ndarray, points: np.ndarray, dense: np.ndarray, origin
         ``(n_states,)`` sums (points outside the grid add nothing).
     """
     dims = np.asarray(dense.shape, dtype=np.int64)
-    idx = np.floor((points - origin) / resolution).astype(np.int64)
-    inside = np.all((idx >= 0) & (idx < dims), axis=-1)
-    flat = np.ravel_multi_index(tuple(np.clip(idx, 0, dims - 1).T), tuple(dims))
+    idx, inside = _voxel_of(points, origin, resolution, dims)
+    flat = np.ravel_multi_index(tuple(idx.T), tuple(dims))
     values = dense.reshape(-1)
     hit = inside & (values[flat] > 0)  # voxels of zero probability add nothing: skip them before unique
     n_vox = int(np.prod(dims))
@@ -142,15 +149,16 @@ def spheres_near_occupancy(centres: np.ndarray, radii: np.ndarray, occupancy: Oc
     Returns:
         ``(N, S)`` bool: False where the sphere certainly touches no non-zero voxel.
     """
-    dense = _dense(occupancy)
+    return _near(centres, radii, _dense(occupancy), np.asarray(occupancy.origin, np.float64),
+                 float(occupancy.resolution))
+
+
+def _near(centres: np.ndarray, radii: np.ndarray, dense: np.ndarray, origin: np.ndarray, res: float) -> np.ndarray:
+    """:func:`spheres_near_occupancy` on the dense grid ``dense`` with corner ``origin`` and voxel edge ``res``."""
     if not np.any(dense > 0):
         return np.zeros(centres.shape[:2], dtype=bool)
-    res = float(occupancy.resolution)
     to_nonzero = distance_transform_edt(dense <= 0) * res  # (X, Y, Z) m between voxel centres
-    dims = np.asarray(dense.shape, dtype=np.int64)
-    idx = np.floor((centres - np.asarray(occupancy.origin, np.float64)) / res).astype(np.int64)
-    inside = np.all((idx >= 0) & (idx < dims), axis=-1)
-    ci = np.clip(idx, 0, dims - 1)
+    ci, inside = _voxel_of(centres, origin, res, np.asarray(dense.shape, dtype=np.int64))
     reach = radii[None, :] + math.sqrt(3.0) * res + 1e-9
     return ~inside | (to_nonzero[ci[..., 0], ci[..., 1], ci[..., 2]] <= reach)
 
@@ -176,16 +184,16 @@ def interference_over_time(robot: Any, q: np.ndarray, stamps: np.ndarray, occupa
     if len(q) < 2:
         return np.zeros(len(q))
     centres, radii = _sphere_centres(robot, q)
-    near = spheres_near_occupancy(centres, radii, occupancy)  # (N, S)
-    spacing = spacing or float(occupancy.resolution) / 2
+    dense, origin, res = _dense(occupancy), np.asarray(occupancy.origin, np.float64), float(occupancy.resolution)
+    near = _near(centres, radii, dense, origin, res)  # (N, S)
+    spacing = spacing or res / 2
     states, points = [np.zeros(0, np.int64)], [np.zeros((0, 3))]
     for s in np.flatnonzero(near.any(axis=0)):
         rows = np.flatnonzero(near[:, s])
         offsets = sphere_surface_offsets(float(radii[s]), spacing)  # (O, 3)
         states.append(np.repeat(rows, len(offsets)))
         points.append((centres[rows, s, None, :] + offsets[None]).reshape(-1, 3))
-    cost = _voxel_sums(np.concatenate(states), np.concatenate(points), _dense(occupancy),
-                       np.asarray(occupancy.origin, np.float64), float(occupancy.resolution), len(q))
+    cost = _voxel_sums(np.concatenate(states), np.concatenate(points), dense, origin, res, len(q))
     dt = np.clip(np.diff(np.asarray(stamps, dtype=np.float64)), 0.0, None)
     return np.concatenate([[0.0], cost[1:] * dt])
 
