@@ -102,7 +102,7 @@ def occupancy_due(batch: Sequence[object]) -> list[bool]:
     return out
 
 
-class GridPacer:
+class GridPacer(Generic[T]):
     """Spaces real-time grids at least ``interval_s`` apart; a skipped newest pose is owed its grid.
 
     Args:
@@ -114,25 +114,25 @@ class GridPacer:
             raise ValueError(f"grid interval must be >= 0 s, got {interval_s}")
         self.interval_s = float(interval_s)
         self.last = -float("inf")
-        self.owed = False
+        self.owed: T | None = None  # the newest pose, skipped: it gets its grid once due
 
     def due(self, now: float) -> bool:
         """Whether a grid may be published at ``now`` (monotonic s)."""
         return now - self.last >= self.interval_s
 
-    def skipped(self) -> None:
-        """The newest pose got no grid: it is owed one."""
-        self.owed = True
+    def skipped(self, pose: T) -> None:
+        """The newest pose ``pose`` got no grid: it is owed one."""
+        self.owed = pose
 
     def sent(self, now: float) -> None:
         """A grid was published at ``now``: nothing is owed."""
         self.last = now
-        self.owed = False
+        self.owed = None
 
     def forget(self) -> None:
-        """A new demonstration started: what was owed to the old one is void."""
-        self.owed = False
+        """Nothing is owed any more (a newer pose came, or a new demonstration started)."""
+        self.owed = None
 
     def wait_s(self, now: float) -> float | None:
         """Seconds until the owed grid is due (None: nothing owed)."""
-        return max(0.0, self.last + self.interval_s - now) if self.owed else None
+        return max(0.0, self.last + self.interval_s - now) if self.owed is not None else None

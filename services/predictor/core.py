@@ -156,7 +156,7 @@ class PredictorCore:
         self.demo_id = -1
         self._ll = np.zeros(model.n_classes)
         self._first: np.ndarray | None = None
-        self._last: tuple[np.ndarray, int] | None = None  # the last observed posture and its index
+        self._last: tuple[np.ndarray, int, np.ndarray] | None = None  # the last posture, its index, the posterior
         self._count = 0
 
     @property
@@ -221,8 +221,8 @@ class PredictorCore:
         x = self.encoder.step(f, t)
         self._ll = self._ll + self.bank.log_likelihood(x[None])[0]
         self._count += 1
-        self._last = (f, t)
-        return posterior_from_log_likelihood(self._ll, temperature=self.temperature)
+        self._last = (f, t, posterior_from_log_likelihood(self._ll, temperature=self.temperature))
+        return self._last[2]
 
     def predict(self) -> PredictionResult:
         """The prediction after the last observed posture (:meth:`observe`).
@@ -232,8 +232,7 @@ class PredictorCore:
         """
         if self._last is None or self._first is None:
             raise PredictorError("predict: no posture observed since the last reset")
-        f, t = self._last
-        post = posterior_from_log_likelihood(self._ll, temperature=self.temperature)
+        f, t, post = self._last
         if self.config.method == "prediction":
             idx, val = self.occupancy_for(post, t)
         else:

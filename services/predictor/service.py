@@ -65,8 +65,7 @@ class PredictorService:
         self.receipt = Receipt(Expectations(clock="auto"))
         self.stats = PredictorStats()
         self.backlog: Backlog[Message] = Backlog(config.backlog)
-        self.pacer = GridPacer(config.grid_interval_s)
-        self._owed: HumanPose | None = None  # the newest real-time pose, skipped by the pacer
+        self.pacer: GridPacer[HumanPose] = GridPacer(config.grid_interval_s)
         self._lock = threading.Lock()
         self._behind_logged = -1e9
         self._post_pub: TypedPublisher[ClassPosterior] | None = None
@@ -93,34 +92,31 @@ class PredictorService:
     def flush(self, now: float) -> list[OccupancyGrid]:
         """The grid owed to the newest real-time pose, once the pacer says it is due ([] otherwise)."""
         with self._lock:
-            msg = self._owed
-            if msg is None or not self.pacer.due(now) or msg.demo_id != self.core.demo_id:
+            msg = self.pacer.owed
+            if msg is None or not self.pacer.due(now):
                 return []
-            self._owed = None
             self.pacer.sent(now)
             self.stats.coalesced -= 1  # it gets its own grid after all
-            return [self._grid(msg)]
+            return [self._grid(msg, time.time())]
 
-    def _grid(self, msg: HumanPose) -> OccupancyGrid:
-        stamp = time.time() if msg.tick < 0 else msg.stamp
+    def _grid(self, msg: HumanPose, stamp: float) -> OccupancyGrid:
         return self.core.predict().to_message(stamp=stamp, tick=msg.tick, tick_last=msg.tick_last,
                                               demo_id=msg.demo_id, index=msg.index)
+
+    def _reset(self, demo_id: int) -> None:
+        self.core.reset(demo_id)
+        self.pacer.forget()  # a grid owed to the old demonstration is void
+        self.stats.resets += 1
 
     def _process(self, msg: Message, grid: bool, now: float | None) -> list[ClassPosterior | OccupancyGrid]:
         if isinstance(msg, DemoMarker):
             if msg.event == "start":
-                self.core.reset(msg.demo_id)
-                self._owed = None
-                self.pacer.forget()
-                self.stats.resets += 1
+                self._reset(msg.demo_id)
                 log.info("predictor: demo %d start (%s)", msg.demo_id, msg.class_name)
             return []
         assert isinstance(msg, HumanPose)
         if msg.demo_id != self.core.demo_id:
-            self.core.reset(msg.demo_id)
-            self._owed = None
-            self.pacer.forget()
-            self.stats.resets += 1
+            self._reset(msg.demo_id)
         try:
             posterior = self.core.observe(msg.features, msg.index)
         except PredictorError as exc:
@@ -135,13 +131,12 @@ class PredictorService:
                            log_likelihood=self.core.log_likelihood())]
         realtime = msg.tick < 0
         if realtime:
-            self._owed = None  # a newer pose supersedes the owed one
+            self.pacer.forget()  # a newer pose supersedes the owed one
         if grid and realtime and now is not None and not self.pacer.due(now):
             grid = False
-            self._owed = msg
-            self.pacer.skipped()
+            self.pacer.skipped(msg)
         if grid:
-            out.append(self._grid(msg))
+            out.append(self._grid(msg, stamp))
             if realtime and now is not None:
                 self.pacer.sent(now)
         else:
@@ -158,7 +153,8 @@ class PredictorService:
             batch = self.backlog.take_all(0.1 if owed is None else min(0.1, owed))
             now = time.monotonic()
             outs = self.handle_batch(batch, now) if batch else []
-            if not any(isinstance(m, HumanPose) and m.tick < 0 for m in batch):
+            streaming = any(isinstance(m, HumanPose) and m.tick < 0 for m in batch)
+            if not streaming:
                 outs += self.flush(now)  # the stream paused: the newest pose gets its grid once due
             for out in outs:
                 pub = self._post_pub if isinstance(out, ClassPosterior) else self._occ_pub
@@ -167,8 +163,7 @@ class PredictorService:
                     self.stats.published += isinstance(out, OccupancyGrid)
             self.stats.dropped = self.backlog.dropped
             waiting = len(batch)
-            if waiting > 1 and now - self._behind_logged > 5.0 and any(isinstance(m, HumanPose) and m.tick < 0
-                                                                       for m in batch):
+            if waiting > 1 and streaming and now - self._behind_logged > 5.0:
                 self._behind_logged = now  # behind: said at most every 5 s
                 log.warning("predictor: %d messages were waiting; occupancy for the newest pose only "
                             "(%d poses without their own grid so far, %d dropped from a full backlog)",

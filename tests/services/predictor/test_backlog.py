@@ -135,7 +135,8 @@ def test_the_pacer_spaces_grids_and_owes_the_newest_pose_its_grid():
     assert pacer.due(0.0) and pacer.wait_s(0.0) is None
     pacer.sent(1.0)
     assert not pacer.due(1.01) and pacer.due(1.02)
-    pacer.skipped()
+    pacer.skipped("pose 7")
+    assert pacer.owed == "pose 7"
     assert pacer.wait_s(1.005) == pytest.approx(0.015)
     pacer.forget()
     assert pacer.wait_s(1.005) is None
