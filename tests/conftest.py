@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -54,3 +55,18 @@ def reference_dir() -> Path:
     if not REFERENCE.is_dir():
         pytest.skip("../shared/reference not present")
     return REFERENCE
+
+
+def _wait_until(pred: Callable[[], bool], timeout: float, interval: float = 0.05) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(interval)
+    return False
+
+
+@pytest.fixture
+def wait_until() -> Callable[..., bool]:
+    """``wait_until(pred, timeout, interval=0.05)``: poll ``pred`` until it holds (True) or ``timeout`` passes."""
+    return _wait_until

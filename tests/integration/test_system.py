@@ -66,21 +66,13 @@ def test_lockstep_is_deterministic(run_system):
     np.testing.assert_array_equal(np.array([s.q for s in sa]), np.array([s.q for s in sb]))
 
 
-def test_realtime_executor_holds_without_prediction_and_resumes(run_system, system_files):
+def test_realtime_executor_holds_without_prediction_and_resumes(run_system, system_files, wait_until):
     # hold_without=[]: the hold comes from the occupancy's age alone (the path where an end marker of the
     # looping human must not release the robot while the prediction is stale, issue 12)
     system = run_system(mode="realtime", steps=0, period=0.3,
                         executor_overrides={"stale_limit_s": 0.5, "wait_for": [], "hold_without": []},
                         replayer_overrides={"loop": True, "rate_hz": 30.0})
     rec = system.recorder
-
-    def wait_until(pred, timeout: float) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if pred():
-                return True
-            time.sleep(0.05)
-        return False
 
     assert wait_until(lambda: len(rec.snapshot()[0]) >= 2 and not rec.snapshot()[1][-1].holding, 60.0), \
         "the robot moves once plans and predictions flow"

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 
 import pytest
 
@@ -76,26 +75,17 @@ def test_require_connection_gives_up_once_and_stops_the_service():
     assert ok.failed is None and not ok.stop.is_set()
 
 
-def _wait_for(pred, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.05)
-    return False
-
-
-def test_peer_with_an_unreachable_router_says_so_then_connects_when_it_listens(caplog):
+def test_peer_with_an_unreachable_router_says_so_then_connects_when_it_listens(caplog, wait_until):
     caplog.set_level(logging.INFO, logger="foresight.connectivity")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     peer = ZenohConfig(mode="peer", listen=["tcp/127.0.0.1:0"], connect=[endpoint])
     with open_session(peer, name="predictor"):
-        assert _wait_for(lambda: any("no router or peer at " + endpoint in m for m in _messages(caplog)), 20.0), \
+        assert wait_until(lambda: any("no router or peer at " + endpoint in m for m in _messages(caplog)), 20.0), \
             _messages(caplog)
         router = ZenohConfig(mode="router", listen=[endpoint], connect=[])
         with open_session(router):
             # Zenoh retries the endpoint in the background (at most every 4 s); the watch says when it answers
-            assert _wait_for(lambda: any(f"predictor: connected to {endpoint}" in m for m in _messages(caplog)),
+            assert wait_until(lambda: any(f"predictor: connected to {endpoint}" in m for m in _messages(caplog)),
                              30.0), _messages(caplog)
 
 

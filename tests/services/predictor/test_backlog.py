@@ -82,7 +82,8 @@ def test_a_batch_observes_every_pose_and_predicts_the_newest(small_model, small_
 
 
 def test_a_slow_predictor_publishes_every_posterior_and_grids_for_the_newest_poses(zenoh_hub, small_model,
-                                                                                 small_library, monkeypatch):
+                                                                                 small_library, monkeypatch,
+                                                                                 wait_until):
     svc_cfg, cli_cfg = zenoh_hub(), zenoh_hub()
     keys = Keys(cli_cfg.prefix)
     service = PredictorService(PredictorConfig(), svc_cfg, model=small_model)
@@ -106,9 +107,7 @@ def test_a_slow_predictor_publishes_every_posterior_and_grids_for_the_newest_pos
             subs = [subscribe(session, keys.occupancy, OccupancyGrid, grids.append),
                     subscribe(session, keys.posterior, ClassPosterior, posts.append)]
             presence = Presence(session, keys, "tester")
-            deadline = time.monotonic() + 10
-            while not presence.is_alive("predictor") and time.monotonic() < deadline:
-                time.sleep(0.02)
+            assert wait_until(lambda: presence.is_alive("predictor"), 10.0, 0.02)
             time.sleep(0.3)
             pub = TypedPublisher(session, keys.pose, block=True)
             for i in range(n):

@@ -35,7 +35,8 @@ def _pose(demo_id: int, i: int, f: np.ndarray, tick: int = -1) -> HumanPose:
     return HumanPose(stamp=stamp, tick=tick, tick_last=True, demo_id=demo_id, index=i, features=f)
 
 
-def test_service_publishes_grid_per_pose_and_survives_bad_input(zenoh_hub, small_model, small_library) -> None:
+def test_service_publishes_grid_per_pose_and_survives_bad_input(zenoh_hub, small_model, small_library,
+                                                                 wait_until) -> None:
     svc_cfg, cli_cfg = zenoh_hub(), zenoh_hub()
     keys = Keys(cli_cfg.prefix)
     service = PredictorService(PredictorConfig(), svc_cfg, model=small_model)
@@ -49,10 +50,7 @@ def test_service_publishes_grid_per_pose_and_survives_bad_input(zenoh_hub, small
             s1 = subscribe(session, keys.occupancy, OccupancyGrid, grids.add)
             s2 = subscribe(session, keys.posterior, ClassPosterior, posts.add)
             presence = Presence(session, keys, "tester")
-            deadline = time.monotonic() + 10
-            while not presence.is_alive("predictor") and time.monotonic() < deadline:
-                time.sleep(0.02)
-            assert presence.is_alive("predictor")
+            assert wait_until(lambda: presence.is_alive("predictor"), 10.0, 0.02)
             time.sleep(0.3)  # let the subscriptions propagate
             pose_pub = TypedPublisher(session, keys.pose, block=True)
             demo_pub = TypedPublisher(session, keys.demo, block=True)
