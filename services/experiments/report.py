@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from services.predictor.volumes import DEFAULT_VOLUME, VOLUMES
 from shared.library import MotionLibrary
 from shared.native_threads import limit_blas_threads
 from shared.scene import load_scene
@@ -71,6 +72,8 @@ def add_report_arguments(p: argparse.ArgumentParser) -> None:
                    "synthetic and the paper's library when it is at ../shared/data/paper-library (--quick: "
                    "synthetic only)")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
+    p.add_argument("--volume", choices=VOLUMES, default=DEFAULT_VOLUME, help="occupancy volume of the held-out "
+                   f"prediction models (foresight train --volume; default: {DEFAULT_VOLUME}; the paper's: paper)")
 
 
 def _subset(lib: MotionLibrary, per_class: int) -> MotionLibrary:
@@ -169,8 +172,8 @@ def _prediction_ms(lib: MotionLibrary, models_dir: Path, components: int) -> dic
     return {"median_ms": float(np.median(times)), "p90_ms": float(np.percentile(times, 90)), "poses": len(times)}
 
 
-def library_section(spec: str, plan: ReportPlan, out: Path, models_dir: Path, n_jobs: int = 2
-                    ) -> tuple[list[str], dict[str, Any]]:
+def library_section(spec: str, plan: ReportPlan, out: Path, models_dir: Path, n_jobs: int = 2,
+                    volume: str = DEFAULT_VOLUME) -> tuple[list[str], dict[str, Any]]:
     """Every experiment on one library: its Markdown section and its data (``planning_ms`` K=1 and K=2 runs)."""
     tag = SYNTHETIC if spec == SYNTHETIC else Path(spec).name
 
@@ -184,7 +187,7 @@ def library_section(spec: str, plan: ReportPlan, out: Path, models_dir: Path, n_
     lines, rec = _recognition(lib, plan, out, tag, n_jobs)
     md += lines
     common = {"library": spec, "timing": timing, "components": plan.components, "models_dir": models_dir,
-              "work_dir": out / "work"}
+              "work_dir": out / "work", "volume": volume}
     t1 = run_interference(InterferenceConfig(demos=plan.table1_demos, seeds=plan.table1_seeds, **common), say,
                           compile=plan.compile)
     png1 = plot_interference(t1, out / f"interference-{tag}.png")
@@ -232,16 +235,19 @@ def run_report(args: argparse.Namespace) -> int:
     if workers > 1:
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=limit_blas_threads) as pool:
-            futures = [pool.submit(library_section, spec, plan, out, Path(args.models_dir), 1) for spec in libs]
+            futures = [pool.submit(library_section, spec, plan, out, Path(args.models_dir), 1, args.volume)
+                       for spec in libs]
             sections = [f.result() for f in futures]
     else:
-        sections = [library_section(spec, plan, out, Path(args.models_dir)) for spec in libs]
+        sections = [library_section(spec, plan, out, Path(args.models_dir), volume=args.volume) for spec in libs]
     md = [f"# Foresight: the paper's experiments ({'quick' if args.quick else 'full'} run)", "",
-          f"Command: `foresight eval all --out {out}{' --quick' if args.quick else ''}`. Timing of every run: "
+          f"Command: `foresight eval all --out {out}{' --quick' if args.quick else ''}"
+          f"{'' if args.volume == DEFAULT_VOLUME else ' --volume ' + args.volume}`. Timing of every run: "
           f"{timing.steps} steps of {timing.period_s} s, {timing.iterations} STOMP iterations, robot at "
-          f"{timing.robot_speed:g} of its velocity limits; {plan.components} Gaussians per class. Why the "
-          "numbers differ from the paper's: docs/experiments.md.", ""]
-    data: dict[str, Any] = {"plan": plan.__dict__, "libraries": {}}
+          f"{timing.robot_speed:g} of its velocity limits; {plan.components} Gaussians per class; occupancy "
+          f"volume `{args.volume}` (`foresight train --volume`; the paper's is `paper`). Why the numbers differ "
+          "from the paper's: docs/experiments.md.", ""]
+    data: dict[str, Any] = {"plan": plan.__dict__, "volume": args.volume, "libraries": {}}
     planning: dict[str, list[float]] = {"K=1": [], "K=2": []}
     for spec, (lines, d) in zip(libs, sections, strict=True):
         md += lines

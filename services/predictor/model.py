@@ -54,11 +54,27 @@ from .gmm import MixtureBank
 from .swept_volume import pack_volumes, unpack_volumes
 from .volumes import VOLUMES
 
-__all__ = ["MODEL_FORMAT", "MODEL_VERSION", "ModelError", "PredictionModel", "TimedVolumes"]
+__all__ = ["MODEL_FORMAT", "MODEL_VERSION", "ModelError", "PredictionModel", "TimedVolumes", "to_bytes", "from_bytes",
+           "quantised"]
 
 MODEL_FORMAT = "foresight-prediction-model"
 MODEL_VERSION = 2
 READABLE_VERSIONS = (1, 2)
+
+
+def to_bytes(p: np.ndarray) -> np.ndarray:
+    """Probabilities in [0, 1] as the file stores them: ``round(255 p)`` as uint8 (same shape)."""
+    return np.rint(np.clip(p, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+def from_bytes(q: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`to_bytes`: uint8 -> float32 ``q / 255``."""
+    return q.astype(np.float32) / np.float32(255.0)
+
+
+def quantised(p: np.ndarray) -> np.ndarray:
+    """``p`` as a saved and loaded model holds it (the trainer applies it, so a model equals its file)."""
+    return from_bytes(to_bytes(p))
 
 
 class ModelError(ValueError):
@@ -174,13 +190,12 @@ class PredictionModel:
         }
         if self.timed is not None:
             arrays["timed_support"] = self.timed.support.astype(np.int32)
-            arrays["timed_values"] = np.rint(np.clip(self.timed.values, 0.0, 1.0) * 255.0).astype(np.uint8)
+            arrays["timed_values"] = to_bytes(self.timed.values)
             arrays["time_bin"] = np.array(int(self.timed.time_bin), dtype=np.int64)
         elif self.volumes is not None and self.volume_method == "paper":
             arrays["volumes"] = pack_volumes(self.volumes > 0.5)
         elif self.volumes is not None:
-            q = np.rint(np.clip(self.volumes, 0.0, 1.0) * 255.0).astype(np.uint8)
-            arrays["volume_probabilities"] = q.reshape(self.n_classes, -1)
+            arrays["volume_probabilities"] = to_bytes(self.volumes).reshape(self.n_classes, -1)
         tmp = p.with_name(p.name + ".tmp.npz")
         with tmp.open("wb") as f:
             np.savez_compressed(f, **arrays)
@@ -240,7 +255,7 @@ class PredictionModel:
                     or (support.size and (support.min() < 0 or support.max() >= n)) or int(d["time_bin"]) < 1:
                 raise ValueError(f"timed volumes {q.shape} / support {support.shape} do not fit {m} classes on a "
                                  f"{dims} grid")
-            timed = TimedVolumes(support, q.astype(np.float32) / np.float32(255.0), int(d["time_bin"]))
+            timed = TimedVolumes(support, from_bytes(q), int(d["time_bin"]))
             volumes = np.zeros((m, n), np.float32)
             volumes[:, support] = timed.values[:, 0]
             volumes = volumes.reshape(m, *dims)
@@ -248,7 +263,7 @@ class PredictionModel:
             q = d["volume_probabilities"]
             if q.dtype != np.uint8 or q.shape != (m, int(np.prod(dims))):
                 raise ValueError(f"volume probabilities of shape {q.shape} do not fit {m} classes on a {dims} grid")
-            volumes = (q.astype(np.float32) / np.float32(255.0)).reshape(m, *dims)
+            volumes = from_bytes(q).reshape(m, *dims)
         elif mapping_for(feature_names) is not None or "volumes" in d:
             packed = d["volumes"]
             if packed.dtype != np.uint8 or packed.shape != (m, (int(np.prod(dims)) + 7) // 8):

@@ -16,23 +16,28 @@ from shared.scene import Grid, Scene
 __all__ = ["posture_voxels", "swept_volume", "pack_volumes", "unpack_volumes"]
 
 
+def _flat(points: np.ndarray, grid: Grid) -> np.ndarray:
+    """Flat C-order indices of the voxels containing ``points (..., 3)`` (points outside dropped; repeats kept).
+
+    Per-axis comparisons on the floored coordinates rather than an ``all`` over the last axis of an
+    ``(N, 3)`` index array: the same voxels, about 3x faster (the swept volumes' inner loop).
+    """
+    f = points.reshape(-1, 3) - grid.min
+    f /= grid.resolution
+    np.floor(f, out=f)
+    nx, ny, nz = grid.dims
+    x, y, z = f[:, 0], f[:, 1], f[:, 2]
+    ok = (x >= 0) & (x < nx) & (y >= 0) & (y < ny) & (z >= 0) & (z < nz)
+    return ((x[ok] * ny + y[ok]) * nz + z[ok]).astype(np.int64)
+
+
 def _mark(points: np.ndarray, grid: Grid, out: np.ndarray) -> None:
-    p = points.reshape(-1, 3)
-    idx = np.floor((p - grid.min) / grid.resolution).astype(np.int64)
-    dims = np.asarray(out.shape)
-    inside = np.all((idx >= 0) & (idx < dims), axis=1)
-    idx = idx[inside]
-    out[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    out.reshape(-1)[_flat(points, grid)] = True
 
 
 def posture_voxels(points: np.ndarray, grid: Grid) -> np.ndarray:
     """Flat C-order indices of the voxels containing any of ``points (..., 3)`` (unique, sorted)."""
-    p = points.reshape(-1, 3)
-    idx = np.floor((p - grid.min) / grid.resolution).astype(np.int64)
-    nx, ny, nz = grid.dims
-    inside = np.all((idx >= 0) & (idx < np.array([nx, ny, nz])), axis=1)
-    idx = idx[inside]
-    return np.unique((idx[:, 0] * ny + idx[:, 1]) * nz + idx[:, 2])
+    return np.unique(_flat(points, grid))
 
 
 def swept_volume(motion: np.ndarray, scene: Scene, grid: Grid, human: HumanModel | None = None,

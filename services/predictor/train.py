@@ -37,7 +37,7 @@ from .calibration import DEFAULT_FOLDS, TemperatureChoice, choose_temperature
 from .features import VARIANTS, FeatureEncoder
 from .gmm import GMMConfig, MixtureBank, fit_class_gmm
 from .gmr import gmr
-from .model import PredictionModel, TimedVolumes
+from .model import PredictionModel, TimedVolumes, quantised
 from .swept_volume import swept_volume
 from .volumes import DEFAULT_VOLUME, VOLUMES, Sweep, demos_volume, digest, spread_volume, sweep, timed_volume
 
@@ -179,11 +179,14 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     volumes = timed = None
     if mapping is not None and cfg.volume == "timed":
         timed = _timed_volumes(mapping, scene, grid, cfg, by_class, cache, progress)
+        timed = TimedVolumes(timed.support, quantised(timed.values), timed.time_bin)  # as its file holds it
         volumes = np.zeros((library.n_classes, int(np.prod(grid.dims))), np.float32)
         volumes[:, timed.support] = timed.values[:, 0]
         volumes = volumes.reshape(library.n_classes, *grid.dims)
     elif mapping is not None:
         volumes = _class_volumes(bank, lengths, encoder, mapping, scene, grid, cfg, by_class, cache, progress)
+        if cfg.volume != "paper":
+            volumes = quantised(volumes)  # probabilities as its file holds them: a model equals its saved copy
     t_max = max(lengths)
     padded = np.zeros((library.n_classes, t_max, library.n_features))
     for m, mot in enumerate(motions):

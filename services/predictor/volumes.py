@@ -35,7 +35,7 @@ __all__ = ["VOLUMES", "DEFAULT_VOLUME", "Sweep", "sweep", "interpolate", "spread
            "demos_volume", "timed_volume", "digest"]
 
 VOLUMES = ("paper", "spread", "demos", "timed")
-DEFAULT_VOLUME = "paper"
+DEFAULT_VOLUME = "spread"
 SPREAD_SAMPLES = 16
 """Trajectories drawn per class for the ``spread`` volume."""
 

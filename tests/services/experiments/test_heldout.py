@@ -10,6 +10,7 @@ from services.experiments.switch import settle_step
 from services.predictor.gmm import GMMConfig
 from services.predictor.model import PredictionModel
 from services.predictor.train import TrainConfig, train_model
+from services.predictor.volumes import DEFAULT_VOLUME
 from shared.library import load_library
 from shared.scene import load_scene
 from shared.synthetic import generate_library
@@ -52,7 +53,7 @@ def test_held_out_models_are_cached_per_held_out_set(tmp_path):
     b = models.without([lib.by_class(0)[1]])
     assert a != b and models.without([lib.by_class(0)[0]]) == a
     model = PredictionModel.load(a)
-    assert model.meta["demos_per_class"][0] == 2 and model.volume_method == "paper"
+    assert model.meta["demos_per_class"][0] == 2 and model.volume_method == DEFAULT_VOLUME
     demos = HeldOutModels(lib, scene, tmp_path, components=2, volume="demos").without([lib.by_class(0)[0]])
     assert demos != a and PredictionModel.load(demos).volume_method == "demos"
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
 import pytest
 
 from services.predictor.gmm import GMMConfig
@@ -26,3 +29,11 @@ def scene() -> Scene:
 def small_model(small_library: MotionLibrary, scene: Scene) -> PredictionModel:
     cfg = TrainConfig(gmm=GMMConfig(n_components=4, max_iter=50), resolution=0.1, oversample=2)
     return train_model(small_library, scene, cfg, progress=False)
+
+
+@pytest.fixture(scope="session")
+def paper_model(small_model: PredictionModel) -> PredictionModel:
+    """``small_model`` with the paper's 0/1 volumes (stored bit-packed as ``volumes``; the trainer's default is
+    ``spread``): for the file-format tests of that layout."""
+    return dataclasses.replace(small_model, volumes=(small_model.volumes > 0).astype(np.float32),
+                               volume_method="paper")

@@ -111,7 +111,8 @@ def test_predictor_service_cli_refuses_in_one_line(wide_model, tmp_path, capsys)
     assert len(err) == 1 and "needs a model with swept volumes" in err[0]
 
 
-def test_model_files_without_feature_names_are_the_papers(small_model, tmp_path) -> None:
+def test_model_files_without_feature_names_are_the_papers(paper_model, tmp_path) -> None:
+    small_model = paper_model  # files written before feature_names held paper volumes only
     small_model.save(tmp_path / "m.npz")
     with np.load(tmp_path / "m.npz", allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
