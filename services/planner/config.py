@@ -40,8 +40,9 @@ class PlannerConfig:
     threads: int = opt(1, help="torch intra-op threads of the process (0: torch's default; >1 is slow on shared cores)")
     fused_cost: bool = opt(True, help="evaluate the PR2 cost with the fused kernel (same numbers as the reference "
                            "StateCost path, fewer ops)")
-    compile: bool = opt(True, help="torch.compile the fused cost (once at construction for the STOMP batch "
-                        "shape: ~10 s, ~1 s with inductor's disk cache; falls back to eager if it fails)")
+    compile: bool = opt(True, help="torch.compile the fused cost and STOMP's rollout and update steps (once at "
+                        "construction for the STOMP batch shape: ~10 s, ~1 s with inductor's disk cache; falls back "
+                        "to eager if it fails)")
     seed: int = opt(0, help="base seed of STOMP's exploration noise (per step and goal)")
     goals: list[str] = opt(default_factory=list, help="cup names to plan for, in order (empty: every cup)")
     integrate_costs: bool = opt(True, help="weight obstacle/human costs by each waypoint's time at the velocity "
@@ -57,7 +58,7 @@ class PlannerConfig:
     limit_tol: float = opt(1e-3, help="start configurations this far outside the limits are clamped, not refused")
     stomp: StompConfig = nested(
         StompConfig, help="STOMP, the optimiser of every goal's trajectory (its seed, device and dtype are the "
-        "planner's)", hide=("seed", "device", "dtype"),
+        "planner's)", hide=("seed", "device", "dtype", "compile"),
         field_help={"joint_noise_scale": "per-joint factors on noise_std (empty: velocity limits / their max)"})
     cost: CostConfig = nested(CostConfig, help="the costs STOMP minimises: smoothness weight, obstacle and human "
                               "occupancy terms")
@@ -86,7 +87,7 @@ class PlannerConfig:
         """``stomp`` with the planner's seed, device and dtype (``joint_noise_scale`` if not configured)."""
         scale = list(self.stomp.joint_noise_scale or joint_noise_scale or [])
         return dataclasses.replace(self.stomp, joint_noise_scale=scale, seed=self.seed, device=self.device,
-                                   dtype=self.dtype)
+                                   dtype=self.dtype, compile=self.compile)
 
 
 @dataclass

@@ -168,6 +168,7 @@ class Planner:
             self.fused = FusedCost(robot, cost, self.w_smooth, self._vmax, c.integrate_costs, compile=c.compile,
                                    grid=scene.grid)
             self.fused.warm_up(len(self.valid_index) * (c.stomp.rollouts + 1), c.stomp.waypoints)
+        self.stomp.warm_up(len(self.valid_index))
         self.step_index = 0
         self._prev: torch.Tensor | None = None  # (Kv, T, D) previous optimised trajectories
         self._prev_best: int | None = None  # index into the valid goals

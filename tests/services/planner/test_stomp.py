@@ -155,3 +155,24 @@ def test_anytime_interrupt_stops_after_min_iterations_with_the_same_prefix() -> 
     assert float(cut.cost[0]) < float(cost(q0).sum())
     never = stomp.optimize(q0, cost, interrupt=lambda: False, min_iterations=1)
     assert torch.equal(never.trajectories, full.trajectories)
+
+
+def test_compiled_steps_equal_eager() -> None:
+    """``compile``: the rollout and update steps as torch.compile graphs give eager's numbers to rounding."""
+    target = _bump_target()
+
+    def cost(q: torch.Tensor) -> torch.Tensor:
+        return ((q - target) ** 2).sum(-1) + _acc_cost(q, 1.0) + 0.2 * _blob(q[..., :2])
+
+    q0 = init_straight_lines(target[0], torch.stack([target[-1], target[-1] * 0.8]), T)
+    bounds = (-torch.ones(3) * 2, torch.ones(3) * 2)
+    runs = {flag: Stomp(StompConfig(iterations=30, noise_std=0.05, compile=flag), bounds) for flag in (False, True)}
+    for s in runs.values():
+        s.warm_up(2)
+    if not runs[True]._compile:
+        pytest.skip("torch.compile is not available here (no C++ compiler): STOMP fell back to eager")
+    eager, compiled = (runs[f].optimize(q0, cost) for f in (False, True))
+    assert runs[True]._compile  # still compiled after the run (no fallback midway)
+    torch.testing.assert_close(compiled.history, eager.history, rtol=1e-4, atol=1e-5)
+    torch.testing.assert_close(compiled.trajectories, eager.trajectories, rtol=1e-4, atol=1e-4)
+    assert float(compiled.history[-1].sum()) < 0.5 * float(compiled.history[0].sum())  # it did optimise
