@@ -9,8 +9,8 @@ paper's and says by how much they differ; docs/experiments.md explains the diffe
 class, recognition on 4 demonstrations per class, Table I with 1 demonstration x 2 seeds, the switch
 with 2 demonstrations, 20 STOMP iterations per step, the cost evaluated eagerly (no compile).
 The full report (the paper's protocol: 20 Gaussians, 5 demonstrations x 10 seeds, every
-demonstration of the class, 50 iterations) takes 53 minutes on 2 quiet cores
-(docs/experiments.md, "Run time").
+demonstration of the class, 50 iterations) takes about 10 minutes on 2 quiet cores
+(docs/experiments.md, "Run time"). ``--volume`` picks the held-out models' occupancy volume.
 """
 
 from __future__ import annotations

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import torch
 
 __all__ = ["StompConfig", "StompError", "StompResult", "Stomp", "finite_difference_matrix", "CostFn", "rollouts",
-           "update"]
+           "update", "with_ends"]
 
 log = logging.getLogger("foresight.planner")
 
@@ -158,10 +158,13 @@ def rollouts(theta: torch.Tensor, noise: torch.Tensor, start: torch.Tensor, goal
     """
     noisy = torch.clamp(theta[:, None] + noise, lower, upper)
     eps = noisy - theta[:, None]
-    interior = torch.cat([theta[:, None], noisy], 1)
+    return with_ends(torch.cat([theta[:, None], noisy], 1), start, goal), eps
+
+
+def with_ends(interior: torch.Tensor, start: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """``interior (K, R', N, D)`` free waypoints, ``start``, ``goal (K, 1, D)`` -> ``(K, R', N + 2, D)``."""
     k, r = interior.shape[:2]
-    q = torch.cat([start[:, None].expand(k, r, 1, -1), interior, goal[:, None].expand(k, r, 1, -1)], 2)
-    return q, eps
+    return torch.cat([start[:, None].expand(k, r, 1, -1), interior, goal[:, None].expand(k, r, 1, -1)], 2)
 
 
 def update(theta: torch.Tensor, eps: torch.Tensor, cost: torch.Tensor, best_cost: torch.Tensor,
@@ -328,10 +331,6 @@ class Stomp:
         best_cost = torch.full((k,), math.inf, device=self.device, dtype=self.dtype)
         history = []
 
-        def full(interior: torch.Tensor) -> torch.Tensor:  # (K, R', N, D) -> (K, R', T, D)
-            r = interior.shape[1]
-            return torch.cat([start[:, None].expand(k, r, 1, -1), interior, goal[:, None].expand(k, r, 1, -1)], 2)
-
         to_go = self.to_go if c.cost_to_go else None
         for it in range(c.iterations):
             # 1. noisy rollouts, clamped to the joint limits (eps is the noise actually applied)
@@ -345,13 +344,18 @@ class Stomp:
             if interrupt is not None and it + 1 >= min_iterations and it + 1 < c.iterations and interrupt():
                 break
 
-        total = self._nonfinite(self._cost(cost_fn, full(theta[:, None]), k, 1))[:, 0].sum(-1)
+        total = self._nonfinite(self._cost(cost_fn, with_ends(theta[:, None], start, goal), k, 1))[:, 0].sum(-1)
         history.append(total)
         better = total < best_cost
         best_cost = torch.where(better, total, best_cost)
         best_theta = torch.where(better[:, None, None], theta, best_theta)
         traj = torch.cat([start, best_theta, goal], 1)
         return StompResult(traj, best_cost, torch.stack(history))
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the rollout and update steps run compiled (``config.compile`` and no fallback so far)."""
+        return self._compile
 
     def warm_up(self, k: int) -> None:
         """With ``config.compile``: compile the rollout and update steps for K goals now (not in the first step)."""

@@ -169,10 +169,10 @@ def test_compiled_steps_equal_eager() -> None:
     runs = {flag: Stomp(StompConfig(iterations=30, noise_std=0.05, compile=flag), bounds) for flag in (False, True)}
     for s in runs.values():
         s.warm_up(2)
-    if not runs[True]._compile:
+    if not runs[True].compiled:
         pytest.skip("torch.compile is not available here (no C++ compiler): STOMP fell back to eager")
     eager, compiled = (runs[f].optimize(q0, cost) for f in (False, True))
-    assert runs[True]._compile  # still compiled after the run (no fallback midway)
+    assert runs[True].compiled  # still compiled after the run (no fallback midway)
     torch.testing.assert_close(compiled.history, eager.history, rtol=1e-4, atol=1e-5)
     torch.testing.assert_close(compiled.trajectories, eager.trajectories, rtol=1e-4, atol=1e-4)
     assert float(compiled.history[-1].sum()) < 0.5 * float(compiled.history[0].sum())  # it did optimise
