@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import faulthandler
+import gc
 import logging
 import os
 import signal
@@ -17,7 +18,7 @@ from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolv
 from shared.native_threads import limit_blas_threads
 
 __all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError", "service_main", "help_text",
-           "SHUTDOWN_GRACE_S", "FORCED_EXIT"]
+           "freeze_startup_heap", "SHUTDOWN_GRACE_S", "FORCED_EXIT"]
 
 SHUTDOWN_GRACE_S = 10.0
 """Seconds a process may take to stop after SIGINT/SIGTERM before it exits anyway (:func:`stop_on_signals`)."""
@@ -108,6 +109,20 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Call
     return restore
 
 
+def freeze_startup_heap() -> int:
+    """Move every object alive now out of the garbage collector's reach (``gc.freeze``); returns their count.
+
+    A service imports torch, builds its models and compiles its kernels before it serves: about a
+    million long-lived objects that every full (generation 2) collection would walk again. Measured
+    in ``foresight demo --mode realtime`` (2026-11-25): such collections stopped the planner for up to
+    0.2 s and the executor for 0.1 s in mid-run, the reaction-time outliers of ``foresight log latency``.
+    Frozen, they are never scanned; what the service allocates while it serves is collected as usual.
+    """
+    gc.collect()
+    gc.freeze()
+    return gc.get_freeze_count()
+
+
 def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls: type, description: str,
                  make: Callable[[Any, ZenohConfig, threading.Event], Callable[[], Any]]) -> int:
     """The ``main`` of every service: options, logging, one-line errors, SIGINT/SIGTERM, run.
@@ -134,7 +149,10 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
         setup_logging(cfg.log_level)
         restore = stop_on_signals(stop)
         try:
-            make(cfg, zcfg, stop)()
+            run = make(cfg, zcfg, stop)
+            logging.getLogger("foresight").debug("%d start-up objects frozen out of the garbage collector",
+                                                 freeze_startup_heap())
+            run()
         finally:
             restore()
     return 0

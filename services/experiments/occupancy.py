@@ -20,6 +20,7 @@ demonstration among the ~200, is the only thing the model knows of it).
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -154,11 +155,15 @@ def _executed(n: int) -> np.ndarray:
 def _evaluate(library: MotionLibrary, scene: Scene, cfg: TrainConfig, methods: tuple[str, ...],
               held: list[Demonstration], cache: dict[str, Any], example: tuple[int, int] | None
               ) -> list[tuple[np.ndarray, dict[str, np.ndarray] | None]]:
-    """Score held-out demonstrations (one worker's share); ``(M methods, F, 3)`` per demo and the example's views."""
+    """Score held-out demonstrations (one worker's share); ``(M methods, F, 3)`` per demo and the example's views.
+
+    Prints one progress line per demonstration to stderr (a worker process's output reaches the terminal).
+    """
     human = HumanModel()
     out = []
+    t0 = time.perf_counter()
     with threadpool_limits(1):
-        for demo in held:
+        for n, demo in enumerate(held, 1):
             demos = [d for d in library.demos if (d.label, d.index) != (demo.label, demo.index)]
             cores = [PredictorCore(train_model(library, scene, replace(cfg, volume=v), demos, progress=False,
                                                fit_cache=cache), scene) for v in methods]
@@ -188,6 +193,8 @@ def _evaluate(library: MotionLibrary, scene: Scene, cfg: TrainConfig, methods: t
                             t.reshape(grid.dims).any(axis=2)
                     k += 1
             out.append((scores, views))
+            print(f"  held out {demo.class_name} #{demo.index}: {n}/{len(held)} of this worker's share "
+                  f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
     return out
 
 

@@ -52,8 +52,9 @@ class PlannerConfig:
     velocity_scale: float = opt(0.5, help="fraction of the joint velocity limits used to time trajectories")
     min_dt: float = opt(0.01, help="smallest time between waypoints (s)")
     goal_tol: float = opt(1e-3, help="a goal this close (joint-space norm) to q_t is reached: its trajectory holds it")
-    anytime_min_iterations: int = opt(0, help="anytime: with a newer input waiting, stop STOMP after this many "
-                                      "iterations (0: always run stomp.iterations; real-time event mode only)")
+    anytime_min_iterations: int = opt(10, help="anytime: with a newer input waiting, stop STOMP after this many "
+                                      "iterations (0: always run stomp.iterations; real time only, lock-step "
+                                      "always runs them all)")
     off_path_tol: float = opt(0.05, help="joint-space distance beyond which the robot is taken as off tau_best")
     limit_tol: float = opt(1e-3, help="start configurations this far outside the limits are clamped, not refused")
     stomp: StompConfig = nested(

@@ -327,7 +327,7 @@ class Stomp:
         noise = self.sample_noise(k, seeds)  # (I, K, R, N, D)
         start, goal = q0[:, :1].contiguous(), q0[:, -1:].contiguous()  # (K, 1, D)
         theta = q0[:, 1:-1].contiguous()  # (K, N, D) the free waypoints (contiguous: one compiled layout)
-        best_theta = theta
+        best_theta = theta.clone()  # never the same tensor as theta: one compiled graph (dynamo guards aliasing)
         best_cost = torch.full((k,), math.inf, device=self.device, dtype=self.dtype)
         history = []
 
@@ -365,10 +365,11 @@ class Stomp:
         theta = ((self.lower + self.upper) / 2).expand(k, n, self.dof).contiguous()
         ends = theta[:, :1].contiguous()
         noise = torch.zeros(k, c.rollouts, n, self.dof, device=self.device, dtype=self.dtype)
-        _, eps = self._step("rollouts", theta, noise, ends, ends, self.lower, self.upper)
+        _, eps = self._step("rollouts", theta, noise, ends, ends.clone(), self.lower, self.upper)  # distinct, as in
+        # optimize: dynamo guards aliasing between arguments, so an aliased warm-up would compile another graph
         cost = torch.zeros(k, c.rollouts + 1, c.waypoints, device=self.device, dtype=self.dtype)
         best = torch.full((k,), math.inf, device=self.device, dtype=self.dtype)
-        self._step("update", theta, eps, cost, best, theta, self.lower, self.upper, self.M,
+        self._step("update", theta, eps, cost, best, theta.clone(), self.lower, self.upper, self.M,
                    self.to_go if c.cost_to_go else None, c.sensitivity)
 
     def _step(self, name: str, *args: object) -> tuple[torch.Tensor, ...]:
