@@ -359,7 +359,7 @@ class Stomp:
 
     def warm_up(self, k: int) -> None:
         """With ``config.compile``: compile the rollout and update steps for K goals now (not in the first step)."""
-        if not self._compile:
+        if not self._compile or k < 1:  # no goal to plan for: nothing to compile
             return
         c, n = self.config, self.config.waypoints - 2
         theta = ((self.lower + self.upper) / 2).expand(k, n, self.dof).contiguous()
