@@ -117,6 +117,10 @@ def freeze_startup_heap() -> int:
     in ``foresight demo --mode realtime`` (2026-11-25): such collections stopped the planner for up to
     0.2 s and the executor for 0.1 s in mid-run, the reaction-time outliers of ``foresight log latency``.
     Frozen, they are never scanned; what the service allocates while it serves is collected as usual.
+    Called by :func:`service_main` only (a process's own entry point), never in-process.
+
+    Returns:
+        The number of objects frozen.
     """
     gc.collect()
     gc.freeze()

@@ -51,8 +51,8 @@ def _common(p: argparse.ArgumentParser, scene: str) -> None:
                    "models (foresight train --volume; default: the trainer's)")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
-    p.add_argument("--no-compile", action="store_true", help="evaluate the planner's cost eagerly (no "
-                   "torch.compile)")
+    p.add_argument("--no-compile", action="store_true", help="run the planner's cost and STOMP's steps "
+                   "eagerly (no torch.compile)")
     p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
 
 
@@ -140,7 +140,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20, the paper's)")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
-    p.add_argument("--no-compile", action="store_true", help="evaluate the planner's cost eagerly")
+    p.add_argument("--no-compile", action="store_true", help="run the planner's cost and STOMP's steps eagerly")
     p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
     from .report import add_report_arguments
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -153,11 +154,12 @@ def _executed(n: int) -> np.ndarray:
 
 
 def _evaluate(library: MotionLibrary, scene: Scene, cfg: TrainConfig, methods: tuple[str, ...],
-              held: list[Demonstration], cache: dict[str, Any], example: tuple[int, int] | None
-              ) -> list[tuple[np.ndarray, dict[str, np.ndarray] | None]]:
+              held: list[Demonstration], cache: dict[str, Any], example: tuple[int, int] | None,
+              verbose: bool = True) -> list[tuple[np.ndarray, dict[str, np.ndarray] | None]]:
     """Score held-out demonstrations (one worker's share); ``(M methods, F, 3)`` per demo and the example's views.
 
-    Prints one progress line per demonstration to stderr (a worker process's output reaches the terminal).
+    With ``verbose``, one progress line per demonstration on stderr (a worker process's output reaches the
+    terminal; a callable would have to be pickled to the worker).
     """
     human = HumanModel()
     out = []
@@ -193,8 +195,9 @@ def _evaluate(library: MotionLibrary, scene: Scene, cfg: TrainConfig, methods: t
                             t.reshape(grid.dims).any(axis=2)
                     k += 1
             out.append((scores, views))
-            print(f"  held out {demo.class_name} #{demo.index}: {n}/{len(held)} of this worker's share "
-                  f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+            if verbose:
+                print(f"  held out {demo.class_name} #{demo.index}: {n}/{len(held)} of this worker's share "
+                      f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
     return out
 
 
@@ -214,18 +217,20 @@ def _sweep_demo(features: np.ndarray, scene: Scene, grid: Grid, cfg: TrainConfig
 
 
 def run_occupancy(library: MotionLibrary, scene: Scene, config: OccupancyConfig | None = None,
-                  progress=print) -> OccupancyResult:
+                  progress: Callable[[str], object] | None = print) -> OccupancyResult:
     """Run the leave-one-out occupancy evaluation.
 
     Args:
         library: Motion library (>= 2 demonstrations per class, features with a human-model mapping).
         scene: The scene the volumes are placed in.
         config: Options.
-        progress: Called with one line per stage.
+        progress: Called with one line per stage (None: silent, also the workers' per-demonstration lines).
 
     Returns:
         The measures per method and executed fraction.
     """
+    verbose = progress is not None
+    progress = progress or (lambda _line: None)
     c = config or OccupancyConfig()
     bad = [v for v in c.methods if v not in VOLUMES]
     if bad or not c.methods:
@@ -256,7 +261,7 @@ def run_occupancy(library: MotionLibrary, scene: Scene, config: OccupancyConfig 
     progress(f"{len(held)} held-out demonstrations x {len(c.methods)} volume methods on {c.n_jobs} workers ...")
     chunks = [held[i::c.n_jobs] for i in range(c.n_jobs)]
     parts = Parallel(n_jobs=c.n_jobs)(delayed(_evaluate)(library, scene, cfg, c.methods, ch, cache,
-                                                         (ex.label, ex.index)) for ch in chunks if ch)
+                                                         (ex.label, ex.index), verbose) for ch in chunks if ch)
     order = [d for ch in chunks if ch for d in ch]
     results = {(d.label, d.index): r for d, r in zip(order, [r for p in parts for r in p], strict=True)}
     scores = np.stack([results[(d.label, d.index)][0] for d in held])              # (N, methods, F, 3)

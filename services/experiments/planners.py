@@ -67,7 +67,7 @@ def build_planner(scene: Scene, goals: list[str], human_cost: bool, timing: Timi
         goals: Cup names, the robot's tasks.
         human_cost: False: basic STOMP (no human cost).
         timing: Iterations and robot speed.
-        compile: torch.compile the fused cost.
+        compile: torch.compile the fused cost and STOMP's steps.
         device: torch device.
         w_human: Weight of the human cost when ``human_cost`` (None: ``CostConfig``'s default).
     """

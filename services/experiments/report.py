@@ -151,7 +151,7 @@ def _switch_section(res: SwitchResult, png: Path) -> list[str]:
     return lines
 
 
-def _prediction_ms(lib: MotionLibrary, models_dir: Path, components: int) -> dict[str, float]:
+def _prediction_ms(lib: MotionLibrary, models_dir: Path, components: int, volume: str) -> dict[str, float]:
     """Median and p90 ms of one predictor update (pose -> occupancy), over one demonstration per class."""
     from services.predictor.core import PredictorCore
     from services.predictor.model import PredictionModel
@@ -159,7 +159,7 @@ def _prediction_ms(lib: MotionLibrary, models_dir: Path, components: int) -> dic
     from .heldout import HeldOutModels
 
     scene = load_scene(TABLE1_SCENE)
-    model = PredictionModel.load(HeldOutModels(lib, scene, models_dir, components).without([]))
+    model = PredictionModel.load(HeldOutModels(lib, scene, models_dir, components, volume).without([]))
     core = PredictorCore(model, scene)
     times = []
     for m in range(lib.n_classes):
@@ -212,7 +212,7 @@ def library_section(spec: str, plan: ReportPlan, out: Path, models_dir: Path, n_
                *_switch_section(mirrored, png3)]
     data = {"recognition": rec, "interference": t1.to_json(), "switch": sw.to_json(),
             "switch_mirrored": mirrored.to_json() if mirrored is not None else None,
-            "prediction_ms": _prediction_ms(lib, models_dir, plan.components),
+            "prediction_ms": _prediction_ms(lib, models_dir, plan.components, volume),
             "planning_ms": {"K=1": [r.planning_ms for r in t1.runs],
                             "K=2": [r.planning_ms for r in sw.runs + (mirrored.runs if mirrored else [])]}}
     return md, data

@@ -261,7 +261,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
     p.add_argument("--threads", type=int, default=1, help="torch threads (0: torch's default)")
     p.add_argument("--device", default="cpu")
     p.add_argument("--compile", action=argparse.BooleanOptionalAction, default=True,
-                   help="torch.compile the fused cost (default on, as PlannerConfig)")
+                   help="torch.compile the fused cost and STOMP's steps (default on, as PlannerConfig)")
     p.add_argument("--baseline", action="store_true",
                    help="also time the unfused reference cost path (StateCost, eager) in the same process")
     p.add_argument("--profile", action="store_true", help="also print a torch.profiler table of a K=2 step")

@@ -15,7 +15,7 @@ no host synchronisation (no ``.item()``, no data-dependent branching), so it run
 Each goal draws its exploration noise from its own ``torch.Generator`` seeded per goal, so a batch of
 K goals gives the same result as K separate runs with the same seeds.
 
-Steps 1 and 3-4 are two pure tensor functions (:func:`rollouts`, :func:`update`); with
+Step 1 and steps 2-4 after the cost call are two pure tensor functions (:func:`rollouts`, :func:`update`); with
 ``StompConfig.compile`` each is one ``torch.compile``-d graph (about 20 small eager ops per iteration
 become two calls: on a CPU, where an eager op costs 5-20 us, that is most of what an iteration spends
 outside the cost). Compiled and eager give the same numbers to float rounding (tested).
@@ -354,7 +354,10 @@ class Stomp:
 
     @property
     def compiled(self) -> bool:
-        """Whether the rollout and update steps run compiled (``config.compile`` and no fallback so far)."""
+        """Whether the rollout and update steps go through ``torch.compile`` (``config.compile``, no fallback so far).
+
+        A shape beyond torch's recompile limit runs eagerly inside the compiled wrapper without changing this.
+        """
         return self._compile
 
     def warm_up(self, k: int) -> None:

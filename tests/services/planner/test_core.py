@@ -52,7 +52,7 @@ def blob_grid(scene, center=(0.5, -0.2, 1.0), sigma=0.12) -> np.ndarray:
 def toy_planner(scene, **cfg) -> Planner:
     goals = GoalSet.joint_space(["a", "b"], [[1.0, -0.2], [0.9, 0.2]], ToyRobot)
     stomp = {k: cfg.pop(k) for k in list(cfg) if k in {f.name for f in dataclasses.fields(StompConfig)}}
-    config = PlannerConfig(**cfg, stomp=StompConfig(**{"noise_std": 0.1, **stomp}))
+    config = PlannerConfig(**{"compile": False, **cfg}, stomp=StompConfig(**{"noise_std": 0.1, **stomp}))
     return Planner(scene, config, robot=ToyRobot(), cost=ToyCost(), goals=goals, w_smooth=5.0)
 
 
@@ -146,7 +146,7 @@ def test_occupancy_message_equals_dense(scene) -> None:
 def test_invalid_goals_are_reported_and_never_chosen(scene) -> None:
     goals = GoalSet.joint_space(["in", "out", "nan"], [[1.0, -0.2], [2.0, 0.0], [np.nan, 0.0]], ToyRobot)
     assert goals.valid.tolist() == [True, False, False] and "outside the joint limits" in goals.reasons[1]
-    config = PlannerConfig(stomp=StompConfig(iterations=5))
+    config = PlannerConfig(compile=False, stomp=StompConfig(iterations=5))
     planner = Planner(scene, config, robot=ToyRobot(), cost=ToyCost(), goals=goals)
     res = planner.step([0.0, -0.2], blob_grid(scene))
     assert res.valid.tolist() == [True, False, False] and res.chosen == 0

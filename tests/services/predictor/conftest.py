@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
 import pytest
 
 from services.predictor.gmm import GMMConfig
@@ -25,15 +24,18 @@ def scene() -> Scene:
     return load_scene(None)
 
 
+SMALL = TrainConfig(gmm=GMMConfig(n_components=4, max_iter=50), resolution=0.1, oversample=2)
+_FITS: dict = {}  # the two models below share their class mixtures
+
+
 @pytest.fixture(scope="session")
 def small_model(small_library: MotionLibrary, scene: Scene) -> PredictionModel:
-    cfg = TrainConfig(gmm=GMMConfig(n_components=4, max_iter=50), resolution=0.1, oversample=2)
-    return train_model(small_library, scene, cfg, progress=False)
+    """The trainer's default volume (``spread``)."""
+    return train_model(small_library, scene, SMALL, progress=False, fit_cache=_FITS)
 
 
 @pytest.fixture(scope="session")
-def paper_model(small_model: PredictionModel) -> PredictionModel:
-    """``small_model`` with the paper's 0/1 volumes (stored bit-packed as ``volumes``; the trainer's default is
-    ``spread``): for the file-format tests of that layout."""
-    return dataclasses.replace(small_model, volumes=(small_model.volumes > 0).astype(np.float32),
-                               volume_method="paper")
+def paper_model(small_library: MotionLibrary, scene: Scene) -> PredictionModel:
+    """The same mixtures with the paper's volume (0/1 along the mean motion, stored bit-packed as ``volumes``)."""
+    return train_model(small_library, scene, dataclasses.replace(SMALL, volume="paper"), progress=False,
+                       fit_cache=_FITS)
