@@ -119,10 +119,10 @@ def test_fuzz_every_key_during_a_lockstep_run(run_system):
         pose = templates[keys.pose]
         templates.setdefault(keys.demo, DemoMarker(stamp=pose.stamp, tick=pose.tick, demo_id=pose.demo_id,
                                                    event="end", true_class=1, class_name="red_cup", n_samples=100))
+        t_fuzz_start = time.time()
         with fuzz_session(system.services["planner"].zenoh) as fz:
             sent = publish_fuzz(fz, templates, LOCKSTEP_ROUNDS, seed=10, keep=refused_in_any_mode,
                                 progress=lambda: executor.rejects.counts.get(keys.clock, 0), pace_key=keys.clock)
-        t_fuzz_end = time.time()
         result = system.executor_result()
         watcher.undeclare()
     assert {p.tick for p in rec.snapshot()[0]} == set(range(steps)), "the run completes with a plan per step"
@@ -135,8 +135,10 @@ def test_fuzz_every_key_during_a_lockstep_run(run_system):
     log = read_log(result.mcap_path, keep=lambda c: True)
     logged = {(m.topic, hashlib.sha1(m.data).digest()) for m in log.messages if m.topic in sent}
     assert not logged & {(k, c.digest) for k, cases in fuzz.items() for c in cases}, "a fuzz payload was logged"
-    assert [m for m in log.messages if m.topic == keys.clock and m.log_time / 1e9 > t_fuzz_end], \
-        "clock ticks flow (and are answered) after the fuzz"
+    ticks = [m.log_time / 1e9 for m in log.messages if m.topic == keys.clock]
+    # the run goes on through the fuzz: ticks after it or, when the run (asserted complete above) ends first on a
+    # fast machine, its last tick during it
+    assert ticks and max(ticks) > t_fuzz_start, "clock ticks flow (and are answered) during the fuzz"
     for name, keys_of in (("planner", (keys.robot_state, keys.occupancy, keys.clock, keys.demo)),
                           ("predictor", (keys.pose, keys.demo)), ("replayer", (keys.clock,))):
         counts = system.services[name].rejects.counts
