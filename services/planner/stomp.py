@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import torch
 
 __all__ = ["StompConfig", "StompError", "StompResult", "Stomp", "finite_difference_matrix", "CostFn", "rollouts",
-           "update", "with_ends"]
+           "update", "with_ends", "finite"]
 
 log = logging.getLogger("foresight.planner")
 
@@ -167,6 +167,11 @@ def with_ends(interior: torch.Tensor, start: torch.Tensor, goal: torch.Tensor) -
     return torch.cat([start[:, None].expand(k, r, 1, -1), interior, goal[:, None].expand(k, r, 1, -1)], 2)
 
 
+def finite(cost: torch.Tensor) -> torch.Tensor:
+    """``cost`` (any shape) with NaN/inf replaced by a very large finite cost (such a rollout is never preferred)."""
+    return torch.nan_to_num(cost, nan=_NONFINITE_COST, posinf=_NONFINITE_COST, neginf=-_NONFINITE_COST)
+
+
 def update(theta: torch.Tensor, eps: torch.Tensor, cost: torch.Tensor, best_cost: torch.Tensor,
            best_theta: torch.Tensor, lower: torch.Tensor, upper: torch.Tensor, m: torch.Tensor,
            to_go: torch.Tensor | None, sensitivity: float
@@ -188,7 +193,7 @@ def update(theta: torch.Tensor, eps: torch.Tensor, cost: torch.Tensor, best_cost
     Returns:
         ``(theta', total (K,) cost of theta, best_cost', best_theta')``.
     """
-    cost = torch.nan_to_num(cost, nan=_NONFINITE_COST, posinf=_NONFINITE_COST, neginf=-_NONFINITE_COST)
+    cost = finite(cost)
     total = cost[:, 0].sum(-1)  # (K,)
     better = total < best_cost
     best_cost = torch.where(better, total, best_cost)
@@ -344,7 +349,7 @@ class Stomp:
             if interrupt is not None and it + 1 >= min_iterations and it + 1 < c.iterations and interrupt():
                 break
 
-        total = self._nonfinite(self._cost(cost_fn, with_ends(theta[:, None], start, goal), k, 1))[:, 0].sum(-1)
+        total = finite(self._cost(cost_fn, with_ends(theta[:, None], start, goal), k, 1))[:, 0].sum(-1)
         history.append(total)
         better = total < best_cost
         best_cost = torch.where(better, total, best_cost)
@@ -368,8 +373,8 @@ class Stomp:
         theta = ((self.lower + self.upper) / 2).expand(k, n, self.dof).contiguous()
         ends = theta[:, :1].contiguous()
         noise = torch.zeros(k, c.rollouts, n, self.dof, device=self.device, dtype=self.dtype)
-        _, eps = self._step("rollouts", theta, noise, ends, ends.clone(), self.lower, self.upper)  # distinct, as in
-        # optimize: dynamo guards aliasing between arguments, so an aliased warm-up would compile another graph
+        # distinct tensors as in optimize: dynamo guards aliasing between arguments (an aliased call is another graph)
+        _, eps = self._step("rollouts", theta, noise, ends, ends.clone(), self.lower, self.upper)
         cost = torch.zeros(k, c.rollouts + 1, c.waypoints, device=self.device, dtype=self.dtype)
         best = torch.full((k,), math.inf, device=self.device, dtype=self.dtype)
         self._step("update", theta, eps, cost, best, theta.clone(), self.lower, self.upper, self.M,
@@ -385,10 +390,6 @@ class Stomp:
                             type(exc).__name__, str(exc).splitlines()[0] if str(exc) else "")
                 self._compile = False
         return (rollouts if name == "rollouts" else update)(*args)
-
-    @staticmethod
-    def _nonfinite(cost: torch.Tensor) -> torch.Tensor:
-        return torch.nan_to_num(cost, nan=_NONFINITE_COST, posinf=_NONFINITE_COST, neginf=-_NONFINITE_COST)
 
     def _cost(self, cost_fn: CostFn, q: torch.Tensor, k: int, r: int) -> torch.Tensor:
         cost = cost_fn(q)

@@ -55,27 +55,25 @@ def test_model_rejects_wrong_version_corrupt_and_missing(paper_model: Prediction
 
 
 def test_swept_volume_contains_regressed_hand_path(paper_model: PredictionModel, scene) -> None:
-    small_model = paper_model  # the paper's volume is the body swept along the regressed (mean) motion
     human = HumanModel()
-    for m in range(small_model.n_classes):
-        mot = small_model.motion(m)
+    for m in range(paper_model.n_classes):
+        mot = paper_model.motion(m)
         hand = human.hand_position(place_in_scene(mot, mot[0], scene))
-        idx, inside = small_model.grid.index(hand)
+        idx, inside = paper_model.grid.index(hand)
         assert inside.all()
-        assert small_model.volumes[m][idx[:, 0], idx[:, 1], idx[:, 2]].all()
+        assert paper_model.volumes[m][idx[:, 0], idx[:, 1], idx[:, 2]].all()
 
 
 def test_swept_volume_contains_demo_hand_positions(paper_model: PredictionModel, small_library, scene) -> None:
     """Every demonstration's hand stays within one voxel of its class's (paper) swept volume."""
-    small_model = paper_model
     from scipy.ndimage import binary_dilation
 
     human = HumanModel()
-    for m in range(small_model.n_classes):
-        vol = binary_dilation(small_model.volumes[m], iterations=1)
+    for m in range(paper_model.n_classes):
+        vol = binary_dilation(paper_model.volumes[m], iterations=1)
         for d in small_library.by_class(m):
             hand = human.hand_position(place_in_scene(d.features, d.features[0], scene))
-            idx, inside = small_model.grid.index(hand)
+            idx, inside = paper_model.grid.index(hand)
             assert inside.all()
             assert vol[idx[:, 0], idx[:, 1], idx[:, 2]].mean() >= 0.95
 

@@ -112,15 +112,14 @@ def test_predictor_service_cli_refuses_in_one_line(wide_model, tmp_path, capsys)
 
 
 def test_model_files_without_feature_names_are_the_papers(paper_model, tmp_path) -> None:
-    small_model = paper_model  # files written before feature_names held paper volumes only
-    small_model.save(tmp_path / "m.npz")
+    paper_model.save(tmp_path / "m.npz")
     with np.load(tmp_path / "m.npz", allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
-    assert tuple(arrays.pop("feature_names").tolist()) == small_model.feature_names
+    assert tuple(arrays.pop("feature_names").tolist()) == paper_model.feature_names
     np.savez(tmp_path / "old.npz", **arrays)  # a file written before feature_names existed
     old = PredictionModel.load(tmp_path / "old.npz")
-    assert old.feature_names == small_model.feature_names and old.volumes is not None
-    np.testing.assert_array_equal(old.volumes, small_model.volumes)
+    assert old.feature_names == paper_model.feature_names and old.volumes is not None
+    np.testing.assert_array_equal(old.volumes, paper_model.volumes)
     del arrays["volumes"]  # the paper's features have a mapping: the volumes must be there
     np.savez(tmp_path / "broken.npz", **arrays)
     with pytest.raises(ModelError, match="inconsistent.*volumes"):
