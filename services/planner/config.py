@@ -47,6 +47,9 @@ class PlannerConfig:
     goals: list[str] = opt(default_factory=list, help="cup names to plan for, in order (empty: every cup)")
     integrate_costs: bool = opt(True, help="weight obstacle/human costs by each waypoint's time at the velocity "
                                 "limits (else sum them per waypoint)")
+    goal_dwell_s: float = opt(1.0, help="with integrate_costs: seconds the robot is charged for the predicted "
+                              "occupancy at its goal, where it stays to grasp (a held goal inside the human's "
+                              "volume is not free; 0: off)")
     lookahead_s: float = opt(0.5, help="time the robot executes tau_best while a step is planned (s; the service "
                              "uses 0 in lock-step mode)")
     velocity_scale: float = opt(0.5, help="fraction of the joint velocity limits used to time trajectories")
@@ -75,6 +78,7 @@ class PlannerConfig:
         except ValueError as exc:
             raise ConfigError(f"planner.cost.{str(exc).removeprefix('costs.')}") from None
         checks = [("threads", self.threads >= 0), ("lookahead_s", self.lookahead_s >= 0),
+                  ("goal_dwell_s", self.goal_dwell_s >= 0),
                   ("anytime_min_iterations", self.anytime_min_iterations >= 0),
                   ("velocity_scale", 0 < self.velocity_scale <= 1), ("min_dt", self.min_dt > 0),
                   ("off_path_tol", self.off_path_tol >= 0), ("limit_tol", self.limit_tol >= 0),

@@ -166,7 +166,7 @@ class Planner:
         self.fused: FusedCost | None = None
         if c.fused_cost and supports(robot, cost):
             self.fused = FusedCost(robot, cost, self.w_smooth, self._vmax, c.integrate_costs, compile=c.compile,
-                                   grid=scene.grid)
+                                   grid=scene.grid, dwell=c.goal_dwell_s)
             self.fused.warm_up(len(self.valid_index) * (c.stomp.rollouts + 1), c.stomp.waypoints)
         self.stomp.warm_up(len(self.valid_index))
         self.step_index = 0
@@ -187,8 +187,9 @@ class Planner:
         Returns:
             ``(..., T)`` seconds: half of each adjacent segment's duration, a segment taking
             ``max_j |dq_j| / (velocity_scale * v_j)``. With ``integrate_costs`` the state costs are
-            weighted by it, so they integrate over the path (a detour or a loop costs more, a
-            trajectory holding still costs nothing), instead of counting waypoints.
+            weighted by it, so they integrate over the path (a detour or a loop costs more),
+            instead of counting waypoints; the human term's last waypoint also counts ``goal_dwell_s``
+            (the robot stays at its goal: holding still inside the human's volume is not free).
         """
         seg = ((q[..., 1:, :] - q[..., :-1, :]).abs() / self._vmax).amax(-1)  # (..., T-1)
         return 0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0)))
@@ -197,7 +198,9 @@ class Planner:
         """``(K, R, T, D)`` -> ``(K, R, T, 2)`` obstacle and human terms, time-weighted if configured."""
         terms = self.cost(q)
         if self.config.integrate_costs:
-            terms = terms * self.waypoint_time(q)[..., None]
+            dt = self.waypoint_time(q)[..., None].expand_as(terms).clone()
+            dt[..., -1, 1] += self.config.goal_dwell_s  # the human term at the goal: the time staying there
+            terms = terms * dt
         return terms
 
     def waypoint_cost(self, q: torch.Tensor) -> torch.Tensor:

@@ -150,7 +150,8 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
         s: Static scalars (inverse resolutions, margins, weights, slices, flags).
 
     Returns:
-        ``(3, N, T)``: smoothness, obstacle, human per waypoint (weighted; state terms time-weighted).
+        ``(3, N, T)``: smoothness, obstacle, human per waypoint (weighted; with ``integrate`` the state terms
+        times the waypoint time, the human's at the last waypoint plus ``dwell`` seconds).
     """
     n, t, d = q.shape
     b = n * t
@@ -203,7 +204,12 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
     state = torch.stack([s["w_obstacle"] * obstacle, s["w_human"] * human]).view(2, n, t)
     if s["integrate"]:
         seg = ((q[:, 1:] - q[:, :-1]).abs() * inv_vmax).amax(-1)  # (N, T - 1)
-        state = state * (0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0))))
+        dt = 0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0)))
+        if s["dwell"] > 0:  # the goal's occupancy for the time the robot stays there
+            state = torch.stack([state[0] * dt, state[1] * (dt + F.pad(torch.zeros_like(seg), (0, 1),
+                                                                          value=s["dwell"]))])
+        else:
+            state = state * dt
     smooth = s["w_smooth"] * acceleration_cost(q)
     return torch.cat([smooth[None], state], 0)
 
@@ -217,6 +223,8 @@ class FusedCost:
         w_smooth: Weight of the squared accelerations.
         vmax: ``(D,)`` scaled velocity limits (waypoint times).
         integrate: Weight the state terms by the waypoint times (``PlannerConfig.integrate_costs``).
+        dwell: With ``integrate``, seconds added to the last waypoint's time in the human term
+            (``PlannerConfig.goal_dwell_s``).
         compile: ``torch.compile`` the kernel (call :meth:`warm_up` with the batch size to compile for).
         grid: The occupancy grid geometry expected (``shared.scene.Grid``, e.g. the scene's): "no occupancy"
             is then a zero grid of the same shape, so the compiled kernel keeps one shape.
@@ -225,7 +233,8 @@ class FusedCost:
     """
 
     def __init__(self, robot: PR2, cost: StateCost, w_smooth: float, vmax: torch.Tensor, integrate: bool,
-                 compile: bool = False, grid: Grid | None = None, pair_loop: bool | None = None) -> None:
+                 compile: bool = False, grid: Grid | None = None, pair_loop: bool | None = None,
+                 dwell: float = 0.0) -> None:
         if not supports(robot, cost):
             raise ValueError("FusedCost needs a PR2 StateCost with lift tables, 1 point per sphere, trilinear")
         self.robot, self.cost = robot, cost
@@ -276,7 +285,8 @@ class FusedCost:
                             lift_n=int(lift.n), self=bool(cost.has_self),
                             a0=robot.arm_slice.start - arm.start, a1=robot.arm_slice.stop - arm.start,
                             self_eps=max(float(cfg.self_clearance), 1e-6), w_obstacle=float(cfg.w_obstacle),
-                            w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate))
+                            w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate),
+                            dwell=float(dwell) if integrate else 0.0)
         if grid is None:
             zeros, first, inv_res = torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0
         else:  # the zero-padded shape and geometry of a real occupancy on `grid` (see VoxelTables.from_grid)

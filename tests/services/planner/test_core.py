@@ -179,9 +179,13 @@ def test_pr2_plans_around_a_blob_on_the_straight_path(pr2_planner) -> None:
     lo, hi = planner.robot.lower.numpy(), planner.robot.upper.numpy()
     assert np.all(res.trajectories >= lo) and np.all(res.trajectories <= hi)
     assert np.allclose(res.trajectories[:, 0], q0.numpy()) and np.allclose(res.trajectories[:, -1], planner.goal_q)
-    straight = planner.cost_terms(line)["human"].numpy()
-    assert res.cost_human[0] * 10 <= straight[0], (res.cost_human, straight)
-    assert np.all(res.cost_human * 3 <= straight)  # the other goal's line crosses the blob's tail: less, too
+    # the blob's tail at the goals costs every trajectory the same (goal_dwell_s there): the paths' share falls
+    at_goal = planner.cost_terms(planner.goal_q[:, None].expand(-1, 40, -1))["human"].numpy()
+    assert np.all(at_goal > 0)
+    straight = planner.cost_terms(line)["human"].numpy() - at_goal
+    path = res.cost_human - at_goal
+    assert path[0] * 10 <= straight[0], (path, straight)
+    assert np.all(path * 3 <= straight)  # the other goal's line crosses the blob's tail: less, too
     assert np.all(np.isfinite(res.cost_total)) and res.dt > 0
     nxt = planner.step(res.start, occ)  # replanning from where the plan starts keeps the goals
     assert np.allclose(nxt.trajectories[:, -1], planner.goal_q) and nxt.step == 1
@@ -291,6 +295,35 @@ def test_pr2_algorithm1_loop_reaches_the_chosen_goal(pr2_planner) -> None:
             break
     assert np.allclose(res.start, res.trajectories[res.chosen, -1], atol=1e-5), "goal not reached in 8 steps"
     assert np.allclose(res.trajectories[res.chosen], res.start)  # a reached goal holds still
+
+
+def test_pr2_held_goal_pays_its_dwell_in_the_occupancy(pr2_planner) -> None:
+    """A robot holding a goal inside the human's volume pays goal_dwell_s x the occupancy there, and leaves."""
+    planner = pr2_planner
+    scene = planner.scene
+    goal = planner.goal_q[0]
+    hand = planner.robot.end_effector(goal)[:3, 3].numpy()
+    occ = blob_grid(scene, center=tuple(hand), sigma=0.08)  # the human is predicted at goal 0
+    planner.cost.set_occupancy(occ, scene.grid.origin, scene.grid.resolution)
+    held = goal.expand(1, 40, -1)
+    at_goal = float(planner.cost(goal[None, None])[0, 0, 1])  # w_human x summed occupancy at the goal
+    assert at_goal > 0.1
+    for fused in (planner.fused, None):
+        keep, planner.fused = planner.fused, fused
+        try:
+            human = float(planner.cost_terms(held)["human"][0])
+        finally:
+            planner.fused = keep
+        assert human == pytest.approx(planner.config.goal_dwell_s * at_goal, rel=1e-5)
+    chosen = {}
+    for dwell in (0.0, 1.0):
+        config = dataclasses.replace(planner.config, goal_dwell_s=dwell)
+        one = Planner(scene, config, robot=planner.robot, cost=planner.cost, goals=planner.goals)
+        res = one.step(goal.numpy(), occ)
+        assert np.allclose(res.trajectories[0], goal.numpy())  # goal 0 is reached: its trajectory holds it
+        assert res.cost_human[0] == pytest.approx(dwell * at_goal, rel=1e-5, abs=1e-9)
+        chosen[dwell] = res.chosen
+    assert chosen == {0.0: 0, 1.0: 1}  # held for free it stays in the human's way; charged, it leaves
 
 
 @pytest.mark.parametrize(("device", "match"), [("tpu", "not a torch device|only cpu and cuda"),

@@ -46,12 +46,13 @@ def test_fused_equals_reference_on_random_batches(planner, scene) -> None:
     planner.cost.set_occupancy(None, grid.origin, grid.resolution)
 
 
-def test_fused_equals_reference_in_float64(scene) -> None:
+@pytest.mark.parametrize("dwell", [0.0, 2.5])
+def test_fused_equals_reference_in_float64(scene, dwell: float) -> None:
     """In float64 the two implementations agree to ~1e-9: the float32 tolerances above are rounding only."""
     robot = PR2.from_scene(scene, dtype=torch.float64)
     cost = StateCost.from_scene(scene, robot, CostConfig())
     goals = GoalSet.joint_space(["start"], robot.q_start[None], robot)
-    config = PlannerConfig(dtype="float64", compile=False, stomp=StompConfig(iterations=1))
+    config = PlannerConfig(dtype="float64", compile=False, stomp=StompConfig(iterations=1), goal_dwell_s=dwell)
     planner = Planner(scene, config, robot=robot, cost=cost, goals=goals)
     assert planner.fused is not None
     grid = scene.grid
