@@ -136,13 +136,15 @@ def _switch_section(res: SwitchResult, png: Path) -> list[str]:
                  f"that ends there counts {res.config.timing.steps}): prediction {ap:g}, current {ac:g} "
                  f"({ac - ap:+g}); runs ending at the human's cup: prediction {res.conflicts('prediction')}, "
                  f"current {res.conflicts('current')}.")
-    held = [r.cost_human[s][r.goal_names.index(res.config.human_cup)] for r in res.runs
-            if r.final_goal == res.config.human_cup and r.reached_step is not None
-            for s in range(r.reached_step + 1, len(r.cost_human))]
+    held = [(r.cost_human[s][h], r.cost_total[s][h], min(c for i, c in enumerate(r.cost_total[s]) if i != h))
+            for r in res.runs if r.final_goal == res.config.human_cup and r.reached_step is not None
+            for h in [r.goal_names.index(res.config.human_cup)] for s in range(r.reached_step + 1, len(r.cost_human))]
     if held:
-        lines.append(f"- while the robot holds at the human's cup, that candidate's human cost is {max(held):.4f} at "
-                     f"most ({len(held)} steps): the planner integrates its costs along the path (a trajectory "
-                     "that holds still costs nothing), so a goal inside the predicted volume is free once reached.")
+        human, total, other = (np.array(x) for x in zip(*held, strict=True))
+        lines.append(f"- while the robot holds at the human's cup ({len(held)} steps), that candidate's human cost is "
+                     f"{human.max():.4f} at most (the goal's predicted occupancy for the time the robot stays there, "
+                     f"`goal_dwell_s`); holding cost {np.median(total):.4f} (median) against {np.median(other):.4f} "
+                     f"for the other cup's trajectory (Algorithm 1 keeps the least).")
     goals = {m: [r.final_goal for r in res.runs if r.method == m] for m in ("prediction", "current")}
     for m, g in goals.items():
         counts = {name: g.count(name) for name in sorted(set(g))}

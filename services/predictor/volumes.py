@@ -35,7 +35,8 @@ __all__ = ["VOLUMES", "DEFAULT_VOLUME", "Sweep", "sweep", "interpolate", "spread
            "demos_volume", "timed_volume", "digest"]
 
 VOLUMES = ("paper", "spread", "demos", "timed")
-DEFAULT_VOLUME = "spread"
+DEFAULT_VOLUME = "demos"
+"""The default of ``foresight train --volume``, chosen in the loop by ``foresight eval volumes``."""
 SPREAD_SAMPLES = 16
 """Trajectories drawn per class for the ``spread`` volume."""
 

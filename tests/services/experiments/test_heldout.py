@@ -10,7 +10,7 @@ from services.experiments.switch import settle_step
 from services.predictor.gmm import GMMConfig
 from services.predictor.model import PredictionModel
 from services.predictor.train import TrainConfig, train_model
-from services.predictor.volumes import DEFAULT_VOLUME
+from services.predictor.volumes import DEFAULT_VOLUME, VOLUMES
 from shared.library import load_library
 from shared.scene import load_scene
 from shared.synthetic import generate_library
@@ -28,13 +28,13 @@ def test_the_synthetic_cup_classes_are_found_at_their_cups(name):
 def test_a_fit_cache_refits_only_the_changed_class_and_changes_nothing(tmp_path):
     scene = load_scene()
     lib = generate_library(8, 4, seed=1, scene=scene)
-    cfg = TrainConfig(gmm=GMMConfig(n_components=2), temperature=150.0)
+    cfg = TrainConfig(gmm=GMMConfig(n_components=2), temperature=150.0, volume="spread")  # one volume per class
     out = lib.by_class(3)[0]
     demos = [d for d in lib.demos if d is not out]
     cache: dict = {}
 
     def count(kind: str) -> int:
-        return sum(k.startswith("volume:") == (kind == "volume") for k in cache)
+        return sum(k.split(":")[0] == kind if ":" in k else kind == "fit" for k in cache)
 
     train_model(lib, scene, cfg, progress=False, fit_cache=cache)
     assert count("fit") == 8 and count("volume") == 8
@@ -54,8 +54,9 @@ def test_held_out_models_are_cached_per_held_out_set(tmp_path):
     assert a != b and models.without([lib.by_class(0)[0]]) == a
     model = PredictionModel.load(a)
     assert model.meta["demos_per_class"][0] == 2 and model.volume_method == DEFAULT_VOLUME
-    demos = HeldOutModels(lib, scene, tmp_path, components=2, volume="demos").without([lib.by_class(0)[0]])
-    assert demos != a and PredictionModel.load(demos).volume_method == "demos"
+    other = next(v for v in VOLUMES if v != DEFAULT_VOLUME)
+    b = HeldOutModels(lib, scene, tmp_path, components=2, volume=other).without([lib.by_class(0)[0]])
+    assert b != a and PredictionModel.load(b).volume_method == other
 
 
 def test_settle_step():
