@@ -35,6 +35,7 @@ from .fused import FusedCost, supports
 from .inputs import PlannerError, PlannerInputError, check_configuration, check_occupancy
 from .multigoal import best, init_straight_lines, interpolate_path, project_onto_path, reconnect_previous
 from .protocols import PlannerCost, PlannerGoals, PlannerRobot
+from .result import PlanResult
 from .stomp import Stomp
 
 __all__ = ["PlannerConfig", "PlannerError", "PlannerInputError", "GoalSet", "PlanResult", "Planner"]
@@ -70,45 +71,6 @@ class GoalSet:
         reasons = ["" if bool(ok) else "goal configuration outside the joint limits" for ok in inside]
         q = torch.where(finite[:, None], q, robot.lower.expand_as(q))
         return cls(list(names), torch.maximum(torch.minimum(q, robot.upper), robot.lower), inside, reasons)
-
-
-@dataclass
-class PlanResult:
-    """One replanning step's output (numpy, on the host).
-
-    Attributes:
-        step: Replanning step index (0 for the first).
-        goal_names: K names; joint_names: D names.
-        trajectories: ``(K, T, D)`` float32 trajectories, all starting at ``start`` and within the
-            limits; an invalid goal's trajectory holds ``start``.
-        cost_smoothness, cost_obstacle, cost_human, cost_total: ``(K,)`` float64 (inf where invalid).
-        valid: ``(K,)`` bool.
-        chosen: Index of tau_best (a valid goal).
-        dt: Seconds between waypoints of the chosen trajectory (velocity limits x ``velocity_scale``).
-        start: ``(D,)`` the configuration the trajectories start at (q_t).
-        planning_ms: Wall time of :meth:`Planner.step`.
-        reasons: Why each invalid goal is invalid.
-        iterations: STOMP iterations run (``stomp.iterations``, fewer when the anytime option stopped early).
-        cost_history: ``(iterations + 1, Kv)`` total cost of each valid goal's current trajectory before each
-            iteration and after the last (``StompResult.history``; how fast the step converged).
-    """
-
-    step: int
-    goal_names: list[str]
-    joint_names: list[str]
-    trajectories: np.ndarray
-    cost_smoothness: np.ndarray
-    cost_obstacle: np.ndarray
-    cost_human: np.ndarray
-    cost_total: np.ndarray
-    valid: np.ndarray
-    chosen: int
-    dt: float
-    start: np.ndarray
-    planning_ms: float
-    reasons: list[str]
-    iterations: int = 0
-    cost_history: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 class Planner:
@@ -167,7 +129,8 @@ class Planner:
         if c.fused_cost and supports(robot, cost):
             self.fused = FusedCost(robot, cost, self.w_smooth, self._vmax, c.integrate_costs, compile=c.compile,
                                    grid=scene.grid, dwell=c.goal_dwell_s)
-            self.fused.warm_up(len(self.valid_index) * (c.stomp.rollouts + 1), c.stomp.waypoints)
+            per_call = goals_per_call(len(self.valid_index), c.cost_chunk_goals if self.device.type == "cpu" else 0)
+            self.fused.warm_up(per_call * (c.stomp.rollouts + 1), c.stomp.waypoints)
         self.stomp.warm_up(len(self.valid_index))
         self.step_index = 0
         self._prev: torch.Tensor | None = None  # (Kv, T, D) previous optimised trajectories
@@ -383,6 +346,17 @@ class Planner:
             dt=self._prev_dt, start=q_t.double().cpu().numpy(), planning_ms=(time.perf_counter() - t0) * 1e3,
             reasons=list(self.goals.reasons) or [""] * k, iterations=result.history.shape[0] - 1,
             cost_history=result.history.double().cpu().numpy())
+
+
+def goals_per_call(k: int, limit: int) -> int:
+    """Goals whose rollouts go through one fused-cost call: the largest divisor of ``k`` up to ``limit`` (0: k).
+
+    On a CPU a call over a few goals keeps the kernel's intermediates in cache (K = 16: 315 -> 269 ms per
+    step, docs/planner.md); a divisor leaves no padded chunk.
+    """
+    if limit <= 0 or k <= limit:
+        return max(k, 1)
+    return max(d for d in range(1, limit + 1) if k % d == 0)
 
 
 def _default_cost(scene: Scene, robot: Any, config: PlannerConfig) -> PlannerCost:

@@ -272,19 +272,16 @@ class Stomp:
         """
         c = self.config
         n = c.waypoints - 2
-        z = []
-        for s in seeds:
-            g = torch.Generator(device=self.device)
-            g.manual_seed(int(s))
-            z.append(torch.randn((n, c.iterations, c.rollouts, self.dof), generator=g, device=self.device,
-                                 dtype=self.dtype))
-        zz = torch.stack(z, dim=1) if z else torch.zeros((n, k, c.iterations, c.rollouts, self.dof),
-                                                         device=self.device, dtype=self.dtype)
         decay = c.noise_decay ** torch.arange(c.iterations, device=self.device, dtype=self.dtype)
         std = self.joint_std * decay[:, None, None]  # (I, 1, D)
-        # L z as one (N, N) x (N, K*I*R*D) product: correlated along the waypoints, independent elsewhere
-        eps = (self.noise_chol @ zz.reshape(n, -1)).reshape(zz.shape) * std
-        return eps.permute(2, 1, 3, 0, 4).contiguous()  # (I, K, R, N, D)
+        eps = torch.zeros((c.iterations, k, c.rollouts, n, self.dof), device=self.device, dtype=self.dtype)
+        for i, s in enumerate(seeds):  # one goal at a time: its (N, I*R*D) block stays in cache
+            g = torch.Generator(device=self.device)
+            g.manual_seed(int(s))
+            z = torch.randn((n, c.iterations, c.rollouts, self.dof), generator=g, device=self.device, dtype=self.dtype)
+            # L z as one (N, N) x (N, I*R*D) product: correlated along the waypoints, independent elsewhere
+            eps[:, i] = ((self.noise_chol @ z.view(n, -1)).view(z.shape) * std).permute(1, 2, 0, 3)
+        return eps
 
     def _check(self, q0: torch.Tensor) -> torch.Tensor:
         c = self.config

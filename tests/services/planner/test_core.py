@@ -333,3 +333,10 @@ def test_device_the_machine_lacks_is_named(device: str, match: str) -> None:
         pytest.skip("this machine has 8 GPUs")
     with pytest.raises(ConfigError, match=match):
         PlannerConfig(device=device).validate()
+
+
+def test_goals_per_call_divides_k() -> None:
+    from services.planner.core import goals_per_call
+
+    assert [goals_per_call(k, 4) for k in (1, 2, 3, 4, 5, 6, 8, 16)] == [1, 2, 3, 4, 1, 3, 4, 4]
+    assert goals_per_call(16, 0) == 16 and goals_per_call(0, 4) == 1

@@ -104,6 +104,22 @@ def test_batched_equals_looped_with_the_same_seeds() -> None:
     assert torch.equal(again.trajectories, batched.trajectories)  # deterministic
 
 
+def test_noise_has_the_paper_covariance_and_each_goal_its_own_stream() -> None:
+    """eps ~ N(0, sigma^2 R^-1 / max): per goal its seed's draw alone (batched == looped), empirical covariance."""
+    d = 2
+    stomp = Stomp(StompConfig(iterations=40, rollouts=50, waypoints=10, noise_std=0.2),
+                  (torch.full((d,), -9.0), torch.full((d,), 9.0)))
+    eps = stomp.sample_noise(3, [11, 12, 13])  # (I, K, R, N, D)
+    assert eps.shape == (40, 3, 50, 8, d)
+    for k, seed in enumerate([11, 12, 13]):
+        assert torch.equal(eps[:, k], stomp.sample_noise(1, [seed])[:, 0])
+    assert not torch.equal(eps[:, 0], eps[:, 1])
+    x = eps[..., 0].reshape(-1, 8).double()  # samples of one joint's waypoint vector
+    cov = x.T @ x / x.shape[0]
+    target = 0.2**2 * stomp.noise_chol.double() @ stomp.noise_chol.double().T
+    assert torch.allclose(cov, target, atol=0.004), float((cov - target).abs().max())
+
+
 def test_bad_input_raises_a_named_error() -> None:
     stomp = Stomp(StompConfig(iterations=2), (-torch.ones(2), torch.ones(2)))
     q0 = init_straight_lines(torch.zeros(2), torch.tensor([[0.5, 0.5]]), T)
