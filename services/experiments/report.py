@@ -136,15 +136,20 @@ def _switch_section(res: SwitchResult, png: Path) -> list[str]:
                  f"that ends there counts {res.config.timing.steps}): prediction {ap:g}, current {ac:g} "
                  f"({ac - ap:+g}); runs ending at the human's cup: prediction {res.conflicts('prediction')}, "
                  f"current {res.conflicts('current')}.")
-    held = [(r.cost_human[s][h], r.cost_total[s][h], min(c for i, c in enumerate(r.cost_total[s]) if i != h))
-            for r in res.runs if r.final_goal == res.config.human_cup and r.reached_step is not None
-            for h in [r.goal_names.index(res.config.human_cup)] for s in range(r.reached_step + 1, len(r.cost_human))]
-    if held:
-        human, total, other = (np.array(x) for x in zip(*held, strict=True))
-        lines.append(f"- while the robot holds at the human's cup ({len(held)} steps), that candidate's human cost is "
-                     f"{human.max():.4f} at most (the goal's predicted occupancy for the time the robot stays there, "
-                     f"`goal_dwell_s`); holding cost {np.median(total):.4f} (median) against {np.median(other):.4f} "
-                     f"for the other cup's trajectory (Algorithm 1 keeps the least).")
+    cup = res.config.human_cup
+    for method in ("prediction", "current"):
+        held = [(r.cost_human[s][h], r.cost_total[s][h],
+                 min((c for i, c in enumerate(r.cost_total[s]) if i != h), default=math.inf))
+                for r in res.runs if r.method == method and cup in r.goal_names and r.reached_step is not None
+                for h in [r.goal_names.index(cup)] for s in range(r.reached_step + 1, len(r.cost_human))
+                if r.final_goal == cup and s < len(r.goals) and r.goals[s] == cup]
+        if held:
+            human, total, other = (np.array(x) for x in zip(*held, strict=True))
+            lines.append(f"- {method}: while the robot holds at the human's cup ({len(held)} steps), that "
+                         f"candidate's human cost is {human.max():.4f} at most (the goal's predicted occupancy for "
+                         f"the time the robot stays there, `goal_dwell_s`); holding cost {np.median(total):.4f} "
+                         f"(median) against {np.median(other):.4f} for the other cup's trajectory (Algorithm 1 "
+                         "keeps the least).")
     goals = {m: [r.final_goal for r in res.runs if r.method == m] for m in ("prediction", "current")}
     for m, g in goals.items():
         counts = {name: g.count(name) for name in sorted(set(g))}

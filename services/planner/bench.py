@@ -101,7 +101,7 @@ def convergence(histories: list[np.ndarray], checkpoints: tuple[int, ...] = CHEC
     ratios = []
     for h in histories:
         best = np.minimum.accumulate(np.asarray(h, dtype=np.float64), axis=0).sum(-1)  # (I + 1,)
-        final = best[-1]  # 0 when every goal is reached (a reached goal's trajectory holds still, cost 0)
+        final = best[-1]  # 0 when every reached goal holds outside the occupancy (a held goal pays its dwell)
         ratios.append([best[i] / final if final > 0 else (1.0 if best[i] == 0 else math.inf)
                        for i in checkpoints if i < len(best)])
     n = min(len(r) for r in ratios)

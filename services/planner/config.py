@@ -14,6 +14,7 @@ STOMP's ``seed``, ``device`` and ``dtype`` are the planner's (hidden in ``[plann
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -43,9 +44,9 @@ class PlannerConfig:
     compile: bool = opt(True, help="torch.compile the fused cost and STOMP's rollout and update steps (once at "
                         "construction for the STOMP batch shape: ~10 s, ~1 s with inductor's disk cache; falls back "
                         "to eager if it fails)")
-    cost_chunk_goals: int = opt(4, help="CPU: goals whose rollouts share one fused-cost call (the largest divisor "
-                                "of K up to this: the kernel's intermediates stay in cache; 0: all in one call, "
-                                "as on CUDA)")
+    cost_chunk_goals: int = opt(4, help="CPU, compiled cost: goals whose rollouts share one kernel call (a divisor "
+                                "of K in [this / 2, this], else one call: the kernel's intermediates stay in "
+                                "cache; 0: all in one call, as on CUDA)")
     seed: int = opt(0, help="base seed of STOMP's exploration noise (per step and goal)")
     goals: list[str] = opt(default_factory=list, help="cup names to plan for, in order (empty: every cup)")
     integrate_costs: bool = opt(True, help="weight obstacle/human costs by each waypoint's time at the velocity "
@@ -81,7 +82,7 @@ class PlannerConfig:
         except ValueError as exc:
             raise ConfigError(f"planner.cost.{str(exc).removeprefix('costs.')}") from None
         checks = [("threads", self.threads >= 0), ("lookahead_s", self.lookahead_s >= 0),
-                  ("goal_dwell_s", self.goal_dwell_s >= 0),
+                  ("goal_dwell_s", math.isfinite(self.goal_dwell_s) and self.goal_dwell_s >= 0),
                   ("cost_chunk_goals", self.cost_chunk_goals >= 0),
                   ("anytime_min_iterations", self.anytime_min_iterations >= 0),
                   ("velocity_scale", 0 < self.velocity_scale <= 1), ("min_dt", self.min_dt > 0),

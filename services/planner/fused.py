@@ -223,13 +223,13 @@ class FusedCost:
         w_smooth: Weight of the squared accelerations.
         vmax: ``(D,)`` scaled velocity limits (waypoint times).
         integrate: Weight the state terms by the waypoint times (``PlannerConfig.integrate_costs``).
-        dwell: With ``integrate``, seconds added to the last waypoint's time in the human term
-            (``PlannerConfig.goal_dwell_s``).
         compile: ``torch.compile`` the kernel (call :meth:`warm_up` with the batch size to compile for).
         grid: The occupancy grid geometry expected (``shared.scene.Grid``, e.g. the scene's): "no occupancy"
             is then a zero grid of the same shape, so the compiled kernel keeps one shape.
         pair_loop: Self-collision as one loop over the arm/body sphere pairs (what inductor fuses) instead of
             a feature matmul; default: when compiled.
+        dwell: With ``integrate``, seconds added to the last waypoint's time in the human term
+            (``PlannerConfig.goal_dwell_s``).
     """
 
     def __init__(self, robot: PR2, cost: StateCost, w_smooth: float, vmax: torch.Tensor, integrate: bool,
@@ -330,7 +330,8 @@ class FusedCost:
 
         Returns:
             ``(3, ..., T)``: ``w_smooth`` x squared acceleration, obstacle, human (the state terms weighted
-            and, with ``integrate``, times the waypoint time), as ``Planner.waypoint_cost_reference`` sums.
+            and, with ``integrate``, times the waypoint time, the human's at the goal plus ``dwell``), as
+            ``Planner.waypoint_cost_reference`` sums.
         """
         lead, (t, d) = q.shape[:-2], q.shape[-2:]
         q3 = q.reshape(-1, t, d).to(self.robot.dtype)

@@ -3,8 +3,9 @@
 Per class m (paper IV.B, IV.D): a Gaussian mixture over ``[time, features]`` of all its
 demonstrations; the GMR-regressed motion (conditioned on time, :func:`services.predictor.gmr.gmr`);
 its occupancy volume ``p(x|C_m)`` in the scene (``--volume``, :mod:`services.predictor.volumes`:
-the paper's swept mean motion, or the motion with its spread). The posterior temperature tau is
-chosen by cross-validation on the library (:mod:`services.predictor.calibration`) unless given.
+the paper's swept mean motion, the motion with its spread, the demonstrations swept, or those by
+time). The posterior temperature tau is chosen by cross-validation on the library
+(:mod:`services.predictor.calibration`) unless given.
 Everything goes into one model file (:class:`services.predictor.model.PredictionModel`).
 
 The mixtures and motions work on any feature set the library declares; the swept volumes need a

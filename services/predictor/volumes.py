@@ -1,6 +1,6 @@
 """Per-class occupancy volumes p(x | C_m): which voxels a class's motion occupies, and how likely.
 
-Three ways to build them (``foresight train --volume``, stored in the model file):
+Four ways to build them (``foresight train --volume``, stored in the model file):
 
 - ``paper``: the body swept along the class's GMR *mean* motion (the paper, IV.D); 0/1.
 - ``spread``: the class's motion *with its spread*: ``n_samples`` posture trajectories drawn from

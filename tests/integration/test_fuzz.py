@@ -107,6 +107,7 @@ def refused_in_any_mode(case: Case) -> bool:
 def test_fuzz_every_key_during_a_lockstep_run(run_system):
     steps = 12
     clean = run_system(mode="lockstep", steps=steps).executor_result()  # the same run without the fuzz
+    assert clean.steps == steps and all(g >= 0 for g in clean.goal_per_step[1:]) and np.ptp(clean.q, 0).max() > 0.1
     system = run_system(mode="lockstep", steps=steps)
     keys, rec = system.keys, system.recorder
     executor = system.services["executor"]

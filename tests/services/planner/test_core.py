@@ -338,5 +338,12 @@ def test_device_the_machine_lacks_is_named(device: str, match: str) -> None:
 def test_goals_per_call_divides_k() -> None:
     from services.planner.core import goals_per_call
 
-    assert [goals_per_call(k, 4) for k in (1, 2, 3, 4, 5, 6, 8, 16)] == [1, 2, 3, 4, 1, 3, 4, 4]
+    ks = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 16)
+    assert [goals_per_call(k, 4) for k in ks] == [1, 2, 3, 4, 5, 3, 7, 4, 3, 2, 4]  # divisors, else one call
     assert goals_per_call(16, 0) == 16 and goals_per_call(0, 4) == 1
+
+
+@pytest.mark.parametrize("value", [-0.5, float("inf"), float("nan")])
+def test_goal_dwell_must_be_finite_and_non_negative(value: float) -> None:
+    with pytest.raises(ConfigError, match="goal_dwell_s"):
+        PlannerConfig(goal_dwell_s=value).validate()

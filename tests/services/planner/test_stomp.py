@@ -107,7 +107,7 @@ def test_batched_equals_looped_with_the_same_seeds() -> None:
 def test_noise_has_the_paper_covariance_and_each_goal_its_own_stream() -> None:
     """eps ~ N(0, sigma^2 R^-1 / max): per goal its seed's draw alone (batched == looped), empirical covariance."""
     d = 2
-    stomp = Stomp(StompConfig(iterations=40, rollouts=50, waypoints=10, noise_std=0.2),
+    stomp = Stomp(StompConfig(iterations=40, rollouts=50, waypoints=10, noise_std=0.2, noise_decay=1.0),
                   (torch.full((d,), -9.0), torch.full((d,), 9.0)))
     eps = stomp.sample_noise(3, [11, 12, 13])  # (I, K, R, N, D)
     assert eps.shape == (40, 3, 50, 8, d)
