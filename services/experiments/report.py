@@ -136,13 +136,8 @@ def _switch_section(res: SwitchResult, png: Path) -> list[str]:
                  f"that ends there counts {res.config.timing.steps}): prediction {ap:g}, current {ac:g} "
                  f"({ac - ap:+g}); runs ending at the human's cup: prediction {res.conflicts('prediction')}, "
                  f"current {res.conflicts('current')}.")
-    cup = res.config.human_cup
     for method in ("prediction", "current"):
-        held = [(r.cost_human[s][h], r.cost_total[s][h],
-                 min((c for i, c in enumerate(r.cost_total[s]) if i != h), default=math.inf))
-                for r in res.runs if r.method == method and cup in r.goal_names and r.reached_step is not None
-                for h in [r.goal_names.index(cup)] for s in range(r.reached_step + 1, len(r.cost_human))
-                if r.final_goal == cup and s < len(r.goals) and r.goals[s] == cup]
+        held = _held_costs(res, method)
         if held:
             human, total, other = (np.array(x) for x in zip(*held, strict=True))
             lines.append(f"- {method}: while the robot holds at the human's cup ({len(held)} steps), that "
@@ -156,6 +151,24 @@ def _switch_section(res: SwitchResult, png: Path) -> list[str]:
         lines.append(f"- final goal with {m}: " + ", ".join(f"{k} in {v} runs" for k, v in counts.items()))
     lines += ["", f"![switch]({png.name})", ""]
     return lines
+
+
+def _held_costs(res: SwitchResult, method: str) -> list[tuple[float, float, float]]:
+    """The costs while ``method``'s robot holds the human's cup (reached, chosen, and its final goal).
+
+    Returns:
+        Per such step: that candidate's human and total cost, and the least total cost of the others.
+    """
+    cup, out = res.config.human_cup, []
+    for r in res.runs:
+        if r.method != method or r.final_goal != cup or r.reached_step is None:
+            continue
+        h = r.goal_names.index(cup)
+        for s in range(r.reached_step + 1, min(len(r.cost_total), len(r.goals))):
+            if r.goals[s] == cup:
+                others = [c for i, c in enumerate(r.cost_total[s]) if i != h]
+                out.append((r.cost_human[s][h], r.cost_total[s][h], min(others, default=math.inf)))
+    return out
 
 
 def _prediction_ms(lib: MotionLibrary, models_dir: Path, components: int, volume: str) -> dict[str, float]:

@@ -204,12 +204,9 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
     state = torch.stack([s["w_obstacle"] * obstacle, s["w_human"] * human]).view(2, n, t)
     if s["integrate"]:
         seg = ((q[:, 1:] - q[:, :-1]).abs() * inv_vmax).amax(-1)  # (N, T - 1)
-        dt = 0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0)))
-        if s["dwell"] > 0:  # the goal's occupancy for the time the robot stays there
-            state = torch.stack([state[0] * dt, state[1] * (dt + F.pad(torch.zeros_like(seg), (0, 1),
-                                                                          value=s["dwell"]))])
-        else:
-            state = state * dt
+        dt = (0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0))))[None].repeat(2, 1, 1)  # (2, N, T)
+        dt[1, :, -1] += s["dwell"]  # the human term at the goal: the time the robot stays there
+        state = state * dt
     smooth = s["w_smooth"] * acceleration_cost(q)
     return torch.cat([smooth[None], state], 0)
 
@@ -286,7 +283,7 @@ class FusedCost:
                             a0=robot.arm_slice.start - arm.start, a1=robot.arm_slice.stop - arm.start,
                             self_eps=max(float(cfg.self_clearance), 1e-6), w_obstacle=float(cfg.w_obstacle),
                             w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate),
-                            dwell=float(dwell) if integrate else 0.0)
+                            dwell=float(dwell))
         if grid is None:
             zeros, first, inv_res = torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0
         else:  # the zero-padded shape and geometry of a real occupancy on `grid` (see VoxelTables.from_grid)

@@ -269,12 +269,17 @@ class Stomp:
 
         Returns:
             ``(I, K, R, N, D)`` noise ``eps ~ N(0, diag(sigma^2) (x) scaled R^-1)`` per iteration.
+
+        Raises:
+            StompError: ``seeds`` does not hold K seeds.
         """
         c = self.config
         n = c.waypoints - 2
+        if len(seeds) != k:
+            raise StompError(f"got {len(seeds)} seeds for {k} goals")
         decay = c.noise_decay ** torch.arange(c.iterations, device=self.device, dtype=self.dtype)
         std = self.joint_std * decay[:, None, None]  # (I, 1, D)
-        eps = torch.zeros((c.iterations, k, c.rollouts, n, self.dof), device=self.device, dtype=self.dtype)
+        eps = torch.empty((c.iterations, k, c.rollouts, n, self.dof), device=self.device, dtype=self.dtype)
         for i, s in enumerate(seeds):  # one goal at a time: its (N, I*R*D) block stays in cache
             g = torch.Generator(device=self.device)
             g.manual_seed(int(s))
@@ -324,9 +329,7 @@ class Stomp:
         k = q0.shape[0]
         if seeds is None:
             seeds = [c.seed + i for i in range(k)]
-        if len(seeds) != k:
-            raise StompError(f"got {len(seeds)} seeds for {k} goals")
-        noise = self.sample_noise(k, seeds)  # (I, K, R, N, D)
+        noise = self.sample_noise(k, seeds)  # (I, K, R, N, D); raises on a wrong number of seeds
         start, goal = q0[:, :1].contiguous(), q0[:, -1:].contiguous()  # (K, 1, D)
         theta = q0[:, 1:-1].contiguous()  # (K, N, D) the free waypoints (contiguous: one compiled layout)
         best_theta = theta.clone()  # never the same tensor as theta: one compiled graph (dynamo guards aliasing)
