@@ -1,10 +1,12 @@
 """``foresight bench planner``: time one replanning step (STOMP, all goals batched) against raw FK.
 
-For K = 1, 2, 4, 8 goals (the scene's IK goals, then joint-space perturbations of them) at the
+For K = 1, 2, 4, 8, 16 goals (the scene's IK goals, then joint-space perturbations of them) at the
 configured rollouts R and waypoints T, it times :meth:`Planner.step` (``iterations`` STOMP
 iterations, reconnectPrevious, cost terms) on a synthetic occupancy blob, next to the time of the
 robot's batched forward kinematics (``PR2.fk_links``, the kernel the cost uses) for the same number
-of configurations (K x R x T per iteration, times the iterations), and prints their ratio.
+of configurations (K x R x T per iteration, times the iterations), and prints their ratio; then the
+time of the step's cost calls alone (``cost_ms``: what the step cannot spend less than while the cost
+is evaluated the same way) and its share of the step.
 ``--json`` prints one JSON object with (at least) the keys ``K``, ``step_ms`` and ``fk_ms`` (lists).
 """
 
@@ -131,6 +133,30 @@ def _time_fk(robot: Any, n: int, iterations: int, repeats: int, seed: int) -> tu
     return statistics.median(times), statistics.median(cpu)
 
 
+def _time_cost(planner: Planner, res: Any, repeats: int) -> float:
+    """Median ms of one step's cost calls alone: ``iterations`` calls of the planner's cost on ``(K, R + 1, T, D)``.
+
+    The rollouts are the last plan's trajectories plus STOMP-sized noise (seeded), so the lookups read the same
+    neighbourhood as in the step. What the step spends beyond this is STOMP itself, reconnectPrevious and Python.
+    """
+    st = planner.config.stomp
+    trajs = torch.as_tensor(res.trajectories[planner.valid_index], device=planner.device, dtype=planner.dtype)
+    gen = torch.Generator(device=planner.device).manual_seed(planner.config.seed)
+    noise = st.noise_std * torch.randn((trajs.shape[0], st.rollouts + 1, *trajs.shape[1:]), generator=gen,
+                                       device=planner.device, dtype=planner.dtype)
+    q = torch.maximum(torch.minimum(trajs[:, None] + noise, planner.upper), planner.lower)
+    planner.waypoint_cost(q)
+    _sync(planner.device)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(st.iterations):
+            planner.waypoint_cost(q)
+        _sync(planner.device)
+        times.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(times)
+
+
 def k_goal_planner(scene: Scene, config: PlannerConfig, k: int, base: Planner | None = None) -> Planner:
     """A planner for ``k`` bench goals sharing ``base``'s robot, cost and IK goals (built if not given)."""
     base = base or Planner(scene, config)
@@ -154,7 +180,8 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
     occ = blob_occupancy(scene)
     q0 = start_configuration(base.robot)
     out: dict[str, Any] = {"K": [], "step_ms": [], "step_ms_min": [], "step_cpu_ms": [], "fk_ms": [],
-                           "fk_cpu_ms": [], "pk_fk_ms": [], "ratio": [], "construct_s": [], "compiled": False,
+                           "fk_cpu_ms": [], "pk_fk_ms": [], "ratio": [], "cost_ms": [], "construct_s": [],
+                           "compiled": False,
                            "checkpoints": list(CHECKPOINTS), "cost_cold": [], "cost_warm": [],
                            "rollouts": config.stomp.rollouts, "waypoints": config.stomp.waypoints,
                            "iterations": config.stomp.iterations, "threads": torch.get_num_threads(),
@@ -174,6 +201,7 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
             cpu.append((time.process_time() - c0) * 1e3)
             times.append(res.planning_ms)
             warm.append(res.cost_history)
+        out["cost_ms"].append(round(_time_cost(planner, res, steps), 2))
         out["cost_cold"].append(convergence([cold]))
         out["cost_warm"].append(convergence(warm))
         st = config.stomp
@@ -299,12 +327,12 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
                   f"{report['load_avg_1min']:.2f} -> {report['load_avg_1min_end']:.2f} (other processes share the CPU)")
             vs1 = report.get("time_vs_k1")
             print(f"{'K':>3} {'step ms':>9} {'min ms':>8} {'cpu ms':>8} {'FK ms':>8} {'FK cpu':>8} {'step/FK':>8} "
-                  f"{'pk FK ms':>9}" + (f" {'t(K)/t(1)':>10}" if vs1 else ""))
+                  f"{'pk FK ms':>9} {'cost ms':>8} {'share':>6}" + (f" {'t(K)/t(1)':>10}" if vs1 else ""))
             for i, k in enumerate(report["K"]):
                 print(f"{k:>3} {report['step_ms'][i]:>9.1f} {report['step_ms_min'][i]:>8.1f} "
                       f"{report['step_cpu_ms'][i]:>8.1f} {report['fk_ms'][i]:>8.1f} {report['fk_cpu_ms'][i]:>8.1f} "
-                      f"{report['ratio'][i]:>8.2f} {report['pk_fk_ms'][i]:>9.1f}"
-                      + (f" {vs1[i]:>10.2f}" if vs1 else ""))
+                      f"{report['ratio'][i]:>8.2f} {report['pk_fk_ms'][i]:>9.1f} {report['cost_ms'][i]:>8.1f} "
+                      f"{report['cost_ms'][i] / report['step_ms'][i]:>6.2f}" + (f" {vs1[i]:>10.2f}" if vs1 else ""))
             marks = report["checkpoints"][:len(report["cost_warm"][0])]
             print("cost reached against STOMP iterations (best so far / final, summed over the goals; median of the "
                   "timed steps, warm-started from the previous tau_best; cold = the first step, straight lines):")
@@ -318,6 +346,9 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
                                   zip(report["K"], report["baseline_step_ms"], report["speedup"], strict=True)))
             print("first Planner construction of each K (incl. compilation): "
                   + ", ".join(f"{s_:.1f} s" for s_ in report["construct_s"]))
+            print("cost ms = the step's cost calls alone (iterations x one call on K x (R + 1) x T configurations: FK, "
+                  "2 trilinear lookups and self-collision per sphere); share = cost ms / step ms, the rest is STOMP, "
+                  "its noise, reconnectPrevious and Python")
             print("FK ms = the fused fk_links on K*R*T configurations x iterations (the planner costs K*(R+1)*T per "
                   "iteration); pk FK ms = pytorch-kinematics forward_kinematics_tensor, same count; cpu = process CPU "
                   "time (with 1 thread: about the time on a core of its own)")

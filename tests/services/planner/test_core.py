@@ -252,7 +252,7 @@ def test_bench_json_prints_one_object(capsys) -> None:
     assert main(["--json", "--k", "1,2", "--steps", "1", "--iterations", "2", "--no-compile"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["K"] == [1, 2]
-    for key in ("step_ms", "fk_ms", "ratio", "pk_fk_ms"):
+    for key in ("step_ms", "fk_ms", "ratio", "pk_fk_ms", "cost_ms"):
         assert len(report[key]) == 2 and all(v > 0 for v in report[key])
     with pytest.raises(SystemExit):
         main(["--k", "0"])

@@ -55,6 +55,9 @@ def test_fused_equals_reference_in_float64(scene, dwell: float) -> None:
     config = PlannerConfig(dtype="float64", compile=False, stomp=StompConfig(iterations=1), goal_dwell_s=dwell)
     planner = Planner(scene, config, robot=robot, cost=cost, goals=goals)
     assert planner.fused is not None
+    # the compiled kernel's formulation (each sphere from its own link, the self-collision pair loop), run eagerly
+    pointwise = FusedCost(robot, cost, planner.w_smooth, _vmax(planner), True, grid=scene.grid, dwell=dwell,
+                          pointwise=True)
     grid = scene.grid
     rng = np.random.default_rng(2)
     for occ in (blob_occupancy(scene), rng.uniform(0, 1, grid.dims), None):
@@ -62,6 +65,8 @@ def test_fused_equals_reference_in_float64(scene, dwell: float) -> None:
         q = _batch(robot, (4, 6, 40), 9, spread=1.0)
         ref, out = planner.waypoint_cost_reference(q), planner.waypoint_cost(q)
         assert float(ref.max()) > 1.0  # obstacle and self-collision terms are exercised
+        assert torch.allclose(out, ref, rtol=1e-9, atol=1e-9), float((out - ref).abs().max())
+        out = pointwise(q)
         assert torch.allclose(out, ref, rtol=1e-9, atol=1e-9), float((out - ref).abs().max())
 
 
@@ -100,8 +105,8 @@ def test_self_collision_and_cropped_field_are_exact(scene) -> None:
     # float32: both sides expand |a - b|^2 = |a|^2 + |b|^2 - 2 a.b in world coordinates (~1 m), so sphere
     # distances agree to ~1e-5 m; weighted (x 10) and summed over 16 spheres that is a few 1e-4
     assert torch.allclose(out, ref, rtol=1e-4, atol=5e-4), float((out - ref).abs().max())
-    pairs_kernel = FusedCost(robot, cost, 0.0, robot.velocity_limits, integrate=False, pair_loop=True)
-    pairs = pairs_kernel.terms(q[:, :, None].expand(20, 20, 3, 8))[1, :, :, 1]  # the compiled kernel's loop, eager
+    pairs_kernel = FusedCost(robot, cost, 0.0, robot.velocity_limits, integrate=False, pointwise=True)
+    pairs = pairs_kernel.terms(q[:, :, None].expand(20, 20, 3, 8))[1, :, :, 1]  # the compiled formulation, eager
     assert torch.allclose(pairs, ref, rtol=1e-4, atol=5e-4), float((pairs - ref).abs().max())
 
 
@@ -118,6 +123,24 @@ def test_chunked_batches_equal_one_call(planner, scene) -> None:
     f.batch = 12  # 3 trajectories: the small-batch path
     assert torch.allclose(f(q[:, :1]), whole[:, :1], atol=1e-6)
     planner.cost.set_occupancy(None, grid.origin, grid.resolution)
+
+
+def test_compiled_kernel_equals_reference(planner, scene) -> None:
+    """The torch.compile-d kernel (what the planner runs by default) against the reference path."""
+    grid = scene.grid
+    planner.cost.set_occupancy(blob_occupancy(scene), grid.origin, grid.resolution)
+    try:
+        f = FusedCost(planner.robot, planner.cost, planner.w_smooth, _vmax(planner), True, compile=True, grid=grid,
+                      dwell=planner.config.goal_dwell_s)
+        f.warm_up(2 * 5, 40)
+        if not f.compiled:
+            pytest.skip("torch.compile is not available here (no C++ compiler): the kernel fell back to eager")
+        q = _batch(planner.robot, (2, 5, 40), 11, spread=1.0)
+        ref, out = planner.waypoint_cost_reference(q), f(q)
+        assert float(ref.max()) > 1.0  # obstacle and self-collision terms are exercised
+        assert torch.allclose(out, ref, rtol=1e-5, atol=1e-4), float((out - ref).abs().max())
+    finally:
+        planner.cost.set_occupancy(None, grid.origin, grid.resolution)
 
 
 def test_unsupported_costs_keep_the_reference_path(scene) -> None:
