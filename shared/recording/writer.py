@@ -49,6 +49,7 @@ from shared.protocol import (
     decode,
 )
 
+from .background import BackgroundWorker
 from .schemas import PROFILE, REJECTED_SCHEMA, REJECTED_TOPIC, SCHEMAS, TOPICS, message_json_schema
 
 __all__ = ["McapLog", "FoxgloveScene"]
@@ -136,12 +137,18 @@ class McapLog:
         scene_text: The scene file's text, attached as ``scene.toml``.
         run_metadata: String map written as metadata ``foresight.run``.
         clock: Log-time source in nanoseconds (default ``time.time_ns``).
+        viz_thread: Build the Foxglove updates of received messages on a background thread
+            (:class:`~shared.recording.background.BackgroundWorker`), so that a caller logging from its
+            receive path never waits for them (an occupancy's cubes take 13-22 ms); updates are stamped
+            with the message's receive time all the same, and one that finds ``viz_pending`` waiting is
+            dropped (counted, metadata ``foresight.viz``). False: built in :meth:`log_message`.
+        viz_pending: Foxglove updates that may wait for the background thread.
     """
 
     def __init__(self, path: str | os.PathLike[str], keys: Keys, builder: FoxgloveScene | None = None,
                  viz_period_s: float = 0.2, chunk_size: int = 256 * 1024, flush_period_s: float = 1.0,
                  scene_text: str | None = None, run_metadata: dict[str, str] | None = None,
-                 clock: Callable[[], int] = time.time_ns) -> None:
+                 clock: Callable[[], int] = time.time_ns, viz_thread: bool = True, viz_pending: int = 16) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.keys = keys
@@ -175,6 +182,8 @@ class McapLog:
             self.write_json("/viz/scene", builder.static_scene(now / 1e9), now)
             self.write_json("/tf", builder.base_transform(now / 1e9), now)
         self._writer.flush()
+        self._viz = (BackgroundWorker(self._visualise_item, "mcap-foxglove", viz_pending)
+                     if builder is not None and viz_thread else None)
 
     # -- channels ------------------------------------------------------------------------------
 
@@ -199,6 +208,7 @@ class McapLog:
 
     def write_json(self, topic: str, obj: dict[str, Any], log_time: int | None = None) -> None:
         """Write a JSON message on a Foxglove (or other JSON) topic."""
+        data = json.dumps(obj, separators=(",", ":")).encode()  # outside the lock (an occupancy's cubes: ~0.6 MB)
         with self._lock:
             if self._closed:
                 return
@@ -209,7 +219,7 @@ class McapLog:
                 schema = SCHEMAS[name]
             cid = self._channel_id(topic, name, schema, "json")
             t = self._clock() if log_time is None else log_time
-            self._add(cid, topic, json.dumps(obj, separators=(",", ":")).encode(), t, t)
+            self._add(cid, topic, data, t, t)
 
     # -- samples -------------------------------------------------------------------------------
 
@@ -237,8 +247,11 @@ class McapLog:
                 cid = self._channel_id(key, f"foresight.{msg.TYPE}", message_json_schema(MESSAGE_TYPES[msg.TYPE]),
                                        "msgpack")
             self._add(cid, key, bytes(payload), log_time, publish)
-        if self.builder is not None:
-            self._visualise(msg, log_time)
+        if self.builder is not None and self._wants_viz(msg):
+            if self._viz is None:
+                self._visualise(msg, log_time)
+            else:
+                self._viz.submit((msg, log_time))
 
     def reject(self, key: str, payload: bytes, error: str, log_time: int | None = None, quiet: bool = False,
                reason: str = "malformed") -> None:
@@ -262,11 +275,24 @@ class McapLog:
                                          "head_hex": bytes(payload[:64]).hex()}, log_time)
 
     def _due(self, topic: str, stamp: float) -> bool:
-        last = self._last_viz.get(topic)
-        if last is not None and 0.0 <= stamp - last < self.viz_period_s - 1e-9:
-            return False
-        self._last_viz[topic] = stamp
-        return True
+        with self._lock:
+            last = self._last_viz.get(topic)
+            if last is not None and 0.0 <= stamp - last < self.viz_period_s - 1e-9:
+                return False
+            self._last_viz[topic] = stamp
+            return True
+
+    def _wants_viz(self, msg: Message) -> bool:
+        """Whether ``msg`` gets a Foxglove update now (plans always; the others at most ``viz_period_s`` apart)."""
+        if isinstance(msg, Plan):
+            return True
+        for kind, topic in ((RobotState, "/viz/robot"), (OccupancyGrid, "/viz/occupancy"), (HumanPose, "/viz/human")):
+            if isinstance(msg, kind):
+                return self._due(topic, float(msg.stamp))
+        return False
+
+    def _visualise_item(self, item: tuple[Message, int]) -> None:
+        self._visualise(*item)
 
     def _visualise(self, msg: Message, log_time: int) -> None:
         # One time base for everything Foxglove sees: the entities and transforms are stamped with the
@@ -280,16 +306,16 @@ class McapLog:
                 upd = b.plan_paths(msg, stamp=t)
                 if upd is not None:
                     self.write_json("/viz/plan", upd, log_time)
-            elif isinstance(msg, RobotState) and self._due("/viz/robot", msg.stamp):
+            elif isinstance(msg, RobotState):
                 upd = b.robot_spheres(msg, stamp=t)
                 if upd is not None:
                     self.write_json("/viz/robot", upd, log_time)
                 tf = b.end_effector_transform(msg, stamp=t)
                 if tf is not None:
                     self.write_json("/tf", tf, log_time)
-            elif isinstance(msg, OccupancyGrid) and self._due("/viz/occupancy", msg.stamp):
+            elif isinstance(msg, OccupancyGrid):
                 self.write_json("/viz/occupancy", b.occupancy_cubes(msg, stamp=t), log_time)
-            elif isinstance(msg, HumanPose) and self._due("/viz/human", msg.stamp):
+            elif isinstance(msg, HumanPose):
                 upd = b.human_body(msg, stamp=t)
                 if upd is not None:
                     self.write_json("/viz/human", upd, log_time)
@@ -313,10 +339,15 @@ class McapLog:
                 self._last_flush = time.monotonic()
 
     def close(self) -> None:
-        """Write the reject counts, the summary and the footer; idempotent."""
+        """Finish the queued Foxglove updates, write the reject counts, the summary and the footer; idempotent."""
+        if self._viz is not None:
+            self._viz.close()  # outside the lock: the updates still queued take it to write
         with self._lock:
             if self._closed:
                 return
+            if self._viz is not None:
+                self._writer.add_metadata("foresight.viz", {"dropped": str(self._viz.dropped),
+                                                            "errors": str(self.viz_errors)})
             self._writer.add_metadata("foresight.rejects", {k: str(v) for k, v in sorted(self.rejects.items())})
             self._writer.add_metadata("foresight.rejects.reasons",
                                       {k: str(v) for k, v in sorted(self.reject_reasons.items())})
@@ -324,8 +355,13 @@ class McapLog:
             self._file.fsync()
             self._file.close()
             self._closed = True
-        log.info("mcap log: wrote %s (%d messages on %d channels, %d rejected)", self.path,
-                 sum(self.counts.values()), len(self.counts), sum(self.rejects.values()))
+        log.info("mcap log: wrote %s (%d messages on %d channels, %d rejected, %d Foxglove updates dropped)",
+                 self.path, sum(self.counts.values()), len(self.counts), sum(self.rejects.values()), self.viz_dropped)
+
+    @property
+    def viz_dropped(self) -> int:
+        """Foxglove updates dropped because ``viz_pending`` were already waiting for the background thread."""
+        return self._viz.dropped if self._viz is not None else 0
 
     @property
     def closed(self) -> bool:

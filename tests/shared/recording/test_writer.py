@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -36,9 +37,9 @@ def test_every_channel_is_written_with_its_schema_and_decodes(tmp_path, pr2) -> 
         assert log.on_sample(key, data) is not None
     assert log.on_sample(KEYS.plan, msgs[0][1]) is None  # a HumanPose on the plan key: wrong schema
     assert log.on_sample(KEYS.occupancy, b"\xc1") is None
-    assert log.viz_errors == 0
     log.close()
     log.close()  # idempotent
+    assert log.viz_errors == 0 and log.viz_dropped == 0
     lf = read_log(path, keep=lambda ch: True)
     assert lf.complete
     topics = {c.topic: c for c in lf.channels.values()}
@@ -48,6 +49,7 @@ def test_every_channel_is_written_with_its_schema_and_decodes(tmp_path, pr2) -> 
         assert lf.topic_messages(key)[0].data == data  # byte for byte
     assert topics["/foresight/rejected"].count == 2
     assert lf.metadata["foresight.rejects"] == {KEYS.plan: "1", KEYS.occupancy: "1"}
+    assert lf.metadata["foresight.viz"] == {"dropped": "0", "errors": "0"}
     # Foxglove channels: JSON that validates against the attached schema
     from mcap.stream_reader import StreamReader
 
@@ -95,6 +97,46 @@ def test_foxglove_channels_are_stamped_on_the_log_clock_not_the_simulated_one(tm
         ("/viz/occupancy", "occupancy"), ("/viz/plan", "plan/paths"), ("/viz/human", "human/body")}
     for topic, ident, ns, log_time, publish_time in stamps:
         assert abs(ns - log_time) < 1000 and publish_time == log_time, (topic, ident, ns, log_time)
+
+
+class _SlowOccupancy(SceneBuilder):
+    """A scene builder whose occupancy update waits until the test releases it."""
+
+    def __init__(self, robot) -> None:  # noqa: ANN001
+        super().__init__(SCENE, robot)
+        self.entered, self.release = threading.Event(), threading.Event()
+
+    def occupancy_cubes(self, occ, stamp=None):  # noqa: ANN001, ANN201 - the SceneBuilder signature
+        self.entered.set()
+        self.release.wait(10)
+        return super().occupancy_cubes(occ, stamp)
+
+
+def test_foxglove_updates_never_hold_up_the_raw_log(tmp_path, pr2) -> None:
+    """An occupancy's Foxglove update is built off the caller's thread: the caller logs the next message
+    (a plan: the robot's input) while it is still being built, and a full queue drops updates, not messages."""
+    builder = _SlowOccupancy(pr2)
+    ticks = iter(range(10**6))
+    clock = lambda: 1_700_000_000_000_000_000 + 1_000_000 * next(ticks)  # noqa: E731 - 1 ms per call
+    path = tmp_path / "a.mcap"
+    log = McapLog(path, KEYS, builder, clock=clock, viz_pending=1)
+    msgs = dict(sample_messages(pr2))
+    try:
+        assert log.on_sample(KEYS.occupancy, msgs[KEYS.occupancy]) is not None
+        assert builder.entered.wait(10)  # the update is being built ...
+        for _ in range(3):  # ... while the caller goes on: each plan is logged, the first one's update waits,
+            assert log.on_sample(KEYS.plan, msgs[KEYS.plan]) is not None  # the others find the queue full
+        assert not builder.release.is_set() and log.viz_dropped == 2
+    finally:
+        builder.release.set()
+        log.close()
+    lf = read_log(path, keep=lambda ch: True)
+    occ_time = lf.topic_messages(KEYS.occupancy)[0].log_time
+    assert len(lf.topic_messages(KEYS.plan)) == 3  # every message is in the raw log
+    viz = lf.topic_messages("/viz/occupancy")
+    assert len(viz) == 1 and viz[0].log_time == occ_time  # stamped with the receive time, built later
+    assert len(lf.topic_messages("/viz/plan")) == 1
+    assert lf.metadata["foresight.viz"] == {"dropped": "2", "errors": "0"}
 
 
 WRITER = textwrap.dedent("""
