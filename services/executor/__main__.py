@@ -23,7 +23,17 @@ way). Options come from the dataclass defaults < --config FILE ([executor], [zen
 FORESIGHT_EXECUTOR_<NAME> / FORESIGHT_ZENOH_<NAME> < flags."""
 
 
+SWITCH_INTERVAL_S = 0.001
+"""The executor process's GIL switch interval (Python's default: 5 ms).
+
+Its Zenoh callback receives the plans while the Foxglove thread builds and encodes updates (an
+occupancy: ~13 ms of Python and JSON, in slices): a thread waiting for the GIL gets it after at most
+this long, so a plan is received (and stamped) within ~1.5 ms of its arrival instead of ~5.5 ms.
+"""
+
+
 def _make(cfg: ExecutorConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
+    sys.setswitchinterval(SWITCH_INTERVAL_S)  # this process only: `python -m services.executor`
     service = ExecutorService(cfg, zcfg, stop)
 
     def run() -> None:

@@ -202,7 +202,10 @@ class ExecutorService:
                     text = res.read_text() if res.is_file() else None
                 meta = {f.name: str(getattr(cfg, f.name)) for f in dataclasses.fields(cfg)}
                 meta.update(prefix=self.zenoh.prefix, joint_names=",".join(self.limits.joint_names))
+                # real time: Foxglove updates on a background thread (never ahead of a plan's receipt); lock-step:
+                # in the callback, so that a run's log never depends on thread timing (no update ever dropped)
                 self.mcap = McapLog(path, self.keys, builder, viz_period_s=1.0 / cfg.viz_rate_hz,
+                                    viz_thread=cfg.mode != "lockstep",
                                     scene_text=text, run_metadata=meta)
                 self.result.mcap_path = str(path)
             sub = session.declare_subscriber(f"{self.zenoh.prefix}/**", lambda s: self._on_sample(

@@ -32,7 +32,7 @@ from shared.scene import Scene, load_scene
 
 from .core import GoalSet, Planner, PlannerConfig
 from .fk_bench import fk_time_ms
-from .stomp import StompConfig
+from .stomp import StompConfig, rollouts
 
 __all__ = ["main", "bench_goals", "blob_occupancy", "run_bench", "convergence"]
 
@@ -134,23 +134,25 @@ def _time_fk(robot: Any, n: int, iterations: int, repeats: int, seed: int) -> tu
 
 
 def _time_cost(planner: Planner, res: Any, repeats: int) -> float:
-    """Median ms of one step's cost calls alone: ``iterations`` calls of the planner's cost on ``(K, R + 1, T, D)``.
+    """Median ms of one step's STOMP cost calls alone: ``iterations`` calls of the cost on ``(K, R + 1, T, D)``.
 
-    The rollouts are the last plan's trajectories plus STOMP-sized noise (seeded), so the lookups read the same
-    neighbourhood as in the step. What the step spends beyond this is STOMP itself, reconnectPrevious and Python.
+    Each call costs what STOMP's iteration would: the last plan's trajectories and their noisy rollouts, drawn by
+    the planner's own STOMP (its correlated noise, its seeds, clamped to the limits, start and goal fixed). A lower
+    bound of the step's cost time: the step also costs the final trajectories, reconnectPrevious's candidates and
+    the result's terms.
     """
-    st = planner.config.stomp
+    st = planner.stomp
     trajs = torch.as_tensor(res.trajectories[planner.valid_index], device=planner.device, dtype=planner.dtype)
-    gen = torch.Generator(device=planner.device).manual_seed(planner.config.seed)
-    noise = st.noise_std * torch.randn((trajs.shape[0], st.rollouts + 1, *trajs.shape[1:]), generator=gen,
-                                       device=planner.device, dtype=planner.dtype)
-    q = torch.maximum(torch.minimum(trajs[:, None] + noise, planner.upper), planner.lower)
-    planner.waypoint_cost(q)
+    k = trajs.shape[0]
+    noise = st.sample_noise(k, [planner.config.seed + i for i in range(k)])  # (I, K, R, N, D)
+    start, goal, theta = trajs[:, :1].contiguous(), trajs[:, -1:].contiguous(), trajs[:, 1:-1].contiguous()
+    qs = [rollouts(theta, noise[i], start, goal, st.lower, st.upper)[0] for i in range(noise.shape[0])]
+    planner.waypoint_cost(qs[0])
     _sync(planner.device)
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        for _ in range(st.iterations):
+        for q in qs:
             planner.waypoint_cost(q)
         _sync(planner.device)
         times.append((time.perf_counter() - t0) * 1e3)
@@ -346,9 +348,9 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
                                   zip(report["K"], report["baseline_step_ms"], report["speedup"], strict=True)))
             print("first Planner construction of each K (incl. compilation): "
                   + ", ".join(f"{s_:.1f} s" for s_ in report["construct_s"]))
-            print("cost ms = the step's cost calls alone (iterations x one call on K x (R + 1) x T configurations: FK, "
-                  "2 trilinear lookups and self-collision per sphere); share = cost ms / step ms, the rest is STOMP, "
-                  "its noise, reconnectPrevious and Python")
+            print("cost ms = STOMP's cost calls alone (iterations x one call on K x (R + 1) x T configurations, its "
+                  "rollouts of the last plan: FK, 2 trilinear lookups per sphere, self-collision); share = cost ms / "
+                  "step ms: the rest is STOMP's own work, its noise, reconnectPrevious (more cost calls) and Python")
             print("FK ms = the fused fk_links on K*R*T configurations x iterations (the planner costs K*(R+1)*T per "
                   "iteration); pk FK ms = pytorch-kinematics forward_kinematics_tensor, same count; cpu = process CPU "
                   "time (with 1 thread: about the time on a core of its own)")

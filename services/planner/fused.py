@@ -160,7 +160,7 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
     n, t, d = q.shape
     b = n * t
     qt = q.reshape(b, d).t()  # (D, B)
-    # one batched product (as pointwise ops inductor fuses it into every chain step: 0.52 -> 0.96 ms per K=2 call)
+    # one batched product (as pointwise ops, inductor recomputes them in every chain step: a K=2 call took 0.96 ms)
     h = torch.baddbmm(a0, a123t, torch.stack([torch.cos(qt), torch.sin(qt), qt], 1)).view(d, 4, 4, b)
     m = h[0, :3]
     links = []
@@ -232,7 +232,8 @@ class FusedCost:
             is then a zero grid of the same shape, so the compiled kernel keeps one shape.
         pointwise: The formulation inductor fuses: each arm sphere from its own link's 12 entries and the
             self-collision as one loop over the arm/body sphere pairs, instead of a ``(S, 28)`` product (6/7
-            zeros) and a feature matmul; default: when compiled.
+            zeros) and a feature matmul; default: when compiled. Calls of a few trajectories, which
+            :meth:`terms` runs eagerly next to a compiled kernel, always take the products.
         dwell: With ``integrate``, seconds added to the last waypoint's time in the human term
             (``PlannerConfig.goal_dwell_s``).
     """
@@ -248,6 +249,8 @@ class FusedCost:
         a0, a123t = robot.kinematics.transform_basis(robot.base_transform)
         arm = robot.arm_carried_slice
         w = robot.spheres.weights[2:len(robot.link_names) - 1, :, arm]  # (7, 4, S) links of the arm joints
+        sph_link = (robot.sphere_anchor[arm] - 2).to(dev)  # (S,) each sphere's link among those 7 (`supports`)
+        sph_local = w[sph_link, :, torch.arange(len(sph_link), device=dev)][:, :, None].contiguous()  # (S, 4, 1)
         r_arm_c = robot.sphere_radii[arm]
         # static field, cropped to where some arm-carried sphere can pay (value < clearance + largest radius)
         sdf = cost.sdf
@@ -275,7 +278,7 @@ class FusedCost:
         # psi (Bb, 14): 7 feature coefficients, radius, centre at lift 0, lift velocity
         self._consts = dict(a0=a0.to(dev, dt), a123t=a123t.contiguous().to(dev, dt),
                             wt=w.reshape(-1, w.shape[-1]).t().contiguous(),
-                            sph_link=w.abs().sum(1).argmax(0).to(dev), sph_local=w.sum(0).t()[:, :, None].contiguous(),
+                            sph_link=sph_link, sph_local=sph_local,
                             obs_thr=(cfg.clearance + r_arm_c)[:, None].contiguous(),
                             sdf_lo=torch.as_tensor(sdf.grid.min, device=dev, dtype=dt).reshape(3, 1, 1),
                             sdf_hi=torch.as_tensor(sdf.grid.max, device=dev, dtype=dt).reshape(3, 1, 1),

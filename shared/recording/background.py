@@ -35,7 +35,7 @@ class BackgroundWorker:
 
     Attributes:
         done: Items processed (with or without an error).
-        dropped: Items refused because ``max_pending`` were already waiting.
+        dropped: Items refused: ``max_pending`` were already waiting, or :meth:`close` had begun.
         errors: Items whose ``work`` raised.
     """
 
@@ -50,6 +50,7 @@ class BackgroundWorker:
         self.done = 0
         self.dropped = 0
         self.errors = 0
+        self._busy = False
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
@@ -80,20 +81,31 @@ class BackgroundWorker:
                 self._queue.put_nowait(_STOP)
         self._thread.join(timeout_s)
         if self._thread.is_alive():
-            log.warning("%s: %d queued item(s) not processed within %.1f s", self._thread.name,
-                        self._queue.qsize(), timeout_s)
+            log.warning("%s: %d queued item(s) not processed within %.1f s", self._thread.name, self.pending,
+                        timeout_s)
             return False
         return True
 
+    @property
+    def pending(self) -> int:
+        """Items submitted and not processed yet (the one being processed included)."""
+        return max(self._queue.qsize() - (1 if self._closed else 0), 0) + (1 if self._busy else 0)
+
     def _run(self) -> None:
-        while True:
-            item = self._queue.get()
-            if item is _STOP:
-                return
-            try:
-                self._work(item)
-            except Exception:
-                self.errors += 1
-                if self.errors == 1 or self.errors % 100 == 0:
-                    log.exception("%s: an item failed (%d so far)", self._thread.name, self.errors)
-            self.done += 1
+        try:
+            while True:
+                item = self._queue.get()
+                if item is _STOP:
+                    return
+                self._busy = True
+                try:
+                    self._work(item)
+                except Exception:
+                    self.errors += 1
+                    if self.errors == 1 or self.errors % 100 == 0:
+                        log.exception("%s: an item failed (%d so far)", self._thread.name, self.errors)
+                self._busy = False
+                self.done += 1
+        except BaseException:  # not an Exception of work's: the thread ends here, say so
+            log.exception("%s: stopped with %d item(s) not processed", self._thread.name, self.pending)
+            raise

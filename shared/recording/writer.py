@@ -93,6 +93,31 @@ class FoxgloveScene(Protocol):
         ...
 
 
+_SLICE = 200
+"""Items of a long JSON list encoded per ``json.dumps`` call by :func:`_dumps`."""
+
+
+def _dumps(obj: Any) -> str:
+    """``json.dumps(obj, separators=(",", ":"))``, the same text, with long lists encoded a slice at a time.
+
+    One ``json.dumps`` call holds the GIL throughout: an occupancy's ~3000 cubes took 12-15 ms, during
+    which the thread that receives the plans could not run; between two slices (~1 ms each) it can.
+    Dicts with string keys and lists of up to 8 items are walked (the few top levels of a Foxglove
+    update); a longer list is encoded whole, or in slices beyond ``_SLICE`` items.
+    """
+    if isinstance(obj, dict) and all(isinstance(k, str) for k in obj):
+        return "{" + ",".join(_plain(k) + ":" + _dumps(v) for k, v in obj.items()) + "}"
+    if isinstance(obj, list) and len(obj) <= 8:
+        return "[" + ",".join(_dumps(v) for v in obj) + "]"
+    if isinstance(obj, list) and len(obj) > _SLICE:
+        return "[" + ",".join(_plain(obj[i:i + _SLICE])[1:-1] for i in range(0, len(obj), _SLICE)) + "]"
+    return _plain(obj)
+
+
+def _plain(obj: Any) -> str:
+    return json.dumps(obj, separators=(",", ":"))
+
+
 class _DirectFile:
     """A binary file whose writes go straight to the OS (the mcap writer buffers a chunk itself)."""
 
@@ -166,6 +191,7 @@ class McapLog:
         self._channels: dict[str, int] = {}
         self._last_flush = time.monotonic()
         self._last_viz: dict[str, float] = {}
+        self._prev_viz: dict[str, float | None] = {}
         self._closed = False
         self.counts: dict[str, int] = {}
         self.rejects: dict[str, int] = {}
@@ -208,7 +234,7 @@ class McapLog:
 
     def write_json(self, topic: str, obj: dict[str, Any], log_time: int | None = None) -> None:
         """Write a JSON message on a Foxglove (or other JSON) topic."""
-        data = json.dumps(obj, separators=(",", ":")).encode()  # outside the lock (an occupancy's cubes: ~0.6 MB)
+        data = _dumps(obj).encode()  # outside the lock (an occupancy's cubes: ~0.6 MB)
         with self._lock:
             if self._closed:
                 return
@@ -247,11 +273,12 @@ class McapLog:
                 cid = self._channel_id(key, f"foresight.{msg.TYPE}", message_json_schema(MESSAGE_TYPES[msg.TYPE]),
                                        "msgpack")
             self._add(cid, key, bytes(payload), log_time, publish)
-        if self.builder is not None and self._wants_viz(msg):
+        topic = self._viz_topic(msg) if self.builder is not None else None
+        if topic is not None and self._due(topic, float(getattr(msg, "stamp", 0.0))):
             if self._viz is None:
                 self._visualise(msg, log_time)
-            else:
-                self._viz.submit((msg, log_time))
+            elif not self._viz.submit((msg, log_time)):
+                self._undue(topic)  # dropped: the next message of the kind may draw instead
 
     def reject(self, key: str, payload: bytes, error: str, log_time: int | None = None, quiet: bool = False,
                reason: str = "malformed") -> None:
@@ -275,21 +302,35 @@ class McapLog:
                                          "head_hex": bytes(payload[:64]).hex()}, log_time)
 
     def _due(self, topic: str, stamp: float) -> bool:
+        """Whether ``topic`` gets an update now: plans always, the others at most ``viz_period_s`` apart (stamps)."""
+        if topic == "/viz/plan":
+            return True
         with self._lock:
             last = self._last_viz.get(topic)
             if last is not None and 0.0 <= stamp - last < self.viz_period_s - 1e-9:
                 return False
+            self._prev_viz[topic] = last
             self._last_viz[topic] = stamp
             return True
 
-    def _wants_viz(self, msg: Message) -> bool:
-        """Whether ``msg`` gets a Foxglove update now (plans always; the others at most ``viz_period_s`` apart)."""
-        if isinstance(msg, Plan):
-            return True
-        for kind, topic in ((RobotState, "/viz/robot"), (OccupancyGrid, "/viz/occupancy"), (HumanPose, "/viz/human")):
+    def _undue(self, topic: str) -> None:
+        """Forget the update :meth:`_due` just allowed on ``topic`` (it was dropped)."""
+        with self._lock:
+            if topic in self._prev_viz:
+                prev = self._prev_viz.pop(topic)
+                if prev is None:
+                    self._last_viz.pop(topic, None)
+                else:
+                    self._last_viz[topic] = prev
+
+    @staticmethod
+    def _viz_topic(msg: Message) -> str | None:
+        """The Foxglove channel that draws ``msg`` (None: none does)."""
+        for kind, topic in ((Plan, "/viz/plan"), (RobotState, "/viz/robot"), (OccupancyGrid, "/viz/occupancy"),
+                            (HumanPose, "/viz/human")):
             if isinstance(msg, kind):
-                return self._due(topic, float(msg.stamp))
-        return False
+                return topic
+        return None
 
     def _visualise_item(self, item: tuple[Message, int]) -> None:
         self._visualise(*item)
@@ -345,8 +386,9 @@ class McapLog:
         with self._lock:
             if self._closed:
                 return
-            if self._viz is not None:
+            if self._viz is not None:  # unfinished: still queued when the worker's close timed out
                 self._writer.add_metadata("foresight.viz", {"dropped": str(self._viz.dropped),
+                                                            "unfinished": str(self._viz.pending),
                                                             "errors": str(self.viz_errors)})
             self._writer.add_metadata("foresight.rejects", {k: str(v) for k, v in sorted(self.rejects.items())})
             self._writer.add_metadata("foresight.rejects.reasons",

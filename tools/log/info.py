@@ -78,4 +78,8 @@ def format_info(lf: LogFile) -> str:
             lines += ["  by reason: " + ", ".join(f"{k}: {v}" for k, v in sorted(d["rejected_reasons"].items()))]
     elif not lf.complete:
         lines += ["rejected:  (counts are written when the file is closed)"]
+    viz = lf.metadata.get("foresight.viz")
+    if viz:  # real-time logs: Foxglove updates built on the executor's background thread
+        lines += ["foxglove:  " + ", ".join(f"{k} {v}" for k, v in viz.items()) + " (updates; the raw messages are all "
+                  "there)"]
     return "\n".join(lines)

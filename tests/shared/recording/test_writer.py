@@ -15,7 +15,7 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 
-from shared.protocol import ClockTick, Keys
+from shared.protocol import ClockTick, Keys, encode
 from shared.recording.foxglove import SceneBuilder
 from shared.recording.reader import read_log
 from shared.recording.writer import McapLog
@@ -49,7 +49,7 @@ def test_every_channel_is_written_with_its_schema_and_decodes(tmp_path, pr2) -> 
         assert lf.topic_messages(key)[0].data == data  # byte for byte
     assert topics["/foresight/rejected"].count == 2
     assert lf.metadata["foresight.rejects"] == {KEYS.plan: "1", KEYS.occupancy: "1"}
-    assert lf.metadata["foresight.viz"] == {"dropped": "0", "errors": "0"}
+    assert lf.metadata["foresight.viz"] == {"dropped": "0", "unfinished": "0", "errors": "0"}
     # Foxglove channels: JSON that validates against the attached schema
     from mcap.stream_reader import StreamReader
 
@@ -126,17 +126,35 @@ def test_foxglove_updates_never_hold_up_the_raw_log(tmp_path, pr2) -> None:
         assert builder.entered.wait(10)  # the update is being built ...
         for _ in range(3):  # ... while the caller goes on: each plan is logged, the first one's update waits,
             assert log.on_sample(KEYS.plan, msgs[KEYS.plan]) is not None  # the others find the queue full
-        assert not builder.release.is_set() and log.viz_dropped == 2
+        assert log.on_sample(KEYS.occupancy, encode(blob(1, 1, 1.0))) is not None  # due, dropped as well
+        assert not builder.release.is_set() and log.viz_dropped == 3
     finally:
         builder.release.set()
-        log.close()
+    deadline = time.monotonic() + 10
+    while log._viz.pending and time.monotonic() < deadline:  # the worker drains the queue
+        time.sleep(0.01)
+    # the dropped occupancy update did not count as drawn: the next one (0.05 s later) is drawn
+    assert log.on_sample(KEYS.occupancy, encode(blob(2, 2, 1.05))) is not None
+    log.close()
     lf = read_log(path, keep=lambda ch: True)
-    occ_time = lf.topic_messages(KEYS.occupancy)[0].log_time
-    assert len(lf.topic_messages(KEYS.plan)) == 3  # every message is in the raw log
-    viz = lf.topic_messages("/viz/occupancy")
-    assert len(viz) == 1 and viz[0].log_time == occ_time  # stamped with the receive time, built later
+    occ_times = [m.log_time for m in lf.topic_messages(KEYS.occupancy)]
+    assert len(lf.topic_messages(KEYS.plan)) == 3 and len(occ_times) == 3  # every message is in the raw log
+    viz = lf.topic_messages("/viz/occupancy")  # stamped with the receive times, built later
+    assert [m.log_time for m in viz] == [occ_times[0], occ_times[2]]
     assert len(lf.topic_messages("/viz/plan")) == 1
-    assert lf.metadata["foresight.viz"] == {"dropped": "2", "errors": "0"}
+    assert lf.metadata["foresight.viz"] == {"dropped": "3", "unfinished": "0", "errors": "0"}
+
+
+def test_sliced_json_is_json_dumps() -> None:
+    """The writer encodes long lists a slice at a time (the GIL is free between slices): the same text."""
+    from shared.recording.writer import _dumps
+
+    cubes = [{"pose": {"position": {"x": i * 0.1, "y": -i, "z": 0.5}}, "color": {"r": 1, "a": 0.5}}
+             for i in range(1234)]
+    for obj in ({"entities": [{"id": "occupancy", "cubes": cubes, "lines": []}], "deletions": []}, cubes[:7],
+                {"a": [1, 2, {"b": list(range(1000))}], "c": None, "d": "\u00e9\n"}, {1: "x", "y": [True]}, [], {},
+                [[1] * 500], "text", 3.5):
+        assert _dumps(obj) == json.dumps(obj, separators=(",", ":"))
 
 
 WRITER = textwrap.dedent("""
