@@ -50,6 +50,7 @@ from shared.protocol import (
 )
 
 from .background import BackgroundWorker
+from .json_slices import dumps_sliced
 from .schemas import PROFILE, REJECTED_SCHEMA, REJECTED_TOPIC, SCHEMAS, TOPICS, message_json_schema
 
 __all__ = ["McapLog", "FoxgloveScene"]
@@ -91,31 +92,6 @@ class FoxgloveScene(Protocol):
     def human_body(self, pose: HumanPose, stamp: float | None = None) -> dict[str, Any] | None:
         """The human's body (``/viz/human``)."""
         ...
-
-
-_SLICE = 200
-"""Items of a long JSON list encoded per ``json.dumps`` call by :func:`_dumps`."""
-
-
-def _dumps(obj: Any) -> str:
-    """``json.dumps(obj, separators=(",", ":"))``, the same text, with long lists encoded a slice at a time.
-
-    One ``json.dumps`` call holds the GIL throughout: an occupancy's ~3000 cubes took 12-15 ms, during
-    which the thread that receives the plans could not run; between two slices (~1 ms each) it can.
-    Dicts with string keys and lists of up to 8 items are walked (the few top levels of a Foxglove
-    update); a longer list is encoded whole, or in slices beyond ``_SLICE`` items.
-    """
-    if isinstance(obj, dict) and all(isinstance(k, str) for k in obj):
-        return "{" + ",".join(_plain(k) + ":" + _dumps(v) for k, v in obj.items()) + "}"
-    if isinstance(obj, list) and len(obj) <= 8:
-        return "[" + ",".join(_dumps(v) for v in obj) + "]"
-    if isinstance(obj, list) and len(obj) > _SLICE:
-        return "[" + ",".join(_plain(obj[i:i + _SLICE])[1:-1] for i in range(0, len(obj), _SLICE)) + "]"
-    return _plain(obj)
-
-
-def _plain(obj: Any) -> str:
-    return json.dumps(obj, separators=(",", ":"))
 
 
 class _DirectFile:
@@ -234,7 +210,7 @@ class McapLog:
 
     def write_json(self, topic: str, obj: dict[str, Any], log_time: int | None = None) -> None:
         """Write a JSON message on a Foxglove (or other JSON) topic."""
-        data = _dumps(obj).encode()  # outside the lock (an occupancy's cubes: ~0.6 MB)
+        data = dumps_sliced(obj).encode()  # outside the lock (an occupancy's cubes: ~0.6 MB)
         with self._lock:
             if self._closed:
                 return

@@ -145,18 +145,6 @@ def test_foxglove_updates_never_hold_up_the_raw_log(tmp_path, pr2) -> None:
     assert lf.metadata["foresight.viz"] == {"dropped": "3", "unfinished": "0", "errors": "0"}
 
 
-def test_sliced_json_is_json_dumps() -> None:
-    """The writer encodes long lists a slice at a time (the GIL is free between slices): the same text."""
-    from shared.recording.writer import _dumps
-
-    cubes = [{"pose": {"position": {"x": i * 0.1, "y": -i, "z": 0.5}}, "color": {"r": 1, "a": 0.5}}
-             for i in range(1234)]
-    for obj in ({"entities": [{"id": "occupancy", "cubes": cubes, "lines": []}], "deletions": []}, cubes[:7],
-                {"a": [1, 2, {"b": list(range(1000))}], "c": None, "d": "\u00e9\n"}, {1: "x", "y": [True]}, [], {},
-                [[1] * 500], "text", 3.5):
-        assert _dumps(obj) == json.dumps(obj, separators=(",", ":"))
-
-
 WRITER = textwrap.dedent("""
     import sys, time
     import numpy as np
