@@ -167,7 +167,6 @@ class McapLog:
         self._channels: dict[str, int] = {}
         self._last_flush = time.monotonic()
         self._last_viz: dict[str, float] = {}
-        self._prev_viz: dict[str, float | None] = {}
         self._closed = False
         self.counts: dict[str, int] = {}
         self.rejects: dict[str, int] = {}
@@ -250,11 +249,17 @@ class McapLog:
                                        "msgpack")
             self._add(cid, key, bytes(payload), log_time, publish)
         topic = self._viz_topic(msg) if self.builder is not None else None
-        if topic is not None and self._due(topic, float(getattr(msg, "stamp", 0.0))):
-            if self._viz is None:
-                self._visualise(msg, log_time)
-            elif not self._viz.submit((msg, log_time)):
-                self._undue(topic)  # dropped: the next message of the kind may draw instead
+        if topic is None:
+            return
+        stamp = float(getattr(msg, "stamp", 0.0))
+        with self._lock:
+            if not self._due(topic, stamp):
+                return
+            # a dropped update does not count as drawn: the next message of its kind may draw instead
+            if self._viz is None or self._viz.submit((msg, log_time)):
+                self._last_viz[topic] = stamp
+        if self._viz is None:
+            self._visualise(msg, log_time)
 
     def reject(self, key: str, payload: bytes, error: str, log_time: int | None = None, quiet: bool = False,
                reason: str = "malformed") -> None:
@@ -279,25 +284,8 @@ class McapLog:
 
     def _due(self, topic: str, stamp: float) -> bool:
         """Whether ``topic`` gets an update now: plans always, the others at most ``viz_period_s`` apart (stamps)."""
-        if topic == "/viz/plan":
-            return True
-        with self._lock:
-            last = self._last_viz.get(topic)
-            if last is not None and 0.0 <= stamp - last < self.viz_period_s - 1e-9:
-                return False
-            self._prev_viz[topic] = last
-            self._last_viz[topic] = stamp
-            return True
-
-    def _undue(self, topic: str) -> None:
-        """Forget the update :meth:`_due` just allowed on ``topic`` (it was dropped)."""
-        with self._lock:
-            if topic in self._prev_viz:
-                prev = self._prev_viz.pop(topic)
-                if prev is None:
-                    self._last_viz.pop(topic, None)
-                else:
-                    self._last_viz[topic] = prev
+        last = self._last_viz.get(topic)
+        return topic == "/viz/plan" or last is None or not 0.0 <= stamp - last < self.viz_period_s - 1e-9
 
     @staticmethod
     def _viz_topic(msg: Message) -> str | None:
