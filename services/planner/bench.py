@@ -183,6 +183,7 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
     q0 = start_configuration(base.robot)
     out: dict[str, Any] = {"K": [], "step_ms": [], "step_ms_min": [], "step_cpu_ms": [], "fk_ms": [],
                            "fk_cpu_ms": [], "pk_fk_ms": [], "ratio": [], "cost_ms": [], "construct_s": [],
+                           "final_cost": [],
                            "compiled": False,
                            "checkpoints": list(CHECKPOINTS), "cost_cold": [], "cost_warm": [],
                            "rollouts": config.stomp.rollouts, "waypoints": config.stomp.waypoints,
@@ -206,6 +207,7 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
         out["cost_ms"].append(round(_time_cost(planner, res, steps), 2))
         out["cost_cold"].append(convergence([cold]))
         out["cost_warm"].append(convergence(warm))
+        out["final_cost"].append(round(float(np.median([np.asarray(h).min(0).sum() for h in warm])), 4))
         st = config.stomp
         fk, fk_cpu = _time_fk(base.robot, k * st.rollouts * st.waypoints, st.iterations, 3, config.seed)
         step_ms = statistics.median(times)
@@ -285,7 +287,12 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
     p.add_argument("--json", action="store_true", help="print one JSON object (keys K, step_ms, fk_ms, ...)")
     p.add_argument("--k", default="1,2,4,8,16", help="comma-separated goal counts (default 1,2,4,8,16)")
     p.add_argument("--steps", type=int, default=5, help="timed replanning steps per K (median reported)")
-    p.add_argument("--rollouts", type=int, default=16)
+    p.add_argument("--rollouts", type=int, default=StompConfig.rollouts)
+    p.add_argument("--reuse", type=int, default=StompConfig.reuse, help="rollouts of the previous iteration reused "
+                   f"(StompConfig.reuse, default {StompConfig.reuse})")
+    p.add_argument("--against", metavar="ROLLOUTS:REUSE", default=None,
+                   help="also run STOMP with these rollouts and reuse in the same process and print the ratios of "
+                   "step time and final cost (e.g. 16:0, the planner's setting before reuse)")
     p.add_argument("--waypoints", type=int, default=40)
     p.add_argument("--iterations", type=int, default=50)
     p.add_argument("--threads", type=int, default=1, help="torch threads (0: torch's default)")
@@ -307,7 +314,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
         if not ks or min(ks) < 1 or args.steps < 1:
             p.error("--k values and --steps must be >= 1")
         config = PlannerConfig(stomp=StompConfig(rollouts=args.rollouts, waypoints=args.waypoints,
-                                                 iterations=args.iterations),
+                                                 iterations=args.iterations, reuse=args.reuse),
                                threads=args.threads, device=args.device, compile=args.compile)
         report = run_bench(ks, config, steps=args.steps, progress=not args.json)
         if args.baseline:
@@ -316,6 +323,18 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
             report["baseline_step_ms"] = ref["step_ms"]
             report["speedup"] = [round(b / a, 2) for a, b in zip(report["step_ms"], ref["step_ms"], strict=True)]
             report["load_avg_1min_end"] = ref["load_avg_1min_end"]
+        if args.against:
+            try:
+                r_other, n_other = (int(x) for x in args.against.split(":"))
+            except ValueError:
+                p.error(f"--against: expected ROLLOUTS:REUSE, e.g. 10:5, got {args.against!r}")
+            other = dataclasses.replace(config, stomp=dataclasses.replace(config.stomp, rollouts=r_other,
+                                                                          reuse=n_other))
+            alt = run_bench(ks, other, steps=args.steps, progress=not args.json)
+            report["against"] = {"rollouts": r_other, "reuse": n_other, "step_ms": alt["step_ms"],
+                                 "final_cost": alt["final_cost"],
+                                 "step_ratio": [round(b / a, 3) for a, b in zip(report["step_ms"], alt["step_ms"],
+                                                                                strict=True)]}
         if args.memory:
             report["peak_rss_mb"] = round(peak_memory_mb(max(ks), config), 1)
             report["peak_rss_K"] = max(ks)
@@ -346,6 +365,13 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
                 print("unfused reference path (StateCost, eager), same process: "
                       + ", ".join(f"K={k}: {b:.1f} ms ({x:.2f}x)" for k, b, x in
                                   zip(report["K"], report["baseline_step_ms"], report["speedup"], strict=True)))
+            if args.against:
+                a = report["against"]
+                print(f"against R={a['rollouts']} reuse={a['reuse']} (same process): step ms, and the least cost "
+                      "reached (summed over the goals, median of the warm steps) against the reference above")
+                for i, k in enumerate(report["K"]):
+                    print(f"{k:>3} {a['step_ms'][i]:>9.1f} ms ({a['step_ratio'][i]:.2f}x the reference)  least cost "
+                          f"{a['final_cost'][i]:.4f} vs {report['final_cost'][i]:.4f}")
             print("first Planner construction of each K (incl. compilation): "
                   + ", ".join(f"{s_:.1f} s" for s_ in report["construct_s"]))
             print("cost ms = STOMP's cost calls alone (iterations x one call on K x (R + 1) x T configurations, its "

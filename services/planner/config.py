@@ -49,6 +49,9 @@ class PlannerConfig:
                                 "cache; 0: all in one call, as on CUDA)")
     seed: int = opt(0, help="base seed of STOMP's exploration noise (per step and goal)")
     goals: list[str] = opt(default_factory=list, help="cup names to plan for, in order (empty: every cup)")
+    goal_choice: str = opt("total", help="the cost term that picks the goal each step: 'total' (the product), or "
+                           "'human' (the least human-occupancy cost, the paper authors' choice)",
+                           choices=("total", "human"))
     integrate_costs: bool = opt(True, help="weight obstacle/human costs by each waypoint's time at the velocity "
                                 "limits (else sum them per waypoint)")
     goal_dwell_s: float = opt(1.0, help="with integrate_costs: seconds the robot is charged for the predicted "
@@ -87,7 +90,7 @@ class PlannerConfig:
                   ("anytime_min_iterations", self.anytime_min_iterations >= 0),
                   ("velocity_scale", 0 < self.velocity_scale <= 1), ("min_dt", self.min_dt > 0),
                   ("off_path_tol", self.off_path_tol >= 0), ("limit_tol", self.limit_tol >= 0),
-                  ("goal_tol", self.goal_tol >= 0)]
+                  ("goal_tol", self.goal_tol >= 0), ("goal_choice", self.goal_choice in ("total", "human"))]
         for name, ok in checks:
             if not ok:
                 raise ConfigError(f"planner.{name}: bad value {getattr(self, name)!r}")

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -130,7 +131,8 @@ class Planner:
             self.fused = FusedCost(robot, cost, self.w_smooth, self._vmax, c.integrate_costs, compile=c.compile,
                                    grid=scene.grid, dwell=c.goal_dwell_s)
             per_call = goals_per_call(len(self.valid_index), c.cost_chunk_goals if self.device.type == "cpu" else 0)
-            self.fused.warm_up(per_call * (c.stomp.rollouts + 1), c.stomp.waypoints)
+            # with reuse, every iteration after the first costs its new rollouts and theta only (the first: two calls)
+            self.fused.warm_up(per_call * (c.stomp.rollouts - c.stomp.reuse + 1), c.stomp.waypoints)
         self.stomp.warm_up(len(self.valid_index))
         self.step_index = 0
         self._prev: torch.Tensor | None = None  # (Kv, T, D) previous optimised trajectories
@@ -330,7 +332,7 @@ class Planner:
         trajs = torch.where(reached[:, None, None], init[:, -1:].expand_as(init), result.trajectories)  # (Kv, T, D)
         terms = self.cost_terms(trajs)
         valid = torch.ones(len(self.valid_index), dtype=torch.bool, device=self.device)
-        chosen_v = best(terms["total"], valid)
+        chosen_v = best(choice_key(terms, c.goal_choice), valid)
         dts = self._dt(trajs)
         self._prev, self._prev_best, self._prev_dt = trajs, chosen_v, float(dts[chosen_v])
 
@@ -350,6 +352,20 @@ class Planner:
             dt=self._prev_dt, start=q_t.double().cpu().numpy(), planning_ms=(time.perf_counter() - t0) * 1e3,
             reasons=list(self.goals.reasons) or [""] * k, iterations=result.history.shape[0] - 1,
             cost_history=result.history.double().cpu().numpy())
+
+
+def choice_key(terms: dict[str, torch.Tensor], goal_choice: str) -> torch.Tensor:
+    """``(K,)`` what the least-cost goal is chosen by (``PlannerConfig.goal_choice``).
+
+    ``total``: the total cost. ``human``: the least human-occupancy cost; among the goals tied on it (to float32
+    rounding; e.g. all 0 before the human is anywhere near) the least total cost, as the authors' path cost adds
+    0.002 x length. Goals that do not tie get inf.
+    """
+    if goal_choice == "total":
+        return terms["total"]
+    h = terms["human"]
+    tied = h <= h.min() + 1e-6 * h.min().abs().clamp_min(1.0)  # float32: equal to rounding
+    return torch.where(tied, terms["total"], h.new_tensor(math.inf))
 
 
 def goals_per_call(k: int, limit: int) -> int:

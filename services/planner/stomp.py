@@ -4,7 +4,8 @@ The optimizer sees only a per-waypoint cost callable and the joint bounds. One i
 trajectories at once (tensors ``(K, R, T, D)``: goals x rollouts x waypoints x joints):
 
 1. noisy rollouts ``theta + eps_r``, ``eps ~ N(0, sigma^2 R^-1)`` (``R = A^T A``, A the finite
-   differencing matrix of accelerations), clamped to the joint limits;
+   differencing matrix of accelerations), clamped to the joint limits; with ``reuse`` the previous
+   iteration's best rollouts join them with the costs they already have;
 2. costs ``S(r, i)`` per rollout and waypoint (cost-to-go by default);
 3. probabilities ``P(r, i) = softmax_r(-h (S - min_r S) / (max_r S - min_r S))``;
 4. update ``delta = M sum_r P(r, i) eps_r(i)``, ``M`` = R^-1 with each column scaled so its max is 1/N;
@@ -30,15 +31,15 @@ from dataclasses import dataclass, field
 
 import torch
 
+from .stomp_steps import finite, finite_difference_matrix, keep_best, rollouts, update, with_ends
+
 __all__ = ["StompConfig", "StompError", "StompResult", "Stomp", "finite_difference_matrix", "CostFn", "rollouts",
-           "update", "with_ends", "finite"]
+           "update", "with_ends", "finite", "keep_best"]
 
 log = logging.getLogger("foresight.planner")
 
 CostFn = Callable[[torch.Tensor], torch.Tensor]
 """Per-waypoint cost: ``q (K, R, T, D) -> (K, R, T)``."""
-
-_NONFINITE_COST = 1e9  # a rollout whose cost is NaN/inf is treated as this costly per waypoint
 
 
 class StompError(ValueError):
@@ -60,13 +61,17 @@ class StompConfig:
         sensitivity: h, the exponent scale of the per-timestep probabilities (paper: 10).
         cost_to_go: Rank rollouts per waypoint by their cost-to-go (sum of costs from that waypoint
             to the goal, as in PI^2) rather than the waypoint's own cost.
+        reuse: Rollouts of the previous iteration kept in the next one, least total cost first, with the
+            costs they already have (ros-industrial STOMP and the paper authors' code: 5 of 10): each
+            iteration after the first then costs ``rollouts - reuse`` new rollouts and the current trajectory
+            (10 and 5 since they were measured against 16 and 0: docs/planner.md, "Reused rollouts").
         seed: Base seed; goal k uses ``seed + k`` unless seeds are given to :meth:`Stomp.optimize`.
         device: Torch device, e.g. ``"cpu"`` or ``"cuda"``.
         dtype: ``"float32"`` or ``"float64"``.
         compile: ``torch.compile`` the rollout and update steps (eager when compilation fails).
     """
 
-    rollouts: int = 16
+    rollouts: int = 10
     waypoints: int = 40
     iterations: int = 50
     noise_std: float = 0.1
@@ -74,6 +79,7 @@ class StompConfig:
     noise_decay: float = 1.0
     sensitivity: float = 10.0
     cost_to_go: bool = True
+    reuse: int = 5
     seed: int = 0
     device: str = "cpu"
     dtype: str = "float32"
@@ -83,6 +89,8 @@ class StompConfig:
         """Raise :class:`StompError` naming the first bad field."""
         if self.rollouts < 2:
             raise StompError(f"stomp.rollouts must be >= 2, got {self.rollouts}")
+        if not 0 <= self.reuse < self.rollouts:
+            raise StompError(f"stomp.reuse must be in [0, rollouts - 1 = {self.rollouts - 1}], got {self.reuse}")
         if self.waypoints < 3:
             raise StompError(f"stomp.waypoints must be >= 3, got {self.waypoints}")
         if self.iterations < 0:
@@ -118,94 +126,6 @@ class StompResult:
     trajectories: torch.Tensor
     cost: torch.Tensor
     history: torch.Tensor
-
-
-def finite_difference_matrix(n: int, dtype: torch.dtype = torch.float64) -> torch.Tensor:
-    """Acceleration finite differencing matrix A of the STOMP paper.
-
-    Args:
-        n: Number of free (interior) waypoints N.
-        dtype: Result dtype.
-
-    Returns:
-        ``(N + 2, N)``: row i gives ``theta[i-2] - 2 theta[i-1] + theta[i]`` with the fixed start and
-        goal contributing zero, so ``theta^T A^T A theta`` is the sum of squared accelerations of
-        the deviation from a trajectory with the same endpoints.
-    """
-    a = torch.zeros(n + 2, n, dtype=dtype)
-    idx = torch.arange(n)
-    a[idx, idx] = 1.0
-    a[idx + 1, idx] = -2.0
-    a[idx + 2, idx] = 1.0
-    return a
-
-
-def rollouts(theta: torch.Tensor, noise: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
-             lower: torch.Tensor, upper: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Step 1: the current trajectory and its noisy rollouts, clamped to the joint limits, with their endpoints.
-
-    Args:
-        theta: ``(K, N, D)`` current free waypoints.
-        noise: ``(K, R, N, D)`` this iteration's exploration noise.
-        start: ``(K, 1, D)`` fixed start.
-        goal: ``(K, 1, D)`` fixed goal.
-        lower: ``(D,)`` lower joint limits.
-        upper: ``(D,)`` upper joint limits.
-
-    Returns:
-        ``(q (K, R + 1, N + 2, D), eps (K, R, N, D))``: row 0 of ``q`` is ``theta``, rows 1.. the rollouts;
-        ``eps`` is the noise actually applied (after clamping).
-    """
-    noisy = torch.clamp(theta[:, None] + noise, lower, upper)
-    eps = noisy - theta[:, None]
-    return with_ends(torch.cat([theta[:, None], noisy], 1), start, goal), eps
-
-
-def with_ends(interior: torch.Tensor, start: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
-    """``interior (K, R', N, D)`` free waypoints, ``start``, ``goal (K, 1, D)`` -> ``(K, R', N + 2, D)``."""
-    k, r = interior.shape[:2]
-    return torch.cat([start[:, None].expand(k, r, 1, -1), interior, goal[:, None].expand(k, r, 1, -1)], 2)
-
-
-def finite(cost: torch.Tensor) -> torch.Tensor:
-    """``cost`` (any shape) with NaN/inf replaced by a very large finite cost (such a rollout is never preferred)."""
-    return torch.nan_to_num(cost, nan=_NONFINITE_COST, posinf=_NONFINITE_COST, neginf=-_NONFINITE_COST)
-
-
-def update(theta: torch.Tensor, eps: torch.Tensor, cost: torch.Tensor, best_cost: torch.Tensor,
-           best_theta: torch.Tensor, lower: torch.Tensor, upper: torch.Tensor, m: torch.Tensor,
-           to_go: torch.Tensor | None, sensitivity: float
-           ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Steps 2-4 after the cost call: keep the best, probabilities per waypoint, the smoothed update.
-
-    Args:
-        theta: ``(K, N, D)`` current free waypoints.
-        eps: ``(K, R, N, D)`` the noise applied to the rollouts.
-        cost: ``(K, R + 1, N + 2)`` per-waypoint cost (row 0: ``theta``); NaN/inf count as very costly.
-        best_cost: ``(K,)`` the least total cost so far.
-        best_theta: ``(K, N, D)`` its waypoints.
-        lower: ``(D,)`` lower joint limits.
-        upper: ``(D,)`` upper joint limits.
-        m: ``(N, N)`` the smoothing matrix M.
-        to_go: ``(N + 1, N)`` cost-to-go summation matrix, or None (rank by each waypoint's own cost).
-        sensitivity: h.
-
-    Returns:
-        ``(theta', total (K,) cost of theta, best_cost', best_theta')``.
-    """
-    cost = finite(cost)
-    total = cost[:, 0].sum(-1)  # (K,)
-    better = total < best_cost
-    best_cost = torch.where(better, total, best_cost)
-    best_theta = torch.where(better[:, None, None], theta, best_theta)
-    # S(r, i) = sum_{j >= i} q(r, j) (goal included), or the free waypoints' own costs
-    s = cost[:, 1:, 1:] @ to_go if to_go is not None else cost[:, 1:, 1:-1]  # (K, R, N)
-    # 3. probabilities per waypoint over the rollouts
-    s_min, s_max = s.amin(1, keepdim=True), s.amax(1, keepdim=True)
-    p = torch.softmax(-sensitivity * (s - s_min) / (s_max - s_min).clamp_min(1e-12), dim=1)
-    # 4. update: probability-weighted noise, smoothed by M, kept within the limits
-    delta = torch.matmul(m, (p[..., None] * eps).sum(1))  # (K, N, D)
-    return torch.clamp(theta + delta, lower, upper), total, best_cost, best_theta
 
 
 _COMPILED: dict[str, Callable[..., tuple[torch.Tensor, ...]]] = {}
@@ -310,8 +230,9 @@ class Stomp:
             q0: ``(K, T, D)`` initial trajectories; ``q0[:, 0]`` and ``q0[:, -1]`` (start and goal)
                 stay fixed and must lie within the bounds; interior waypoints are clamped into them.
             cost_fn: ``q (K, R', T, D) -> (K, R', T)`` per-waypoint cost, called once per iteration
-                with R' = R + 1 (the current trajectory first, then the R noisy rollouts) and once at
-                the end with R' = 1. Goals must not interact (row k depends only on ``q[k]``).
+                with R' = R + 1 (the current trajectory first, then the R noisy rollouts; with ``reuse``,
+                R - reuse + 1 after the first iteration) and once at the end with R' = 1. Goals must not
+                interact (row k depends only on ``q[k]``).
             seeds: K noise seeds (default ``config.seed + k``).
             interrupt: Anytime: asked after each iteration from ``min_iterations`` on; True stops the
                 loop there (the result is the best so far). A host-side callable (e.g. "is a newer input
@@ -337,11 +258,26 @@ class Stomp:
         history = []
 
         to_go = self.to_go if c.cost_to_go else None
+        fresh = c.rollouts - c.reuse  # new rollouts per iteration after the first
+        kept: tuple[torch.Tensor, torch.Tensor] | None = None  # reused rollouts (interior, per-waypoint cost)
         for it in range(c.iterations):
             # 1. noisy rollouts, clamped to the joint limits (eps is the noise actually applied)
-            q, eps = self._step("rollouts", theta, noise[it], start, goal, self.lower, self.upper)
-            # 2. costs of the current trajectory (rollout 0) and of the R noisy rollouts
-            cost = self._cost(cost_fn, q, k, c.rollouts + 1)
+            if not c.reuse:
+                q, eps = self._step("rollouts", theta, noise[it], start, goal, self.lower, self.upper)
+            else:  # the loop's two shapes: R - reuse new rollouts, and (first iteration only) reuse more
+                q, eps = self._step("rollouts", theta, noise[it, :, :fresh].contiguous(), start, goal, self.lower,
+                                    self.upper)
+                if kept is None:
+                    q2, eps2 = self._step("rollouts", theta, noise[it, :, fresh:].contiguous(), start, goal,
+                                          self.lower, self.upper)
+                    q, eps = torch.cat([q, q2[:, 1:]], 1), torch.cat([eps, eps2], 1)
+            # 2. costs of the current trajectory (rollout 0) and of the new noisy rollouts
+            cost = self._cost(cost_fn, q, k, q.shape[1])
+            if kept is not None:  # ... and the previous iteration's best rollouts, with the costs they have
+                eps = torch.cat([eps, kept[0] - theta[:, None]], 1)
+                cost = torch.cat([cost, kept[1]], 1)
+            if c.reuse:
+                kept = keep_best(theta[:, None] + eps, cost[:, 1:], c.reuse)
             # 2-4. keep the best, probabilities per waypoint, smoothed update within the limits
             theta, total, best_cost, best_theta = self._step("update", theta, eps, cost, best_cost, best_theta,
                                                              self.lower, self.upper, self.M, to_go, c.sensitivity)
@@ -372,9 +308,11 @@ class Stomp:
         c, n = self.config, self.config.waypoints - 2
         theta = ((self.lower + self.upper) / 2).expand(k, n, self.dof).contiguous()
         ends = theta[:, :1].contiguous()
-        noise = torch.zeros(k, c.rollouts, n, self.dof, device=self.device, dtype=self.dtype)
         # distinct tensors as in optimize: dynamo guards aliasing between arguments (an aliased call is another graph)
-        _, eps = self._step("rollouts", theta, noise, ends, ends.clone(), self.lower, self.upper)
+        eps = torch.cat([self._step("rollouts", theta, torch.zeros(k, r, n, self.dof, device=self.device,
+                                                                   dtype=self.dtype), ends, ends.clone(), self.lower,
+                                    self.upper)[1]
+                         for r in ([c.rollouts] if not c.reuse else [c.rollouts - c.reuse, c.reuse])], 1)
         cost = torch.zeros(k, c.rollouts + 1, c.waypoints, device=self.device, dtype=self.dtype)
         best = torch.full((k,), math.inf, device=self.device, dtype=self.dtype)
         self._step("update", theta, eps, cost, best, theta.clone(), self.lower, self.upper, self.M,

@@ -390,3 +390,20 @@ def test_pr2_stomp_iterations_never_read_back_to_the_host(pr2_planner, monkeypat
         planner.stomp.config = config
     assert reads[2] > 0  # the checks before the loop read (so the counting works) ...
     assert reads[7] == reads[2], reads  # ... the iterations do not
+
+
+@pytest.mark.parametrize("choice, expected", [("total", 0), ("human", 1)])
+def test_goal_choice_picks_the_lower_term_it_names(scene, choice: str, expected: int) -> None:
+    planner = toy_planner(scene, goal_choice=choice, iterations=2)
+    real = planner.cost_terms
+
+    def terms(q: torch.Tensor) -> dict[str, torch.Tensor]:  # goal a: lower total, goal b: lower prediction cost
+        out = real(q)
+        out["human"] = torch.tensor([0.5, 0.1])
+        out["total"] = torch.tensor([1.0, 2.0])
+        return out
+
+    planner.cost_terms = terms  # type: ignore[method-assign]
+    res = planner.step([0.0, -0.2], blob_grid(scene))
+    assert res.chosen == expected
+    assert res.trajectories[res.chosen, -1].tolist() == pytest.approx([[1.0, -0.2], [0.9, 0.2]][expected])

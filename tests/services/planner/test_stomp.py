@@ -173,7 +173,8 @@ def test_anytime_interrupt_stops_after_min_iterations_with_the_same_prefix() -> 
     assert torch.equal(never.trajectories, full.trajectories)
 
 
-def test_compiled_steps_equal_eager() -> None:
+@pytest.mark.parametrize("reuse", [0, 5])
+def test_compiled_steps_equal_eager(reuse: int) -> None:
     """``compile``: the rollout and update steps as torch.compile graphs give eager's numbers to rounding."""
     target = _bump_target()
 
@@ -182,7 +183,8 @@ def test_compiled_steps_equal_eager() -> None:
 
     q0 = init_straight_lines(target[0], torch.stack([target[-1], target[-1] * 0.8]), T)
     bounds = (-torch.ones(3) * 2, torch.ones(3) * 2)
-    runs = {flag: Stomp(StompConfig(iterations=30, noise_std=0.05, compile=flag), bounds) for flag in (False, True)}
+    runs = {flag: Stomp(StompConfig(iterations=30, noise_std=0.05, compile=flag, rollouts=10 if reuse else 16,
+                                    reuse=reuse), bounds) for flag in (False, True)}
     for s in runs.values():
         s.warm_up(2)
     if not runs[True].compiled:
@@ -192,3 +194,38 @@ def test_compiled_steps_equal_eager() -> None:
     torch.testing.assert_close(compiled.history, eager.history, rtol=1e-4, atol=1e-5)
     torch.testing.assert_close(compiled.trajectories, eager.trajectories, rtol=1e-4, atol=1e-4)
     assert float(compiled.history[-1].sum()) < 0.5 * float(compiled.history[0].sum())  # it did optimise
+
+
+def test_reused_rollouts_are_the_previous_iterations_best_with_their_costs() -> None:
+    q0 = init_straight_lines(torch.zeros(2), torch.tensor([[1.0, 0.0]]), T)
+    stomp = Stomp(StompConfig(rollouts=10, reuse=5, iterations=4, seed=0), (-torch.ones(2), torch.ones(2)))
+    calls: list[int] = []
+    updates: list[tuple[torch.Tensor, ...]] = []
+
+    def cost(q: torch.Tensor) -> torch.Tensor:
+        calls.append(q.shape[1])
+        return _blob(q) + _acc_cost(q, 10.0)
+
+    step = stomp._step
+
+    def spy(name: str, *args: object) -> tuple[torch.Tensor, ...]:
+        if name == "update":
+            updates.append(tuple(a.clone() if isinstance(a, torch.Tensor) else a for a in args[:3]))
+        return step(name, *args)
+
+    stomp._step = spy  # type: ignore[method-assign]
+    res = stomp.optimize(q0, cost)
+    assert calls == [11, 6, 6, 6, 1]  # theta + 10 rollouts, then theta + 5 new ones per iteration: 29 vs 44 costed
+    for prev, cur in zip(updates, updates[1:], strict=False):
+        theta0, eps0, cost0 = prev
+        theta1, eps1, cost1 = cur
+        order = torch.argsort(cost0[:, 1:].sum(-1), dim=1)[0, :5]
+        # the last 5 rollouts of an iteration are the best 5 of the one before, as trajectories and with their costs
+        torch.testing.assert_close(theta1[0] + eps1[0, 5:], theta0[0] + eps0[0, order])
+        assert torch.equal(cost1[0, 6:], cost0[0, 1:][order])
+    assert bool(torch.isfinite(res.cost).all())
+
+
+def test_reuse_must_leave_new_rollouts() -> None:
+    with pytest.raises(StompError, match="stomp.reuse"):
+        Stomp(StompConfig(rollouts=4, reuse=4), (-torch.ones(2), torch.ones(2)))

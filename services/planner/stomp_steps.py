@@ -1,0 +1,120 @@
+"""STOMP's iteration as pure tensor functions (:mod:`services.planner.stomp` runs them, compiled or eager).
+
+1. :func:`rollouts`: the current trajectory and its noisy rollouts, clamped to the joint limits;
+2. the caller costs them (and, with reuse, adds the previous iteration's best with their costs, :func:`keep_best`);
+3. :func:`update`: keep the best, probabilities per waypoint, the smoothed update.
+
+:func:`finite_difference_matrix` is the STOMP paper's A (R = A^T A).
+"""
+
+from __future__ import annotations
+
+import torch
+
+__all__ = ["finite_difference_matrix", "rollouts", "with_ends", "finite", "update", "keep_best"]
+
+_NONFINITE_COST = 1e9  # a rollout whose cost is NaN/inf is treated as this costly per waypoint
+
+
+def finite_difference_matrix(n: int, dtype: torch.dtype = torch.float64) -> torch.Tensor:
+    """Acceleration finite differencing matrix A of the STOMP paper.
+
+    Args:
+        n: Number of free (interior) waypoints N.
+        dtype: Result dtype.
+
+    Returns:
+        ``(N + 2, N)``: row i gives ``theta[i-2] - 2 theta[i-1] + theta[i]`` with the fixed start and
+        goal contributing zero, so ``theta^T A^T A theta`` is the sum of squared accelerations of
+        the deviation from a trajectory with the same endpoints.
+    """
+    a = torch.zeros(n + 2, n, dtype=dtype)
+    idx = torch.arange(n)
+    a[idx, idx] = 1.0
+    a[idx + 1, idx] = -2.0
+    a[idx + 2, idx] = 1.0
+    return a
+
+
+def rollouts(theta: torch.Tensor, noise: torch.Tensor, start: torch.Tensor, goal: torch.Tensor,
+             lower: torch.Tensor, upper: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Step 1: the current trajectory and its noisy rollouts, clamped to the joint limits, with their endpoints.
+
+    Args:
+        theta: ``(K, N, D)`` current free waypoints.
+        noise: ``(K, R, N, D)`` this iteration's exploration noise.
+        start: ``(K, 1, D)`` fixed start.
+        goal: ``(K, 1, D)`` fixed goal.
+        lower: ``(D,)`` lower joint limits.
+        upper: ``(D,)`` upper joint limits.
+
+    Returns:
+        ``(q (K, R + 1, N + 2, D), eps (K, R, N, D))``: row 0 of ``q`` is ``theta``, rows 1.. the rollouts;
+        ``eps`` is the noise actually applied (after clamping).
+    """
+    noisy = torch.clamp(theta[:, None] + noise, lower, upper)
+    eps = noisy - theta[:, None]
+    return with_ends(torch.cat([theta[:, None], noisy], 1), start, goal), eps
+
+
+def with_ends(interior: torch.Tensor, start: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """``interior (K, R', N, D)`` free waypoints, ``start``, ``goal (K, 1, D)`` -> ``(K, R', N + 2, D)``."""
+    k, r = interior.shape[:2]
+    return torch.cat([start[:, None].expand(k, r, 1, -1), interior, goal[:, None].expand(k, r, 1, -1)], 2)
+
+
+def finite(cost: torch.Tensor) -> torch.Tensor:
+    """``cost`` (any shape) with NaN/inf replaced by a very large finite cost (such a rollout is never preferred)."""
+    return torch.nan_to_num(cost, nan=_NONFINITE_COST, posinf=_NONFINITE_COST, neginf=-_NONFINITE_COST)
+
+
+def update(theta: torch.Tensor, eps: torch.Tensor, cost: torch.Tensor, best_cost: torch.Tensor,
+           best_theta: torch.Tensor, lower: torch.Tensor, upper: torch.Tensor, m: torch.Tensor,
+           to_go: torch.Tensor | None, sensitivity: float
+           ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Steps 2-4 after the cost call: keep the best, probabilities per waypoint, the smoothed update.
+
+    Args:
+        theta: ``(K, N, D)`` current free waypoints.
+        eps: ``(K, R, N, D)`` the noise applied to the rollouts.
+        cost: ``(K, R + 1, N + 2)`` per-waypoint cost (row 0: ``theta``); NaN/inf count as very costly.
+        best_cost: ``(K,)`` the least total cost so far.
+        best_theta: ``(K, N, D)`` its waypoints.
+        lower: ``(D,)`` lower joint limits.
+        upper: ``(D,)`` upper joint limits.
+        m: ``(N, N)`` the smoothing matrix M.
+        to_go: ``(N + 1, N)`` cost-to-go summation matrix, or None (rank by each waypoint's own cost).
+        sensitivity: h.
+
+    Returns:
+        ``(theta', total (K,) cost of theta, best_cost', best_theta')``.
+    """
+    cost = finite(cost)
+    total = cost[:, 0].sum(-1)  # (K,)
+    better = total < best_cost
+    best_cost = torch.where(better, total, best_cost)
+    best_theta = torch.where(better[:, None, None], theta, best_theta)
+    # S(r, i) = sum_{j >= i} q(r, j) (goal included), or the free waypoints' own costs
+    s = cost[:, 1:, 1:] @ to_go if to_go is not None else cost[:, 1:, 1:-1]  # (K, R, N)
+    # 3. probabilities per waypoint over the rollouts
+    s_min, s_max = s.amin(1, keepdim=True), s.amax(1, keepdim=True)
+    p = torch.softmax(-sensitivity * (s - s_min) / (s_max - s_min).clamp_min(1e-12), dim=1)
+    # 4. update: probability-weighted noise, smoothed by M, kept within the limits
+    delta = torch.matmul(m, (p[..., None] * eps).sum(1))  # (K, N, D)
+    return torch.clamp(theta + delta, lower, upper), total, best_cost, best_theta
+
+
+def keep_best(interior: torch.Tensor, cost: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The ``n`` rollouts of least total cost, to be reused in the next iteration (``StompConfig.reuse``).
+
+    Args:
+        interior: ``(K, R, N, D)`` the rollouts' free waypoints (absolute, not noise).
+        cost: ``(K, R, T)`` their per-waypoint costs.
+        n: Rollouts kept (<= R).
+
+    Returns:
+        ``(interior (K, n, N, D), cost (K, n, T))``, least total cost first.
+    """
+    order = torch.argsort(finite(cost).sum(-1), dim=1, stable=True)[:, :n]  # (K, n); ties: the first rollout
+    kept = torch.gather(interior, 1, order[..., None, None].expand(-1, -1, *interior.shape[2:]))
+    return kept, torch.gather(cost, 1, order[..., None].expand(-1, -1, cost.shape[-1]))
