@@ -31,7 +31,9 @@ from shared.lockstep import FIRST_PLAN
 from shared.protocol import Plan, RobotState
 from shared.scene import SCENE_HELP
 
-__all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "Reference", "reason_kind", "HUMAN_SOURCE"]
+from .reference import Reference
+
+__all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "reason_kind", "HUMAN_SOURCE"]
 
 HUMAN_SOURCE = "replayer"
 """The service that streams the human's poses (its liveliness token holds the robot only mid-demonstration)."""
@@ -68,6 +70,15 @@ class ExecutorConfig:
     goal_tolerance: float = opt(0.02, help="goal reached when every joint is within this of the goal (rad or m)")
     velocity_scale: float = opt(1.0, help="fraction of the robot's joint velocity limits the simulation may use")
     stop_on_goal: bool = opt(False, help="end the run at the end of the step in which the goal is reached")
+    path_per_step: float = opt(0.0, help="advance this configuration-space length (weighted joint-space Euclidean "
+                               "norm) along the chosen trajectory per step_period_s, whatever the plan's timing, "
+                               "within the velocity limits (the paper authors' pace, docs/experiments.md); 0: follow "
+                               "the plan in time")
+    path_weights: list[float] = opt(default_factory=list, help="per-joint weights of the configuration-space length "
+                                    "of path_per_step (Move3D weighs a revolute joint by the size of its body; "
+                                    "empty: 1 each)")
+    finish_path: bool = opt(False, help="lockstep: after the last step, execute the rest of the last plan without "
+                            "replanning, at the same pace (the paper authors' protocol)")
     lockstep_timeout_s: float = opt(30.0, help="lockstep: longest wait (wall s) for the plan of a tick before "
                                     "going on without it")
     wait_for: list[str] = opt(default_factory=lambda: ["replayer", "predictor", "planner"],
@@ -94,6 +105,10 @@ class ExecutorConfig:
             raise ConfigError(f"executor.steps: must be >= 0, got {self.steps}")
         if self.velocity_scale > 1.0:
             raise ConfigError(f"executor.velocity_scale: must be <= 1, got {self.velocity_scale}")
+        if not (self.path_per_step >= 0 and math.isfinite(self.path_per_step)):
+            raise ConfigError(f"executor.path_per_step: must be >= 0, got {self.path_per_step}")
+        if not all(w > 0 and math.isfinite(w) for w in self.path_weights):
+            raise ConfigError(f"executor.path_weights: must be finite and > 0, got {self.path_weights}")
         for name in ("wait_for", "hold_without"):
             unknown = set(getattr(self, name)) - {"replayer", "predictor", "planner"}
             if unknown:
@@ -166,36 +181,6 @@ class ArmLimits:
                    arr(robot.velocity_limits))  # type: ignore[attr-defined]
 
 
-class Reference:
-    """The chosen trajectory of one plan as a piecewise-linear function of its own clock.
-
-    Args:
-        waypoints: ``(T, D)`` configurations ``dt`` seconds apart (already clamped to the limits).
-        dt: Waypoint spacing, seconds.
-    """
-
-    def __init__(self, waypoints: np.ndarray, dt: float) -> None:
-        self.waypoints = waypoints
-        self.dt = float(dt)
-        self.duration = self.dt * (len(waypoints) - 1)
-
-    @property
-    def goal(self) -> np.ndarray:
-        """``(D,)`` last waypoint."""
-        return self.waypoints[-1]
-
-    def at(self, tau: float) -> np.ndarray:
-        """``(D,)`` reference configuration ``tau`` seconds after the trajectory's start (held at the ends)."""
-        if tau <= 0.0 or len(self.waypoints) == 1:
-            return self.waypoints[0].copy()
-        if tau >= self.duration:
-            return self.waypoints[-1].copy()
-        x = tau / self.dt
-        i = int(math.floor(x))
-        a = x - i
-        return (1.0 - a) * self.waypoints[i] + a * self.waypoints[i + 1]
-
-
 @dataclass
 class _Freshness:
     plan: float | None = None       # time (core clock) of the latest plan
@@ -234,7 +219,11 @@ class ExecutorCore:
         self.qd = np.zeros(limits.dof)
         self.plan: Plan | None = None
         self.reference: Reference | None = None
-        self.tau = 0.0  # progress along the reference (stops while holding)
+        self.tau = 0.0  # progress along the reference (stops while holding): seconds, or length with path_per_step
+        weights = self.config.path_weights
+        if weights and len(weights) != limits.dof:
+            raise ExecutorError(f"path_weights: expected {limits.dof} values, got {len(weights)}")
+        self._path_weights = np.asarray(weights, dtype=np.float64) if weights else None
         self.goal = -1
         self.holding = True
         self.reason = FIRST_PLAN
@@ -266,7 +255,7 @@ class ExecutorCore:
         self.check_plan(plan)
         waypoints = self.limits.clamp(plan.trajectories[plan.chosen].astype(np.float64))
         self.plan = plan
-        self.reference = Reference(waypoints, plan.dt)
+        self.reference = Reference(waypoints, plan.dt, self._path_weights)
         self.tau = 0.0
         self.goal = int(plan.chosen)
         self.fresh.plan = self.t if stamp is None else float(stamp)
@@ -354,8 +343,12 @@ class ExecutorCore:
             self.qd = np.zeros(self.limits.dof)
         else:
             self.holding, self.reason = False, ""
-            self.tau += h
-            target = self.reference.at(self.tau)
+            if self.config.path_per_step > 0:  # the paper authors' pace: a fixed length of the path per step
+                self.tau += self.config.path_per_step * h / self.config.step_period_s
+                target = self.reference.at_length(self.tau)
+            else:
+                self.tau += h
+                target = self.reference.at(self.tau)
             v = (target - self.q) / h
             vmax = self.limits.velocity * self.config.velocity_scale
             scale = float(np.max(np.abs(v) / vmax))
@@ -366,6 +359,25 @@ class ExecutorCore:
             self.q = q_new
         self.t += h
         self._update_reached()
+
+    @property
+    def remaining(self) -> float:
+        """What is left of the reference: seconds, or configuration-space length with ``path_per_step``.
+
+        Once the reference's own clock has run out, what the arm still lags behind its end (the velocity limits
+        may hold a joint back): the weighted distance to the last waypoint, or the time it takes at the limits.
+        """
+        if self.reference is None:
+            return 0.0
+        ref = self.reference
+        gap = ref.goal - self.q
+        if self.config.path_per_step > 0:
+            left = ref.length - self.tau
+            lag = float(np.linalg.norm(gap * (1.0 if self._path_weights is None else self._path_weights)))
+        else:
+            left = ref.duration - self.tau
+            lag = float(np.max(np.abs(gap) / (self.limits.velocity * self.config.velocity_scale)))
+        return left if left > 0.0 else (lag if lag > 1e-9 else 0.0)
 
     def _update_reached(self) -> None:
         if self.reference is None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import threading
 import time
 from collections import OrderedDict
@@ -72,6 +73,7 @@ class ExecutorResult:
         reached: Whether the goal was reached; ``reached_step`` the first step it was (-1: never).
         goal_per_step: Goal index executed during each step (-1: none yet).
         held_steps: Steps (lock-step) or state samples (real time) during which the robot held.
+        finish_steps: Steps after the last one that executed the rest of the last plan (``finish_path``).
         plans: Plans adopted; ``plans_rejected``: plans with the wrong joints.
         rejects: Payloads refused (decoding, values, order), per key; ``reject_reasons`` per
             ``"key reason"``.
@@ -84,6 +86,7 @@ class ExecutorResult:
     reached_step: int = -1
     goal_per_step: list[int] = field(default_factory=list)
     held_steps: int = 0
+    finish_steps: int = 0
     plans: int = 0
     plans_rejected: int = 0
     rejects: dict[str, int] = field(default_factory=dict)
@@ -128,7 +131,8 @@ class ExecutorService:
         lockstep = config.mode == "lockstep"
         self.receipt = Receipt(Expectations(
             clock=config.mode, period_s=config.step_period_s if lockstep else None,
-            max_tick=(lambda: self.result.steps) if lockstep else None,  # no tick beyond the one in progress
+            # no tick beyond the one in progress (the steps after the last one, finish_path, count too)
+            max_tick=(lambda: self.result.steps + self.result.finish_steps) if lockstep else None,
             robot=RobotSpec(tuple(lim.joint_names), lim.lower, lim.upper, lim.velocity),
             grid=GridSpec.from_grid(self.scene.grid)))
         self._expected = self.keys.data_keys()
@@ -275,10 +279,34 @@ class ExecutorService:
                 log.info("executor: goal %d reached during step %d", step.goal, n)
             clock_pub.put(step.clock)
             if cfg.stop_on_goal and step.reached:
-                break
+                return  # at the goal: nothing left to finish
             flush = self.mcap.flush_if_due if self.mcap is not None else None
             if not self.inbox.wait_plan(n, cfg.lockstep_timeout_s, self.stop, idle=flush):
                 log.warning("executor: no plan for tick %d within %.1f s; going on", n, cfg.lockstep_timeout_s)
+            n += 1
+        if cfg.finish_path and not self.stop.is_set():
+            self._finish_path(master, state_pub, n)
+
+    def _finish_path(self, master: LockstepMaster, state_pub: TypedPublisher[Any], n: int) -> None:
+        """After the last step: the rest of the last plan at the same pace, without replanning (paper protocol).
+
+        The first of these steps adopts the plan of the last replanning step (as any step adopts the plan of the one
+        before); a bounded number of steps follows (its length at the pace, and 20 more for a lagging joint).
+        """
+        cfg, r, core = self.config, self.result, self.core
+        per_step = cfg.path_per_step if cfg.path_per_step > 0 else cfg.step_period_s
+        start, bound = n, n + 1
+        received = self.inbox.latest()  # the last step's plan: the rest of the best path is the newest plan's
+        while (n == start or (core.remaining > 0.0 and n < bound)) and not self.stop.is_set():
+            r.finish_steps += 1  # before its states go out: they carry tick n
+            step = master.finish(n, received if n == start else None)
+            if n == start:  # a bounded tail: the plan's length at the pace, 20 steps more for a lagging joint
+                bound = n + 1 + math.ceil(core.remaining / per_step) + 20
+            for state in step.states:
+                self._publish_state(state_pub, state)
+            if step.reached and r.reached_step < 0:
+                r.reached, r.reached_step = True, n
+                log.info("executor: goal %d reached during step %d (the rest of the path)", step.goal, n)
             n += 1
 
     def _run_realtime(self, state_pub: TypedPublisher[Any], presence: Presence) -> None:

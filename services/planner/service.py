@@ -1,7 +1,7 @@
 """The planner's Zenoh loop: occupancy + robot state in, one Plan per replanning step out.
 
 Lock-step mode (deterministic; see docs/protocol.md): on ClockTick n the planner takes what its
-:class:`shared.lockstep.TickInbox` pairs with the tick,
+:class:`shared.lockstep_followers.TickInbox` pairs with the tick,
 
 * the robot configuration at the end of step n, i.e. the last RobotState of tick n (stamp
   ``tick.stamp + tick.period``), which is where plan n starts executing, and
@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from shared.config import ZenohConfig
-from shared.lockstep import TickInbox
+from shared.lockstep_followers import TickInbox
 from shared.protocol import (
     ClockTick,
     DemoMarker,

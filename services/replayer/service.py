@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from shared.config import ZenohConfig
 from shared.library import MotionLibrary
-from shared.lockstep import TickOrder, TickQueue
+from shared.lockstep_followers import TickOrder, TickQueue
 from shared.protocol import ClockTick, DemoMarker, Expectations, HumanPose, Keys, Message, Receipt
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe
 

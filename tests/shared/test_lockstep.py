@@ -1,4 +1,4 @@
-"""Lock-step rules without Zenoh: the clock, plan adoption, the per-step hold, the tick inboxes."""
+"""Lock-step rules without Zenoh: the clock, plan adoption, the per-step hold, the path pace (the master)."""
 
 from __future__ import annotations
 
@@ -15,10 +15,8 @@ from shared.lockstep import (
     PlanInbox,
     Received,
     StepClock,
-    TickInbox,
-    TickOrder,
 )
-from shared.protocol import ClockTick, DemoMarker, OccupancyGrid, Plan, RobotState
+from shared.protocol import ClockTick, Plan
 
 NAMES = ("j0", "j1")
 LIMITS = ArmLimits(NAMES, np.array([-1.0, -1.0]), np.array([1.0, 1.0]), np.array([1.0, 1.0]))
@@ -31,16 +29,6 @@ def plan(tick: int, goal: float = 0.5) -> Plan:
     return Plan(stamp=tick * 0.2, tick=tick, step=tick, goal_names=["g"], joint_names=list(NAMES), dt=0.1, chosen=0,
                 planning_ms=1.0, occupancy_tick=tick - 1, occupancy_index=0, trajectories=traj,
                 cost_smoothness=zero, cost_obstacle=zero, cost_human=zero, cost_total=zero, valid=np.ones(1, bool))
-
-
-def grid(tick: int, last: bool = True) -> OccupancyGrid:
-    return OccupancyGrid.from_dense(np.zeros((2, 2, 2), np.float32), np.zeros(3), 0.1, stamp=0.0, tick=tick,
-                                    tick_last=last, demo_id=0, index=tick, method="prediction")
-
-
-def state(tick: int, stamp: float) -> RobotState:
-    return RobotState(stamp=stamp, tick=tick, joint_names=list(NAMES), goal=-1, reached=False, holding=True,
-                      reason="", q=np.zeros(2), qd=np.zeros(2))
 
 
 def test_clock_times_are_multiples_of_the_period() -> None:
@@ -118,55 +106,50 @@ def test_plan_inbox_waits_for_the_plan_of_a_tick() -> None:
     assert inbox.latest().occupancy_tick == 3 and inbox.latest().occupancy_time == 2.0
 
 
-def test_tick_order_takes_each_tick_once_in_order() -> None:
-    order = TickOrder()
-    assert order.accept(0) == (True, "")
-    assert order.accept(1) == (True, "")
-    assert order.accept(1) == (False, "ignoring clock tick 1 (already at tick 1)")
-    assert order.accept(3) == (True, "clock jumped from tick 1 to 3")
-    assert order.accept(2)[0] is False
+def test_path_pace_advances_the_stated_length_per_step_and_finishes_the_path() -> None:
+    # plan(0): a straight line from (0, 0) to (0.5, 0.5), length 0.5 sqrt(2) = 0.7071, timed 1 s at dt 0.1
+    core = ExecutorCore(LIMITS, np.zeros(2), ExecutorConfig(state_rate_hz=20.0, step_period_s=0.2,
+                                                            path_per_step=0.1, stale_limit_s=10.0))
+    master = LockstepMaster(core, CLOCK)
+
+    def feed(n: int, inbox: PlanInbox) -> None:
+        if n == 1:
+            inbox.put_plan(plan(0))
+            inbox.put_occupancy(0, arrival=0.0)
+
+    steps = run_steps(master, PlanInbox(), 4, feed)
+    assert steps[0].held and not steps[1].held
+    moved = [np.linalg.norm(s.states[-1].q) for s in steps]  # distance from the start along the straight line
+    np.testing.assert_allclose(moved, [0.0, 0.1, 0.2, 0.3], atol=1e-9)  # 0.1 per step, whatever dt says
+    np.testing.assert_allclose(np.linalg.norm(steps[1].states[0].q), 0.025, atol=1e-9)  # a quarter per substep
+    assert core.remaining == pytest.approx(0.5 * np.sqrt(2) - 0.3)
+    # after the last step: the rest of the path at the same pace, no clock tick, no new plan
+    tail = []
+    n = 4
+    while core.remaining > 0:
+        tail.append(master.finish(n))
+        n += 1
+    assert len(tail) == 5  # 0.407 left at 0.1 per step
+    assert all(s.clock is None and not s.held for s in tail)
+    assert [m.tick for m in tail[0].states] == [4] * 4
+    np.testing.assert_allclose(tail[-1].states[-1].q, [0.5, 0.5], atol=1e-9)
+    assert tail[-1].reached and len(tail[-1].states) < 4  # it stops at the end of the path
 
 
-def test_tick_inbox_pairs_a_tick_with_its_state_and_the_previous_prediction() -> None:
-    inbox = TickInbox(keep=3)
-    tick0, tick2 = ClockTick(stamp=0.0, tick=0, period=0.2), ClockTick(stamp=0.4, tick=2, period=0.2)
-    inbox.add_tick(tick0)
-    assert inbox.ticks.get(timeout=1.0) == tick0 and inbox.ticks.get(timeout=0.0) is None
-    inbox.add_state(state(0, 0.2))
-    got = inbox.inputs(tick0, timeout=0.0)
-    assert got.state.stamp == 0.2 and got.occupancy is None and not got.prediction_missing
-    inbox.add_state(state(2, 0.6))
-    inbox.add_state(state(2, 0.5))  # an earlier state of the tick arriving late is not kept
-    inbox.add_occupancy(grid(1, last=False))  # only a tick's final grid counts
-    got = inbox.inputs(tick2, timeout=0.0)
-    assert got.state.stamp == 0.6 and got.occupancy is None and got.prediction_missing
-    inbox.add_occupancy(grid(0))
-    got = inbox.inputs(tick2, timeout=0.0)
-    assert got.occupancy.tick == 0 and got.prediction_missing  # the newest earlier grid, reported
-    inbox.add_occupancy(grid(1))
-    got = inbox.inputs(tick2, timeout=0.0)
-    assert got.occupancy.tick == 1 and not got.prediction_missing
-
-
-def test_after_the_demonstration_ends_its_last_prediction_is_the_one_to_use() -> None:
-    inbox = TickInbox()
-    inbox.add_occupancy(grid(1))
-    inbox.add_marker(DemoMarker(stamp=0.2, tick=1, demo_id=0, event="end", true_class=0, class_name="c",
-                                n_samples=5))
-    tick5 = ClockTick(stamp=1.0, tick=5, period=0.2)
-    inbox.add_state(state(5, 1.2))
-    got = inbox.inputs(tick5, timeout=0.0)
-    assert got.expected_tick == 1 and got.occupancy.tick == 1 and not got.prediction_missing
-
-
-def test_no_state_means_no_wait_for_the_prediction() -> None:
-    got = TickInbox().inputs(ClockTick(stamp=0.2, tick=1, period=0.2), timeout=0.0)
-    assert got.state is None and got.occupancy is None
-
-
-def test_inboxes_keep_only_recent_ticks() -> None:
-    inbox = TickInbox(keep=2)
-    for t in range(4):
-        inbox.add_state(state(t, t * 0.2))
-        inbox.add_occupancy(grid(t))
-    assert sorted(inbox.states) == [2, 3] and sorted(inbox.occupancy) == [2, 3]
+def test_the_rest_of_the_path_is_the_last_steps_plan() -> None:
+    core = ExecutorCore(LIMITS, np.zeros(2), ExecutorConfig(state_rate_hz=20.0, step_period_s=0.2,
+                                                            path_per_step=0.1, stale_limit_s=10.0))
+    master, inbox = LockstepMaster(core, CLOCK), PlanInbox()
+    inbox.put_plan(plan(0))
+    inbox.put_occupancy(0, arrival=0.0)
+    master.step(0, inbox.latest())
+    master.step(1, inbox.latest())  # plan 0 adopted: towards (0.5, 0.5)
+    here = core.q.copy()
+    last = plan(1)
+    last.trajectories[0] = np.linspace(here, [0.5, -0.2], 11).astype(np.float32)  # the last step re-planned
+    inbox.put_plan(last)
+    n = 2
+    while n == 2 or core.remaining > 0:
+        master.finish(n, inbox.latest() if n == 2 else None)
+        n += 1
+    np.testing.assert_allclose(core.q, [0.5, -0.2], atol=1e-6)  # the newest plan's goal, not plan 0's

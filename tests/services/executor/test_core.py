@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.executor.core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, Reference, reason_kind
+from services.executor.core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, reason_kind
+from services.executor.reference import Reference
 from shared.config import ConfigError
 from shared.protocol import Plan
 

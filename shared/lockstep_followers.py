@@ -1,0 +1,155 @@
+"""Lock-step followers of the clock: how the replayer and the planner take ClockTicks.
+
+The master, the executor's rules, is :mod:`shared.lockstep`.
+
+No Zenoh here. The replayer publishes its poses of tick n on ClockTick n, each tick once and in order
+(:class:`TickOrder`, fed by a :class:`TickQueue`); the planner plans tick n from the last robot state of tick n
+(where plan n starts) and the prediction of tick n-1 (:class:`TickInbox`).
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from dataclasses import dataclass
+
+from shared.protocol import ClockTick, DemoMarker, OccupancyGrid, RobotState
+
+__all__ = ["TickQueue", "TickOrder", "PlanningInputs", "TickInbox"]
+
+
+class TickQueue:
+    """Clock ticks in arrival order, handed to the service's loop one at a time (``put`` as they arrive)."""
+
+    def __init__(self) -> None:
+        self._q: queue.Queue[ClockTick] = queue.Queue()
+        self.put = self._q.put
+
+    def get(self, timeout: float) -> ClockTick | None:
+        """The next tick, or None after ``timeout`` seconds."""
+        try:
+            return self._q.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+
+class TickOrder:
+    """Each tick once and in order (the replayer's rule): a repeated or older tick is ignored, a gap reported."""
+
+    def __init__(self) -> None:
+        self.last = -1
+
+    def accept(self, tick: int) -> tuple[bool, str]:
+        """Whether to act on ``tick``, and what to report ("" when all is in order)."""
+        if tick <= self.last:
+            return False, f"ignoring clock tick {tick} (already at tick {self.last})"
+        note = f"clock jumped from tick {self.last} to {tick}" if tick != self.last + 1 and self.last >= 0 else ""
+        self.last = tick
+        return True, note
+
+
+@dataclass(frozen=True)
+class PlanningInputs:
+    """What the planner plans tick n from.
+
+    Attributes:
+        tick: ClockTick n.
+        state: The last RobotState of tick n (where plan n starts), or None if it never came.
+        occupancy: The prediction of tick n-1 (or the newest earlier one after the timeout; None at tick 0).
+        expected_tick: The tick of the prediction to use (n-1, or the demonstration's last pose's tick
+            once it ended; -1 at tick 0).
+    """
+
+    tick: ClockTick
+    state: RobotState | None
+    occupancy: OccupancyGrid | None
+    expected_tick: int
+
+    @property
+    def prediction_missing(self) -> bool:
+        """Whether the prediction to use did not arrive in time (the planner uses ``occupancy`` instead)."""
+        return self.tick.tick > 0 and (self.occupancy is None or self.occupancy.tick != self.expected_tick)
+
+
+class TickInbox:
+    """The planner's inbox: clock ticks, and robot states and final occupancy grids by tick, with waiting.
+
+    Args:
+        keep: Ticks of states and grids kept (the oldest are dropped).
+    """
+
+    def __init__(self, keep: int = 8) -> None:
+        self.cond = threading.Condition()
+        self.ticks = TickQueue()
+        self.states: dict[int, RobotState] = {}
+        self.occupancy: dict[int, OccupancyGrid] = {}
+        self.end_tick: int | None = None  # tick of the observed demonstration's last pose, once it ended
+        self.keep = keep
+
+    def _trim(self, d: dict[int, object]) -> None:
+        while len(d) > self.keep:
+            d.pop(min(d))
+
+    def add_tick(self, msg: ClockTick) -> None:
+        """A clock tick arrived."""
+        self.ticks.put(msg)
+
+    def add_state(self, msg: RobotState) -> None:
+        """A robot state arrived; the latest-stamped one of each tick is kept."""
+        with self.cond:
+            old = self.states.get(msg.tick)
+            if old is None or msg.stamp >= old.stamp:
+                self.states[msg.tick] = msg
+                self._trim(self.states)
+            self.cond.notify_all()
+
+    def add_occupancy(self, msg: OccupancyGrid) -> None:
+        """An occupancy grid arrived; only a tick's final grid (``tick_last``) is kept."""
+        if not msg.tick_last:
+            return
+        with self.cond:
+            self.occupancy[msg.tick] = msg
+            self._trim(self.occupancy)
+            self.cond.notify_all()
+
+    def add_marker(self, msg: DemoMarker) -> None:
+        """A demonstration marker arrived (its end carries the tick of the last pose)."""
+        with self.cond:
+            self.end_tick = msg.tick if msg.event == "end" else None
+            self.cond.notify_all()
+
+    def wait_state(self, tick: int, stamp: float, timeout: float) -> RobotState | None:
+        """The state of ``tick`` stamped at least ``stamp`` (else the newest of that tick after the timeout)."""
+        with self.cond:
+            self.cond.wait_for(lambda: tick in self.states and self.states[tick].stamp >= stamp - 1e-9, timeout)
+            return self.states.get(tick)
+
+    def wait_occupancy(self, tick: int, timeout: float) -> OccupancyGrid | None:
+        """The final grid of ``tick``, else the newest final grid of an earlier tick after the timeout.
+
+        Once the observed demonstration has ended (its end marker carries the tick of its last pose),
+        no grid comes after that tick: the grid of the last pose's tick is the prediction to use.
+        """
+
+        def target() -> int:
+            return tick if self.end_tick is None else min(tick, self.end_tick)
+
+        with self.cond:
+            if self.cond.wait_for(lambda: target() in self.occupancy, timeout):
+                return self.occupancy[target()]
+            earlier = [t for t in self.occupancy if t < tick]
+            return self.occupancy[max(earlier)] if earlier else None
+
+    def inputs(self, tick: ClockTick, timeout: float) -> PlanningInputs:
+        """Wait (at most ``timeout`` s each) for the state and the prediction tick n is planned from.
+
+        The state is the last one of tick n (stamp ``t_n + P``); without it there is nothing to plan
+        from and the prediction is not awaited.
+        """
+        state = self.wait_state(tick.tick, tick.stamp + tick.period, timeout)
+        if state is None:
+            return PlanningInputs(tick, None, None, tick.tick - 1)
+        occ = self.wait_occupancy(tick.tick - 1, timeout) if tick.tick > 0 else None
+        end = self.end_tick
+        expected = tick.tick - 1 if end is None else min(tick.tick - 1, end)
+        return PlanningInputs(tick, state, occ, expected)

@@ -1,0 +1,74 @@
+"""The clock's followers without Zenoh: each tick once and in order, the planner's tick inbox."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shared.lockstep_followers import TickInbox, TickOrder
+from shared.protocol import ClockTick, DemoMarker, OccupancyGrid, RobotState
+
+NAMES = ("j0", "j1")
+
+
+def grid(tick: int, last: bool = True) -> OccupancyGrid:
+    return OccupancyGrid.from_dense(np.zeros((2, 2, 2), np.float32), np.zeros(3), 0.1, stamp=0.0, tick=tick,
+                                    tick_last=last, demo_id=0, index=tick, method="prediction")
+
+
+def state(tick: int, stamp: float) -> RobotState:
+    return RobotState(stamp=stamp, tick=tick, joint_names=list(NAMES), goal=-1, reached=False, holding=True,
+                      reason="", q=np.zeros(2), qd=np.zeros(2))
+
+
+def test_tick_order_takes_each_tick_once_in_order() -> None:
+    order = TickOrder()
+    assert order.accept(0) == (True, "")
+    assert order.accept(1) == (True, "")
+    assert order.accept(1) == (False, "ignoring clock tick 1 (already at tick 1)")
+    assert order.accept(3) == (True, "clock jumped from tick 1 to 3")
+    assert order.accept(2)[0] is False
+
+
+def test_tick_inbox_pairs_a_tick_with_its_state_and_the_previous_prediction() -> None:
+    inbox = TickInbox(keep=3)
+    tick0, tick2 = ClockTick(stamp=0.0, tick=0, period=0.2), ClockTick(stamp=0.4, tick=2, period=0.2)
+    inbox.add_tick(tick0)
+    assert inbox.ticks.get(timeout=1.0) == tick0 and inbox.ticks.get(timeout=0.0) is None
+    inbox.add_state(state(0, 0.2))
+    got = inbox.inputs(tick0, timeout=0.0)
+    assert got.state.stamp == 0.2 and got.occupancy is None and not got.prediction_missing
+    inbox.add_state(state(2, 0.6))
+    inbox.add_state(state(2, 0.5))  # an earlier state of the tick arriving late is not kept
+    inbox.add_occupancy(grid(1, last=False))  # only a tick's final grid counts
+    got = inbox.inputs(tick2, timeout=0.0)
+    assert got.state.stamp == 0.6 and got.occupancy is None and got.prediction_missing
+    inbox.add_occupancy(grid(0))
+    got = inbox.inputs(tick2, timeout=0.0)
+    assert got.occupancy.tick == 0 and got.prediction_missing  # the newest earlier grid, reported
+    inbox.add_occupancy(grid(1))
+    got = inbox.inputs(tick2, timeout=0.0)
+    assert got.occupancy.tick == 1 and not got.prediction_missing
+
+
+def test_after_the_demonstration_ends_its_last_prediction_is_the_one_to_use() -> None:
+    inbox = TickInbox()
+    inbox.add_occupancy(grid(1))
+    inbox.add_marker(DemoMarker(stamp=0.2, tick=1, demo_id=0, event="end", true_class=0, class_name="c",
+                                n_samples=5))
+    tick5 = ClockTick(stamp=1.0, tick=5, period=0.2)
+    inbox.add_state(state(5, 1.2))
+    got = inbox.inputs(tick5, timeout=0.0)
+    assert got.expected_tick == 1 and got.occupancy.tick == 1 and not got.prediction_missing
+
+
+def test_no_state_means_no_wait_for_the_prediction() -> None:
+    got = TickInbox().inputs(ClockTick(stamp=0.2, tick=1, period=0.2), timeout=0.0)
+    assert got.state is None and got.occupancy is None
+
+
+def test_inboxes_keep_only_recent_ticks() -> None:
+    inbox = TickInbox(keep=2)
+    for t in range(4):
+        inbox.add_state(state(t, t * 0.2))
+        inbox.add_occupancy(grid(t))
+    assert sorted(inbox.states) == [2, 3] and sorted(inbox.occupancy) == [2, 3]
