@@ -53,6 +53,9 @@ class PredictorConfig:
                       choices=METHODS)
     temperature: float = opt(0.0, help="posterior temperature tau: p(C_m|xi) = softmax(ln p(xi|C_m) / tau); "
                              "1 = the paper's; 0 = the model file's (set by `foresight train --temperature`)")
+    evidence: str = opt("sum", help="how the observed frames weigh: 'sum' (ln p(xi|C_m) summed over the frames, the "
+                        "paper's text) or 'mean' (divided by the frames observed: the per-frame mean log-likelihood "
+                        "whose softmax the authors' code takes, HRICS_ClassifyMotion.cpp)", choices=("sum", "mean"))
     grid_interval_s: float = opt(0.02, help="real time: at least this long between two occupancy grids (the "
                                  "newest pose's grid is owed and sent once due; 0: a grid for every pose)")
     backlog: int = opt(3000, help="most messages waiting to be processed (about 10 s at 300 Hz); beyond it the "
@@ -65,6 +68,8 @@ class PredictorConfig:
         """Check the options."""
         if not str(self.model):
             raise ConfigError("predictor.model: must name a model file")
+        if self.evidence not in ("sum", "mean"):
+            raise ConfigError(f"predictor.evidence: 'sum' or 'mean', got {self.evidence!r}")
         if not (self.temperature >= 0 and np.isfinite(self.temperature)):
             raise ConfigError(f"predictor.temperature: must be >= 0 (0 = the model's), got {self.temperature}")
         if not (0 <= self.grid_interval_s <= 10 and np.isfinite(self.grid_interval_s)):
@@ -221,7 +226,8 @@ class PredictorCore:
         x = self.encoder.step(f, t)
         self._ll = self._ll + self.bank.log_likelihood(x[None])[0]
         self._count += 1
-        self._last = (f, t, posterior_from_log_likelihood(self._ll, temperature=self.temperature))
+        ll = self._ll / self._count if self.config.evidence == "mean" else self._ll
+        self._last = (f, t, posterior_from_log_likelihood(ll, temperature=self.temperature))
         return self._last[2]
 
     def predict(self) -> PredictionResult:

@@ -204,3 +204,18 @@ def test_core_log_likelihood_is_the_batch_sum(small_library, small_model: Predic
     assert np.array_equal(result.log_likelihood, core.log_likelihood())
     core.reset(8)  # a new demonstration starts from nothing
     assert core.n_observed == 0 and np.array_equal(core.log_likelihood(), np.zeros(small_library.n_classes))
+
+
+def test_mean_evidence_is_the_softmax_of_the_per_frame_mean(small_model: PredictionModel, small_library, scene) -> None:
+    from services.predictor.gmm import posterior_from_log_likelihood
+
+    demo = small_library.by_class(1)[2].features[:30]
+    summed = PredictorCore(small_model, scene, PredictorConfig(temperature=1.0))
+    mean = PredictorCore(small_model, scene, PredictorConfig(temperature=1.0, evidence="mean"))
+    for core in (summed, mean):
+        core.reset(0)
+    for i, f in enumerate(demo):
+        a, b = summed.update(f, i), mean.update(f, i)
+        assert np.array_equal(a.log_likelihood, b.log_likelihood)  # the evidence is the same, its weight is not
+        assert np.allclose(b.posterior, posterior_from_log_likelihood(a.log_likelihood / (i + 1)))
+    assert b.posterior.max() < a.posterior.max()  # the authors' mean is less confident than the paper's product
