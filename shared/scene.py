@@ -20,11 +20,12 @@ __all__ = ["SceneError", "Box", "Cup", "Grid", "HumanPlacement", "RobotPlacement
 DEFAULT_SCENE = "pr2_two_cups"
 
 PAPER_SCENES = {"PR2TwoCups": "pr2_two_cups", "PR2TwoCupsFacing": "pr2_two_cups_facing",
-                "PR2TwoCupsSide": "pr2_two_cups_side"}
+                "PR2TwoCupsSide": "pr2_two_cups_side", "PR2TwoCupsSideParallel": "pr2_two_cups_side_parallel"}
 """The paper's Move3D scene names and the embedded scene files written from them (docs/scenes.md)."""
 
-SCENE_HELP = ("scene: an embedded name (pr2_two_cups, pr2_two_cups_facing, pr2_two_cups_side, or the paper's "
-              "PR2TwoCups, PR2TwoCupsFacing, PR2TwoCupsSide) or a scene TOML file")
+SCENE_HELP = ("scene: an embedded name (pr2_two_cups, pr2_two_cups_facing, pr2_two_cups_side, "
+              "pr2_two_cups_side_parallel, or the paper's PR2TwoCups, PR2TwoCupsFacing, PR2TwoCupsSide, "
+              "PR2TwoCupsSideParallel) or a scene TOML file")
 """``--help`` text of every ``--scene`` option."""
 
 

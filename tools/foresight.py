@@ -25,7 +25,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "log": ("tools.log.cli", "inspect (info), draw (render) and time (latency) a run's MCAP log"),
     "predictor": ("services.predictor.__main__", "recognise the human's motion early; publish predicted occupancy"),
     "train": ("services.predictor.train", "train the prediction model (GMMs, GMR motions, swept volumes)"),
-    "eval": ("services.experiments.cli", "the paper's experiments: recognition | interference | switch | all"),
+    "eval": ("services.experiments.cli", "the paper's experiments and beyond: recognition | interference | switch | "
+             "occupancy | volumes | pace | all"),
     "bench": ("services.bench", "benchmark a component: predictor | planner"),
 }
 

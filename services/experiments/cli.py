@@ -5,6 +5,7 @@
     foresight eval switch        two robot tasks, when the robot settles on its goal (Fig. 8-9)
     foresight eval occupancy     does the predicted occupancy hold where the human really goes (leave-one-out)
     foresight eval volumes       each occupancy volume in the loop (Table I + switch) against the real human
+    foresight eval pace          Table I across the robot's pace, both protocols: where prediction pays off
     foresight eval all           all of them and the timings, one Markdown report with PNGs
 
 Every run goes through the four services (in-process, loopback Zenoh, lock-step, seeded): the same
@@ -26,7 +27,9 @@ from shared.runtime import UserError, cli_errors, setup_logging
 from shared.scene import SCENE_HELP
 
 from .interference import TABLE1_SCENE, InterferenceConfig, run_interference
+from .pace import DEFAULT_PACES
 from .planners import Timing
+from .protocol import PAPER, PROTOCOLS, TRIALS, protocol
 from .switch import SWITCH_SCENE, SwitchConfig, plot_switch, run_switch
 
 __all__ = ["main"]
@@ -36,14 +39,20 @@ def _common(p: argparse.ArgumentParser, scene: str) -> None:
     p.add_argument("--library", default="synthetic", help="motion library: 'synthetic' (the embedded synthetic "
                    "library, generated for the scene's cups) or a path (dir of compound_*.csv or .npz); "
                    "default: synthetic")
-    p.add_argument("--scene", default=scene, help=f"{SCENE_HELP} (default: {scene})")
+    default = f"{scene}; with --protocol paper the authors' scene, {PAPER.table1_scene}" if scene == TABLE1_SCENE \
+        else scene
+    p.add_argument("--scene", default=None, help=f"{SCENE_HELP} (default: {default})")
     p.add_argument("--steps", type=int, default=Timing.steps, help="replanning steps per run (default: 20)")
     p.add_argument("--period-s", type=float, default=Timing.period_s, help="simulated seconds the robot executes "
                    "per step (default: 0.5, the paper's planning time per step)")
-    p.add_argument("--iterations", type=int, default=Timing.iterations, help="STOMP iterations per step "
-                   "(default: 50)")
+    p.add_argument("--iterations", type=int, default=None, help="STOMP iterations per step "
+                   "(default: the protocol's, 50 in the product's, 51 in the paper's)")
     p.add_argument("--robot-speed", type=float, default=Timing.robot_speed, help="fraction of the PR2's joint "
                    "velocity limits (default: 0.25)")
+    p.add_argument("--rollouts", type=int, default=None, help="STOMP rollouts per iteration (default: 10, the "
+                   "planner's and the paper authors')")
+    p.add_argument("--reuse", type=int, default=None, help="rollouts of the previous iteration STOMP reuses, the "
+                   "best first (default: 5, the planner's and the paper authors')")
     p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20, the paper's)")
     p.add_argument("--w-human", type=float, default=None, help="weight of the planner's human cost (default: the "
                    "planner's, 1); for ablations")
@@ -53,6 +62,11 @@ def _common(p: argparse.ArgumentParser, scene: str) -> None:
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
     p.add_argument("--no-compile", action="store_true", help="run the planner's cost and STOMP's steps "
                    "eagerly (no torch.compile)")
+    p.add_argument("--protocol", choices=PROTOCOLS, default="product", help="product: the product's pace, costs and "
+                   "measure (default); paper: the paper's authors' protocol, from their code (docs/experiments.md)")
+    p.add_argument("--trials", choices=TRIALS, default="auto", help="the human's motions: authors (the authors' "
+                   "motions of the paper's library, 25-29 / 77), cup (the class nearest the human's cup), auto "
+                   "(authors with --protocol paper on the paper's library, else cup)")
     p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
 
 
@@ -70,8 +84,11 @@ def _user_errors() -> Iterator[None]:
 
 
 def _timing(args: argparse.Namespace) -> Timing:
-    t = Timing(args.steps, args.period_s, args.iterations, args.robot_speed)
-    if t.steps < 1 or t.iterations < 1 or not t.period_s > 0 or not 0 < t.robot_speed <= 1:
+    t = Timing(args.steps, args.period_s, args.iterations, args.robot_speed, args.rollouts, args.reuse)
+    if (t.rollouts is not None and t.rollouts < 2) or (t.reuse is not None and t.reuse < 0):
+        raise UserError(f"--rollouts must be >= 2 and --reuse >= 0, got {t.rollouts} and {t.reuse}")
+    if t.steps < 1 or (t.iterations is not None and t.iterations < 1) or not t.period_s > 0 \
+            or not 0 < t.robot_speed <= 1:
         raise UserError("--steps and --iterations must be >= 1, --period-s > 0, --robot-speed in (0, 1]")
     if args.components < 1:
         raise UserError(f"--components must be >= 1, got {args.components}")
@@ -91,7 +108,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="what", required=True,
-                                metavar="{recognition,interference,switch,occupancy,volumes,all}")
+                                metavar="{recognition,interference,switch,occupancy,volumes,pace,all}")
     sub.add_parser("recognition", help="early recognition, leave-one-out (Fig. 6); see its --help", add_help=False)
     p = sub.add_parser("interference", help="Table I: basic STOMP vs least penetration vs current occupancy",
                        description=_doc("interference"),
@@ -140,6 +157,22 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20, the paper's)")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
+    p.add_argument("--no-compile", action="store_true", help="run the planner's cost and STOMP's steps eagerly")
+    p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
+    p = sub.add_parser("pace", help="Table I across the robot's pace, per protocol and library",
+                       description=_doc("pace"), formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--libraries", default="synthetic", help="comma-separated: 'synthetic' and/or paths "
+                   "(default: synthetic)")
+    p.add_argument("--protocols", default="product,paper", help="comma-separated (default: product,paper)")
+    for prot, paces in DEFAULT_PACES.items():
+        p.add_argument(f"--{prot}-paces", default=",".join(f"{x:g}" for x in paces),
+                       help=f"paces of the {prot} protocol (default: {','.join(f'{x:g}' for x in paces)})")
+    p.add_argument("--demos", type=int, default=5, help="held-out demonstrations per point (default: 5)")
+    p.add_argument("--seeds", type=int, default=2, help="seeds per demonstration (default: 2)")
+    p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20)")
+    p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
+    p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
+    p.add_argument("--plot", type=Path, default=Path("runs/plots/pace.png"), help="the PNG")
     p.add_argument("--no-compile", action="store_true", help="run the planner's cost and STOMP's steps eagerly")
     p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
     from .report import add_report_arguments
@@ -192,6 +225,35 @@ def _volumes(args: argparse.Namespace, out) -> int:
     return 0
 
 
+def _pace(args: argparse.Namespace, out) -> int:
+    from .pace import PaceConfig, plot_pace, run_pace
+
+    protocols = tuple(p.strip() for p in args.protocols.split(",") if p.strip())
+    bad = [p for p in protocols if p not in PROTOCOLS]
+    if bad or not protocols:
+        raise UserError(f"--protocols: {', '.join(bad) or 'none given'}; choose from {', '.join(PROTOCOLS)}")
+    try:
+        paces = {p: tuple(float(x) for x in getattr(args, f"{p}_paces").split(",") if x.strip()) for p in PROTOCOLS}
+    except ValueError as exc:
+        raise UserError(f"--*-paces: comma-separated numbers ({exc})") from None
+    if any(not v or not all(x > 0 and math.isfinite(x) for x in v) for v in paces.values()):
+        raise UserError("--product-paces and --paper-paces: numbers > 0")
+    if any(x > 1 for x in paces["product"]):
+        raise UserError("--product-paces: fractions of the velocity limits, in (0, 1]")
+    if args.demos < 1 or args.seeds < 1 or args.components < 1:
+        raise UserError("--demos, --seeds and --components must be >= 1")
+    libraries = tuple(x.strip() for x in args.libraries.split(",") if x.strip())
+    res = run_pace(PaceConfig(libraries=libraries, protocols=protocols, paces=paces, demos=args.demos,
+                              seeds=args.seeds, components=args.components, models_dir=args.models_dir,
+                              work_dir=args.work_dir), out, compile=not args.no_compile)
+    png = plot_pace(res, args.plot)
+    if args.json:
+        print(json.dumps({**res.to_json(), "plot": str(png)}))
+    else:
+        print("\n".join([*res.lines(), f"plot: {png}"]))
+    return 0
+
+
 def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
     """``foresight eval ...``; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -212,10 +274,14 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             return _occupancy(args, out)
         if args.what == "volumes":
             return _volumes(args, out)
+        if args.what == "pace":
+            return _pace(args, out)
         timing = _timing(args)
-        common = {"library": str(args.library), "scene": args.scene, "timing": timing,
+        default_scene = (protocol(args.protocol).table1_scene if args.what == "interference" else SWITCH_SCENE)
+        common = {"library": str(args.library), "scene": args.scene or default_scene, "timing": timing,
                   "components": args.components, "models_dir": args.models_dir, "work_dir": args.work_dir,
-                  "w_human": args.w_human, "volume": args.volume}
+                  "w_human": args.w_human, "volume": args.volume, "protocol": args.protocol,
+                  "trials": args.trials}
         if args.what == "interference":
             res = run_interference(InterferenceConfig(robot_cup=args.robot_cup, human_cup=args.human_cup,
                                                       demos=args.demos, seeds=args.seeds, **common),

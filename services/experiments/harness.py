@@ -55,6 +55,11 @@ class RunSpec:
         period_s: Simulated seconds per step.
         seed: STOMP seed of the run.
         timeout_s: Longest wall time of the run.
+        path_per_step: The executor's pace: configuration-space length per step (0: the plan's timing);
+            ``path_weights`` its per-joint weights; ``finish_path``: the rest of the path after the last step
+            (``ExecutorConfig``; the paper protocol, :mod:`services.experiments.protocol`).
+        evidence: The predictor's posterior: ``sum`` or ``mean`` (``PredictorConfig.evidence``);
+            ``temperature``: its temperature (0: the model file's).
     """
 
     scene: Scene
@@ -66,6 +71,11 @@ class RunSpec:
     period_s: float = 0.2
     seed: int = 0
     timeout_s: float = 300.0
+    path_per_step: float = 0.0
+    path_weights: tuple[float, ...] = ()
+    finish_path: bool = False
+    evidence: str = "sum"
+    temperature: float = 0.0
 
 
 @dataclass
@@ -217,7 +227,8 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
     scene_ref = spec.scene.ref
     svc_cfg = PlannerServiceConfig(mode="lockstep", period_s=spec.period_s, input_timeout_s=min(60.0, spec.timeout_s),
                                    scene=scene_ref, planner=planner.config)
-    predictor = PredictorService(PredictorConfig(model=spec.model, method=spec.method, scene=scene_ref), peer)
+    predictor = PredictorService(PredictorConfig(model=spec.model, method=spec.method, scene=scene_ref,
+                                                 evidence=spec.evidence, temperature=spec.temperature), peer)
     planner_svc = PlannerService(svc_cfg, peer, planner=planner, scene=spec.scene)
     replayer = ReplayerService(ReplayerConfig(library=spec.human, mode="lockstep",
                                               samples_per_tick=spec.samples_per_tick), peer)
@@ -225,7 +236,9 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
     robot, human = _executor_models(spec.scene)
     executor = ExecutorService(ExecutorConfig(mode="lockstep", steps=spec.steps, step_period_s=spec.period_s,
                                               mcap=str(mcap) if mcap else "none", scene=scene_ref,
-                                              lockstep_timeout_s=min(60.0, spec.timeout_s)),
+                                              lockstep_timeout_s=min(60.0, spec.timeout_s),
+                                              path_per_step=spec.path_per_step, path_weights=list(spec.path_weights),
+                                              finish_path=spec.finish_path),
                                peer, stop=ex_stop, robot=robot, human=human, scene=spec.scene)
     threads = [ServiceThread("predictor", predictor.run), ServiceThread("planner", planner_svc.run),
                ServiceThread("replayer", replayer.run),

@@ -28,7 +28,7 @@ from shared.runtime import UserError
 from shared.scene import Scene
 
 __all__ = ["SYNTHETIC", "load_experiment_library", "short_name", "CupClass", "cup_class", "HeldOutModels", "human_file",
-           "samples_per_tick"]
+           "samples_per_tick", "class_at_cup"]
 
 SHARED_FITS: dict[str, Any] = {}
 """``train_model``'s fit cache shared by every :class:`HeldOutModels` of this process (fits keyed by data + options)."""
@@ -76,20 +76,35 @@ def cup_class(library: MotionLibrary, scene: Scene, cup: str, exclude: tuple[int
         cup: Cup name.
         exclude: Class labels not to choose (e.g. the class chosen for another cup).
     """
-    target = scene.cup(cup).center[:2]
     human = HumanModel()
     best: CupClass | None = None
-    for m, name in enumerate(library.class_names):
-        demos = library.by_class(m)
-        if m in exclude or not demos:
+    for m in range(len(library.class_names)):
+        if m in exclude or not library.by_class(m):
             continue
-        reach, _ = reach_points(human, [d.features for d in demos], scene)
-        d = float(np.linalg.norm(reach.mean(axis=0)[:2] - target))
-        if best is None or d < best.distance:
-            best = CupClass(cup, m, name, d)
+        c = class_at_cup(library, scene, cup, m, human)
+        if best is None or c.distance < best.distance:
+            best = c
     if best is None:
         raise UserError(f"library {library.source}: no class with demonstrations to reach {cup}")
     return best
+
+
+def class_at_cup(library: MotionLibrary, scene: Scene, cup: str | None, label: int,
+                 human: HumanModel | None = None) -> CupClass:
+    """Class ``label`` of ``library`` as the human's class for ``cup`` (None: the cup nearest its mean reach point).
+
+    Returns:
+        The class, its cup and the horizontal distance from its mean reach point to that cup.
+    """
+    if cup is not None:
+        scene.cup(cup)  # an unknown cup: SceneError naming it
+    demos = library.by_class(label)
+    if not demos:
+        raise UserError(f"library {library.source}: class {library.class_names[label]} has no demonstrations")
+    reach, _ = reach_points(human or HumanModel(), [d.features for d in demos], scene)
+    gaps = {c.name: float(np.linalg.norm(reach.mean(axis=0)[:2] - c.center[:2])) for c in scene.cups}
+    cup = cup or min(gaps, key=gaps.__getitem__)
+    return CupClass(cup, label, library.class_names[label], gaps[cup])
 
 
 def samples_per_tick(demo: Demonstration, steps: int) -> int:

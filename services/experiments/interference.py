@@ -23,15 +23,26 @@ from typing import Any
 
 import numpy as np
 
+from shared.runtime import UserError
 from shared.scene import Scene, load_scene
 
+from .authors import table1_summary
 from .harness import RunRecord, RunSpec, run_lockstep
-from .heldout import CupClass, HeldOutModels, cup_class, human_file, load_experiment_library, samples_per_tick
-from .measures import body_clearance, contact_summary, interference_over_time, postures_at
+from .heldout import (
+    CupClass,
+    HeldOutModels,
+    class_at_cup,
+    cup_class,
+    human_file,
+    load_experiment_library,
+    samples_per_tick,
+)
+from .measures import body_clearance, contact_summary, interference_along_path, interference_over_time, postures_at
 from .planners import VARIANTS, Timing, build_planner
+from .protocol import AUTHORS_TRIALS, Protocol, authors_trial, move3d_path_weights, protocol
 
-__all__ = ["TABLE1_SCENE", "InterferenceConfig", "RunScore", "InterferenceResult", "score_run",
-           "run_interference"]
+__all__ = ["TABLE1_SCENE", "InterferenceConfig", "RunScore", "InterferenceResult", "score_run", "run_pacing",
+           "ratio_text", "run_interference"]
 
 TABLE1_SCENE = "pr2_two_cups_side"
 """The scene of the paper's Table I and Fig. 7 (docs/scenes.md says why)."""
@@ -56,6 +67,10 @@ class InterferenceConfig:
     volume: str | None = None  # None: the trainer's default
     variants: tuple[str, ...] = tuple(VARIANTS)  # the planners run (``eval volumes``: least_penetration only)
     selection_seed: int = 0
+    protocol: str = "product"
+    trials: str = "auto"  # authors: the authors' human motions; cup: the class nearest the human's cup; auto: the
+    # authors' with the paper protocol on the paper's library, else cup
+    path_per_step: float | None = None  # paper protocol: the robot's pace (None: the authors' for the scene)
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
 
@@ -93,23 +108,38 @@ class RunScore:
 
 
 def score_run(rec: RunRecord, robot: Any, scene: Scene, final: Any, demo: int, seed: int, planner: str,
-              label: int) -> RunScore:
-    """Score one run against the final prediction ``final`` and the streamed human of class ``label``."""
+              label: int, path_weights: np.ndarray | None = None) -> RunScore:
+    """Score one run against the final prediction ``final`` and the streamed human of class ``label``.
+
+    ``path_weights`` given: Table I's integral is along the path's configuration-space length with these
+    per-joint weights (the paper protocol, :func:`~services.experiments.measures.interference_along_path`);
+    None: over time.
+    """
     q, t = rec.q(), rec.stamps()
     contact = contact_summary(body_clearance(robot, q, postures_at(rec.poses, t, scene)), t)
     res = rec.result
     reached = res.reached_step if res is not None and res.reached and res.reached_step >= 0 else None
-    per_state = interference_over_time(robot, q, t, final)
+    per_state = (interference_over_time(robot, q, t, final) if path_weights is None
+                 else interference_along_path(robot, q, final, weights=path_weights))
     at_goal = np.array([s.reached for s in rec.states], dtype=bool)
     at_goal = np.maximum.accumulate(at_goal) if len(at_goal) else at_goal  # from the first state at the goal on
-    # the plan executed during tick n was made with the prediction of tick n - 1 (Fig. 4)
+    # the plan executed during tick n was made with the prediction of tick n - 1 (Fig. 4); after the last tick
+    # (the rest of the path, paper protocol) with the last prediction
     belief = {t: float(p.posterior[label]) for t, p in rec.posteriors.items()}
-    unknown = np.array([belief.get(s.tick - 1, 0.0) < 0.5 for s in rec.states], dtype=bool)
+    last = max(belief, default=-1)
+    unknown = np.array([belief.get(min(s.tick - 1, last), 0.0) < 0.5 for s in rec.states], dtype=bool)
     return RunScore(demo, seed, planner, float(per_state.sum()), float(per_state[at_goal].sum()),
                     float(per_state[unknown].sum()), contact.min_clearance, contact.time_in_contact, contact.time_near,
                     reached,
                     tuple(rec.chosen_goals()),
                     float(np.median([p.planning_ms for p in rec.plans])) if rec.plans else math.nan)
+
+
+def ratio_text(ratio: float | None) -> str:
+    """``12.3x``; ``inf`` where least penetration scores 0; ``n/a (0 / 0)`` where neither planner scores."""
+    if ratio is None or math.isnan(ratio):
+        return "n/a (0 / 0)"
+    return "inf" if math.isinf(ratio) else f"{ratio:.1f}x"
 
 
 @dataclass
@@ -135,7 +165,10 @@ class InterferenceResult:
     def ratio(self) -> float:
         """Mean basic interference over mean least-penetration interference (the paper: about 45)."""
         lp = self.values("least_penetration", "interference").mean()
-        return float(self.values("basic", "interference").mean() / lp) if lp > 0 else math.inf
+        basic = self.values("basic", "interference").mean()
+        if lp > 0:
+            return float(basic / lp)
+        return math.inf if basic > 0 else math.nan  # 0 / 0: neither entered the final prediction
 
     def contact_violations(self) -> int:
         """Runs (demo, seed) where least penetration spent longer in contact than basic STOMP."""
@@ -153,11 +186,13 @@ class InterferenceResult:
             out[part] = {name: self.per_demo(name, part)[0] for name in VARIANTS}
         out["ratio_basic_over_least_penetration"] = self.ratio()
         out["runs_with_more_contact_than_basic"] = self.contact_violations()
+        out["authors_comparison"] = self.authors_comparison()
         out["reached"] = {n: int(sum(r.reached_step is not None for r in self.runs if r.planner == n))
                           for n in VARIANTS}
-        out.update(library=self.library, scene=self.config.scene, human_class=self.human.name,
+        out.update(protocol=self.config.protocol, library=self.library, scene=self.config.scene,
+                   human_class=self.human.name,
                    human_class_distance_m=self.human.distance, demos=self.demos, seeds=self.config.seeds,
-                   robot_cup=self.config.robot_cup, human_cup=self.config.human_cup,
+                   robot_cup=self.config.robot_cup, human_cup=self.human.cup,
                    timing=dataclasses.asdict(self.config.timing), w_human=self.config.w_human,
                    volume=self.config.volume,
                    runs=[dataclasses.asdict(r) for r in self.runs])
@@ -167,14 +202,16 @@ class InterferenceResult:
         """The Table I layout: one row per demonstration, mean (std) over seeds; then the real human."""
         names = list(VARIANTS)
         head = f"{'demo':>6}" + "".join(f"{VARIANTS[n].label:>22}" for n in names)
-        out = [f"interference with the final prediction (probability-voxels x s), mean (std) of "
+        unit = "probability-voxels x s" if self.config.protocol == "product" else \
+            "probability-voxels x configuration-space length"
+        out = [f"interference with the final prediction ({unit}), {self.config.protocol} protocol, mean (std) of "
                f"{self.config.seeds} seeds; {self.library}, scene {self.config.scene}, human: {self.human.name}", head]
         stats = {n: self.per_demo(n) for n in names}
         for i, d in enumerate(self.demos):
             cells = "".join(f"{stats[n][0][i]:>14.3f} ({stats[n][1][i]:5.3f})" for n in names)
             out.append(f"{'#' + str(d):>6}" + cells)
         out.append(f"{'mean':>6}" + "".join(f"{np.mean(stats[n][0]):>22.3f}" for n in names))
-        out.append(f"basic / least penetration: {self.ratio():.1f}x (the paper: about 45x)")
+        out.append(f"basic / least penetration: {ratio_text(self.ratio())} (the paper: about 45x)")
         for part, what in (("interference_at_goal", "holding at the goal"),
                            ("interference_unrecognised", "before the human's class was recognised (p < 0.5)")):
             mean = {n: float(self.values(n, part).mean()) for n in names}
@@ -194,7 +231,61 @@ class InterferenceResult:
                    f"{self.contact_violations()} of {len(self.demos) * self.config.seeds}")
         reached = self.to_json()["reached"]
         out.append("runs that reached the goal: " + ", ".join(f"{VARIANTS[n].label} {reached[n]}" for n in names))
+        return out + self.authors_lines()
+
+    def authors_trials(self) -> bool:
+        """Whether these runs are the authors' Table I trials (paper protocol, their motions 25-29)."""
+        trial = AUTHORS_TRIALS.get(self.config.scene)
+        return (self.config.protocol == "paper" and trial is not None and self.human.name == trial[0]
+                and tuple(self.demos) == trial[1][:len(self.demos)])
+
+    def authors_comparison(self) -> list[dict[str, Any]]:
+        """Per motion and planner: the authors' 10 runs (mean, min, max) and these runs (mean, min, max)."""
+        if not self.authors_trials():
+            return []
+        rows = []
+        for name in ("basic", "least_penetration"):
+            theirs = table1_summary(name)
+            ours = self.values(name, "interference")
+            for i, d in enumerate(self.demos):
+                rows.append({"planner": name, "motion": 25 + d, "demo": d, "authors": theirs[d],
+                             "ours": {"mean": float(ours[i].mean()), "std": float(ours[i].std()),
+                                      "min": float(ours[i].min()), "max": float(ours[i].max())}})
+        return rows
+
+    def authors_lines(self) -> list[str]:
+        """The comparison with the authors' runs (costs_motions.m), when these are their trials."""
+        rows = self.authors_comparison()
+        if not rows:
+            return []
+        out = ["", "beside the authors' runs (gmm-gmr costs_motions.m, 10 runs each; their units: the cost summed over "
+               "mesh-triangle centroids, ours over distinct voxels of the collision spheres' surfaces)",
+               f"{'motion':>7}{'planner':>20}{'authors mean [min, max]':>30}{'paper protocol mean [min, max]':>34}"]
+        for r in rows:
+            a, o = r["authors"], r["ours"]
+            out.append(f"{r['motion']:>7}{VARIANTS[r['planner']].label:>20}"
+                       f"{a['mean']:>12.3f} [{a['min']:.3f}, {a['max']:.3f}]{o['mean']:>14.3f} "
+                       f"[{o['min']:.3f}, {o['max']:.3f}]")
+        theirs = {n: np.mean([r["authors"]["mean"] for r in rows if r["planner"] == n])
+                  for n in ("basic", "least_penetration")}
+        out.append(f"basic / least penetration: the authors' runs "
+                   f"{theirs['basic'] / theirs['least_penetration']:.1f}x, the paper protocol here "
+                   f"{ratio_text(self.ratio())}")
         return out
+
+
+def run_pacing(prot: Protocol, scene: str, weights: np.ndarray | None) -> dict[str, Any]:
+    """The :class:`~services.experiments.harness.RunSpec` fields a protocol sets in ``scene``: pace and posterior.
+
+    Raises:
+        UserError: The protocol paces the robot along its path but knows no pace for ``scene``.
+    """
+    pace = prot.pace(scene)
+    if prot.path_per_step and not pace:
+        raise UserError(f"--protocol {prot.name}: the authors' pace is known for the scenes "
+                        f"{', '.join(dict(prot.path_per_step))}, not for {scene}")
+    return {"path_per_step": pace, "path_weights": tuple(weights) if pace and weights is not None else (),
+            "finish_path": prot.finish_path, "evidence": prot.evidence, "temperature": prot.temperature}
 
 
 def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = print,
@@ -204,19 +295,35 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
     if unknown or not cfg.variants:
         raise ValueError(f"interference: variants must be some of {', '.join(VARIANTS)}, got {cfg.variants}")
     variants = {name: v for name, v in VARIANTS.items() if name in cfg.variants}
+    prot = protocol(cfg.protocol)
     scene = load_scene(cfg.scene)
+    cfg = dataclasses.replace(cfg, scene=scene.name)  # the result names its scene (PR2TwoCupsSide -> its file name)
     lib = load_experiment_library(cfg.library, scene)
-    human = cup_class(lib, scene, cfg.human_cup)
-    pool = lib.by_class(human.label)
-    rng = np.random.default_rng(cfg.selection_seed)
-    picked = sorted(rng.choice(len(pool), size=min(cfg.demos, len(pool)), replace=False).tolist())
-    demos = [pool[i] for i in picked]
-    progress(f"interference: {lib.source}, scene {scene.name}; robot -> {cfg.robot_cup}; human -> {cfg.human_cup}: "
-             f"class {human.name} (mean reach {human.distance:.3f} m from the cup), demonstrations "
-             f"{[d.index for d in demos]} held out")
-    model = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components, cfg.volume).without(demos)
-    planners = {flag: build_planner(scene, [cfg.robot_cup], flag, cfg.timing, compile=compile, w_human=cfg.w_human)
+    trial = authors_trial(cfg.trials, prot, scene.name, lib.class_names)
+    if trial is not None:  # the paper's library: the authors' human motions
+        human = class_at_cup(lib, scene, None, lib.class_names.index(trial[0]))  # its cup: the nearest
+        pool = lib.by_class(human.label)
+        demos = [pool[i] for i in trial[1][:cfg.demos] if i < len(pool)]
+        how = "the authors' motions"
+    else:
+        human = cup_class(lib, scene, cfg.human_cup)
+        pool = lib.by_class(human.label)
+        rng = np.random.default_rng(cfg.selection_seed)
+        picked = sorted(rng.choice(len(pool), size=min(cfg.demos, len(pool)), replace=False).tolist())
+        demos = [pool[i] for i in picked]
+        how = f"drawn with seed {cfg.selection_seed}"
+    progress(f"interference ({prot.name} protocol): {lib.source}, scene {scene.name}; robot -> {cfg.robot_cup}; "
+             f"human -> {human.cup}: class {human.name} (mean reach {human.distance:.3f} m from the cup), "
+             f"demonstrations {[d.index for d in demos]} ({how}, held out)")
+    volume = cfg.volume or prot.volume
+    model = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components, volume).without(demos)
+    planners = {flag: build_planner(scene, [cfg.robot_cup], flag, cfg.timing, compile=compile, w_human=cfg.w_human,
+                                    protocol=prot)
                 for flag in sorted({v.human_cost for v in variants.values()})}
+    weights = move3d_path_weights(next(iter(planners.values())).robot) if prot.measure == "path" else None
+    pacing = run_pacing(prot, scene.name, weights)
+    if cfg.path_per_step is not None and pacing["path_per_step"]:
+        pacing["path_per_step"] = cfg.path_per_step
     result = InterferenceResult(cfg, lib.source, human, [d.index for d in demos])
     total, done = len(demos) * cfg.seeds * len(variants), 0
     for demo in demos:
@@ -225,14 +332,14 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
         for seed in range(cfg.seeds):
             for name, variant in variants.items():  # basic first: a prediction run gives the final grid
                 spec = RunSpec(scene, model, path, samples_per_tick(demo, cfg.timing.steps), method=variant.method,
-                               steps=cfg.timing.steps, period_s=cfg.timing.period_s, seed=seed)
+                               steps=cfg.timing.steps, period_s=cfg.timing.period_s, seed=seed, **pacing)
                 planner = planners[variant.human_cost]
                 rec = run_lockstep(spec, planner)
                 if final is None and variant.method == "prediction":
                     final = rec.final_occupancy
                 if final is None:
                     raise RuntimeError("interference: no final prediction was received")
-                score = score_run(rec, planner.robot, scene, final, demo.index, seed, name, human.label)
+                score = score_run(rec, planner.robot, scene, final, demo.index, seed, name, human.label, weights)
                 result.runs.append(score)
                 done += 1
                 progress(f"  [{done}/{total}] demo #{demo.index} seed {seed} {variant.label:<18} interference "

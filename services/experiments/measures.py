@@ -28,7 +28,7 @@ from shared.human import HumanModel
 from shared.protocol import OccupancyGrid
 
 __all__ = ["sphere_surface_offsets", "robot_points", "penetration_per_state", "spheres_near_occupancy", "interference",
-           "interference_over_time",
+           "interference_over_time", "penetration", "path_samples", "interference_along_path",
            "ContactSummary",
            "postures_at", "body_clearance", "contact_summary", "NEAR_M"]
 
@@ -163,12 +163,40 @@ def _near(centres: np.ndarray, radii: np.ndarray, dense: np.ndarray, origin: np.
     return ~inside | (to_nonzero[ci[..., 0], ci[..., 1], ci[..., 2]] <= reach)
 
 
-def interference_over_time(robot: Any, q: np.ndarray, stamps: np.ndarray, occupancy: OccupancyGrid,
-                           spacing: float | None = None) -> np.ndarray:
-    """Each executed state's share of :func:`interference`: ``cost(q_n) * (t_n - t_{n-1})``, 0 for the first.
+def penetration(robot: Any, q: np.ndarray, occupancy: OccupancyGrid, spacing: float | None = None) -> np.ndarray:
+    """The paper's penetration cost of each configuration against one grid (:func:`penetration_per_state`).
 
     Only the spheres that can reach a non-zero voxel (:func:`spheres_near_occupancy`) are sampled:
     the others add nothing, so the value equals that of every point of :func:`robot_points`.
+
+    Args:
+        robot: Robot model (:func:`robot_points`).
+        q: ``(N, D)`` configurations.
+        occupancy: The grid to score against (the final prediction).
+        spacing: Surface sampling of the robot's spheres (default: half the grid's voxel edge).
+
+    Returns:
+        ``(N,)`` probability-voxels: the sum of p(x) over the distinct voxels the configuration's points occupy.
+    """
+    q = np.asarray(q, dtype=np.float64)
+    if len(q) == 0:
+        return np.zeros(0)
+    centres, radii = _sphere_centres(robot, q)
+    dense, origin, res = _dense(occupancy), np.asarray(occupancy.origin, np.float64), float(occupancy.resolution)
+    near = _near(centres, radii, dense, origin, res)  # (N, S)
+    spacing = spacing or res / 2
+    states, points = [np.zeros(0, np.int64)], [np.zeros((0, 3))]
+    for s in np.flatnonzero(near.any(axis=0)):
+        rows = np.flatnonzero(near[:, s])
+        offsets = sphere_surface_offsets(float(radii[s]), spacing)  # (O, 3)
+        states.append(np.repeat(rows, len(offsets)))
+        points.append((centres[rows, s, None, :] + offsets[None]).reshape(-1, 3))
+    return _voxel_sums(np.concatenate(states), np.concatenate(points), dense, origin, res, len(q))
+
+
+def interference_over_time(robot: Any, q: np.ndarray, stamps: np.ndarray, occupancy: OccupancyGrid,
+                           spacing: float | None = None) -> np.ndarray:
+    """Each executed state's share of :func:`interference`: ``cost(q_n) * (t_n - t_{n-1})``, 0 for the first.
 
     Args:
         robot: Robot model (:func:`robot_points`).
@@ -183,19 +211,63 @@ def interference_over_time(robot: Any, q: np.ndarray, stamps: np.ndarray, occupa
     q = np.asarray(q, dtype=np.float64)
     if len(q) < 2:
         return np.zeros(len(q))
-    centres, radii = _sphere_centres(robot, q)
-    dense, origin, res = _dense(occupancy), np.asarray(occupancy.origin, np.float64), float(occupancy.resolution)
-    near = _near(centres, radii, dense, origin, res)  # (N, S)
-    spacing = spacing or res / 2
-    states, points = [np.zeros(0, np.int64)], [np.zeros((0, 3))]
-    for s in np.flatnonzero(near.any(axis=0)):
-        rows = np.flatnonzero(near[:, s])
-        offsets = sphere_surface_offsets(float(radii[s]), spacing)  # (O, 3)
-        states.append(np.repeat(rows, len(offsets)))
-        points.append((centres[rows, s, None, :] + offsets[None]).reshape(-1, 3))
-    cost = _voxel_sums(np.concatenate(states), np.concatenate(points), dense, origin, res, len(q))
+    cost = penetration(robot, q, occupancy, spacing)
     dt = np.clip(np.diff(np.asarray(stamps, dtype=np.float64)), 0.0, None)
     return np.concatenate([[0.0], cost[1:] * dt])
+
+
+def path_samples(q: np.ndarray, ds: float, weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Configurations every ``ds`` of configuration-space length along the polyline through ``q``.
+
+    Args:
+        q: ``(N, D)`` configurations, in order (the executed path).
+        ds: Spacing (> 0) in the weighted joint-space Euclidean norm.
+        weights: ``(D,)`` per-joint weights of the norm (None: 1 each).
+
+    Returns:
+        ``(samples (M, D), segment (M,))``: the configurations at lengths ``ds, 2 ds, ...`` up to the path's
+        length, and for each the index n >= 1 of the state that ends its segment (``q[n-1] -> q[n]``).
+    """
+    q = np.asarray(q, dtype=np.float64)
+    if not ds > 0:
+        raise ValueError(f"path_samples: ds must be > 0, got {ds}")
+    if len(q) < 2:
+        return np.zeros((0, q.shape[-1] if q.ndim == 2 else 0)), np.zeros(0, np.int64)
+    w = 1.0 if weights is None else np.asarray(weights, dtype=np.float64)
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0) * w, axis=-1))])
+    s = ds * np.arange(1, int(np.floor(cum[-1] / ds + 1e-9)) + 1)
+    seg = np.clip(np.searchsorted(cum, s, side="left"), 1, len(q) - 1)  # q[seg-1] -> q[seg] holds length s
+    span = cum[seg] - cum[seg - 1]
+    a = np.where(span > 0, (s - cum[seg - 1]) / np.where(span > 0, span, 1.0), 1.0)[:, None]
+    return (1.0 - a) * q[seg - 1] + a * q[seg], seg
+
+
+def interference_along_path(robot: Any, q: np.ndarray, occupancy: OccupancyGrid, ds: float = 0.005,
+                            spacing: float | None = None, weights: np.ndarray | None = None) -> np.ndarray:
+    """Each executed state's share of the path-length integral of the penetration (the paper authors' measure).
+
+    The executed path is sampled every ``ds`` of configuration-space length (:func:`path_samples`; the
+    authors' code: every 0.005 of Move3D's path parameter, docs/experiments.md) and each sample's penetration
+    (:func:`penetration`) counts ``cost x ds``: a path outside every occupied voxel scores 0, and the score grows
+    with the length inside. Time plays no part: a robot standing still accrues nothing.
+
+    Args:
+        robot: Robot model (:func:`robot_points`).
+        q: ``(N, D)`` executed configurations, in order.
+        occupancy: The grid to score against (the final prediction).
+        ds: Sampling step along the path.
+        spacing: Surface sampling of the robot's spheres (default: half the grid's voxel edge).
+        weights: ``(D,)`` per-joint weights of the length (:func:`path_samples`).
+
+    Returns:
+        ``(N,)`` probability-voxels x configuration-space length, per state (the samples of the segment
+        ending at it; 0 for the first).
+    """
+    samples, seg = path_samples(q, ds, weights)
+    out = np.zeros(len(np.asarray(q)))
+    if len(samples):
+        np.add.at(out, seg, penetration(robot, samples, occupancy, spacing) * ds)
+    return out
 
 
 def interference(robot: Any, q: np.ndarray, stamps: np.ndarray, occupancy: OccupancyGrid,

@@ -1,16 +1,19 @@
 """``foresight eval all --out DIR``: every experiment and the timings, one Markdown report with its PNGs.
 
 For each library (default: the synthetic one and, when it is beside the repository, the paper's):
-recognition (Fig. 6), interference (Table I), goal switch (Fig. 8-9), then the timings (planning ms per
-step from every run, prediction ms per pose). Each section sets the measured numbers beside the
-paper's and says by how much they differ; docs/experiments.md explains the differences.
+recognition (Fig. 6), then under each protocol (``--protocols``, default both: the product's and the paper
+authors', :mod:`services.experiments.protocol`) interference (Table I) and the goal switch (Fig. 8-9), then
+Table I across the robot's pace (:mod:`services.experiments.pace`) and the timings (planning ms per step from
+every run, prediction ms per pose). A summary sets the paper's numbers, the paper protocol's and the product
+protocol's side by side with a verdict for each (:mod:`services.experiments.verdicts`); docs/experiments.md
+explains the differences.
 
-``--quick`` (about 2 minutes on 2 cores, run in CI): the synthetic library only, 4 Gaussians per
-class, recognition on 4 demonstrations per class, Table I with 1 demonstration x 2 seeds, the switch
-with 2 demonstrations, 20 STOMP iterations per step, the cost evaluated eagerly (no compile).
-The full report (the paper's protocol: 20 Gaussians, 5 demonstrations x 10 seeds, every
-demonstration of the class, 50 iterations) takes about 10 minutes on 2 quiet cores
-(docs/experiments.md, "Run time"). ``--volume`` picks the held-out models' occupancy volume.
+``--quick`` (run in CI): the synthetic library only, 4 Gaussians per class, recognition on 4 demonstrations per
+class, Table I with 1 demonstration x 2 seeds, the switch with 2 demonstrations, 20 STOMP iterations per step,
+the pace sweep at each protocol's own pace only, the cost evaluated eagerly (no compile). The full report (20
+Gaussians, 5 demonstrations x 10 seeds, every demonstration of the class, each protocol's iterations, five paces
+per protocol with 3 demonstrations) runs both libraries side by side, one process per core (docs/experiments.md,
+"Run time"). ``--volume`` picks the product protocol's occupancy volume.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import math
 import multiprocessing
 import os
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,13 +35,24 @@ import numpy as np
 from services.predictor.volumes import DEFAULT_VOLUME, VOLUMES
 from shared.library import MotionLibrary
 from shared.native_threads import limit_blas_threads
+from shared.runtime import UserError
 from shared.scene import load_scene
 
 from .heldout import SYNTHETIC, load_experiment_library
-from .interference import PAPER_TABLE1, TABLE1_SCENE, InterferenceConfig, InterferenceResult, run_interference
+from .interference import (
+    PAPER_TABLE1,
+    TABLE1_SCENE,
+    InterferenceConfig,
+    InterferenceResult,
+    ratio_text,
+    run_interference,
+)
+from .pace import DEFAULT_PACES, PaceConfig, PacePoint, PaceResult, plot_pace, run_pace
 from .planners import Timing
 from .plots import plot_interference
+from .protocol import PROTOCOLS, protocol
 from .switch import SwitchConfig, SwitchResult, plot_switch, run_switch
+from .verdicts import summary, switch_verdict, table1_verdict
 
 __all__ = ["ReportPlan", "QUICK", "FULL", "add_report_arguments", "library_section", "run_report", "PAPER_LIBRARY"]
 
@@ -54,14 +69,18 @@ class ReportPlan:
     table1_demos: int
     table1_seeds: int
     switch_demos: int  # 0: all of the class
-    iterations: int
+    iterations: int | None  # None: each protocol's (50 / 51)
     compile: bool
+    pace_demos: int  # the pace sweep: demonstrations x seeds per point
+    pace_seeds: int
+    paces: dict[str, tuple[float, ...]] | None = None  # None: every pace of DEFAULT_PACES
 
 
 FULL = ReportPlan(components=20, recognition_demos=0, table1_demos=5, table1_seeds=10, switch_demos=0,
-                  iterations=50, compile=True)
+                  iterations=None, compile=True, pace_demos=3, pace_seeds=1)
 QUICK = ReportPlan(components=4, recognition_demos=4, table1_demos=1, table1_seeds=2, switch_demos=2,
-                   iterations=20, compile=False)
+                   iterations=20, compile=False, pace_demos=1, pace_seeds=1,
+                   paces={"product": (0.25,), "paper": (0.05,)})
 
 
 def add_report_arguments(p: argparse.ArgumentParser) -> None:
@@ -73,7 +92,10 @@ def add_report_arguments(p: argparse.ArgumentParser) -> None:
                    "synthetic only)")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--volume", choices=VOLUMES, default=DEFAULT_VOLUME, help="occupancy volume of the held-out "
-                   f"prediction models (foresight train --volume; default: {DEFAULT_VOLUME}; the paper's: paper)")
+                   f"prediction models of the product protocol (foresight train --volume; default: {DEFAULT_VOLUME}; "
+                   "the paper protocol always uses the paper's: paper)")
+    p.add_argument("--protocols", default="product,paper", help="comma-separated protocols run side by side "
+                   "(default: product,paper; docs/experiments.md)")
 
 
 def _subset(lib: MotionLibrary, per_class: int) -> MotionLibrary:
@@ -109,9 +131,10 @@ def _table1_section(res: InterferenceResult, png: Path) -> list[str]:
     lp = float(np.mean(res.per_demo("least_penetration")[0]))
     cur = float(np.mean(res.per_demo("current")[0]))
     paper_b, paper_lp = np.mean(PAPER_TABLE1["basic"]), np.mean(PAPER_TABLE1["least_penetration"])
+    lines.append(f"- verdict ({res.config.protocol} protocol): {table1_verdict(res)}.")
     lines.append(f"- paper: basic {paper_b:.2f}, least penetration {paper_lp:.2f}: {paper_b / paper_lp:.0f}x. "
                  f"Measured: basic {basic:.3f}, least penetration {lp:.3f}, current {cur:.3f}: "
-                 f"{res.ratio():.1f}x (target >= 20x; least penetration below current: {lp < cur}).")
+                 f"{ratio_text(res.ratio())} (least penetration below current: {lp < cur}).")
     lines.append("- The absolute values are not comparable with the paper's: its robot points and voxels are "
                  "its own (Move3D's PR2 surface samples); the ratio is.")
     early = float(np.mean(res.per_demo("least_penetration", "interference_unrecognised")[0]))
@@ -128,6 +151,8 @@ def _table1_section(res: InterferenceResult, png: Path) -> list[str]:
 
 def _switch_section(res: SwitchResult, png: Path) -> list[str]:
     lines = ["```", *res.lines(), "```", ""]
+    lines.append(f"- verdict ({res.config.protocol} protocol, the step from which the robot leaves the human's cup "
+                 f"for good): {switch_verdict(res)}.")
     p, c = res.median_settle("prediction"), res.median_settle("current")
     lines.append(f"- paper: prediction settles at step 4, current at step 13 (9 steps earlier). Measured medians: "
                  f"prediction {p:g}, current {c:g} ({c - p:+g} steps; target >= 5 earlier).")
@@ -192,29 +217,22 @@ def _prediction_ms(lib: MotionLibrary, models_dir: Path, components: int, volume
     return {"median_ms": float(np.median(times)), "p90_ms": float(np.percentile(times, 90)), "poses": len(times)}
 
 
-def library_section(spec: str, plan: ReportPlan, out: Path, models_dir: Path, n_jobs: int = 2,
-                    volume: str = DEFAULT_VOLUME) -> tuple[list[str], dict[str, Any]]:
-    """Every experiment on one library: its Markdown section and its data (``planning_ms`` K=1 and K=2 runs)."""
-    tag = SYNTHETIC if spec == SYNTHETIC else Path(spec).name
-
-    def say(line: str) -> None:
-        print(f"[{tag}] {line}", flush=True)
-
+def _protocol_section(spec: str, prot: str, plan: ReportPlan, out: Path, models_dir: Path, volume: str, tag: str,
+                      say: Callable[[str], None]) -> tuple[list[str], dict[str, Any]]:
+    """Table I and the switch (mirrored where the robot's first choice is the other cup) under one protocol."""
+    proto = protocol(prot)
     timing = Timing(iterations=plan.iterations)
-    lib = load_experiment_library(spec, load_scene(TABLE1_SCENE))
-    say(f"recognition, leave-one-out on {lib.source}")
-    md = [f"## Library: {lib.source}", "", "### Recognition (Fig. 6)", ""]
-    lines, rec = _recognition(lib, plan, out, tag, n_jobs)
-    md += lines
     common = {"library": spec, "timing": timing, "components": plan.components, "models_dir": models_dir,
-              "work_dir": out / "work", "volume": volume}
-    t1 = run_interference(InterferenceConfig(demos=plan.table1_demos, seeds=plan.table1_seeds, **common), say,
-                          compile=plan.compile)
-    png1 = plot_interference(t1, out / f"interference-{tag}.png")
-    md += ["### Interference (Table I)", "", *_table1_section(t1, png1)]
+              "work_dir": out / "work", "volume": volume if prot == "product" else None, "protocol": prot}
+    suffix = "" if prot == "product" else f"-{prot}"
+    md = [f"### Protocol: {prot}", "", PROTOCOL_TEXT[prot], ""]
+    t1 = run_interference(InterferenceConfig(scene=proto.table1_scene, demos=plan.table1_demos,
+                                             seeds=plan.table1_seeds, **common), say, compile=plan.compile)
+    png1 = plot_interference(t1, out / f"interference-{tag}{suffix}.png")
+    md += [f"#### Interference (Table I), {prot} protocol", "", *_table1_section(t1, png1)]
     sw = run_switch(SwitchConfig(demos=plan.switch_demos, **common), say, compile=plan.compile)
-    png2 = plot_switch(sw, out / f"switch-{tag}.png")
-    md += ["### Goal switch (Fig. 8-9)", "", *_switch_section(sw, png2)]
+    png2 = plot_switch(sw, out / f"switch-{tag}{suffix}.png")
+    md += [f"#### Goal switch (Fig. 8-9), {prot} protocol", "", *_switch_section(sw, png2)]
     first = {r.goals[0] for r in sw.runs if r.goals}
     mirrored = None
     if len(first) == 1 and sw.config.human_cup not in first:
@@ -222,19 +240,71 @@ def library_section(spec: str, plan: ReportPlan, out: Path, models_dir: Path, n_
         cup = first.pop()
         say(f"the robot first goes for {cup}, not {sw.config.human_cup}: the switch again with the human reaching "
             f"for {cup}")
-        mirrored = run_switch(SwitchConfig(demos=plan.switch_demos, human_cup=cup, **common), say,
+        mirrored = run_switch(SwitchConfig(demos=plan.switch_demos, human_cup=cup, trials="cup", **common), say,
                               compile=plan.compile)
-        png3 = plot_switch(mirrored, out / f"switch-mirrored-{tag}.png")
-        md += [f"### Goal switch, the human reaching for {cup} (the robot's first choice)", "",
+        png3 = plot_switch(mirrored, out / f"switch-mirrored-{tag}{suffix}.png")
+        md += [f"#### Goal switch, the human reaching for {cup} (the robot's first choice), {prot} protocol", "",
                f"With an empty grid the robot first goes for {cup}, so with the human reaching for "
                f"{sw.config.human_cup} neither planner has a reason to switch. The paper's Fig. 8-9 has the human "
-               "reach for the cup the robot first goes for; this run does the same here.", "",
-               *_switch_section(mirrored, png3)]
-    data = {"recognition": rec, "interference": t1.to_json(), "switch": sw.to_json(),
+               "reach for the cup the robot first goes for; this run does the same here (the class nearest "
+               f"{cup}).", "", *_switch_section(mirrored, png3)]
+    data = {"interference": t1.to_json(), "switch": sw.to_json(),
             "switch_mirrored": mirrored.to_json() if mirrored is not None else None,
-            "prediction_ms": _prediction_ms(lib, models_dir, plan.components, volume),
             "planning_ms": {"K=1": [r.planning_ms for r in t1.runs],
-                            "K=2": [r.planning_ms for r in sw.runs + (mirrored.runs if mirrored else [])]}}
+                            "K=2": [r.planning_ms for r in sw.runs + (mirrored.runs if mirrored else [])]},
+            "verdicts": {"table1": table1_verdict(t1), "switch": switch_verdict(sw),
+                         "switch_mirrored": switch_verdict(mirrored) if mirrored is not None else None}}
+    return md, data
+
+
+PROTOCOL_TEXT = {
+    "product": "The product's own: the robot follows its plan in time at 0.25 of the PR2's velocity limits, 0.5 s "
+               "per step; costs integrated over time with the goal's dwell; the least total cost wins; Table I "
+               "integrates over time; the product's Table I scene (`pr2_two_cups_side`) and the class nearest the "
+               "human's cup.",
+    "paper": "The authors' code (libmove3d-planners at its \"Paper submission\" commit): the robot executes 0.05 "
+             "(side) / 0.085 (facing) of its path's configuration-space length per step and the rest after step "
+             "20; STOMP with 10 rollouts of which 5 reused, 101 waypoints, 51 iterations; costs summed per "
+             "waypoint; the least prediction cost wins; the swept volume of each class's regressed motion and a "
+             "softmax of the mean per-frame log-likelihood; Table I integrated along the path; the authors' scene "
+             "(`pr2_two_cups_side_parallel`) and, on the paper's library, the authors' motions (25-29, 77). "
+             "docs/experiments.md lists every value and where it differs.",
+}
+
+
+def library_section(spec: str, plan: ReportPlan, out: Path, models_dir: Path, n_jobs: int = 2,
+                    volume: str = DEFAULT_VOLUME, protocols: tuple[str, ...] = PROTOCOLS
+                    ) -> tuple[list[str], dict[str, Any]]:
+    """Every experiment on one library under each protocol, and the pace sweep: its Markdown section and its data.
+
+    The data: ``recognition``, ``prediction_ms``, ``pace`` (``foresight eval pace``'s JSON for this library),
+    ``protocols`` (per protocol: ``interference``, ``switch``, ``switch_mirrored``, ``planning_ms``, ``verdicts``),
+    and the first protocol's ``interference``, ``switch`` and ``planning_ms`` at the top level.
+    """
+    tag = SYNTHETIC if spec == SYNTHETIC else Path(spec).name
+
+    def say(line: str) -> None:
+        print(f"[{tag}] {line}", flush=True)
+
+    lib = load_experiment_library(spec, load_scene(TABLE1_SCENE))
+    say(f"recognition, leave-one-out on {lib.source}")
+    md = [f"## Library: {lib.source}", "", "### Recognition (Fig. 6)", ""]
+    lines, rec = _recognition(lib, plan, out, tag, n_jobs)
+    md += lines
+    data: dict[str, Any] = {"recognition": rec, "protocols": {}}
+    for prot in protocols:
+        lines, d = _protocol_section(spec, prot, plan, out, models_dir, volume, tag, say)
+        md += lines
+        data["protocols"][prot] = d
+    data.update({k: data["protocols"][protocols[0]][k] for k in ("interference", "switch", "planning_ms")})
+    say("Table I across the robot's pace")
+    pace = run_pace(PaceConfig(libraries=(spec,), protocols=protocols, paces=plan.paces or dict(DEFAULT_PACES),
+                               demos=plan.pace_demos, seeds=plan.pace_seeds,
+                               timing=Timing(iterations=plan.iterations),
+                               components=plan.components, models_dir=models_dir, work_dir=out / "work"),
+                    say, compile=plan.compile)
+    data["pace"] = pace.to_json()
+    data["prediction_ms"] = _prediction_ms(lib, models_dir, plan.components, volume)
     return md, data
 
 
@@ -244,6 +314,10 @@ def run_report(args: argparse.Namespace) -> int:
     Two libraries run in two worker processes at once (one per core); one library runs in this process.
     """
     plan = QUICK if args.quick else FULL
+    protocols = tuple(p.strip() for p in args.protocols.split(",") if p.strip())
+    bad = [p for p in protocols if p not in PROTOCOLS]
+    if bad or not protocols:
+        raise UserError(f"--protocols: {', '.join(bad) or 'none given'}; choose from {', '.join(PROTOCOLS)}")
     libs = [s.strip() for s in args.libraries.split(",") if s.strip()]
     if not libs:
         libs = [SYNTHETIC] + ([] if args.quick or not PAPER_LIBRARY.is_dir() else [str(PAPER_LIBRARY)])
@@ -255,27 +329,40 @@ def run_report(args: argparse.Namespace) -> int:
     if workers > 1:
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=limit_blas_threads) as pool:
-            futures = [pool.submit(library_section, spec, plan, out, Path(args.models_dir), 1, args.volume)
+            futures = [pool.submit(library_section, spec, plan, out, Path(args.models_dir), 1, args.volume, protocols)
                        for spec in libs]
             sections = [f.result() for f in futures]
     else:
-        sections = [library_section(spec, plan, out, Path(args.models_dir), volume=args.volume) for spec in libs]
+        sections = [library_section(spec, plan, out, Path(args.models_dir), volume=args.volume, protocols=protocols)
+                    for spec in libs]
+    pace = PaceResult(PaceConfig(libraries=tuple(libs), protocols=protocols, demos=plan.pace_demos,
+                                 seeds=plan.pace_seeds))
+    for _, d in sections:
+        pace.points += [PacePoint(p["protocol"], p["library"], p["pace"], p["ratio"],
+                                  {k: p[k] for k in ("basic", "least_penetration")}) for p in d["pace"]["points"]]
+    pace_png = plot_pace(pace, out / "pace.png")
+    iterations = (f"{timing.iterations} STOMP iterations" if timing.iterations else
+                  "50 STOMP iterations in the product protocol (51 in the paper's)")
     md = [f"# Foresight: the paper's experiments ({'quick' if args.quick else 'full'} run)", "",
           f"Command: `foresight eval all --out {out}{' --quick' if args.quick else ''}"
-          f"{'' if args.volume == DEFAULT_VOLUME else ' --volume ' + args.volume}`. Timing of every run: "
-          f"{timing.steps} steps of {timing.period_s} s, {timing.iterations} STOMP iterations, robot at "
-          f"{timing.robot_speed:g} of its velocity limits; {plan.components} Gaussians per class; occupancy "
-          f"volume `{args.volume}` (`foresight train --volume`; the paper's is `paper`). Why the numbers differ "
-          "from the paper's: docs/experiments.md.", ""]
-    data: dict[str, Any] = {"plan": plan.__dict__, "volume": args.volume, "libraries": {}}
-    planning: dict[str, list[float]] = {"K=1": [], "K=2": []}
+          f"{'' if args.volume == DEFAULT_VOLUME else ' --volume ' + args.volume}"
+          f"{'' if protocols == PROTOCOLS else ' --protocols ' + ','.join(protocols)}`. Every run: "
+          f"{timing.steps} steps of {timing.period_s} s, "
+          f"{iterations}, {plan.components} Gaussians per class; the product protocol's occupancy "
+          f"volume `{args.volume}` (`foresight train --volume`; the paper protocol's is `paper`). Why the numbers "
+          "differ from the paper's: docs/experiments.md.", "", *summary(libs, sections, protocols),
+          "## Across the robot's pace", "", "```", *pace.lines(), "```", "", f"![pace]({pace_png.name})", ""]
+    data: dict[str, Any] = {"plan": plan.__dict__, "volume": args.volume, "protocols": protocols, "libraries": {},
+                            "pace": pace.to_json()}
+    planning: dict[str, list[float]] = {f"{k}, {prot} protocol": [] for prot in protocols for k in ("K=1", "K=2")}
     for spec, (lines, d) in zip(libs, sections, strict=True):
         md += lines
         data["libraries"][SYNTHETIC if spec == SYNTHETIC else Path(spec).name] = d
-        for k in planning:
-            planning[k] += d["planning_ms"][k]
+        for prot in protocols:
+            for k in ("K=1", "K=2"):
+                planning[f"{k}, {prot} protocol"] += d["protocols"][prot]["planning_ms"][k]
     how = "side by side, one process per core" if workers > 1 else "in one process"
-    md += ["## Timing", "", f"{len(libs)} libraries ran {how}.", "",
+    md += ["## Timing", "", f"{len(libs)} {'library' if len(libs) == 1 else 'libraries'} ran {how}.", "",
            "| measure | median | p90 | samples |", "|---|---|---|---|"]
     for k, v in planning.items():
         if v:

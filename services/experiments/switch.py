@@ -24,18 +24,22 @@ import numpy as np
 
 from shared.scene import load_scene
 
+from .authors import FIG9_TRACES
 from .harness import RunSpec, run_lockstep
 from .heldout import (
     CupClass,
     HeldOutModels,
+    class_at_cup,
     cup_class,
     human_file,
     load_experiment_library,
     samples_per_tick,
     short_name,
 )
+from .interference import run_pacing
 from .measures import body_clearance, contact_summary, postures_at
 from .planners import Timing, build_planner
+from .protocol import authors_trial, move3d_path_weights, protocol
 
 __all__ = ["SWITCH_SCENE", "SwitchConfig", "SwitchRun", "SwitchResult", "settle_step", "away_step", "run_switch",
            "plot_switch"]
@@ -82,6 +86,9 @@ class SwitchConfig:
     w_human: float | None = None  # None: the planner's default
     volume: str | None = None  # None: the trainer's default
     methods: tuple[str, ...] = METHODS  # the occupancies compared (``eval volumes``: prediction only)
+    protocol: str = "product"
+    trials: str = "auto"  # authors: the authors' human motions; cup: the class nearest the human's cup; auto: the
+    # authors' with the paper protocol on the paper's library, else cup
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
 
@@ -146,7 +153,8 @@ class SwitchResult:
         out.update({f"final_goal_{m}": [r.final_goal for r in self.runs if r.method == m] for m in METHODS})
         out.update({f"reached_step_{m}": [r.reached_step for r in self.runs if r.method == m] for m in METHODS})
         out["earlier_by"] = self.median_settle("current") - self.median_settle("prediction")
-        out.update(library=self.library, scene=self.config.scene, human_class=self.human.name,
+        out.update(protocol=self.config.protocol, library=self.library, scene=self.config.scene,
+                   human_class=self.human.name,
                    human_class_distance_m=self.human.distance, timing=dataclasses.asdict(self.config.timing),
                    w_human=self.config.w_human, volume=self.config.volume,
                    runs=[dataclasses.asdict(r) for r in self.runs])
@@ -178,17 +186,27 @@ def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compi
     """Run the experiment (every run in lock-step through the four services)."""
     if not cfg.methods or any(m not in METHODS for m in cfg.methods):
         raise ValueError(f"switch: methods must be some of {', '.join(METHODS)}, got {cfg.methods}")
+    prot = protocol(cfg.protocol)
     scene = load_scene(cfg.scene)
+    cfg = dataclasses.replace(cfg, scene=scene.name)
     lib = load_experiment_library(cfg.library, scene)
-    human = cup_class(lib, scene, cfg.human_cup)
-    demos = lib.by_class(human.label)
+    trial = authors_trial(cfg.trials, prot, scene.name, lib.class_names)
+    if trial is not None:  # the paper's library: the authors' class, its trial first; its cup the nearest one
+        human = class_at_cup(lib, scene, None, lib.class_names.index(trial[0]))
+        cfg = dataclasses.replace(cfg, human_cup=human.cup)
+        pool = lib.by_class(human.label)
+        demos = [pool[i] for i in trial[1] if i < len(pool)] + [d for i, d in enumerate(pool) if i not in trial[1]]
+    else:
+        human = cup_class(lib, scene, cfg.human_cup)
+        demos = lib.by_class(human.label)
     demos = demos[: cfg.demos] if cfg.demos > 0 else demos
     cups = [c.name for c in scene.cups]
-    progress(f"switch: {lib.source}, scene {scene.name}; robot -> {', '.join(cups)}; human -> {cfg.human_cup}: class "
-             f"{human.name} (mean reach {human.distance:.3f} m from the cup); {len(demos)} demonstrations, each "
-             f"held out in turn")
-    models = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components, cfg.volume)
-    planner = build_planner(scene, cups, True, cfg.timing, compile=compile, w_human=cfg.w_human)
+    progress(f"switch ({prot.name} protocol): {lib.source}, scene {scene.name}; robot -> {', '.join(cups)}; human -> "
+             f"{cfg.human_cup}: class {human.name} (mean reach {human.distance:.3f} m from the cup); {len(demos)} "
+             f"demonstrations, each held out in turn")
+    models = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components, cfg.volume or prot.volume)
+    planner = build_planner(scene, cups, True, cfg.timing, compile=compile, w_human=cfg.w_human, protocol=prot)
+    pacing = run_pacing(prot, scene.name, move3d_path_weights(planner.robot))
     result = SwitchResult(cfg, lib.source, human)
     total = len(demos) * len(cfg.methods)
     for i, demo in enumerate(demos):
@@ -196,7 +214,7 @@ def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compi
         path = human_file(lib, demo, Path(cfg.work_dir) / "humans")
         for j, method in enumerate(cfg.methods):
             spec = RunSpec(scene, model, path, samples_per_tick(demo, cfg.timing.steps), method=method,
-                           steps=cfg.timing.steps, period_s=cfg.timing.period_s, seed=cfg.seed)
+                           steps=cfg.timing.steps, period_s=cfg.timing.period_s, seed=cfg.seed, **pacing)
             rec = run_lockstep(spec, planner)
             chosen = rec.chosen_goals()
             q, t = rec.q(), rec.stamps()
@@ -221,34 +239,52 @@ def _colour(name: str) -> str:
 
 
 def plot_switch(result: SwitchResult, path: str | Path) -> Path:
-    """Fig. 9: per-step integral cost of each candidate, current occupancy (top) and prediction (bottom)."""
+    """Fig. 9: per-step cost of each candidate, current occupancy (top) and prediction (bottom).
+
+    The product protocol plots each candidate's integral cost (the Plan's ``cost_total``); the paper protocol
+    the cost its goal is chosen by (``cost_human``), with the authors' two traces (:data:`FIG9_TRACES`, their
+    own units) in a column beside.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-    for ax, method in zip(axes, ("current", "prediction"), strict=True):
+    paper = result.config.protocol == "paper"
+    fig, axes = plt.subplots(2, 2 if paper else 1, figsize=(12 if paper else 7, 6), sharex=True, squeeze=False)
+    for row, method in enumerate(("current", "prediction")):
+        ax = axes[row, 0]
         runs = [r for r in result.runs if r.method == method and r.cost_total]
         for r in runs:
-            cost = np.array(r.cost_total)
+            cost = np.array(r.cost_human if paper else r.cost_total)
             for k, name in enumerate(r.goal_names):
                 ax.plot(np.arange(len(cost)), cost[:, k], color=_colour(name), alpha=0.15, lw=0.8)
         if runs:
             n = min(len(r.cost_total) for r in runs)
-            stack = np.array([np.array(r.cost_total)[:n] for r in runs])  # (runs, steps, K)
+            stack = np.array([np.array(r.cost_human if paper else r.cost_total)[:n] for r in runs])  # (runs, steps, K)
             for k, name in enumerate(runs[0].goal_names):
                 ax.plot(np.arange(n), np.median(stack[:, :, k], axis=0), color=_colour(name), lw=2.2,
                         label=f"{name} (median of {len(runs)})")
             settle = result.median_settle(method)
             if not math.isnan(settle):
                 ax.axvline(settle, color="k", ls="--", lw=1, label=f"median settle step {settle:g}")
-        ax.set_ylabel("integral cost")
-        ax.set_title(f"{'current occupancy only' if method == 'current' else 'predicted occupancy'}")
+        ax.set_ylabel("prediction cost (goal choice)" if paper else "integral cost")
+        ax.set_title(f"{'current occupancy only' if method == 'current' else 'predicted occupancy'}, Foresight "
+                     f"({result.config.protocol} protocol)")
         ax.legend(fontsize=8)
-    axes[-1].set_xlabel("replanning step")
+        if paper:
+            ax = axes[row, 1]
+            for k, trace in FIG9_TRACES[method].items():
+                ax.plot(np.arange(len(trace)), trace, color=("tab:gray", "k")[k], lw=2, label=f"authors' goal {k}")
+            ax.set_ylabel("path cost, the authors' units")
+            ax.set_title(f"{'current occupancy only' if method == 'current' else 'predicted occupancy'}, the authors' "
+                         "run (gmm-gmr costs_motions.m)", fontsize=9)
+            ax.legend(fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("replanning step")
     cfg = result.config
-    fig.suptitle(f"Fig. 9: {short_name(result.library)}, scene {cfg.scene}, human -> {cfg.human_cup}", fontsize=10)
+    fig.suptitle(f"Fig. 9: {short_name(result.library)}, scene {cfg.scene}, human -> {cfg.human_cup}"
+                 + ("; the authors' traces drawn in their own units (not rescaled)" if paper else ""), fontsize=10)
     from .plots import save_figure
 
     return save_figure(fig, path)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
@@ -67,10 +69,72 @@ def test_switch_command_prints_the_settle_steps_and_draws_fig9(tmp_path, capsys)
 @pytest.mark.parametrize(("args", "named"), [(["interference", "--steps", "0"], "--steps"),
                                              (["switch", "--scene", "nowhere"], "nowhere"),
                                              (["interference", "--library", "/no/such/library"], "/no/such/library"),
-                                             (["switch", "--human-cup", "green_cup"], "green_cup")])
+                                             (["switch", "--human-cup", "green_cup"], "green_cup"),
+                                             (["interference", "--trials", "authors"], "--trials authors"),
+                                             (["pace", "--product-paces", "0.5,2"], "--product-paces")])
 def test_bad_options_give_one_line(args, named, capsys):
     with pytest.raises(SystemExit) as exit_:
         main(args)
     assert exit_.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and named in err[0]
+
+
+def test_a_paper_protocol_run_paces_the_path_and_executes_the_rest_after_the_last_step(small_run):
+    from services.experiments.interference import run_pacing
+    from services.experiments.protocol import PAPER, move3d_path_weights
+
+    spec, _ = small_run
+    planner = build_planner(spec.scene, ["red_cup"], True, Timing(steps=4, iterations=3), compile=False,
+                            protocol=PAPER)
+    assert planner.stomp.config.rollouts == 10 and planner.stomp.config.reuse == 5
+    assert planner.config.stomp.waypoints == 101 and planner.config.goal_choice == "human"
+    weights = move3d_path_weights(planner.robot)
+    pacing = run_pacing(PAPER, spec.scene.name, weights)
+    assert pacing["path_per_step"] == pytest.approx(0.05) and pacing["finish_path"]
+    rec = run_lockstep(dataclasses.replace(spec, **pacing), planner)
+    assert [p.tick for p in rec.plans] == list(range(4))  # replanned in the 4 steps only
+    q = rec.q()
+    ticks = np.array([s.tick for s in rec.states])
+    length = np.linalg.norm(np.diff(q, axis=0) * weights, axis=1)
+    per_step = [length[ticks[1:] == n].sum() for n in range(ticks.max() + 1)]
+    assert per_step[0] == 0.0  # the first plan is executed from step 1 on (Fig. 4)
+    # the authors' side-scene pace, on the wire (chords across a waypoint are a little shorter than the path)
+    np.testing.assert_allclose(per_step[1:4], 0.05, rtol=1e-3)
+    assert rec.result.finish_steps == ticks.max() - 3 > 0  # then the rest of the path, without a new plan
+    np.testing.assert_allclose(q[-1], rec.plans[-1].trajectories[rec.plans[-1].chosen, -1], atol=1e-5)
+    assert rec.result.reached and rec.result.reached_step > 3
+    again = run_lockstep(dataclasses.replace(spec, **pacing), planner)  # lock-step and seeded: the same run
+    np.testing.assert_array_equal(again.q(), q)
+
+
+def test_paper_protocol_commands_run_in_the_authors_scene_and_measure_along_the_path(tmp_path, capsys):
+    small = ["--steps", "2", "--iterations", "2", "--components", "2", "--no-compile", "--models-dir",
+             str(tmp_path / "m"), "--work-dir", str(tmp_path / "w"), "--json"]
+    assert main(["interference", "--protocol", "paper", "--demos", "1", "--seeds", "1", *small]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["protocol"] == "paper" and data["scene"] == "pr2_two_cups_side_parallel"
+    assert data["authors_comparison"] == []  # the synthetic library: not the authors' motions
+    assert all(r["reached_step"] is not None and r["reached_step"] >= 2 for r in data["runs"])  # the rest, executed
+    png = tmp_path / "fig9.png"
+    assert main(["switch", "--protocol", "paper", "--demos", "1", "--plot", str(png), *small]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["protocol"] == "paper" and png.is_file() and png.stat().st_size > 10_000
+
+
+def test_pace_command_prints_a_point_per_protocol_library_and_pace(tmp_path, capsys):
+    png = tmp_path / "pace.png"
+    args = ["pace", "--product-paces", "0.25,0.5", "--paper-paces", "0.05,0.1", "--demos", "1", "--seeds", "1",
+            "--components", "2", "--no-compile", "--models-dir", str(tmp_path / "m"), "--work-dir",
+            str(tmp_path / "w"), "--plot", str(png), "--json"]
+    assert main(args) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert [(p["protocol"], p["pace"]) for p in data["points"]] == [("product", 0.25), ("product", 0.5),
+                                                                     ("paper", 0.05), ("paper", 0.1)]
+    for p in data["points"]:
+        assert p["library"] == "synthetic"
+        assert p["ratio"] >= 0 or math.isnan(p["ratio"])  # inf where least penetration scores 0
+        for name in ("basic", "least_penetration"):
+            assert set(p[name]) >= {"contact_s", "min_clearance_m", "reached_step"}
+    assert data["operating_point"]["paper"] == pytest.approx(0.05)
+    assert png.is_file() and png.stat().st_size > 10_000

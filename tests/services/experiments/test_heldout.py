@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.experiments.heldout import HeldOutModels, cup_class, human_file, load_experiment_library, short_name
+from services.experiments.heldout import (
+    HeldOutModels,
+    class_at_cup,
+    cup_class,
+    human_file,
+    load_experiment_library,
+    short_name,
+)
 from services.experiments.switch import settle_step
 from services.predictor.gmm import GMMConfig
 from services.predictor.model import PredictionModel
@@ -90,3 +97,12 @@ def test_human_files_of_two_libraries_never_collide(tmp_path):
     assert human_file(a, da, tmp_path) == pa  # written once, found again
     np.testing.assert_array_equal(load_library(pb).demos[0].features, db.features)
     np.testing.assert_array_equal(load_library(pa).demos[0].features, da.features)
+
+
+def test_a_given_class_takes_the_cup_nearest_its_reach_unless_one_is_named():
+    scene = load_scene("pr2_two_cups_facing")
+    lib = generate_library(8, 3, seed=0, scene=scene)
+    red = cup_class(lib, scene, "red_cup")
+    assert class_at_cup(lib, scene, None, red.label) == red  # its own cup, at the same distance
+    named = class_at_cup(lib, scene, "blue_cup", red.label)
+    assert named.cup == "blue_cup" and named.distance > red.distance

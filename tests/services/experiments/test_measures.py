@@ -10,6 +10,8 @@ from services.experiments.measures import (
     body_clearance,
     contact_summary,
     interference,
+    interference_along_path,
+    path_samples,
     penetration_per_state,
     postures_at,
     robot_points,
@@ -65,6 +67,29 @@ def test_interference_is_zero_outside_and_grows_with_time_inside():
     assert all(b > a for a, b in zip(costs, costs[1:], strict=False))
     # inside, the sphere's points occupy a fixed set of voxels: the cost is linear in the time spent there
     np.testing.assert_allclose(np.diff(costs), costs[1], rtol=1e-9)
+
+
+def test_path_samples_are_evenly_spaced_along_a_bent_path_checked_by_hand():
+    q = np.array([[0.0, 0.0, 0.0], [0.03, 0.0, 0.0], [0.03, 0.04, 0.0]])  # 0.03 then 0.04: length 0.07
+    samples, seg = path_samples(q, 0.01)
+    assert len(samples) == 7
+    np.testing.assert_allclose(samples[2], [0.03, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(samples[4], [0.03, 0.02, 0.0], atol=1e-12)
+    assert seg.tolist() == [1, 1, 1, 2, 2, 2, 2]
+
+
+def test_path_integral_is_zero_outside_grows_with_length_inside_and_ignores_time():
+    robot, occ = PointRobot(), grid_with_block()
+    outside = np.linspace([0.05, 0.05, 0.05], [0.3, 0.05, 0.05], 11)  # 0.25 long, no occupied voxel near
+    assert interference_along_path(robot, outside, occ).sum() == 0.0
+    tiny = PointRobot(r=1e-4)  # its points all lie in one voxel of probability 1: cost 1 per sample
+    inside = [interference_along_path(tiny, np.linspace([0.405, 0.42, 0.42], [0.405 + length, 0.42, 0.42], 9), occ,
+                                      ds=0.005).sum() for length in (0.01, 0.02, 0.03, 0.04)]
+    np.testing.assert_allclose(inside, [0.01, 0.02, 0.03, 0.04], atol=1e-12)  # = the length inside, by hand
+    # standing still accrues nothing (unlike the time integral): a path of length 0
+    still = np.tile([0.5, 0.5, 0.5], (20, 1))
+    assert interference_along_path(robot, still, occ).sum() == 0.0
+    assert interference(robot, still, np.arange(20) * 0.1, occ) > 0.0
 
 
 def test_a_sphere_reaching_into_the_block_counts_without_its_centre_inside():

@@ -1,0 +1,33 @@
+"""``foresight eval pace``'s verdicts from its points (the sweep itself runs in test_harness)."""
+
+from __future__ import annotations
+
+from services.experiments.pace import PaceConfig, PacePoint, PaceResult
+
+
+def point(pace: float, basic: float, lp: float) -> PacePoint:
+    row = {"min_clearance_m": 0.1, "reached_step": 10.0, "interference": 1.0}
+    return PacePoint("product", "synthetic", pace, 2.0, {"basic": {**row, "contact_s": basic},
+                                                         "least_penetration": {**row, "contact_s": lp}})
+
+
+def result(*points: PacePoint) -> PaceResult:
+    return PaceResult(PaceConfig(protocols=("product",)), list(points))
+
+
+def test_the_pace_from_which_prediction_no_longer_lowers_contact():
+    res = result(point(0.05, 1.0, 0.0), point(0.1, 0.8, 0.2), point(0.25, 0.4, 0.4), point(0.5, 0.0, 0.0))
+    assert [ok for _, ok in res.pays("product", "synthetic")] == [True, True, False, None]
+    verdict = res.verdict("product", "synthetic")
+    assert "lowers the contact at pace 0.05, 0.1; from pace 0.25 on it no longer does" in verdict
+    assert verdict.endswith("touches longer than basic STOMP at no pace")
+
+
+def test_touching_longer_and_never_touching_are_named():
+    res = result(point(0.1, 0.0, 0.3), point(0.2, 0.0, 0.0))
+    assert "lowers the contact at no pace" in res.verdict("product", "synthetic")
+    assert res.verdict("product", "synthetic").endswith("at 0.1")
+    assert res.verdict("product", "synthetic").startswith("least penetration")
+    none = result(point(0.1, 0.0, 0.0))
+    assert none.verdict("product", "synthetic").startswith("neither planner touches the human at any pace")
+    assert none.to_json()["verdicts"] == {"product, synthetic": none.verdict("product", "synthetic")}

@@ -1,0 +1,59 @@
+"""The paper protocol's settings, the authors' trials and Move3D's path weights."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from services.experiments.authors import FIG9_TRACES, TABLE1_RUNS, table1_summary
+from services.experiments.protocol import PAPER, PRODUCT, authors_trial, move3d_path_weights, protocol
+from services.planner.stomp import finite_difference_matrix
+from shared.robot import PR2
+from shared.runtime import UserError
+from shared.scene import load_scene
+
+PAPER_CLASSES = [f"compound_{i}" for i in range(8)]
+
+
+def test_protocols_by_name_and_the_authors_paces():
+    assert protocol("paper") is PAPER and protocol("product") is PRODUCT
+    with pytest.raises(ValueError, match="protocol"):
+        protocol("papr")
+    assert PAPER.pace("pr2_two_cups_side_parallel") == pytest.approx(0.05)  # 10 x 0.005
+    assert PAPER.pace("pr2_two_cups_facing") == pytest.approx(0.085)  # 17 x 0.005
+    assert PRODUCT.pace("pr2_two_cups_side") == 0.0
+
+
+def test_the_noise_is_the_authors_0_002_times_r_inverse():
+    # 101 waypoints (100 segments), 99 free; the product's 3-point stencil gives the same R^-1 maximum within 1 %
+    a = finite_difference_matrix(PAPER.waypoints - 2)
+    r_inv_max = float(np.linalg.inv((a.T @ a).numpy()).max())
+    assert PAPER.noise_std == pytest.approx(0.002 * math.sqrt(r_inv_max), rel=0.01)
+
+
+def test_authors_trials_on_the_paper_library_only():
+    assert authors_trial("auto", PAPER, "pr2_two_cups_side_parallel", PAPER_CLASSES) == ("compound_1", (0, 1, 2, 3, 4))
+    assert authors_trial("auto", PAPER, "pr2_two_cups_facing", PAPER_CLASSES) == ("compound_3", (2,))
+    assert authors_trial("auto", PRODUCT, "pr2_two_cups_facing", PAPER_CLASSES) is None
+    assert authors_trial("auto", PAPER, "pr2_two_cups_facing", ["blue_cup", "red_cup"]) is None  # synthetic
+    assert authors_trial("cup", PAPER, "pr2_two_cups_facing", PAPER_CLASSES) is None
+    with pytest.raises(UserError, match="authors ran no motion"):
+        authors_trial("authors", PAPER, "pr2_two_cups", PAPER_CLASSES)
+
+
+def test_move3d_weights_are_the_bodies_reach_and_1_for_the_torso():
+    robot = PR2.from_scene(load_scene("pr2_two_cups_side_parallel"))
+    w = move3d_path_weights(robot)
+    assert w.shape == (8,) and w[0] == 1.0
+    assert np.all((w[1:] > 0.02) & (w[1:] < 0.6))  # metres: a PR2 arm link's size
+    assert w[3] > w[4] and w[5] > w[6]  # the upper arm and forearm rolls move the long links
+
+
+def test_the_authors_runs_are_the_papers_table1():
+    lp, basic = table1_summary("least_penetration"), table1_summary("basic")
+    assert [round(s["mean"], 2) for s in basic] == [24.41, 21.48, 27.53, 24.45, 25.13]
+    assert [round(s["mean"], 2) for s in lp] == [0.42, 0.49, 0.61, 0.42, 0.74]
+    assert all(len(r) == 10 for runs in TABLE1_RUNS.values() for r in runs)
+    assert all(len(t) == 20 for traces in FIG9_TRACES.values() for t in traces.values())
