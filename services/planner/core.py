@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -34,7 +33,7 @@ from .config import PlannerConfig
 from .costs import acceleration_cost
 from .fused import FusedCost, supports
 from .inputs import PlannerError, PlannerInputError, check_configuration, check_occupancy
-from .multigoal import best, init_straight_lines, interpolate_path, project_onto_path, reconnect_previous
+from .multigoal import best, choice_key, init_straight_lines, interpolate_path, project_onto_path, reconnect_previous
 from .protocols import PlannerCost, PlannerGoals, PlannerRobot
 from .result import PlanResult
 from .stomp import Stomp
@@ -352,20 +351,6 @@ class Planner:
             dt=self._prev_dt, start=q_t.double().cpu().numpy(), planning_ms=(time.perf_counter() - t0) * 1e3,
             reasons=list(self.goals.reasons) or [""] * k, iterations=result.history.shape[0] - 1,
             cost_history=result.history.double().cpu().numpy())
-
-
-def choice_key(terms: dict[str, torch.Tensor], goal_choice: str) -> torch.Tensor:
-    """``(K,)`` what the least-cost goal is chosen by (``PlannerConfig.goal_choice``).
-
-    ``total``: the total cost. ``human``: the least human-occupancy cost; among the goals tied on it (to float32
-    rounding; e.g. all 0 before the human is anywhere near) the least total cost, as the authors' path cost adds
-    0.002 x length. Goals that do not tie get inf.
-    """
-    if goal_choice == "total":
-        return terms["total"]
-    h = terms["human"]
-    tied = h <= h.min() + 1e-6 * h.min().abs().clamp_min(1.0)  # float32: equal to rounding
-    return torch.where(tied, terms["total"], h.new_tensor(math.inf))
 
 
 def goals_per_call(k: int, limit: int) -> int:

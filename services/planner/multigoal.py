@@ -8,12 +8,13 @@ joint-limit box whenever their inputs are (straight lines and resampling only in
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import torch
 
 __all__ = ["init_straight_lines", "resample_path", "interpolate_path", "project_onto_path",
-           "reconnect_previous", "best"]
+           "reconnect_previous", "best", "choice_key"]
 
 
 def init_straight_lines(q_start: torch.Tensor, goals: torch.Tensor, waypoints: int) -> torch.Tensor:
@@ -159,3 +160,17 @@ def best(total: torch.Tensor, valid: torch.Tensor) -> int:
     if not bool(torch.isfinite(masked).any()):  # all valid costs infinite: first valid goal
         return int(torch.nonzero(valid)[0, 0])
     return int(torch.argmin(masked))
+
+
+def choice_key(terms: dict[str, torch.Tensor], goal_choice: str) -> torch.Tensor:
+    """``(K,)`` what the least-cost goal is chosen by (``PlannerConfig.goal_choice``).
+
+    ``total``: the total cost. ``human``: the least human-occupancy cost; among the goals tied on it (to float32
+    rounding; e.g. all 0 before the human is anywhere near) the least total cost, as the authors' path cost adds
+    0.002 x length. Goals that do not tie get inf.
+    """
+    if goal_choice == "total":
+        return terms["total"]
+    h = terms["human"]
+    tied = h <= h.min() + 1e-6 * h.min().abs().clamp_min(1.0)  # float32: equal to rounding
+    return torch.where(tied, terms["total"], h.new_tensor(math.inf))

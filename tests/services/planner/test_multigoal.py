@@ -7,6 +7,7 @@ import torch
 
 from services.planner.multigoal import (
     best,
+    choice_key,
     init_straight_lines,
     interpolate_path,
     project_onto_path,
@@ -81,3 +82,12 @@ def test_best_picks_the_least_cost_valid_goal() -> None:
     assert best(torch.full((2,), float("inf")), torch.tensor([False, True])) == 1
     with pytest.raises(ValueError, match="no valid goal"):
         best(total, torch.zeros(4, dtype=torch.bool))
+
+
+def test_choice_by_human_cost_breaks_ties_by_total() -> None:
+    valid = torch.ones(3, dtype=torch.bool)
+    terms = {"human": torch.tensor([0.0, 0.0, 0.3]), "total": torch.tensor([5.0, 2.0, 1.0])}
+    assert best(choice_key(terms, "human"), valid) == 1  # the two free goals tie: the cheaper of them
+    assert best(choice_key(terms, "total"), valid) == 2
+    terms["human"] = torch.tensor([0.2, 0.1, 0.3])
+    assert best(choice_key(terms, "human"), valid) == 1
