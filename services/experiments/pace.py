@@ -172,7 +172,7 @@ def plot_pace(res: PaceResult, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     protocols = list(res.config.protocols)
-    fig, axes = plt.subplots(3, len(protocols), figsize=(5.5 * len(protocols), 9), squeeze=False)
+    fig, axes = plt.subplots(3, len(protocols), figsize=(5.5 * len(protocols), 9), squeeze=False, sharex="col")
     units = {"product": "robot speed (fraction of the PR2's velocity limits)",
              "paper": "path length per step (configuration space)"}
     for col, prot in enumerate(protocols):
