@@ -28,7 +28,7 @@ from shared.runtime import UserError
 from shared.scene import Scene
 
 __all__ = ["SYNTHETIC", "load_experiment_library", "short_name", "CupClass", "cup_class", "HeldOutModels", "human_file",
-           "samples_per_tick", "class_at_cup"]
+           "samples_per_tick", "class_at_cup", "human_class"]
 
 SHARED_FITS: dict[str, Any] = {}
 """``train_model``'s fit cache shared by every :class:`HeldOutModels` of this process (fits keyed by data + options)."""
@@ -87,6 +87,17 @@ def cup_class(library: MotionLibrary, scene: Scene, cup: str, exclude: tuple[int
     if best is None:
         raise UserError(f"library {library.source}: no class with demonstrations to reach {cup}")
     return best
+
+
+def human_class(library: MotionLibrary, scene: Scene, trial: tuple[str, tuple[int, ...]] | None, cup: str
+                ) -> CupClass:
+    """The human's class of an experiment: the class of the authors' ``trial``, else the class nearest ``cup``.
+
+    ``trial`` is a (class name, demonstrations) of ``protocol.authors_trial``; its class's cup is the nearest one.
+    """
+    if trial is not None:
+        return class_at_cup(library, scene, None, library.class_names.index(trial[0]))
+    return cup_class(library, scene, cup)
 
 
 def class_at_cup(library: MotionLibrary, scene: Scene, cup: str | None, label: int,

@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from shared.runtime import UserError
 from shared.scene import Scene, load_scene
 
 from .authors import table1_summary
@@ -31,17 +30,16 @@ from .harness import RunRecord, RunSpec, run_lockstep
 from .heldout import (
     CupClass,
     HeldOutModels,
-    class_at_cup,
-    cup_class,
+    human_class,
     human_file,
     load_experiment_library,
     samples_per_tick,
 )
 from .measures import body_clearance, contact_summary, interference_along_path, interference_over_time, postures_at
 from .planners import VARIANTS, Timing, build_planner
-from .protocol import AUTHORS_TRIALS, Protocol, authors_trial, move3d_path_weights, protocol
+from .protocol import AUTHORS_TRIALS, authors_trial, move3d_path_weights, protocol, run_pacing
 
-__all__ = ["TABLE1_SCENE", "InterferenceConfig", "RunScore", "InterferenceResult", "score_run", "run_pacing",
+__all__ = ["TABLE1_SCENE", "InterferenceConfig", "RunScore", "InterferenceResult", "score_run",
            "ratio_text", "run_interference"]
 
 TABLE1_SCENE = "pr2_two_cups_side"
@@ -274,20 +272,6 @@ class InterferenceResult:
         return out
 
 
-def run_pacing(prot: Protocol, scene: str, weights: np.ndarray | None) -> dict[str, Any]:
-    """The :class:`~services.experiments.harness.RunSpec` fields a protocol sets in ``scene``: pace and posterior.
-
-    Raises:
-        UserError: The protocol paces the robot along its path but knows no pace for ``scene``.
-    """
-    pace = prot.pace(scene)
-    if prot.path_per_step and not pace:
-        raise UserError(f"--protocol {prot.name}: the authors' pace is known for the scenes "
-                        f"{', '.join(dict(prot.path_per_step))}, not for {scene}")
-    return {"path_per_step": pace, "path_weights": tuple(weights) if pace and weights is not None else (),
-            "finish_path": prot.finish_path, "evidence": prot.evidence, "temperature": prot.temperature}
-
-
 def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = print,
                      compile: bool = True) -> InterferenceResult:
     """Run the experiment (every run in lock-step through the four services)."""
@@ -300,14 +284,12 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
     cfg = dataclasses.replace(cfg, scene=scene.name)  # the result names its scene (PR2TwoCupsSide -> its file name)
     lib = load_experiment_library(cfg.library, scene)
     trial = authors_trial(cfg.trials, prot, scene.name, lib.class_names)
+    human = human_class(lib, scene, trial, cfg.human_cup)
+    pool = lib.by_class(human.label)
     if trial is not None:  # the paper's library: the authors' human motions
-        human = class_at_cup(lib, scene, None, lib.class_names.index(trial[0]))  # its cup: the nearest
-        pool = lib.by_class(human.label)
         demos = [pool[i] for i in trial[1][:cfg.demos] if i < len(pool)]
         how = "the authors' motions"
     else:
-        human = cup_class(lib, scene, cfg.human_cup)
-        pool = lib.by_class(human.label)
         rng = np.random.default_rng(cfg.selection_seed)
         picked = sorted(rng.choice(len(pool), size=min(cfg.demos, len(pool)), replace=False).tolist())
         demos = [pool[i] for i in picked]

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -40,7 +41,7 @@ import torch
 from shared.runtime import UserError
 
 __all__ = ["PROTOCOLS", "Protocol", "PAPER", "PRODUCT", "protocol", "move3d_path_weights", "AUTHORS_TRIALS", "TRIALS",
-           "authors_trial"]
+           "authors_trial", "run_pacing"]
 
 PROTOCOLS = ("product", "paper")
 
@@ -145,6 +146,20 @@ def authors_trial(trials: str, prot: Protocol, scene: str, class_names: list[str
     if trials == "authors" or (trials == "auto" and prot.authors_trials and usable):
         return trial
     return None
+
+
+def run_pacing(prot: Protocol, scene: str, weights: np.ndarray | None) -> dict[str, Any]:
+    """The :class:`~services.experiments.harness.RunSpec` fields a protocol sets in ``scene``: pace and posterior.
+
+    Raises:
+        UserError: The protocol paces the robot along its path but knows no pace for ``scene``.
+    """
+    pace = prot.pace(scene)
+    if prot.path_per_step and not pace:
+        raise UserError(f"--protocol {prot.name}: the authors' pace is known for the scenes "
+                        f"{', '.join(dict(prot.path_per_step))}, not for {scene}")
+    return {"path_per_step": pace, "path_weights": tuple(weights) if pace and weights is not None else (),
+            "finish_path": prot.finish_path, "evidence": prot.evidence, "temperature": prot.temperature}
 
 
 def move3d_path_weights(robot: object) -> np.ndarray:

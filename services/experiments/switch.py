@@ -29,17 +29,15 @@ from .harness import RunSpec, run_lockstep
 from .heldout import (
     CupClass,
     HeldOutModels,
-    class_at_cup,
-    cup_class,
+    human_class,
     human_file,
     load_experiment_library,
     samples_per_tick,
     short_name,
 )
-from .interference import run_pacing
 from .measures import body_clearance, contact_summary, postures_at
 from .planners import Timing, build_planner
-from .protocol import authors_trial, move3d_path_weights, protocol
+from .protocol import authors_trial, move3d_path_weights, protocol, run_pacing
 
 __all__ = ["SWITCH_SCENE", "SwitchConfig", "SwitchRun", "SwitchResult", "settle_step", "away_step", "run_switch",
            "plot_switch"]
@@ -191,14 +189,11 @@ def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compi
     cfg = dataclasses.replace(cfg, scene=scene.name)
     lib = load_experiment_library(cfg.library, scene)
     trial = authors_trial(cfg.trials, prot, scene.name, lib.class_names)
-    if trial is not None:  # the paper's library: the authors' class, its trial first; its cup the nearest one
-        human = class_at_cup(lib, scene, None, lib.class_names.index(trial[0]))
-        cfg = dataclasses.replace(cfg, human_cup=human.cup)
-        pool = lib.by_class(human.label)
-        demos = [pool[i] for i in trial[1] if i < len(pool)] + [d for i, d in enumerate(pool) if i not in trial[1]]
-    else:
-        human = cup_class(lib, scene, cfg.human_cup)
-        demos = lib.by_class(human.label)
+    human = human_class(lib, scene, trial, cfg.human_cup)
+    cfg = dataclasses.replace(cfg, human_cup=human.cup)
+    demos = lib.by_class(human.label)
+    if trial is not None:  # the paper's library: the authors' class, its trial first
+        demos = [demos[i] for i in trial[1] if i < len(demos)] + [d for i, d in enumerate(demos) if i not in trial[1]]
     demos = demos[: cfg.demos] if cfg.demos > 0 else demos
     cups = [c.name for c in scene.cups]
     progress(f"switch ({prot.name} protocol): {lib.source}, scene {scene.name}; robot -> {', '.join(cups)}; human -> "

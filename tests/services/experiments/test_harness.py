@@ -81,8 +81,7 @@ def test_bad_options_give_one_line(args, named, capsys):
 
 
 def test_a_paper_protocol_run_paces_the_path_and_executes_the_rest_after_the_last_step(small_run):
-    from services.experiments.interference import run_pacing
-    from services.experiments.protocol import PAPER, move3d_path_weights
+    from services.experiments.protocol import PAPER, move3d_path_weights, run_pacing
 
     spec, _ = small_run
     planner = build_planner(spec.scene, ["red_cup"], True, Timing(steps=4, iterations=3), compile=False,
