@@ -37,6 +37,7 @@ import typing
 from pathlib import Path
 from typing import Any, Protocol, TypeVar
 
+from shared.config_names import SECTIONS, check_environment, check_file_sections, closest
 from shared.config_tree import (
     ENV_PREFIX,
     ConfigError,
@@ -193,9 +194,10 @@ def _check_tables(section: str, cls: type, data: dict[str, Any]) -> None:
             values = values.get(step, {}) if isinstance(values, dict) else {}
         if not isinstance(values, dict):
             raise ConfigError(f"[{'.'.join(table)}]: must be a table, got {values!r}")
-        unknown = set(values) - allowed
+        unknown = sorted(set(values) - allowed)
         if unknown:
-            raise ConfigError(f"[{'.'.join(table)}]: unknown option(s) {', '.join(sorted(unknown))}")
+            hint = closest(unknown[0], allowed)
+            raise ConfigError(f"[{'.'.join(table)}]: unknown option(s) {', '.join(unknown)}{hint}")
 
 
 def _file_value(data: dict[str, Any], o: Option) -> Any:
@@ -286,6 +288,9 @@ def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None =
     for key, value in data.items():
         if not isinstance(value, dict):
             raise ConfigError(f"config file: top-level key {key!r} must be a table like [{key}]")
+    if section in SECTIONS:  # a section of the product (tests resolve sections of their own)
+        check_file_sections(data, str(path))
+    check_environment(env, {section: cls, **({"zenoh": ZenohConfig} if with_zenoh else {})})
     sec = _resolve_section(section, cls, data.get(section, {}), env, cli)
     names = _zenoh_flags({o.flag for o in config_options(section, cls)})
     zen = (_resolve_section("zenoh", ZenohConfig, data.get("zenoh", {}), env, cli, zenoh_base, names)

@@ -3,7 +3,7 @@
 The four services run in-process over loopback Zenoh, as in ``test_system.py``. A fuzzer session
 publishes, on every data key, rounds of random, truncated, bit-flipped, wrong-schema, oversized
 (declared and real) and well-formed-but-absurd payloads (``fuzzing.py``). In real time (replayer
-looping), ``FORESIGHT_FUZZ_COUNT`` rounds (default 240):
+looping), ``FORESIGHT_TEST_FUZZ_COUNT`` rounds (default 240):
 
 * every service is still running;
 * the executor refused every payload that is not a plausible message, each counted under its key
@@ -46,7 +46,7 @@ from .fuzz_checks import (
 )
 from .fuzzing import Case, clock_template
 
-COUNT = int(os.environ.get("FORESIGHT_FUZZ_COUNT", "240"))
+COUNT = int(os.environ.get("FORESIGHT_TEST_FUZZ_COUNT", "240"))
 RSS_GROWTH_LIMIT_MB = 1024.0
 """A loose bound: the fuzz must not leave the process (four services) this much larger."""
 

@@ -1,6 +1,6 @@
 """The real-time fuzz against the four services as separate processes: per-service RSS, exit status, counts.
 
-Opt-in (``FORESIGHT_FUZZ_PROCESSES=1``; ``FORESIGHT_FUZZ_COUNT`` rounds per key, default 240): the
+Opt-in (``FORESIGHT_TEST_FUZZ_PROCESSES=1``; ``FORESIGHT_TEST_FUZZ_COUNT`` rounds per key, default 240): the
 in-process ``test_fuzz.py`` checks the same in CI. Here each service is ``python -m services.<name>``
 connected to this test's Zenoh session on loopback, so a crash is a dead process and each
 service's resident memory is its own. The executor's refusals come from its MCAP (metadata and the
@@ -36,12 +36,12 @@ from .fuzz_checks import (
 )
 from .fuzzing import clock_template
 
-COUNT = int(os.environ.get("FORESIGHT_FUZZ_COUNT", "240"))
+COUNT = int(os.environ.get("FORESIGHT_TEST_FUZZ_COUNT", "240"))
 RSS_GROWTH_LIMIT_MB = 512.0
 """A loose bound per service."""
 
-pytestmark = pytest.mark.skipif(not os.environ.get("FORESIGHT_FUZZ_PROCESSES"),
-                                reason="opt-in: FORESIGHT_FUZZ_PROCESSES=1 (test_fuzz.py covers it in-process)")
+pytestmark = pytest.mark.skipif(not os.environ.get("FORESIGHT_TEST_FUZZ_PROCESSES"),
+                                reason="opt-in: FORESIGHT_TEST_FUZZ_PROCESSES=1 (test_fuzz.py covers it in-process)")
 
 
 def parse_summary(log_text: str) -> dict[tuple[str, str], int]:

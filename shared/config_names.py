@@ -1,0 +1,113 @@
+"""Every configuration name that exists: sections, their options' variables; a misspelt one is an error.
+
+A TOML file is shared by every service (one table per section) and the environment by every process
+a command starts, so a name that matches nothing (``[zenho]``, ``[replayr]``,
+``FORESIGHT_REPLAYER_RATEHZ``) would otherwise be ignored without a word. :func:`check_file_sections`
+and :func:`check_environment` make it a :class:`~shared.config_tree.ConfigError` naming the closest
+valid name, like an unknown key in a table.
+
+:data:`SECTIONS` maps each section to its config dataclass (imported only when its names are needed);
+:data:`OTHER_VARIABLES` lists the ``FORESIGHT_*`` variables that are not options of a section.
+Variables starting with ``FORESIGHT_TEST_`` belong to the test suite and are not checked.
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib
+import typing
+from collections.abc import Iterable
+
+from shared.config_tree import ENV_PREFIX, ConfigError, config_options
+
+__all__ = ["SECTIONS", "OTHER_VARIABLES", "section_class", "check_file_sections", "check_environment",
+           "closest", "every_variable"]
+
+SECTIONS: dict[str, str] = {
+    "zenoh": "shared.config:ZenohConfig",
+    "replayer": "services.replayer.core:ReplayerConfig",
+    "predictor": "services.predictor.core:PredictorConfig",
+    "planner": "services.planner.config:PlannerServiceConfig",
+    "executor": "services.executor.core:ExecutorConfig",
+    "router": "tools.router:RouterConfig",
+    "demo": "services.demo:DemoConfig",
+}
+"""Section (TOML table, variable and command name) -> ``module:Class`` of its config dataclass."""
+
+OTHER_VARIABLES: dict[str, str] = {
+    f"{ENV_PREFIX}_CONFIG": "the TOML config file",
+    f"{ENV_PREFIX}_BLAS_THREADS": "BLAS threads per process (shared.native_threads)",
+    f"{ENV_PREFIX}_PARENT_PID": "set by foresight demo for its services (shared.runtime.watch_parent)",
+}
+"""``FORESIGHT_*`` variables that are not options of a section, with what each is."""
+
+TEST_PREFIX = f"{ENV_PREFIX}_TEST_"
+
+
+def section_class(section: str) -> type:
+    """The config dataclass of ``section`` (imports its module)."""
+    module, _, name = SECTIONS[section].partition(":")
+    return typing.cast(type, getattr(importlib.import_module(module), name))
+
+
+def closest(name: str, valid: Iterable[str]) -> str:
+    """``"; did you mean X?"`` for the valid name closest to ``name``, or ``""`` when none is close."""
+    match = difflib.get_close_matches(name, list(valid), n=1, cutoff=0.6)
+    return f"; did you mean {match[0]}?" if match else ""
+
+
+def every_variable() -> list[str]:
+    """The variable of every option of every section of :data:`SECTIONS` (imports every config module)."""
+    return [o.env for section in SECTIONS for o in config_options(section, section_class(section))]
+
+
+def check_file_sections(data: dict[str, typing.Any], path: str = "config file") -> None:
+    """Raise ConfigError for a top-level table of a config file that is no section.
+
+    Args:
+        data: The parsed TOML file.
+        path: How to name the file in the message.
+    """
+    for key in data:
+        if key not in SECTIONS:
+            raise ConfigError(f"{path}: unknown section [{key}]{closest(key, SECTIONS)} "
+                              f"(sections: {', '.join(SECTIONS)})")
+
+
+def _section_of(variable: str, sections: Iterable[str]) -> str | None:
+    """The section a ``FORESIGHT_<SECTION>_...`` variable addresses (the longest that fits), or None."""
+    fits = [s for s in sections if variable.startswith(f"{ENV_PREFIX}_{s.upper()}_")]
+    return max(fits, key=len) if fits else None
+
+
+def check_environment(env: typing.Mapping[str, str], checked: typing.Mapping[str, type]) -> None:
+    """Raise ConfigError for a ``FORESIGHT_*`` variable that matches no option.
+
+    Variables of the ``checked`` sections must name one of their options; those of another section of
+    :data:`SECTIONS` are left to the command that reads it; any other ``FORESIGHT_*`` variable must be
+    one of :data:`OTHER_VARIABLES`.
+
+    Args:
+        env: The environment, e.g. ``os.environ``.
+        checked: The sections the calling command reads, with their config dataclasses.
+    """
+    every_section = {*SECTIONS, *checked}
+    known: dict[str, set[str]] = {}
+    for variable in sorted(env):
+        if not variable.startswith(f"{ENV_PREFIX}_") or variable in OTHER_VARIABLES \
+                or variable.startswith(TEST_PREFIX):
+            continue
+        section = _section_of(variable, every_section)
+        if section is None:
+            every = [*OTHER_VARIABLES, *every_variable(), *(o.env for s, c in checked.items()
+                                                            for o in config_options(s, c))]
+            raise ConfigError(f"environment: {variable} is no Foresight option{closest(variable, every)} (options "
+                              f"are FORESIGHT_<SECTION>_<OPTION>, sections: {', '.join(sorted(every_section))})")
+        if section not in checked:
+            continue
+        if section not in known:
+            known[section] = {o.env for o in config_options(section, checked[section])}
+        if variable not in known[section]:
+            where = "" if section == "zenoh" else f" (see foresight {section} --help)"
+            raise ConfigError(f"environment: {variable} is no option of [{section}]"
+                              f"{closest(variable, known[section])}{where}")

@@ -1,0 +1,75 @@
+"""Misspelt sections and variables are errors naming the closest valid name (issue 24)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from shared.config import ConfigError, ZenohConfig, add_config_arguments, opt, resolve_config
+from shared.config_names import SECTIONS, check_environment, check_file_sections, section_class
+
+
+@dataclasses.dataclass
+class Svc:
+    rate_hz: float = opt(30.0, help="rate")
+    log_level: str = opt("INFO", help="level")
+
+
+def test_every_section_names_its_config_class() -> None:
+    for section in SECTIONS:
+        cls = section_class(section)
+        assert dataclasses.is_dataclass(cls), section
+
+
+def test_unknown_file_section_names_the_closest() -> None:
+    with pytest.raises(ConfigError, match=r"unknown section \[zenho\]; did you mean zenoh\?"):
+        check_file_sections({"zenho": {}})
+    with pytest.raises(ConfigError, match=r"unknown section \[replayr\]; did you mean replayer\?"):
+        check_file_sections({"replayer": {}, "replayr": {}})
+    with pytest.raises(ConfigError, match=r"unknown section \[xyz\] \(sections: zenoh, "):
+        check_file_sections({"xyz": {}})
+    check_file_sections({name: {} for name in SECTIONS})
+
+
+def test_misspelt_variable_names_the_closest_option() -> None:
+    checked = {"replayer": section_class("replayer"), "zenoh": ZenohConfig}
+    with pytest.raises(ConfigError, match=r"FORESIGHT_REPLAYER_RATEHZ is no option of \[replayer\]; did you mean "
+                                          r"FORESIGHT_REPLAYER_RATE_HZ\?"):
+        check_environment({"FORESIGHT_REPLAYER_RATEHZ": "3"}, checked)
+    with pytest.raises(ConfigError, match=r"FORESIGHT_ZENOH_MOD is no option of \[zenoh\]; did you mean "
+                                          r"FORESIGHT_ZENOH_MODE\?"):
+        check_environment({"FORESIGHT_ZENOH_MOD": "peer"}, checked)
+    # a misspelt section: the closest option of any section
+    with pytest.raises(ConfigError, match=r"FORESIGHT_REPLAYR_RATE_HZ is no Foresight option; did you mean "
+                                          r"FORESIGHT_REPLAYER_RATE_HZ\?"):
+        check_environment({"FORESIGHT_REPLAYR_RATE_HZ": "3"}, checked)
+
+
+def test_valid_and_foreign_variables_pass() -> None:
+    checked = {"replayer": section_class("replayer")}
+    check_environment({"FORESIGHT_REPLAYER_RATE_HZ": "3", "FORESIGHT_CONFIG": "x.toml",
+                       "FORESIGHT_BLAS_THREADS": "2", "FORESIGHT_PARENT_PID": "1",
+                       "FORESIGHT_TEST_FUZZ_COUNT": "3",  # the test suite's own
+                       "FORESIGHT_PLANNER_NOPE": "1",  # another section's: its own command checks it
+                       "PATH": "/bin"}, checked)
+    with pytest.raises(ConfigError, match="FORESIGHT_PLANNER_NOPE is no option of"):
+        check_environment({"FORESIGHT_PLANNER_NOPE": "1"}, {"planner": section_class("planner")})
+
+
+def test_resolve_config_checks_file_and_environment(tmp_path: Path) -> None:
+    p = argparse.ArgumentParser()
+    add_config_arguments(p, "replayer", Svc)
+    f = tmp_path / "c.toml"
+    f.write_text("[replayer]\nrate_hz = 3\n[zenho]\nmode = 'peer'\n")
+    with pytest.raises(ConfigError, match=r"unknown section \[zenho\]; did you mean zenoh"):
+        resolve_config("replayer", Svc, p.parse_args(["--config", str(f)]), env={})
+    f.write_text("[replayer]\nratehz = 3\n")
+    with pytest.raises(ConfigError, match=r"unknown option\(s\) ratehz; did you mean rate_hz\?"):
+        resolve_config("replayer", Svc, p.parse_args(["--config", str(f)]), env={})
+    with pytest.raises(ConfigError, match="FORESIGHT_REPLAYER_RATEHZ"):
+        resolve_config("replayer", Svc, p.parse_args([]), env={"FORESIGHT_REPLAYER_RATEHZ": "3"})
+    cfg, _ = resolve_config("replayer", Svc, p.parse_args([]), env={"FORESIGHT_REPLAYER_RATE_HZ": "3"})
+    assert cfg.rate_hz == 3.0
