@@ -33,6 +33,7 @@ import numpy as np
 
 from shared.config import ZenohConfig
 from shared.lockstep_followers import TickInbox
+from shared.log_summary import PeriodicSummary
 from shared.protocol import (
     ClockTick,
     DemoMarker,
@@ -119,6 +120,7 @@ class PlannerService:
         self.stats = PlannerStats()
         self._empty = np.zeros(self.scene.grid.dims, dtype=np.float32)
         self.trigger: ReplanTrigger | None = None  # real-time mode: when steps start (and why, counted)
+        self.summary = PeriodicSummary(log, "planner: plans")  # each plan at DEBUG, a summary at INFO
 
     def _plan(self, q: np.ndarray, occupancy: OccupancyGrid | None, tick: int, stamp: float,
               pub: TypedPublisher[Plan], interrupt: Callable[[], bool] | None = None,
@@ -135,8 +137,9 @@ class PlannerService:
         self.stats.plans += 1
         self.stats.planning_ms.append(result.planning_ms)
         costs = ", ".join(f"{n}={c:.3g}" for n, c in zip(result.goal_names, result.cost_total, strict=True))
-        log.info("planner: tick %d step %d chose %s (%s) in %.0f ms", tick, result.step,
-                 result.goal_names[result.chosen], costs, result.planning_ms)
+        log.debug("planner: tick %d step %d chose %s (%s) in %.0f ms", tick, result.step,
+                  result.goal_names[result.chosen], costs, result.planning_ms)
+        self.summary.add(result.planning_ms, f"chose {result.goal_names[result.chosen]}")
         return result
 
     def run(self, stop: threading.Event | None = None) -> PlannerStats:
@@ -150,6 +153,7 @@ class PlannerService:
                 self._run_lockstep(session, pub, stop)
             else:
                 self._run_realtime(session, pub, stop)
+        self.summary.flush()
         log.info("planner: stopped after %d plans (%d failed), rejected: %s", self.stats.plans, self.stats.failures,
                  self.rejects.summary())
         return self.stats
