@@ -89,6 +89,8 @@ class ExecutorConfig:
                                "robot model's order (empty: the robot model's start configuration)")
     scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")
     mcap: str = opt("", help="MCAP log path (empty: runs/<UTC timestamp>.mcap; 'none': no log)")
+    mcap_compression: str = opt("zstd", choices=("zstd", "lz4", "none"),
+                                help="compression of the MCAP's chunks (every MCAP reader reads zstd and lz4)")
     viz_rate_hz: float = opt(5.0, help="highest rate of the Foxglove robot/human/occupancy scene updates per channel")
     device: str = opt("cpu", help="torch device of the robot model (cpu or cuda)")
     log_level: str = opt("INFO", help="log level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))

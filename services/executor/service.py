@@ -209,7 +209,7 @@ class ExecutorService:
                 # real time: Foxglove updates on a background thread (never ahead of a plan's receipt); lock-step:
                 # in the callback, so that a run's log never depends on thread timing (no update ever dropped)
                 self.mcap = McapLog(path, self.keys, builder, viz_period_s=1.0 / cfg.viz_rate_hz,
-                                    viz_thread=cfg.mode != "lockstep",
+                                    viz_thread=cfg.mode != "lockstep", compression=cfg.mcap_compression,
                                     scene_text=text, run_metadata=meta)
                 self.result.mcap_path = str(path)
             sub = session.declare_subscriber(f"{self.zenoh.prefix}/**", lambda s: self._on_sample(

@@ -17,7 +17,8 @@ Layout (see docs/executor.md; the channels' schemas are in :mod:`shared.recordin
   where the messages themselves carry simulated time;
 * attachment ``scene.toml`` (the scene the run used) and metadata ``foresight.run`` (the config).
 
-The file is written in chunks straight to the operating system (no user-space buffer) and the open
+Chunks are compressed with zstd by default (``compression``; lz4 or none on request). The file is
+written in chunks straight to the operating system (no user-space buffer) and the open
 chunk is flushed every ``flush_period_s``; if the process is killed, everything up to the last
 complete chunk stays readable (with a non-seeking reader, see :func:`shared.recording.reader.read_log`).
 """
@@ -53,7 +54,10 @@ from .background import BackgroundWorker
 from .json_slices import dumps_sliced
 from .schemas import PROFILE, REJECTED_SCHEMA, REJECTED_TOPIC, SCHEMAS, TOPICS, message_json_schema
 
-__all__ = ["McapLog", "FoxgloveScene"]
+__all__ = ["McapLog", "FoxgloveScene", "COMPRESSION"]
+
+COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+"""Chunk compressions by name (the ``mcap`` library compresses with ``zstandard`` and ``lz4``)."""
 
 log = logging.getLogger(__name__)
 
@@ -144,12 +148,17 @@ class McapLog:
             with the message's receive time all the same, and one that finds ``viz_pending`` waiting is
             dropped (counted, metadata ``foresight.viz``). False: built in :meth:`log_message`.
         viz_pending: Foxglove updates that may wait for the background thread.
+        compression: Chunk compression, ``"zstd"``, ``"lz4"`` or ``"none"``. A chunk is compressed as a
+            whole when it is closed, so a killed writer's file still reads back up to its last chunk.
     """
 
     def __init__(self, path: str | os.PathLike[str], keys: Keys, builder: FoxgloveScene | None = None,
                  viz_period_s: float = 0.2, chunk_size: int = 256 * 1024, flush_period_s: float = 1.0,
                  scene_text: str | None = None, run_metadata: dict[str, str] | None = None,
-                 clock: Callable[[], int] = time.time_ns, viz_thread: bool = True, viz_pending: int = 16) -> None:
+                 clock: Callable[[], int] = time.time_ns, viz_thread: bool = True, viz_pending: int = 16,
+                 compression: str = "zstd") -> None:
+        if compression not in COMPRESSION:
+            raise ValueError(f"MCAP compression must be one of {', '.join(COMPRESSION)}, got {compression!r}")
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.keys = keys
@@ -159,9 +168,8 @@ class McapLog:
         self._clock = clock
         self._lock = threading.RLock()
         self._file = _DirectFile(self.path)
-        # No compression: zstandard/lz4 are not dependencies (the writer would need them).
         self._writer = Writer(typing.cast(io.BufferedWriter, self._file), chunk_size=chunk_size,
-                              compression=CompressionType.NONE)
+                              compression=COMPRESSION[compression])
         self._writer.start(profile=PROFILE, library="foresight executor")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}

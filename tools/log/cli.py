@@ -3,7 +3,9 @@
 * ``foresight log info FILE [--json]``: channels, schemas and message counts (:mod:`tools.log.info`);
 * ``foresight log render FILE --step N --out PNG`` (or ``--all --out DIR``): draw replanning steps
   (:mod:`tools.log.render`);
-* ``foresight log latency FILE [--json]``: pose -> occupancy -> plan latencies (:mod:`tools.log.latency`).
+* ``foresight log latency FILE [--json]``: pose -> occupancy -> plan latencies (:mod:`tools.log.latency`);
+* ``foresight log compress IN OUT``: the same log with compressed chunks, read back identical
+  (:mod:`tools.log.compress`).
 
 The log is read with :func:`shared.recording.reader.read_log` (record by record: a truncated file is
 read up to its last complete chunk).
@@ -21,12 +23,21 @@ from pathlib import Path
 from shared.recording.reader import read_log
 from shared.runtime import UserError, cli_errors
 
+from .compress import compress_log
 from .info import format_info, info_dict
 from .latency import format_latencies, run_latencies
 from .render import render_step
 from .steps import scene_of, step_views
 
-__all__ = ["main"]
+__all__ = ["main", "SUBCOMMANDS"]
+
+SUBCOMMANDS: dict[str, str] = {
+    "info": "channels, schemas and message counts of an MCAP log",
+    "render": "draw replanning step(s) to PNG",
+    "latency": "pose -> occupancy -> plan latencies and the replanning period (p50, p99)",
+    "compress": "rewrite a log with compressed chunks; read both back, compare them",
+}
+"""The sub-commands of ``foresight log`` with one line each (``foresight --help`` lists them)."""
 
 
 def _main_info(args: argparse.Namespace) -> int:
@@ -87,26 +98,35 @@ def _main_latency(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
-    """``foresight log info|render|latency``; returns the exit status."""
+    """``foresight log info|render|latency|compress``; returns the exit status."""
     parser = argparse.ArgumentParser(prog=prog, description="Look at a run's MCAP log without Foxglove: 'info' "
                                      "lists channels, schemas and message counts; 'render' draws replanning steps "
                                      "to PNG (table, cups, human, predicted occupancy, robot spheres, candidate "
-                                     "end-effector paths); 'latency' measures pose -> occupancy -> plan.")
-    sub = parser.add_subparsers(dest="cmd", required=True, metavar="{info,render,latency}")
-    pi = sub.add_parser("info", help="channels, schemas and message counts of an MCAP log")
+                                     "end-effector paths); 'latency' measures pose -> occupancy -> plan; 'compress' "
+                                     "rewrites a log with compressed chunks.")
+    sub = parser.add_subparsers(dest="cmd", required=True, metavar="{" + ",".join(SUBCOMMANDS) + "}")
+    pi = sub.add_parser("info", help=SUBCOMMANDS["info"])
     pi.add_argument("file", help="MCAP file")
     pi.add_argument("--json", action="store_true", help="print one JSON object")
-    pr = sub.add_parser("render", help="draw replanning step(s) to PNG")
+    pr = sub.add_parser("render", help=SUBCOMMANDS["render"])
     pr.add_argument("file", help="MCAP file")
     pr.add_argument("--step", type=int, default=None, help="replanning step (Plan.step) to draw")
     pr.add_argument("--all", action="store_true", help="draw every step; --out is then a directory")
     pr.add_argument("--out", required=True, help="PNG path (or directory with --all)")
     pr.add_argument("--min-probability", type=float, default=0.05, help="hide voxels below this probability")
-    pl = sub.add_parser("latency", help="pose -> occupancy -> plan latencies and the replanning period (p50, p99)")
+    pl = sub.add_parser("latency", help=SUBCOMMANDS["latency"])
     pl.add_argument("file", help="MCAP file")
     pl.add_argument("--json", action="store_true", help="print one JSON object")
+    pc = sub.add_parser("compress", help=SUBCOMMANDS["compress"])
+    pc.add_argument("file", help="MCAP file")
+    pc.add_argument("out", help="the new MCAP file")
+    pc.add_argument("--compression", default="zstd", choices=("zstd", "lz4", "none"), help="chunk compression")
     args = parser.parse_args(argv)
     with cli_errors(prog):
+        if args.cmd == "compress":
+            result = compress_log(args.file, args.out, args.compression)
+            print(result.line(Path(args.file), Path(args.out)))
+            return 0 if result.identical else 1
         if args.cmd == "info":
             return _main_info(args)
         if args.cmd == "latency":

@@ -1,0 +1,48 @@
+"""``foresight log compress``: the same log with compressed chunks, read back identical."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from shared.recording.reader import read_log
+from shared.runtime import UserError
+from tools.log.cli import main
+from tools.log.compress import compress_log, same_messages
+
+
+def test_round_trip_is_identical_and_sizes_follow_the_compression(run_log: Path, tmp_path: Path) -> None:
+    plain = compress_log(run_log, tmp_path / "plain.mcap", "none")
+    packed = compress_log(tmp_path / "plain.mcap", tmp_path / "packed.mcap", "zstd")
+    assert plain.identical and packed.identical and plain.input_complete
+    assert plain.messages == packed.messages == read_log(run_log).message_count
+    assert packed.size_out < plain.size_out
+    assert same_messages(run_log, tmp_path / "packed.mcap")
+    assert read_log(tmp_path / "packed.mcap").complete
+
+
+def test_truncated_input_is_copied_up_to_its_last_chunk(run_log: Path, tmp_path: Path) -> None:
+    compress_log(run_log, tmp_path / "plain.mcap", "none", chunk_size=4096)
+    data = (tmp_path / "plain.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    result = compress_log(cut, tmp_path / "out.mcap")
+    assert not result.input_complete and result.identical
+    assert 0 < result.messages == read_log(cut).message_count
+    assert "truncated" in result.line(cut, tmp_path / "out.mcap")
+
+
+def test_cli_and_bad_input(run_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["compress", str(run_log), str(tmp_path / "o.mcap"), "--compression", "lz4"]) == 0
+    assert "read back identical" in capsys.readouterr().out
+    with pytest.raises(UserError, match="not found"):
+        compress_log(tmp_path / "missing.mcap", tmp_path / "o2.mcap")
+    shutil.copy(run_log, tmp_path / "same.mcap")
+    with pytest.raises(UserError, match="another file"):
+        compress_log(tmp_path / "same.mcap", tmp_path / "same.mcap")
+    (tmp_path / "text.mcap").write_text("not a log")
+    with pytest.raises(SystemExit) as e:
+        main(["compress", str(tmp_path / "text.mcap"), str(tmp_path / "o3.mcap")])
+    assert e.value.code == 2 and "not an MCAP file" in capsys.readouterr().err
