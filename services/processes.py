@@ -8,11 +8,12 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from shared.runtime import UserError
+from shared.runtime import PARENT_ENV, UserError
 
 __all__ = ["ServiceProcess", "free_port"]
 
@@ -24,6 +25,12 @@ class ServiceProcess:
 
     Output (stdout and stderr) goes to ``log_path``. :meth:`stop` sends SIGTERM, waits up to a
     bounded time, then kills.
+
+    The process runs in its own process group, so a terminal's Ctrl-C (SIGINT to the foreground
+    group) reaches only the parent, which stops its services once each, in its own order (the
+    executor first, which closes the MCAP). Should the parent die without stopping them, each service
+    sees it (:data:`shared.runtime.PARENT_ENV` names the parent's pid; :func:`shared.runtime.watch_parent`) and stops
+    by itself.
 
     Args:
         name: Service name; also the liveliness token it declares (``<prefix>/alive/<name>``).
@@ -52,7 +59,9 @@ class ServiceProcess:
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
         with self.log_path.open("wb") as out:
             self.proc = subprocess.Popen(self.command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                         env={**os.environ, "PYTHONUNBUFFERED": "1", **self.env})
+                                         process_group=0,
+                                         env={**os.environ, "PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid()),
+                                              **self.env})
         log.info("started %s (pid %d): %s", self.name, self.proc.pid, " ".join(self.command))
         return self
 
@@ -74,23 +83,31 @@ class ServiceProcess:
             return ""
         return "\n".join(text.strip().splitlines()[-lines:])
 
-    def wait_alive(self, is_alive: Callable[[str], bool], timeout: float) -> None:
+    def wait_alive(self, is_alive: Callable[[str], bool], timeout: float,
+                   stop: threading.Event | None = None) -> bool:
         """Wait until the service's liveliness token is seen.
 
         Args:
             is_alive: E.g. :meth:`shared.transport.Presence.is_alive`.
             timeout: Seconds.
+            stop: Set by the caller's stop request (Ctrl-C): stop waiting.
+
+        Returns:
+            True once the service is alive, False when ``stop`` was set first.
 
         Raises:
             UserError: If the process exits first (with its last output line) or the timeout passes.
         """
         deadline = time.monotonic() + timeout
         while not is_alive(self.name):
+            if stop is not None and stop.is_set():
+                return False
             if not self.running:
                 raise UserError(f"{self.name} exited with status {self.returncode}: {self.tail(1)}")
             if time.monotonic() > deadline:
                 raise UserError(f"{self.name} did not come up within {timeout:g} s (see {self.log_path})")
             time.sleep(0.02)
+        return True
 
     def stop(self, timeout: float = 5.0) -> int | None:
         """SIGTERM, wait up to ``timeout`` s, then SIGKILL; returns the exit status."""

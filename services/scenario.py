@@ -22,7 +22,7 @@ import numpy as np
 
 from services.experiments.measures import interference
 from shared.library import Demonstration, MotionLibrary
-from shared.protocol import ClassPosterior, Message, OccupancyGrid, Plan, RobotState
+from shared.protocol import ClassPosterior, HumanPose, Message, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.scene import Scene
 
@@ -148,6 +148,7 @@ class RunRecorder:
         self.states: list[RobotState] = []
         self.final_occupancy: OccupancyGrid | None = None
         self.posteriors: dict[int, ClassPosterior] = {}
+        self.poses: list[HumanPose] = []
 
     def on_message(self, msg: Message) -> None:
         """Feed one received message."""
@@ -162,11 +163,18 @@ class RunRecorder:
                     self.final_occupancy = msg
             elif isinstance(msg, ClassPosterior):
                 self.posteriors[msg.tick] = msg
+            elif isinstance(msg, HumanPose):
+                self.poses.append(msg)
 
     def snapshot(self) -> tuple[list[Plan], list[RobotState], OccupancyGrid | None, dict[int, ClassPosterior]]:
         """Copies of what was recorded so far."""
         with self._lock:
             return list(self.plans), list(self.states), self.final_occupancy, dict(self.posteriors)
+
+    def human_poses(self) -> list[HumanPose]:
+        """The human's poses received so far, in time order."""
+        with self._lock:
+            return sorted(self.poses, key=lambda p: (p.stamp, p.index))
 
 
 def step_entry(plan: Plan, t0: float) -> dict[str, Any]:
@@ -261,15 +269,6 @@ class Summary:
         out.append(f"human class: {self.human_class}; recognised at the end: {self.recognised_class}")
         out.append(f"interference cost of the executed trajectory (final prediction): {self.interference_cost:.4f}")
         out.append(f"MCAP log: {self.mcap_path}")
-        rows = self.extra.get("comparison")
-        if rows:
-            out.append("")
-            out.append("comparison (interference with the final prediction of the paper's method, as in its Table I):")
-            out.append(f"  {'planner':<20}{'interference':>13}{'switch step':>13}{'reached step':>14}")
-            for r in rows:
-                sw = "-" if r["switch_step"] is None else str(r["switch_step"])
-                re = "-" if r["reached_step"] is None else str(r["reached_step"])
-                out.append(f"  {r['planner']:<20}{r['interference_cost']:>13.4f}{sw:>13}{re:>14}")
         return out
 
 

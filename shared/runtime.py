@@ -18,12 +18,14 @@ from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolv
 from shared.native_threads import limit_blas_threads
 
 __all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError", "service_main", "help_text",
-           "freeze_startup_heap", "SHUTDOWN_GRACE_S", "FORCED_EXIT"]
+           "freeze_startup_heap", "watch_parent", "SHUTDOWN_GRACE_S", "FORCED_EXIT", "PARENT_ENV"]
 
 SHUTDOWN_GRACE_S = 10.0
 """Seconds a process may take to stop after SIGINT/SIGTERM before it exits anyway (:func:`stop_on_signals`)."""
 FORCED_EXIT = 3
 """Exit status of a process that did not stop within :data:`SHUTDOWN_GRACE_S` (or got a second signal)."""
+PARENT_ENV = "FORESIGHT_PARENT_PID"
+"""Environment variable with the pid of the process that started this one (``foresight demo``, tests)."""
 
 
 class UserError(Exception):
@@ -109,6 +111,36 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Call
     return restore
 
 
+def watch_parent(stop: threading.Event, period_s: float = 0.5) -> int | None:
+    """Set ``stop`` when the process that started this one has gone (a thread; returns the parent's pid).
+
+    Services started by ``foresight demo`` run in their own process group (a terminal's Ctrl-C reaches
+    the demo only, which stops them in order); should the demo itself be killed, its services notice
+    here (they are re-parented) and stop cleanly, the executor closing its MCAP. Only when
+    :data:`PARENT_ENV` is set; a service started by hand has no parent to watch.
+
+    Returns:
+        The watched parent's pid, or None when there is none to watch.
+    """
+    try:
+        parent = int(os.environ.get(PARENT_ENV, ""))
+    except ValueError:
+        return None
+    if os.getppid() != parent:  # already gone (or a grandchild inherited the variable): nothing to watch
+        return None
+
+    def watch() -> None:
+        while not stop.wait(period_s):
+            if os.getppid() != parent:
+                logging.getLogger("foresight").warning("the process that started this one (pid %d) has exited; "
+                                                       "stopping", parent)
+                stop.set()
+                return
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+    return parent
+
+
 def freeze_startup_heap() -> int:
     """Move every object alive now out of the garbage collector's reach (``gc.freeze``); returns their count.
 
@@ -152,6 +184,7 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
         cfg, zcfg = resolve_config(section, config_cls, args)
         setup_logging(cfg.log_level)
         restore = stop_on_signals(stop)
+        watch_parent(stop)
         try:
             run = make(cfg, zcfg, stop)
             logging.getLogger("foresight").debug("%d start-up objects frozen out of the garbage collector",

@@ -70,3 +70,26 @@ def _wait_until(pred: Callable[[], bool], timeout: float, interval: float = 0.05
 def wait_until() -> Callable[..., bool]:
     """``wait_until(pred, timeout, interval=0.05)``: poll ``pred`` until it holds (True) or ``timeout`` passes."""
     return _wait_until
+
+
+COLLECTED = pytest.StashKey[int]()
+"""How many tests this session collected (after -k/-m deselection); see :func:`whole_suite`."""
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    session.config.stash[COLLECTED] = len(session.items)
+
+
+@pytest.fixture
+def whole_suite_count(request: pytest.FixtureRequest) -> int | None:
+    """The number of tests collected when this session runs the whole suite as ``make test`` does, else None."""
+    return _whole_suite(request.config)
+
+
+def _whole_suite(config: pytest.Config) -> int | None:
+    opt = config.option
+    if getattr(opt, "keyword", "") or getattr(opt, "markexpr", "") or getattr(opt, "deselect", None):
+        return None
+    if {str(Path(a).resolve()) for a in config.args} != {str(REPO / "tests")}:
+        return None
+    return config.stash.get(COLLECTED, None)

@@ -183,3 +183,14 @@ def test_running_one_service_lines_yield_a_plan(tmp_path) -> None:
     lf = read_log(tmp_path / "runs" / "mine.mcap")
     counts = {c.schema_name: c.count for c in lf.channels.values()}
     assert lf.complete and counts.get("foresight.Plan", 0) > 0 and counts.get("foresight.HumanPose", 0) > 0
+
+
+def test_the_readme_test_count_is_what_make_test_collects(whole_suite_count: int | None) -> None:
+    """The README's number of tests is produced by the suite, not typed: `make test` checks it."""
+    collected = whole_suite_count
+    if collected is None:
+        pytest.skip("only a run of the whole suite (make test) knows its count")
+    match = re.search(r"runs the test suite \((\d+) tests", README.read_text())
+    assert match, "the README says how many tests `make test` runs"
+    assert int(match.group(1)) == collected, (f"README says {match.group(1)} tests, `make test` collects {collected}: "
+                                              "update the README")

@@ -12,39 +12,70 @@ import argparse
 import importlib
 import sys
 
-__all__ = ["COMMANDS", "main"]
+__all__ = ["COMMANDS", "SUBCOMMANDS", "subcommands", "main"]
 
 # command -> (module with main(argv), one-line description)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "demo": ("services.demo", "run the whole system on this machine and show it live (make demo)"),
+    "demo": ("services.demo", "run the whole system on this machine; compare planners (--compare); a PNG of the run"),
     "replayer": ("services.replayer.__main__", "stream recorded human poses over Zenoh"),
     "router": ("tools.router", "run a Zenoh router on loopback for local multi-process runs"),
-    "library": ("tools.library", "inspect/validate/convert motion libraries"),
+    "library": ("tools.library", "inspect, validate, convert and generate motion libraries"),
     "planner": ("services.planner.__main__", "plan for every goal at once around the predicted occupancy"),
     "executor": ("services.executor.__main__", "simulate the PR2 executing the plans; log the run to MCAP"),
-    "log": ("tools.log.cli", "inspect (info), draw (render) and time (latency) a run's MCAP log"),
+    "log": ("tools.log.cli", "look at a run's MCAP log"),
     "predictor": ("services.predictor.__main__", "recognise the human's motion early; publish predicted occupancy"),
     "train": ("services.predictor.train", "train the prediction model (GMMs, GMR motions, swept volumes)"),
-    "eval": ("services.experiments.cli", "the paper's experiments and beyond: recognition | interference | switch | "
-             "occupancy | volumes | pace | all"),
-    "bench": ("services.bench", "benchmark a component: predictor | planner"),
+    "eval": ("services.experiments.cli", "the paper's experiments and beyond"),
+    "bench": ("services.bench", "benchmark a component"),
 }
+
+SUBCOMMANDS: dict[str, str] = {
+    "library": "tools.library:SUBCOMMANDS",
+    "log": "tools.log.cli:SUBCOMMANDS",
+    "eval": "services.experiments.commands:EXPERIMENTS",
+    "bench": "services.bench:BENCHES",
+}
+"""Commands with sub-commands -> ``module:table`` of them (name -> help, or name -> (module, help)); light modules,
+so that ``foresight --help`` lists every sub-command that exists without importing what runs it."""
+
+
+def subcommands(command: str) -> dict[str, str]:
+    """The sub-commands of ``command`` with their one-line help (empty when it has none)."""
+    if command not in SUBCOMMANDS:
+        return {}
+    module, _, attr = SUBCOMMANDS[command].partition(":")
+    table = getattr(importlib.import_module(module), attr)
+    return {name: entry if isinstance(entry, str) else entry[-1] if isinstance(entry[-1], str) else entry[0]
+            for name, entry in table.items()}
 
 
 def _parser() -> argparse.ArgumentParser:
     width = max(map(len, COMMANDS))
-    lines = "\n".join(f"  {name:<{width}}  {desc}" for name, (_, desc) in COMMANDS.items())
+    lines = []
+    for name, (_, desc) in COMMANDS.items():
+        lines.append(f"  {name:<{width}}  {desc}")
+        subs = subcommands(name)
+        sub_width = max(map(len, subs), default=0)
+        lines += [f"  {'':<{width}}    {sub:<{sub_width}}  {text}" for sub, text in subs.items()]
     return argparse.ArgumentParser(
         prog="foresight",
         description="Foresight: plan robot motion around the early-predicted workspace occupancy of a human.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=f"commands:\n{lines}\n\nRun 'foresight COMMAND --help' for the options of a command.",
+        epilog="commands:\n" + "\n".join(lines) + "\n\nRun 'foresight COMMAND --help' for the options of a command.",
         usage="foresight [-h] COMMAND [ARGS...]",
     )
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Dispatch ``foresight COMMAND ARGS...``; returns the process exit code."""
+    """Dispatch ``foresight COMMAND ARGS...``; returns the process exit code (130 after Ctrl-C)."""
+    try:
+        return _dispatch(argv)
+    except KeyboardInterrupt:  # Ctrl-C before a command installed its own handler (while importing, ...)
+        print("foresight: interrupted", file=sys.stderr)
+        return 130
+
+
+def _dispatch(argv: list[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = _parser()
     if not argv or argv[0] in ("-h", "--help"):

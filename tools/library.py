@@ -158,7 +158,7 @@ SUBCOMMANDS: dict[str, tuple[str, Callable[[argparse.ArgumentParser], None], Cal
 def _parser(prog: str) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description="Inspect, validate and convert human-motion libraries "
                                      "(a directory of compound_*.csv in the paper's format, or a native .npz).")
-    sub = parser.add_subparsers(dest="subcommand", metavar="SUBCOMMAND", required=True)
+    sub = parser.add_subparsers(dest="subcommand", metavar="{" + ",".join(SUBCOMMANDS) + "}", required=True)
     for name, (text, add_args, run) in SUBCOMMANDS.items():
         p = sub.add_parser(name, help=text, description=text)
         add_args(p)

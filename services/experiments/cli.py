@@ -1,12 +1,4 @@
-"""foresight eval: the paper's experiments through the product.
-
-    foresight eval recognition   early recognition, leave-one-out (Fig. 6)
-    foresight eval interference  one robot task against a human reaching across it (Table I)
-    foresight eval switch        two robot tasks, when the robot settles on its goal (Fig. 8-9)
-    foresight eval occupancy     does the predicted occupancy hold where the human really goes (leave-one-out)
-    foresight eval volumes       each occupancy volume in the loop (Table I + switch) against the real human
-    foresight eval pace          Table I across the robot's pace, both protocols: where prediction pays off
-    foresight eval all           all of them and the timings, one Markdown report with PNGs
+"""foresight eval: the paper's experiments through the product (the list: :data:`~.commands.EXPERIMENTS`).
 
 Every run goes through the four services (in-process, loopback Zenoh, lock-step, seeded): the same
 command prints the same numbers every time.
@@ -23,9 +15,10 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from services.predictor.volumes import VOLUMES
-from shared.runtime import UserError, cli_errors, setup_logging
+from shared.runtime import UserError, cli_errors, help_text, setup_logging
 from shared.scene import SCENE_HELP
 
+from .commands import EXPERIMENTS
 from .interference import TABLE1_SCENE, InterferenceConfig, run_interference
 from .pace import DEFAULT_PACES
 from .planners import Timing
@@ -105,12 +98,14 @@ def _doc(module: str) -> str:
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__,
+    listing = "\n".join(f"    {prog} {name:<13} {text}" for name, text in EXPERIMENTS.items())
+    intro, rest = __doc__.split("\n", 1)
+    description = help_text(f"{intro.split(' (')[0]}:\n\n{listing}\n{rest}")
+    parser = argparse.ArgumentParser(prog=prog, description=description,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="what", required=True,
-                                metavar="{recognition,interference,switch,occupancy,volumes,pace,all}")
-    sub.add_parser("recognition", help="early recognition, leave-one-out (Fig. 6); see its --help", add_help=False)
-    p = sub.add_parser("interference", help="Table I: basic STOMP vs least penetration vs current occupancy",
+    sub = parser.add_subparsers(dest="what", required=True, metavar="{" + ",".join(EXPERIMENTS) + "}")
+    sub.add_parser("recognition", help=EXPERIMENTS["recognition"], add_help=False)
+    p = sub.add_parser("interference", help=EXPERIMENTS["interference"],
                        description=_doc("interference"),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     _common(p, TABLE1_SCENE)
@@ -118,7 +113,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=int, default=10, help="runs per demonstration and planner (default: 10)")
     p.add_argument("--robot-cup", default="red_cup", help="the robot's one task (default: red_cup)")
     p.add_argument("--human-cup", default="blue_cup", help="the cup the human reaches for (default: blue_cup)")
-    p = sub.add_parser("switch", help="Fig. 8-9: the step at which the robot settles on its goal",
+    p = sub.add_parser("switch", help=EXPERIMENTS["switch"],
                        description=_doc("switch"),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     _common(p, SWITCH_SCENE)
@@ -127,7 +122,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                    "(default 0: all)")
     p.add_argument("--seed", type=int, default=0, help="STOMP seed of every run (default: 0)")
     p.add_argument("--plot", type=Path, default=Path("runs/plots/switch.png"), help="Fig. 9 PNG")
-    p = sub.add_parser("occupancy", help="leave-one-out: predicted occupancy against where the human really goes",
+    p = sub.add_parser("occupancy", help=EXPERIMENTS["occupancy"],
                        description=_doc("occupancy"), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--library", default="synthetic", help="motion library: 'synthetic' (the embedded synthetic "
                    "library) or a path (dir of compound_*.csv or .npz); default: synthetic")
@@ -144,8 +139,8 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("runs/occupancy"), help="directory of the PNG "
                    "(default: runs/occupancy)")
     p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
-    p = sub.add_parser("volumes", help="each occupancy volume in the loop (Table I + switch), scored against the "
-                       "real human", description=_doc("volumes"), formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser("volumes", help=EXPERIMENTS["volumes"], description=_doc("volumes"),
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--library", default="synthetic", help="motion library: 'synthetic' (the embedded synthetic "
                    "library) or a path (dir of compound_*.csv or .npz); default: synthetic")
     p.add_argument("--volumes", default=",".join(VOLUMES), help=f"volume methods, comma-separated (default: "
@@ -159,10 +154,12 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
     p.add_argument("--no-compile", action="store_true", help="run the planner's cost and STOMP's steps eagerly")
     p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
-    p = sub.add_parser("pace", help="Table I across the robot's pace, per protocol and library",
+    p = sub.add_parser("pace", help=EXPERIMENTS["pace"],
                        description=_doc("pace"), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--libraries", default="synthetic", help="comma-separated: 'synthetic' and/or paths "
                    "(default: synthetic)")
+    p.add_argument("--library", default="", metavar="PATH", help="the paper's motion library (a directory of "
+                   "compound_*.csv or an .npz): run it beside the synthetic one (--libraries synthetic,PATH)")
     p.add_argument("--protocols", default="product,paper", help="comma-separated (default: product,paper)")
     for prot, paces in DEFAULT_PACES.items():
         p.add_argument(f"--{prot}-paces", default=",".join(f"{x:g}" for x in paces),
@@ -177,7 +174,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
     from .report import add_report_arguments
 
-    add_report_arguments(sub.add_parser("all", help="every experiment and the timings into one Markdown report",
+    add_report_arguments(sub.add_parser("all", help=EXPERIMENTS["all"],
                                         description=_doc("report"),
                                         formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
@@ -243,6 +240,8 @@ def _pace(args: argparse.Namespace, out) -> int:
     if args.demos < 1 or args.seeds < 1 or args.components < 1:
         raise UserError("--demos, --seeds and --components must be >= 1")
     libraries = tuple(x.strip() for x in args.libraries.split(",") if x.strip())
+    if args.library:
+        libraries = (*dict.fromkeys((*libraries, args.library)),)
     res = run_pace(PaceConfig(libraries=libraries, protocols=protocols, paces=paces, demos=args.demos,
                               seeds=args.seeds, components=args.components, models_dir=args.models_dir,
                               work_dir=args.work_dir), out, compile=not args.no_compile)

@@ -90,6 +90,9 @@ def add_report_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--libraries", default="", help="comma-separated libraries ('synthetic' or paths); default: "
                    "synthetic and the paper's library when it is at ../shared/data/paper-library (--quick: "
                    "synthetic only)")
+    p.add_argument("--library", default="", metavar="PATH", help="the paper's motion library (a directory of "
+                   "compound_*.csv, github.com/jmainpri/gmm-gmr data/gestures/8classes_rafi1, or an .npz): run it "
+                   "beside the synthetic library (the same as --libraries synthetic,PATH)")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--volume", choices=VOLUMES, default=DEFAULT_VOLUME, help="occupancy volume of the held-out "
                    f"prediction models of the product protocol (foresight train --volume; default: {DEFAULT_VOLUME}; "
@@ -319,6 +322,13 @@ def run_report(args: argparse.Namespace) -> int:
     if bad or not protocols:
         raise UserError(f"--protocols: {', '.join(bad) or 'none given'}; choose from {', '.join(PROTOCOLS)}")
     libs = [s.strip() for s in args.libraries.split(",") if s.strip()]
+    if args.library:
+        if libs:
+            raise UserError("give --library PATH or --libraries A,B, not both")
+        if not Path(args.library).exists():
+            raise UserError(f"--library: {args.library} not found (the paper's library: a directory of "
+                            "compound_*.csv, see the README's 'The paper's motion library')")
+        libs = [SYNTHETIC, args.library]
     if not libs:
         libs = [SYNTHETIC] + ([] if args.quick or not PAPER_LIBRARY.is_dir() else [str(PAPER_LIBRARY)])
     out = Path(args.out)

@@ -127,7 +127,7 @@ def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAUL
     cum = np.array(list(tqdm(it, total=len(demos), desc=f"leave-one-out ({features})", unit="demo",
                              disable=not progress)))                   # (N, F, M)
     correct = np.argmax(cum, axis=2) == labels[:, None]
-    label = name or f"{features}, {cfg.n_components or 'BIC'} Gaussians"
+    label = name or f"Foresight, {features} features, {cfg.n_components or 'BIC'} Gaussians per class"
     return RecognitionResult(label, list(fractions), correct.mean(axis=0).tolist(), correct, labels, cum)
 
 

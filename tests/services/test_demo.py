@@ -24,7 +24,8 @@ def test_demo_multiprocess_json(tmp_path: Path) -> None:
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=480, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0, proc.stderr[-3000:]
     summary = json.loads(proc.stdout)
-    for key in ("steps", "chosen_goal_per_step", "switch_step", "interference_cost", "mcap_path"):
+    for key in ("steps", "chosen_goal_per_step", "switch_step", "interference_cost", "mcap_path", "run_dir",
+                "figure", "comparison"):
         assert key in summary
     assert len(summary["steps"]) == 5 and len(summary["chosen_goal_per_step"]) == 5
     assert set(summary["chosen_goal_per_step"]) <= {"blue_cup", "red_cup"}
@@ -34,18 +35,25 @@ def test_demo_multiprocess_json(tmp_path: Path) -> None:
         topics = {c.topic for c in reader.get_summary().channels.values()}
         n = sum(1 for _ in reader.iter_messages())
     assert "foresight/planner/plan" in topics and "foresight/robot/state" in topics and n > 0
+    run_dir = Path(summary["run_dir"])  # the run's own directory, beside the others' and `latest`
+    assert run_dir.parent == tmp_path / "run" and (tmp_path / "run" / "latest").resolve() == run_dir.resolve()
+    assert Path(summary["mcap_path"]).parent == run_dir
     for name in ("predictor", "planner", "replayer", "executor"):
-        assert (tmp_path / "run" / f"{name}.log").is_file()
+        assert (run_dir / f"{name}.log").is_file()
+    assert Path(summary["figure"]).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    (row,) = summary["comparison"]  # one planner: the prediction
+    assert row["planner"] == "prediction" and row["contact_s"] >= 0.0 and row["near_s"] >= row["contact_s"]
+    assert "verdict" not in summary  # a verdict needs --compare
     # the live progress (stderr with --json): the run's length, then one table with a header and a row
     # per step, in order, agreeing with the summary
     progress = proc.stderr.splitlines()
-    assert any("lockstep mode, 5 steps of 0.2 s" in ln for ln in progress)
+    assert any("lockstep mode, 5 steps of 0.5 s" in ln for ln in progress)
     header = table_header(summary["goal_names"])
     assert progress.count(header) == 1
     rows = progress[progress.index(header) + 1:][:5]
     assert [r.split()[0] for r in rows] == ["0", "1", "2", "3", "4"]
     assert [r.split()[2] for r in rows] == summary["chosen_goal_per_step"]
-    assert [float(r.split()[1]) for r in rows] == pytest.approx([0.0, 0.2, 0.4, 0.6, 0.8])
+    assert [float(r.split()[1]) for r in rows] == pytest.approx([0.0, 0.5, 1.0, 1.5, 2.0])
 
 
 def test_demo_bad_input_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -48,7 +48,7 @@ def test_choose_demonstration_is_seeded_and_spreads_the_motion():
         choose_demonstration(lib, steps=20, seed=0, human_class="nope")
 
 
-def test_summary_switch_step_and_comparison_table():
+def test_summary_switch_step_and_goal_reached():
     plans = [_plan(0, 1, [2.0, 1.0]), _plan(1, 1, [2.0, 1.5]), _plan(2, 0, [1.0, 3.0]), _plan(3, 0, [1.0, 3.0])]
     states = [RobotState(stamp=0.1 * i, tick=i, joint_names=["a", "b", "c"], goal=0, reached=i == 3, holding=False,
                          reason="", q=np.full(3, 0.15), qd=np.zeros(3)) for i in range(4)]
@@ -57,9 +57,8 @@ def test_summary_switch_step_and_comparison_table():
     assert s.switch_step == 2 and s.reached and s.reached_step == 3
     assert s.interference_cost == pytest.approx(128 / 255 * 0.3)  # 0.5 quantised to 8 bits, 3 intervals of 0.1 s
     assert s.to_json()["switch_step"] == 2
-    s.extra["comparison"] = [{"planner": "prediction", "interference_cost": 0.1, "switch_step": 2, "reached_step": 3}]
     text = "\n".join(s.lines())
-    assert "switch step: 2 (t = 0.40 s)" in text and "prediction" in text and "Table I" in text
+    assert "switch step: 2 (t = 0.40 s)" in text
     assert "goal reached: yes, during step 3 (t = 0.30 s)" in text
     assert isinstance(s, Summary)
 

@@ -1,0 +1,143 @@
+"""The picture a demo run ends with: the robot's path around the predicted volume, the human, the chosen goals.
+
+One PNG, three panels:
+
+* top view of the scene: table and cups, the prediction planner's final predicted occupancy (the most
+  probable voxel of each column), the human's hand path and body at the end, and each planner's
+  executed end-effector path with a dot per replanning step coloured by the goal it chose;
+* the clearance between the robot and the real human over time, per planner (below 0: contact);
+* the goal each planner chose at every replanning step.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from services.demo_outcome import Outcome
+from shared.protocol import HumanPose, OccupancyGrid
+from shared.scene import Scene
+
+__all__ = ["draw_outcomes"]
+
+_PLANNER_COLORS = ("#2a9d3a", "#8a5cc2", "#7f7f7f", "#d08c1a")
+_GOAL_COLORS = {"blue": "#2659f2", "red": "#e62626", "green": "#1ab233", "yellow": "#e6cc1a"}
+
+
+def _goal_color(name: str) -> str:
+    return next((c for word, c in _GOAL_COLORS.items() if word in name.lower()), "#444444")
+
+
+def _hand_path(poses: list[HumanPose], scene: Scene) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+    """``(P, 3)`` the human's hand over the run and the body capsules at its last pose (scene frame)."""
+    if not poses:
+        return np.zeros((0, 3)), None
+    from shared.human import HumanModel, place_in_scene
+
+    model = HumanModel()
+    first = poses[0].features
+    placed = [place_in_scene(p.features, first, scene) for p in poses]
+    hands = np.array([model.hand_position(f) for f in placed])
+    ends, radii = model.capsules(placed[-1])
+    return hands, (np.asarray(ends), np.asarray(radii))
+
+
+def _step_points(o: Outcome, steps: int, period_s: float) -> np.ndarray:
+    """The end-effector position at the start of each replanning step (``(S, 3)``)."""
+    if len(o.stamps) == 0:
+        return np.zeros((0, 3))
+    idx = np.searchsorted(o.stamps, np.arange(steps) * period_s, side="left").clip(0, len(o.stamps) - 1)
+    return o.ee_path[idx]
+
+
+def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGrid | None,
+                  poses: list[HumanPose], out: str | Path, period_s: float, title: str = "",
+                  min_probability: float = 0.05) -> Path:
+    """Draw the run(s) to a PNG; returns its path.
+
+    Args:
+        outcomes: One per planner run (the first is the prediction planner's).
+        scene: The scene.
+        prediction: The predicted occupancy drawn (the prediction planner's final one; None: none).
+        poses: The human's poses during the run.
+        out: PNG path.
+        period_s: Seconds per replanning step (to mark the steps on the paths).
+        title: Figure title.
+        min_probability: Voxels below this are not drawn.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle, Rectangle
+
+    fig = plt.figure(figsize=(15, 7.5))
+    grid = fig.add_gridspec(2, 2, width_ratios=(1.15, 1.0), height_ratios=(1.4, 1.0))
+    top, clear, goals = fig.add_subplot(grid[:, 0]), fig.add_subplot(grid[0, 1]), fig.add_subplot(grid[1, 1])
+
+    for b in scene.boxes:
+        (x0, y0, _), (x1, y1, _) = b.lower, b.upper
+        top.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, facecolor="#d9b38c", edgecolor="#6b4a2a", alpha=0.5,
+                                zorder=0))
+    for cup in scene.cups:
+        top.add_patch(Circle(tuple(cup.position[:2]), max(cup.radius, 0.03), color=_goal_color(cup.name), zorder=5))
+        top.annotate(cup.name, cup.position[:2], xytext=(6, 6), textcoords="offset points", fontsize=9)
+    if prediction is not None and prediction.indices.size:
+        p = prediction.values.astype(np.float64) / 255.0
+        keep = p >= min_probability
+        ijk = np.stack(np.unravel_index(prediction.indices[keep].astype(np.int64),
+                                        tuple(int(d) for d in prediction.dims)), -1)
+        columns: dict[tuple[int, int], float] = {}
+        for (i, j, _), v in zip(ijk, p[keep], strict=True):
+            columns[(i, j)] = max(columns.get((i, j), 0.0), float(v))
+        if columns:
+            ij, v = np.array(list(columns)), np.array(list(columns.values()))
+            o = np.argsort(v)
+            sc = top.scatter(prediction.origin[0] + prediction.resolution * (ij[o, 0] + 0.5),
+                             prediction.origin[1] + prediction.resolution * (ij[o, 1] + 0.5), c=v[o], cmap="YlOrRd",
+                             vmin=0, vmax=1, marker="s", s=30, alpha=0.55, linewidths=0, zorder=1)
+            fig.colorbar(sc, ax=top, shrink=0.6, label="predicted occupancy p(x|ξ), final (column max)")
+    hands, body = _hand_path(poses, scene)
+    if len(hands):
+        top.plot(hands[:, 0], hands[:, 1], color="#333333", lw=1.5, ls="--", zorder=3, label="human's hand")
+    if body is not None:
+        ends, radii = body
+        for (a, b), r in zip(ends, radii, strict=True):
+            top.plot([a[0], b[0]], [a[1], b[1]], color="#f0b7a0", lw=max(2.0, 120 * float(r)), alpha=0.7,
+                     solid_capstyle="round", zorder=2)
+    steps = max((len(o.chosen_goal_per_step) for o in outcomes), default=0)
+    for k, o in enumerate(outcomes):
+        col = _PLANNER_COLORS[k % len(_PLANNER_COLORS)]
+        if len(o.ee_path):
+            top.plot(o.ee_path[:, 0], o.ee_path[:, 1], color=col, lw=2.2, zorder=6,
+                     label=f"robot hand, {o.planner} (contact {o.contact_s:.1f} s)")
+            marks = _step_points(o, len(o.chosen_goal_per_step), period_s)
+            top.scatter(marks[:, 0], marks[:, 1], c=[_goal_color(g) for g in o.chosen_goal_per_step], s=22,
+                        edgecolors=col, linewidths=0.8, zorder=7)
+            clear.plot(o.stamps, o.clearance, color=col, lw=1.8, label=o.planner)
+        goals.scatter(np.arange(len(o.chosen_goal_per_step)), np.full(len(o.chosen_goal_per_step), k),
+                      c=[_goal_color(g) for g in o.chosen_goal_per_step], s=70, marker="s")
+    top.set_aspect("equal")
+    top.set_xlabel("x (m)")
+    top.set_ylabel("y (m)")
+    top.set_title("top view: robot hand paths (dots: replanning steps, in the chosen cup's colour)", fontsize=10)
+    top.legend(loc="best", fontsize=8)
+    clear.axhline(0.0, color="k", lw=0.8)
+    clear.set_ylabel("robot-human clearance (m)")
+    clear.set_xlabel("t (s)")
+    clear.set_title("clearance to the real human (below 0: contact)", fontsize=10)
+    clear.legend(fontsize=8)
+    goals.set_yticks(range(len(outcomes)), [o.planner for o in outcomes])
+    goals.set_xticks(range(steps))
+    goals.set_xlabel("replanning step")
+    goals.set_title("goal chosen at each step (square colour = cup)", fontsize=10)
+    goals.set_ylim(-0.6, len(outcomes) - 0.4)
+    if title:
+        fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return out

@@ -1,0 +1,143 @@
+"""What a demo run did to the human: interference with the prediction, contact with the real body, a verdict.
+
+:func:`measure_run` scores one run's executed trajectory the way the experiments do
+(:mod:`services.experiments.measures`): the interference with a reference prediction (the paper's
+Table I: penetration of the predicted occupancy integrated over time) and the clearance between the
+robot's spheres and the real human's body capsules at every executed state (contact = clearance <= 0).
+:func:`verdict` says in words whether ``--compare`` showed the paper's point: the prediction planner
+interferes less and touches the human less than both baselines.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from services.experiments.measures import body_clearance, contact_summary, interference, postures_at
+from shared.protocol import HumanPose, OccupancyGrid, RobotState
+from shared.scene import Scene
+
+__all__ = ["Outcome", "measure_run", "verdict", "outcome_lines"]
+
+
+@dataclass
+class Outcome:
+    """One planner's run, measured.
+
+    Attributes:
+        planner: ``prediction``, ``current occupancy`` or ``no human cost``.
+        interference: Penetration of the reference prediction integrated over the run (probability-voxels x s).
+        contact_s: Seconds the robot overlapped the real human's body.
+        near_s: Seconds the robot was within :data:`~services.experiments.measures.NEAR_M` (5 cm) of it.
+        min_clearance_m: Smallest robot-human clearance (m; negative: overlap).
+        switch_step, reached_step: As in the run's summary (None: never).
+        chosen_goal_per_step: The goal chosen at each replanning step.
+        stamps: ``(N,)`` times of the executed states (s, the run's clock).
+        ee_path: ``(N, 3)`` end-effector positions of the executed states (scene frame).
+        clearance: ``(N,)`` robot-human clearance at each executed state (m).
+        mcap_path: The run's log.
+    """
+
+    planner: str
+    interference: float
+    contact_s: float
+    near_s: float
+    min_clearance_m: float
+    switch_step: int | None
+    reached_step: int | None
+    chosen_goal_per_step: list[str]
+    stamps: np.ndarray = field(repr=False)
+    ee_path: np.ndarray = field(repr=False)
+    clearance: np.ndarray = field(repr=False)
+    mcap_path: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The scalar fields (the arrays stay out of ``--json``)."""
+        return {"planner": self.planner, "interference_cost": self.interference, "contact_s": self.contact_s,
+                "near_s": self.near_s,
+                "min_clearance_m": self.min_clearance_m if math.isfinite(self.min_clearance_m) else None,
+                "switch_step": self.switch_step, "reached_step": self.reached_step,
+                "chosen_goal_per_step": self.chosen_goal_per_step, "mcap_path": self.mcap_path}
+
+
+def measure_run(planner: str, states: list[RobotState], poses: list[HumanPose], reference: OccupancyGrid | None,
+                robot: Any, scene: Scene, summary: Any) -> Outcome:
+    """Measure one run.
+
+    Args:
+        planner: Its name.
+        states: The executed robot states (any order; sorted by stamp here).
+        poses: The human's poses streamed during the run (their stamps share the states' clock).
+        reference: The prediction to score interference against (None: 0).
+        robot: The robot model (:class:`shared.robot.PR2` of the scene).
+        scene: The run's scene (places the human as the predictor does).
+        summary: The run's :class:`services.scenario.Summary`.
+    """
+    import torch
+
+    states = sorted(states, key=lambda st: st.stamp)
+    t = np.array([st.stamp for st in states], dtype=np.float64)
+    q = np.array([st.q for st in states], dtype=np.float64).reshape(len(states), -1)
+    cost = interference(robot, q, t, reference) if reference is not None and len(q) else 0.0
+    if len(q) and poses:
+        clearance = body_clearance(robot, q, postures_at(poses, t, scene))
+    else:
+        clearance = np.full(len(q), np.inf)
+    contact = contact_summary(clearance, t)
+    ee = (robot.end_effector(torch.as_tensor(q, dtype=robot.lower.dtype)).detach().cpu().numpy()[..., :3, 3]
+          if len(q) else np.zeros((0, 3)))
+    return Outcome(planner, float(cost), contact.time_in_contact, contact.time_near, contact.min_clearance,
+                   summary.switch_step, summary.reached_step, list(summary.chosen_goal_per_step), t, ee, clearance,
+                   summary.mcap_path)
+
+
+def verdict(outcomes: list[Outcome]) -> str:
+    """Whether the first (the prediction planner) interfered and came near the human less than every other, in words.
+
+    Contact decides where any planner touched the human; where none did, the time within 5 cm and the
+    smallest clearance tell them apart (said so).
+    """
+    main, others = outcomes[0], outcomes[1:]
+    if not others:
+        return ""
+    names = " and ".join(o.planner for o in others)
+    less_interference = all(main.interference < o.interference for o in others)
+    interference = (f"interference with the predicted motion {main.interference:.2f} against "
+                    f"{', '.join(f'{o.interference:.2f}' for o in others)}")
+    if any(o.contact_s > 0 for o in outcomes):
+        closer = all(main.contact_s < o.contact_s for o in others)
+        body = (f"touched the real human {main.contact_s:.1f} s against "
+                f"{', '.join(f'{o.contact_s:.1f} s' for o in others)}")
+    else:
+        closer = all(main.near_s < o.near_s or main.min_clearance_m > o.min_clearance_m for o in others)
+        body = (f"no planner touched the real human; the prediction planner kept {main.min_clearance_m * 100:.0f} cm "
+                f"from it (within 5 cm for {main.near_s:.1f} s), the others came to "
+                f"{', '.join(f'{o.min_clearance_m * 100:.0f} cm ({o.near_s:.1f} s)' for o in others)}")
+    if less_interference and closer:
+        return f"shown, against {names}: {interference}; {body}"
+    missed = [what for what, ok in (("its interference was not the lowest", less_interference),
+                                    ("it did not stay further from the human", closer)) if not ok]
+    return (f"not shown in this run ({' and '.join(missed)}): {interference}; {body}. "
+            "docs/experiments.md, 'Across the robot's pace': prediction pays off when the robot is slow "
+            "relative to the human")
+
+
+def outcome_lines(outcomes: list[Outcome]) -> list[str]:
+    """The comparison table and its verdict."""
+    out = ["", "comparison (interference: the paper's Table I measure against the prediction planner's final "
+           "prediction; contact: overlap with the real human's body):",
+           f"  {'planner':<20}{'interference':>13}{'contact s':>11}{'within 5 cm s':>15}{'min clearance m':>17}"
+           f"{'switch step':>13}{'reached step':>14}"]
+    for o in outcomes:
+        sw = "-" if o.switch_step is None else str(o.switch_step)
+        re = "-" if o.reached_step is None else str(o.reached_step)
+        clear = f"{o.min_clearance_m:+.3f}" if math.isfinite(o.min_clearance_m) else "-"
+        out.append(f"  {o.planner:<20}{o.interference:>13.3f}{o.contact_s:>11.2f}{o.near_s:>15.2f}{clear:>17}{sw:>13}"
+                   f"{re:>14}")
+    text = verdict(outcomes)
+    if text:
+        out.append(f"verdict: {text}")
+    return out

@@ -1,0 +1,243 @@
+"""One run of the demo's scenario: the four services as processes around a Zenoh router, watched and stopped.
+
+:func:`run_once` trains (or loads) the prediction model, starts the predictor, planner, replayer and
+executor (in that order, each in its own process group: :class:`services.processes.ServiceProcess`),
+prints the table of plans as they arrive, supervises the services (:class:`services.supervisor.Supervisor`),
+and on the executor's end or a stop request stops them, the executor first (it closes the MCAP).
+:mod:`services.demo` runs it once or once per planner (``--compare``) and measures the outcome.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from services.processes import ServiceProcess, free_port
+from services.scenario import (
+    RunRecorder,
+    Summary,
+    choose_demonstration,
+    model_for,
+    step_entry,
+    summarise,
+    table_header,
+    table_row,
+)
+from services.supervisor import Supervisor
+from shared.config import ZenohConfig
+from shared.feature_sets import LIVE_MAPPING, require_mapping
+from shared.library import MotionLibrary, load_library, save_library
+from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyGrid, Plan, RobotState
+from shared.scene import Scene, load_scene
+from shared.transport import Presence, open_session, subscribe
+
+if TYPE_CHECKING:
+    from services.demo import DemoConfig
+
+__all__ = ["SERVICES_IN_ORDER", "RunRecord", "run_once", "service_args"]
+
+log = logging.getLogger("foresight.demo")
+
+
+SERVICES_IN_ORDER = ("predictor", "planner", "replayer", "executor")
+"""Start order: the executor (simulation master) last, once the others listen."""
+
+
+def _library(cfg: DemoConfig, scene: Scene) -> MotionLibrary:
+    if cfg.library is None:
+        from shared.synthetic import generate_library
+
+        return generate_library(seed=0, scene=scene)  # its cup classes reach for this scene's cups
+    lib = load_library(cfg.library)
+    require_mapping(lib.feature_names, "foresight demo (HumanPose messages, occupancy)",
+                    f"library {lib.source}", exact=LIVE_MAPPING)
+    return lib
+
+
+def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Path, samples_per_tick: int,
+                 mcap: Path) -> dict[str, list[str]]:
+    """Command-line arguments of each service for this demo."""
+    common = ["--connect", endpoint, "--listen", "tcp/127.0.0.1:0", "--prefix", cfg.prefix, "--zenoh-mode", "peer",
+              "--log-level", "INFO"]
+    scene = ["--scene", cfg.scene] if cfg.scene else []
+    lockstep = cfg.mode == "lockstep"
+    return {
+        "predictor": ["--model", str(model), "--method", cfg.method, *scene, *common],
+        "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
+                    "--velocity-scale", str(cfg.robot_speed),
+                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--cost.w-human", "0"]), *scene,
+                    *common],
+        "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
+                     "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"]), *common],
+        "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
+                     *(["--finish-path"] if lockstep and cfg.finish else []),
+                     "--mcap", str(mcap), *scene, *common],
+    }
+
+
+
+def _log_state(mcap: Path) -> str:
+    """One phrase on the run's MCAP: complete (the executor finished it) or not, with its message count."""
+    if not mcap.is_file():
+        return "no log was written (the executor had not started)"
+    from shared.recording.reader import read_log
+
+    lf = read_log(mcap)
+    state = "complete" if lf.complete else f"TRUNCATED ({lf.error or 'no footer'})"
+    return f"log {mcap}: {state}, {lf.message_count} messages"
+
+
+def _belief(posterior: ClassPosterior | None) -> str:
+    if posterior is None:
+        return ""
+    k = int(posterior.posterior.argmax())
+    return f"{posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
+
+
+def _run_length(cfg: DemoConfig) -> str:
+    if cfg.mode == "lockstep":
+        return f"lockstep mode, {cfg.steps} steps of {cfg.period_s:g} s (simulated time)"
+    return (f"realtime mode, {cfg.steps * cfg.period_s:g} s of wall time ({cfg.steps} periods of {cfg.period_s:g} s; "
+            "a plan per period while the planner keeps up)")
+
+
+
+@dataclasses.dataclass
+class RunRecord:
+    """What one run of the scenario left: its summary, what was received, and its measured outcome."""
+
+    name: str
+    summary: Summary
+    states: list[RobotState]
+    final: OccupancyGrid | None
+    poses: list[HumanPose]
+    run_dir: Path
+
+
+
+def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable[[str], None]
+              ) -> tuple[int, RunRecord | None]:
+    """One run of the scenario in ``cfg.run_dir``; returns ``(exit status, its record or None)``."""
+    scene = load_scene(cfg.scene or None)
+    lib = _library(cfg, scene)
+    scenario = choose_demonstration(lib, cfg.steps, cfg.seed, cfg.human_class)
+    demo = scenario.demo
+    out(f"foresight demo: library {lib.source}: {lib.n_classes} classes, {len(lib.demos)} demonstrations; "
+        f"the human performs {demo.class_name} #{demo.index} ({demo.n_samples} samples, "
+        f"{scenario.samples_per_tick} per step)")
+    model = model_for(lib, scene, demo, cfg.models_dir, None if cfg.components < 0 else cfg.components)
+    out(f"foresight demo: prediction model {model}")
+    if stop.is_set():
+        out("foresight demo: interrupted before the services started; nothing was recorded")
+        return 130, None
+    run_dir = Path(cfg.run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    replay_lib = run_dir / "human.npz"
+    save_library(MotionLibrary(class_names=list(lib.class_names), demos=[demo], issues=[],
+                               source=f"{lib.source} ({demo.class_name} #{demo.index})"), replay_lib)
+    mcap = run_dir / f"{run_dir.name}.mcap"
+    endpoint = f"tcp/127.0.0.1:{cfg.port or free_port()}"
+    keys = Keys(cfg.prefix)
+    args = service_args(cfg, endpoint, model, replay_lib, scenario.samples_per_tick, mcap)
+    out(f"foresight demo: router on {endpoint}; {_run_length(cfg)}; logs in {run_dir}/")
+    hub = ZenohConfig(mode="router", listen=[endpoint], connect=[], multicast_scouting=False, prefix=cfg.prefix)
+    recorder = RunRecorder()
+    latest_posterior: list[ClassPosterior | None] = [None]
+    realtime = cfg.mode == "realtime"
+    lock = threading.Lock()
+    # the run's clock: 0 in lock-step (simulated time); the executor's first state in real time
+    run_start: list[float | None] = [None if realtime else 0.0]
+    header_printed = [False]
+
+    def on_state(msg: RobotState) -> None:
+        with lock:
+            if run_start[0] is None:
+                run_start[0] = msg.stamp
+        recorder.on_message(msg)
+
+    def on_plan(msg: Plan) -> None:
+        with lock:
+            if run_start[0] is None:
+                run_start[0] = msg.stamp
+            t0 = run_start[0]
+            if realtime and msg.stamp - t0 >= cfg.steps * cfg.period_s:
+                return  # planned after the executor's run ended: never executed, not part of the run
+            recorder.on_message(msg)
+            if not header_printed[0]:
+                out(table_header(list(msg.goal_names)))
+                header_printed[0] = True
+            out(table_row(step_entry(msg, t0), list(msg.goal_names), _belief(latest_posterior[0])))
+
+    def on_other(msg: Message) -> None:
+        if isinstance(msg, ClassPosterior):
+            latest_posterior[0] = msg
+        recorder.on_message(msg)
+
+    status = 0
+    procs = {name: ServiceProcess(name, f"services.{name}", args[name], run_dir / f"{name}.log")
+             for name in SERVICES_IN_ORDER}
+    deadline = time.monotonic() + cfg.timeout
+    with open_session(hub) as session:
+        subs = [subscribe(session, keys.plan, Plan, on_plan),
+                subscribe(session, keys.robot_state, RobotState, on_state),
+                subscribe(session, keys.occupancy, OccupancyGrid, on_other),
+                subscribe(session, keys.posterior, ClassPosterior, on_other),
+                subscribe(session, keys.pose, HumanPose, on_other)]
+        presence = Presence(session, keys, "demo")
+        try:
+            for name in SERVICES_IN_ORDER:
+                if stop.is_set():
+                    break
+                procs[name].start()
+                if name != "executor":
+                    procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout), stop=stop)
+            executor = procs["executor"]
+            supervisor = Supervisor(procs, out, restart=cfg.restart)
+            while not stop.is_set() and executor.running:
+                if time.monotonic() > deadline:
+                    out(f"foresight demo: timeout after {cfg.timeout:g} s")
+                    status = 1
+                    break
+                supervisor.check()  # a dead service is reported (and restarted), the run goes on
+                stop.wait(0.1)
+            if stop.is_set():
+                out("foresight demo: interrupted; stopping the services (the executor first: it closes the log)")
+                status = 130
+            elif executor.returncode not in (0, None):
+                out(f"foresight demo: executor exited with status {executor.returncode}: {executor.tail(2)}")
+                status = 1
+            if supervisor.faults:
+                out("foresight demo: faults during the run: " + ", ".join(
+                    f"{name} ({'killed' if code is not None and code < 0 else code})"
+                    for name, code in supervisor.faults))
+        finally:
+            for name in reversed(SERVICES_IN_ORDER):
+                code = procs[name].stop(timeout=10.0)
+                if code not in (0, None, -15):
+                    log.warning("%s exited with status %s", name, code)
+            presence.close()
+            for s in subs:
+                s.undeclare()
+    plans, states, final, posteriors = recorder.snapshot()
+    if status == 130:
+        done = f"{len(plans)} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{len(plans)} plans"
+        out(f"foresight demo: interrupted after {done}; {_log_state(mcap)}")
+    if not plans:
+        if status != 130:
+            out("foresight demo: no plan was received; see the service logs in " + str(run_dir))
+        return status or 1, None
+    from shared.robot import PR2
+
+    summary = summarise(plans, states, final, posteriors, PR2.from_scene(scene), demo.class_name,
+                        str(mcap) if mcap.is_file() else None, t0=run_start[0])
+    summary.extra["mode"] = cfg.mode
+    summary.extra["method"] = cfg.method
+    summary.extra["human_cost"] = cfg.human_cost
+    return status, RunRecord(planner, summary, states, final, recorder.human_poses(), run_dir)
+
+

@@ -1,0 +1,37 @@
+"""The demo's PNG: drawn from measured outcomes, with or without a prediction and a human."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from services.demo_figure import draw_outcomes
+from services.demo_outcome import Outcome
+from shared.protocol import HumanPose, OccupancyGrid
+from shared.scene import load_scene
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _outcome(name: str, goals: list[str]) -> Outcome:
+    t = np.linspace(0.0, 2.0, 21)
+    ee = np.stack([0.5 - 0.02 * np.arange(21), np.full(21, -0.7), np.full(21, 0.8)], -1)
+    return Outcome(name, 0.5, 0.0, 0.1, 0.02, 2, 15, goals, t, ee, np.linspace(0.3, 0.02, 21))
+
+
+def test_draws_one_png_for_one_or_three_planners(tmp_path: Path) -> None:
+    scene = load_scene("pr2_two_cups_side")
+    dense = np.zeros(scene.grid.dims)
+    dense[10:14, 10:14, 5:9] = 0.8
+    grid = OccupancyGrid.from_dense(dense, scene.grid.origin, scene.grid.resolution, stamp=0.0, tick=0,
+                                    tick_last=True, demo_id=0, index=0, method="prediction")
+    feats = np.array([0.0, 0.0, 0.95, 0.0, 0.0, 0.0, 0.0, 0.2, 0.1, 0.3, 0.0, 0.5])
+    poses = [HumanPose(stamp=0.1 * i, tick=i, tick_last=True, demo_id=1, index=i, features=feats + 0.01 * i)
+             for i in range(10)]
+    three = [_outcome("prediction", ["blue_cup", "red_cup"] + ["red_cup"] * 2),
+             _outcome("current occupancy", ["blue_cup"] * 4), _outcome("no human cost", ["blue_cup"] * 4)]
+    out = draw_outcomes(three, scene, grid, poses, tmp_path / "three.png", period_s=0.5, title="three")
+    assert out.read_bytes()[:8] == PNG
+    one = draw_outcomes(three[:1], scene, None, [], tmp_path / "sub" / "one.png", period_s=0.5)
+    assert one.read_bytes()[:8] == PNG and one.parent.name == "sub"

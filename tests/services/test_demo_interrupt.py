@@ -1,0 +1,178 @@
+"""Ctrl-C at any moment of ``foresight demo`` loses nothing (issue 24): every MCAP reads back complete.
+
+A terminal's Ctrl-C sends SIGINT to the whole foreground process group. Each test starts the demo as
+a process group of its own (as a shell does), waits for a moment of the run named by a line of its
+output, and sends SIGINT to that group; the demo must stop every service within a bounded time, say
+so in one line, and leave every MCAP it wrote complete, with no forced exit (status 3) or stack dump
+in any log.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from shared.library import save_library
+from shared.recording.reader import read_log
+from shared.runtime import PARENT_ENV
+from shared.synthetic import generate_library
+
+STEPS = 6
+
+
+def _row(step: int) -> str:
+    """The start of the live table's row of ``step``."""
+    return f"{step:>4} "
+
+
+# moment -> (start of the demo's output line that marks it, seconds to wait after it)
+MOMENTS = {
+    "training done, services not started": ("foresight demo: prediction model", 0.0),
+    "services starting": ("foresight demo: router on", 0.3),
+    "mid-run": (_row(STEPS // 2), 0.0),
+    "last step, shutting down": (_row(STEPS - 1), 0.0),
+}
+
+
+@pytest.fixture(scope="module")
+def demo_inputs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    root = tmp_path_factory.mktemp("demo-interrupt")
+    lib = root / "lib.npz"
+    save_library(generate_library(8, 6, seed=3), lib)
+    return lib, root / "models"
+
+
+def _demo(lib: Path, models: Path, run_dir: Path, mode: str) -> subprocess.Popen[str]:
+    cmd = [sys.executable, "-m", "tools", "demo", "--steps", str(STEPS), "--library", str(lib), "--components", "4",
+           "--models-dir", str(models), "--run-dir", str(run_dir), "--mode", mode, "--timeout", "300"]
+    env = {**os.environ, "FORESIGHT_PLANNER_COMPILE": "false", "PYTHONUNBUFFERED": "1"}
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                            text=True, env=env, start_new_session=True)
+
+
+def _interrupt_at(proc: subprocess.Popen[str], marker: str, delay_s: float, sig: int, group: bool
+                  ) -> tuple[list[str], bool, float]:
+    """Read the demo's output; on the first line containing ``marker`` send ``sig``; returns (lines, sent, stop s)."""
+    lines: list[str] = []
+    sent_at: list[float] = []
+    assert proc.stdout is not None
+
+    def send() -> None:
+        if proc.poll() is None:
+            os.killpg(proc.pid, sig) if group else proc.send_signal(sig)
+            sent_at.append(time.monotonic())
+
+    for line in proc.stdout:
+        lines.append(line.rstrip("\n"))
+        if not sent_at and line.startswith(marker):
+            if delay_s:
+                threading.Timer(delay_s, send).start()
+                time.sleep(delay_s + 0.05)
+            else:
+                send()
+    proc.wait(timeout=120)
+    stop_s = time.monotonic() - sent_at[0] if sent_at else 0.0
+    return lines, bool(sent_at), stop_s
+
+
+def _check_run(run_dir: Path, lines: list[str], returncode: int) -> list[str]:
+    text = "\n".join(lines)
+    assert returncode in (0, 130), text[-3000:]
+    assert "Traceback" not in text and "status 3" not in text, text[-3000:]
+    for log in run_dir.rglob("*.log"):
+        body = log.read_text(errors="replace")
+        assert "exiting with status 3" not in body and "Traceback" not in body, f"{log}:\n{body[-3000:]}"
+    mcaps = sorted({p.resolve() for p in run_dir.rglob("*.mcap")})
+    for mcap in mcaps:
+        lf = read_log(mcap)
+        assert lf.complete and not lf.error, f"{mcap}: {lf.error or 'no footer'}"
+    return [str(m) for m in mcaps]
+
+
+@pytest.mark.parametrize("moment", list(MOMENTS))
+def test_ctrl_c_at_any_moment_leaves_complete_logs(moment: str, demo_inputs: tuple[Path, Path],
+                                                   tmp_path: Path) -> None:
+    lib, models = demo_inputs
+    marker, delay = MOMENTS[moment]
+    run_dir = tmp_path / "run"
+    proc = _demo(lib, models, run_dir, "lockstep")
+    try:
+        lines, sent, stop_s = _interrupt_at(proc, marker, delay, signal.SIGINT, group=True)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+    assert sent, "\n".join(lines)[-3000:]
+    mcaps = _check_run(run_dir, lines, proc.returncode)
+    if proc.returncode == 130:
+        summary = [ln for ln in lines if ln.startswith("foresight demo: interrupted")]
+        assert summary, "\n".join(lines)[-3000:]
+        if mcaps:
+            assert any("complete" in ln and mcaps[0] in ln for ln in lines)
+    if moment != "training done, services not started" and moment != "services starting":
+        assert mcaps, "\n".join(lines)[-3000:]  # the executor was running: its log exists
+    assert stop_s < 60.0
+
+
+def test_sigterm_to_the_demo_alone_stops_its_services(demo_inputs: tuple[Path, Path], tmp_path: Path) -> None:
+    """``kill PID`` (SIGTERM to the demo only, as a process manager sends it) in real time: same clean stop."""
+    lib, models = demo_inputs
+    run_dir = tmp_path / "run"
+    proc = _demo(lib, models, run_dir, "realtime")
+    try:
+        lines, sent, _ = _interrupt_at(proc, _row(2), 0.0, signal.SIGTERM, group=False)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+    assert sent and proc.returncode == 130, "\n".join(lines)[-3000:]
+    assert _check_run(run_dir, lines, proc.returncode)
+
+
+def test_killed_demo_leaves_no_service_behind(demo_inputs: tuple[Path, Path], tmp_path: Path) -> None:
+    """SIGKILL of the demo alone: its services see their parent gone, stop, and the executor closes its log."""
+    lib, models = demo_inputs
+    run_dir = tmp_path / "run"
+    proc = _demo(lib, models, run_dir, "realtime")
+    try:
+        lines, sent, _ = _interrupt_at(proc, _row(2), 0.0, signal.SIGKILL, group=False)
+        assert sent
+        pgids: set[int] = set()
+        deadline = time.monotonic() + 60
+        for log in ("executor", "planner", "predictor", "replayer"):
+            assert (run_dir / "latest" / f"{log}.log").is_file()
+        while time.monotonic() < deadline:
+            pgids = _services_of(proc.pid)
+            if not pgids:
+                break
+            time.sleep(0.5)
+        assert not pgids, f"services still running: {pgids}"
+    finally:
+        for pid in _services_of(proc.pid):
+            os.kill(pid, signal.SIGKILL)
+    mcaps = sorted({p.resolve() for p in run_dir.rglob("*.mcap")})
+    assert mcaps and all(read_log(m).complete for m in mcaps)
+
+
+def _services_of(demo_pid: int) -> set[int]:
+    """Pids of the live processes started by the demo ``demo_pid`` (their environment names it)."""
+    mark = f"{PARENT_ENV}={demo_pid}".encode()
+    pids = set()
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            env = (entry / "environ").read_bytes().split(b"\0")
+            state = (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError):
+            continue
+        if mark in env and state != "Z":
+            pids.add(int(entry.name))
+    return pids

@@ -1,0 +1,70 @@
+"""The demo's measured outcome (interference, contact with the real human) and its verdict in words."""
+
+from __future__ import annotations
+
+import types
+
+import numpy as np
+import pytest
+import torch
+
+from services.demo_outcome import Outcome, measure_run, outcome_lines, verdict
+from shared.protocol import HumanPose, OccupancyGrid, RobotState
+from shared.robot import PR2
+from shared.scene import load_scene
+
+
+def _outcome(name: str, interference: float, contact: float, near: float, clearance: float) -> Outcome:
+    t = np.linspace(0.0, 1.0, 5)
+    return Outcome(name, interference, contact, near, clearance, None, None, ["red_cup"] * 3, t, np.zeros((5, 3)),
+                   np.full(5, clearance))
+
+
+def test_verdict_by_contact_when_anyone_touched() -> None:
+    shown = [_outcome("prediction", 0.1, 0.0, 0.2, 0.03), _outcome("current occupancy", 5.0, 1.5, 2.0, -0.02),
+             _outcome("no human cost", 9.0, 2.5, 3.0, -0.05)]
+    assert verdict(shown).startswith("shown, against current occupancy and no human cost")
+    assert "touched the real human 0.0 s against 1.5 s, 2.5 s" in verdict(shown)
+    worse = [_outcome("prediction", 0.1, 2.0, 2.0, -0.03), *shown[1:]]
+    text = verdict(worse)
+    assert text.startswith("not shown in this run (it did not stay further from the human)")
+    assert "Across the robot's pace" in text
+    higher = [_outcome("prediction", 6.0, 0.0, 0.0, 0.1), *shown[1:]]
+    assert verdict(higher).startswith("not shown in this run (its interference was not the lowest)")
+
+
+def test_verdict_by_clearance_when_nobody_touched_says_so() -> None:
+    runs = [_outcome("prediction", 0.01, 0.0, 0.0, 0.13), _outcome("current occupancy", 7.9, 0.0, 3.7, 0.01),
+            _outcome("no human cost", 9.9, 0.0, 4.7, 0.01)]
+    text = verdict(runs)
+    assert text.startswith("shown") and "no planner touched the real human" in text and "13 cm" in text
+    assert verdict(runs[:1]) == ""  # one planner: nothing to compare
+    lines = outcome_lines(runs)
+    assert lines[-1] == f"verdict: {text}"
+    assert [ln.split()[0] for ln in lines[3:6]] == ["prediction", "current", "no"]
+
+
+def test_measure_run_scores_contact_and_interference() -> None:
+    scene = load_scene("pr2_two_cups_side")
+    robot = PR2.from_scene(scene, device="cpu", dtype=torch.float32)
+    q0 = robot.q_start.numpy().astype(np.float64)
+    states = [RobotState(stamp=0.5 * i, tick=i, joint_names=robot.joint_names, goal=0, reached=False, holding=False,
+                         reason="", q=q0, qd=np.zeros(len(q0))) for i in (2, 0, 1)]  # any order
+    summary = types.SimpleNamespace(switch_step=None, reached_step=None, chosen_goal_per_step=["red_cup"] * 3,
+                                    mcap_path=None)
+    # no human, empty prediction: nothing measured against
+    empty = OccupancyGrid.from_dense(np.zeros(scene.grid.dims), scene.grid.origin, scene.grid.resolution, stamp=0.0,
+                                     tick=0, tick_last=True, demo_id=0, index=0, method="prediction")
+    o = measure_run("prediction", states, [], empty, robot, scene, summary)
+    assert o.interference == 0.0 and o.contact_s == 0.0 and not np.isfinite(o.min_clearance_m)
+    assert list(o.stamps) == [0.0, 0.5, 1.0] and o.ee_path.shape == (3, 3)
+    # the whole grid occupied: the robot is inside the prediction the whole second
+    full = OccupancyGrid.from_dense(np.ones(scene.grid.dims), scene.grid.origin, scene.grid.resolution, stamp=0.0,
+                                    tick=0, tick_last=True, demo_id=0, index=0, method="prediction")
+    assert measure_run("prediction", states, [], full, robot, scene, summary).interference > 0.0
+    # a human: its clearance is measured at every state
+    pose = HumanPose(stamp=0.0, tick=0, tick_last=True, demo_id=1, index=0,
+                     features=np.array([0.0, 0.0, 0.95, 0.0, 0.0, 0.0, 0.0, 0.2, 0.1, 0.3, 0.0, 0.5]))
+    with_human = measure_run("prediction", states, [pose], None, robot, scene, summary)
+    assert with_human.clearance.shape == (3,) and np.isfinite(with_human.min_clearance_m)
+    assert with_human.contact_s == pytest.approx(1.0 if with_human.min_clearance_m <= 0 else 0.0)
