@@ -34,6 +34,7 @@ from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyGrid, Plan, RobotState
 from shared.scene import Scene, load_scene
+from shared.security import secure_endpoints
 from shared.transport import Presence, open_session, subscribe
 
 if TYPE_CHECKING:
@@ -63,7 +64,7 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
                  mcap: Path) -> dict[str, list[str]]:
     """Command-line arguments of each service for this demo."""
     common = ["--connect", endpoint, "--listen", "tcp/127.0.0.1:0", "--prefix", cfg.prefix, "--zenoh-mode", "peer",
-              "--log-level", "INFO"]
+              "--log-level", "INFO", *(["--security", str(cfg.security)] if cfg.security else [])]
     scene = ["--scene", cfg.scene] if cfg.scene else []
     lockstep = cfg.mode == "lockstep"
     return {
@@ -144,8 +145,11 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     endpoint = f"tcp/127.0.0.1:{cfg.port or free_port()}"
     keys = Keys(cfg.prefix)
     args = service_args(cfg, endpoint, model, replay_lib, scenario.samples_per_tick, mcap)
-    out(f"foresight demo: router on {endpoint}; {_run_length(cfg)}; logs in {run_dir}/")
-    hub = ZenohConfig(mode="router", listen=[endpoint], connect=[], multicast_scouting=False, prefix=cfg.prefix)
+    hub = ZenohConfig(mode="router", listen=[endpoint], connect=[], multicast_scouting=False, prefix=cfg.prefix,
+                      security_dir=str(cfg.security or ""), role="router")
+    shown = secure_endpoints([endpoint])[0] if cfg.security else endpoint
+    out(f"foresight demo: router on {shown}{' (mutual TLS, access control)' if cfg.security else ''}; "
+        f"{_run_length(cfg)}; logs in {run_dir}/")
     recorder = RunRecorder()
     latest_posterior: list[ClassPosterior | None] = [None]
     realtime = cfg.mode == "realtime"

@@ -51,6 +51,7 @@ from shared.config_tree import (
     opt,
     parse_value,
 )
+from shared.security.acl import OBSERVER, ROLES
 
 __all__ = [
     "ConfigError",
@@ -84,6 +85,12 @@ class ZenohConfig:
     require_connection: bool = opt(False, help="any mode: give up (one line, exit status 2) when no router or peer "
                                    "answered within connect_timeout_s; default: log it within seconds and keep "
                                    "retrying")
+    security_dir: str = opt("", help="mutual TLS and access control: the directory of `foresight security init` "
+                            "(ca.crt, <role>.crt, <role>.key); tcp/ endpoints become tls/. Empty: plain TCP "
+                            "(loopback only)")
+    role: str = opt("", help="with security_dir: the certificate this session presents (router, replayer, "
+                    "predictor, planner, executor, observer); empty: the command's own (a service its name, "
+                    "tools observer)")
 
     def validate(self) -> None:
         """Check endpoint syntax, the prefix and the connect timeout."""
@@ -93,6 +100,9 @@ class ZenohConfig:
             for ep in getattr(self, name):
                 if "/" not in ep or not ep.split("/", 1)[1]:
                     raise ConfigError(f"zenoh.{name}: endpoint {ep!r} is not of the form proto/address")
+        if self.role and self.role not in ROLES:
+            raise ConfigError(f"zenoh.role: {self.role!r} is no role{closest(self.role, ROLES)} "
+                              f"(roles: {', '.join(ROLES)})")
         if not self.prefix or self.prefix.startswith("/") or self.prefix.endswith("/") or "*" in self.prefix:
             raise ConfigError(f"zenoh.prefix: {self.prefix!r} must be a non-empty key without wildcards "
                               "or leading/trailing '/'")
@@ -118,7 +128,7 @@ def load_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise ConfigError(f"config file {str(p)!r}: {exc}") from None
 
 
-ZENOH_FLAG_NAMES = {"mode": "zenoh_mode"}
+ZENOH_FLAG_NAMES = {"mode": "zenoh_mode", "security_dir": "security"}
 """Zenoh options whose flag differs from the field name in every command (``--mode`` is the services' own)."""
 
 
@@ -295,4 +305,6 @@ def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None =
     names = _zenoh_flags({o.flag for o in config_options(section, cls)})
     zen = (_resolve_section("zenoh", ZenohConfig, data.get("zenoh", {}), env, cli, zenoh_base, names)
            if with_zenoh else ZenohConfig())
+    if not zen.role:  # the certificate a command presents by default: its own role, else the read-only observer
+        zen = dataclasses.replace(zen, role=section if section in ROLES else OBSERVER)
     return sec, zen

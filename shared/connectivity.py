@@ -129,9 +129,12 @@ class ConnectionWatch:
         if waited >= self._next_report:
             self.warnings += 1
             what = "no router or peer" if not self._ever_up else "still no router or peer"
-            log.warning("%s: %s at %s after %.0f s; Zenoh retries every %g-%g s; next report in %.0f s",
+            hint = (f" (mutual TLS as {self.cfg.role or 'observer'}: a refused certificate - another CA, expired, "
+                    "or the peer's name not in it - looks like this; `foresight security check DIR`)"
+                    if self.cfg.security_dir else "")
+            log.warning("%s: %s at %s after %.0f s; Zenoh retries every %g-%g s; next report in %.0f s%s",
                         self.name, what, self._where, waited, RETRY_FIRST_MS / 1000, RETRY_MAX_MS / 1000,
-                        self._interval)
+                        self._interval, hint)
             self._next_report += self._interval
             self._interval = min(2 * self._interval, MAX_REPORT_S)
 

@@ -24,6 +24,9 @@ from shared.config import ZenohConfig
 from shared.connectivity import retry_config, watched
 from shared.protocol import Keys, Message, ProtocolError, Receipt, decode, encode
 from shared.rejects import RejectCounter
+from shared.security import OBSERVER
+from shared.security.guard import denied, forget, remember
+from shared.security.tls import security_settings
 
 __all__ = [
     "TransportError",
@@ -48,8 +51,11 @@ def zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
     """Build a ``zenoh.Config`` from a :class:`ZenohConfig` (explicit endpoints, scouting as set)."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(cfg.mode))
-    conf.insert_json5("listen/endpoints", json.dumps(list(cfg.listen)))
-    conf.insert_json5("connect/endpoints", json.dumps(list(cfg.connect)))
+    listen, connect, secure = security_settings(cfg)  # mutual TLS and access control, or a warning
+    for path, value in secure.items():
+        conf.insert_json5(path, json.dumps(value))
+    conf.insert_json5("listen/endpoints", json.dumps(listen))
+    conf.insert_json5("connect/endpoints", json.dumps(connect))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(bool(cfg.multicast_scouting)))
     conf.insert_json5("connect/retry", json.dumps(retry_config()))  # unreachable endpoints: retried 1, 2, 4, 4 ... s
     # Shared memory leaves segments in /dev/shm; our large messages are compact, so TCP on loopback is
@@ -132,10 +138,13 @@ def open_session(cfg: ZenohConfig, stop: threading.Event | None = None, name: st
         TransportError: If Zenoh refuses to open the session, or (on exit) the watch gave up (one line).
     """
     session = open_with_retry(cfg, stop=stop)
+    if cfg.security_dir:
+        remember(session, cfg.role or OBSERVER, Keys(cfg.prefix))
     try:
         with watched(session, cfg, name, stop):
             yield session
     finally:
+        forget(session)
         session.close()
 
 
@@ -163,6 +172,9 @@ class TypedPublisher(Generic[M]):
         """
         self.key = key
         self.sender = str(session.zid())
+        refused = denied(session, key, "put")
+        if refused:
+            log.warning("access control: %s", refused)
         cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         self._pub = session.declare_publisher(key, congestion_control=cc)
 
@@ -236,6 +248,10 @@ def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str,
         except Exception:  # a bug in one handler must not kill the subscription
             log.exception("handler for %s failed", key)
 
+    for key in types:
+        refused = denied(session, key, "subscribe")
+        if refused:
+            log.warning("access control: %s", refused)
     return session.declare_subscriber(key_expr, handler)
 
 

@@ -293,3 +293,43 @@ def test_dockerfile_installs_what_the_makefile_installs() -> None:
     ignored = (REPO / ".dockerignore").read_text().split()
     assert {".venv", ".git", "models", "runs"} <= set(ignored)
     assert not {"shared", "services", "tools"} & set(ignored)
+
+
+SECURE = REPO / "compose.secure.yaml"
+
+
+def test_the_secure_variant_is_valid_and_gives_each_service_only_its_own_role() -> None:
+    """compose.secure.yaml: schema-valid; every Zenoh session on TLS with its role's certificate (read-only),
+    the router `foresight router --security` (its access control from the same generator)."""
+    ok = _check(SECURE)
+    assert ok.returncode == 0, ok.stdout + ok.stderr
+    secure = YAML(typ="safe").load(SECURE.read_text())["services"]
+    base = compose()["services"]
+    zenoh_services = [name for name, svc in base.items() if name != "train"]
+    assert sorted(secure) == sorted(zenoh_services)
+    for name, svc in secure.items():
+        mounts = [v.rsplit(":", 2) for v in svc["volumes"]]  # SOURCE:TARGET:ro (the source has a ${...:-...})
+        assert all(m[-1] == "ro" for m in mounts), name
+        files = sorted(Path(m[0]).name for m in mounts)
+        assert files == sorted(["ca.crt", f"{name}.crt", f"{name}.key"]), name  # its own role, nothing else
+        assert {Path(m[1]).parent for m in mounts} == {Path("/run/foresight/security")}
+        if name == "router":
+            cmd = svc["command"]
+            assert cmd[:2] == ["foresight", "router"] and cmd[cmd.index("--security") + 1] == "/run/foresight/security"
+            assert cmd[cmd.index("--listen") + 1].startswith("tls/")
+            continue
+        env = svc["environment"]
+        assert env["FORESIGHT_ZENOH_CONNECT"].startswith("tls/router:")
+        assert env["FORESIGHT_ZENOH_SECURITY_DIR"] == "/run/foresight/security"
+        # the variables name real options of the [zenoh] section
+        names = {o.env for o in config_options("zenoh", ZenohConfig)}
+        assert set(env) <= names
+
+
+def test_the_secure_router_command_parses() -> None:
+    from tools.router import main as router_main
+
+    cmd = YAML(typ="safe").load(SECURE.read_text())["services"]["router"]["command"]
+    with pytest.raises(SystemExit) as exc:
+        router_main([*cmd[2:], "--help"])
+    assert exc.value.code == 0

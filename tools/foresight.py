@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("services.predictor.train", "train the prediction model (GMMs, GMR motions, swept volumes)"),
     "eval": ("services.experiments.cli", "the paper's experiments and beyond"),
     "bench": ("services.bench", "benchmark a component"),
+    "security": ("tools.security", "certificates for mutual TLS and the access control from the wire contract"),
 }
 
 SUBCOMMANDS: dict[str, str] = {
@@ -34,6 +35,7 @@ SUBCOMMANDS: dict[str, str] = {
     "log": "tools.log.cli:SUBCOMMANDS",
     "eval": "services.experiments.commands:EXPERIMENTS",
     "bench": "services.bench:BENCHES",
+    "security": "tools.security:SUBCOMMANDS",
 }
 """Commands with sub-commands -> ``module:table`` of them (name -> help, or name -> (module, help)); light modules,
 so that ``foresight --help`` lists every sub-command that exists without importing what runs it."""

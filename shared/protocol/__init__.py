@@ -17,7 +17,7 @@ the services call). Import the names from here (``from shared.protocol import Pl
 """
 
 from .codec import decode, encode
-from .keys import SERVICES, Keys
+from .keys import ROUTES, SERVICES, Keys
 from .messages import (
     MESSAGE_TYPES,
     ClassPosterior,
@@ -48,6 +48,7 @@ __all__ = [
     "MESSAGE_TYPES",
     "Keys",
     "SERVICES",
+    "ROUTES",
     "encode",
     "decode",
     "Expectations",

@@ -5,9 +5,26 @@ from __future__ import annotations
 from .messages import ClassPosterior, ClockTick, DemoMarker, HumanPose, OccupancyGrid, Plan, RobotState
 from .schema import Message
 
-__all__ = ["SERVICES", "Keys"]
+__all__ = ["SERVICES", "ROUTES", "Keys"]
 
 SERVICES = ("replayer", "predictor", "planner", "executor")
+
+ROUTES: dict[str, tuple[str, tuple[str, ...]]] = {
+    "pose": ("replayer", ("predictor", "executor")),
+    "demo": ("replayer", ("predictor", "planner", "executor")),
+    "posterior": ("predictor", ("executor",)),
+    "occupancy": ("predictor", ("planner", "executor")),
+    "plan": ("planner", ("executor",)),
+    "robot_state": ("executor", ("planner", "executor")),
+    "clock": ("executor", ("replayer", "planner", "executor")),
+}
+"""Who publishes and who subscribes to each data key (an attribute of :class:`Keys`): ``(owner, consumers)``.
+
+Exactly one service owns (publishes) a key; the executor consumes every key, its own included (its
+MCAP log subscribes to ``<prefix>/**``).
+Displays and tools read as observers. The access control of :mod:`shared.security.acl` is generated
+from this table, and docs/protocol.md's key table states it.
+"""
 
 
 class Keys:
@@ -32,6 +49,10 @@ class Keys:
     def alive(self, service: str) -> str:
         """Liveliness token key of a service."""
         return f"{self.prefix}/alive/{service}"
+
+    def routes(self) -> dict[str, tuple[str, tuple[str, ...]]]:
+        """Every data key expression with its owner and consumers (:data:`ROUTES`)."""
+        return {getattr(self, attr): route for attr, route in ROUTES.items()}
 
     def data_keys(self) -> dict[str, type[Message]]:
         """Every data key expression and the one message type it carries."""

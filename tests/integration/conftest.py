@@ -79,10 +79,18 @@ def run_system(system_files: SystemFiles, tmp_path: Path) -> Iterator[Callable[.
 
     def start(mode: str = "lockstep", steps: int = 20, seed: int = 0, period: float = 0.2,
               planner_overrides: dict[str, Any] | None = None, executor_overrides: dict[str, Any] | None = None,
-              replayer_overrides: dict[str, Any] | None = None, mcap: str = "") -> System:
+              replayer_overrides: dict[str, Any] | None = None, mcap: str = "", security: Path | None = None
+              ) -> System:
         endpoint = f"tcp/127.0.0.1:{free_port()}"
-        hub = ZenohConfig(mode="peer", listen=[endpoint], connect=[], multicast_scouting=False)
-        peer = ZenohConfig(mode="peer", listen=["tcp/127.0.0.1:0"], connect=[endpoint], multicast_scouting=False)
+        secure = {"security_dir": str(security)} if security is not None else {}
+        # with security: the test's own session (the hub, which records every key) presents the router's certificate
+        hub = ZenohConfig(mode="peer", listen=[endpoint], connect=[], multicast_scouting=False, role="router", **secure)
+        base = ZenohConfig(mode="peer", listen=["tcp/127.0.0.1:0"], connect=[endpoint], multicast_scouting=False,
+                           **secure)
+
+        def peer_as(role: str) -> ZenohConfig:
+            return dataclasses.replace(base, role=role)
+
         keys = Keys(hub.prefix)
         recorder = RunRecorder()
         ctx = open_session(hub)
@@ -93,15 +101,15 @@ def run_system(system_files: SystemFiles, tmp_path: Path) -> Iterator[Callable[.
                 subscribe(session, keys.occupancy, OccupancyGrid, recorder.on_message),
                 subscribe(session, keys.posterior, ClassPosterior, recorder.on_message)]
         sessions.append(subs)
-        predictor = PredictorService(PredictorConfig(model=system_files.model), peer)
+        predictor = PredictorService(PredictorConfig(model=system_files.model), peer_as("predictor"))
         planner_cfg = PlannerServiceConfig(mode=mode, period_s=period, input_timeout_s=20.0,
                                            planner=PlannerConfig(seed=seed, lookahead_s=period, compile=False,
                                                                  stomp=StompConfig(iterations=20),
                                                                  **(planner_overrides or {})))
-        planner = PlannerService(planner_cfg, peer)
+        planner = PlannerService(planner_cfg, peer_as("planner"))
         replayer = ReplayerService(ReplayerConfig(library=system_files.human, mode=mode,
                                                   samples_per_tick=system_files.samples_per_tick,
-                                                  **(replayer_overrides or {})), peer)
+                                                  **(replayer_overrides or {})), peer_as("replayer"))
         ex_cfg = ExecutorConfig(mode=mode, steps=steps, step_period_s=period,
                                 mcap=mcap or str(tmp_path / f"run{len(started)}.mcap"), lockstep_timeout_s=60.0,
                                 **(executor_overrides or {}))
@@ -113,7 +121,7 @@ def run_system(system_files: SystemFiles, tmp_path: Path) -> Iterator[Callable[.
         for t in threads.values():
             t.start()
         ex_stop = threading.Event()
-        executor = ExecutorService(ex_cfg, peer, stop=ex_stop)
+        executor = ExecutorService(ex_cfg, peer_as("executor"), stop=ex_stop)
         threads["executor"] = ServiceThread("executor", lambda _stop: executor.run())
         threads["executor"].stop_event = ex_stop
         threads["executor"].start()

@@ -50,10 +50,15 @@ def test_lockstep_two_cup_run(run_system):
     assert any(topic.startswith("/viz/") for topic in channels), "Foxglove scene channels"
 
 
-def test_lockstep_is_deterministic(run_system):
+def test_lockstep_is_deterministic_and_the_same_with_security(run_system, tmp_path):
+    """Two runs, the second with mutual TLS and the generated access control (certificates made here): equal."""
+    from shared.security.acl import ROLES
+    from shared.security.certificates import init_security_dir
+
+    init_security_dir(tmp_path / "security", ROLES)
     runs = []
-    for _ in range(2):
-        system = run_system(mode="lockstep", steps=8, seed=7)
+    for security in (None, tmp_path / "security"):
+        system = run_system(mode="lockstep", steps=8, seed=7, security=security)
         system.executor_result()
         plans, states, _, _ = system.recorder.snapshot()
         runs.append((_plans_by_tick(plans), sorted(states, key=lambda s: s.stamp)))

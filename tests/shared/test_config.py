@@ -49,7 +49,9 @@ def write(tmp_path: Path, text: str) -> Path:
 def test_defaults():
     cfg, z = resolve_config("demo", DemoCfg, parse([]), env={})
     assert cfg == DemoCfg()
-    assert z == ZenohConfig() and z.multicast_scouting is False
+    assert z == ZenohConfig(role="observer") and z.multicast_scouting is False  # demo is no role: the observer's
+    _, zp = resolve_config("planner", DemoCfg, parse([]), env={})
+    assert zp.role == "planner"  # a service presents its own certificate (with security)
 
 
 def test_precedence_file_env_flag(tmp_path):

@@ -1,0 +1,114 @@
+"""Zenoh access control generated from the wire contract: a role may write only what it owns.
+
+Subjects are matched by the common name of the certificate a remote session presents (the role:
+:mod:`shared.security.certificates`). The rules are derived from :data:`shared.protocol.ROUTES`
+(each data key's one owner and its consumers) and nothing else; every message kind not allowed here
+is denied (``default_permission: deny``). Zenoh applies them on every unicast link, in router, peer
+and client sessions alike, from the point of view of the session holding the config: *ingress*
+rules govern what a remote subject may send to it, *egress* rules what it may send to the subject.
+
+Per data key ``k`` with owner ``o`` and consumers ``C``:
+
+* ``put`` in from ``o`` (and from the router, which forwards it); ``put`` out to ``C``, the observer
+  and the router;
+* ``declare_subscriber`` in from ``C``, the observer and the router (a subscription tells the
+  publisher to send), out to every role (a session announces its own subscriptions to its peers).
+
+Liveliness (``<prefix>/alive/<service>``): each service declares its own token only (the router
+forwards all); every role may watch the tokens (``declare_liveliness_subscriber``,
+``liveliness_query``, its ``reply``). The observer declares no token and puts nothing.
+
+What a router certificate can do follows from forwarding: it may send any key. A stolen role key
+acts as that role (docs/security.md).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from shared.protocol import SERVICES, Keys
+
+__all__ = ["ROLES", "ROUTER", "OBSERVER", "access_control", "owned_keys", "consumed_keys", "subscription_exprs"]
+
+ROUTER = "router"
+OBSERVER = "observer"
+ROLES = (ROUTER, *SERVICES, OBSERVER)
+"""Every certificate role: the router, each service (:data:`shared.protocol.SERVICES`), the read-only observer."""
+
+
+def owned_keys(keys: Keys, role: str) -> list[str]:
+    """The data keys ``role`` publishes."""
+    return [key for key, (owner, _) in keys.routes().items() if owner == role]
+
+
+def consumed_keys(keys: Keys, role: str) -> list[str]:
+    """The data keys ``role`` may receive (the observer and the router: all)."""
+    every = keys.routes()
+    if role in (OBSERVER, ROUTER):
+        return list(every)
+    return [key for key, (_, consumers) in every.items() if role in consumers]
+
+
+def subscription_exprs(keys: Keys, role: str) -> list[str]:
+    """The key expressions ``role`` may subscribe to: its consumed keys and the wildcards that match only those.
+
+    Zenoh checks a subscription's own key expression, so a service subscribing to ``foresight/human/*``
+    (the predictor, poses and markers in one ordered stream) or ``foresight/**`` (the executor's log)
+    needs that expression allowed; it is, exactly when every data key it matches is one the role consumes.
+    """
+    consumed = consumed_keys(keys, role)
+    every = list(keys.routes())
+    wildcards = [f"{keys.prefix}/**", *dict.fromkeys(f"{k.rsplit('/', 1)[0]}/*" for k in every)]
+
+    def matches(pattern: str, key: str) -> bool:
+        if pattern.endswith("/**"):
+            return key.startswith(pattern[:-2])
+        return key.rsplit("/", 1)[0] == pattern[:-2]
+
+    allowed = [w for w in wildcards if all(k in consumed for k in every if matches(w, k))]
+    return [*consumed, *allowed]
+
+
+def _rule(rule_id: str, messages: list[str], flows: list[str], key_exprs: list[str]) -> dict[str, Any]:
+    return {"id": rule_id, "permission": "allow", "messages": messages, "flows": flows, "key_exprs": key_exprs}
+
+
+def access_control(keys: Keys) -> dict[str, Any]:
+    """The ``access_control`` section of a Zenoh config for the keys under ``keys.prefix``.
+
+    Returns:
+        A JSON-ready dict: ``enabled``, ``default_permission`` (deny), ``rules``, ``subjects`` (one
+        per role, by certificate common name) and ``policies`` (which rules apply to which subject).
+    """
+    rules: list[dict[str, Any]] = []
+    policies: dict[str, list[str]] = {role: [] for role in ROLES}
+
+    def grant(role: str, rule: dict[str, Any]) -> None:
+        if not any(r["id"] == rule["id"] for r in rules):
+            rules.append(rule)
+        policies[role].append(rule["id"])
+
+    for role in ROLES:
+        owned = owned_keys(keys, role) if role != ROUTER else list(keys.routes())
+        if owned:
+            grant(role, _rule(f"{role}: put in", ["put"], ["ingress"], owned))
+        consumed = consumed_keys(keys, role)
+        if consumed:
+            grant(role, _rule(f"{role}: put out", ["put"], ["egress"], consumed))
+            grant(role, _rule(f"{role}: subscribe in", ["declare_subscriber"], ["ingress"],
+                              subscription_exprs(keys, role)))
+        grant(role, _rule("subscribe out", ["declare_subscriber"], ["egress"], [f"{keys.prefix}/**"]))
+        watch = ["declare_liveliness_subscriber", "liveliness_query", "reply"]
+        grant(role, _rule("watch presence", watch, ["ingress", "egress"], [keys.alive_all]))
+        grant(role, _rule("presence out", ["liveliness_token"], ["egress"], [keys.alive_all]))
+        if role in SERVICES:
+            grant(role, _rule(f"{role}: presence in", ["liveliness_token"], ["ingress"], [keys.alive(role)]))
+        elif role == ROUTER:
+            grant(role, _rule("router: presence in", ["liveliness_token"], ["ingress"], [keys.alive_all]))
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": [{"id": role, "cert_common_names": [role]} for role in ROLES],
+        "policies": [{"id": role, "rules": ids, "subjects": [role]} for role, ids in policies.items()],
+    }

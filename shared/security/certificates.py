@@ -1,0 +1,202 @@
+"""Certificates for mutual TLS between Foresight's sessions: one authority, one certificate per role.
+
+:func:`init_security_dir` writes ``ca.crt`` (the authority; its key ``ca.key`` stays beside it for
+issuing and rotating) and, for each role of :data:`shared.security.acl.ROLES`, ``<role>.crt`` and
+``<role>.key``: PEM, keys readable by their owner only (0600), the role as the certificate's common
+name (Zenoh's access control matches subjects by it), and subject alternative names for the hosts
+the certificate's holder serves (``--hosts``: the router's; every certificate names ``localhost`` and
+``127.0.0.1`` so that loopback runs verify; ``--hosts`` adds names to every certificate, since a peer
+listens as well as the router). Keys are ECDSA P-256; certificates are valid for
+``days`` days. Everything with the ``cryptography`` library, nothing shelled out.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import ipaddress
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from cryptography import x509
+from cryptography.exceptions import InvalidSignature
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+__all__ = ["Issued", "make_authority", "issue", "init_security_dir", "read_role", "verify_role", "LOOPBACK_HOSTS"]
+
+LOOPBACK_HOSTS = ("localhost", "127.0.0.1")
+"""Names every certificate carries, so that a run on one machine verifies."""
+
+
+@dataclass(frozen=True)
+class Issued:
+    """A certificate and its private key (PEM bytes)."""
+
+    cert_pem: bytes
+    key_pem: bytes
+
+    @property
+    def certificate(self) -> x509.Certificate:
+        """The parsed certificate."""
+        return x509.load_pem_x509_certificate(self.cert_pem)
+
+
+def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
+    return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                             serialization.NoEncryption())
+
+
+def _san(hosts: Iterable[str]) -> x509.SubjectAlternativeName:
+    names: list[x509.GeneralName] = []
+    for host in dict.fromkeys(hosts):
+        try:
+            names.append(x509.IPAddress(ipaddress.ip_address(host)))
+        except ValueError:
+            names.append(x509.DNSName(host))
+    return x509.SubjectAlternativeName(names)
+
+
+def make_authority(name: str = "Foresight CA", days: int = 3650,
+                   now: dt.datetime | None = None) -> Issued:
+    """A self-signed certificate authority (may sign certificates, not be a TLS peer)."""
+    now = now or dt.datetime.now(dt.UTC)
+    key = ec.generate_private_key(ec.SECP256R1())
+    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name),
+                         x509.NameAttribute(NameOID.ORGANIZATION_NAME, "Foresight")])
+    cert = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject).public_key(key.public_key())
+            .serial_number(x509.random_serial_number())
+            .not_valid_before(now - dt.timedelta(minutes=5)).not_valid_after(now + dt.timedelta(days=days))
+            .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+            .add_extension(x509.KeyUsage(digital_signature=True, key_cert_sign=True, crl_sign=True,
+                                         content_commitment=False, key_encipherment=False, data_encipherment=False,
+                                         key_agreement=False, encipher_only=False, decipher_only=False), critical=True)
+            .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
+            .sign(key, hashes.SHA256()))
+    return Issued(cert.public_bytes(serialization.Encoding.PEM), _key_pem(key))
+
+
+def issue(authority: Issued, role: str, hosts: Sequence[str] = (), days: int = 365,
+          now: dt.datetime | None = None, not_after: dt.datetime | None = None) -> Issued:
+    """A certificate for ``role`` (its common name), signed by ``authority``, for client and server use.
+
+    Args:
+        authority: The CA (certificate and key).
+        role: Common name, e.g. ``planner``.
+        hosts: DNS names or IP addresses the holder serves, beside :data:`LOOPBACK_HOSTS`.
+        days: Validity from ``now``.
+        now: Issue time (default: now).
+        not_after: End of validity, overriding ``days`` (tests make expired certificates with it).
+    """
+    now = now or dt.datetime.now(dt.UTC)
+    ca_cert = authority.certificate
+    ca_key = serialization.load_pem_private_key(authority.key_pem, password=None)
+    if not isinstance(ca_key, ec.EllipticCurvePrivateKey):
+        raise ValueError("the authority's key is not an EC key")
+    key = ec.generate_private_key(ec.SECP256R1())
+    end = not_after or now + dt.timedelta(days=days)
+    start = min(now - dt.timedelta(minutes=5), end - dt.timedelta(minutes=10))
+    cert = (x509.CertificateBuilder()
+            .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, role),
+                                     x509.NameAttribute(NameOID.ORGANIZATION_NAME, "Foresight")]))
+            .issuer_name(ca_cert.subject).public_key(key.public_key()).serial_number(x509.random_serial_number())
+            .not_valid_before(start).not_valid_after(end)
+            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+            .add_extension(x509.KeyUsage(digital_signature=True, key_encipherment=False, key_cert_sign=False,
+                                         crl_sign=False, content_commitment=False, data_encipherment=False,
+                                         key_agreement=True, encipher_only=False, decipher_only=False), critical=True)
+            .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]),
+                           critical=False)
+            .add_extension(_san([*hosts, *LOOPBACK_HOSTS]), critical=False)
+            .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False)
+            .sign(ca_key, hashes.SHA256()))
+    return Issued(cert.public_bytes(serialization.Encoding.PEM), _key_pem(key))
+
+
+def _write(path: Path, data: bytes, private: bool) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC
+    fd = os.open(path, flags, 0o600 if private else 0o644)
+    with os.fdopen(fd, "wb") as f:
+        f.write(data)
+    os.chmod(path, 0o600 if private else 0o644)  # also when the file existed with other permissions
+
+
+def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], hosts: Sequence[str] = (),
+                      days: int = 365, force: bool = False) -> dict[str, Path]:
+    """Write a CA and one certificate per role into ``directory``; returns the files written by name.
+
+    Args:
+        directory: Where (created if missing).
+        roles: Common names, one certificate each (``router`` gets ``hosts`` as alternative names).
+        hosts: Host names or addresses the sessions listen on beyond loopback (beside localhost), in every
+            certificate: the router's in client mode, each peer's too in peer mode.
+        days: Validity of the role certificates (the CA: ten years).
+        force: Replace an existing authority (without it an existing ``ca.key`` is reused, so that
+            running it again re-issues the role certificates under the same CA: rotation).
+
+    Raises:
+        FileExistsError: Never with ``force``; see above.
+    """
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    ca_crt, ca_key = d / "ca.crt", d / "ca.key"
+    if ca_crt.is_file() and ca_key.is_file() and not force:
+        authority = Issued(ca_crt.read_bytes(), ca_key.read_bytes())
+    else:
+        authority = make_authority()
+        _write(ca_crt, authority.cert_pem, private=False)
+        _write(ca_key, authority.key_pem, private=True)
+    written = {"ca.crt": ca_crt, "ca.key": ca_key}
+    for role in roles:
+        issued = issue(authority, role, hosts, days=days)
+        _write(d / f"{role}.crt", issued.cert_pem, private=False)
+        _write(d / f"{role}.key", issued.key_pem, private=True)
+        written[f"{role}.crt"] = d / f"{role}.crt"
+        written[f"{role}.key"] = d / f"{role}.key"
+    return written
+
+
+def read_role(directory: str | os.PathLike[str], role: str) -> tuple[Path, Path, Path]:
+    """``(ca.crt, <role>.crt, <role>.key)`` of a security directory.
+
+    Raises:
+        FileNotFoundError: Naming the missing file and how to make it.
+    """
+    d = Path(directory)
+    files = (d / "ca.crt", d / f"{role}.crt", d / f"{role}.key")
+    for f in files:
+        if not f.is_file():
+            raise FileNotFoundError(f"security directory {d}: {f.name} is missing (make the certificates with "
+                                    f"`foresight security init {d}`)")
+    return files
+
+
+def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime | None = None) -> x509.Certificate:
+    """Check ``<role>.crt``: signed by the directory's CA, common name ``role``, valid at ``now``; returns it.
+
+    Raises:
+        FileNotFoundError: A file is missing.
+        ValueError: Naming what is wrong (signature, common name, validity, key mismatch).
+    """
+    ca_path, cert_path, key_path = read_role(directory, role)
+    ca = x509.load_pem_x509_certificate(ca_path.read_bytes())
+    cert = x509.load_pem_x509_certificate(cert_path.read_bytes())
+    try:
+        cert.verify_directly_issued_by(ca)
+    except (ValueError, TypeError, InvalidSignature) as exc:
+        raise ValueError(f"{cert_path.name} is not signed by {ca_path.name} ({type(exc).__name__})") from None
+    names = [a.value for a in cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)]
+    if names != [role]:
+        raise ValueError(f"{cert_path.name}: common name {names} is not [{role!r}]")
+    now = now or dt.datetime.now(dt.UTC)
+    if not cert.not_valid_before_utc <= now <= cert.not_valid_after_utc:
+        raise ValueError(f"{cert_path.name}: not valid now (valid {cert.not_valid_before_utc:%Y-%m-%d} .. "
+                         f"{cert.not_valid_after_utc:%Y-%m-%d})")
+    key = serialization.load_pem_private_key(key_path.read_bytes(), password=None)
+    der, spki = serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo
+    if key.public_key().public_bytes(der, spki) != cert.public_key().public_bytes(der, spki):
+        raise ValueError(f"{key_path.name} does not belong to {cert_path.name}")
+    return cert

@@ -1,0 +1,48 @@
+"""What the access control will refuse a session, said by the session itself when it declares it.
+
+Zenoh drops a denied put or subscription silently on the receiving side. A Foresight session knows
+its role and the generated rules (:mod:`shared.security.acl`), so :class:`shared.transport.TypedPublisher`
+and :func:`shared.transport.subscribe` log one line naming the role, the key and the reason when they
+declare something the rules deny, and the service keeps running.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from shared.protocol import Keys
+
+from .acl import consumed_keys, owned_keys
+
+__all__ = ["remember", "forget", "denied"]
+
+_ROLES: dict[int, tuple[str, Keys]] = {}  # id(session) -> (role, keys) of the open secure sessions
+
+
+def remember(session: Any, role: str, keys: Keys) -> None:
+    """Note that ``session`` presents ``role``'s certificate (called by :func:`shared.transport.open_session`)."""
+    _ROLES[id(session)] = (role, keys)
+
+
+def forget(session: Any) -> None:
+    """The session is closing."""
+    _ROLES.pop(id(session), None)
+
+
+def denied(session: Any, key: str, kind: str) -> str:
+    """Why the access control drops ``kind`` (``put`` or ``subscribe``) on ``key`` from ``session`` ("" if not).
+
+    Only sessions opened with security are known here; others get "".
+    """
+    entry = _ROLES.get(id(session))
+    if entry is None:
+        return ""
+    role, keys = entry
+    routes = keys.routes()
+    if key not in routes:
+        return ""
+    if kind == "put" and key not in owned_keys(keys, role):
+        return f"role {role} may not put {key} (its owner is {routes[key][0]}): every peer drops it"
+    if kind == "subscribe" and key not in consumed_keys(keys, role):
+        return f"role {role} may not subscribe to {key}: it will receive nothing"
+    return ""

@@ -1,0 +1,88 @@
+"""A session's TLS settings from a security directory and a role; endpoints on TLS; the plain-TCP warning."""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import os
+from typing import TYPE_CHECKING, Any
+
+from shared.protocol import Keys
+
+from .acl import OBSERVER, access_control
+from .certificates import read_role
+
+if TYPE_CHECKING:
+    from shared.config import ZenohConfig
+
+__all__ = ["tls_settings", "secure_endpoints", "insecure_listen_warning", "security_settings"]
+
+log = logging.getLogger("shared.transport")
+
+
+def tls_settings(security_dir: str | os.PathLike[str], role: str) -> dict[str, Any]:
+    """Zenoh's ``transport/link/tls`` section: mutual TLS with the role's certificate, names verified.
+
+    Raises:
+        FileNotFoundError: If the CA or the role's certificate or key is missing (naming it).
+    """
+    ca, cert, key = read_role(security_dir, role)
+    return {
+        "root_ca_certificate": str(ca),
+        "enable_mtls": True,
+        "listen_private_key": str(key),
+        "listen_certificate": str(cert),
+        "connect_private_key": str(key),
+        "connect_certificate": str(cert),
+        "verify_name_on_connect": True,
+    }
+
+
+def secure_endpoints(endpoints: list[str]) -> list[str]:
+    """``tcp/HOST:PORT`` -> ``tls/HOST:PORT`` (other protocols unchanged): no plain-text link when secure."""
+    return [f"tls/{ep[4:]}" if ep.startswith("tcp/") else ep for ep in endpoints]
+
+
+def _host(endpoint: str) -> str:
+    address = endpoint.split("/", 1)[1].split("#")[0]
+    host = address.rsplit(":", 1)[0] if ":" in address else address
+    return host.strip("[]")
+
+
+def insecure_listen_warning(listen: list[str]) -> str:
+    """One warning line when a session without security listens beyond loopback ("" when it does not)."""
+    exposed = []
+    for ep in listen:
+        host = _host(ep)
+        try:
+            loopback = ipaddress.ip_address(host).is_loopback
+        except ValueError:
+            loopback = host == "localhost"
+        if not loopback:
+            exposed.append(ep)
+    if not exposed:
+        return ""
+    return (f"listening on {', '.join(exposed)} without security: anyone who reaches it may read and write every "
+            "key; use --security DIR (foresight security init, docs/security.md)")
+
+
+def security_settings(cfg: ZenohConfig) -> tuple[list[str], list[str], dict[str, Any]]:
+    """A session's endpoints and the Zenoh config entries its security asks for.
+
+    With ``cfg.security_dir``: endpoints on TLS, ``transport/link/tls`` (mutual TLS with the role's
+    certificate) and ``access_control`` (generated from the wire contract). Without: the endpoints as
+    given, no entries, and one warning logged when they listen beyond loopback.
+
+    Returns:
+        ``(listen, connect, {config path: value})``.
+    """
+    listen, connect = list(cfg.listen), list(cfg.connect)
+    if not cfg.security_dir:
+        warning = insecure_listen_warning(listen)
+        if warning:
+            log.warning("%s", warning)
+        return listen, connect, {}
+    return secure_endpoints(listen), secure_endpoints(connect), {
+        "transport/link/tls": tls_settings(cfg.security_dir, cfg.role or OBSERVER),
+        "access_control": access_control(Keys(cfg.prefix)),
+    }

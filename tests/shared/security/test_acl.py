@@ -1,0 +1,49 @@
+"""The access control is generated from the wire contract's table, and nothing else."""
+
+from __future__ import annotations
+
+from shared.protocol import ROUTES, SERVICES, Keys
+from shared.security.acl import OBSERVER, ROLES, ROUTER, access_control, consumed_keys, owned_keys, subscription_exprs
+
+KEYS = Keys("cell")
+
+
+def _rules_of(acl: dict, role: str, message: str, flow: str) -> set[str]:
+    ids = next(p["rules"] for p in acl["policies"] if p["subjects"] == [role])
+    exprs: set[str] = set()
+    for rule in acl["rules"]:
+        if rule["id"] in ids and message in rule["messages"] and flow in rule["flows"]:
+            assert rule["permission"] == "allow"
+            exprs |= set(rule["key_exprs"])
+    return exprs
+
+
+def test_every_data_key_has_exactly_one_owner_among_the_services() -> None:
+    """A key added to Keys.data_keys without an owner in ROUTES fails here."""
+    assert set(ROUTES) == {attr for attr in vars(KEYS) if getattr(KEYS, attr) in KEYS.data_keys()}
+    for attr, (owner, consumers) in ROUTES.items():
+        assert owner in SERVICES and set(consumers) <= set(SERVICES), attr
+        assert "executor" in consumers, f"{attr}: the executor logs every key"
+    owned = [k for role in SERVICES for k in owned_keys(KEYS, role)]
+    assert sorted(owned) == sorted(KEYS.data_keys())  # each key once
+
+
+def test_each_role_puts_only_what_it_owns_and_receives_what_it_consumes() -> None:
+    acl = access_control(KEYS)
+    assert acl["enabled"] and acl["default_permission"] == "deny"
+    assert {s["id"]: s["cert_common_names"] for s in acl["subjects"]} == {r: [r] for r in ROLES}
+    for role in SERVICES:
+        assert _rules_of(acl, role, "put", "ingress") == set(owned_keys(KEYS, role))
+        assert _rules_of(acl, role, "put", "egress") == set(consumed_keys(KEYS, role))
+        assert _rules_of(acl, role, "liveliness_token", "ingress") == {KEYS.alive(role)}
+    assert _rules_of(acl, OBSERVER, "put", "ingress") == set()  # reads only
+    assert _rules_of(acl, OBSERVER, "liveliness_token", "ingress") == set()
+    assert _rules_of(acl, OBSERVER, "put", "egress") == set(KEYS.data_keys())
+    assert _rules_of(acl, ROUTER, "put", "ingress") == set(KEYS.data_keys())  # it forwards
+
+
+def test_wildcard_subscriptions_only_where_every_matched_key_is_consumed() -> None:
+    assert "cell/human/*" in subscription_exprs(KEYS, "predictor")  # poses and markers, one ordered stream
+    assert "cell/**" in subscription_exprs(KEYS, "executor")  # its log
+    assert "cell/**" not in subscription_exprs(KEYS, "planner")
+    assert "cell/human/*" not in subscription_exprs(KEYS, "planner")  # it does not consume poses

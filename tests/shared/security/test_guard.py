@@ -1,0 +1,58 @@
+"""A secure session says, at declaration, what the access control will drop (one line, the service goes on)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import pytest
+
+from services.processes import free_port
+from shared.config import ZenohConfig
+from shared.protocol import HumanPose, Keys, RobotState
+from shared.security.acl import ROLES
+from shared.security.certificates import init_security_dir
+from shared.security.guard import denied, forget, remember
+from shared.security.tls import insecure_listen_warning, secure_endpoints
+from shared.transport import TypedPublisher, open_session, subscribe
+
+
+def test_denied_names_role_key_and_reason() -> None:
+    session, keys = object(), Keys()
+    assert denied(session, keys.pose, "put") == ""  # not a secure session
+    remember(session, "planner", keys)
+    try:
+        assert denied(session, keys.plan, "put") == ""
+        assert denied(session, keys.pose, "put") == ("role planner may not put foresight/human/pose (its owner is "
+                                                     "replayer): every peer drops it")
+        assert denied(session, keys.robot_state, "subscribe") == ""
+        assert "may not subscribe to foresight/human/pose" in denied(session, keys.pose, "subscribe")
+    finally:
+        forget(session)
+    assert denied(session, keys.pose, "put") == ""
+
+
+def test_endpoints_and_the_plain_tcp_warning() -> None:
+    assert secure_endpoints(["tcp/127.0.0.1:7447", "tls/h:1", "udp/h:2"]) == ["tls/127.0.0.1:7447", "tls/h:1",
+                                                                              "udp/h:2"]
+    assert insecure_listen_warning(["tcp/127.0.0.1:0", "tcp/localhost:7447", "tcp/[::1]:7447"]) == ""
+    text = insecure_listen_warning(["tcp/0.0.0.0:7447", "tcp/127.0.0.1:0"])
+    assert text.startswith("listening on tcp/0.0.0.0:7447 without security") and "--security DIR" in text
+
+
+def test_a_secure_service_logs_what_it_may_not_do(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    init_security_dir(tmp_path, ROLES)
+    cfg = ZenohConfig(mode="peer", listen=[f"tcp/127.0.0.1:{free_port()}"], connect=[], security_dir=str(tmp_path),
+                      role="planner")
+    keys = Keys()
+    with caplog.at_level(logging.WARNING, logger="shared.transport"), open_session(cfg) as session:
+        TypedPublisher(session, keys.plan)
+        TypedPublisher(session, keys.pose)
+        sub = subscribe(session, keys.robot_state, RobotState, lambda m: None)
+        sub2 = subscribe(session, keys.pose, HumanPose, lambda m: None)
+        sub.undeclare()
+        sub2.undeclare()
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("access control:")]
+    assert lines == ["access control: role planner may not put foresight/human/pose (its owner is replayer): every "
+                     "peer drops it", "access control: role planner may not subscribe to foresight/human/pose: it "
+                     "will receive nothing"]

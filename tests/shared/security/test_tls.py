@@ -1,0 +1,129 @@
+"""Real sessions on loopback: mutual TLS and the generated access control keep every role to its keys.
+
+One router (role ``router``) listens on ``tls/127.0.0.1:PORT``; services connect to it as peers
+with their own certificates (made here). Refused: a session with no certificate, one from another
+CA, an expired one, plain TCP to the TLS port - each reads nothing and writes nothing; the observer
+reads everything and writes nothing; a service cannot put a key it does not own.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import json
+import shutil
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from services.processes import free_port
+from shared.config import ZenohConfig
+from shared.security.acl import ROLES
+from shared.security.certificates import Issued, init_security_dir, issue
+from shared.transport import open_session
+
+POSE, STATE, PLAN = "foresight/human/pose", "foresight/robot/state", "foresight/planner/plan"
+
+
+@pytest.fixture(scope="module")
+def dirs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("security")
+    good, other, expired = root / "good", root / "other", root / "expired"
+    init_security_dir(good, ROLES)
+    init_security_dir(other, ["replayer"])  # another authority
+    shutil.copytree(good, expired)
+    old = issue(Issued((good / "ca.crt").read_bytes(), (good / "ca.key").read_bytes()), "replayer",
+                not_after=dt.datetime.now(dt.UTC) - dt.timedelta(hours=1))
+    (expired / "replayer.crt").write_bytes(old.cert_pem)
+    (expired / "replayer.key").write_bytes(old.key_pem)
+    return {"good": good, "other": other, "expired": expired}
+
+
+class Inbox:
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.got: list[tuple[str, str]] = []
+
+    def __call__(self, sample: zenoh.Sample) -> None:
+        with self.lock:
+            self.got.append((str(sample.key_expr), sample.payload.to_bytes().decode()))
+
+    def payloads(self) -> set[str]:
+        with self.lock:
+            return {p for _, p in self.got}
+
+
+@contextlib.contextmanager
+def cell(dirs: dict[str, Path]) -> Iterator[tuple[str, contextlib.ExitStack]]:
+    port = free_port()
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(open_session(ZenohConfig(mode="router", listen=[f"tcp/127.0.0.1:{port}"], connect=[],
+                                                     security_dir=str(dirs["good"]), role="router")))
+        yield f"tcp/127.0.0.1:{port}", stack
+
+
+def _session(stack: contextlib.ExitStack, endpoint: str, role: str, security: Path | None) -> zenoh.Session:
+    cfg = ZenohConfig(mode="peer", listen=["tcp/127.0.0.1:0"], connect=[endpoint], security_dir=str(security or ""),
+                      role=role)
+    return stack.enter_context(open_session(cfg))
+
+
+def _raw_tls_without_certificate(endpoint: str, ca: Path) -> zenoh.Session:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", "[]")
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint.replace("tcp/", "tls/")]))
+    conf.insert_json5("transport/link/tls", json.dumps({"root_ca_certificate": str(ca)}))
+    return zenoh.open(conf)
+
+
+def test_roles_are_held_to_the_wire_contract(dirs: dict[str, Path]) -> None:
+    with cell(dirs) as (endpoint, stack):
+        inboxes = {role: Inbox() for role in ("predictor", "executor", "planner", "observer")}
+        sessions = {}
+        for role, key in (("predictor", "foresight/human/*"), ("executor", "foresight/**"), ("planner", STATE),
+                          ("observer", "foresight/**")):
+            sessions[role] = _session(stack, endpoint, role, dirs["good"])
+            sessions[role].declare_subscriber(key, inboxes[role])
+        replayer = _session(stack, endpoint, "replayer", dirs["good"])
+        executor = sessions["executor"]
+        time.sleep(1.0)
+        replayer.put(POSE, "pose from the replayer")
+        executor.put(STATE, "state from the executor")
+        sessions["planner"].put(POSE, "pose from the planner")  # not its key
+        replayer.put(PLAN, "plan from the replayer")  # not its key
+        sessions["observer"].put(STATE, "state from the observer")  # reads only
+        time.sleep(1.0)
+        got = {role: inbox.payloads() for role, inbox in inboxes.items()}
+    assert got["predictor"] == {"pose from the replayer"}
+    assert got["planner"] == {"state from the executor"}
+    # the observer reads every key (its own put only in its own process: it reached no one else)
+    assert got["observer"] == {"pose from the replayer", "state from the executor", "state from the observer"}
+    assert got["executor"] == {"pose from the replayer", "state from the executor"}
+
+
+@pytest.mark.parametrize("intruder", ["no certificate", "another CA", "expired", "plain TCP"])
+def test_refused_sessions_read_and_write_nothing(intruder: str, dirs: dict[str, Path]) -> None:
+    with cell(dirs) as (endpoint, stack):
+        executor = _session(stack, endpoint, "executor", dirs["good"])
+        logged = Inbox()
+        executor.declare_subscriber("foresight/**", logged)
+        if intruder == "no certificate":
+            bad = stack.enter_context(_raw_tls_without_certificate(endpoint, dirs["good"] / "ca.crt"))
+        else:
+            security = {"another CA": dirs["other"], "expired": dirs["expired"], "plain TCP": None}[intruder]
+            bad = _session(stack, endpoint, "replayer", security)
+        seen = Inbox()
+        bad.declare_subscriber("foresight/**", seen)
+        replayer = _session(stack, endpoint, "replayer", dirs["good"])
+        time.sleep(1.0)
+        bad.put(POSE, "intruder pose")
+        replayer.put(POSE, "genuine pose")
+        time.sleep(1.0)
+        assert logged.payloads() == {"genuine pose"}
+        assert seen.payloads() <= {"intruder pose"}  # at most its own put, delivered in its own process
