@@ -75,6 +75,7 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
                     *common],
         "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
                      "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"]), *common],
+        "ros2": [*scene, *common],
         "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
                      *(["--finish-path"] if lockstep and cfg.finish else []),
                      "--mcap", str(mcap), *scene, *common],
@@ -183,8 +184,10 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
         recorder.on_message(msg)
 
     status = 0
+    # with --ros2 the ROS 2 gateway starts before the executor, so that it sees the whole run
+    order = (*SERVICES_IN_ORDER[:-1], *(["ros2"] if cfg.ros2 else []), SERVICES_IN_ORDER[-1])
     procs = {name: ServiceProcess(name, f"services.{name}", args[name], run_dir / f"{name}.log")
-             for name in SERVICES_IN_ORDER}
+             for name in order}
     deadline = time.monotonic() + cfg.timeout
     with open_session(hub) as session:
         subs = [subscribe(session, keys.plan, Plan, on_plan),
@@ -194,7 +197,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 subscribe(session, keys.pose, HumanPose, on_other)]
         presence = Presence(session, keys, "demo")
         try:
-            for name in SERVICES_IN_ORDER:
+            for name in order:
                 if stop.is_set():
                     break
                 procs[name].start()
@@ -220,7 +223,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                     f"{name} ({'killed' if code is not None and code < 0 else code})"
                     for name, code in supervisor.faults))
         finally:
-            for name in reversed(SERVICES_IN_ORDER):
+            for name in reversed(order):
                 code = procs[name].stop(timeout=10.0)
                 if code not in (0, None, -15):
                     log.warning("%s exited with status %s", name, code)

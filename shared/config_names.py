@@ -30,6 +30,7 @@ SECTIONS: dict[str, str] = {
     "planner": "services.planner.config:PlannerServiceConfig",
     "executor": "services.executor.core:ExecutorConfig",
     "router": "tools.router:RouterConfig",
+    "ros2": "services.ros2.service:Ros2ServiceConfig",
     "demo": "services.demo:DemoConfig",
 }
 """Section (TOML table, variable and command name) -> ``module:Class`` of its config dataclass."""

@@ -27,6 +27,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("services.predictor.train", "train the prediction model (GMMs, GMR motions, swept volumes)"),
     "eval": ("services.experiments.cli", "the paper's experiments and beyond"),
     "bench": ("services.bench", "benchmark a component"),
+    "ros2": ("services.ros2.__main__", "publish the run as ROS 2 topics over rmw_zenoh (RViz, ros2 topic echo)"),
     "security": ("tools.security", "certificates for mutual TLS and the access control from the wire contract"),
 }
 

@@ -97,6 +97,7 @@ def test_roles_are_held_to_the_wire_contract(dirs: dict[str, Path]) -> None:
         executor.put(STATE, "state from the executor")
         sessions["planner"].put(POSE, "pose from the planner")  # not its key
         replayer.put(PLAN, "plan from the replayer")  # not its key
+        sessions["predictor"].put(STATE, "state from the predictor")  # not its key
         sessions["observer"].put(STATE, "state from the observer")  # reads only
         time.sleep(1.0)
         got = {role: inbox.payloads() for role, inbox in inboxes.items()}

@@ -1,0 +1,153 @@
+"""The ``ros2`` service's loop: Foresight's messages in, ROS 2 samples out on rmw_zenoh keys, with the graph tokens.
+
+A ROS 2 node named ``config.node`` (liveliness token ``NN``), one publisher token (``MP``) per topic,
+and per published sample the rmw_zenoh attachment (per-topic sequence number from 1, source time,
+the publisher's 16-byte GID). The occupancy and the human are markers for RViz and are sent at most
+``viz_rate_hz`` times a second each (the newest one; encoding thousands of points is not free); the
+plan, goal, joint states and posterior go out as they come.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from shared.config import ZenohConfig, opt
+from shared.protocol import ClassPosterior, DemoMarker, HumanPose, Keys, OccupancyGrid, Plan, RobotState
+from shared.rejects import RejectCounter
+from shared.scene import SCENE_HELP, load_scene
+from shared.transport import Presence, open_session, subscribe
+
+from .core import TOPICS, Ros2Config, Ros2Mapping
+from .wire import Attachment, endpoint_token, node_token, qos_chunk
+
+__all__ = ["Ros2ServiceConfig", "Ros2Service", "Ros2Stats"]
+
+log = logging.getLogger("foresight.ros2")
+
+
+@dataclass
+class Ros2ServiceConfig(Ros2Config):
+    """Options of ``foresight ros2``: the mapping's and the loop's."""
+
+    scene: str = opt("", help=SCENE_HELP + " (places the human's markers; empty: pr2_two_cups)")
+    viz_rate_hz: float = opt(5.0, help="highest rate of the occupancy and human markers per topic")
+    stop_with: str = opt("", help="stop when this service's liveliness token goes away (e.g. executor)")
+
+
+@dataclass
+class Ros2Stats:
+    """What the gateway sent, per ROS 2 topic."""
+
+    sent: dict[str, int]
+
+
+class Ros2Service:
+    """Publishes Foresight's run as ROS 2 topics over rmw_zenoh (no ROS installation needed).
+
+    Args:
+        config: Topics, frame, rates.
+        zenoh: The session's config (the same Zenoh network as the ROS 2 nodes: their rmw_zenoh router).
+    """
+
+    def __init__(self, config: Ros2ServiceConfig, zenoh: ZenohConfig) -> None:
+        config.validate()
+        self.config = config
+        self.zenoh = zenoh
+        self.keys = Keys(zenoh.prefix)
+        self.mapping = Ros2Mapping(config)
+        self.scene = load_scene(config.scene or None)
+        self.rejects = RejectCounter("ros2")
+        self.stats = Ros2Stats({role: 0 for role in TOPICS})
+        self._lock = threading.Lock()
+        self._seq = dict.fromkeys(TOPICS, 0)
+        self._gid: dict[str, bytes] = {}
+        self._first_pose: dict[int, np.ndarray] = {}
+        self._last_viz: dict[str, float] = {}
+        self._session: Any = None
+
+    def _put(self, role: str, payload: bytes) -> None:
+        with self._lock:
+            self._seq[role] += 1
+            att = Attachment(self._seq[role], time.time_ns(), self._gid[role]).encode()
+            self.stats.sent[role] += 1
+        self._session.put(self.mapping.key(role), payload, attachment=att)
+
+    def _due(self, role: str) -> bool:
+        now = time.monotonic()
+        with self._lock:
+            if now - self._last_viz.get(role, -1e9) < 1.0 / self.config.viz_rate_hz:
+                return False
+            self._last_viz[role] = now
+            return True
+
+    def on_plan(self, plan: Plan) -> None:
+        """The chosen trajectory and goal."""
+        self._put("trajectory", self.mapping.trajectory(plan))
+        self._put("goal", self.mapping.goal(plan))
+
+    def on_state(self, state: RobotState) -> None:
+        """The simulated robot's joints."""
+        if self.config.joint_states:
+            self._put("joint_states", self.mapping.joint_state(state))
+
+    def on_occupancy(self, grid: OccupancyGrid) -> None:
+        """The predicted occupancy (rate-limited)."""
+        if self._due("occupancy"):
+            self._put("occupancy", self.mapping.occupancy(grid))
+
+    def on_human(self, msg: HumanPose | DemoMarker) -> None:
+        """The human's body, placed as the predictor places it (relative to the demonstration's first pose)."""
+        from shared.human import place_in_scene
+
+        if isinstance(msg, DemoMarker):
+            return
+        first = self._first_pose.setdefault(msg.demo_id, np.asarray(msg.features, dtype=np.float64))
+        if self._due("human"):
+            self._put("human", self.mapping.human(msg, place_in_scene(msg.features, first, self.scene)))
+
+    def on_posterior(self, post: ClassPosterior) -> None:
+        """The class posterior."""
+        self._put("posterior", self.mapping.posterior(post))
+
+    def run(self, stop: threading.Event | None = None) -> Ros2Stats:
+        """Serve until ``stop`` is set (or the ``stop_with`` service goes away)."""
+        stop = stop or threading.Event()
+        cfg = self.config
+        with open_session(self.zenoh, stop, "ros2") as session:
+            self._session = session
+            zid = str(session.zid())
+            liveliness = session.liveliness()
+            tokens = [liveliness.declare_token(node_token(cfg.domain_id, zid, 0, cfg.namespace, cfg.node))]
+            for entity, (role, topic) in enumerate(TOPICS.items(), start=1):
+                self._gid[role] = hashlib.sha256(f"{zid}/{entity}".encode()).digest()[:16]
+                if role == "joint_states" and not cfg.joint_states:
+                    continue
+                h = self.mapping.hashes[topic.msgtype]
+                tokens.append(liveliness.declare_token(endpoint_token(
+                    cfg.domain_id, zid, 0, entity, "MP", cfg.namespace, cfg.node, cfg.topic(role), topic.msgtype, h,
+                    qos_chunk(depth=10))))
+            subs = [subscribe(session, self.keys.plan, Plan, self.on_plan, self.rejects),
+                    subscribe(session, self.keys.robot_state, RobotState, self.on_state, self.rejects),
+                    subscribe(session, self.keys.occupancy, OccupancyGrid, self.on_occupancy, self.rejects),
+                    subscribe(session, self.keys.posterior, ClassPosterior, self.on_posterior, self.rejects),
+                    subscribe(session, self.keys.pose, HumanPose, self.on_human, self.rejects)]
+            presence = Presence(session, self.keys, "ros2", stop_with=cfg.stop_with, stop=stop)
+            log.info("ros2: node %s%s on domain %d, topics %s, session %s", cfg.namespace.rstrip("/") + "/", cfg.node,
+                     cfg.domain_id, ", ".join(cfg.topic(r) for r in TOPICS), zid)
+            try:
+                stop.wait()
+            finally:
+                presence.close()
+                for s in subs:
+                    s.undeclare()
+                for t in tokens:
+                    t.undeclare()
+        log.info("ros2: stopped; sent %s", ", ".join(f"{cfg.topic(r)} {n}" for r, n in self.stats.sent.items()))
+        return self.stats

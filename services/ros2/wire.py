@@ -1,0 +1,108 @@
+"""How rmw_zenoh puts a ROS 2 topic on Zenoh: data keys, the sample attachment, graph liveliness tokens.
+
+Followed: ros2/rmw_zenoh ``docs/design.md`` and ``rmw_zenoh_cpp/src/detail/`` (``attachment_helpers.cpp``:
+``AttachmentData::serialize_to_zbytes`` with zenoh-cpp's ``ext::Serializer``, the layout since late
+2024, rolling and jazzy; ``liveliness_utils.cpp``: the tokens; ``qos.cpp``: the QoS chunk). Pure: no
+Zenoh, no ROS; the ``rosbags`` type store gives the message definitions, CDR and the RIHS01 hashes.
+
+* data key: ``<domain>/<topic without its leading slash>/<pkg>::msg::dds_::<Type>_/<RIHS01 hash>``;
+* payload: CDR, little-endian, with its 4-byte encapsulation header ``00 01 00 00``;
+* attachment, 33 bytes: int64 LE sequence number, int64 LE source timestamp (ns since the epoch),
+  the byte 16 (the GID's length), the 16-byte GID. A ROS 2 subscriber drops a sample without one;
+* graph: ``@ros2_lv/<domain>/<zid>/<node id>/<entity id>/<NN|MP|MS>/<enclave>/<namespace>/<node>``
+  ``[/<topic, / as %>/<dds type>/<hash>/<qos>]``, empty names as ``%``.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+__all__ = ["Attachment", "ATTACHMENT_SIZE", "GID_SIZE", "dds_type", "data_key", "mangle", "node_token",
+           "endpoint_token", "qos_chunk", "AttachmentError"]
+
+GID_SIZE = 16
+ATTACHMENT_SIZE = 8 + 8 + 1 + GID_SIZE
+_LAYOUT = struct.Struct("<qqB16s")
+
+
+class AttachmentError(ValueError):
+    """A sample's attachment is missing or is not rmw_zenoh's."""
+
+
+@dataclass(frozen=True)
+class Attachment:
+    """rmw_zenoh's per-sample metadata."""
+
+    sequence_number: int
+    source_timestamp_ns: int
+    gid: bytes
+
+    def encode(self) -> bytes:
+        """The 33 bytes."""
+        if len(self.gid) != GID_SIZE:
+            raise AttachmentError(f"attachment: the GID must be {GID_SIZE} bytes, got {len(self.gid)}")
+        return _LAYOUT.pack(self.sequence_number, self.source_timestamp_ns, GID_SIZE, self.gid)
+
+    @classmethod
+    def decode(cls, data: bytes | None) -> Attachment:
+        """Parse 33 bytes.
+
+        Raises:
+            AttachmentError: Missing, of another size, or a GID length other than 16.
+        """
+        if data is None:
+            raise AttachmentError("attachment: missing (rmw_zenoh sends one with every sample)")
+        if len(data) != ATTACHMENT_SIZE:
+            raise AttachmentError(f"attachment: {len(data)} bytes, rmw_zenoh's is {ATTACHMENT_SIZE}")
+        seq, stamp, n, gid = _LAYOUT.unpack(data)
+        if n != GID_SIZE:
+            raise AttachmentError(f"attachment: GID length {n}, expected {GID_SIZE}")
+        return cls(seq, stamp, gid)
+
+
+def dds_type(msgtype: str) -> str:
+    """``sensor_msgs/msg/JointState`` -> ``sensor_msgs::msg::dds_::JointState_``."""
+    pkg, kind, name = msgtype.split("/")
+    return f"{pkg}::{kind}::dds_::{name}_"
+
+
+def _topic(topic: str) -> str:
+    if not topic.startswith("/") or topic.endswith("/") or "//" in topic or any(c in topic for c in "*$?#"):
+        raise ValueError(f"ROS 2 topic {topic!r}: must be absolute (/a/b), without wildcards or empty parts")
+    return topic[1:]
+
+
+def data_key(domain: int, topic: str, msgtype: str, type_hash: str) -> str:
+    """The Zenoh key of a topic's data."""
+    return f"{domain}/{_topic(topic)}/{dds_type(msgtype)}/{type_hash}"
+
+
+def mangle(name: str) -> str:
+    """A name in a liveliness token: ``/`` -> ``%``, empty -> ``%``."""
+    return name.replace("/", "%") if name and name != "/" else "%"
+
+
+def qos_chunk(reliable: bool = True, depth: int = 10, transient_local: bool = False) -> str:
+    """rmw_zenoh's QoS field of a token; a component equal to its default (reliable, volatile, keep last) is empty.
+
+    ``<reliability>:<durability>:<history>,<depth>:<deadline>:<lifespan>:<liveliness>,<lease>``.
+    """
+    reliability = "" if reliable else "2"
+    durability = "1" if transient_local else ""
+    return f"{reliability}:{durability}:,{depth}:,:,:,,"
+
+
+def node_token(domain: int, zid: str, node_id: int, namespace: str, node: str, enclave: str = "") -> str:
+    """The liveliness token that makes a node visible (``ros2 node list``)."""
+    return f"@ros2_lv/{domain}/{zid}/{node_id}/{node_id}/NN/{mangle(enclave)}/{mangle(namespace)}/{node}"
+
+
+def endpoint_token(domain: int, zid: str, node_id: int, entity_id: int, kind: str, namespace: str, node: str,
+                   topic: str, msgtype: str, type_hash: str, qos: str, enclave: str = "") -> str:
+    """The liveliness token of a publisher (``kind`` ``MP``) or subscription (``MS``)."""
+    if kind not in ("MP", "MS"):
+        raise ValueError(f"entity kind must be MP or MS, got {kind!r}")
+    _topic(topic)
+    return (f"@ros2_lv/{domain}/{zid}/{node_id}/{entity_id}/{kind}/{mangle(enclave)}/{mangle(namespace)}/{node}/"
+            f"{mangle(topic)}/{dds_type(msgtype)}/{type_hash}/{qos}")

@@ -1,0 +1,105 @@
+"""Every Foresight message mapped to ROS 2 decodes with rosbags' own deserializer; bad input is refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rosbags.typesys import Stores, get_typestore
+
+from services.ros2.core import TOPICS, Ros2Config, Ros2InputError, Ros2Mapping
+from shared.config import ConfigError
+from shared.human import place_in_scene
+from shared.protocol import ClassPosterior, HumanPose, OccupancyGrid, Plan, RobotState
+from shared.scene import load_scene
+
+JOINTS = ["torso_lift_joint", "r_shoulder_pan_joint", "r_shoulder_lift_joint"]
+TS = get_typestore(Stores.ROS2_JAZZY)  # a type store of its own: decoding does not share the writer's
+
+
+@pytest.fixture(scope="module")
+def mapping() -> Ros2Mapping:
+    return Ros2Mapping(Ros2Config(namespace="/cell", frame_id="world"))
+
+
+def _plan() -> Plan:
+    traj = np.stack([np.linspace(0, 1, 5)[:, None] * np.array([0.1, 0.2, 0.3]) + k for k in range(2)]).astype(
+        np.float32)
+    return Plan(stamp=12.25, tick=3, step=3, goal_names=["blue_cup", "red_cup"], joint_names=JOINTS, dt=0.1, chosen=1,
+                planning_ms=5.0, occupancy_tick=2, occupancy_index=0, trajectories=traj,
+                cost_smoothness=np.zeros(2), cost_obstacle=np.zeros(2), cost_human=np.zeros(2),
+                cost_total=np.array([2.0, 1.0]), valid=np.ones(2, bool))
+
+
+def test_topics_keys_and_hashes(mapping: Ros2Mapping) -> None:
+    assert mapping.config.topic("trajectory") == "/cell/foresight/joint_trajectory"
+    assert mapping.config.topic("joint_states") == "/joint_states"  # absolute: not namespaced
+    for role, topic in TOPICS.items():
+        key = mapping.key(role)
+        assert key.startswith("0/") and key.endswith(TS.hash_rihs01(topic.msgtype))
+        assert key.split("/")[-2].endswith("_") and "::msg::dds_::" in key
+
+
+def test_plan_goal_state_posterior_round_trip(mapping: Ros2Mapping) -> None:
+    plan = _plan()
+    raw = mapping.trajectory(plan)
+    assert raw[:4] == b"\x00\x01\x00\x00"  # CDR, little-endian
+    jt = TS.deserialize_cdr(raw, "trajectory_msgs/msg/JointTrajectory")
+    assert list(jt.joint_names) == JOINTS and len(jt.points) == 5 and jt.header.frame_id == "world"
+    np.testing.assert_allclose(jt.points[4].positions, plan.trajectories[1][4], rtol=1e-6)
+    assert [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in jt.points] == pytest.approx(
+        [0.0, 0.1, 0.2, 0.3, 0.4])
+    assert (jt.header.stamp.sec, jt.header.stamp.nanosec) == (12, 250_000_000)
+    assert TS.deserialize_cdr(mapping.goal(plan), "std_msgs/msg/String").data == "red_cup"
+    state = RobotState(stamp=1.5, tick=1, joint_names=JOINTS, goal=1, reached=False, holding=False, reason="",
+                       q=np.array([0.1, -0.2, 0.3]), qd=np.array([0.0, 0.1, 0.0]))
+    js = TS.deserialize_cdr(mapping.joint_state(state), "sensor_msgs/msg/JointState")
+    assert list(js.name) == JOINTS and js.position.tolist() == [0.1, -0.2, 0.3]
+    post = ClassPosterior(stamp=1.0, tick=1, demo_id=0, index=3, class_names=["a", "b"],
+                          posterior=np.array([0.25, 0.75]), log_likelihood=np.array([-3.0, -2.0]))
+    ds = TS.deserialize_cdr(mapping.posterior(post), "diagnostic_msgs/msg/DiagnosticStatus")
+    assert ds.message == "b" and [(kv.key, float(kv.value)) for kv in ds.values] == [("a", 0.25), ("b", 0.75)]
+
+
+def test_occupancy_and_human_markers(mapping: Ros2Mapping) -> None:
+    dense = np.zeros((6, 6, 6))
+    dense[1, 2, 3], dense[4, 4, 4], dense[0, 0, 0] = 1.0, 0.5, 0.01  # the last under min_probability
+    grid = OccupancyGrid.from_dense(dense, np.array([1.0, 2.0, 3.0]), 0.1, stamp=2.0, tick=2, tick_last=True,
+                                    demo_id=0, index=5, method="prediction")
+    ma = TS.deserialize_cdr(mapping.occupancy(grid), "visualization_msgs/msg/MarkerArray")
+    (m,) = ma.markers
+    assert m.type == 6 and m.scale.x == pytest.approx(0.1) and len(m.points) == len(m.colors) == 2
+    assert sorted((round(p.x, 3), round(p.y, 3), round(p.z, 3)) for p in m.points) == [(1.15, 2.25, 3.35),
+                                                                                       (1.45, 2.45, 3.45)]
+    feats = np.array([0.0, 0.0, 0.95, 0.0, 0.0, 0.0, 0.0, 0.2, 0.1, 0.3, 0.0, 0.5])
+    pose = HumanPose(stamp=2.0, tick=2, tick_last=True, demo_id=0, index=0, features=feats)
+    hm = TS.deserialize_cdr(mapping.human(pose, place_in_scene(feats, feats, load_scene(None))),
+                            "visualization_msgs/msg/MarkerArray")
+    assert hm.markers[0].type == 5 and len(hm.markers[0].points) % 2 == 0 and len(hm.markers[0].points) >= 2
+
+
+def test_incoming_joint_states_are_checked(mapping: Ros2Mapping) -> None:
+    js = TS.types["sensor_msgs/msg/JointState"]
+    header = TS.types["std_msgs/msg/Header"](stamp=TS.types["builtin_interfaces/msg/Time"](sec=3, nanosec=5),
+                                             frame_id="")
+
+    def raw(names: list[str], pos: list[float]) -> bytes:
+        msg = js(header=header, name=names, position=np.array(pos), velocity=np.zeros(0), effort=np.zeros(0))
+        return bytes(TS.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+
+    stamp, q = mapping.joint_state_in(raw(["x", *reversed(JOINTS)], [9.0, 0.3, 0.2, 0.1]), JOINTS)
+    assert stamp == pytest.approx(3.000000005) and q.tolist() == [0.1, 0.2, 0.3]  # reordered to ours
+    with pytest.raises(Ros2InputError, match=r"joints \['r_shoulder_lift_joint'\] missing"):
+        mapping.joint_state_in(raw(JOINTS[:2], [0.1, 0.2]), JOINTS)
+    with pytest.raises(Ros2InputError, match="non-finite position of \\['r_shoulder_pan_joint'\\]"):
+        mapping.joint_state_in(raw(JOINTS, [0.1, float("nan"), 0.3]), JOINTS)
+    with pytest.raises(Ros2InputError, match="not CDR"):
+        mapping.joint_state_in(b"\xff\xff", JOINTS)
+    with pytest.raises(Ros2InputError, match="cannot be decoded"):
+        mapping.joint_state_in(raw(JOINTS, [0.1, 0.2, 0.3])[:20], JOINTS)
+
+
+def test_bad_config_is_named() -> None:
+    for kwargs, text in (({"domain_id": 300}, "ros2.domain_id"), ({"namespace": "cell"}, "ros2.namespace"),
+                         ({"node": "a/b"}, "ros2.node")):
+        with pytest.raises(ConfigError, match=text):
+            Ros2Config(**kwargs).validate()

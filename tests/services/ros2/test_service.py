@@ -1,0 +1,98 @@
+"""The ROS 2 gateway on a real loopback session: what a ROS 2 node over rmw_zenoh would receive.
+
+A "ROS side" session subscribes to the domain's keys and asks for the graph tokens, as rmw_zenoh
+does; every sample must decode with rosbags by the type its key names, carry rmw_zenoh's attachment
+with per-topic sequence numbers 1, 2, ..., and every topic must have its publisher token.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+import zenoh
+from rosbags.typesys import Stores, get_typestore
+
+from services.ros2.core import TOPICS
+from services.ros2.service import Ros2Service, Ros2ServiceConfig
+from services.ros2.wire import Attachment
+from shared.config import ZenohConfig
+from shared.protocol import ClassPosterior, HumanPose, Keys, OccupancyGrid, Plan, RobotState
+from shared.transport import TypedPublisher, open_session
+
+TS = get_typestore(Stores.ROS2_JAZZY)
+JOINTS = ["torso_lift_joint", "r_shoulder_pan_joint"]
+
+
+def _msgtype(dds: str) -> str:
+    pkg, kind, _, name = dds.split("::")
+    return f"{pkg}/{kind}/{name[:-1]}"
+
+
+def test_every_sample_decodes_with_its_attachment_and_every_topic_has_a_token(
+        zenoh_hub: Callable[[], ZenohConfig], wait_until: Callable[..., bool]) -> None:
+    hub = zenoh_hub()
+    keys = Keys(hub.prefix)
+    got: list[tuple[str, bytes, bytes | None]] = []
+    lock = threading.Lock()
+
+    def on_ros(sample: zenoh.Sample) -> None:
+        with lock:
+            att = sample.attachment
+            got.append((str(sample.key_expr), sample.payload.to_bytes(), att.to_bytes() if att is not None else None))
+
+    stop = threading.Event()
+    service = Ros2Service(Ros2ServiceConfig(viz_rate_hz=1000.0), zenoh_hub())
+    with open_session(hub) as ros, open_session(zenoh_hub()) as foresight:
+        sub = ros.declare_subscriber("0/**", on_ros)
+        thread = threading.Thread(target=service.run, args=(stop,), daemon=True)
+        thread.start()
+        try:
+            assert wait_until(lambda: len(list(ros.liveliness().get("@ros2_lv/0/**", timeout=1.0))) >= 7, 30.0)
+            tokens = [str(r.ok.key_expr) for r in ros.liveliness().get("@ros2_lv/0/**", timeout=2.0) if r.ok]
+            time.sleep(0.3)
+            traj = np.zeros((2, 4, 2), np.float32)
+            plan = Plan(stamp=1.0, tick=0, step=0, goal_names=["blue_cup", "red_cup"], joint_names=JOINTS, dt=0.1,
+                        chosen=0, planning_ms=1.0, occupancy_tick=-1, occupancy_index=-1, trajectories=traj,
+                        cost_smoothness=np.zeros(2), cost_obstacle=np.zeros(2), cost_human=np.zeros(2),
+                        cost_total=np.ones(2), valid=np.ones(2, bool))
+            TypedPublisher(foresight, keys.plan).put(plan)
+            state_pub = TypedPublisher(foresight, keys.robot_state)
+            for i in range(3):
+                state_pub.put(RobotState(stamp=1.0 + i, tick=i, joint_names=JOINTS, goal=0, reached=False,
+                                         holding=False, reason="", q=np.full(2, 0.1 * i), qd=np.zeros(2)))
+            dense = np.zeros((8, 8, 8))
+            dense[2, 3, 4] = 0.9
+            TypedPublisher(foresight, keys.occupancy).put(OccupancyGrid.from_dense(
+                dense, np.zeros(3), 0.05, stamp=1.0, tick=0, tick_last=True, demo_id=0, index=0, method="prediction"))
+            TypedPublisher(foresight, keys.posterior).put(ClassPosterior(
+                stamp=1.0, tick=0, demo_id=0, index=0, class_names=["a", "b"], posterior=np.array([0.4, 0.6]),
+                log_likelihood=np.zeros(2)))
+            TypedPublisher(foresight, keys.pose).put(HumanPose(
+                stamp=1.0, tick=0, tick_last=True, demo_id=0, index=0,
+                features=np.array([0.0, 0.0, 0.95, 0.0, 0.0, 0.0, 0.0, 0.2, 0.1, 0.3, 0.0, 0.5])))
+            assert wait_until(lambda: len(got) >= 8, 20.0), got
+        finally:
+            stop.set()
+            thread.join(10.0)
+            sub.undeclare()
+    by_key: dict[str, list[tuple[bytes, Attachment]]] = {}
+    for key, payload, att in got:
+        by_key.setdefault(key, []).append((payload, Attachment.decode(att)))
+    expected = {service.mapping.key(role) for role in TOPICS}
+    assert set(by_key) == expected
+    for key, samples in by_key.items():
+        msgtype = _msgtype(key.split("/")[-2])
+        assert key.split("/")[-1] == TS.hash_rihs01(msgtype)
+        for payload, _ in samples:
+            TS.deserialize_cdr(payload, msgtype)  # decodes, by an independent type store
+        assert [a.sequence_number for _, a in samples] == list(range(1, len(samples) + 1))
+        assert len({a.gid for _, a in samples}) == 1 and samples[0][1].source_timestamp_ns > 1.7e18
+    assert len(by_key[service.mapping.key("joint_states")]) == 3
+    assert sum("/NN/" in t and t.endswith("/foresight") for t in tokens) == 1
+    publishers = [t for t in tokens if "/MP/" in t]
+    for role, topic in TOPICS.items():
+        mangled = service.config.topic(role).replace("/", "%")
+        assert sum(f"/{mangled}/" in t and t.split("/")[-2] == TS.hash_rihs01(topic.msgtype) for t in publishers) == 1
