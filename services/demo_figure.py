@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from services.demo_outcome import Outcome
+from services.experiments.plots import save_figure
 from shared.protocol import HumanPose, OccupancyGrid
 from shared.scene import Scene
 
@@ -135,9 +136,4 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
     goals.set_ylim(-0.6, len(outcomes) - 0.4)
     if title:
         fig.suptitle(title, fontsize=11)
-    fig.tight_layout()
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)

@@ -9,12 +9,14 @@ in any log.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -55,6 +57,20 @@ def _demo(lib: Path, models: Path, run_dir: Path, mode: str) -> subprocess.Popen
     env = {**os.environ, "FORESIGHT_PLANNER_COMPILE": "false", "PYTHONUNBUFFERED": "1"}
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                             text=True, env=env, start_new_session=True)
+
+
+@contextlib.contextmanager
+def _demo_run(lib: Path, models: Path, run_dir: Path, mode: str) -> Iterator[subprocess.Popen[str]]:
+    """The demo as a process group of its own; killed with its group (and any service left) at the end."""
+    proc = _demo(lib, models, run_dir, mode)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+        for pid in _services_of(proc.pid):
+            os.kill(pid, signal.SIGKILL)
 
 
 def _interrupt_at(proc: subprocess.Popen[str], marker: str, delay_s: float, sig: int, group: bool
@@ -102,13 +118,8 @@ def test_ctrl_c_at_any_moment_leaves_complete_logs(moment: str, demo_inputs: tup
     lib, models = demo_inputs
     marker, delay = MOMENTS[moment]
     run_dir = tmp_path / "run"
-    proc = _demo(lib, models, run_dir, "lockstep")
-    try:
+    with _demo_run(lib, models, run_dir, "lockstep") as proc:
         lines, sent, stop_s = _interrupt_at(proc, marker, delay, signal.SIGINT, group=True)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=30)
     assert sent, "\n".join(lines)[-3000:]
     mcaps = _check_run(run_dir, lines, proc.returncode)
     if proc.returncode == 130:
@@ -125,13 +136,8 @@ def test_sigterm_to_the_demo_alone_stops_its_services(demo_inputs: tuple[Path, P
     """``kill PID`` (SIGTERM to the demo only, as a process manager sends it) in real time: same clean stop."""
     lib, models = demo_inputs
     run_dir = tmp_path / "run"
-    proc = _demo(lib, models, run_dir, "realtime")
-    try:
+    with _demo_run(lib, models, run_dir, "realtime") as proc:
         lines, sent, _ = _interrupt_at(proc, _row(2), 0.0, signal.SIGTERM, group=False)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=30)
     assert sent and proc.returncode == 130, "\n".join(lines)[-3000:]
     assert _check_run(run_dir, lines, proc.returncode)
 
@@ -140,23 +146,19 @@ def test_killed_demo_leaves_no_service_behind(demo_inputs: tuple[Path, Path], tm
     """SIGKILL of the demo alone: its services see their parent gone, stop, and the executor closes its log."""
     lib, models = demo_inputs
     run_dir = tmp_path / "run"
-    proc = _demo(lib, models, run_dir, "realtime")
-    try:
+    with _demo_run(lib, models, run_dir, "realtime") as proc:
         lines, sent, _ = _interrupt_at(proc, _row(2), 0.0, signal.SIGKILL, group=False)
         assert sent
-        pgids: set[int] = set()
-        deadline = time.monotonic() + 60
         for log in ("executor", "planner", "predictor", "replayer"):
             assert (run_dir / "latest" / f"{log}.log").is_file()
+        left: set[int] = set()
+        deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
-            pgids = _services_of(proc.pid)
-            if not pgids:
+            left = _services_of(proc.pid)
+            if not left:
                 break
             time.sleep(0.5)
-        assert not pgids, f"services still running: {pgids}"
-    finally:
-        for pid in _services_of(proc.pid):
-            os.kill(pid, signal.SIGKILL)
+        assert not left, f"services still running: {left}"
     mcaps = sorted({p.resolve() for p in run_dir.rglob("*.mcap")})
     assert mcaps and all(read_log(m).complete for m in mcaps)
 
