@@ -12,6 +12,7 @@ import hashlib
 import json
 import logging
 import math
+import os
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -133,7 +134,7 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
     demos = [d for d in library.demos if (d.label, d.index) not in skip]
     model = train_model(library, scene, cfg, demos=demos, progress=progress, fit_cache=fit_cache)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp.npz")
+    tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # workers training the same model never share it
     model.save(tmp)
     tmp.replace(path)
     return path
