@@ -166,6 +166,8 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                        help=f"paces of the {prot} protocol (default: {','.join(f'{x:g}' for x in paces)})")
     p.add_argument("--demos", type=int, default=5, help="held-out demonstrations per point (default: 5)")
     p.add_argument("--seeds", type=int, default=2, help="seeds per demonstration (default: 2)")
+    p.add_argument("--iterations", type=int, default=None, help="STOMP iterations per step (default: each "
+                   "protocol's, 50 / 51); fewer for a quick look")
     p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20)")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
@@ -242,9 +244,12 @@ def _pace(args: argparse.Namespace, out) -> int:
     libraries = tuple(x.strip() for x in args.libraries.split(",") if x.strip())
     if args.library:
         libraries = (*dict.fromkeys((*libraries, args.library)),)
+    if args.iterations is not None and args.iterations < 1:
+        raise UserError(f"--iterations must be >= 1, got {args.iterations}")
     res = run_pace(PaceConfig(libraries=libraries, protocols=protocols, paces=paces, demos=args.demos,
                               seeds=args.seeds, components=args.components, models_dir=args.models_dir,
-                              work_dir=args.work_dir), out, compile=not args.no_compile)
+                              work_dir=args.work_dir, timing=Timing(iterations=args.iterations)),
+                   out, compile=not args.no_compile)
     png = plot_pace(res, args.plot)
     if args.json:
         print(json.dumps({**res.to_json(), "plot": str(png)}))

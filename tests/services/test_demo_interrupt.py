@@ -2,9 +2,9 @@
 
 A terminal's Ctrl-C sends SIGINT to the whole foreground process group. Each test starts the demo as
 a process group of its own (as a shell does), waits for a moment of the run named by a line of its
-output, and sends SIGINT to that group; the demo must stop every service within a bounded time, say
-so in one line, and leave every MCAP it wrote complete, with no forced exit (status 3) or stack dump
-in any log.
+output, and sends SIGINT to that group (or SIGTERM to the demo alone, as a process manager does); the
+demo must stop every service within a bounded time, say so in one line, and leave every MCAP it wrote
+complete, with no forced exit (status 3) or stack dump in any log.
 """
 
 from __future__ import annotations
@@ -34,12 +34,13 @@ def _row(step: int) -> str:
     return f"{step:>4} "
 
 
-# moment -> (start of the demo's output line that marks it, seconds to wait after it)
+# moment -> (start of the demo's output line that marks it, seconds to wait after it, signal, to the whole group)
 MOMENTS = {
-    "training done, services not started": ("foresight demo: prediction model", 0.0),
-    "services starting": ("foresight demo: router on", 0.3),
-    "mid-run": (_row(STEPS // 2), 0.0),
-    "last step, shutting down": (_row(STEPS - 1), 0.0),
+    "training done, services not started": ("foresight demo: prediction model", 0.0, signal.SIGINT, True),
+    "services starting": ("foresight demo: router on", 0.3, signal.SIGINT, True),
+    # `kill PID`, as a process manager stops it: SIGTERM to the demo alone
+    "mid-run, SIGTERM to the demo alone": (_row(STEPS // 2), 0.0, signal.SIGTERM, False),
+    "last step, shutting down": (_row(STEPS - 1), 0.0, signal.SIGINT, True),
 }
 
 
@@ -116,10 +117,10 @@ def _check_run(run_dir: Path, lines: list[str], returncode: int) -> list[str]:
 def test_ctrl_c_at_any_moment_leaves_complete_logs(moment: str, demo_inputs: tuple[Path, Path],
                                                    tmp_path: Path) -> None:
     lib, models = demo_inputs
-    marker, delay = MOMENTS[moment]
+    marker, delay, sig, group = MOMENTS[moment]
     run_dir = tmp_path / "run"
     with _demo_run(lib, models, run_dir, "lockstep") as proc:
-        lines, sent, stop_s = _interrupt_at(proc, marker, delay, signal.SIGINT, group=True)
+        lines, sent, stop_s = _interrupt_at(proc, marker, delay, sig, group=group)
     assert sent, "\n".join(lines)[-3000:]
     mcaps = _check_run(run_dir, lines, proc.returncode)
     if proc.returncode == 130:
@@ -127,19 +128,9 @@ def test_ctrl_c_at_any_moment_leaves_complete_logs(moment: str, demo_inputs: tup
         assert summary, "\n".join(lines)[-3000:]
         if mcaps:
             assert any("complete" in ln and mcaps[0] in ln for ln in lines)
-    if moment != "training done, services not started" and moment != "services starting":
+    if moment not in ("training done, services not started", "services starting"):
         assert mcaps, "\n".join(lines)[-3000:]  # the executor was running: its log exists
     assert stop_s < 60.0
-
-
-def test_sigterm_to_the_demo_alone_stops_its_services(demo_inputs: tuple[Path, Path], tmp_path: Path) -> None:
-    """``kill PID`` (SIGTERM to the demo only, as a process manager sends it) in real time: same clean stop."""
-    lib, models = demo_inputs
-    run_dir = tmp_path / "run"
-    with _demo_run(lib, models, run_dir, "realtime") as proc:
-        lines, sent, _ = _interrupt_at(proc, _row(2), 0.0, signal.SIGTERM, group=False)
-    assert sent and proc.returncode == 130, "\n".join(lines)[-3000:]
-    assert _check_run(run_dir, lines, proc.returncode)
 
 
 def test_killed_demo_leaves_no_service_behind(demo_inputs: tuple[Path, Path], tmp_path: Path) -> None:

@@ -31,6 +31,13 @@ def small_run(tmp_path_factory):
     return spec, planner
 
 
+@pytest.fixture(scope="module")
+def models_dir(tmp_path_factory):
+    """One held-out model cache for the command tests: models are cached by content (library, held-out set, scene,
+    options), so the commands that need the same model train it once."""
+    return tmp_path_factory.mktemp("models")
+
+
 def test_a_run_goes_through_every_service_and_is_reproducible(small_run):
     spec, planner = small_run
     a = run_lockstep(spec, planner)
@@ -44,9 +51,9 @@ def test_a_run_goes_through_every_service_and_is_reproducible(small_run):
         np.testing.assert_array_equal(pa.trajectories, pb.trajectories)
 
 
-def test_interference_command_prints_the_table_i_json(tmp_path, capsys):
+def test_interference_command_prints_the_table_i_json(tmp_path, capsys, models_dir):
     args = ["interference", "--demos", "1", "--seeds", "1", "--steps", "3", "--iterations", "3", "--components", "2",
-            "--no-compile", "--models-dir", str(tmp_path / "m"), "--work-dir", str(tmp_path / "w"), "--json"]
+            "--no-compile", "--models-dir", str(models_dir), "--work-dir", str(tmp_path / "w"), "--json"]
     assert main(args) == 0
     data = json.loads(capsys.readouterr().out)
     for key in ("basic", "least_penetration", "current"):
@@ -55,10 +62,10 @@ def test_interference_command_prints_the_table_i_json(tmp_path, capsys):
     assert set(data["min_clearance"]) == {"basic", "least_penetration", "current"}
 
 
-def test_switch_command_prints_the_settle_steps_and_draws_fig9(tmp_path, capsys):
+def test_switch_command_prints_the_settle_steps_and_draws_fig9(tmp_path, capsys, models_dir):
     png = tmp_path / "fig9.png"
     args = ["switch", "--demos", "1", "--steps", "3", "--iterations", "3", "--components", "2", "--no-compile",
-            "--models-dir", str(tmp_path / "m"), "--work-dir", str(tmp_path / "w"), "--plot", str(png), "--json"]
+            "--models-dir", str(models_dir), "--work-dir", str(tmp_path / "w"), "--plot", str(png), "--json"]
     assert main(args) == 0
     data = json.loads(capsys.readouterr().out)
     assert len(data["switch_steps_prediction"]) == len(data["switch_steps_current"]) == 1
@@ -107,9 +114,9 @@ def test_a_paper_protocol_run_paces_the_path_and_executes_the_rest_after_the_las
     np.testing.assert_array_equal(again.q(), q)
 
 
-def test_paper_protocol_commands_run_in_the_authors_scene_and_measure_along_the_path(tmp_path, capsys):
+def test_paper_protocol_commands_run_in_the_authors_scene_and_measure_along_the_path(tmp_path, capsys, models_dir):
     small = ["--steps", "2", "--iterations", "2", "--components", "2", "--no-compile", "--models-dir",
-             str(tmp_path / "m"), "--work-dir", str(tmp_path / "w"), "--json"]
+             str(models_dir), "--work-dir", str(tmp_path / "w"), "--json"]
     assert main(["interference", "--protocol", "paper", "--demos", "1", "--seeds", "1", *small]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["protocol"] == "paper" and data["scene"] == "pr2_two_cups_side_parallel"
@@ -121,10 +128,11 @@ def test_paper_protocol_commands_run_in_the_authors_scene_and_measure_along_the_
     assert data["protocol"] == "paper" and png.is_file() and png.stat().st_size > 10_000
 
 
-def test_pace_command_prints_a_point_per_protocol_library_and_pace(tmp_path, capsys):
+def test_pace_command_prints_a_point_per_protocol_library_and_pace(tmp_path, capsys, models_dir):
     png = tmp_path / "pace.png"
     args = ["pace", "--product-paces", "0.25,0.5", "--paper-paces", "0.05,0.1", "--demos", "1", "--seeds", "1",
-            "--components", "2", "--no-compile", "--models-dir", str(tmp_path / "m"), "--work-dir",
+            "--iterations", "3",
+            "--components", "2", "--no-compile", "--models-dir", str(models_dir), "--work-dir",
             str(tmp_path / "w"), "--plot", str(png), "--json"]
     assert main(args) == 0
     data = json.loads(capsys.readouterr().out)
