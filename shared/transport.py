@@ -26,7 +26,7 @@ from shared.protocol import Keys, Message, ProtocolError, Receipt, decode, encod
 from shared.rejects import RejectCounter
 from shared.security import OBSERVER
 from shared.security.guard import denied, forget, remember
-from shared.security.tls import security_settings
+from shared.security.tls import insecure_listen_warning, security_settings
 
 __all__ = [
     "TransportError",
@@ -51,7 +51,7 @@ def zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
     """Build a ``zenoh.Config`` from a :class:`ZenohConfig` (explicit endpoints, scouting as set)."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(cfg.mode))
-    listen, connect, secure = security_settings(cfg)  # mutual TLS and access control, or a warning
+    listen, connect, secure = security_settings(cfg)  # mutual TLS and access control, or nothing
     for path, value in secure.items():
         conf.insert_json5(path, json.dumps(value))
     conf.insert_json5("listen/endpoints", json.dumps(listen))
@@ -137,6 +137,9 @@ def open_session(cfg: ZenohConfig, stop: threading.Event | None = None, name: st
     Raises:
         TransportError: If Zenoh refuses to open the session, or (on exit) the watch gave up (one line).
     """
+    warning = "" if cfg.security_dir else insecure_listen_warning(list(cfg.listen))
+    if warning:  # once per session, not once per connection attempt of a retrying client
+        log.warning("%s", warning)
     session = open_with_retry(cfg, stop=stop)
     if cfg.security_dir:
         remember(session, cfg.role or OBSERVER, Keys(cfg.prefix))

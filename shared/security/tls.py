@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import ipaddress
-import logging
 import os
 from typing import TYPE_CHECKING, Any
 
@@ -16,8 +15,6 @@ if TYPE_CHECKING:
     from shared.config import ZenohConfig
 
 __all__ = ["tls_settings", "secure_endpoints", "insecure_listen_warning", "security_settings"]
-
-log = logging.getLogger("shared.transport")
 
 
 def tls_settings(security_dir: str | os.PathLike[str], role: str) -> dict[str, Any]:
@@ -71,16 +68,14 @@ def security_settings(cfg: ZenohConfig) -> tuple[list[str], list[str], dict[str,
 
     With ``cfg.security_dir``: endpoints on TLS, ``transport/link/tls`` (mutual TLS with the role's
     certificate) and ``access_control`` (generated from the wire contract). Without: the endpoints as
-    given, no entries, and one warning logged when they listen beyond loopback.
+    given and no entries (:func:`insecure_listen_warning` says, once per session, when they listen beyond
+    loopback).
 
     Returns:
         ``(listen, connect, {config path: value})``.
     """
     listen, connect = list(cfg.listen), list(cfg.connect)
     if not cfg.security_dir:
-        warning = insecure_listen_warning(listen)
-        if warning:
-            log.warning("%s", warning)
         return listen, connect, {}
     return secure_endpoints(listen), secure_endpoints(connect), {
         "transport/link/tls": tls_settings(cfg.security_dir, cfg.role or OBSERVER),
