@@ -93,6 +93,10 @@ class DemoConfig:
     run_dir: Path = opt(Path("runs/demo"), help="service logs and the MCAP file go here")
     ros2: bool = opt(False, help="also run the ROS 2 gateway (foresight ros2): the run as ROS 2 topics over "
                      "rmw_zenoh on the demo's router (docs/ros2.md)")
+    robot: str = opt("sim", choices=("sim", "ros2", "ros2-sim"), help="what the executor drives: sim, its own "
+                     "simulated arm; ros2, a ROS 2 robot on the demo's router (its /joint_states in, plans to "
+                     "/r_arm_controller/joint_trajectory); ros2-sim, the same with `foresight simrobot` started as the "
+                     "robot (docs/ros2.md)")
     security: Path | None = opt(None, help="mutual TLS and access control: the directory of `foresight security "
                                 "init`; the demo's router and every service present their role's certificate")
     port: int = opt(0, help="loopback TCP port of the demo's Zenoh router (0 = a free port)")
@@ -111,9 +115,9 @@ class DemoConfig:
             raise ConfigError("demo.period_s, demo.rate_hz and demo.timeout must be > 0")
         if not 0 < self.robot_speed <= 1:
             raise ConfigError(f"demo.robot_speed: must be in (0, 1], got {self.robot_speed}")
-        if self.ros2 and self.security is not None:
-            raise ConfigError("demo.ros2 with demo.security: the ROS 2 gateway has no role in the access control yet "
-                              "(docs/ros2.md); run one or the other")
+        if (self.ros2 or self.robot != "sim") and self.security is not None:
+            raise ConfigError(f"demo.{'ros2' if self.ros2 else 'robot'} with demo.security: ROS 2 keys have no role in "
+                              "the access control yet (docs/ros2.md); run one or the other")
         if self.security is not None and not Path(self.security).is_dir():
             raise ConfigError(f"demo.security: {self.security} is not a directory (make one with `foresight security "
                               "init DIR`)")

@@ -40,7 +40,7 @@ from shared.transport import Presence, open_session, subscribe
 if TYPE_CHECKING:
     from services.demo import DemoConfig
 
-__all__ = ["SERVICES_IN_ORDER", "RunRecord", "run_once", "service_args"]
+__all__ = ["SERVICES_IN_ORDER", "MODULES", "RunRecord", "run_once", "service_args"]
 
 log = logging.getLogger("foresight.demo")
 
@@ -60,6 +60,10 @@ def _library(cfg: DemoConfig, scene: Scene) -> MotionLibrary:
     return lib
 
 
+MODULES = {"simrobot": "services.ros2.robot_sim"}
+"""Services whose module is not ``services.<name>``."""
+
+
 def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Path, samples_per_tick: int,
                  mcap: Path) -> dict[str, list[str]]:
     """Command-line arguments of each service for this demo."""
@@ -75,8 +79,10 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
                     *common],
         "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
                      "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"]), *common],
-        "ros2": [*scene, *common],
+        "ros2": [*scene, *([] if cfg.robot == "sim" else ["--no-joint-states"]), *common],  # a ROS 2 robot has its own
+        "simrobot": [*scene, "--sim-time" if lockstep else "--no-sim-time", *common],
         "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
+                     *([] if cfg.robot == "sim" else ["--robot", "ros2"]),
                      *(["--finish-path"] if lockstep and cfg.finish else []),
                      "--mcap", str(mcap), *scene, *common],
     }
@@ -184,9 +190,10 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
         recorder.on_message(msg)
 
     status = 0
-    # with --ros2 the ROS 2 gateway starts before the executor, so that it sees the whole run
-    order = (*SERVICES_IN_ORDER[:-1], *(["ros2"] if cfg.ros2 else []), SERVICES_IN_ORDER[-1])
-    procs = {name: ServiceProcess(name, f"services.{name}", args[name], run_dir / f"{name}.log")
+    # with --ros2 the ROS 2 gateway starts before the executor, so that it sees the whole run; so does the robot
+    extra = [*(["ros2"] if cfg.ros2 else []), *(["simrobot"] if cfg.robot == "ros2-sim" else [])]
+    order = (*SERVICES_IN_ORDER[:-1], *extra, SERVICES_IN_ORDER[-1])
+    procs = {name: ServiceProcess(name, MODULES.get(name, f"services.{name}"), args[name], run_dir / f"{name}.log")
              for name in order}
     deadline = time.monotonic() + cfg.timeout
     with open_session(hub) as session:

@@ -28,9 +28,10 @@ SECTIONS: dict[str, str] = {
     "replayer": "services.replayer.core:ReplayerConfig",
     "predictor": "services.predictor.core:PredictorConfig",
     "planner": "services.planner.config:PlannerServiceConfig",
-    "executor": "services.executor.core:ExecutorConfig",
+    "executor": "services.executor.config:ExecutorConfig",
     "router": "tools.router:RouterConfig",
     "ros2": "services.ros2.service:Ros2ServiceConfig",
+    "simrobot": "services.ros2.robot_sim:RobotSimConfig",
     "demo": "services.demo:DemoConfig",
 }
 """Section (TOML table, variable and command name) -> ``module:Class`` of its config dataclass."""

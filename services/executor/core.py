@@ -22,15 +22,13 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from shared.config import ConfigError, opt
 from shared.lockstep import FIRST_PLAN
 from shared.protocol import Plan, RobotState
-from shared.scene import SCENE_HELP
 
+from .config import ExecutorConfig, ExecutorError
 from .reference import Reference
 
 __all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "reason_kind", "HUMAN_SOURCE"]
@@ -45,89 +43,6 @@ def reason_kind(reason: str) -> str:
     Two reasons of one kind differ only in the ages they quote; a change of kind is what gets logged.
     """
     return re.sub(r"\d+(?:\.\d+)?", "#", reason)
-
-
-class ExecutorError(ValueError):
-    """A plan or configuration the executor cannot use; the message names what is wrong."""
-
-
-@dataclass
-class ExecutorConfig:
-    """Executor options (``[executor]`` in a config file, ``FORESIGHT_EXECUTOR_<NAME>`` in the environment)."""
-
-    mode: str = opt("lockstep", help="lockstep: the executor is the simulation master and emits clock ticks; "
-                    "realtime: wall clock", choices=("lockstep", "realtime"))
-    steps: int = opt(20, help="replanning steps to run (the paper runs 20); 0 = until stopped")
-    step_period_s: float = opt(0.2, help="replanning period: simulated seconds per clock tick (lockstep) or the "
-                               "run length unit steps * period (realtime)")
-    state_rate_hz: float = opt(50.0, help="RobotState publishing rate (per simulated second in lockstep)")
-    stale_limit_s: float = opt(0.5, help="hold the robot when the latest plan or occupancy is older than this")
-    require_occupancy: bool = opt(True, help="also hold when the occupancy prediction is missing or stale")
-    hold_without: list[str] = opt(default_factory=lambda: ["predictor", "planner", "replayer"],
-                                  help="hold while one of these services, once seen, is gone (its liveliness "
-                                  "token lost: stopped or killed), before its inputs are stale; the replayer only "
-                                  "when it goes in the middle of a demonstration; empty = never")
-    goal_tolerance: float = opt(0.02, help="goal reached when every joint is within this of the goal (rad or m)")
-    velocity_scale: float = opt(1.0, help="fraction of the robot's joint velocity limits the simulation may use")
-    stop_on_goal: bool = opt(False, help="end the run at the end of the step in which the goal is reached")
-    path_per_step: float = opt(0.0, help="advance this configuration-space length (weighted joint-space Euclidean "
-                               "norm) along the chosen trajectory per step_period_s, whatever the plan's timing, "
-                               "within the velocity limits (the paper authors' pace, docs/experiments.md); 0: follow "
-                               "the plan in time")
-    path_weights: list[float] = opt(default_factory=list, help="per-joint weights of the configuration-space length "
-                                    "of path_per_step (Move3D weighs a revolute joint by the size of its body; "
-                                    "empty: 1 each)")
-    finish_path: bool = opt(False, help="lockstep: after the last step, execute the rest of the last plan without "
-                            "replanning, at the same pace (the paper authors' protocol)")
-    lockstep_timeout_s: float = opt(30.0, help="lockstep: longest wait (wall s) for the plan of a tick before "
-                                    "going on without it")
-    wait_for: list[str] = opt(default_factory=lambda: ["replayer", "predictor", "planner"],
-                              help="services whose liveliness token to wait for (at most startup_timeout_s) "
-                              "before the run starts: the first tick (lockstep) or the clock (realtime)")
-    startup_timeout_s: float = opt(60.0, help="longest wait (wall s) for the wait_for services")
-    start_q: list[float] = opt(default_factory=list, help="start configuration, one value per joint in the "
-                               "robot model's order (empty: the robot model's start configuration)")
-    scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")
-    mcap: str = opt("", help="MCAP log path (empty: runs/<UTC timestamp>.mcap; 'none': no log)")
-    mcap_compression: str = opt("zstd", choices=("zstd", "lz4", "none"),
-                                help="compression of the MCAP's chunks (every MCAP reader reads zstd and lz4)")
-    viz_rate_hz: float = opt(5.0, help="highest rate of the Foxglove robot/human/occupancy scene updates per channel")
-    device: str = opt("cpu", help="torch device of the robot model (cpu or cuda)")
-    log_level: str = opt("INFO", help="log level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
-
-    def validate(self) -> None:
-        """Check ranges; raises ConfigError naming the option."""
-        positive = ("step_period_s", "state_rate_hz", "stale_limit_s", "goal_tolerance", "velocity_scale",
-                    "lockstep_timeout_s", "startup_timeout_s", "viz_rate_hz")
-        for name in positive:
-            value = getattr(self, name)
-            if not (value > 0 and math.isfinite(value)):
-                raise ConfigError(f"executor.{name}: must be > 0, got {value}")
-        if self.steps < 0:
-            raise ConfigError(f"executor.steps: must be >= 0, got {self.steps}")
-        if self.velocity_scale > 1.0:
-            raise ConfigError(f"executor.velocity_scale: must be <= 1, got {self.velocity_scale}")
-        if not (self.path_per_step >= 0 and math.isfinite(self.path_per_step)):
-            raise ConfigError(f"executor.path_per_step: must be >= 0, got {self.path_per_step}")
-        if not all(w > 0 and math.isfinite(w) for w in self.path_weights):
-            raise ConfigError(f"executor.path_weights: must be finite and > 0, got {self.path_weights}")
-        for name in ("wait_for", "hold_without"):
-            unknown = set(getattr(self, name)) - {"replayer", "predictor", "planner"}
-            if unknown:
-                raise ConfigError(f"executor.{name}: unknown service(s) {sorted(unknown)}")
-        if not all(math.isfinite(v) for v in self.start_q):
-            raise ConfigError(f"executor.start_q: values must be finite, got {self.start_q}")
-
-    @property
-    def substeps(self) -> int:
-        """Simulation substeps per replanning period (one RobotState each)."""
-        return max(1, round(self.step_period_s * self.state_rate_hz))
-
-    def mcap_path(self, now: str) -> Path | None:
-        """The MCAP path to write (``now``: a UTC timestamp for the default name), or None for 'none'."""
-        if self.mcap.lower() == "none":
-            return None
-        return Path(self.mcap) if self.mcap else Path("runs") / f"{now}.mcap"
 
 
 @dataclass(frozen=True)

@@ -212,6 +212,7 @@ class ExecutorService:
                                     viz_thread=cfg.mode != "lockstep", compression=cfg.mcap_compression,
                                     scene_text=text, run_metadata=meta)
                 self.result.mcap_path = str(path)
+            link = self._connect_robot(session) if cfg.robot == "ros2" else None
             sub = session.declare_subscriber(f"{self.zenoh.prefix}/**", lambda s: self._on_sample(
                 str(s.key_expr), s.payload.to_bytes(), sender_of(s)))
             # block (never drop) under congestion: lock-step consumers count on every state and tick
@@ -229,6 +230,8 @@ class ExecutorService:
             finally:
                 presence.close()
                 sub.undeclare()
+                if link is not None:
+                    link.close()
                 if self.mcap is not None:
                     self.mcap.close()
         r = self.result
@@ -241,6 +244,23 @@ class ExecutorService:
                  r.steps, r.goal_per_step[-1] if r.goal_per_step else -1, r.reached, r.reached_step, r.plans,
                  r.held_steps, sum(r.rejects.values()), self.rejects.summary())
         return r
+
+    def _connect_robot(self, session: Any) -> Any:
+        """``robot = "ros2"``: find the ROS 2 robot and drive it (:class:`services.ros2.arm.Ros2Arm`) from here on."""
+        from services.ros2.arm import Ros2Arm
+        from services.ros2.link import Ros2RobotLink
+
+        record = self.mcap.write_ros2 if self.mcap is not None else None
+        link = Ros2RobotLink(session, self.config, list(self.limits.joint_names), self.stop, self.rejects, record)
+        try:
+            q0 = link.initial(self.config.startup_timeout_s)
+        except BaseException:
+            link.close()
+            if self.mcap is not None:
+                self.mcap.close()  # complete, with what it has: the run never started
+            raise
+        self.core = Ros2Arm(self.limits, q0, self.config, link)
+        return link
 
     def _publish_state(self, pub: TypedPublisher[Any], state: RobotState) -> None:
         pub.put(state)

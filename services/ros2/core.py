@@ -59,6 +59,10 @@ TOPICS = {
 }
 """What the ``ros2`` service publishes, by role."""
 
+ROBOT_TYPES = {"command": "trajectory_msgs/msg/JointTrajectory", "state": "sensor_msgs/msg/JointState",
+               "clock": "rosgraph_msgs/msg/Clock"}
+"""What the executor exchanges with a ROS 2 robot (``robot = "ros2"``): plans out, joint states in, /clock out."""
+
 
 @dataclass
 class Ros2Config:
@@ -115,7 +119,8 @@ class Ros2Mapping:
 
         self.config = config
         self.ts = get_typestore(Stores.ROS2_JAZZY)
-        self.hashes = {t.msgtype: self.ts.hash_rihs01(t.msgtype) for t in TOPICS.values()}
+        types = {t.msgtype for t in TOPICS.values()} | set(ROBOT_TYPES.values())
+        self.hashes = {msgtype: self.ts.hash_rihs01(msgtype) for msgtype in sorted(types)}
 
     # -- keys -------------------------------------------------------------------------------------------------
 
@@ -151,11 +156,36 @@ class Ros2Mapping:
 
     def joint_state(self, state: RobotState) -> bytes:
         """The simulated robot's state as ``JointState`` (positions and velocities)."""
+        return self.joint_state_of(list(state.joint_names), state.q, state.qd, state.stamp)
+
+    def command(self, joint_names: list[str], positions: np.ndarray, times: np.ndarray) -> bytes:
+        """A command to a ``joint_trajectory_controller``: ``JointTrajectory`` with a zero header stamp (start now).
+
+        Args:
+            joint_names: ``D`` names, the columns of ``positions``.
+            positions: ``(N, D)`` waypoints.
+            times: ``(N,)`` their ``time_from_start``, seconds, increasing.
+        """
+        ts = self.ts
+        point = ts.types["trajectory_msgs/msg/JointTrajectoryPoint"]
         empty = np.zeros(0, dtype=np.float64)
+        points = [point(positions=np.asarray(q, np.float64).copy(), velocities=empty, accelerations=empty,
+                        effort=empty, time_from_start=_duration(ts, float(t))) for q, t in zip(positions, times,
+                                                                                             strict=True)]
+        msg = ts.types["trajectory_msgs/msg/JointTrajectory"](header=self._header(0.0), joint_names=list(joint_names),
+                                                              points=points)
+        return self._cdr(msg, ROBOT_TYPES["command"])
+
+    def clock(self, t: float) -> bytes:
+        """Simulated time as ``rosgraph_msgs/Clock`` (what ROS 2 nodes with ``use_sim_time`` follow)."""
+        return self._cdr(self.ts.types["rosgraph_msgs/msg/Clock"](clock=_stamp(self.ts, t)), ROBOT_TYPES["clock"])
+
+    def joint_state_of(self, joint_names: list[str], q: np.ndarray, qd: np.ndarray, stamp: float) -> bytes:
+        """A robot's ``JointState`` (positions, velocities) at ``stamp``."""
         msg = self.ts.types["sensor_msgs/msg/JointState"](
-            header=self._header(state.stamp), name=list(state.joint_names),
-            position=np.asarray(state.q, np.float64), velocity=np.asarray(state.qd, np.float64), effort=empty)
-        return self._cdr(msg, TOPICS["joint_states"].msgtype)
+            header=self._header(stamp), name=list(joint_names), position=np.asarray(q, np.float64),
+            velocity=np.asarray(qd, np.float64), effort=np.zeros(0, dtype=np.float64))
+        return self._cdr(msg, ROBOT_TYPES["state"])
 
     def _marker(self, ns: str, marker_id: int, kind: int, stamp: float, scale: float, points: np.ndarray,
                 colors: np.ndarray) -> Any:
@@ -225,22 +255,60 @@ class Ros2Mapping:
         except Exception as exc:  # rosbags raises several types for truncated or garbled bytes
             raise Ros2InputError(f"{msgtype}: cannot be decoded ({type(exc).__name__}: {exc})") from None
 
-    def joint_state_in(self, payload: bytes, joint_names: list[str]) -> tuple[float, np.ndarray]:
-        """A robot's ``JointState`` as ``(stamp s, q in joint_names' order)``.
+    def joint_state_in(self, payload: bytes, joint_names: list[str]) -> tuple[float, np.ndarray, np.ndarray]:
+        """A robot's ``JointState`` as ``(stamp s, q, qd)`` in ``joint_names``' order (qd zero when not sent).
 
         Raises:
             Ros2InputError: Not a JointState, a joint of ``joint_names`` missing, lengths that disagree, NaN.
         """
         msg = self.decode(payload, "sensor_msgs/msg/JointState")
         names = list(msg.name)
-        pos = np.asarray(msg.position, dtype=np.float64)
-        if len(pos) != len(names):
-            raise Ros2InputError(f"JointState: {len(names)} names but {len(pos)} positions")
+        pos, vel = np.asarray(msg.position, dtype=np.float64), np.asarray(msg.velocity, dtype=np.float64)
+        if len(pos) != len(names) or len(vel) not in (0, len(names)):
+            raise Ros2InputError(f"JointState: {len(names)} names but {len(pos)} positions, {len(vel)} velocities")
         missing = [n for n in joint_names if n not in names]
         if missing:
             raise Ros2InputError(f"JointState: joints {missing} missing (has {names})")
-        q = pos[[names.index(n) for n in joint_names]]
-        if not np.all(np.isfinite(q)):
-            bad = [n for n, v in zip(joint_names, q, strict=True) if not np.isfinite(v)]
-            raise Ros2InputError(f"JointState: non-finite position of {bad}")
-        return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, q
+        order = [names.index(n) for n in joint_names]
+        q, qd = pos[order], (vel[order] if len(vel) else np.zeros(len(order)))
+        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            bad = [n for n, v, w in zip(joint_names, q, qd, strict=True) if not (np.isfinite(v) and np.isfinite(w))]
+            raise Ros2InputError(f"JointState: non-finite position or velocity of {bad}")
+        return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, q, qd
+
+    def trajectory_in(self, payload: bytes, joint_names: list[str]) -> tuple[list[int], np.ndarray, np.ndarray]:
+        """A ``JointTrajectory`` command for a controller of ``joint_names``: ``(columns, positions, times)``.
+
+        Returns:
+            ``columns``: for each of the message's joints its index in ``joint_names``; ``positions``
+            ``(N, len(columns))``; ``times`` ``(N,)`` seconds from the start, increasing (no points: hold).
+
+        Raises:
+            Ros2InputError: A joint the controller does not have, a point of the wrong length, NaN, times not
+                increasing.
+        """
+        msg = self.decode(payload, ROBOT_TYPES["command"])
+        names = list(msg.joint_names)
+        unknown = [n for n in names if n not in joint_names]
+        if unknown or len(set(names)) != len(names):
+            raise Ros2InputError(f"JointTrajectory: joints {unknown or names} unknown or repeated (controller has "
+                                 f"{joint_names})")
+        if any(len(p.positions) != len(names) for p in msg.points):
+            raise Ros2InputError(f"JointTrajectory: a point without {len(names)} positions")
+        positions = np.array([p.positions for p in msg.points], dtype=np.float64).reshape(-1, len(names))
+        times = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points])
+        if not np.all(np.isfinite(positions)):
+            raise Ros2InputError("JointTrajectory: non-finite positions")
+        if np.any(np.diff(times) <= 0) or (len(times) and times[0] < 0):
+            raise Ros2InputError(f"JointTrajectory: time_from_start must increase from >= 0, got {times.tolist()}")
+        return [joint_names.index(n) for n in names], positions, times
+
+    def clock_in(self, payload: bytes) -> float:
+        """Seconds of a ``rosgraph_msgs/Clock``."""
+        stamp = self.decode(payload, ROBOT_TYPES["clock"]).clock
+        return stamp.sec + stamp.nanosec * 1e-9
+
+    def robot_key(self, topic: str, role: str, type_hash: str | None = None) -> str:
+        """The data key of a robot topic (``role`` in :data:`ROBOT_TYPES`); ``type_hash="*"`` matches any hash."""
+        msgtype = ROBOT_TYPES[role]
+        return data_key(self.config.domain_id, topic, msgtype, type_hash or self.hashes[msgtype])

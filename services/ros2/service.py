@@ -9,12 +9,10 @@ plan, goal, joint states and posterior go out as they come.
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -25,7 +23,7 @@ from shared.scene import SCENE_HELP, load_scene
 from shared.transport import Presence, open_session, subscribe
 
 from .core import TOPICS, Ros2Config, Ros2Mapping
-from .wire import Attachment, endpoint_token, node_token, qos_chunk
+from .node import Ros2Node, Ros2Publisher
 
 __all__ = ["Ros2ServiceConfig", "Ros2Service", "Ros2Stats"]
 
@@ -66,18 +64,15 @@ class Ros2Service:
         self.rejects = RejectCounter("ros2")
         self.stats = Ros2Stats({role: 0 for role in TOPICS})
         self._lock = threading.Lock()
-        self._seq = dict.fromkeys(TOPICS, 0)
-        self._gid: dict[str, bytes] = {}
+        self._pubs: dict[str, Ros2Publisher] = {}
         self._first_pose: dict[int, np.ndarray] = {}
         self._last_viz: dict[str, float] = {}
-        self._session: Any = None
 
     def _put(self, role: str, payload: bytes) -> None:
-        with self._lock:
-            self._seq[role] += 1
-            att = Attachment(self._seq[role], time.time_ns(), self._gid[role]).encode()
-            self.stats.sent[role] += 1
-        self._session.put(self.mapping.key(role), payload, attachment=att)
+        pub = self._pubs.get(role)
+        if pub is not None:
+            pub.put(payload)
+            self.stats.sent[role] = pub.sent
 
     def _due(self, role: str) -> bool:
         now = time.monotonic()
@@ -121,24 +116,18 @@ class Ros2Service:
         stop = stop or threading.Event()
         cfg = self.config
         with open_session(self.zenoh, stop, "ros2") as session:
-            self._session = session
-            zid = str(session.zid())
-            liveliness = session.liveliness()
-            tokens = [liveliness.declare_token(node_token(cfg.domain_id, zid, 0, cfg.namespace, cfg.node))]
-            for entity, (role, topic) in enumerate(TOPICS.items(), start=1):
-                self._gid[role] = hashlib.sha256(f"{zid}/{entity}".encode()).digest()[:16]
-                if role == "joint_states" and not cfg.joint_states:
-                    continue
-                h = self.mapping.hashes[topic.msgtype]
-                tokens.append(liveliness.declare_token(endpoint_token(
-                    cfg.domain_id, zid, 0, entity, "MP", cfg.namespace, cfg.node, cfg.topic(role), topic.msgtype, h,
-                    qos_chunk(depth=10))))
+            node = Ros2Node(session, cfg.domain_id, cfg.namespace, cfg.node, self.mapping.hashes, self.rejects)
+            zid = node.zid
+            for role, topic in TOPICS.items():
+                if role != "joint_states" or cfg.joint_states:
+                    self._pubs[role] = node.publisher(cfg.topic(role), topic.msgtype)
             subs = [subscribe(session, self.keys.plan, Plan, self.on_plan, self.rejects),
                     subscribe(session, self.keys.robot_state, RobotState, self.on_state, self.rejects),
                     subscribe(session, self.keys.occupancy, OccupancyGrid, self.on_occupancy, self.rejects),
                     subscribe(session, self.keys.posterior, ClassPosterior, self.on_posterior, self.rejects),
                     subscribe(session, self.keys.pose, HumanPose, self.on_human, self.rejects)]
-            presence = Presence(session, self.keys, "ros2", stop_with=cfg.stop_with, stop=stop)
+            ends = [cfg.stop_with] if cfg.stop_with else []  # one service's name, not its letters
+            presence = Presence(session, self.keys, "ros2", stop_with=ends, stop=stop)
             log.info("ros2: node %s%s on domain %d, topics %s, session %s", cfg.namespace.rstrip("/") + "/", cfg.node,
                      cfg.domain_id, ", ".join(cfg.topic(r) for r in TOPICS), zid)
             try:
@@ -147,7 +136,6 @@ class Ros2Service:
                 presence.close()
                 for s in subs:
                     s.undeclare()
-                for t in tokens:
-                    t.undeclare()
+                node.close()
         log.info("ros2: stopped; sent %s", ", ".join(f"{cfg.topic(r)} {n}" for r, n in self.stats.sent.items()))
         return self.stats

@@ -51,6 +51,7 @@ from shared.protocol import (
 )
 
 from .background import BackgroundWorker
+from .direct_file import DirectFile
 from .json_slices import dumps_sliced
 from .schemas import PROFILE, REJECTED_SCHEMA, REJECTED_TOPIC, SCHEMAS, TOPICS, message_json_schema
 
@@ -98,36 +99,6 @@ class FoxgloveScene(Protocol):
         ...
 
 
-class _DirectFile:
-    """A binary file whose writes go straight to the OS (the mcap writer buffers a chunk itself)."""
-
-    def __init__(self, path: Path) -> None:
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        self._pos = 0
-
-    def write(self, data: bytes | bytearray | memoryview) -> int:
-        view = memoryview(data)
-        while view:
-            n = os.write(self._fd, view)
-            view = view[n:]
-            self._pos += n
-        return len(data)
-
-    def tell(self) -> int:
-        return self._pos
-
-    def flush(self) -> None:
-        """Nothing is buffered here."""
-
-    def fsync(self) -> None:
-        os.fsync(self._fd)
-
-    def close(self) -> None:
-        if self._fd >= 0:
-            os.close(self._fd)
-            self._fd = -1
-
-
 class McapLog:
     """Thread-safe MCAP writer of Foresight messages (call :meth:`on_sample` from any thread).
 
@@ -167,7 +138,7 @@ class McapLog:
         self.flush_period_s = flush_period_s
         self._clock = clock
         self._lock = threading.RLock()
-        self._file = _DirectFile(self.path)
+        self._file = DirectFile(self.path)
         self._writer = Writer(typing.cast(io.BufferedWriter, self._file), chunk_size=chunk_size,
                               compression=COMPRESSION[compression])
         self._writer.start(profile=PROFILE, library="foresight executor")
@@ -229,6 +200,20 @@ class McapLog:
             cid = self._channel_id(topic, name, schema, "json")
             t = self._clock() if log_time is None else log_time
             self._add(cid, topic, data, t, t)
+
+    def write_ros2(self, topic: str, msgtype: str, data: bytes, log_time: int | None = None) -> None:
+        """Write a ROS 2 message as sent or received (CDR, schema ``ros2msg``: its definition from ``rosbags``)."""
+        with self._lock:
+            if self._closed:
+                return
+            if topic not in self._channels:
+                from rosbags.typesys import Stores, get_typestore
+
+                msgdef, _ = get_typestore(Stores.ROS2_JAZZY).generate_msgdef(msgtype, ros_version=2)
+                sid = self._writer.register_schema(name=msgtype, encoding="ros2msg", data=msgdef.encode())
+                self._channels[topic] = self._writer.register_channel(topic, "cdr", sid)
+            t = self._clock() if log_time is None else log_time
+            self._add(self._channels[topic], topic, data, t, t)
 
     # -- samples -------------------------------------------------------------------------------
 

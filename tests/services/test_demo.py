@@ -65,3 +65,30 @@ def test_demo_bad_input_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[s
     with pytest.raises(SystemExit):
         main(["--steps", "0"])
     assert "demo.steps: must be >= 1" in capsys.readouterr().err
+
+
+def test_demo_drives_the_simulated_ros2_robot(tmp_path: Path) -> None:
+    """``--robot ros2-sim``: the executor drives `foresight simrobot` (a process) over rmw_zenoh, lock-step."""
+    lib = tmp_path / "lib.npz"
+    save_library(generate_library(8, 6, seed=3), lib)
+    cmd = [sys.executable, "-m", "tools", "demo", "--steps", "4", "--library", str(lib), "--components", "4",
+           "--models-dir", str(tmp_path / "models"), "--run-dir", str(tmp_path / "run"), "--json", "--timeout", "400",
+           "--robot", "ros2-sim", "--ros2"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=480, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads(proc.stdout)
+    assert len(summary["chosen_goal_per_step"]) == 4 and "faults" not in proc.stderr
+    with open(summary["mcap_path"], "rb") as f:
+        channels = {c.topic: c.message_encoding for c in make_reader(f).get_summary().channels.values()}
+    assert channels["/joint_states"] == channels["/r_arm_controller/joint_trajectory"] == channels["/clock"] == "cdr"
+    robot_log = (Path(summary["run_dir"]) / "simrobot.log").read_text()
+    assert "0 samples refused" in robot_log and " 0 trajectories received" not in robot_log
+    ros2_log = (Path(summary["run_dir"]) / "ros2.log").read_text()
+    assert "/joint_states 0," in ros2_log, "the gateway leaves /joint_states to the robot"
+
+
+def test_demo_refuses_a_ros2_robot_with_security(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as e:
+        main(["--robot", "ros2-sim", "--security", str(tmp_path)])
+    assert e.value.code == 2
+    assert "demo.robot with demo.security" in capsys.readouterr().err

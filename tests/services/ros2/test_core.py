@@ -86,16 +86,43 @@ def test_incoming_joint_states_are_checked(mapping: Ros2Mapping) -> None:
         msg = js(header=header, name=names, position=np.array(pos), velocity=np.zeros(0), effort=np.zeros(0))
         return bytes(TS.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
 
-    stamp, q = mapping.joint_state_in(raw(["x", *reversed(JOINTS)], [9.0, 0.3, 0.2, 0.1]), JOINTS)
+    stamp, q, qd = mapping.joint_state_in(raw(["x", *reversed(JOINTS)], [9.0, 0.3, 0.2, 0.1]), JOINTS)
     assert stamp == pytest.approx(3.000000005) and q.tolist() == [0.1, 0.2, 0.3]  # reordered to ours
+    assert qd.tolist() == [0.0, 0.0, 0.0]  # no velocities sent
+    _, q, qd = mapping.joint_state_in(mapping.joint_state_of(JOINTS, [0.1, 0.2, 0.3], [1.0, 2.0, 3.0], 4.5), JOINTS)
+    assert q.tolist() == [0.1, 0.2, 0.3] and qd.tolist() == [1.0, 2.0, 3.0]
     with pytest.raises(Ros2InputError, match=r"joints \['r_shoulder_lift_joint'\] missing"):
         mapping.joint_state_in(raw(JOINTS[:2], [0.1, 0.2]), JOINTS)
-    with pytest.raises(Ros2InputError, match="non-finite position of \\['r_shoulder_pan_joint'\\]"):
+    with pytest.raises(Ros2InputError, match="non-finite position or velocity of \\['r_shoulder_pan_joint'\\]"):
         mapping.joint_state_in(raw(JOINTS, [0.1, float("nan"), 0.3]), JOINTS)
     with pytest.raises(Ros2InputError, match="not CDR"):
         mapping.joint_state_in(b"\xff\xff", JOINTS)
     with pytest.raises(Ros2InputError, match="cannot be decoded"):
         mapping.joint_state_in(raw(JOINTS, [0.1, 0.2, 0.3])[:20], JOINTS)
+
+
+def test_commands_and_clock_round_trip_and_bad_commands_are_named(mapping: Ros2Mapping) -> None:
+    """What the executor sends a ROS 2 robot decodes with an independent type store, and back through the checks."""
+    pos = np.array([[0.1, 0.2, 0.3], [0.2, 0.3, 0.4]])
+    raw = mapping.command(JOINTS, pos, np.array([0.25, 1.5]))
+    msg = TS.deserialize_cdr(raw, "trajectory_msgs/msg/JointTrajectory")
+    assert list(msg.joint_names) == JOINTS and msg.header.stamp.sec == 0 and msg.header.stamp.nanosec == 0
+    assert [(p.time_from_start.sec, p.time_from_start.nanosec) for p in msg.points] == [(0, 250_000_000),
+                                                                                      (1, 500_000_000)]
+    columns, got, times = mapping.trajectory_in(raw, ["x", *JOINTS])
+    assert columns == [1, 2, 3] and np.array_equal(got, pos) and times.tolist() == [0.25, 1.5]
+    assert TS.deserialize_cdr(mapping.clock(12.75), "rosgraph_msgs/msg/Clock").clock.nanosec == 750_000_000
+    assert mapping.clock_in(mapping.clock(12.75)) == 12.75
+    with pytest.raises(Ros2InputError, match=r"joints \['torso_lift_joint'\] unknown"):
+        mapping.trajectory_in(raw, JOINTS[1:])
+    with pytest.raises(Ros2InputError, match="time_from_start must increase"):
+        mapping.trajectory_in(mapping.command(JOINTS, pos, np.array([1.0, 1.0])), JOINTS)
+    with pytest.raises(Ros2InputError, match="non-finite positions"):
+        mapping.trajectory_in(mapping.command(JOINTS, pos * np.nan, np.array([1.0, 2.0])), JOINTS)
+    assert mapping.trajectory_in(mapping.command(JOINTS, np.zeros((0, 3)), np.zeros(0)), JOINTS)[1].shape == (0, 3)
+    key = mapping.robot_key("/r_arm_controller/joint_trajectory", "command")
+    assert key == ("0/r_arm_controller/joint_trajectory/trajectory_msgs::msg::dds_::JointTrajectory_/"
+                   + TS.hash_rihs01("trajectory_msgs/msg/JointTrajectory"))
 
 
 def test_bad_config_is_named() -> None:

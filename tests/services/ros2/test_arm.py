@@ -1,0 +1,103 @@
+"""Ros2Arm: the executor's rules driving a ROS 2 robot -- each plan sent once, a hold once per hold, the measured
+state replacing the simulated one; command_points: the executor's pace within the velocity limits."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.executor.config import ExecutorConfig
+from services.executor.core import ArmLimits
+from services.executor.reference import Reference
+from services.ros2.arm import MIN_SEGMENT_S, Measured, Ros2Arm, command_points
+from services.ros2.controller import SimulatedController
+from shared.lockstep import FIRST_PLAN
+from tests.services.executor.test_core import make_plan
+
+NAMES = ("j0", "j1")
+LIMITS = ArmLimits(NAMES, np.array([-3.0, -3.0]), np.array([3.0, 3.0]), np.array([1.0, 2.0]))
+
+
+class FakeRobot:
+    """A RobotLink over a SimulatedController on the arm's clock; ``age`` is what measure reports."""
+
+    def __init__(self, q0: np.ndarray) -> None:
+        self.arm = SimulatedController(q0)
+        self.sent: list[tuple[np.ndarray, np.ndarray]] = []
+        self.age = 0.0
+
+    def send(self, positions: np.ndarray, times: np.ndarray) -> None:
+        self.sent.append((positions, times))
+        self.arm.command(self.arm.t, [0, 1], positions, times)
+
+    def measure(self, t: float) -> Measured:
+        self.arm.advance(t)
+        return Measured(self.arm.q.copy(), self.arm.qd.copy(), self.age)
+
+
+def _arm(config: ExecutorConfig | None = None) -> tuple[Ros2Arm, FakeRobot]:
+    robot = FakeRobot(np.zeros(2))
+    return Ros2Arm(LIMITS, np.zeros(2), config or ExecutorConfig(stale_limit_s=0.5), robot), robot
+
+
+def test_each_plan_is_sent_once_and_the_robot_state_is_measured() -> None:
+    arm, robot = _arm(ExecutorConfig(stale_limit_s=5.0))
+    arm.step(0.1)
+    assert arm.reason == FIRST_PLAN and robot.sent == []  # nothing to hold before a plan
+    plan = make_plan(np.zeros(2), [np.array([0.5, 1.0])], t=11, dt=0.1, names=NAMES)  # 1 s, within the limits
+    arm.adopt(plan)
+    for _ in range(12):
+        arm.note_occupancy()
+        arm.step(0.1)
+    assert len(robot.sent) == 1 and arm.sent_plans == 1
+    positions, times = robot.sent[0]
+    assert positions.shape == (10, 2) and times[-1] == pytest.approx(1.0)  # the waypoints ahead at the plan's pace
+    np.testing.assert_allclose(arm.q, [0.5, 1.0], atol=1e-9)  # where the robot is
+    assert arm.reached and not arm.holding
+
+
+def test_a_hold_is_sent_once_at_the_present_configuration_and_the_plan_again_on_resuming() -> None:
+    arm, robot = _arm()
+    arm.adopt(make_plan(np.zeros(2), [np.array([1.0, 1.0])], t=21, dt=0.1, names=NAMES))
+    arm.note_occupancy()
+    arm.step(0.1)
+    q_then = arm.q.copy()
+    for _ in range(8):  # nothing new: plan and occupancy stale after 0.5 s
+        arm.step(0.1)
+    assert arm.holding and "s old (limit 0.50 s)" in arm.reason
+    holds = [p for p, t in robot.sent if len(p) == 1]
+    assert len(holds) == 1 and arm.sent_holds == 1
+    assert np.all(holds[0][0] > q_then)  # where the robot was when it was told to hold
+    held = arm.q.copy()
+    arm.step(0.1)
+    np.testing.assert_allclose(arm.q, held)  # stopped
+    arm.adopt(make_plan(arm.q, [np.array([1.0, 1.0])], t=11, dt=0.1, names=NAMES))
+    arm.note_occupancy()
+    arm.step(0.1)
+    assert not arm.holding and arm.sent_plans == 2 and len(robot.sent) == 3
+
+
+def test_stale_joint_states_hold_the_robot() -> None:
+    arm, robot = _arm()
+    arm.adopt(make_plan(np.zeros(2), [np.array([1.0, 1.0])], t=21, dt=0.1, names=NAMES))
+    arm.note_occupancy()
+    robot.age = 0.8
+    arm.step(0.1)  # measures the age
+    arm.note_occupancy()
+    arm.step(0.1)
+    assert arm.holding and arm.reason == "robot's joint states are 0.80 s old (limit 0.50 s)"
+
+
+def test_command_points_keep_the_pace_within_the_velocity_limits() -> None:
+    ref = Reference(np.array([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0], [1.2, 0.0]]), dt=0.1)
+    cfg = ExecutorConfig(velocity_scale=0.5)  # joint 0 at most 0.5 rad/s
+    positions, times = command_points(ref, 0.15, np.array([0.15, 0.0]), cfg, LIMITS.velocity)
+    np.testing.assert_allclose(positions, [[0.2, 0.0], [1.2, 0.0]])
+    np.testing.assert_allclose(times, [0.1, 0.1 + 2.0])  # 0.05 rad: 0.1 s at 0.5 rad/s; 1 rad: 2 s, not 0.1
+    # the paper authors' pace: 0.1 of path length per 0.5 s step
+    cfg = ExecutorConfig(path_per_step=0.1, step_period_s=0.5)
+    positions, times = command_points(ref, 0.1, np.array([0.1, 0.0]), cfg, LIMITS.velocity)
+    np.testing.assert_allclose(times[:1], [0.5]) and np.testing.assert_allclose(times[-1], 0.5 + 5.0)
+    # past the end: the goal, at least MIN_SEGMENT_S away
+    positions, times = command_points(ref, 5.0, np.array([1.2, 0.0]), ExecutorConfig(), LIMITS.velocity)
+    assert positions.tolist() == [[1.2, 0.0]] and times.tolist() == [MIN_SEGMENT_S]

@@ -1,0 +1,93 @@
+"""The executor's line to a ROS 2 robot, on loopback Zenoh: the simulated robot found and driven in real time, and
+what the robot sends refused with its reason (type hash, attachment, joints, NaN) without stopping either side."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from services.executor.config import ExecutorConfig
+from services.ros2.core import Ros2Config, Ros2Mapping
+from services.ros2.link import Ros2RobotLink
+from services.ros2.robot_sim import RobotSim, RobotSimConfig
+from services.ros2.wire import Attachment, data_key
+from shared.config import ZenohConfig
+from shared.rejects import RejectCounter
+from shared.robot import JOINT_NAMES
+from shared.transport import open_session
+
+STATE = "sensor_msgs/msg/JointState"
+
+
+def test_the_robot_is_found_driven_and_bad_samples_are_refused(
+        zenoh_hub: Callable[[], ZenohConfig], wait_until: Callable[..., bool]) -> None:
+    hub = zenoh_hub()
+    robot = RobotSim(RobotSimConfig(sim_time=False, rate_hz=50.0), zenoh_hub())
+    stop, robot_stop = threading.Event(), threading.Event()
+    thread = threading.Thread(target=robot.run, args=(robot_stop,), daemon=True)
+    thread.start()
+    mapping = Ros2Mapping(Ros2Config())
+    names = list(JOINT_NAMES)
+    rejects = RejectCounter("executor")
+    recorded: list[str] = []
+    try:
+        with open_session(hub) as session, open_session(zenoh_hub()) as other:
+            link = Ros2RobotLink(session, ExecutorConfig(mode="realtime", robot="ros2"), names, stop, rejects,
+                                 record=lambda topic, msgtype, data: recorded.append(topic))
+            try:
+                q0 = link.initial(30.0)
+                np.testing.assert_allclose(q0, robot.arm.q)
+                target = q0 + 0.1
+                link.send(target[None], np.array([0.3]))
+                assert wait_until(lambda: np.allclose(link.measure(0.0).q, target, atol=1e-9), 10.0)
+                assert link.measure(0.0).age_s < 0.5
+                # samples the executor must refuse, each with its reason; then a good one still counts
+                key = data_key(0, "/joint_states", STATE, mapping.hashes[STATE])
+                att = Attachment(1, time.time_ns(), b"\x01" * 16).encode()
+                good = mapping.joint_state_of(names, q0, np.zeros(len(names)), 1.0)
+                other.put(data_key(0, "/joint_states", STATE, "RIHS01_" + "0" * 64), good, attachment=att)
+                other.put(key, good)  # no attachment
+                other.put(key, mapping.joint_state_of(names[:-1], q0[:-1], np.zeros(7), 1.0), attachment=att)
+                other.put(key, mapping.joint_state_of(names, q0 * np.nan, np.zeros(len(names)), 1.0),
+                          attachment=att)
+                other.put(key, b"\x00\x01\x00\x00\x03", attachment=att)
+                assert wait_until(lambda: rejects.total >= 5, 10.0)
+                reasons = {why for (_, why) in rejects.by_reason}
+                assert reasons == {"type", "attachment", "malformed"}
+                assert rejects.counts == {"/joint_states": 5}
+                before = link.received
+                assert wait_until(lambda: link.received > before + 3, 10.0)  # the robot's own states still come
+                # a command the robot must refuse (a joint it does not have); it keeps running
+                cmd = data_key(0, "/r_arm_controller/joint_trajectory", "trajectory_msgs/msg/JointTrajectory",
+                               mapping.hashes["trajectory_msgs/msg/JointTrajectory"])
+                other.put(cmd, mapping.command(["no_such_joint"], np.zeros((1, 1)), np.array([1.0])),
+                          attachment=att)
+                assert wait_until(lambda: robot.rejects.total == 1, 10.0)
+                assert robot.rejects.counts == {"/r_arm_controller/joint_trajectory": 1}
+                link.send(q0[None], np.array([0.2]))
+                assert wait_until(lambda: np.allclose(link.measure(0.0).q, q0, atol=1e-9), 10.0)
+            finally:
+                link.close()
+    finally:
+        robot_stop.set()
+        thread.join(10.0)
+    assert not thread.is_alive()
+    assert "/r_arm_controller/joint_trajectory" in recorded and "/joint_states" in recorded
+    assert robot.arm.received == 2
+
+
+def test_no_robot_is_one_clear_error(zenoh_hub: Callable[[], ZenohConfig]) -> None:
+    from services.executor.config import ExecutorError
+
+    with open_session(zenoh_hub()) as session:
+        link = Ros2RobotLink(session, ExecutorConfig(mode="realtime", robot="ros2"), list(JOINT_NAMES),
+                             threading.Event(), RejectCounter("executor"))
+        try:
+            with pytest.raises(ExecutorError, match=r"no valid sensor_msgs/JointState .* on /joint_states"):
+                link.initial(0.5)
+        finally:
+            link.close()
