@@ -19,13 +19,18 @@ DEMO_ARGS ?=
 TORCH_VERSION ?= 2.13.0
 TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 
-.PHONY: demo test setup lint clean
+.PHONY: demo test setup lint clean compose-check
 
 demo: $(STAMP)
 	@$(VENV)/bin/foresight demo $(DEMO_ARGS)
 
 test: $(STAMP)
 	$(PY) -m pytest -q
+
+# `docker compose up` for real: build the image, run the stack, check its log, compare with foresight demo, down
+# (needs a running Docker engine; says in one line why not). COMPOSE_ARGS: --twice, --secure, --no-demo.
+compose-check: $(STAMP)
+	@FORESIGHT=$(VENV)/bin/foresight tools/compose_check.sh $(COMPOSE_ARGS)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check shared services tools tests

@@ -99,6 +99,9 @@ class DemoConfig:
                      "robot (docs/ros2.md)")
     security: Path | None = opt(None, help="mutual TLS and access control: the directory of `foresight security "
                                 "init`; the demo's router and every service present their role's certificate")
+    prepare: Path | None = opt(None, help="only write the scenario's inputs and a config file for the services to this "
+                               "directory (DIR/foresight.toml: run each service with --config DIR/foresight.toml), "
+                               "then exit; what compose.yaml's prepare service runs")
     port: int = opt(0, help="loopback TCP port of the demo's Zenoh router (0 = a free port)")
     prefix: str = opt("foresight", help="key-expression prefix")
     timeout: float = opt(900.0, help="give up after this many seconds")
@@ -229,6 +232,11 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
         restore = stop_on_signals(stop, grace_s=STOP_GRACE_S)  # the services' own bounded stops come first
         progress = (lambda line: print(line, file=sys.stderr, flush=True)) if cfg.json else \
             (lambda line: print(line, flush=True))
+        if cfg.prepare is not None:
+            from services.demo_prepare import prepare
+
+            prepare(cfg, cfg.prepare, progress)
+            return 0
         try:
             status, summary = run_demo(cfg, stop, out=progress)
         finally:

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 from services.processes import ServiceProcess, free_port
 from services.scenario import (
     RunRecorder,
+    Scenario,
     Summary,
     choose_demonstration,
     model_for,
@@ -40,7 +41,8 @@ from shared.transport import Presence, open_session, subscribe
 if TYPE_CHECKING:
     from services.demo import DemoConfig
 
-__all__ = ["SERVICES_IN_ORDER", "MODULES", "RunRecord", "run_once", "service_args"]
+__all__ = ["SERVICES_IN_ORDER", "MODULES", "RunRecord", "run_once", "service_args", "service_options",
+           "prepare_inputs"]
 
 log = logging.getLogger("foresight.demo")
 
@@ -69,24 +71,29 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
     """Command-line arguments of each service for this demo."""
     common = ["--connect", endpoint, "--listen", "tcp/127.0.0.1:0", "--prefix", cfg.prefix, "--zenoh-mode", "peer",
               "--log-level", "INFO", *(["--security", str(cfg.security)] if cfg.security else [])]
+    own = service_options(cfg, model, replay_library, samples_per_tick, mcap)
+    return {name: [*flags, *common] for name, flags in own.items()}
+
+
+def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_per_tick: int,
+                    mcap: Path | None) -> dict[str, list[str]]:
+    """Each service's own options (flags, no Zenoh ones) for this demo's scenario; ``mcap`` None: the default."""
     scene = ["--scene", cfg.scene] if cfg.scene else []
     lockstep = cfg.mode == "lockstep"
     return {
-        "predictor": ["--model", str(model), "--method", cfg.method, *scene, *common],
+        "predictor": ["--model", str(model), "--method", cfg.method, *scene],
         "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
                     "--velocity-scale", str(cfg.robot_speed),
-                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--cost.w-human", "0"]), *scene,
-                    *common],
+                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--cost.w-human", "0"]), *scene],
         "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
-                     "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"]), *common],
-        "ros2": [*scene, *([] if cfg.robot == "sim" else ["--no-joint-states"]), *common],  # a ROS 2 robot has its own
-        "simrobot": [*scene, "--sim-time" if lockstep else "--no-sim-time", *common],
+                     "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"])],
+        "ros2": [*scene, *([] if cfg.robot == "sim" else ["--no-joint-states"])],  # a ROS 2 robot has its own
+        "simrobot": [*scene, "--sim-time" if lockstep else "--no-sim-time"],
         "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
                      *([] if cfg.robot == "sim" else ["--robot", "ros2"]),
                      *(["--finish-path"] if lockstep and cfg.finish else []),
-                     "--mcap", str(mcap), *scene, *common],
+                     *(["--mcap", str(mcap)] if mcap is not None else []), *scene],
     }
-
 
 
 def _log_state(mcap: Path) -> str:
@@ -128,10 +135,13 @@ class RunRecord:
 
 
 
-def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable[[str], None]
-              ) -> tuple[int, RunRecord | None]:
-    """One run of the scenario in ``cfg.run_dir``; returns ``(exit status, its record or None)``."""
-    scene = load_scene(cfg.scene or None)
+def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable[[str], None]
+                   ) -> tuple[Scenario, Path, Path]:
+    """The scenario's inputs: ``(scenario, model, human)``.
+
+    The library, the human's demonstration (``directory/human.npz``, a library of one) and the prediction model
+    trained without it (cached in ``cfg.models_dir``).
+    """
     lib = _library(cfg, scene)
     scenario = choose_demonstration(lib, cfg.steps, cfg.seed, cfg.human_class)
     demo = scenario.demo
@@ -140,14 +150,23 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
         f"{scenario.samples_per_tick} per step)")
     model = model_for(lib, scene, demo, cfg.models_dir, None if cfg.components < 0 else cfg.components)
     out(f"foresight demo: prediction model {model}")
+    directory.mkdir(parents=True, exist_ok=True)
+    human = directory / "human.npz"
+    save_library(MotionLibrary(class_names=list(lib.class_names), demos=[demo], issues=[],
+                               source=f"{lib.source} ({demo.class_name} #{demo.index})"), human)
+    return scenario, model, human
+
+
+def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable[[str], None]
+              ) -> tuple[int, RunRecord | None]:
+    """One run of the scenario in ``cfg.run_dir``; returns ``(exit status, its record or None)``."""
+    scene = load_scene(cfg.scene or None)
+    run_dir = Path(cfg.run_dir)
+    scenario, model, replay_lib = prepare_inputs(cfg, scene, run_dir, out)
+    demo = scenario.demo
     if stop.is_set():
         out("foresight demo: interrupted before the services started; nothing was recorded")
         return 130, None
-    run_dir = Path(cfg.run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    replay_lib = run_dir / "human.npz"
-    save_library(MotionLibrary(class_names=list(lib.class_names), demos=[demo], issues=[],
-                               source=f"{lib.source} ({demo.class_name} #{demo.index})"), replay_lib)
     mcap = run_dir / f"{run_dir.name}.mcap"
     endpoint = f"tcp/127.0.0.1:{cfg.port or free_port()}"
     keys = Keys(cfg.prefix)

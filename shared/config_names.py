@@ -40,6 +40,14 @@ OTHER_VARIABLES: dict[str, str] = {
     f"{ENV_PREFIX}_CONFIG": "the TOML config file",
     f"{ENV_PREFIX}_BLAS_THREADS": "BLAS threads per process (shared.native_threads)",
     f"{ENV_PREFIX}_PARENT_PID": "set by foresight demo for its services (shared.runtime.watch_parent)",
+    f"{ENV_PREFIX}_UID": "compose.yaml: the user id the containers run as (default 1000)",
+    f"{ENV_PREFIX}_GID": "compose.yaml: the group id the containers run as (default 1000)",
+    f"{ENV_PREFIX}_BASE_IMAGE": "compose.yaml / tools/compose_check.sh: the image's base (default python:3.11-slim)",
+    f"{ENV_PREFIX}_WHEELHOUSE": "compose.yaml: an image whose root holds wheels the build prefers (docs/docker.md)",
+    f"{ENV_PREFIX}_WHEELHOUSE_DIR": "tools/compose_check.sh: a directory of wheels the build prefers",
+    f"{ENV_PREFIX}_SECURITY_DIR": "compose.secure.yaml: the directory of `foresight security init` (default "
+                                  "./security)",
+    f"{ENV_PREFIX}_CA_BUNDLE": "tools/compose_check.sh: extra CA certificates the build trusts (a proxy's)",
 }
 """``FORESIGHT_*`` variables that are not options of a section, with what each is."""
 

@@ -1,15 +1,13 @@
 """compose.yaml and Dockerfile: schema-valid compose file, configuration that the services understand,
-no multicast scouting, a stack that starts in any order, trains what models/ lacks, streams a
-demonstration the model was not trained on and ends with its executor, and the Dockerfile installing
-what the Makefile installs (no Docker engine here)."""
+no multicast scouting, a stack that starts in any order, runs the scenario of `foresight demo` (its prepared
+config file) and ends with its executor, and the Dockerfile installing what the Makefile installs (the run
+itself: tests/test_compose_run.py, where a Docker engine answers)."""
 
 from __future__ import annotations
 
 import contextlib
 import importlib
 import io
-import math
-import os
 import re
 import shlex
 import shutil
@@ -31,7 +29,7 @@ CHECK = shutil.which("check-jsonschema") or str(Path(sys.executable).parent / "c
 # service section -> its config dataclass, for the sections that exist as services
 SECTIONS = {
     "zenoh": "shared.config:ZenohConfig",
-    "executor": "services.executor.core:ExecutorConfig",
+    "executor": "services.executor.config:ExecutorConfig",
     "replayer": "services.replayer.core:ReplayerConfig",
     "predictor": "services.predictor.core:PredictorConfig",
     "planner": "services.planner.config:PlannerServiceConfig",
@@ -61,37 +59,37 @@ def test_compose_file_is_valid_against_the_compose_spec(tmp_path) -> None:
 def test_services_router_volumes_and_dependencies() -> None:
     c = compose()
     services = c["services"]
-    assert {"router", "train", "replayer", "predictor", "planner", "executor"} <= set(services)
-    assert services["router"]["image"].startswith("eclipse/zenoh:")
+    assert {"router", "prepare", "replayer", "predictor", "planner", "executor"} <= set(services)
+    # the router comes from the project image (Docker Hub may be out of reach): `foresight router`
+    assert services["router"]["command"][:2] == ["foresight", "router"]
     assert "--no-multicast-scouting" in services["router"]["command"]
     assert "tcp/0.0.0.0:7447" in services["router"]["command"]
+    assert "7447" in " ".join(services["router"]["healthcheck"]["test"])
     for name, svc in services.items():
         for dep in svc.get("depends_on", {}):
             assert dep in services, f"{name} depends on unknown service {dep}"
-        if name == "router":
-            continue
         assert svc["image"] == services["executor"]["image"] and svc["build"]["context"] == "."
         assert "./models:/app/models" in svc["volumes"] and "./runs:/app/runs" in svc["volumes"]
-    assert services["predictor"]["depends_on"]["train"]["condition"] == "service_completed_successfully"
+        assert svc["init"] is True and svc["user"].startswith("${FORESIGHT_UID")
+    for name in FORESIGHT_SERVICES:
+        deps = services[name]["depends_on"]
+        assert deps["prepare"]["condition"] == "service_completed_successfully", name
+        assert deps["router"]["condition"] == "service_healthy", name
     assert set(services["executor"]["depends_on"]) >= {"router", "replayer", "predictor", "planner"}
+    assert services["prepare"]["command"] == ["foresight", "demo", "--prepare", "models/compose"]
 
 
 FORESIGHT_SERVICES = ("replayer", "predictor", "planner", "executor")
 
 
-def service_config(name: str):
+def service_config(name: str, prepared: Path | None = None):
     """``(section config, zenoh config)`` of a compose service, resolved from its environment as the
-    service itself resolves it (defaults < environment)."""
+    service itself resolves it (defaults < the prepared file, when given < environment)."""
     module, cls_name = SECTIONS[name].split(":")
     cls = getattr(importlib.import_module(module), cls_name)
     env = {k: str(v) for k, v in compose()["services"][name]["environment"].items()}
-    return resolve_config(name, cls, None, env=env)
-
-
-def train_command() -> str:
-    cmd = compose()["services"]["train"]["command"]
-    assert cmd[:2] == ["sh", "-c"]
-    return cmd[2]
+    env.pop("FORESIGHT_CONFIG")
+    return resolve_config(name, cls, None, env=env, config_file=prepared)
 
 
 def test_the_stack_starts_in_any_order() -> None:
@@ -102,6 +100,7 @@ def test_the_stack_starts_in_any_order() -> None:
         _, z = service_config(name)
         assert z.mode == "client" and z.connect == ["tcp/router:7447"], name
         assert z.connect_timeout_s > 0, f"{name}: a client that starts before the router listens must retry"
+        assert services[name]["environment"]["FORESIGHT_CONFIG"] == "models/compose/foresight.toml", name
     executor, _ = service_config("executor")
     assert set(executor.wait_for) == {"replayer", "predictor", "planner"} and executor.startup_timeout_s > 0
     for name, svc in services.items():
@@ -111,93 +110,57 @@ def test_the_stack_starts_in_any_order() -> None:
 
 
 @pytest.fixture(scope="module")
-def trained_dir(tmp_path_factory) -> Path:
-    """A working directory where the train service's command ran with models/ holding the model only."""
-    work = tmp_path_factory.mktemp("compose-train")
-    (work / "models").mkdir()
-    bin_dir = work / "bin"
-    bin_dir.mkdir()
-    tool = bin_dir / "foresight"  # what `pip install .` puts on the image's PATH: the real CLI
-    tool.write_text(f"#!/bin/sh\nexec {shlex.quote(sys.executable)} -m tools \"$@\"\n")
-    tool.chmod(0o755)
-    model = service_config("predictor")[0].model
-    (work / model).write_bytes(b"a model trained earlier")
-    return work
+def prepared(tmp_path_factory) -> tuple[Path, dict[str, list[str]]]:
+    """The config file `foresight demo --prepare` writes for the demo's defaults, and the flags the demo passes."""
+    import tomli_w
+
+    from services.demo import DemoConfig
+    from services.demo_prepare import config_tables
+    from services.demo_run import service_options
+
+    options = service_options(DemoConfig(), Path("models/demo-x.npz"), Path("models/compose/human.npz"), 5, None)
+    path = tmp_path_factory.mktemp("prepared") / "foresight.toml"
+    path.write_text(tomli_w.dumps(config_tables({name: options[name] for name in FORESIGHT_SERVICES})))
+    return path, options
 
 
-def _run_train(work: Path) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PATH": f"{work / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}",
-           "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run(["sh", "-c", train_command()], cwd=work, env=env, capture_output=True, text=True,
-                          timeout=300)
+def test_the_prepared_file_gives_each_service_the_demos_options(prepared) -> None:
+    """Each service resolves from the prepared file exactly what it resolves from the demo's flags, so that the
+    compose stack runs the demo's scenario (tools/compose_check.sh compares their step tables for real)."""
+    import argparse
+
+    from shared.config import add_config_arguments
+
+    path, options = prepared
+    for name in FORESIGHT_SERVICES:
+        module, cls_name = SECTIONS[name].split(":")
+        cls = getattr(importlib.import_module(module), cls_name)
+        parser = argparse.ArgumentParser()
+        add_config_arguments(parser, name, cls, with_zenoh=False)
+        from_flags, _ = resolve_config(name, cls, parser.parse_args(options[name]), env={}, with_zenoh=False)
+        from_file, _ = resolve_config(name, cls, None, env={}, config_file=path, with_zenoh=False)
+        assert from_file == from_flags, name
+        assert from_file != cls(), f"{name}: the demo sets none of its options?"
+    # and compose's own variables on top leave the scenario as it is
+    planner, _ = service_config("planner", path)
+    executor, _ = service_config("executor", path)
+    assert planner.planner.velocity_scale == 0.1 and planner.mode == executor.mode == "lockstep"
+    assert executor.step_period_s == 0.5 and executor.finish_path and executor.steps == 20
 
 
-def test_train_makes_every_file_the_services_read_and_only_what_is_missing(trained_dir) -> None:
-    library = service_config("replayer")[0].library
-    model = service_config("predictor")[0].model
-    cmd = train_command()
-    for path in (library, model):
-        assert f"test -f {path}" in cmd, f"the train service does not check for {path}"
-    # models/ has the model but not the library: the library is made, the model left alone
-    first = _run_train(trained_dir)
-    assert first.returncode == 0, first.stdout + first.stderr
-    from shared.library import load_library
-
-    assert len(load_library(trained_dir / library).demos) > 0
-    assert (trained_dir / model).read_bytes() == b"a model trained earlier"
-    assert not list((trained_dir / "models").glob("*.tmp*"))
-    # both there: nothing to do
-    stamp = (trained_dir / library).stat().st_mtime_ns
-    again = _run_train(trained_dir)
-    assert again.returncode == 0 and "wrote" not in again.stdout + again.stderr
-    assert (trained_dir / library).stat().st_mtime_ns == stamp
-
-
-def _train_invocation() -> tuple[dict[str, str], str]:
-    """The options of the train service's ``foresight train`` and the final path of its model."""
-    cmd = train_command()
-    part = next(p for p in re.split(r"&&|\|\||;|\{|\}", cmd) if shlex.split(p)[:2] == ["foresight", "train"])
-    tokens = shlex.split(part)[2:]
-    opts = {tokens[i]: tokens[i + 1] for i in range(len(tokens) - 1) if tokens[i].startswith("--")
-            and not tokens[i + 1].startswith("--")}
-    renames = dict(re.findall(r"\bmv\s+([^\s;&|{}]+)\s+([^\s;&|{}]+)", cmd))
-    return opts, renames.get(opts["--out"], opts["--out"])
-
-
-def test_the_streamed_demonstration_is_held_out_of_the_model(trained_dir) -> None:
-    from services.replayer.core import select_demos
-    from shared.library import heldout_split, load_library
-
-    replayer, _ = service_config("replayer")
-    predictor, _ = service_config("predictor")
-    executor, _ = service_config("executor")
-    opts, model_path = _train_invocation()
-    assert opts["--library"] == str(replayer.library) and model_path == str(predictor.model)
-    assert int(opts["--heldout"]) > 0
-    _run_train(trained_dir)  # the library (the model is there already)
-    lib = load_library(trained_dir / replayer.library)
-    streamed = select_demos(lib, replayer)[: replayer.max_demos or None]
-    # what `foresight train --heldout N --seed S` trains on (services/predictor/train.py)
-    training = heldout_split(lib, int(opts["--heldout"]), int(opts.get("--seed", "0")))[0]
-    assert streamed
-    assert not {(d.label, d.index) for d in streamed} & {(d.label, d.index) for d in training}
-    # the scenario of `make demo`: a red-cup reach that lasts the executor's steps
-    assert [d.class_name for d in streamed] == ["red_cup"]
-    assert math.ceil(streamed[0].n_samples / replayer.samples_per_tick) >= executor.steps
-
-
-def test_the_run_ends_cleanly_with_its_executor() -> None:
+def test_the_run_ends_cleanly_with_its_executor(prepared) -> None:
     services = compose()["services"]
-    executor, _ = service_config("executor")
+    path, _ = prepared
+    executor, _ = service_config("executor", path)
     assert executor.steps > 0 and services["executor"].get("restart", "no") == "no"
-    assert services["train"].get("restart", "no") == "no"
+    assert services["prepare"].get("restart", "no") == "no"
     for name in ("replayer", "predictor", "planner"):
-        cfg, _ = service_config(name)
+        cfg, _ = service_config(name, path)
         assert "executor" in cfg.stop_with, f"{name} would run on after the executor ends"
         assert services[name].get("restart", "no") == "no", f"{name} would be restarted after it ends"
     # lock-step throughout: a real-time planner never answers the executor's ticks
     assert executor.mode == "lockstep"
-    assert service_config("planner")[0].mode == service_config("replayer")[0].mode == "lockstep"
+    assert service_config("planner", path)[0].mode == service_config("replayer", path)[0].mode == "lockstep"
 
 
 def _env_items():
@@ -209,6 +172,10 @@ def _env_items():
 
 @pytest.mark.parametrize("service, key, value", list(_env_items()))
 def test_environment_variables_name_real_options(service, key, value) -> None:
+    from shared.config_names import OTHER_VARIABLES
+
+    if key in OTHER_VARIABLES:
+        return
     section = key[len("FORESIGHT_"):].lower().partition("_")[0]
     target = SECTIONS.get(section)
     assert target is not None, f"{service}: {key} names no known section"
@@ -227,7 +194,7 @@ def test_environment_variables_name_real_options(service, key, value) -> None:
 
 def test_every_service_is_a_zenoh_client_of_the_router_without_scouting() -> None:
     for name, svc in compose()["services"].items():
-        if name in ("router", "train"):
+        if name in ("router", "prepare"):
             continue
         env = svc["environment"]
         assert env["FORESIGHT_ZENOH_CONNECT"] == "tcp/router:7447"
@@ -276,14 +243,14 @@ def test_dockerfile_installs_what_the_makefile_installs() -> None:
     index_docker = re.search(r"^ARG TORCH_INDEX_URL=(\S+)$", docker, re.M)
     assert index_make and index_docker and index_make[1] == index_docker[1] == "https://download.pytorch.org/whl/cpu"
     # base image: python:3.11-slim, which satisfies requires-python
-    base = re.search(r"^FROM\s+python:(\d+)\.(\d+)-slim\s*$", docker, re.M)
+    base = re.search(r"^ARG BASE_IMAGE=python:(\d+)\.(\d+)-slim\s*$", docker, re.M)
     assert base is not None
     need = re.match(r">=\s*(\d+)\.(\d+)", pyproject["project"]["requires-python"])
     assert (int(base[1]), int(base[2])) >= (int(need[1]), int(need[2]))
     # torch before the project (as in the Makefile), then the project from the copied sources
     runs = [ln for ln in re.findall(r"^RUN (.*(?:\n .*)*)", docker, re.M)]
     flat = " ".join(runs)
-    assert flat.index("torch==") < flat.index("pip install .")
+    assert flat.index("torch==") < flat.index("pip install --find-links /wheelhouse .")
     stamp = re.search(r"^\$\(STAMP\):.*\n((?:\t.*\n)+)", make, re.M)
     assert stamp is not None and stamp[1].index("torch") < stamp[1].index('install --quiet -e ".[dev]"')
     assert '--index-url "$(TORCH_INDEX)"' in make and 'install "torch==$(TORCH_VERSION)"' in make
@@ -305,7 +272,7 @@ def test_the_secure_variant_is_valid_and_gives_each_service_only_its_own_role() 
     assert ok.returncode == 0, ok.stdout + ok.stderr
     secure = YAML(typ="safe").load(SECURE.read_text())["services"]
     base = compose()["services"]
-    zenoh_services = [name for name, svc in base.items() if name != "train"]
+    zenoh_services = [name for name, svc in base.items() if name != "prepare"]
     assert sorted(secure) == sorted(zenoh_services)
     for name, svc in secure.items():
         mounts = [v.rsplit(":", 2) for v in svc["volumes"]]  # SOURCE:TARGET:ro (the source has a ${...:-...})

@@ -92,3 +92,26 @@ def test_demo_refuses_a_ros2_robot_with_security(tmp_path: Path, capsys: pytest.
         main(["--robot", "ros2-sim", "--security", str(tmp_path)])
     assert e.value.code == 2
     assert "demo.robot with demo.security" in capsys.readouterr().err
+
+
+def test_demo_prepare_writes_the_inputs_and_the_services_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                                                 ) -> None:
+    """``--prepare DIR``: the human's demonstration, the model, DIR/foresight.toml that each service reads."""
+    import tomllib
+
+    from shared.library import load_library
+
+    lib = tmp_path / "lib.npz"
+    save_library(generate_library(8, 6, seed=3), lib)
+    out = tmp_path / "compose"
+    assert main(["--prepare", str(out), "--library", str(lib), "--components", "4", "--steps", "5",
+                 "--models-dir", str(tmp_path / "models")]) == 0
+    config = tomllib.loads((out / "foresight.toml").read_text())
+    assert set(config) == {"predictor", "planner", "replayer", "executor"}
+    assert Path(config["predictor"]["model"]).is_file() and Path(config["predictor"]["model"]).parent == \
+        tmp_path / "models"
+    human = load_library(config["replayer"]["library"])
+    assert len(human.demos) == 1 and config["replayer"]["samples_per_tick"] >= 1
+    assert config["executor"]["steps"] == 5 and config["planner"]["velocity_scale"] == 0.1
+    assert "foresight.toml" in capsys.readouterr().out
+    assert not list(tmp_path.glob("run*")), "nothing was run"

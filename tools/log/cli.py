@@ -36,6 +36,7 @@ SUBCOMMANDS: dict[str, str] = {
     "render": "draw replanning step(s) to PNG",
     "latency": "pose -> occupancy -> plan latencies and the replanning period (p50, p99)",
     "compress": "rewrite a log with compressed chunks; read both back, compare them",
+    "table": "the run's step table (goal per step, costs), switch step, goal reached, as foresight demo prints it",
 }
 """The sub-commands of ``foresight log`` with one line each (``foresight --help`` lists them)."""
 
@@ -78,6 +79,17 @@ def _main_render(args: argparse.Namespace, prog: str) -> int:
     return 0
 
 
+def _main_table(args: argparse.Namespace) -> int:
+    from .table import WANTED, run_summary, table_lines
+
+    lf = read_log(args.file, keep=lambda ch: ch.schema_name in WANTED and ch.message_encoding == "msgpack")
+    summary = run_summary(lf)
+    if not summary.steps:
+        raise UserError(f"{args.file}: no plans logged")
+    print(json.dumps(summary.to_json()) if args.json else "\n".join(table_lines(summary)))
+    return 0
+
+
 def _main_latency(args: argparse.Namespace) -> int:
     wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.DemoMarker"}
     lf = read_log(args.file, keep=lambda ch: ch.schema_name in wanted and ch.message_encoding == "msgpack")
@@ -98,7 +110,7 @@ def _main_latency(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
-    """``foresight log info|render|latency|compress``; returns the exit status."""
+    """``foresight log info|render|latency|compress|table``; returns the exit status."""
     parser = argparse.ArgumentParser(prog=prog, description="Look at a run's MCAP log without Foxglove: 'info' "
                                      "lists channels, schemas and message counts; 'render' draws replanning steps "
                                      "to PNG (table, cups, human, predicted occupancy, robot spheres, candidate "
@@ -121,8 +133,13 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
     pc.add_argument("file", help="MCAP file")
     pc.add_argument("out", help="the new MCAP file")
     pc.add_argument("--compression", default="zstd", choices=("zstd", "lz4", "none"), help="chunk compression")
+    pt = sub.add_parser("table", help=SUBCOMMANDS["table"])
+    pt.add_argument("file", help="MCAP file")
+    pt.add_argument("--json", action="store_true", help="print one JSON object (the demo's --json keys)")
     args = parser.parse_args(argv)
     with cli_errors(prog):
+        if args.cmd == "table":
+            return _main_table(args)
         if args.cmd == "compress":
             result = compress_log(args.file, args.out, args.compression)
             print(result.line(Path(args.file), Path(args.out)))

@@ -16,7 +16,7 @@ from shared.protocol import HumanPose, OccupancyGrid, Plan, ProtocolError, Robot
 from shared.recording.reader import LogFile
 from shared.scene import Scene, load_scene, parse_scene
 
-__all__ = ["StepView", "step_views", "step_title", "scene_of"]
+__all__ = ["StepView", "step_views", "step_title", "scene_of", "decode_all"]
 
 
 @dataclass
@@ -35,7 +35,8 @@ class StepView:
     t0: float = 0.0
 
 
-def _decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
+def decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
+    """``(log time ns, message)`` of every valid message of ``schema`` (Foresight's msgpack channels) in the log."""
     topics = {c.topic for c in lf.channels.values() if c.schema_name == schema and c.message_encoding == "msgpack"}
     out = []
     for m in lf.messages:
@@ -57,10 +58,10 @@ def _latest_before(items: list[tuple[int, Any]], t: int, pred: Callable[[Any], b
 
 def step_views(lf: LogFile) -> dict[int, StepView]:
     """One :class:`StepView` per replanning step (``Plan.step``) in the log (the last plan of a step wins)."""
-    plans = _decode_all(lf, "foresight.Plan", Plan)
-    occs = _decode_all(lf, "foresight.OccupancyGrid", OccupancyGrid)
-    poses = _decode_all(lf, "foresight.HumanPose", HumanPose)
-    states = _decode_all(lf, "foresight.RobotState", RobotState)
+    plans = decode_all(lf, "foresight.Plan", Plan)
+    occs = decode_all(lf, "foresight.OccupancyGrid", OccupancyGrid)
+    poses = decode_all(lf, "foresight.HumanPose", HumanPose)
+    states = decode_all(lf, "foresight.RobotState", RobotState)
     realtime = bool(plans) and all(p.tick < 0 for _, p in plans)
     t0 = 0.0
     if realtime:

@@ -1,0 +1,43 @@
+"""``foresight log table``: a logged run's step table and outcome, as ``foresight demo`` printed it live.
+
+The plans, robot states, final occupancy and class posteriors of the MCAP go through the same summary as the
+demo's (:func:`services.scenario.summarise`): one row per replanning step (time, chosen goal, each goal's
+cost, planning time), the switch step, whether and when the goal was reached, the interference cost. Two
+runs of one scenario -- ``foresight demo`` and ``docker compose up``, say -- compare by their tables.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from services.scenario import Summary, summarise
+from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
+from shared.recording.reader import LogFile
+
+from .steps import decode_all, scene_of
+
+__all__ = ["WANTED", "run_summary", "table_lines"]
+
+WANTED = {"foresight.Plan", "foresight.RobotState", "foresight.OccupancyGrid", "foresight.ClassPosterior"}
+"""The channels (schemas) the table is made from."""
+
+
+def run_summary(lf: LogFile) -> Summary:
+    """The run's summary from its log (read with the :data:`WANTED` channels kept)."""
+    import torch
+
+    from shared.robot import PR2
+
+    plans = [p for _, p in decode_all(lf, "foresight.Plan", Plan)]
+    states = [s for _, s in decode_all(lf, "foresight.RobotState", RobotState)]
+    grids = [g for _, g in decode_all(lf, "foresight.OccupancyGrid", OccupancyGrid)]
+    posteriors: dict[int, Any] = {}
+    for i, (_, post) in enumerate(decode_all(lf, "foresight.ClassPosterior", ClassPosterior)):
+        posteriors[post.tick if post.tick >= 0 else i] = post
+    robot = PR2.from_scene(scene_of(lf), device="cpu", dtype=torch.float32)
+    return summarise(plans, states, grids[-1] if grids else None, posteriors, robot, "", lf.path)
+
+
+def table_lines(summary: Summary) -> list[str]:
+    """The table, then the switch step, the goal reached, the interference cost (no human class: not logged)."""
+    return [line for line in summary.lines() if not line.startswith(("human class:", "MCAP log:"))]
