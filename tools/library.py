@@ -146,12 +146,64 @@ def _cmd_generate(args: argparse.Namespace) -> int:
 
 
 # name -> (help, add_arguments(parser), run(args) -> exit code)
+def _to_keypoints_args(p: argparse.ArgumentParser) -> None:
+    _info_args(p)
+    p.add_argument("--out", required=True, metavar="DIR", help="the keypoint library's directory")
+    p.add_argument("--noise-m", type=float, default=0.0, help="Gaussian noise per axis, metres")
+    p.add_argument("--drop", type=float, default=0.0, help="fraction of frames left out")
+    p.add_argument("--missing", type=float, default=0.0, help="fraction of frames with one point left empty")
+    p.add_argument("--seed", type=int, default=0, help="seed of the noise, drops and missing points")
+
+
+def _cmd_to_keypoints(args: argparse.Namespace) -> int:
+    from shared.keypoints.library import write_keypoint_library
+
+    for name in ("noise_m", "drop", "missing"):
+        value = getattr(args, name)
+        if not (value >= 0 and (name == "noise_m" or value < 1)):
+            raise LibraryError(f"--{name.replace('_', '-')}: must be >= 0{'' if name == 'noise_m' else ' and < 1'}, "
+                               f"got {value}")
+    lib = load_library(args.path, report=False)
+    files = write_keypoint_library(lib, Path(args.out), args.noise_m, args.drop, args.missing, args.seed)
+    print(f"wrote {len(files)} keypoint files to {args.out}: {len(lib.demos)} demonstrations")
+    return 0
+
+
+def _from_keypoints_args(p: argparse.ArgumentParser) -> None:
+    from shared.keypoints.layouts import LAYOUTS
+
+    p.add_argument("path", help="a keypoint library: a directory of <class>.csv")
+    p.add_argument("--out", required=True, metavar="FILE.npz", help="the motion library to write")
+    p.add_argument("--layout", default="foresight", choices=LAYOUTS, help="how the CSVs name their points")
+
+
+def _cmd_from_keypoints(args: argparse.Namespace) -> int:
+    from shared.keypoints.library import fit_keypoint_library
+
+    out = Path(args.out)
+    if out.suffix != ".npz":
+        raise LibraryError(f"--out {str(out)!r}: the native format is a .npz file")
+    if not Path(args.path).is_dir():
+        raise LibraryError(f"keypoint library {args.path!r}: not a directory")
+    try:
+        lib, report = fit_keypoint_library(Path(args.path), args.layout)
+    except ValueError as exc:
+        raise LibraryError(str(exc)) from None
+    save_library(lib, out)
+    print(f"wrote {out}: {len(lib.demos)} demonstrations in {lib.n_classes} classes; {report.line()}")
+    return 0
+
+
 SUBCOMMANDS: dict[str, tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {
     "info": ("classes, demonstrations per class and issues of a library", _info_args, _cmd_info),
     "validate": ("report malformed demonstrations; exit status 1 if any", _info_args, _cmd_validate),
     "convert": ("convert a library (e.g. the paper's CSVs) to the native .npz", _convert_args, _cmd_convert),
     "generate": ("generate a synthetic library of table reaches (IK on the human model; shared/synthetic.py)",
                  _generate_args, _cmd_generate),
+    "to-keypoints": ("write a library as 3D body keypoints, one CSV per class (optionally noisy, with drops)",
+                     _to_keypoints_args, _cmd_to_keypoints),
+    "from-keypoints": ("fit the 12 features to a keypoint library (one CSV per class): a motion library",
+                       _from_keypoints_args, _cmd_from_keypoints),
 }
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 from collections.abc import Callable
@@ -23,6 +24,8 @@ Options: defaults < --config FILE ([ros2], [zenoh]) < env FORESIGHT_ROS2_<NAME> 
 
 def _make(cfg: Ros2ServiceConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
     service = Ros2Service(cfg, zcfg)
+    if cfg.nice:  # this process only (the gateway as `foresight ros2`), never a process it runs inside of
+        os.nice(cfg.nice)
     return lambda: service.run(stop)
 
 

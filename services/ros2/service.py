@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shared.config import ZenohConfig, opt
+from shared.config import ConfigError, ZenohConfig, opt
 from shared.protocol import ClassPosterior, DemoMarker, HumanPose, Keys, OccupancyGrid, Plan, RobotState
 from shared.rejects import RejectCounter
 from shared.scene import SCENE_HELP, load_scene
@@ -37,6 +37,16 @@ class Ros2ServiceConfig(Ros2Config):
     scene: str = opt("", help=SCENE_HELP + " (places the human's markers; empty: pr2_two_cups)")
     viz_rate_hz: float = opt(5.0, help="highest rate of the occupancy and human markers per topic")
     stop_with: str = opt("", help="stop when this service's liveliness token goes away (e.g. executor)")
+    nice: int = opt(10, help="`foresight ros2` lowers its CPU priority by this much (0-19): encoding markers must "
+                    "not take CPU from the planning loop on a shared machine")
+
+    def validate(self) -> None:
+        """Check ranges and names."""
+        super().validate()
+        if not 0 <= self.nice <= 19:
+            raise ConfigError(f"ros2.nice: must be 0..19, got {self.nice}")
+        if not self.viz_rate_hz > 0:
+            raise ConfigError(f"ros2.viz_rate_hz: must be > 0, got {self.viz_rate_hz}")
 
 
 @dataclass

@@ -100,3 +100,22 @@ def test_generate_cli_wide(tmp_path, capsys) -> None:
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--plot (hand positions in the scene) needs a mapping" in err[0]
+
+
+def test_cli_to_and_from_keypoints(tmp_path, capsys) -> None:
+    from shared.library import save_library
+
+    lib = tmp_path / "lib.npz"
+    save_library(generate_library(2, 2, seed=2), lib)
+    assert library_main(["to-keypoints", str(lib), "--out", str(tmp_path / "kp"), "--noise-m", "0.01"]) == 0
+    assert sorted(p.name for p in (tmp_path / "kp").iterdir()) == [f"{c}.csv" for c in
+                                                                   sorted(load_library(lib).class_names)]
+    assert library_main(["from-keypoints", str(tmp_path / "kp"), "--out", str(tmp_path / "back.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "fit residual median" in out and len(load_library(tmp_path / "back.npz").demos) == 4
+    for argv, text in ((["to-keypoints", str(lib), "--out", str(tmp_path / "x"), "--drop", "1.5"], "--drop"),
+                       (["from-keypoints", str(tmp_path / "none"), "--out", str(tmp_path / "y.npz")],
+                        "not a directory")):
+        with pytest.raises(SystemExit) as exc:
+            library_main(argv)
+        assert exc.value.code == 2 and text in capsys.readouterr().err

@@ -1,0 +1,78 @@
+"""Skeleton layouts: which of a tracker's or a motion-capture system's points make each of Foresight's points.
+
+A layout is a small table (``shared/data/keypoints/<name>.toml``): each Foresight point
+(:data:`shared.keypoints.POINT_NAMES`) is the mean of the layout points listed for it, e.g. the pelvis is the
+mean of COCO's two hips. Foresight's own point names are the layout ``foresight`` (identity). Points a
+layout does not give are simply unobserved.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+
+import numpy as np
+
+from .fit import POINT_NAMES, REQUIRED
+
+__all__ = ["Layout", "load_layout", "LAYOUTS"]
+
+LAYOUTS = ("foresight", "coco17", "plugin_gait")
+"""The layouts that ship with Foresight."""
+
+
+@dataclass(frozen=True)
+class Layout:
+    """A skeleton layout: Foresight point -> the layout points whose mean it is."""
+
+    name: str
+    description: str
+    points: dict[str, tuple[str, ...]]
+
+    @property
+    def source_names(self) -> list[str]:
+        """Every layout point the table uses, in a stable order."""
+        return sorted({n for names in self.points.values() for n in names})
+
+    def to_model(self, names: list[str], positions: np.ndarray) -> np.ndarray:
+        """Positions in the layout's names -> Foresight's points.
+
+        Args:
+            names: ``K`` layout point names, the columns of ``positions``.
+            positions: ``(..., K, 3)`` (NaN where missing).
+
+        Returns:
+            ``(..., J, 3)`` in :data:`POINT_NAMES` order: each the mean of its layout points, NaN when one of them is
+            missing or the layout does not give it.
+        """
+        pos = np.asarray(positions, dtype=np.float64)
+        out = np.full((*pos.shape[:-2], len(POINT_NAMES), 3), np.nan)
+        index = {n: i for i, n in enumerate(names)}
+        for j, point in enumerate(POINT_NAMES):
+            sources = self.points.get(point, ())
+            if sources and all(s in index for s in sources):
+                out[..., j, :] = np.mean(pos[..., [index[s] for s in sources], :], axis=-2)
+        return out
+
+
+def load_layout(name: str) -> Layout:
+    """A shipped layout by name (:data:`LAYOUTS`).
+
+    Raises:
+        ValueError: An unknown layout, or a table naming a point Foresight does not have or leaving out a required
+            one.
+    """
+    if name == "foresight":
+        return Layout("foresight", "Foresight's own point names", {p: (p,) for p in POINT_NAMES})
+    if name not in LAYOUTS:
+        raise ValueError(f"keypoint layout {name!r}: unknown (layouts: {', '.join(LAYOUTS)})")
+    data = tomllib.loads((resources.files("shared") / "data" / "keypoints" / f"{name}.toml").read_text())
+    points = {k: tuple(v) for k, v in data["points"].items()}
+    unknown = set(points) - set(POINT_NAMES)
+    if unknown:
+        raise ValueError(f"keypoint layout {name}: points {sorted(unknown)} are not the model's {list(POINT_NAMES)}")
+    missing = [p for p in REQUIRED if p not in points]
+    if missing:
+        raise ValueError(f"keypoint layout {name}: gives none of the required {missing}")
+    return Layout(data["name"], data.get("description", ""), points)

@@ -1,0 +1,172 @@
+"""Keypoint libraries: recorded demonstrations as 3D body points, one CSV per class, to and from motion libraries.
+
+A keypoint library is a directory with one ``<class>.csv`` per class; header
+``demo,frame,<point>_x,<point>_y,<point>_z,...`` (metres, the recorder's frame), one row per frame,
+demonstrations one after another; a missing point is an absent column or an empty cell, a dropped frame an
+absent row. Points are named as a layout names them (:mod:`shared.keypoints.layouts`; Foresight's own names
+by default). :func:`write_keypoint_library` makes one from a motion library (the human model's joint
+positions, optionally with noise, dropped frames and missing points); :func:`fit_keypoint_library` turns one
+into a motion library (:class:`shared.keypoints.KeypointFit`, frame by frame, gaps bridged by interpolating the
+fitted features).
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from shared.human import HumanModel
+from shared.library import Demonstration, MotionLibrary
+
+from .fit import POINT_NAMES, REQUIRED, FitConfig, KeypointFit
+from .layouts import load_layout
+
+__all__ = ["write_keypoint_library", "read_keypoint_csv", "fit_keypoint_library", "KeypointDemo", "FitReport"]
+
+
+@dataclass
+class KeypointDemo:
+    """One demonstration of a keypoint CSV: its frame numbers and points (layout names)."""
+
+    demo: int
+    frames: np.ndarray     # (T,) int
+    names: list[str]       # K
+    positions: np.ndarray  # (T, K, 3), NaN where missing
+
+
+@dataclass
+class FitReport:
+    """What :func:`fit_keypoint_library` measured: every observed point's fit residual, frames bridged."""
+
+    residual_m: np.ndarray  # (N,) over every observed point of every fitted frame
+    frames: int
+    bridged: int
+
+    def line(self) -> str:
+        """One line: median and p99 residual, frames fitted and bridged."""
+        r = self.residual_m
+        return (f"fit residual median {np.median(r) * 1e3:.2f} mm, p99 {np.percentile(r, 99) * 1e3:.2f} mm over "
+                f"{len(r)} points of {self.frames} frames; {self.bridged} frames bridged (dropped, or a required "
+                "point missing)")
+
+
+def write_keypoint_library(lib: MotionLibrary, out: Path, noise_m: float = 0.0, drop: float = 0.0,
+                           missing: float = 0.0, seed: int = 0) -> list[Path]:
+    """Write ``lib`` as a keypoint library: the human model's joint positions of every sample.
+
+    Args:
+        lib: A motion library of the paper's 12 features.
+        out: The directory (created).
+        noise_m: Standard deviation of Gaussian noise per axis, metres.
+        drop: Fraction of frames left out (never a demonstration's first).
+        missing: Fraction of frames with one point (chosen at random) left empty.
+        seed: Seed of the noise, drops and missing points.
+
+    Returns:
+        The CSV files written.
+    """
+    rng = np.random.default_rng(seed)
+    model = HumanModel()
+    out.mkdir(parents=True, exist_ok=True)
+    header = ["demo", "frame", *(f"{p}_{a}" for p in POINT_NAMES for a in "xyz")]
+    written = []
+    for label, name in enumerate(lib.class_names):
+        path = out / f"{name}.csv"
+        with path.open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(header)
+            for demo in (d for d in lib.demos if d.label == label):
+                pts = model.joint_positions(demo.features)  # (T, J, 3)
+                pts = pts + rng.normal(0.0, noise_m, pts.shape) if noise_m > 0 else pts
+                keep = rng.random(len(pts)) >= drop
+                keep[0] = True
+                blank = rng.random(len(pts)) < missing
+                which = rng.integers(0, len(POINT_NAMES), len(pts))
+                for t in np.flatnonzero(keep):
+                    row = [f"{v:.5f}" for v in pts[t].reshape(-1)]
+                    if blank[t]:
+                        row[3 * which[t]:3 * which[t] + 3] = ["", "", ""]
+                    w.writerow([demo.index, t, *row])
+        written.append(path)
+    return written
+
+
+def read_keypoint_csv(path: Path) -> list[KeypointDemo]:
+    """The demonstrations of one keypoint CSV.
+
+    Raises:
+        ValueError: A header without ``demo,frame`` and ``<point>_x/_y/_z`` triplets, a cell that is not a number,
+            frames not increasing within a demonstration (the message names the file and line).
+    """
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or rows[0][:2] != ["demo", "frame"] or (len(rows[0]) - 2) % 3:
+        raise ValueError(f"{path}: header must be demo,frame,<point>_x,<point>_y,<point>_z,... (got "
+                         f"{','.join(rows[0][:5]) if rows else 'an empty file'})")
+    cols = rows[0][2:]
+    names = [c[:-2] for c in cols[::3]]
+    if any(cols[3 * i:3 * i + 3] != [f"{n}_x", f"{n}_y", f"{n}_z"] for i, n in enumerate(names)):
+        raise ValueError(f"{path}: columns must come as <point>_x,<point>_y,<point>_z triplets")
+    by_demo: dict[int, list[tuple[int, list[float]]]] = {}
+    for line, row in enumerate(rows[1:], start=2):
+        try:
+            demo, frame = int(row[0]), int(row[1])
+            values = [float(v) if v.strip() else np.nan for v in row[2:]]
+        except (ValueError, IndexError) as exc:
+            raise ValueError(f"{path}:{line}: {exc}") from None
+        if len(values) != len(cols):
+            raise ValueError(f"{path}:{line}: {len(values)} values, the header has {len(cols)}")
+        frames = by_demo.setdefault(demo, [])
+        if frames and frame <= frames[-1][0]:
+            raise ValueError(f"{path}:{line}: frame {frame} of demo {demo} after frame {frames[-1][0]}")
+        frames.append((frame, values))
+    return [KeypointDemo(d, np.array([f for f, _ in fr]), names,
+                         np.array([v for _, v in fr], dtype=np.float64).reshape(len(fr), len(names), 3))
+            for d, fr in by_demo.items()]
+
+
+def fit_keypoint_library(directory: Path, layout: str = "foresight", config: FitConfig | None = None
+                         ) -> tuple[MotionLibrary, FitReport]:
+    """Fit the 12 features to every demonstration of a keypoint library; returns the motion library and a report.
+
+    Frames are fitted in order, each warm-started from the one before (all demonstrations at once); frames that
+    are absent or lack a required point get the features interpolated between their neighbours.
+
+    Raises:
+        ValueError: No CSV in ``directory``, or a malformed one.
+    """
+    files = sorted(Path(directory).glob("*.csv"))
+    if not files:
+        raise ValueError(f"keypoint library {directory}: no <class>.csv files")
+    lay = load_layout(layout)
+    demos: list[tuple[int, str, KeypointDemo, np.ndarray]] = []
+    for label, path in enumerate(files):
+        for kd in read_keypoint_csv(path):
+            demos.append((label, path.stem, kd, lay.to_model(kd.names, kd.positions)))
+    required = [POINT_NAMES.index(p) for p in REQUIRED]
+    usable = [np.all(np.isfinite(pts[:, required]).all(-1), axis=-1) for *_, pts in demos]
+    longest = max(int(u.sum()) for u in usable)
+    batch = np.zeros((len(demos), longest, len(POINT_NAMES), 3))
+    for i, ((*_, pts), ok) in enumerate(zip(demos, usable, strict=True)):
+        kept = pts[ok]
+        batch[i, :len(kept)] = kept
+        batch[i, len(kept):] = kept[-1]  # padding: the last frame again (its fits are not used)
+    result = KeypointFit(config).fit_sequences(batch)
+    out, residuals, bridged, fitted = [], [], 0, 0
+    counts: dict[int, int] = {}
+    for i, ((label, name, kd, _), ok) in enumerate(zip(demos, usable, strict=True)):
+        n = int(ok.sum())
+        frames = kd.frames[ok]
+        span = np.arange(kd.frames[0], kd.frames[-1] + 1)
+        feats = np.stack([np.interp(span, frames, result.features[i, :n, k]) for k in range(12)], axis=-1)
+        bridged += len(span) - n
+        fitted += n
+        r = result.residual_m[i, :n]
+        residuals.append(r[np.isfinite(r)])
+        index = counts[label] = counts.get(label, -1) + 1
+        out.append(Demonstration(label, name, index, feats, f"{name}.csv#demo {kd.demo}"))
+    lib = MotionLibrary([p.stem for p in files], out, [], f"keypoints:{directory} (layout {lay.name})")
+    return lib, FitReport(np.concatenate(residuals), fitted, bridged)

@@ -1,0 +1,62 @@
+"""KeypointFit: the human model's joint positions fit back to their features; batched equals looped; a frame
+without a required point is refused clearly; missing points keep their degrees of freedom from the prior."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from shared.human import HumanModel
+from shared.keypoints import POINT_NAMES, REQUIRED, KeypointFit
+from shared.synthetic import generate_library
+
+MODEL = HumanModel()
+
+
+@pytest.fixture(scope="module")
+def demos() -> np.ndarray:
+    lib = generate_library(3, 2, seed=1)
+    return np.stack([d.features[:40] for d in lib.demos[:4]])  # (4, 40, 12)
+
+
+def test_round_trip_within_a_millimetre(demos) -> None:
+    points = MODEL.joint_positions(demos)
+    result = KeypointFit().fit_sequences(points)
+    err = np.linalg.norm(MODEL.joint_positions(result.features) - points, axis=-1)
+    assert np.median(err) < 1e-3 and np.percentile(err, 99) < 0.01
+    assert result.features.shape == demos.shape and np.nanmax(result.residual_m) == pytest.approx(err.max())
+
+
+def test_batched_equals_looped(demos) -> None:
+    frames = demos[:, 10]  # (4, 12)
+    points = MODEL.joint_positions(frames)
+    fit = KeypointFit()
+    batched = fit.fit(points).features
+    looped = np.stack([fit.fit(points[i:i + 1]).features[0] for i in range(len(points))])
+    np.testing.assert_allclose(batched, looped, atol=1e-9)
+
+
+def test_a_missing_required_point_is_refused_and_an_optional_one_is_bridged_by_the_prior(demos) -> None:
+    points = MODEL.joint_positions(demos[0, :2])
+    bad = points.copy()
+    bad[1, POINT_NAMES.index("r_wrist")] = np.nan
+    with pytest.raises(ValueError, match="r_wrist missing in 1 frame"):
+        KeypointFit().fit(bad)
+    assert set(REQUIRED) <= set(POINT_NAMES)
+    fit = KeypointFit()
+    first = fit.fit(points[:1])
+    partial = points[1:].copy()
+    partial[0, POINT_NAMES.index("r_hand")] = np.nan  # the hand: the forearm is fixed by the wrist anyway
+    second = fit.fit(partial, prior=first.features)
+    assert np.isnan(second.residual_m[0, POINT_NAMES.index("r_hand")])
+    err = np.linalg.norm(MODEL.joint_positions(second.features) - points[1:], axis=-1)
+    assert err.max() < 0.01
+
+
+def test_wrong_shapes_are_named() -> None:
+    with pytest.raises(ValueError, match=r"expected shape \(B, 12, 3\)"):
+        KeypointFit().fit(np.zeros((2, 5, 3)))
+    with pytest.raises(ValueError, match="unknown features"):
+        from shared.keypoints import FitConfig
+
+        KeypointFit(FitConfig(bounds={"elbow": (0.0, 1.0)}))

@@ -1,0 +1,71 @@
+"""Keypoint libraries: written from a motion library and fitted back (clean and noisy), CSV checks, layouts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shared.human import HumanModel
+from shared.keypoints import POINT_NAMES
+from shared.keypoints.layouts import LAYOUTS, load_layout
+from shared.keypoints.library import fit_keypoint_library, read_keypoint_csv, write_keypoint_library
+from shared.library import MotionLibrary
+from shared.synthetic import generate_library
+
+
+@pytest.fixture(scope="module")
+def small() -> MotionLibrary:
+    lib = generate_library(2, 2, seed=4)
+    return MotionLibrary(lib.class_names, lib.demos, [], lib.source)
+
+
+def test_clean_round_trip_and_noisy_with_gaps(small, tmp_path: Path) -> None:
+    model = HumanModel()
+    write_keypoint_library(small, tmp_path / "clean")
+    lib, report = fit_keypoint_library(tmp_path / "clean")
+    assert lib.class_names == small.class_names and len(lib.demos) == len(small.demos)
+    for got, want in zip(lib.demos, small.demos, strict=True):
+        assert got.features.shape == want.features.shape
+        err = np.linalg.norm(model.joint_positions(got.features) - model.joint_positions(want.features), axis=-1)
+        assert np.median(err) < 1e-3
+    assert np.median(report.residual_m) < 1e-3 and report.bridged == 0
+    write_keypoint_library(small, tmp_path / "noisy", noise_m=0.02, drop=0.05, missing=0.1, seed=1)
+    lib, report = fit_keypoint_library(tmp_path / "noisy")
+    assert report.bridged > 0 and 0.01 < np.median(report.residual_m) < 0.05  # about the noise
+    for got, want in zip(lib.demos, small.demos, strict=True):
+        assert got.features.shape == want.features.shape  # dropped frames bridged: every frame is there
+        err = np.linalg.norm(model.joint_positions(got.features) - model.joint_positions(want.features), axis=-1)
+        assert np.median(err) < 0.03
+
+
+def test_bad_csvs_are_named(tmp_path: Path) -> None:
+    bad = tmp_path / "a.csv"
+    bad.write_text("frame,demo,pelvis_x\n")
+    with pytest.raises(ValueError, match="header must be demo,frame"):
+        read_keypoint_csv(bad)
+    bad.write_text("demo,frame,pelvis_x,pelvis_y,pelvis_z\n0,0,1,2,x\n")
+    with pytest.raises(ValueError, match=r"a.csv:2: could not convert"):
+        read_keypoint_csv(bad)
+    bad.write_text("demo,frame,pelvis_x,pelvis_y,pelvis_z\n0,1,1,2,3\n0,1,1,2,3\n")
+    with pytest.raises(ValueError, match="a.csv:3: frame 1 of demo 0 after frame 1"):
+        read_keypoint_csv(bad)
+    with pytest.raises(ValueError, match="no <class>.csv files"):
+        fit_keypoint_library(tmp_path / "nothing")
+
+
+def test_every_layout_loads_and_maps_its_points() -> None:
+    for name in LAYOUTS:
+        layout = load_layout(name)
+        names = layout.source_names
+        pos = np.arange(len(names) * 3, dtype=float).reshape(1, len(names), 3)
+        mapped = layout.to_model(names, pos)
+        given = [p for p in POINT_NAMES if p in layout.points]
+        assert np.all(np.isfinite(mapped[0, [POINT_NAMES.index(p) for p in given]]))
+        assert np.all(np.isnan(np.delete(mapped[0], [POINT_NAMES.index(p) for p in given], axis=0)))
+    coco = load_layout("coco17")
+    pelvis = coco.to_model(["left_hip", "right_hip"], np.array([[0.0, 0.1, 1.0], [0.0, -0.1, 1.0]]))
+    np.testing.assert_allclose(pelvis[POINT_NAMES.index("pelvis")], [0.0, 0.0, 1.0])
+    with pytest.raises(ValueError, match="unknown"):
+        load_layout("kinect_v1")
