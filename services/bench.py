@@ -1,4 +1,4 @@
-"""``foresight bench {predictor,planner,faults,soak}``: dispatch to each component's benchmark script.
+"""``foresight bench {predictor,planner,faults,keypoints,soak}``: dispatch to each component's benchmark script.
 
 Each benchmark lives beside the code it measures and exposes ``main(argv, prog) -> int``; it is
 imported only when asked for.
@@ -15,6 +15,7 @@ BENCHES: dict[str, tuple[str, str]] = {
     "predictor": ("services.predictor.bench", "one pose -> encoded occupancy message (64^3 grid)"),
     "planner": ("services.planner.bench", "one replanning step (STOMP over all goals)"),
     "faults": ("tools.faults", "kill -9 each service of a moving robot's run: hold and resume latency, MCAP recovery"),
+    "keypoints": ("shared.keypoints.bench", "fit the human model to a frame of body keypoints: live, baseline, batch"),
     "soak": ("tools.soak", "poses at 300 Hz for 60 s: predictor latency and drops, replanning period, RSS"),
 }
 

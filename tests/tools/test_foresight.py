@@ -16,7 +16,7 @@ def _choices(command: str, capsys: pytest.CaptureFixture[str]) -> set[str]:
         cli_main([command, "--help"])
     except SystemExit:
         pass
-    return set(re.findall(r"\{([a-z,]+)\}", capsys.readouterr().out)[0].split(","))
+    return set(re.findall(r"\{([a-z,-]+)\}", capsys.readouterr().out)[0].split(","))
 
 
 @pytest.mark.parametrize("command", list(SUBCOMMANDS))

@@ -1,0 +1,92 @@
+"""``foresight bench keypoints``: how long fitting the human model to a frame of keypoints takes.
+
+Keypoints are the human model's joint positions of a library's demonstrations (optionally with noise). Three
+ways, in one process, one thread: a frame at a time warm-started from the previous fit (what a live tracker
+does), a frame at a time from the first guess (the baseline: no warm start), and every frame of the
+demonstrations at once (a keypoint library's conversion). Prints the time per frame (median, p99), the ratio
+against the baseline, and the fitted joints' distance from the true ones.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+
+from shared.human import HumanModel
+from shared.native_threads import limit_blas_threads
+
+from .fit import KeypointFit
+
+__all__ = ["main"]
+
+
+def _per_frame(fit: KeypointFit, points: np.ndarray, warm: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``(times s (T,), features (T, 12))`` fitting ``points (T, J, 3)`` one frame at a time."""
+    times, feats, prior = [], [], None
+    for frame in points:
+        t0 = time.perf_counter()
+        res = fit.fit(frame[None], prior=prior if warm else None)
+        times.append(time.perf_counter() - t0)
+        feats.append(res.features[0])
+        prior = res.features
+    return np.array(times), np.array(feats)
+
+
+def main(argv: list[str] | None = None, prog: str = "foresight bench keypoints") -> int:
+    """Run the benchmark; returns the exit status."""
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser.add_argument("--library", default=None, help="motion library (default: the synthetic one, seed 0)")
+    parser.add_argument("--demos", type=int, default=4, help="demonstrations to fit")
+    parser.add_argument("--noise-m", type=float, default=0.0, help="Gaussian noise per axis on the keypoints, m")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the noise")
+    args = parser.parse_args(argv)
+    limit_blas_threads(1)
+    if args.library:
+        from shared.library import load_library
+
+        lib = load_library(args.library, report=False)
+    else:
+        from shared.synthetic import generate_library
+
+        lib = generate_library(seed=0)
+    demos = lib.demos[:max(1, args.demos)]
+    model = HumanModel()
+    truth = [model.joint_positions(d.features) for d in demos]
+    rng = np.random.default_rng(args.seed)
+    observed = [p + rng.normal(0.0, args.noise_m, p.shape) if args.noise_m > 0 else p for p in truth]
+    fit = KeypointFit()
+    _per_frame(fit, observed[0][:5], True)  # warm-up
+    rows, errors = {}, {}
+    for name, warm in (("one frame, warm start (live)", True), ("one frame, first guess (baseline)", False)):
+        times, feats = [], []
+        for obs in observed:
+            t, f = _per_frame(fit, obs, warm)
+            times.append(t)
+            feats.append(f)
+        rows[name] = np.concatenate(times)
+        errors[name] = np.concatenate([np.linalg.norm(model.joint_positions(f) - p, axis=-1).ravel()
+                                       for f, p in zip(feats, truth, strict=True)])
+    longest = min(len(o) for o in observed)
+    batch = np.stack([o[:longest] for o in observed])
+    t0 = time.perf_counter()
+    res = fit.fit_sequences(batch)
+    rows["every frame at once (a library)"] = np.full(batch.shape[0] * batch.shape[1],
+                                                      (time.perf_counter() - t0) / (batch.shape[0] * batch.shape[1]))
+    errors["every frame at once (a library)"] = np.linalg.norm(
+        model.joint_positions(res.features) - np.stack([p[:longest] for p in truth]), axis=-1).ravel()
+    base = np.median(rows["one frame, first guess (baseline)"])
+    print(f"{prog}: {len(demos)} demonstrations of {lib.source}, {sum(len(o) for o in observed)} frames, "
+          f"noise {args.noise_m * 100:g} cm per axis, one thread")
+    print(f"{'':36}{'ms/frame p50':>13}{'p99':>8}{'vs baseline':>13}{'joint err mm p50':>18}{'p99':>8}")
+    for name, t in rows.items():
+        e = errors[name]
+        print(f"{name:36}{np.median(t) * 1e3:>13.2f}{np.percentile(t, 99) * 1e3:>8.2f}"
+              f"{base / np.median(t):>12.1f}x{np.median(e) * 1e3:>18.2f}{np.percentile(e, 99) * 1e3:>8.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
