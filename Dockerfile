@@ -9,8 +9,9 @@
 #                    `--build-arg WHEELHOUSE=foresight-wheelhouse:local` (older engines); default: none
 #   secret "ca"      extra CA certificates (PEM) that pip and apt must trust, e.g. a proxy's:
 #                    `--secret id=ca,src=/etc/ssl/certs/ca-certificates.crt`; used while building, never stored
+#   secret "pipconf" a pip.conf (another index, credentials): `--secret id=pipconf,src=pip.conf`; never stored
 #   TORCH_INDEX_URL  where torch comes from when the wheelhouse has none (default: PyTorch's CPU index;
-#                    empty: pip's own indexes); PIP_INDEX_URL / PIP_EXTRA_INDEX_URL as pip reads them
+#                    empty: pip's own indexes)
 # BuildKit is needed (RUN --mount): Docker >= 23 uses it by default, Docker 20.10 with DOCKER_BUILDKIT=1.
 ARG BASE_IMAGE=python:3.11-slim
 ARG WHEELHOUSE=scratch
@@ -19,8 +20,6 @@ FROM ${WHEELHOUSE} AS wheelhouse
 
 FROM ${BASE_IMAGE}
 ARG TORCH_INDEX_URL=https://download.pytorch.org/whl/cpu
-ARG PIP_INDEX_URL
-ARG PIP_EXTRA_INDEX_URL
 
 ENV PYTHONUNBUFFERED=1 \
     PIP_NO_CACHE_DIR=1 \
@@ -58,14 +57,17 @@ RUN python3 -m venv /opt/venv \
  && chmod 1777 /tmp/torchinductor
 
 # torch first, pinned to the CPU build (an unpinned torch pulls a multi-GB CUDA build): the wheelhouse's
-# when it has one, else TORCH_INDEX_URL's
-RUN --mount=type=secret,id=ca --mount=type=bind,from=wheelhouse,target=/wheelhouse \
+# when it has one (that wheel and no other: an unusable one fails here, never falls back to PyPI's CUDA
+# build), its dependencies from the index; else TORCH_INDEX_URL's
+RUN --mount=type=secret,id=ca --mount=type=secret,id=pipconf,target=/etc/pip.conf \
+    --mount=type=bind,from=wheelhouse,target=/wheelhouse \
     set -e; \
     if [ -s /run/secrets/ca ]; then cat /etc/ssl/certs/ca-certificates.crt /run/secrets/ca > /tmp/ca.pem; \
         export PIP_CERT=/tmp/ca.pem; fi; \
     pip install --quiet --upgrade pip; \
     if ls /wheelhouse/torch-2.13.0* >/dev/null 2>&1; then \
-        pip install --find-links /wheelhouse "torch==2.13.0"; \
+        pip install --no-deps --no-index --find-links /wheelhouse "torch==2.13.0"; \
+        pip install "torch==2.13.0"; \
     elif [ -n "$TORCH_INDEX_URL" ]; then \
         pip install --index-url "$TORCH_INDEX_URL" "torch==2.13.0"; \
     else \
@@ -77,7 +79,8 @@ COPY pyproject.toml README.md ./
 COPY shared ./shared
 COPY services ./services
 COPY tools ./tools
-RUN --mount=type=secret,id=ca --mount=type=bind,from=wheelhouse,target=/wheelhouse \
+RUN --mount=type=secret,id=ca --mount=type=secret,id=pipconf,target=/etc/pip.conf \
+    --mount=type=bind,from=wheelhouse,target=/wheelhouse \
     set -e; \
     if [ -s /run/secrets/ca ]; then cat /etc/ssl/certs/ca-certificates.crt /run/secrets/ca > /tmp/ca.pem; \
         export PIP_CERT=/tmp/ca.pem; fi; \

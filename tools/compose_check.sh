@@ -81,7 +81,7 @@ if [ -n "$CA" ] && [ -f "$CA" ]; then SECRET=(--secret "id=ca,src=$CA"); fi
 # 3. the image
 say "building $IMAGE on $BASE (wheelhouse: $WHEELHOUSE${WHEELS:+ from $WHEELS}; extra CA: ${CA:-none})"
 t=$(now)
-DOCKER_BUILDKIT=1 docker build --build-arg "BASE_IMAGE=$BASE" --build-arg "WHEELHOUSE=$WHEELHOUSE" "${SECRET[@]}" \
+DOCKER_BUILDKIT=1 docker build --build-arg "BASE_IMAGE=$BASE" --build-arg "WHEELHOUSE=$WHEELHOUSE" ${SECRET[@]+"${SECRET[@]}"} \
   -t "$IMAGE" . > "$OUT/build.log" 2>&1 || fail "docker build (see $OUT/build.log)"
 size=$(docker image inspect "$IMAGE" --format '{{.Size}}' | awk '{ printf "%.2f GB", $1 / 1e9 }')
 say "built $IMAGE in $(secs "$t" "$(now)") s, $size"
@@ -91,19 +91,23 @@ run_stack() {  # $1: label; sets MCAP, UP_S (up -> executor done), FIRST_PLAN_S 
   local label=$1 t0 code
   compose down --remove-orphans >/dev/null 2>&1 || true
   t0=$(now)
+  trap 'compose down --remove-orphans >/dev/null 2>&1' EXIT  # whatever happens next, nothing is left running
   FORESIGHT_BASE_IMAGE=$BASE FORESIGHT_WHEELHOUSE=$WHEELHOUSE compose up -d --no-build > "$OUT/up-$label.log" 2>&1 \
     || { compose logs --no-color > "$OUT/compose-$label.log" 2>&1; compose down >/dev/null 2>&1; fail "up (see $OUT/up-$label.log, $OUT/compose-$label.log)"; }
   timeout 900 docker compose -p "$PROJECT" "${FILES[@]}" wait executor > /dev/null 2>&1 || true
   UP_S=$(secs "$t0" "$(now)")
-  code=$(docker inspect "$(compose ps -a -q executor)" --format '{{if .State.Running}}still running{{else}}{{.State.ExitCode}}{{end}}')
+  code=$(docker inspect "$(compose ps -a -q executor)" --format '{{if .State.Running}}still running{{else}}{{.State.ExitCode}}{{end}}' \
+    2>/dev/null || echo "unknown (no executor container)")
   compose logs --no-color --timestamps > "$OUT/compose-$label.log" 2>&1 || true
   PREPARE_S=$(docker inspect "$(compose ps -a -q prepare)" --format '{{.State.StartedAt}} {{.State.FinishedAt}}' \
-    | "$PY" -c "import sys, datetime as d; a, b = (d.datetime.fromisoformat(x[:26].rstrip('Z')) for x in sys.stdin.read().split()); print(f'{(b - a).total_seconds():.1f}')")
+    | "$PY" -c "import sys, datetime as d; a, b = (d.datetime.fromisoformat(x[:26].rstrip('Z')) for x in sys.stdin.read().split()); print(f'{(b - a).total_seconds():.1f}')" \
+    2>/dev/null || echo "?")
   compose down --remove-orphans > "$OUT/down-$label.log" 2>&1 || fail "down (see $OUT/down-$label.log)"
+  trap - EXIT
   left=$(docker ps -q --filter "label=com.docker.compose.project=$PROJECT")
   [ -z "$left" ] || fail "containers still running after down: $left"
   [ "$code" = 0 ] || fail "executor exited with '$code' (see $OUT/compose-$label.log)"
-  MCAP=$(grep -o 'mcap: runs/[^ ]*\.mcap' "$OUT/compose-$label.log" | tail -1 | cut -d' ' -f2)
+  MCAP=$(grep -o 'mcap: runs/[^ ]*\.mcap' "$OUT/compose-$label.log" | tail -1 | cut -d' ' -f2 || true)
   [ -n "$MCAP" ] && [ -f "$MCAP" ] || fail "the executor named no MCAP in runs/ (see $OUT/compose-$label.log)"
   FIRST_PLAN_S=$("$PY" - "$MCAP" "$t0" <<'EOF'
 import sys
@@ -136,11 +140,11 @@ if [ "$DEMO" = 1 ]; then
 fi
 if [ "$TWICE" = 1 ]; then
   first_prepare=$PREPARE_S
-  models_before=$(ls -l --time-style=+%s.%N models/*.npz)
+  models_before=$(ls -l --time-style=+%s.%N models/*.npz 2>/dev/null || true)
   run_stack second
   diff <(strip_ms "$OUT/table-first.txt") <(strip_ms "$OUT/table-second.txt") > /dev/null \
     || fail "the second run's table differs from the first's"
-  [ "$(ls -l --time-style=+%s.%N models/*.npz)" = "$models_before" ] || fail "the second up wrote models/ again"
+  [ "$(ls -l --time-style=+%s.%N models/*.npz 2>/dev/null || true)" = "$models_before" ] || fail "the second up wrote models/ again"
   say "second up: the trained model reused (models/ untouched; prepare $PREPARE_S s, first $first_prepare s), the same table"
 fi
 say "passed"

@@ -8,8 +8,8 @@ hold rules, reference and its pace -- whose configuration is measured rather tha
   from where the executor's pace has got to, timed at that pace and within ``velocity_scale`` of the
   joint velocity limits (:func:`command_points`); again after a hold ends;
 * sends a hold when the robot must hold (:meth:`ExecutorCore.stale_reason`, plus the robot's own joint
-  states going stale): one point at the present configuration, reached in one state period, so the
-  controller stops there;
+  states going stale): a trajectory without points, which a joint_trajectory_controller takes as "hold
+  the present position" (where the arm is when it arrives, not where it was last measured);
 * reads the robot's configuration and velocity back after each step (lock-step: the state the robot
   reports at the step's simulated time, which it follows on ``/clock``; real time: the newest one).
 """
@@ -116,7 +116,7 @@ class Ros2Arm(ExecutorCore):
                 self._commanded = self.plan
                 self.sent_plans += 1
         elif self._commanded is not None:  # hold where it is, once per hold (nothing was sent before a plan)
-            self.link.send(self.q[None].copy(), np.array([max(h, 1e-3)]))
+            self.link.send(np.zeros((0, self.limits.dof)), np.zeros(0))
             self._commanded = None
             self.sent_holds += 1
         super().step(h, reason)  # the pace (tau), the clock, holding and its reason; its simulated q is replaced:

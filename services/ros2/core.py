@@ -20,7 +20,6 @@ Frames: everything in the scene's frame, ``frame_id`` (default ``world``, as in 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -96,15 +95,19 @@ class Ros2Config:
         return "/" + "/".join(p for p in (*self.namespace.split("/"), *name.split("/")) if p)
 
 
+def _sec_nanosec(seconds: float) -> tuple[int, int]:
+    """Seconds as whole seconds and nanoseconds, rounded to the nanosecond (2.9999999999999996 -> (3, 0))."""
+    return divmod(int(round(seconds * 1e9)), 10**9)
+
+
 def _stamp(ts: Any, seconds: float) -> Any:
-    sec = math.floor(seconds)
-    return ts.types["builtin_interfaces/msg/Time"](sec=int(sec), nanosec=int(round((seconds - sec) * 1e9)) % 10**9)
+    sec, nanosec = _sec_nanosec(seconds)
+    return ts.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
 def _duration(ts: Any, seconds: float) -> Any:
-    sec = math.floor(seconds)
-    return ts.types["builtin_interfaces/msg/Duration"](sec=int(sec),
-                                                      nanosec=int(round((seconds - sec) * 1e9)) % 10**9)
+    sec, nanosec = _sec_nanosec(seconds)
+    return ts.types["builtin_interfaces/msg/Duration"](sec=sec, nanosec=nanosec)
 
 
 class Ros2Mapping:

@@ -28,7 +28,7 @@ from services.executor.config import ExecutorConfig, ExecutorError
 from shared.rejects import RejectCounter
 
 from .arm import Measured
-from .core import ROBOT_TYPES, Ros2Config, Ros2Mapping
+from .core import ROBOT_TYPES, Ros2Config, Ros2InputError, Ros2Mapping
 from .node import Ros2Node
 
 __all__ = ["Ros2RobotLink", "NODE_NAME", "Ros2Log"]
@@ -79,6 +79,9 @@ class Ros2RobotLink:
         stamp, q, qd = self.mapping.joint_state_in(payload, self.joint_names)  # Ros2InputError: refused, counted
         self.record(self.config.ros2_joint_states, ROBOT_TYPES["state"], payload)
         with self._cond:
+            if self._latest is not None and stamp < self._latest[0]:
+                raise Ros2InputError(f"JointState: stamped {stamp:.3f} s, older than the last one "
+                                     f"({self._latest[0]:.3f} s): two publishers on {self.config.ros2_joint_states}?")
             self._latest = (stamp, q, qd, time.monotonic())
             self.received += 1
             self._cond.notify_all()
@@ -102,10 +105,16 @@ class Ros2RobotLink:
         """
         poke = (lambda: self._put_clock(0.0)) if self.lockstep else None  # until the robot has subscribed
         if not self._wait(lambda: self._latest is not None, timeout, poke):
+            if self.stop.is_set():
+                raise ExecutorError("robot: stopped while waiting for its first joint state")
             raise ExecutorError(f"robot: no valid sensor_msgs/JointState with joints {self.joint_names} on "
                                 f"{self.config.ros2_joint_states} (domain {self.config.ros2_domain_id}) within "
                                 f"{timeout:.0f} s")
         assert self._latest is not None
+        if self.lockstep and abs(self._latest[0]) > STAMP_TOLERANCE_S:
+            raise ExecutorError(f"robot: its joint state answering /clock = 0 is stamped {self._latest[0]:.3f} s: it "
+                                "does not follow /clock (a lock-step run needs a simulated robot with use_sim_time, "
+                                "e.g. foresight simrobot --sim-time; a real robot runs in real time)")
         log.info("executor: ROS 2 robot found: %s, commands to %s", self.config.ros2_joint_states,
                  self.command_topic)
         return self._latest[1].copy()
@@ -131,7 +140,7 @@ class Ros2RobotLink:
         """
         if self.lockstep:
             self._put_clock(t)
-            if not self._wait(lambda: self._latest is not None and self._latest[0] >= t - STAMP_TOLERANCE_S,
+            if not self._wait(lambda: self._latest is not None and abs(self._latest[0] - t) <= STAMP_TOLERANCE_S,
                               self.config.lockstep_timeout_s):
                 if not self.stop.is_set():  # stopping: the last state known will do
                     raise ExecutorError(f"robot: no joint state stamped {t:.3f} s (sim time, /clock) within "

@@ -53,10 +53,13 @@ class Ros2Node:
         domain_id: ROS 2 domain; ``namespace`` (absolute) and ``name``: the node's.
         hashes: RIHS01 hash per message type (:attr:`services.ros2.core.Ros2Mapping.hashes`).
         rejects: Where refused samples are counted (keyed by topic).
+        ordered: Handle all subscriptions in one Zenoh subscriber, one sample at a time in arrival order (as a ROS 2
+            node's single-threaded executor does), at the price of receiving every topic of the domain; else one
+            Zenoh subscriber per topic, whose callbacks may run concurrently.
     """
 
     def __init__(self, session: Any, domain_id: int, namespace: str, name: str, hashes: dict[str, str],
-                 rejects: RejectCounter) -> None:
+                 rejects: RejectCounter, ordered: bool = False) -> None:
         self.session = session
         self.domain_id, self.namespace, self.name = domain_id, namespace, name
         self.hashes = hashes
@@ -67,6 +70,7 @@ class Ros2Node:
         self._undeclare: list[Any] = []
         self._handlers: dict[str, tuple[str, str, Callable[[bytes], None]]] = {}
         self._subscriber: Any = None
+        self.ordered = ordered
 
     def _token(self, kind: str, topic: str, msgtype: str) -> int:
         self._entities += 1
@@ -87,15 +91,16 @@ class Ros2Node:
         """Call ``callback(payload)`` per sample of ``msgtype`` on ``topic`` with the type's hash and an attachment.
 
         The subscription's ``MS`` token is declared; the callback may raise ``ValueError`` to refuse a sample.
-        All of a node's subscriptions share one Zenoh subscriber (on the domain's keys), so that its callbacks
-        run one at a time in the order the samples arrived, as in a ROS 2 node's single-threaded executor
-        (Zenoh calls each subscriber's callback on a thread of its own: a command and the ``/clock`` after it
-        could otherwise be handled in the opposite order).
+        With ``ordered``, all of a node's subscriptions share one Zenoh subscriber (on the domain's keys), so that
+        its callbacks run one at a time in the order the samples arrived (Zenoh calls each subscriber's callback on
+        a thread of its own: a command and the ``/clock`` after it could otherwise be handled the other way round).
         """
         self._token("MS", topic, msgtype)
         prefix = data_key(self.domain_id, topic, msgtype, "")
         self._handlers[prefix] = (topic, msgtype, callback)
-        if self._subscriber is None:
+        if not self.ordered:
+            self._undeclare.append(self.session.declare_subscriber(prefix + "*", self._on_sample))
+        elif self._subscriber is None:
             self._subscriber = self.session.declare_subscriber(f"{self.domain_id}/**", self._on_sample)
 
     def _on_sample(self, sample: Any) -> None:

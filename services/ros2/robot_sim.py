@@ -98,11 +98,14 @@ class RobotSim:
             self.arm.command(self._now(), columns, positions, times)
 
     def on_clock(self, payload: bytes) -> None:
-        """``/clock``: move to that time and report the state there (a clock going back is answered as it is)."""
+        """``/clock``: move to that time and report the state there (a clock going back starts over from here)."""
         t = self.mapping.clock_in(payload)
         with self._lock:
-            if t >= self.arm.t:
-                self.arm.advance(t)
+            if t < self.arm.t:  # a new run's clock: the arm stays where it is, its old trajectory dropped
+                received = self.arm.received
+                self.arm = SimulatedController(self.arm.q)
+                self.arm.t, self.arm.received = t, received
+            self.arm.advance(t)
             self._publish(t)
 
     def run(self, stop: threading.Event | None = None) -> int:
@@ -110,7 +113,7 @@ class RobotSim:
         stop = stop or threading.Event()
         cfg = self.config
         with open_session(self.zenoh, stop, "simrobot") as session:
-            node = Ros2Node(session, cfg.domain_id, "/", cfg.node, self.mapping.hashes, self.rejects)
+            node = Ros2Node(session, cfg.domain_id, "/", cfg.node, self.mapping.hashes, self.rejects, ordered=True)
             self._pub = node.publisher(cfg.joint_states, ROBOT_TYPES["state"])
             node.subscription(f"/{cfg.controller}/joint_trajectory", ROBOT_TYPES["command"], self.on_command)
             if cfg.sim_time:

@@ -51,7 +51,7 @@ class FitConfig:
     """
 
     iterations: int = 30
-    tolerance_m: float = 1e-6
+    tolerance_m: float = 1e-4
     prior: list[float] = field(default_factory=_default_prior)
     bounds: dict[str, tuple[float, float]] = field(default_factory=lambda: dict(HERAKLES_RANGES))
     damping: float = 1e-3
@@ -169,16 +169,18 @@ class KeypointFit:
             a = jtj + mu[:, None, None] * (np.eye(12) * np.diagonal(jtj, axis1=-2, axis2=-1)[:, None, :] + np.eye(12)
                                            * 1e-9)
             delta = -np.linalg.solve(a, g[..., None])[..., 0]
+            f_old = f
             f_new = np.clip(f + delta, self.low, self.high)
             r_new = self._residuals(f_new, y, w, f0)
             cost_new = np.sum(r_new ** 2, axis=-1)
-            better = (cost_new < cost) & active  # a frame that has converged stays as it is (batched == looped)
+            better = (cost_new <= cost) & active  # a frame that has converged stays as it is (batched == looped)
+            small = better & (cost - cost_new <= 1e-8 * cost)  # no longer worth a step (noisy points: the optimum)
             f = np.where(better[:, None], f_new, f)
             r = np.where(better[:, None], r_new, r)
             cost = np.where(better, cost_new, cost)
             mu = np.where(active, np.where(better, mu * 0.3, mu * 10.0), mu)
-            moved = np.max(np.abs(delta), axis=-1)
-            active &= ~((better & (moved < self.config.tolerance_m)) | (mu > 1e8))
+            moved = np.max(np.abs(f_new - f_old), axis=-1)  # the clipped step: at a bound a feature stays
+            active &= ~((better & (moved < self.config.tolerance_m)) | small | (mu > 1e6))
             if not active.any():
                 break
         p = self.model.joint_positions(f)

@@ -148,6 +148,12 @@ def fit_keypoint_library(directory: Path, layout: str = "foresight", config: Fit
             demos.append((label, path.stem, kd, lay.to_model(kd.names, kd.positions)))
     required = [POINT_NAMES.index(p) for p in REQUIRED]
     usable = [np.all(np.isfinite(pts[:, required]).all(-1), axis=-1) for *_, pts in demos]
+    for (_, name, kd, pts), ok in zip(demos, usable, strict=True):
+        if not ok.any():
+            lacking = [p for p, j in zip(REQUIRED, required, strict=True) if not np.isfinite(pts[:, j]).all(-1).any()]
+            raise ValueError(f"keypoint library {directory}: {name}.csv demo {kd.demo} has no frame with every "
+                             f"required point ({', '.join(REQUIRED)}; never given: {', '.join(lacking) or 'none'}; "
+                             f"layout {lay.name})")
     longest = max(int(u.sum()) for u in usable)
     batch = np.zeros((len(demos), longest, len(POINT_NAMES), 3))
     for i, ((*_, pts), ok) in enumerate(zip(demos, usable, strict=True)):

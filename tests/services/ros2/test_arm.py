@@ -65,10 +65,10 @@ def test_a_hold_is_sent_once_at_the_present_configuration_and_the_plan_again_on_
     for _ in range(8):  # nothing new: plan and occupancy stale after 0.5 s
         arm.step(0.1)
     assert arm.holding and "s old (limit 0.50 s)" in arm.reason
-    holds = [p for p, t in robot.sent if len(p) == 1]
+    holds = [p for p, t in robot.sent if len(p) == 0]  # no points: hold the present position
     assert len(holds) == 1 and arm.sent_holds == 1
-    assert np.all(holds[0][0] > q_then)  # where the robot was when it was told to hold
     held = arm.q.copy()
+    assert np.all(held > q_then)  # it stopped where it was when told to hold, not back where it was measured
     arm.step(0.1)
     np.testing.assert_allclose(arm.q, held)  # stopped
     arm.adopt(make_plan(arm.q, [np.array([1.0, 1.0])], t=11, dt=0.1, names=NAMES))

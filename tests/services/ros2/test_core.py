@@ -112,6 +112,12 @@ def test_commands_and_clock_round_trip_and_bad_commands_are_named(mapping: Ros2M
     columns, got, times = mapping.trajectory_in(raw, ["x", *JOINTS])
     assert columns == [1, 2, 3] and np.array_equal(got, pos) and times.tolist() == [0.25, 1.5]
     assert TS.deserialize_cdr(mapping.clock(12.75), "rosgraph_msgs/msg/Clock").clock.nanosec == 750_000_000
+    # a time a hair below a whole second is that second, not a second early (float sums of 0.1 s steps)
+    almost = sum([0.1] * 30)  # 3.0000000000000013 or 2.9999999999999996 depending on the order
+    for t in (almost, 2.9999999999999996, 17.999999999999996):
+        assert mapping.clock_in(mapping.clock(t)) == pytest.approx(t, abs=1e-9)
+    late = mapping.trajectory_in(mapping.command(JOINTS, pos, np.array([0.5, 17.999999999999996])), JOINTS)[2]
+    assert late.tolist() == [0.5, 18.0]
     assert mapping.clock_in(mapping.clock(12.75)) == 12.75
     with pytest.raises(Ros2InputError, match=r"joints \['torso_lift_joint'\] unknown"):
         mapping.trajectory_in(raw, JOINTS[1:])
