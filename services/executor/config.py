@@ -9,10 +9,22 @@ from pathlib import Path
 from shared.config import ConfigError, opt
 from shared.scene import SCENE_HELP
 
-__all__ = ["ExecutorConfig", "ExecutorError", "ROBOTS"]
+__all__ = ["ExecutorConfig", "ExecutorError", "ROBOTS", "check_robot_names"]
 
 ROBOTS = ("sim", "ros2")
 """What the executor drives: its own simulated arm, or a ROS 2 robot's joint_trajectory_controller."""
+
+
+def check_robot_names(controller: str, joint_states: str, prefix: str) -> None:
+    """Refuse a ROS 2 robot's controller name or joint-state topic that ROS 2 cannot have.
+
+    Raises:
+        ConfigError: Named ``<prefix>controller`` or ``<prefix>joint_states`` (e.g. ``executor.ros2_controller``).
+    """
+    if not controller or any(c in controller for c in "/*$?# "):
+        raise ConfigError(f"{prefix}controller: a controller name (no '/'), got {controller!r}")
+    if not joint_states.startswith("/") or any(c in joint_states for c in "*$?# "):
+        raise ConfigError(f"{prefix}joint_states: an absolute topic (/a/b), got {joint_states!r}")
 
 
 class ExecutorError(ValueError):
@@ -92,10 +104,7 @@ class ExecutorConfig:
                 raise ConfigError(f"executor.{name}: unknown service(s) {sorted(unknown)}")
         if not 0 <= self.ros2_domain_id <= 232:
             raise ConfigError(f"executor.ros2_domain_id: must be 0..232, got {self.ros2_domain_id}")
-        if not self.ros2_controller or any(c in self.ros2_controller for c in "/*$?# "):
-            raise ConfigError(f"executor.ros2_controller: a controller name (no '/'), got {self.ros2_controller!r}")
-        if not self.ros2_joint_states.startswith("/") or any(c in self.ros2_joint_states for c in "*$?# "):
-            raise ConfigError(f"executor.ros2_joint_states: an absolute topic (/a/b), got {self.ros2_joint_states!r}")
+        check_robot_names(self.ros2_controller, self.ros2_joint_states, "executor.ros2_")
         if not all(math.isfinite(v) for v in self.start_q):
             raise ConfigError(f"executor.start_q: values must be finite, got {self.start_q}")
 

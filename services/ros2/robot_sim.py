@@ -18,7 +18,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from services.executor.config import ExecutorConfig
+from services.executor.config import ExecutorConfig, check_robot_names
 from services.executor.core import ArmLimits
 from services.executor.models import load_models, start_configuration
 from shared.config import ConfigError, ZenohConfig, opt
@@ -56,7 +56,7 @@ class RobotSimConfig:
         Ros2Config(domain_id=self.domain_id, node=self.node).validate()
         if not self.rate_hz > 0:
             raise ConfigError(f"simrobot.rate_hz: must be > 0, got {self.rate_hz}")
-        ExecutorConfig(ros2_controller=self.controller, ros2_joint_states=self.joint_states).validate()
+        check_robot_names(self.controller, self.joint_states, "simrobot.")
 
 
 class RobotSim:

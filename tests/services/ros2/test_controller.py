@@ -37,3 +37,4 @@ def test_no_points_holds_and_a_point_due_now_is_where_the_arm_is() -> None:
     arm.command(0.5, [0], np.array([[0.2], [0.4]]), np.array([0.0, 1.0]))
     np.testing.assert_allclose(arm.position(0.5), [0.2])
     np.testing.assert_allclose(arm.position(1.0), [0.3])
+
