@@ -1,4 +1,4 @@
-"""``foresight bench {predictor,planner,faults,keypoints,soak}``: dispatch to each component's benchmark script.
+"""``foresight bench {predictor,planner,faults,keypoints,soak,viz}``: dispatch to each component's benchmark script.
 
 Each benchmark lives beside the code it measures and exposes ``main(argv, prog) -> int``; it is
 imported only when asked for.
@@ -16,7 +16,11 @@ BENCHES: dict[str, tuple[str, str]] = {
     "planner": ("services.planner.bench", "one replanning step (STOMP over all goals)"),
     "faults": ("tools.faults", "kill -9 each service of a moving robot's run: hold and resume latency, MCAP recovery"),
     "keypoints": ("shared.keypoints.bench", "fit the human model to a frame of body keypoints: live, baseline, batch"),
+    "live": ("services.view.bench", "foresight demo in real time with and without a live Foxglove client: pose -> "
+             "plan p99"),
     "soak": ("tools.soak", "poses at 300 Hz for 60 s: predictor latency and drops, replanning period, RSS"),
+    "viz": ("shared.foxglove.bench",
+            "one occupancy update of the Foxglove scene: SDK protobuf vs the JSON path it replaced"),
 }
 
 

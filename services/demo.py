@@ -46,6 +46,7 @@ from services.demo_figure import draw_outcomes
 from services.demo_outcome import measure_run, outcome_lines, verdict
 from services.demo_run import SERVICES_IN_ORDER, RunRecord, run_once
 from services.scenario import Summary
+from services.view.config import DEFAULT_PORT
 from shared.config import ConfigError, add_config_arguments, opt, resolve_config
 from shared.config_names import SECTIONS, check_environment, section_class
 from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
@@ -97,6 +98,8 @@ class DemoConfig:
                      "simulated arm; ros2, a ROS 2 robot on the demo's router (its /joint_states in, plans to "
                      "/r_arm_controller/joint_trajectory); ros2-sim, the same with `foresight simrobot` started as the "
                      "robot (docs/ros2.md)")
+    live: int = opt(0, help="also serve the run live to the Foxglove app on ws://127.0.0.1:PORT (the executor serves "
+                    "the scene it logs; bare --live: 8765, the app's default; docs/live-view.md); 0: off")
     security: Path | None = opt(None, help="mutual TLS and access control: the directory of `foresight security "
                                 "init`; the demo's router and every service present their role's certificate")
     prepare: Path | None = opt(None, help="only write the scenario's inputs and a config file for the services to this "
@@ -126,6 +129,8 @@ class DemoConfig:
                               "init DIR`)")
         if not 0 <= self.port < 65536:
             raise ConfigError(f"demo.port: must be 0..65535, got {self.port}")
+        if not 0 <= self.live < 65536:
+            raise ConfigError(f"demo.live: must be a port 1..65535 (0: off), got {self.live}")
 
 
 VARIANTS = (("prediction", {"method": "prediction", "human_cost": True}),
@@ -217,12 +222,26 @@ def _closing_lines(cfg: DemoConfig, summary: Summary) -> list[str]:
     return lines
 
 
+def _bare_live(argv: list[str]) -> list[str]:
+    """``--live`` without a port means Foxglove's default port (8765)."""
+    out = []
+    for i, a in enumerate(argv):
+        out.append(a)
+        if a == "--live" and (i + 1 == len(argv) or not argv[i + 1].isdigit()):
+            out.append(str(LIVE_PORT))
+    return out
+
+
+LIVE_PORT = DEFAULT_PORT
+"""``foresight demo --live``'s port without a number: the Foxglove app's default."""
+
+
 def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
     """Run the demo; returns 0 when the run completed."""
     parser = argparse.ArgumentParser(prog=prog, description=help_text(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_arguments(parser, "demo", DemoConfig, with_zenoh=False)
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_bare_live(sys.argv[1:] if argv is None else list(argv)))
     with cli_errors(prog):
         cfg, _ = resolve_config("demo", DemoConfig, args, with_zenoh=False)
         # the services inherit the environment: a misspelt variable of any of them is an error now, not later

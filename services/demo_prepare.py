@@ -72,7 +72,8 @@ def prepare(cfg: DemoConfig, directory: Path, out: Callable[[str], None] = print
     scene = load_scene(cfg.scene or None)
     scenario, model, human = prepare_inputs(cfg, scene, Path(directory), out)
     options = service_options(cfg, model, human, scenario.samples_per_tick, mcap=None)
-    names = [*SERVICES_IN_ORDER, *(["ros2"] if cfg.ros2 else []), *(["simrobot"] if cfg.robot == "ros2-sim" else [])]
+    names = [*SERVICES_IN_ORDER, *(["ros2"] if cfg.ros2 else []), *(["simrobot"] if cfg.robot == "ros2-sim" else []),
+             "view"]  # compose.yaml's optional live view (profile live) reads the scene from it
     tables = config_tables({name: options[name] for name in names})
     path = Path(directory) / CONFIG_NAME
     header = (f"# Written by `foresight demo --prepare {directory}`: the demo's scenario ({scenario.demo.class_name} "

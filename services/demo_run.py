@@ -30,6 +30,7 @@ from services.scenario import (
     table_row,
 )
 from services.supervisor import Supervisor
+from services.view.config import DEFAULT_PORT
 from shared.config import ZenohConfig
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library, save_library
@@ -89,9 +90,11 @@ def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_
                      "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"])],
         "ros2": [*scene, *([] if cfg.robot == "sim" else ["--no-joint-states"])],  # a ROS 2 robot has its own
         "simrobot": [*scene, "--sim-time" if lockstep else "--no-sim-time"],
+        "view": ["--port", str(cfg.live or DEFAULT_PORT), *scene],
         "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
                      *([] if cfg.robot == "sim" else ["--robot", "ros2"]),
                      *(["--finish-path"] if lockstep and cfg.finish else []),
+                     *(["--live-port", str(cfg.live)] if cfg.live else []),
                      *(["--mcap", str(mcap)] if mcap is not None else []), *scene],
     }
 
@@ -227,7 +230,10 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 if stop.is_set():
                     break
                 procs[name].start()
-                if name != "executor":
+                if name == "executor" and cfg.live:  # it serves the scene it logs
+                    out(f"foresight demo: watch live at ws://127.0.0.1:{cfg.live} (Foxglove: Open connection -> "
+                        "Foxglove WebSocket; layout docs/foresight.foxglove.json)")
+                elif name != "executor":
                     procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout), stop=stop)
             executor = procs["executor"]
             supervisor = Supervisor(procs, out, restart=cfg.restart)

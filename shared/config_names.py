@@ -32,6 +32,7 @@ SECTIONS: dict[str, str] = {
     "router": "tools.router:RouterConfig",
     "ros2": "services.ros2.service:Ros2ServiceConfig",
     "simrobot": "services.ros2.robot_sim:RobotSimConfig",
+    "view": "services.view.config:ViewConfig",
     "demo": "services.demo:DemoConfig",
 }
 """Section (TOML table, variable and command name) -> ``module:Class`` of its config dataclass."""

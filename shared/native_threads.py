@@ -9,7 +9,11 @@ took 7-16 s with OpenBLAS's default 2 threads and 0.6-0.7 s with 1 (the same fit
 ``foresight`` command, every ``python -m services.X`` and every experiment worker process starts with
 one BLAS thread; ``FORESIGHT_BLAS_THREADS`` overrides it (``0``: the libraries' own default).
 
-torch's intra-op threads are separate (``PlannerConfig.threads``) and not touched here.
+torch's intra-op threads are separate: the planner sets them (``PlannerConfig.threads``); a process whose
+torch work is a robot's forward kinematics for drawing (the executor, ``foresight view``) takes one with
+:func:`limit_torch_threads`: on such batches a second thread gains nothing and its OpenMP worker spins.
+Measured: drawing a real-time run's 913 messages took 2.16 s of process CPU with torch's default 2 threads
+and 1.06 s with 1, in the same 1.1 s of wall time (2026-11-26, this 2-core machine).
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ from threadpoolctl import threadpool_limits
 
 from shared.config import ConfigError
 
-__all__ = ["ENV", "blas_threads", "limit_blas_threads"]
+__all__ = ["ENV", "blas_threads", "limit_blas_threads", "limit_torch_threads"]
 
 ENV = "FORESIGHT_BLAS_THREADS"
 """Environment variable: BLAS threads per process (default 1; 0 leaves the libraries' default)."""
@@ -61,3 +65,10 @@ def limit_blas_threads(threads: int | None = None) -> int:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", str(n))
         threadpool_limits(limits=n, user_api="blas")  # the ones already loaded
     return n
+
+
+def limit_torch_threads(threads: int = 1) -> None:
+    """One torch intra-op thread (or ``threads``) in this process: for processes that draw, not plan."""
+    import torch
+
+    torch.set_num_threads(int(threads))

@@ -278,7 +278,8 @@ def test_the_secure_variant_is_valid_and_gives_each_service_only_its_own_role() 
         mounts = [v.rsplit(":", 2) for v in svc["volumes"]]  # SOURCE:TARGET:ro (the source has a ${...:-...})
         assert all(m[-1] == "ro" for m in mounts), name
         files = sorted(Path(m[0]).name for m in mounts)
-        assert files == sorted(["ca.crt", f"{name}.crt", f"{name}.key"]), name  # its own role, nothing else
+        role = "observer" if name == "view" else name  # the live view reads, as displays do
+        assert files == sorted(["ca.crt", f"{role}.crt", f"{role}.key"]), name  # its own role, nothing else
         assert {Path(m[1]).parent for m in mounts} == {Path("/run/foresight/security")}
         if name == "router":
             cmd = svc["command"]

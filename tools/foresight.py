@@ -28,6 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "eval": ("services.experiments.cli", "the paper's experiments and beyond"),
     "bench": ("services.bench", "benchmark a component"),
     "ros2": ("services.ros2.__main__", "publish the run as ROS 2 topics over rmw_zenoh (RViz, ros2 topic echo)"),
+    "view": ("services.view.__main__", "serve a running system live to the Foxglove app (ws://127.0.0.1:8765)"),
     "simrobot": ("services.ros2.robot_sim", "a simulated PR2 arm on ROS 2 (rmw_zenoh) to drive with --robot ros2"),
     "security": ("tools.security", "certificates for mutual TLS and the access control from the wire contract"),
 }

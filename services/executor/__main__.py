@@ -7,6 +7,7 @@ import threading
 from collections.abc import Callable
 
 from shared.config import ZenohConfig
+from shared.native_threads import limit_torch_threads
 from shared.runtime import service_main
 
 from .core import ExecutorConfig
@@ -34,6 +35,7 @@ this long, so a plan is received (and stamped) within ~1.5 ms of its arrival ins
 
 def _make(cfg: ExecutorConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
     sys.setswitchinterval(SWITCH_INTERVAL_S)  # this process only: `python -m services.executor`
+    limit_torch_threads(1)  # its torch work is the scene's forward kinematics: a second thread only spins
     service = ExecutorService(cfg, zcfg, stop)
 
     def run() -> None:

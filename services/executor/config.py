@@ -72,6 +72,9 @@ class ExecutorConfig:
     mcap_compression: str = opt("zstd", choices=("zstd", "lz4", "none"),
                                 help="compression of the MCAP's chunks (every MCAP reader reads zstd and lz4)")
     viz_rate_hz: float = opt(5.0, help="highest rate of the Foxglove robot/human/occupancy scene updates per channel")
+    live_port: int = opt(0, help="also serve the logged scene live to the Foxglove app on ws://LIVE_HOST:PORT "
+                         "(foxglove-sdk; docs/live-view.md); 0: off")
+    live_host: str = opt("127.0.0.1", help="the live server's address (loopback: only this machine can watch)")
     device: str = opt("cpu", help="torch device of the robot model (cpu or cuda)")
     robot: str = opt("sim", choices=ROBOTS, help="sim: simulate the arm; ros2: drive a ROS 2 robot over rmw_zenoh "
                      "(its JointState in, each plan out to its joint_trajectory_controller, the same holds; lock-step "
@@ -105,6 +108,10 @@ class ExecutorConfig:
         if not 0 <= self.ros2_domain_id <= 232:
             raise ConfigError(f"executor.ros2_domain_id: must be 0..232, got {self.ros2_domain_id}")
         check_robot_names(self.ros2_controller, self.ros2_joint_states, "executor.ros2_")
+        if not 0 <= self.live_port <= 65535:
+            raise ConfigError(f"executor.live_port: must be a port 1..65535 (0: off), got {self.live_port}")
+        if self.live_port and self.mcap.lower() == "none":
+            raise ConfigError("executor.live_port: the live scene is the log's; it needs the MCAP log (mcap is 'none')")
         if not all(math.isfinite(v) for v in self.start_q):
             raise ConfigError(f"executor.start_q: values must be finite, got {self.start_q}")
 

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from shared.config import ZenohConfig
+from shared.foxglove.scene import SceneBuilder
 from shared.lockstep import FIRST_PLAN, Adoption, LockstepMaster, PlanInbox, StepClock
 from shared.protocol import (
     DemoMarker,
@@ -48,7 +49,6 @@ from shared.protocol import (
     RobotSpec,
     RobotState,
 )
-from shared.recording.foxglove import SceneBuilder
 from shared.recording.writer import McapLog
 from shared.scene import Scene, load_scene
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, sender_of
@@ -140,6 +140,7 @@ class ExecutorService:
         self.inbox = PlanInbox()
         self._pose_arrival: OrderedDict[tuple[int, int], float] = OrderedDict()  # (demo_id, index) -> arrival
         self.mcap: McapLog | None = None
+        self.live: Any = None  # the live server (live_port), fed by the log
         self._times: list[float] = []
         self._qs: list[np.ndarray] = []
 
@@ -208,9 +209,10 @@ class ExecutorService:
                 meta.update(prefix=self.zenoh.prefix, joint_names=",".join(self.limits.joint_names))
                 # real time: Foxglove updates on a background thread (never ahead of a plan's receipt); lock-step:
                 # in the callback, so that a run's log never depends on thread timing (no update ever dropped)
+                live = self._live_server(builder)
                 self.mcap = McapLog(path, self.keys, builder, viz_period_s=1.0 / cfg.viz_rate_hz,
                                     viz_thread=cfg.mode != "lockstep", compression=cfg.mcap_compression,
-                                    scene_text=text, run_metadata=meta)
+                                    scene_text=text, run_metadata=meta, on_viz=live.log if live else None)
                 self.result.mcap_path = str(path)
             link = self._connect_robot(session) if cfg.robot == "ros2" else None
             sub = session.declare_subscriber(f"{self.zenoh.prefix}/**", lambda s: self._on_sample(
@@ -234,6 +236,8 @@ class ExecutorService:
                     link.close()
                 if self.mcap is not None:
                     self.mcap.close()
+                if self.live is not None:
+                    self.live.close()
         r = self.result
         r.rejects = dict(self.rejects.counts)
         r.reject_reasons = {f"{k} {why}": n for (k, why), n in sorted(self.rejects.by_reason.items())}
@@ -244,6 +248,18 @@ class ExecutorService:
                  r.steps, r.goal_per_step[-1] if r.goal_per_step else -1, r.reached, r.reached_step, r.plans,
                  r.held_steps, sum(r.rejects.values()), self.rejects.summary())
         return r
+
+    def _live_server(self, builder: SceneBuilder) -> Any:
+        """``live_port``: Foxglove's WebSocket server, fed every scene message the log writes (None: off)."""
+        if not self.config.live_port:
+            return None
+        from shared.foxglove.live import LiveServer
+        from shared.foxglove.stream import SceneStream
+
+        self.live = LiveServer(self.config.live_port, self.config.live_host, static=SceneStream(builder).static)
+        log.info("executor: serving the scene live at %s (Foxglove: Open connection -> Foxglove WebSocket)",
+                 self.live.url)
+        return self.live
 
     def _connect_robot(self, session: Any) -> Any:
         """``robot = "ros2"``: find the ROS 2 robot and drive it (:class:`services.ros2.arm.Ros2Arm`) from here on."""
@@ -258,6 +274,8 @@ class ExecutorService:
             link.close()
             if self.mcap is not None:
                 self.mcap.close()  # complete, with what it has: the run never started
+            if self.live is not None:
+                self.live.close()
             raise
         self.core = Ros2Arm(self.limits, q0, self.config, link)
         return link

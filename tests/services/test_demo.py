@@ -107,7 +107,7 @@ def test_demo_prepare_writes_the_inputs_and_the_services_config(tmp_path: Path, 
     assert main(["--prepare", str(out), "--library", str(lib), "--components", "4", "--steps", "5",
                  "--models-dir", str(tmp_path / "models")]) == 0
     config = tomllib.loads((out / "foresight.toml").read_text())
-    assert set(config) == {"predictor", "planner", "replayer", "executor"}
+    assert set(config) == {"predictor", "planner", "replayer", "executor", "view"}  # view: compose's profile live
     assert Path(config["predictor"]["model"]).is_file() and Path(config["predictor"]["model"]).parent == \
         tmp_path / "models"
     human = load_library(config["replayer"]["library"])
@@ -115,3 +115,19 @@ def test_demo_prepare_writes_the_inputs_and_the_services_config(tmp_path: Path, 
     assert config["executor"]["steps"] == 5 and config["planner"]["velocity_scale"] == 0.1
     assert "foresight.toml" in capsys.readouterr().out
     assert not list(tmp_path.glob("run*")), "nothing was run"
+
+
+def test_demo_live_takes_a_port_or_foxgloves_default(capsys: pytest.CaptureFixture[str]) -> None:
+    from services.demo import DemoConfig
+    from services.demo_run import service_options
+
+    with pytest.raises(SystemExit):
+        main(["--live", "--steps", "0"])  # a bare --live does not swallow the next option
+    assert "demo.steps: must be >= 1" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--live", "70000"])
+    assert "demo.live: must be a port" in capsys.readouterr().err
+    opts = service_options(DemoConfig(live=8765), Path("m.npz"), Path("h.npz"), 3, None)
+    live = opts["executor"].index("--live-port")  # the executor serves the scene it logs
+    assert opts["executor"][live + 1] == "8765" and "--live-port" not in service_options(
+        DemoConfig(), Path("m.npz"), Path("h.npz"), 3, None)["executor"]

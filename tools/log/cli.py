@@ -5,10 +5,13 @@
   (:mod:`tools.log.render`);
 * ``foresight log latency FILE [--json]``: pose -> occupancy -> plan latencies (:mod:`tools.log.latency`);
 * ``foresight log compress IN OUT``: the same log with compressed chunks, read back identical
-  (:mod:`tools.log.compress`).
+  (:mod:`tools.log.compress`);
+* ``foresight log snapshot FILE [--at SECONDS] [--out PNG]``: the logged 3D scene (Foxglove's channels) at a
+  moment of the run (:mod:`tools.log.snapshot`).
 
 The log is read with :func:`shared.recording.reader.read_log` (record by record: a truncated file is
-read up to its last complete chunk).
+read up to its last complete chunk); ``snapshot`` reads only the scene channels
+(:func:`shared.foxglove.decode.read_scene`).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from shared.runtime import UserError, cli_errors
 
 from .compress import compress_log
 from .info import format_info, info_dict
-from .latency import format_latencies, run_latencies
+from .latency import format_latencies, log_latencies
 from .render import render_step
 from .steps import scene_of, step_views
 
@@ -37,6 +40,7 @@ SUBCOMMANDS: dict[str, str] = {
     "latency": "pose -> occupancy -> plan latencies and the replanning period (p50, p99)",
     "compress": "rewrite a log with compressed chunks; read both back, compare them",
     "table": "the run's step table (goal per step, costs), switch step, goal reached, as foresight demo prints it",
+    "snapshot": "draw the logged 3D scene (Foxglove's channels) at a time to PNG",
 }
 """The sub-commands of ``foresight log`` with one line each (``foresight --help`` lists them)."""
 
@@ -90,18 +94,22 @@ def _main_table(args: argparse.Namespace) -> int:
     return 0
 
 
+def _main_snapshot(args: argparse.Namespace) -> int:
+    from .snapshot import draw_snapshot, scene_at
+
+    file = Path(args.file)
+    out = Path(args.out) if args.out else file.with_name(f"{file.stem}-snapshot.png")
+    state = scene_at(file, args.at)
+    draw_snapshot(state, out, title=file.name)
+    print(f"wrote {out} ({state.summary()})")
+    return 0
+
+
 def _main_latency(args: argparse.Namespace) -> int:
-    wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.DemoMarker"}
-    lf = read_log(args.file, keep=lambda ch: ch.schema_name in wanted and ch.message_encoding == "msgpack")
-    topics = {}
-    for ch in lf.channels.values():
-        for key, schema in (("pose", "foresight.HumanPose"), ("occupancy", "foresight.OccupancyGrid"),
-                            ("plan", "foresight.Plan"), ("demo", "foresight.DemoMarker")):
-            if ch.schema_name == schema and ch.message_encoding == "msgpack":
-                topics[key] = ch.topic
-    if not {"pose", "occupancy", "plan"} <= set(topics):
-        raise UserError(f"{args.file}: needs HumanPose, OccupancyGrid and Plan channels, found {sorted(topics)}")
-    stats = run_latencies(lf.messages, topics)
+    try:
+        stats = log_latencies(args.file)
+    except ValueError as exc:
+        raise UserError(str(exc)) from exc
     if args.json:
         print(json.dumps({k: dataclasses.asdict(v) for k, v in stats.items()}))
     else:
@@ -110,12 +118,13 @@ def _main_latency(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
-    """``foresight log info|render|latency|compress|table``; returns the exit status."""
+    """``foresight log info|render|latency|compress|table|snapshot``; returns the exit status."""
     parser = argparse.ArgumentParser(prog=prog, description="Look at a run's MCAP log without Foxglove: 'info' "
                                      "lists channels, schemas and message counts; 'render' draws replanning steps "
                                      "to PNG (table, cups, human, predicted occupancy, robot spheres, candidate "
                                      "end-effector paths); 'latency' measures pose -> occupancy -> plan; 'compress' "
-                                     "rewrites a log with compressed chunks.")
+                                     "rewrites a log with compressed chunks; 'snapshot' draws the logged 3D "
+                                     "scene (Foxglove's channels) at a moment of the run.")
     sub = parser.add_subparsers(dest="cmd", required=True, metavar="{" + ",".join(SUBCOMMANDS) + "}")
     pi = sub.add_parser("info", help=SUBCOMMANDS["info"])
     pi.add_argument("file", help="MCAP file")
@@ -136,6 +145,12 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
     pt = sub.add_parser("table", help=SUBCOMMANDS["table"])
     pt.add_argument("file", help="MCAP file")
     pt.add_argument("--json", action="store_true", help="print one JSON object (the demo's --json keys)")
+    ps = sub.add_parser("snapshot", help=SUBCOMMANDS["snapshot"])
+    ps.add_argument("file", help="MCAP file")
+    ps.add_argument("--at", type=float, default=None, metavar="SECONDS",
+                    help="seconds from the first scene record (default: the last plan)")
+    ps.add_argument("--out", default=None, metavar="PNG",
+                    help="PNG path (default: FILE's stem + '-snapshot.png' next to it)")
     args = parser.parse_args(argv)
     with cli_errors(prog):
         if args.cmd == "table":
@@ -148,6 +163,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
             return _main_info(args)
         if args.cmd == "latency":
             return _main_latency(args)
+        if args.cmd == "snapshot":
+            return _main_snapshot(args)
         if not (0.0 <= args.min_probability <= 1.0) or math.isnan(args.min_probability):
             raise UserError(f"--min-probability must be in [0, 1], got {args.min_probability}")
         return _main_render(args, prog)

@@ -16,6 +16,7 @@ clock for all), so differences between log times are end-to-end latencies across
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -102,3 +103,24 @@ def format_latencies(stats: dict[str, Stat]) -> str:
     for name, s in stats.items():
         lines.append(f"{name.replace('_', ' '):<22}{s.count:>7}{s.p50:>10.1f}{s.p99:>10.1f}{s.max:>10.1f}")
     return "\n".join(lines)
+
+
+def log_latencies(path: str | Path) -> dict[str, Stat]:
+    """:func:`run_latencies` of an MCAP log's Foresight channels.
+
+    Raises:
+        ValueError: The log lacks the HumanPose, OccupancyGrid or Plan channel.
+    """
+    from shared.recording.reader import read_log
+
+    wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.DemoMarker"}
+    lf = read_log(path, keep=lambda ch: ch.schema_name in wanted and ch.message_encoding == "msgpack")
+    topics = {}
+    for ch in lf.channels.values():
+        for key, schema in (("pose", "foresight.HumanPose"), ("occupancy", "foresight.OccupancyGrid"),
+                            ("plan", "foresight.Plan"), ("demo", "foresight.DemoMarker")):
+            if ch.schema_name == schema and ch.message_encoding == "msgpack":
+                topics[key] = ch.topic
+    if not {"pose", "occupancy", "plan"} <= set(topics):
+        raise ValueError(f"{path}: needs HumanPose, OccupancyGrid and Plan channels, found {sorted(topics)}")
+    return run_latencies(lf.messages, topics)

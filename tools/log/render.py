@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.recording.foxglove import ArmModel
+from shared.foxglove.scene import ArmModel
 from shared.scene import Scene
 
 from .steps import StepView, step_title

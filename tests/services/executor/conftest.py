@@ -178,18 +178,3 @@ def pr2():
 
     return PR2.from_scene(SCENE, device="cpu", dtype=torch.float32)
 
-
-def foxglove_stamps(lf) -> list[tuple[str, str, int, int, int]]:
-    """Every entity and transform of a log's Foxglove channels as ``(topic, id or child frame,
-    timestamp ns, record log_time, record publish_time)``."""
-    import json
-
-    out = []
-    for m in lf.messages:
-        if not (m.topic.startswith("/viz/") or m.topic == "/tf"):
-            continue
-        obj = json.loads(m.data)
-        for item in obj.get("entities", []) + obj.get("transforms", []):
-            ns = item["timestamp"]["sec"] * 1_000_000_000 + item["timestamp"]["nsec"]
-            out.append((m.topic, item.get("id") or item["child_frame_id"], ns, m.log_time, m.publish_time))
-    return out

@@ -183,6 +183,10 @@ def test_bad_inputs_are_named() -> None:
         ExecutorConfig(stale_limit_s=0).validate()
     with pytest.raises(ConfigError, match="wait_for"):
         ExecutorConfig(wait_for=["planer"]).validate()
+    with pytest.raises(ConfigError, match="live_port: must be a port"):
+        ExecutorConfig(live_port=70000).validate()
+    with pytest.raises(ConfigError, match="live_port: the live scene is the log's"):
+        ExecutorConfig(live_port=8765, mcap="none").validate()
 
 
 def test_reference_interpolates_and_holds_at_the_ends() -> None:

@@ -13,11 +13,12 @@ import pytest
 
 from services.executor.core import ExecutorConfig
 from services.executor.service import ExecutorService
+from shared.foxglove.decode import read_scene, scene_stamps
 from shared.protocol import Keys, RobotState, decode
 from shared.recording.reader import read_log
 from shared.transport import Presence, open_session
 
-from .conftest import SCENE, FakeSystem, foxglove_stamps, new_hub
+from .conftest import SCENE, FakeSystem, new_hub
 
 
 def lockstep_config(tmp_path, **kw) -> ExecutorConfig:
@@ -67,10 +68,11 @@ def test_lockstep_mcap_has_one_time_base_for_foxglove(zenoh_hub, pr2, tmp_path) 
     keys = Keys()
     sim = [decode(m.data).stamp for m in lf.topic_messages(keys.robot_state) + lf.topic_messages(keys.plan)]
     assert sim and max(sim) <= 4 * 0.2 + 1e-9
-    stamps = foxglove_stamps(lf)
+    stamps = scene_stamps(cfg.mcap)
     kinds = {(topic, ident) for topic, ident, *_ in stamps}
     assert {("/tf", "robot_base"), ("/tf", "end_effector"), ("/viz/scene", "obstacles"),
-            ("/viz/robot", "robot/spheres"), ("/viz/plan", "plan/paths"), ("/viz/occupancy", "occupancy")} <= kinds
+            ("/viz/robot", "robot/spheres"), ("/viz/plan", "plan/paths"), ("/viz/occupancy", "points"),
+            ("/viz/costs", "chart")} <= kinds
     first = min(m.log_time for m in lf.messages)
     last = max(m.log_time for m in lf.messages)
     for topic, ident, ns, log_time, publish_time in stamps:
@@ -83,6 +85,42 @@ def test_lockstep_is_deterministic(zenoh_hub, pr2, tmp_path) -> None:
     assert r1.goal_per_step == r2.goal_per_step == [-1, 0, 0, 0, 1, 1]
     assert np.array_equal(r1.q, r2.q)
     assert r1.mcap_path is None
+
+
+def clear_stamps(msg) -> None:  # noqa: ANN001 - a protobuf message
+    """Clear every ``timestamp`` field of a protobuf message, nested ones included."""
+    for fd, value in msg.ListFields():
+        if fd.name == "timestamp":
+            msg.ClearField("timestamp")
+        elif fd.message_type is not None:
+            for item in ([value] if hasattr(value, "ListFields") else value):
+                clear_stamps(item)
+
+
+def test_lockstep_logs_are_reproducible_scene_included(zenoh_hub, pr2, tmp_path) -> None:
+    """Two lock-step runs log the same raw messages in the same order on every channel, and the same scene
+    messages (every one decoded with the file's schema; only the receive-time stamps differ)."""
+    logs = []
+    for run in ("a", "b"):
+        cfg = lockstep_config(tmp_path / run, steps=5)
+        run_lockstep(new_hub(), pr2, cfg, switch_at=3)
+        raw = {}
+        for m in read_log(cfg.mcap, keep=lambda ch: ch.message_encoding == "msgpack").messages:
+            raw.setdefault(m.topic, []).append(m.data)
+        scene = {}
+        for r in read_scene(cfg.mcap):
+            msg = r.message
+            if isinstance(msg, dict):
+                msg.pop("timestamp")
+                text = repr(sorted(msg.items()))
+            else:
+                clear_stamps(msg)
+                text = msg.SerializeToString(deterministic=True)
+            scene.setdefault(r.topic, []).append(text)
+        logs.append((raw, scene))
+    (raw_a, scene_a), (raw_b, scene_b) = logs
+    assert raw_a == raw_b and len(raw_a[Keys().plan]) == 5
+    assert scene_a == scene_b and {"/viz/plan", "/viz/robot", "/viz/occupancy", "/viz/costs"} <= set(scene_a)
 
 
 def test_lockstep_holds_without_plans_then_resumes(zenoh_hub, pr2, tmp_path) -> None:
@@ -129,7 +167,8 @@ def test_mcap_has_every_channel_decodable_with_schemas(zenoh_hub, pr2, tmp_path)
     assert by_topic[keys.robot_state].count == 1 + 5 * 5
     assert by_topic[keys.plan].count == 5
     for topic in ("/viz/scene", "/viz/robot", "/viz/plan", "/viz/occupancy", "/tf"):
-        assert by_topic[topic].message_encoding == "json" and by_topic[topic].count > 0
+        assert by_topic[topic].message_encoding == "protobuf" and by_topic[topic].count > 0
+    assert by_topic["/viz/costs"].message_encoding == "json" and by_topic["/viz/costs"].count == 5
     assert by_topic["/foresight/rejected"].count == 2 * len(garbage)
     assert lf.metadata["foresight.rejects"] == {keys.plan: "4", keys.occupancy: "4"}
     assert lf.metadata["foresight.run"]["mode"] == "lockstep"

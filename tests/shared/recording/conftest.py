@@ -1,8 +1,6 @@
-"""Messages of every type for the recording tests, the robot model, and the stamps of Foxglove entities."""
+"""Messages of every type for the recording tests, and the robot model."""
 
 from __future__ import annotations
-
-import json
 
 import numpy as np
 import pytest
@@ -54,16 +52,3 @@ def sample_messages(pr2) -> list[tuple[str, bytes]]:
         (KEYS.clock, encode(ClockTick(stamp=0.0, tick=0, period=0.2))),
     ]
 
-
-def foxglove_stamps(lf) -> list[tuple[str, str, int, int, int]]:
-    """Every entity and transform of a log's Foxglove channels as ``(topic, id or child frame,
-    timestamp ns, record log_time, record publish_time)``."""
-    out = []
-    for m in lf.messages:
-        if not (m.topic.startswith("/viz/") or m.topic == "/tf"):
-            continue
-        obj = json.loads(m.data)
-        for item in obj.get("entities", []) + obj.get("transforms", []):
-            ns = item["timestamp"]["sec"] * 1_000_000_000 + item["timestamp"]["nsec"]
-            out.append((m.topic, item.get("id") or item["child_frame_id"], ns, m.log_time, m.publish_time))
-    return out

@@ -1,5 +1,6 @@
-"""McapLog: every channel with its schema, Foxglove channels, rejects, and files that stay readable when
-the writer is killed (SIGKILL)."""
+"""McapLog: every channel with its schema, the scene channels (decoded back with protobuf and the schemas the
+file carries, not with the SDK that wrote them), rejects, and files that stay readable when the writer is
+killed (SIGKILL)."""
 
 from __future__ import annotations
 
@@ -16,12 +17,13 @@ import jsonschema
 import numpy as np
 import pytest
 
+from shared.foxglove.decode import read_scene, scene_stamps
+from shared.foxglove.scene import SceneBuilder
 from shared.protocol import ClockTick, Keys, encode
-from shared.recording.foxglove import SceneBuilder
 from shared.recording.reader import read_log
 from shared.recording.writer import McapLog
 
-from .conftest import SCENE, blob, foxglove_stamps, sample_messages
+from .conftest import SCENE, blob, sample_messages
 
 REPO = Path(__file__).resolve().parents[3]
 KEYS = Keys()
@@ -51,32 +53,47 @@ def test_every_channel_is_written_with_its_schema_and_decodes(tmp_path, pr2) -> 
     assert topics["/foresight/rejected"].count == 2
     assert lf.metadata["foresight.rejects"] == {KEYS.plan: "1", KEYS.occupancy: "1"}
     assert lf.metadata["foresight.viz"] == {"dropped": "0", "unfinished": "0", "errors": "0"}
-    # Foxglove channels: JSON that validates against the attached schema
+    # the scene channels: protobuf under the FileDescriptorSet each channel's schema holds, and the plots' JSON
+    scene = {}
+    for r in read_scene(path):
+        scene.setdefault(r.topic, []).append(r.message)
+    for topic, entity in {"/viz/scene": "obstacles", "/viz/robot": "robot/spheres", "/viz/plan": "plan/paths",
+                          "/viz/human": "human/body"}.items():
+        assert topics[topic].schema_name == "foxglove.SceneUpdate" and topics[topic].schema_encoding == "protobuf"
+        assert scene[topic][0].entities[0].id == entity
+    assert [e.id for e in scene["/viz/scene"][0].entities] == ["obstacles", *(f"cup/{c.name}" for c in SCENE.cups)]
+    robot = scene["/viz/robot"][0].entities[0]
+    assert len(robot.spheres) == len(pr2.sphere_radii)
+    centers = pr2.sphere_centers(pr2.q_start).numpy().reshape(-1, 3)
+    got = np.array([[s.pose.position.x, s.pose.position.y, s.pose.position.z] for s in robot.spheres])
+    assert np.allclose(got, centers, atol=1e-6)
+    assert robot.spheres[0].color.r == 1.0  # holding: orange
+    paths = scene["/viz/plan"][0].entities[0].lines
+    assert len(paths) == 2 and paths[1].thickness > paths[0].thickness  # chosen = 1 is highlighted
+    cloud = scene["/viz/occupancy"][0]
+    assert topics["/viz/occupancy"].schema_name == "foxglove.PointCloud"
+    assert [f.name for f in cloud.fields] == ["x", "y", "z", "probability", "red", "green", "blue", "alpha"]
+    points = np.frombuffer(cloud.data, dtype=[("xyz", "<f4", (3,)), ("p", "<f4"), ("rgba", "u1", (4,))])
+    grid = blob(0, 0, 0.0)
+    kept = grid.values >= 0.05 * 255
+    assert len(points) == int(np.count_nonzero(kept)) and cloud.point_stride == 20
+    ijk = np.stack(np.unravel_index(grid.indices[kept].astype(np.int64), tuple(grid.dims)), axis=-1)
+    assert np.allclose(points["xyz"], grid.origin + grid.resolution * (ijk + 0.5), atol=1e-6)
+    assert np.allclose(points["p"], grid.values[kept] / 255.0, atol=1e-6)
+    human = scene["/viz/human"][0].entities[0].lines
+    assert len(human) == len(HumanModel().capsules(np.zeros(12))[1])
+    assert {t.child_frame_id for tf in scene["/tf"] for t in tf.transforms} == {"robot_base", "end_effector"}
+    costs = scene["/viz/costs"][0]
+    jsonschema.validate(costs, json.loads(read_schema(path, "foresight.viz.Costs")))
+    assert costs["chosen"] == "red_cup" and set(costs["total"]) == {"blue_cup", "red_cup"}
+
+
+def read_schema(path: Path, name: str) -> bytes:
+    """The data of schema ``name`` in an MCAP file."""
     from mcap.stream_reader import StreamReader
 
-    schemas = {}
-    for rec in StreamReader(str(path)).records:
-        if type(rec).__name__ == "Schema":
-            schemas[rec.name] = json.loads(rec.data)
-    expected = {"/viz/scene": "obstacles", "/viz/robot": "robot/spheres", "/viz/occupancy": "occupancy",
-                "/viz/plan": "plan/paths", "/viz/human": "human/body"}
-    for topic, entity in expected.items():
-        assert topics[topic].schema_name == "foxglove.SceneUpdate"
-        upd = json.loads(lf.topic_messages(topic)[0].data)
-        jsonschema.validate(upd, schemas["foxglove.SceneUpdate"])
-        assert upd["entities"][0]["id"] == entity
-    robot = json.loads(lf.topic_messages("/viz/robot")[0].data)["entities"][0]
-    assert len(robot["spheres"]) == len(pr2.sphere_radii)
-    paths = json.loads(lf.topic_messages("/viz/plan")[0].data)["entities"][0]["lines"]
-    assert len(paths) == 2 and paths[1]["thickness"] > paths[0]["thickness"]  # chosen = 1 is highlighted
-    cubes = json.loads(lf.topic_messages("/viz/occupancy")[0].data)["entities"][0]["cubes"]
-    assert len(cubes) == int(np.count_nonzero(blob(0, 0, 0.0).values >= 0.05 * 255))
-    human = json.loads(lf.topic_messages("/viz/human")[0].data)["entities"][0]["lines"]
-    assert len(human) == len(HumanModel().capsules(np.zeros(12))[1])
-    tf = [json.loads(m.data) for m in lf.topic_messages("/tf")]
-    for t in tf:
-        jsonschema.validate(t, schemas["foxglove.FrameTransforms"])
-    assert {x["child_frame_id"] for t in tf for x in t["transforms"]} == {"robot_base", "end_effector"}
+    return next(rec.data for rec in StreamReader(str(path)).records
+                if type(rec).__name__ == "Schema" and rec.name == name)
 
 
 def test_foxglove_channels_are_stamped_on_the_log_clock_not_the_simulated_one(tmp_path, pr2) -> None:
@@ -91,11 +108,12 @@ def test_foxglove_channels_are_stamped_on_the_log_clock_not_the_simulated_one(tm
     for key, data in sample_messages(pr2):  # every stamp is 0.0
         assert log.on_sample(key, data) is not None
     log.close()
-    stamps = foxglove_stamps(read_log(path, keep=lambda ch: True))
+    stamps = scene_stamps(path)
     assert {(t, i) for t, i, *_ in stamps} == {
         ("/viz/scene", "obstacles"), *(("/viz/scene", f"cup/{c.name}") for c in SCENE.cups),
         ("/tf", "robot_base"), ("/tf", "end_effector"), ("/viz/robot", "robot/spheres"),
-        ("/viz/occupancy", "occupancy"), ("/viz/plan", "plan/paths"), ("/viz/human", "human/body")}
+        ("/viz/occupancy", "points"), ("/viz/plan", "plan/paths"), ("/viz/human", "human/body"),
+        ("/viz/costs", "chart")}
     for topic, ident, ns, log_time, publish_time in stamps:
         assert abs(ns - log_time) < 1000 and publish_time == log_time, (topic, ident, ns, log_time)
 
@@ -107,10 +125,10 @@ class _SlowOccupancy(SceneBuilder):
         super().__init__(SCENE, robot)
         self.entered, self.release = threading.Event(), threading.Event()
 
-    def occupancy_cubes(self, occ, stamp=None):  # noqa: ANN001, ANN201 - the SceneBuilder signature
+    def occupancy_cloud(self, occ, stamp=None):  # noqa: ANN001, ANN201 - the SceneBuilder signature
         self.entered.set()
         self.release.wait(10)
-        return super().occupancy_cubes(occ, stamp)
+        return super().occupancy_cloud(occ, stamp)
 
 
 def test_foxglove_updates_never_hold_up_the_raw_log(tmp_path, pr2) -> None:
@@ -149,13 +167,22 @@ def test_foxglove_updates_never_hold_up_the_raw_log(tmp_path, pr2) -> None:
 WRITER = textwrap.dedent("""
     import sys, time
     import numpy as np
+    from shared.foxglove.scene import SceneBuilder
     from shared.recording.writer import McapLog
-    from shared.protocol import ClockTick, Keys, encode
+    from shared.protocol import ClockTick, Keys, OccupancyGrid, encode
+    from shared.scene import load_scene
     keys = Keys()
-    log = McapLog(sys.argv[1], keys, None, chunk_size=4096, flush_period_s=0.05)
+    scene = load_scene(None)
+    log = McapLog(sys.argv[1], keys, SceneBuilder(scene), chunk_size=4096, flush_period_s=0.05, viz_thread=False)
+    dense = np.zeros(scene.grid.dims, np.float32)
+    dense[18:24, 12:20, 15:22] = 0.8
     n = 0
     while True:
         log.on_sample(keys.clock, encode(ClockTick(stamp=n * 0.2, tick=n, period=0.2)))
+        if n % 50 == 0:  # a scene update (the occupancy's point cloud) every 50 ticks
+            occ = OccupancyGrid.from_dense(dense, scene.grid.origin, scene.grid.resolution, stamp=n * 0.2, tick=n,
+                                           tick_last=True, demo_id=0, index=n, method="prediction")
+            log.on_sample(keys.occupancy, encode(occ))
         n += 1
         if n == 2000:
             log.flush()
@@ -164,7 +191,7 @@ WRITER = textwrap.dedent("""
 """)
 
 
-def test_killed_writer_leaves_a_readable_file(tmp_path) -> None:
+def test_killed_writer_leaves_a_readable_file_scene_included(tmp_path) -> None:
     path = tmp_path / "killed.mcap"
     proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path)], cwd=REPO, stdout=subprocess.PIPE, text=True)
     try:
@@ -185,6 +212,10 @@ def test_killed_writer_leaves_a_readable_file(tmp_path) -> None:
 
     ticks = [decode(m.data, ClockTick).tick for m in msgs]
     assert ticks == list(range(len(ticks)))  # nothing lost or garbled up to the last whole chunk
+    scene = list(read_scene(path))  # the scene channels too, decoded with the schemas the file carries
+    clouds = [r for r in scene if r.topic == "/viz/occupancy"]
+    assert scene[0].topic == "/viz/scene" and len(clouds) >= 2000 // 50
+    assert {len(r.message.data) for r in clouds} == {6 * 8 * 7 * 20}
 
 
 def test_compressed_chunks_hold_the_same_messages(tmp_path, pr2) -> None:

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from shared.foxglove.scene import SceneBuilder
 from shared.protocol import ClockTick, HumanPose, Keys, OccupancyGrid, Plan, RobotState, encode
-from shared.recording.foxglove import SceneBuilder
 from shared.recording.writer import McapLog
 from shared.scene import load_scene
 

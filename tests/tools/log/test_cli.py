@@ -19,7 +19,7 @@ def test_info_lists_channels_schemas_and_counts(run_log, capsys) -> None:
     lines = {ln.split()[0]: ln.split() for ln in out.splitlines() if ln.startswith("  ") and "/" in ln}
     assert lines[KEYS.plan][1:] == ["foresight.Plan", "jsonschema", "msgpack", "2"]
     assert lines[KEYS.robot_state][-1] == "2" and lines[KEYS.occupancy][-1] == "2"
-    assert lines["/viz/plan"][1:] == ["foxglove.SceneUpdate", "jsonschema", "json", "2"]
+    assert lines["/viz/plan"][1:] == ["foxglove.SceneUpdate", "protobuf", "protobuf", "2"]
     assert lines["/foresight/rejected"][-1] == "1"
     assert "scene.toml" in out and f"rejected:  {KEYS.plan}: 1" in out and "mode=lockstep" in out
     assert main(["info", str(run_log), "--json"]) == 0

@@ -1,20 +1,40 @@
-"""The Foxglove conversion: the project's messages as scene entities for Foxglove's 3D panel.
+"""The 3D scene of a run: the project's messages as Foxglove's well-known messages, built with ``foxglove-sdk``.
 
-:class:`SceneBuilder` turns messages into ``foxglove.SceneUpdate`` / ``foxglove.FrameTransforms``
-objects (JSON-ready dicts; their schemas are in :mod:`shared.recording.schemas`): the table and cups
-(static), the robot's collision spheres, occupied voxels as cubes coloured by probability, the K
-candidate end-effector paths (the chosen one thick and green) and the human's body as line segments.
-The robot and human models are optional (``None`` skips what needs them); what the builder needs of
-them is written down as :class:`ArmModel`, :class:`BodyModel` and :class:`PlaceInScene`.
+:class:`SceneBuilder` turns messages into ``foxglove.messages`` objects (``SceneUpdate``,
+``FrameTransforms``, ``PointCloud``), which the SDK encodes as protobuf with the schemas it carries: the
+table and cups (static), the robot's collision spheres, the predicted occupancy as a point cloud of voxel
+centres with their probability and colour, the K candidate end-effector paths (the chosen one thick and
+green) and the human's body as line segments. The robot and human models are optional (``None`` skips
+what needs them); what the builder needs of them is written down as :class:`ArmModel`, :class:`BodyModel`
+and :class:`PlaceInScene`.
 """
 
 from __future__ import annotations
 
 import logging
 import math
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
+from foxglove.messages import (
+    Color,
+    CubePrimitive,
+    CylinderPrimitive,
+    FrameTransform,
+    FrameTransforms,
+    LinePrimitive,
+    PackedElementField,
+    PackedElementFieldNumericType,
+    Point3,
+    PointCloud,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneUpdate,
+    SpherePrimitive,
+    Timestamp,
+    Vector3,
+)
 
 from shared.protocol import HumanPose, OccupancyGrid, Plan, RobotState
 from shared.scene import Scene
@@ -22,20 +42,20 @@ from shared.scene import Scene
 if TYPE_CHECKING:
     import torch
 
-__all__ = [
-    "WORLD_FRAME",
-    "ArmModel",
-    "BodyModel",
-    "PlaceInScene",
-    "SceneBuilder",
-    "time_of",
-    "probability_color",
-    "goal_rgb",
-]
+__all__ = ["WORLD_FRAME", "ArmModel", "BodyModel", "PlaceInScene", "SceneBuilder", "timestamp", "probability_color",
+           "goal_rgb", "CLOUD_FIELDS", "CHOSEN_RGBA", "default_builder"]
 
 log = logging.getLogger(__name__)
 
 WORLD_FRAME = "world"
+
+_F32, _U8 = PackedElementFieldNumericType.Float32, PackedElementFieldNumericType.Uint8
+CLOUD_FIELDS: tuple[tuple[str, int, PackedElementFieldNumericType], ...] = (
+    ("x", 0, _F32), ("y", 4, _F32), ("z", 8, _F32), ("probability", 12, _F32),
+    ("red", 16, _U8), ("green", 17, _U8), ("blue", 18, _U8), ("alpha", 19, _U8))
+"""The occupancy cloud's point layout ``(name, byte offset, type)``: the voxel centre (m, world frame), its
+probability p(x|xi) in [0, 1], and its colour (:func:`probability_color`, Foxglove's ``rgba-fields`` mode)."""
+_CLOUD_DTYPE = np.dtype([("xyz", "<f4", (3,)), ("p", "<f4"), ("rgba", "u1", (4,))])
 
 
 class ArmModel(Protocol):
@@ -78,35 +98,36 @@ class PlaceInScene(Protocol):
 # primitives
 
 
-def time_of(seconds: float) -> dict[str, int]:
-    """``{"sec", "nsec"}`` of a non-negative time in seconds."""
+def timestamp(seconds: float) -> Timestamp:
+    """The ``Timestamp`` of a non-negative time in seconds (rounded to the nanosecond)."""
     ns = max(0, int(round(seconds * 1e9)))
-    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+    return Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
 
 
-def _v(p: np.ndarray | list[float]) -> dict[str, float]:
-    return {"x": float(p[0]), "y": float(p[1]), "z": float(p[2])}
+def _v(p: np.ndarray | list[float]) -> Vector3:
+    return Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
 
 
-def _c(rgba: tuple[float, float, float, float]) -> dict[str, float]:
-    return {"r": float(rgba[0]), "g": float(rgba[1]), "b": float(rgba[2]), "a": float(rgba[3])}
+def _p(p: np.ndarray | list[float]) -> Point3:
+    return Point3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
 
 
-_IDENTITY_Q = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+def _c(rgba: tuple[float, float, float, float] | np.ndarray) -> Color:
+    return Color(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]), a=float(rgba[3]))
 
 
-def _pose_at(p: np.ndarray | list[float], q: dict[str, float] | None = None) -> dict[str, Any]:
-    return {"position": _v(p), "orientation": dict(q or _IDENTITY_Q)}
+def _pose_at(p: np.ndarray | list[float], q: Quaternion | None = None) -> Pose:
+    return Pose(position=_v(p), orientation=q or Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
 
 
-def _quat_from_matrix(r: np.ndarray) -> dict[str, float]:
+def _quat_from_matrix(r: np.ndarray) -> Quaternion:
     """Unit quaternion of a ``(3, 3)`` rotation matrix."""
     w = math.sqrt(max(0.0, 1.0 + r[0, 0] + r[1, 1] + r[2, 2])) / 2
     x = math.copysign(math.sqrt(max(0.0, 1.0 + r[0, 0] - r[1, 1] - r[2, 2])) / 2, r[2, 1] - r[1, 2])
     y = math.copysign(math.sqrt(max(0.0, 1.0 - r[0, 0] + r[1, 1] - r[2, 2])) / 2, r[0, 2] - r[2, 0])
     z = math.copysign(math.sqrt(max(0.0, 1.0 - r[0, 0] - r[1, 1] + r[2, 2])) / 2, r[1, 0] - r[0, 1])
     n = math.sqrt(w * w + x * x + y * y + z * z) or 1.0
-    return {"x": x / n, "y": y / n, "z": z / n, "w": w / n}
+    return Quaternion(x=x / n, y=y / n, z=z / n, w=w / n)
 
 
 def probability_color(p: np.ndarray) -> np.ndarray:
@@ -115,22 +136,13 @@ def probability_color(p: np.ndarray) -> np.ndarray:
     return np.stack([np.ones_like(p), 0.9 * (1.0 - p), np.zeros_like(p), 0.15 + 0.6 * p], axis=-1)
 
 
-def _entity(entity_id: str, stamp: float, **primitives: list[dict[str, Any]]) -> dict[str, Any]:
-    ent: dict[str, Any] = {"timestamp": time_of(stamp), "frame_id": WORLD_FRAME, "id": entity_id,
-                           "lifetime": {"sec": 0, "nsec": 0}, "frame_locked": False, "metadata": []}
-    for kind in ("arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts", "models"):
-        ent[kind] = primitives.get(kind, [])
-    return ent
+def _entity(entity_id: str, stamp: float, **primitives: list) -> SceneEntity:
+    return SceneEntity(timestamp=timestamp(stamp), frame_id=WORLD_FRAME, id=entity_id, **primitives)
 
 
-def _update(*entities: dict[str, Any]) -> dict[str, Any]:
-    return {"deletions": [], "entities": list(entities)}
-
-
-def _line(points: np.ndarray, rgba: tuple[float, float, float, float], thickness: float,
-          kind: int = 0) -> dict[str, Any]:
-    return {"type": kind, "pose": _pose_at([0, 0, 0]), "thickness": float(thickness), "scale_invariant": False,
-            "points": [_v(p) for p in points], "color": _c(rgba), "colors": [], "indices": []}
+def _line(points: np.ndarray, rgba: tuple[float, float, float, float], thickness: float) -> LinePrimitive:
+    return LinePrimitive(pose=_pose_at([0, 0, 0]), thickness=float(thickness), scale_invariant=False,
+                         points=[_p(p) for p in points], color=_c(rgba))
 
 
 # goal colours: a goal named after a colour is drawn in it
@@ -149,7 +161,7 @@ def goal_rgb(name: str, k: int) -> tuple[float, float, float]:
 
 
 class SceneBuilder:
-    """Builds Foxglove scene updates from the project's messages.
+    """Builds Foxglove scene messages from the project's messages.
 
     Args:
         scene: The scene (table, cups, robot base, human placement).
@@ -173,33 +185,31 @@ class SceneBuilder:
 
     # -- static scene ----------------------------------------------------------------------------
 
-    def static_scene(self, stamp: float) -> dict[str, Any]:
+    def static_scene(self, stamp: float) -> SceneUpdate:
         """Table boxes and cups."""
-        cubes = [{"pose": _pose_at(b.center), "size": _v(b.size), "color": _c((0.55, 0.4, 0.25, 0.9))}
+        cubes = [CubePrimitive(pose=_pose_at(b.center), size=_v(b.size), color=_c((0.55, 0.4, 0.25, 0.9)))
                  for b in self.scene.boxes]
         ents = [_entity("obstacles", stamp, cubes=cubes)]
         for k, cup in enumerate(self.scene.cups):
-            rgb = goal_rgb(cup.name, k)
-            cyl = {"pose": _pose_at(cup.center), "size": _v([2 * cup.radius, 2 * cup.radius, cup.height]),
-                   "bottom_scale": 1.0, "top_scale": 1.0, "color": _c((*rgb, 1.0))}
+            cyl = CylinderPrimitive(pose=_pose_at(cup.center), size=_v([2 * cup.radius, 2 * cup.radius, cup.height]),
+                                    bottom_scale=1.0, top_scale=1.0, color=_c((*goal_rgb(cup.name, k), 1.0)))
             ents.append(_entity(f"cup/{cup.name}", stamp, cylinders=[cyl]))
-        return _update(*ents)
+        return SceneUpdate(entities=ents)
 
-    def base_transform(self, stamp: float) -> dict[str, Any]:
-        """FrameTransforms world -> robot_base (from the scene)."""
-        t = self.scene.robot.base_transform()
-        return {"transforms": [self._tf(stamp, WORLD_FRAME, "robot_base", t)]}
+    def base_transform(self, stamp: float) -> FrameTransforms:
+        """The transform world -> robot_base (from the scene)."""
+        return FrameTransforms(transforms=[self._tf(stamp, "robot_base", self.scene.robot.base_transform())])
 
     @staticmethod
-    def _tf(stamp: float, parent: str, child: str, t: np.ndarray) -> dict[str, Any]:
-        return {"timestamp": time_of(stamp), "parent_frame_id": parent, "child_frame_id": child,
-                "translation": _v(t[:3, 3]), "rotation": _quat_from_matrix(t[:3, :3])}
+    def _tf(stamp: float, child: str, t: np.ndarray) -> FrameTransform:
+        return FrameTransform(timestamp=timestamp(stamp), parent_frame_id=WORLD_FRAME, child_frame_id=child,
+                              translation=_v(t[:3, 3]), rotation=_quat_from_matrix(t[:3, :3]))
 
     # -- robot -----------------------------------------------------------------------------------
 
     def _to_robot_order(self, q: np.ndarray, names: list[str]) -> np.ndarray | None:
         """``(..., D)`` in the message's joint order -> the robot model's order (None if they differ)."""
-        model = list(self.robot.joint_names)
+        model = list(self.robot.joint_names)  # type: ignore[union-attr] - called only with a robot
         if list(names) == model:
             return q
         if sorted(names) != sorted(model):
@@ -214,7 +224,7 @@ class SceneBuilder:
         lower = self.robot.lower  # type: ignore[union-attr] - called only with a robot
         return torch.as_tensor(q, dtype=lower.dtype, device=lower.device)
 
-    def robot_spheres(self, state: RobotState, stamp: float | None = None) -> dict[str, Any] | None:
+    def robot_spheres(self, state: RobotState, stamp: float | None = None) -> SceneUpdate | None:
         """The robot's collision spheres at ``state.q`` (grey; orange while holding).
 
         Stamped ``stamp`` (default: ``state.stamp``).
@@ -226,22 +236,23 @@ class SceneBuilder:
             return None
         centers = self.robot.sphere_centers(self._torch(q)).detach().cpu().numpy().reshape(-1, 3)
         radii = np.asarray(self.robot.sphere_radii.detach().cpu().numpy()).reshape(-1)
-        rgba = (1.0, 0.6, 0.1, 0.8) if state.holding else (0.75, 0.75, 0.8, 0.8)
-        spheres = [{"pose": _pose_at(c), "size": _v([2 * r] * 3), "color": _c(rgba)} for c, r in zip(centers, radii,
-                                                                                                         strict=True)]
-        return _update(_entity("robot/spheres", state.stamp if stamp is None else stamp, spheres=spheres))
+        color = _c((1.0, 0.6, 0.1, 0.8) if state.holding else (0.75, 0.75, 0.8, 0.8))
+        spheres = [SpherePrimitive(pose=_pose_at(c), size=_v([2 * r] * 3), color=color)
+                   for c, r in zip(centers, radii, strict=True)]
+        return SceneUpdate(entities=[_entity("robot/spheres", state.stamp if stamp is None else stamp,
+                                             spheres=spheres)])
 
-    def end_effector_transform(self, state: RobotState, stamp: float | None = None) -> dict[str, Any] | None:
-        """FrameTransforms world -> end_effector at ``state.q``, stamped ``stamp`` (default: ``state.stamp``)."""
+    def end_effector_transform(self, state: RobotState, stamp: float | None = None) -> FrameTransforms | None:
+        """The transform world -> end_effector at ``state.q``, stamped ``stamp`` (default: ``state.stamp``)."""
         if self.robot is None:
             return None
         q = self._to_robot_order(state.q, state.joint_names)
         if q is None:
             return None
         t = self.robot.end_effector(self._torch(q)).detach().cpu().numpy().astype(np.float64)
-        return {"transforms": [self._tf(state.stamp if stamp is None else stamp, WORLD_FRAME, "end_effector", t)]}
+        return FrameTransforms(transforms=[self._tf(state.stamp if stamp is None else stamp, "end_effector", t)])
 
-    def plan_paths(self, plan: Plan, stamp: float | None = None) -> dict[str, Any] | None:
+    def plan_paths(self, plan: Plan, stamp: float | None = None) -> SceneUpdate | None:
         """The K candidate end-effector paths; the chosen one thick and green, invalid ones grey.
 
         Stamped ``stamp`` (default: ``plan.stamp``).
@@ -261,32 +272,39 @@ class SceneBuilder:
             else:
                 rgba, width = (*goal_rgb(plan.goal_names[k], k), 0.8), 0.006
             lines.append(_line(ee[k], rgba, width))
-        return _update(_entity("plan/paths", plan.stamp if stamp is None else stamp, lines=lines))
+        return SceneUpdate(entities=[_entity("plan/paths", plan.stamp if stamp is None else stamp, lines=lines)])
 
     # -- occupancy -------------------------------------------------------------------------------
 
-    def occupancy_cubes(self, occ: OccupancyGrid, stamp: float | None = None) -> dict[str, Any]:
-        """Occupied voxels (p >= min_probability, at most max_voxels) as cubes coloured by probability.
-
-        Stamped ``stamp`` (default: ``occ.stamp``).
-        """
+    def occupancy_voxels(self, occ: OccupancyGrid) -> tuple[np.ndarray, np.ndarray]:
+        """``(centres (N, 3), probabilities (N,))`` of the voxels drawn: p >= min_probability, at most max_voxels."""
         p = occ.values.astype(np.float64) / 255.0
         keep = np.flatnonzero(p >= self.min_probability)
         if keep.size > self.max_voxels:
             keep = keep[np.argsort(-p[keep], kind="stable")[: self.max_voxels]]
-        dims = tuple(int(d) for d in occ.dims)
-        ijk = np.stack(np.unravel_index(occ.indices[keep].astype(np.int64), dims), axis=-1)
-        centers = occ.origin + occ.resolution * (ijk + 0.5)
-        colors = probability_color(p[keep])
-        size = _v([occ.resolution] * 3)
-        cubes = [{"pose": _pose_at(c), "size": size, "color": _c(tuple(col))} for c, col in zip(centers, colors,
-                                                                                                 strict=True)]
-        return _update(_entity("occupancy", occ.stamp if stamp is None else stamp, cubes=cubes))
+        ijk = np.stack(np.unravel_index(occ.indices[keep].astype(np.int64), tuple(int(d) for d in occ.dims)), axis=-1)
+        return occ.origin + occ.resolution * (ijk + 0.5), p[keep]
+
+    def occupancy_cloud(self, occ: OccupancyGrid, stamp: float | None = None) -> PointCloud:
+        """The drawn voxels (:meth:`occupancy_voxels`) as a point cloud, points laid out as :data:`CLOUD_FIELDS`.
+
+        Stamped ``stamp`` (default: ``occ.stamp``); Foxglove draws each point as a cube of the voxel's size when
+        the layout says so (docs/foresight.foxglove.json).
+        """
+        centers, p = self.occupancy_voxels(occ)
+        points = np.empty(len(p), dtype=_CLOUD_DTYPE)
+        points["xyz"] = centers
+        points["p"] = p
+        points["rgba"] = np.round(probability_color(p) * 255.0)
+        fields = [PackedElementField(name=name, offset=offset, type=kind) for name, offset, kind in CLOUD_FIELDS]
+        return PointCloud(timestamp=timestamp(occ.stamp if stamp is None else stamp), frame_id=WORLD_FRAME,
+                          pose=_pose_at([0, 0, 0]), point_stride=_CLOUD_DTYPE.itemsize, fields=fields,
+                          data=points.tobytes())
 
     # -- human -----------------------------------------------------------------------------------
 
-    def human_body(self, pose: HumanPose, stamp: float | None = None) -> dict[str, Any] | None:
-        """The human's body capsules' axes as line segments, in the scene frame.
+    def human_body(self, pose: HumanPose, stamp: float | None = None) -> SceneUpdate | None:
+        """The human's body capsules' axes as line segments as thick as the limbs, in the scene frame.
 
         Stamped ``stamp`` (default: ``pose.stamp``).
         """
@@ -299,6 +317,16 @@ class SceneBuilder:
         ends, radii = self.human.capsules(feats)  # (S, 2, 3), (S,)
         ends = np.asarray(ends, dtype=np.float64).reshape(-1, 2, 3)
         radii = np.asarray(radii, dtype=np.float64).reshape(-1)
-        # one line per capsule, as thick as the limb (metres, not pixels)
         lines = [_line(seg, (0.25, 0.5, 0.95, 0.6), 2.0 * r) for seg, r in zip(ends, radii, strict=True)]
-        return _update(_entity("human/body", pose.stamp if stamp is None else stamp, lines=lines))
+        return SceneUpdate(entities=[_entity("human/body", pose.stamp if stamp is None else stamp, lines=lines)])
+
+
+def default_builder(scene: Scene, device: str = "cpu") -> SceneBuilder:
+    """The builder of a run's scene: the PR2 placed in ``scene`` and the human model (``shared.human``)."""
+    import torch
+
+    from shared.human import HumanModel, place_in_scene
+    from shared.robot import PR2
+
+    return SceneBuilder(scene, PR2.from_scene(scene, device=device, dtype=torch.float32), HumanModel(),
+                        place_in_scene)

@@ -1,0 +1,1 @@
+"""``foresight view``: a running system served live to the Foxglove app (core: :mod:`.core`, loop: :mod:`.service`)."""

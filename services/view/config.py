@@ -1,0 +1,41 @@
+"""``foresight view``'s options (a module of its own: the config checks import it without the SDK or torch)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from shared.config import ConfigError, opt
+from shared.scene import SCENE_HELP
+
+__all__ = ["ViewConfig", "DEFAULT_PORT"]
+
+DEFAULT_PORT = 8765
+"""The Foxglove app's default WebSocket port (its "Open connection" dialog proposes ws://localhost:8765)."""
+
+
+@dataclass
+class ViewConfig:
+    """Options of ``foresight view``."""
+
+    port: int = opt(DEFAULT_PORT, help="WebSocket port the Foxglove app connects to (0: any free one)")
+    host: str = opt("127.0.0.1", help="address to serve on (loopback: only this machine can watch; the server "
+                    "has no access control of its own)")
+    scene: str = opt("", help=SCENE_HELP + " (the static scene and the human's placement; empty: pr2_two_cups)")
+    viz_rate_hz: float = opt(10.0, help="highest rate of the robot, human and occupancy updates per topic")
+    static_period_s: float = opt(1.0, help="the table and cups are sent again this often, for clients that join")
+    device: str = opt("cpu", help="torch device of the robot model (cpu or cuda)")
+    nice: int = opt(10, help="`foresight view` lowers its CPU priority by this much (0-19): drawing must not "
+                    "take CPU from the planning loop on a shared machine")
+    write_layout: str = opt("", help="write the Foxglove layout for this scene (3D panel, posterior and cost plots) "
+                            "to this file and exit")
+    log_level: str = opt("INFO", help="log level (DEBUG, INFO, WARNING, ERROR)")
+
+    def validate(self) -> None:
+        """Check ranges; raises ConfigError naming the option."""
+        if not 0 <= self.port <= 65535:
+            raise ConfigError(f"view.port: must be 0..65535, got {self.port}")
+        for name in ("viz_rate_hz", "static_period_s"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"view.{name}: must be > 0, got {getattr(self, name)}")
+        if not 0 <= self.nice <= 19:
+            raise ConfigError(f"view.nice: must be 0..19, got {self.nice}")

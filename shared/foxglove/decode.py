@@ -1,0 +1,141 @@
+"""The scene channels of a recording, read back with ``protobuf`` and the schemas the file carries.
+
+Nothing here imports ``foxglove-sdk``: a scene message is decoded from the ``FileDescriptorSet`` its
+channel's schema holds (schema encoding ``protobuf``), or parsed as JSON (``jsonschema``), as any MCAP
+consumer would. The tests use it to check what the SDK wrote; ``foresight log snapshot`` draws from it.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+from google.protobuf.message import DecodeError, Message
+from mcap.exceptions import McapError
+from mcap.records import Channel, Schema
+from mcap.records import Message as McapMessage
+from mcap.stream_reader import StreamReader
+
+__all__ = ["SceneRecord", "SceneDecodeError", "SchemaDecoder", "read_scene", "scene_stamps"]
+
+
+class SceneDecodeError(ValueError):
+    """A scene message or its schema does not decode; the message names the channel."""
+
+
+@dataclass
+class SceneRecord:
+    """One decoded scene message: a protobuf message, or a dict for a JSON channel."""
+
+    topic: str
+    schema_name: str
+    log_time: int
+    publish_time: int
+    message: Message | dict[str, Any]
+
+
+class SchemaDecoder:
+    """Decodes messages of the schemas it is given, building each schema's message class once."""
+
+    def __init__(self) -> None:
+        self._classes: dict[tuple[str, bytes], type[Message]] = {}
+
+    def message_class(self, name: str, data: bytes) -> type[Message]:
+        """The protobuf class of message ``name`` in the serialised ``FileDescriptorSet`` ``data``."""
+        key = (name, bytes(data))
+        if key not in self._classes:
+            fds = descriptor_pb2.FileDescriptorSet.FromString(bytes(data))
+            pool = descriptor_pool.DescriptorPool()
+            pending = list(fds.file)
+            while pending:  # a file is added after the files it imports, whatever their order in the set
+                added = [f for f in pending if all(d in {g.name for g in fds.file if g not in pending}
+                                                   for d in f.dependency)]
+                if not added:
+                    raise SceneDecodeError(f"schema {name}: unresolved imports in {[f.name for f in pending]}")
+                for f in added:
+                    pool.Add(f)
+                    pending.remove(f)
+            self._classes[key] = message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
+        return self._classes[key]
+
+    def decode(self, topic: str, schema_name: str, schema_encoding: str, schema_data: bytes,
+               data: bytes) -> Message | dict[str, Any]:
+        """One message of ``topic`` under its channel's schema."""
+        try:
+            if schema_encoding == "protobuf":
+                return self.message_class(schema_name, schema_data).FromString(bytes(data))
+            if schema_encoding == "jsonschema":
+                return json.loads(data)
+        except (DecodeError, KeyError, TypeError, ValueError) as exc:
+            raise SceneDecodeError(f"{topic} ({schema_name}): {exc}") from exc
+        raise SceneDecodeError(f"{topic}: schema encoding {schema_encoding!r} is not protobuf or jsonschema")
+
+
+def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[SceneRecord]:
+    """The scene messages of a log (channels ``/viz/...`` and ``/tf``, or ``topics``) in log-time order.
+
+    The file is read record by record, as :func:`shared.recording.reader.read_log` does: a log whose writer
+    was killed yields what its complete chunks hold.
+
+    Raises:
+        SceneDecodeError: A message does not decode under its channel's schema.
+        OSError: The file cannot be read.
+        mcap.exceptions.McapError: The file is not an MCAP file.
+    """
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, tuple[Channel, Schema]] = {}
+    raw: list[tuple[int, int, int, bytes]] = []  # (log_time, publish_time, channel id, data)
+    with open(path, "rb") as f:
+        try:
+            for rec in StreamReader(f, record_size_limit=1 << 31).records:
+                if isinstance(rec, Schema):
+                    schemas[rec.id] = rec
+                elif isinstance(rec, Channel) and rec.schema_id in schemas:
+                    wanted = rec.topic in topics if topics is not None else (
+                        rec.topic.startswith("/viz/") or rec.topic == "/tf")
+                    if wanted:
+                        channels[rec.id] = (rec, schemas[rec.schema_id])
+                elif isinstance(rec, McapMessage) and rec.channel_id in channels:
+                    raw.append((rec.log_time, rec.publish_time, rec.channel_id, bytes(rec.data)))
+        except (McapError, struct.error, ValueError, EOFError):
+            if not schemas:  # not an MCAP file at all
+                raise
+            # else a truncated end: what was read stands (foresight log info says whether a file is complete)
+    raw.sort(key=lambda r: r[0])  # the scene is written off the receive path: in file order, not time order
+    decoder = SchemaDecoder()
+    for log_time, publish_time, cid, data in raw:
+        channel, schema = channels[cid]
+        yield SceneRecord(channel.topic, schema.name, log_time, publish_time,
+                          decoder.decode(channel.topic, schema.name, schema.encoding, schema.data, data))
+
+
+def _ns(t: Any) -> int:
+    if isinstance(t, dict):  # a JSON chart's {"sec", "nsec"}
+        return int(t["sec"]) * 1_000_000_000 + int(t["nsec"])
+    return int(t.seconds) * 1_000_000_000 + int(t.nanos)  # google.protobuf.Timestamp
+
+
+def scene_stamps(path: str | Path) -> list[tuple[str, str, int, int, int]]:
+    """Every stamped item of a log's scene channels as ``(topic, item, stamp ns, log_time, publish_time)``.
+
+    An item is a scene entity (its id), a transform (its child frame), a point cloud (``"points"``) or a
+    chart (``"chart"``).
+    """
+    out = []
+    for r in read_scene(path):
+        m = r.message
+        if isinstance(m, dict):
+            items = [("chart", m["timestamp"])]
+        elif r.schema_name == "foxglove.SceneUpdate":
+            items = [(e.id, e.timestamp) for e in m.entities]  # type: ignore[attr-defined]
+        elif r.schema_name == "foxglove.FrameTransforms":
+            items = [(t.child_frame_id, t.timestamp) for t in m.transforms]  # type: ignore[attr-defined]
+        else:
+            items = [("points", m.timestamp)]  # type: ignore[attr-defined]
+        out += [(r.topic, ident, _ns(t), r.log_time, r.publish_time) for ident, t in items]
+    return out

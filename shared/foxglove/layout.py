@@ -1,0 +1,78 @@
+"""The Foxglove layout of a run: the 3D scene beside the class posterior and the costs, built with ``foxglove.layouts``.
+
+:func:`foresight_layout` places a 3D panel (every scene channel on, the occupancy drawn as cubes of the
+grid's voxel size coloured by their probability, the camera on the workspace) beside two plots: the class
+posterior p(c|xi) per class and the total cost per goal. A plot's series are message paths that name a
+class or a goal (``/viz/posterior.probability.red_cup``), so the layout is made for a scene's cups.
+docs/foresight.foxglove.json is the layout of the default scene (``foresight view --write-layout FILE``
+writes one for another scene).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import foxglove.layouts as fl
+import numpy as np
+
+from shared.scene import Scene
+
+from .scene import goal_rgb
+from .stream import SCHEMAS
+
+__all__ = ["foresight_layout", "layout_text"]
+
+
+def _hex(rgb: Sequence[float]) -> str:
+    return "#" + "".join(f"{round(255 * c):02x}" for c in rgb[:3])
+
+
+def _plot(title: str, paths: list[tuple[str, str, str]], y_label: str, y_max: float | None = None) -> fl.PlotPanel:
+    series = [fl.PlotSeries(value=value, label=label, color=color, enabled=True, timestamp_method="receiveTime")
+              for value, label, color in paths]
+    return fl.PlotPanel(title=title, config=fl.PlotConfig(paths=series, show_legend=True, legend_display="top",
+                                                          y_axis_label=y_label, min_y_value=0.0, max_y_value=y_max,
+                                                          x_axis_val="timestamp"))
+
+
+def foresight_layout(scene: Scene, class_names: Sequence[str] | None = None,
+                     goal_names: Sequence[str] | None = None) -> fl.Layout:
+    """The layout for a run in ``scene``.
+
+    Args:
+        scene: The scene (its cups are the goals; its grid's resolution is the voxels' size).
+        class_names: The motion classes of the posterior plot (default: the cups' names, as the libraries name them).
+        goal_names: The goals of the cost plot (default: the cups' names).
+
+    Returns:
+        The layout; ``layout.to_json()`` is the file the Foxglove app imports.
+    """
+    cups = [c.name for c in scene.cups]
+    classes = list(class_names) if class_names is not None else cups
+    goals = list(goal_names) if goal_names is not None else cups
+    topics: dict[str, fl.BaseRendererTopicSettings] = {
+        topic: fl.BaseRendererSceneUpdateTopicSettings(visible=True)  # type: ignore[dict-item]
+        for topic, s in SCHEMAS.items() if s.name == "foxglove.SceneUpdate"}
+    topics["/viz/occupancy"] = fl.BaseRendererPointCloudTopicSettings(
+        visible=True, point_shape="cube", cube_size=float(scene.grid.resolution), color_mode="rgba-fields")
+    centre = (np.asarray(scene.workspace.min, dtype=float) + np.asarray(scene.workspace.max, dtype=float)) / 2
+    three_d = fl.ThreeDeePanel(title="scene", config=fl.ThreeDeeConfig(
+        follow_tf="world", topics=topics,
+        camera_state=fl.ThreeDeeCameraState(distance=3.5, perspective=True, phi=55.0, theta_offset=45.0,
+                                            target=(float(centre[0]), float(centre[1]), float(centre[2])),
+                                            target_offset=(0.0, 0.0, 0.0))))
+    posterior = _plot("class posterior p(c|xi)", [
+        (f"/viz/posterior.probability.{name}", name, _hex(goal_rgb(name, k))) for k, name in enumerate(classes)],
+        "probability", 1.0)
+    costs = _plot("total cost per goal (the least is chosen)", [
+        (f"/viz/costs.total.{name}", name, _hex(goal_rgb(name, k))) for k, name in enumerate(goals)], "cost")
+    plots = fl.SplitContainer(direction="column", items=[fl.SplitItem(content=posterior), fl.SplitItem(content=costs)])
+    return fl.Layout(content=fl.SplitContainer(direction="row", items=[
+        fl.SplitItem(proportion=2, content=three_d), fl.SplitItem(proportion=1, content=plots)]))
+
+
+def layout_text(layout: fl.Layout) -> str:
+    """The layout as the file the Foxglove app imports (indented JSON, one trailing newline)."""
+    import json
+
+    return json.dumps(json.loads(layout.to_json()), indent=2) + "\n"

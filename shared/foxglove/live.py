@@ -1,0 +1,108 @@
+"""Foxglove's live WebSocket server (``foxglove-sdk``), one channel per scene topic.
+
+Every channel of :data:`shared.foxglove.stream.SCHEMAS` is advertised from the start, so a client (the
+Foxglove app, or any client of Foxglove's WebSocket protocol) can subscribe before the first message; a
+message on a channel no client subscribes to costs nothing but the call. The static scene (table, cups,
+robot base) is sent again every ``static_period_s`` for apps that connect later (Foxglove keeps a scene
+entity until it is replaced). The server has its own ``foxglove.Context``: nothing else logged through the
+SDK in this process reaches it.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+import foxglove
+
+from shared.runtime import UserError
+
+from .stream import SCHEMAS, VizMessage
+
+__all__ = ["LiveServer", "LiveServerError"]
+
+log = logging.getLogger(__name__)
+
+class LiveServerError(UserError):
+    """The server could not start (e.g. the port is taken); the message names the address."""
+
+
+class LiveServer:
+    """Serves the scene channels on ``ws://HOST:PORT`` to the Foxglove app; a context manager.
+
+    Args:
+        port: TCP port (0: any free one; :attr:`port` says which).
+        host: Address to bind (loopback by default: anyone who can connect sees the run).
+        name: The server's name, shown by the app.
+        static: Builds the static scene stamped at a time (ns), e.g. ``SceneStream.static``; sent at start and
+            every ``static_period_s`` (None: nothing is re-sent).
+        static_period_s: The static scene's period.
+
+    Attributes:
+        sent: Messages logged per topic (whether a client was subscribed or not).
+    """
+
+    def __init__(self, port: int = 8765, host: str = "127.0.0.1", name: str = "foresight",
+                 static: Callable[[int], list[VizMessage]] | None = None, static_period_s: float = 1.0) -> None:
+        self._context = foxglove.Context()
+        self._channels = {
+            topic: foxglove.Channel(topic, schema=foxglove.Schema(name=s.name, encoding=s.encoding, data=s.data),
+                                    message_encoding=s.message_encoding, context=self._context)
+            for topic, s in SCHEMAS.items()}
+        try:
+            self._server = foxglove.start_server(name=name, host=host, port=port, context=self._context)
+        except Exception as exc:  # the SDK raises its own error types (a taken port: an OSError-like message)
+            raise LiveServerError(f"live view: cannot serve on ws://{host}:{port}: {exc}") from exc
+        self.host = host
+        self.port: int = self._server.port
+        self.sent: dict[str, int] = dict.fromkeys(SCHEMAS, 0)
+        self._stopped = False
+        self._stop = threading.Event()
+        self._static = static
+        self._resender = None
+        if static is not None:
+            self._resender = threading.Thread(target=self._resend, args=(static_period_s,), name="live-static",
+                                              daemon=True)
+            self._resender.start()
+
+    def _resend(self, period_s: float) -> None:
+        assert self._static is not None
+        while True:
+            try:
+                for m in self._static(time.time_ns()):
+                    self.log(m)
+            except Exception:  # a drawing bug costs the static scene, never the server
+                log.exception("live view: the static scene failed")
+            if self._stop.wait(period_s):
+                return
+
+    @property
+    def url(self) -> str:
+        """The address to open in the Foxglove app."""
+        return f"ws://{self.host}:{self.port}"
+
+    def log(self, message: VizMessage) -> None:
+        """Send one encoded scene message to every client subscribed to its topic."""
+        if self._stopped:
+            return
+        self._channels[message.topic].log(message.data, log_time=message.log_time)
+        self.sent[message.topic] += 1
+
+    def close(self) -> None:
+        """Stop serving (clients are disconnected); idempotent."""
+        if not self._stopped:
+            self._stopped = True
+            self._stop.set()
+            if self._resender is not None:
+                self._resender.join(5.0)
+            self._server.stop()
+            for ch in self._channels.values():
+                ch.close()
+
+    def __enter__(self) -> LiveServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

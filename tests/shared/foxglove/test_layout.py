@@ -1,0 +1,47 @@
+"""The Foxglove layout: docs/foresight.foxglove.json is the default scene's, and every plotted path exists."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from shared.foxglove.layout import foresight_layout, layout_text
+from shared.foxglove.stream import SCHEMAS, SceneStream
+
+from .conftest import SCENE, plan, posterior
+
+DOC = Path(__file__).resolve().parents[3] / "docs" / "foresight.foxglove.json"
+
+
+def panels(node: dict) -> list[dict]:
+    if node.get("type") == "panel":
+        return [node]
+    return [p for item in node.get("items", []) for p in panels(item["content"])]
+
+
+def test_the_documented_layout_is_the_default_scenes() -> None:
+    assert DOC.read_text() == layout_text(foresight_layout(SCENE)), "regenerate: foresight view --write-layout " \
+                                                                     "docs/foresight.foxglove.json"
+
+
+def test_the_layout_shows_every_scene_topic_and_plots_paths_that_resolve(builder) -> None:
+    layout = json.loads(foresight_layout(SCENE).to_json())
+    by_type = {p["panelType"]: p for p in panels(layout["content"])}
+    three_d = by_type["ThreeDee"]["config"]
+    drawn = {t for t, s in SCHEMAS.items() if s.name in ("foxglove.SceneUpdate", "foxglove.PointCloud")}
+    assert set(three_d["topics"]) == drawn and all(v["visible"] for v in three_d["topics"].values())
+    cloud = three_d["topics"]["/viz/occupancy"]
+    assert (cloud["pointShape"], cloud["cubeSize"], cloud["colorMode"]) == ("cube", SCENE.grid.resolution,
+                                                                            "rgba-fields")
+    stream = SceneStream(builder)
+    charts = {m.topic: json.loads(m.data) for m in stream.draw(plan(builder.robot), 0) + stream.draw(posterior(), 0)
+              if m.schema.message_encoding == "json"}
+    plots = [p for p in panels(layout["content"]) if p["panelType"] == "Plot"]
+    assert len(plots) == 2
+    for p in plots:
+        for series in p["config"]["paths"]:
+            topic, _, path = series["value"].partition(".")
+            value = charts[topic]
+            for part in path.split("."):
+                value = value[part]
+            assert value is None or isinstance(value, float), series["value"]

@@ -1,0 +1,66 @@
+"""LiveServer: a client of Foxglove's WebSocket protocol sees every scene channel advertised, gets what it
+subscribed to byte for byte, and is disconnected when the server stops; a taken port is named."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from shared.foxglove.client import FoxgloveClient
+from shared.foxglove.live import LiveServer, LiveServerError
+from shared.foxglove.stream import SCHEMAS, SceneStream
+
+from .conftest import occupancy, posterior
+
+T = 1_700_000_000_000_000_000
+
+
+def test_a_client_gets_every_channel_and_the_messages_it_subscribed_to(builder) -> None:
+    stream = SceneStream(builder)
+    with LiveServer(port=0) as server:
+        assert server.url == f"ws://127.0.0.1:{server.port}" and server.port > 0
+        with FoxgloveClient(server.url) as client:
+            assert client.server_info["name"] == "foresight"
+            advertised = {ch["topic"]: ch for ch in client.channels.values()}
+            assert set(advertised) == set(SCHEMAS)
+            for topic, ch in advertised.items():  # what the app needs to decode: the schema the SDK carries
+                s = SCHEMAS[topic]
+                assert (ch["schemaName"], ch["encoding"], ch["schemaEncoding"]) == (s.name, s.message_encoding,
+                                                                                     s.encoding)
+            assert set(client.subscribe(["/viz/occupancy", "/viz/posterior"])) == {"/viz/occupancy", "/viz/posterior"}
+            time.sleep(0.3)  # the subscription reaches the server
+            sent = stream.draw(occupancy(), T) + stream.draw(posterior(), T + 1) + stream.static(T + 2)
+            for m in sent:
+                server.log(m)
+            got = []
+            deadline = time.monotonic() + 5
+            while len(got) < 2 and time.monotonic() < deadline:
+                got += client.receive(0.2)
+            assert [(r.topic, r.log_time, r.data) for r in got] == [
+                (m.topic, m.log_time, m.data) for m in sent if m.topic in ("/viz/occupancy", "/viz/posterior")]
+            assert server.sent["/viz/scene"] == 1  # sent, though nobody subscribed
+        server.close()
+        server.close()  # idempotent
+
+
+def test_the_server_stops_with_its_owner_and_its_clients_are_disconnected(builder) -> None:
+    server = LiveServer(port=0)
+    client = FoxgloveClient(server.url).connect()
+    client.subscribe()
+    server.close()
+    client.receive(1.0)
+    assert client.closed
+    with socket.socket() as s:  # the port is free again
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s.bind(("127.0.0.1", server.port))
+
+
+def test_a_taken_port_is_named() -> None:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        with pytest.raises(LiveServerError, match=f"ws://127.0.0.1:{port}"):
+            LiveServer(port=port)

@@ -1,0 +1,124 @@
+"""SceneBuilder and SceneStream: the scene of a known state has the expected entities and poses, decoded back
+with protobuf and the schema the SDK declares (not with the SDK)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from shared.foxglove.decode import SceneDecodeError, SchemaDecoder
+from shared.foxglove.stream import SCHEMAS, SceneStream
+
+from .conftest import SCENE, occupancy, plan, pose, posterior, state
+
+T = 1_700_000_000_123_456_789  # a receive time (ns)
+
+
+def decoded(messages):
+    """``{topic: decoded message}`` of a list of VizMessage."""
+    dec = SchemaDecoder()
+    out = {}
+    for m in messages:
+        s = m.schema
+        out[m.topic] = dec.decode(m.topic, s.name, s.encoding, s.data, m.data)
+    return out
+
+
+def xyz(p) -> list[float]:
+    return [p.x, p.y, p.z]
+
+
+def test_static_scene_has_the_table_and_each_cup_where_the_scene_puts_them(builder) -> None:
+    got = decoded(SceneStream(builder).static(T))
+    ents = {e.id: e for e in got["/viz/scene"].entities}
+    assert set(ents) == {"obstacles", *(f"cup/{c.name}" for c in SCENE.cups)}
+    assert np.allclose([xyz(c.pose.position) for c in ents["obstacles"].cubes], [b.center for b in SCENE.boxes])
+    for cup in SCENE.cups:
+        cyl = ents[f"cup/{cup.name}"].cylinders[0]
+        assert xyz(cyl.pose.position) == pytest.approx(list(cup.center))
+        assert cyl.size.z == pytest.approx(cup.height)
+    (tf,) = got["/tf"].transforms
+    assert (tf.parent_frame_id, tf.child_frame_id) == ("world", "robot_base")
+    assert xyz(tf.translation) == pytest.approx(list(SCENE.robot.base_transform()[:3, 3]))
+    assert abs(ents["obstacles"].timestamp.seconds * 10**9 + ents["obstacles"].timestamp.nanos - T) < 1000  # float s
+
+
+def test_robot_spheres_are_at_the_forward_kinematics_and_orange_while_holding(builder) -> None:
+    pr2 = builder.robot
+    for holding, red in ((False, 0.75), (True, 1.0)):
+        got = decoded(SceneStream(builder).draw(state(pr2, holding), T))
+        spheres = got["/viz/robot"].entities[0].spheres
+        centers = pr2.sphere_centers(pr2.q_start).numpy().reshape(-1, 3)
+        assert np.allclose([xyz(s.pose.position) for s in spheres], centers, atol=1e-6)
+        assert np.allclose([s.size.x for s in spheres], 2 * pr2.sphere_radii.numpy(), atol=1e-6)
+        assert spheres[0].color.r == pytest.approx(red)
+        ee = pr2.end_effector(pr2.q_start).numpy()
+        (tf,) = got["/tf"].transforms
+        assert tf.child_frame_id == "end_effector" and xyz(tf.translation) == pytest.approx(list(ee[:3, 3]), abs=1e-6)
+
+
+def test_plan_paths_follow_the_end_effector_the_chosen_one_thick_and_green(builder) -> None:
+    pr2 = builder.robot
+    p = plan(pr2, chosen=1)
+    got = decoded(SceneStream(builder).draw(p, T))
+    lines = got["/viz/plan"].entities[0].lines
+    assert len(lines) == 2
+    assert lines[1].thickness > lines[0].thickness and lines[1].color.g > 0.8  # chosen
+    assert lines[0].color.r == lines[0].color.g == 0.5  # invalid: grey
+    import torch
+
+    ee = pr2.end_effector(torch.as_tensor(p.trajectories[1])).numpy()[:, :3, 3]
+    assert np.allclose([xyz(q) for q in lines[1].points], ee, atol=1e-5)
+    costs = got["/viz/costs"]
+    assert costs["chosen"] == "red_cup" and costs["step"] == 3
+    assert costs["total"] == {"blue_cup": None, "red_cup": 4.0}  # infinite: null (JSON has no infinity)
+
+
+def test_occupancy_cloud_has_every_voxel_above_the_threshold_at_its_centre(builder) -> None:
+    occ = occupancy()
+    cloud = decoded(SceneStream(builder).draw(occ, T))["/viz/occupancy"]
+    pts = np.frombuffer(cloud.data, dtype=[("xyz", "<f4", (3,)), ("p", "<f4"), ("rgba", "u1", (4,))])
+    values = occ.values.astype(np.float64) / 255
+    kept = values >= 0.05
+    assert len(pts) == kept.sum() == 6 * 8 * 7 and cloud.point_stride == 20 and cloud.frame_id == "world"
+    ijk = np.stack(np.unravel_index(occ.indices[kept].astype(np.int64), tuple(occ.dims)), axis=-1)
+    assert np.allclose(pts["xyz"], occ.origin + occ.resolution * (ijk + 0.5), atol=1e-6)
+    assert np.allclose(pts["p"], values[kept], atol=1e-6)
+    assert (pts["rgba"][:, 0] == 255).all() and (pts["rgba"][:, 2] == 0).all()  # yellow to red
+
+
+def test_human_body_and_posterior(builder) -> None:
+    got = decoded(SceneStream(builder).draw(pose(), T) + SceneStream(builder).draw(posterior(), T))
+    lines = got["/viz/human"].entities[0].lines
+    assert len(lines) == len(builder.human.capsules(np.zeros(12))[1]) and all(len(ln.points) == 2 for ln in lines)
+    post = got["/viz/posterior"]
+    assert post["probability"] == {"blue_cup": 0.25, "red_cup": 0.75}
+    assert post["recognised"] == "red_cup" and post["index"] == 40
+
+
+def test_the_robot_human_and_occupancy_are_throttled_plans_and_posteriors_are_not(builder) -> None:
+    stream = SceneStream(builder, viz_period_s=0.5)
+    occ = occupancy()
+    assert stream.due(occ) == "/viz/occupancy"
+    stream.mark("/viz/occupancy", occ)
+    occ.stamp = 1.4
+    assert stream.due(occ) is None
+    occ.stamp = 1.5
+    assert stream.due(occ) == "/viz/occupancy"
+    occ.stamp = 0.2  # a new run's clock went back: drawn
+    assert stream.due(occ) == "/viz/occupancy"
+    p = plan(builder.robot)
+    stream.mark("/viz/plan", p)
+    assert stream.due(p) == "/viz/plan" and stream.due(posterior()) == "/viz/posterior"
+
+
+def test_every_topic_has_a_schema_and_a_bad_message_is_named() -> None:
+    assert {s.message_encoding for s in SCHEMAS.values()} == {"protobuf", "json"}
+    s = SCHEMAS["/viz/occupancy"]
+    with pytest.raises(SceneDecodeError, match="/viz/occupancy"):
+        SchemaDecoder().decode("/viz/occupancy", s.name, s.encoding, s.data, b"\xff\xff\xff")
+    with pytest.raises(SceneDecodeError, match="not protobuf or jsonschema"):
+        SchemaDecoder().decode("/x", "x", "flatbuffer", b"", b"")
+    json.loads(SCHEMAS["/viz/costs"].data)
