@@ -25,10 +25,11 @@ import math
 import threading
 import time
 from collections import OrderedDict
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -55,6 +56,9 @@ from shared.transport import Presence, RejectCounter, TypedPublisher, describe, 
 
 from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, reason_kind
 from .models import HumanBody, PlaceInScene, RobotModel, load_models, start_configuration
+
+if TYPE_CHECKING:
+    from shared.foxglove.live import LiveServer
 
 __all__ = ["ExecutorResult", "ExecutorService", "load_models", "start_configuration"]  # the last two: .models
 
@@ -140,7 +144,7 @@ class ExecutorService:
         self.inbox = PlanInbox()
         self._pose_arrival: OrderedDict[tuple[int, int], float] = OrderedDict()  # (demo_id, index) -> arrival
         self.mcap: McapLog | None = None
-        self.live: Any = None  # the live server (live_port), fed by the log
+        self.live: LiveServer | None = None  # the live server (live_port), fed by the log
         self._times: list[float] = []
         self._qs: list[np.ndarray] = []
 
@@ -196,7 +200,8 @@ class ExecutorService:
         cfg = self.config
         now = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
         path = cfg.mcap_path(now)
-        with open_session(self.zenoh, self.stop, "executor") as session:
+        # the log and the live server close on every way out, the log first (it drains into the server)
+        with open_session(self.zenoh, self.stop, "executor") as session, ExitStack() as closing:
             if path is not None:
                 builder = SceneBuilder(self.scene, self.robot, *self.human)
                 text = Path(self.scene.source).read_text() if Path(self.scene.source).is_file() else None
@@ -210,9 +215,12 @@ class ExecutorService:
                 # real time: Foxglove updates on a background thread (never ahead of a plan's receipt); lock-step:
                 # in the callback, so that a run's log never depends on thread timing (no update ever dropped)
                 live = self._live_server(builder)
+                if live is not None:
+                    closing.callback(live.close)
                 self.mcap = McapLog(path, self.keys, builder, viz_period_s=1.0 / cfg.viz_rate_hz,
                                     viz_thread=cfg.mode != "lockstep", compression=cfg.mcap_compression,
                                     scene_text=text, run_metadata=meta, on_viz=live.log if live else None)
+                closing.callback(self.mcap.close)
                 self.result.mcap_path = str(path)
             link = self._connect_robot(session) if cfg.robot == "ros2" else None
             sub = session.declare_subscriber(f"{self.zenoh.prefix}/**", lambda s: self._on_sample(
@@ -234,10 +242,6 @@ class ExecutorService:
                 sub.undeclare()
                 if link is not None:
                     link.close()
-                if self.mcap is not None:
-                    self.mcap.close()
-                if self.live is not None:
-                    self.live.close()
         r = self.result
         r.rejects = dict(self.rejects.counts)
         r.reject_reasons = {f"{k} {why}": n for (k, why), n in sorted(self.rejects.by_reason.items())}
@@ -249,7 +253,7 @@ class ExecutorService:
                  r.held_steps, sum(r.rejects.values()), self.rejects.summary())
         return r
 
-    def _live_server(self, builder: SceneBuilder) -> Any:
+    def _live_server(self, builder: SceneBuilder) -> LiveServer | None:
         """``live_port``: Foxglove's WebSocket server, fed every scene message the log writes (None: off)."""
         if not self.config.live_port:
             return None
@@ -274,8 +278,6 @@ class ExecutorService:
             link.close()
             if self.mcap is not None:
                 self.mcap.close()  # complete, with what it has: the run never started
-            if self.live is not None:
-                self.live.close()
             raise
         self.core = Ros2Arm(self.limits, q0, self.config, link)
         return link

@@ -46,6 +46,7 @@ class ViewService:
                              viz_period_s=1.0 / config.viz_rate_hz)
         self.rejects = RejectCounter("view")
         self.server: LiveServer | None = None
+        self.failures = 0
 
     def _on(self, msg: Message) -> None:
         server = self.server
@@ -55,8 +56,9 @@ class ViewService:
             for m in self.core.on_message(msg):
                 server.log(m)
         except Exception:  # a drawing bug costs a picture, never the view
-            if self.core.errors == 1 or self.core.errors % 100 == 0:
-                log.exception("view: drawing a %s failed (%d so far)", msg.TYPE, self.core.errors)
+            self.failures += 1
+            if self.failures == 1 or self.failures % 100 == 0:
+                log.exception("view: drawing or sending a %s failed (%d so far)", msg.TYPE, self.failures)
 
     def run(self, stop: threading.Event | None = None) -> dict[str, int]:
         """Serve until ``stop`` is set; returns the messages sent per topic."""

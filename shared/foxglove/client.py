@@ -69,9 +69,8 @@ class FoxgloveClient:
                 if time.monotonic() > deadline:
                     raise
                 time.sleep(0.1)
-        while not (self.server_info and self.channels):
-            if self._next(max(0.1, deadline - time.monotonic())) is None and time.monotonic() > deadline:
-                break
+        while not (self.server_info and self.channels) and not self.closed and time.monotonic() < deadline:
+            self._next(max(0.1, deadline - time.monotonic()))
         return self
 
     def subscribe(self, topics: list[str] | None = None) -> list[str]:
@@ -83,10 +82,13 @@ class FoxgloveClient:
         return [t for _, t in chosen]
 
     def receive(self, duration_s: float) -> list[Received]:
-        """Every message received within ``duration_s`` (advertisements are taken in on the way)."""
+        """Every message received within ``duration_s``, or until the server closes the connection.
+
+        Advertisements that come meanwhile are taken in (:attr:`channels`).
+        """
         out: list[Received] = []
         end = time.monotonic() + duration_s
-        while (left := end - time.monotonic()) > 0:
+        while (left := end - time.monotonic()) > 0 and not self.closed:
             msg = self._next(left)
             if isinstance(msg, Received):
                 out.append(msg)
@@ -113,7 +115,7 @@ class FoxgloveClient:
                 for cid in obj.get("channelIds", []):
                     self.channels.pop(int(cid), None)
             return obj
-        if frame and frame[0] == _MESSAGE_DATA:
+        if len(frame) >= 13 and frame[0] == _MESSAGE_DATA:
             sub, log_time = struct.unpack_from("<IQ", frame, 1)
             return Received(self._subscriptions.get(sub, str(sub)), log_time, bytes(frame[13:]))
         return None

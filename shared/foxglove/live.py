@@ -25,6 +25,7 @@ __all__ = ["LiveServer", "LiveServerError"]
 
 log = logging.getLogger(__name__)
 
+
 class LiveServerError(UserError):
     """The server could not start (e.g. the port is taken); the message names the address."""
 
@@ -59,6 +60,7 @@ class LiveServer:
         self.port: int = self._server.port
         self.sent: dict[str, int] = dict.fromkeys(SCHEMAS, 0)
         self._stopped = False
+        self._count_lock = threading.Lock()
         self._stop = threading.Event()
         self._static = static
         self._resender = None
@@ -88,7 +90,8 @@ class LiveServer:
         if self._stopped:
             return
         self._channels[message.topic].log(message.data, log_time=message.log_time)
-        self.sent[message.topic] += 1
+        with self._count_lock:  # several threads log (Zenoh's per subscriber, the log's, the static resend)
+            self.sent[message.topic] += 1
 
     def close(self) -> None:
         """Stop serving (clients are disconnected); idempotent."""

@@ -108,6 +108,7 @@ class McapLog:
         self.rejects: dict[str, int] = {}
         self.reject_reasons: dict[str, int] = {}
         self.viz_errors = 0
+        self.live_errors = 0
         self._expected = keys.data_keys()
         if scene_text is not None:
             now = self._clock()
@@ -166,7 +167,13 @@ class McapLog:
                     topic=m.topic, message_encoding=s.message_encoding, schema_id=self._schemas[s.name])
             self._add(self._channels[m.topic], m.topic, m.data, m.log_time, m.log_time)
         if self._on_viz is not None:
-            self._on_viz(m)
+            try:
+                self._on_viz(m)
+            except Exception:  # the live server's trouble must never cost the log
+                self.live_errors += 1
+                if self.live_errors == 1 or self.live_errors % 100 == 0:
+                    log.exception("mcap log: passing a scene message on (on_viz) failed (%d so far)",
+                                  self.live_errors)
 
     def write_ros2(self, topic: str, msgtype: str, data: bytes, log_time: int | None = None) -> None:
         """Write a ROS 2 message as sent or received (CDR, schema ``ros2msg``: its definition from ``rosbags``)."""

@@ -97,8 +97,8 @@ def scene_at(path: str | Path, at_s: float | None) -> SceneState:
     p = Path(path)
     if not p.is_file():
         raise UserError(f"log file {str(p)!r} not found")
-    if at_s is not None and not at_s >= 0.0:
-        raise UserError(f"--at must be a time >= 0 s, got {at_s}")
+    if at_s is not None and not (at_s >= 0.0 and math.isfinite(at_s)):
+        raise UserError(f"--at must be a finite time >= 0 s, got {at_s}")
     end = math.inf
     if at_s is None:  # a first pass for the last plan's time
         end = max((r.log_time for r in _records(p, {"/viz/plan"})), default=math.inf)

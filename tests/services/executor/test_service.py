@@ -98,11 +98,14 @@ def clear_stamps(msg) -> None:  # noqa: ANN001 - a protobuf message
 
 
 def test_lockstep_logs_are_reproducible_scene_included(zenoh_hub, pr2, tmp_path) -> None:
-    """Two lock-step runs log the same raw messages in the same order on every channel, and the same scene
-    messages (every one decoded with the file's schema; only the receive-time stamps differ)."""
+    """Two lock-step runs, the second also serving its scene live, log the same raw messages in the same order
+    on every channel, and the same scene messages (every one decoded with the file's schema; only the
+    receive-time stamps differ)."""
+    from services.processes import free_port
+
     logs = []
-    for run in ("a", "b"):
-        cfg = lockstep_config(tmp_path / run, steps=5)
+    for run, live in (("a", 0), ("b", free_port())):
+        cfg = lockstep_config(tmp_path / run, steps=5, live_port=live)
         run_lockstep(new_hub(), pr2, cfg, switch_at=3)
         raw = {}
         for m in read_log(cfg.mcap, keep=lambda ch: ch.message_encoding == "msgpack").messages:

@@ -109,7 +109,8 @@ def test_human_and_posterior_are_drawn(robot, tmp_path) -> None:
 @pytest.mark.parametrize("argv, message", [
     (["snapshot", "/nonexistent.mcap"], "not found"),
     (["snapshot", "{bad}"], "not a readable MCAP file"),
-    (["snapshot", "{log}", "--at", "-1"], "--at must be a time >= 0"),
+    (["snapshot", "{log}", "--at", "-1"], "--at must be a finite time >= 0"),
+    (["snapshot", "{log}", "--at", "inf"], "--at must be a finite time >= 0"),
     (["snapshot", "{empty}"], "no scene channels"),
 ])
 def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
