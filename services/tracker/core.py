@@ -1,0 +1,213 @@
+"""The tracker's core: a person's body keypoints in, the paper's posture features and reach markers out.
+
+No Zenoh here. Per keypoint frame (names, positions (K, 3) in the sensor's frame, a stamp):
+
+1. the layout's table maps the sensor's points to the human model's (:mod:`shared.keypoints.layouts`); a frame
+   without a required point is refused;
+2. the human model is fitted, warm-started from the last accepted frame (:class:`shared.keypoints.fit.KeypointFit`);
+3. a frame whose fit residual (rms) exceeds ``max_residual_m``, or whose pelvis moved faster than
+   ``max_speed_mps`` or any joint angle turned faster than ``max_turn_rad_s`` since the last accepted frame,
+   is refused (a swapped or wild point: sensors do that);
+4. the features are smoothed by a One-Euro filter (:mod:`.filters`);
+5. a gap (dropped or refused frames) up to ``max_gap_s`` is bridged: the missing frames, at the sensor's
+   period, are interpolated between the frames on either side; a longer gap ends the reach under way and
+   starts afresh;
+6. the reach rule (:mod:`.reach`) says when a reach starts and ends: ``DemoMarker`` start and end, the poses
+   in between as ``HumanPose`` (index 0, 1, ... from the start; ``demo_id`` one per reach). Between reaches
+   nothing is published: the predictor recognises reaches, as it does the recorder's demonstrations.
+
+Every refused frame is counted by reason (:attr:`TrackerCore.refused`) and named in :attr:`TrackerOutput.refused`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shared.config import ConfigError, opt
+from shared.human import HumanModel
+from shared.keypoints.fit import POINT_NAMES, REQUIRED, KeypointFit
+from shared.keypoints.layouts import LAYOUTS, load_layout
+from shared.protocol import DemoMarker, HumanPose, Message
+
+from .filters import OneEuroFilter
+from .reach import ReachDetector, ReachRule
+
+__all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS"]
+
+REASONS = ("missing", "residual", "jump")
+"""Why a frame is refused: a required point missing, a fit too far from the points, an implausible jump."""
+
+_ANGLES = [3, 4, 5, 6, 7, 8, 9, 11]  # pelvis yaw, torso X Y Z, shoulder X Z Y, elbow (the arm translation is 10)
+
+
+@dataclass
+class TrackerConfig:
+    """The tracker core's options (``[tracker]``)."""
+
+    layout: str = opt("foresight", choices=LAYOUTS, help="the sensor's skeleton layout (docs/keypoints.md)")
+    max_residual_m: float = opt(0.08, help="refuse a frame whose fit leaves its points further than this (rms, m)")
+    max_speed_mps: float = opt(3.0, help="refuse a frame whose pelvis moved faster than this since the last (m/s)")
+    max_turn_rad_s: float = opt(20.0, help="refuse a frame with a joint angle turning faster than this (rad/s)")
+    max_gap_s: float = opt(0.3, help="bridge a gap in the frames up to this long (interpolated); a longer one "
+                           "ends the reach under way")
+    min_cutoff_hz: float = opt(1.5, help="One-Euro smoothing: the cutoff on a still person (Hz)")
+    beta: float = opt(0.3, help="One-Euro smoothing: how fast the cutoff rises with speed")
+    start_m: float = opt(0.10, help="a reach starts when the right wrist is this far from its rest position (m)")
+    end_m: float = opt(0.03, help="a reach ends when the wrist stays within this of one place ...")
+    end_s: float = opt(1.0, help="... for this long (s)")
+    pre_s: float = opt(0.3, help="a reach's first pose is this long before the start threshold was crossed (s)")
+    max_reach_s: float = opt(10.0, help="a reach ends after this long in any case (s)")
+
+    def validate(self) -> None:
+        """Check ranges; raises ConfigError naming the option."""
+        for name in ("max_residual_m", "max_speed_mps", "max_turn_rad_s", "max_gap_s", "min_cutoff_hz", "start_m",
+                     "end_m", "end_s", "max_reach_s"):
+            v = getattr(self, name)
+            if not (v > 0 and math.isfinite(v)):
+                raise ConfigError(f"tracker.{name}: must be a finite number > 0, got {v}")
+        if not (self.beta >= 0 and self.pre_s >= 0):
+            raise ConfigError(f"tracker.beta and tracker.pre_s: must be >= 0, got {self.beta}, {self.pre_s}")
+
+    @property
+    def rule(self) -> ReachRule:
+        """The reach rule's thresholds."""
+        return ReachRule(self.start_m, self.end_m, self.end_s, self.pre_s, 1.0, self.max_reach_s)
+
+
+@dataclass
+class TrackerOutput:
+    """What one frame gave: messages to publish, and why it was refused (None: accepted)."""
+
+    messages: list[Message] = field(default_factory=list)
+    refused: str | None = None
+
+
+class TrackerCore:
+    """Keypoint frames -> ``HumanPose`` and ``DemoMarker`` messages (see the module docstring).
+
+    Args:
+        config: Thresholds, layout, smoothing.
+        model: The human model (default: ``shared.human.HumanModel()``).
+
+    Attributes:
+        refused: Frames refused per reason (:data:`REASONS`).
+        accepted: Frames accepted.
+        bridged: Poses interpolated across gaps.
+        reaches: Reaches started.
+    """
+
+    def __init__(self, config: TrackerConfig | None = None, model: HumanModel | None = None) -> None:
+        self.config = config or TrackerConfig()
+        self.config.validate()
+        self.model = model or HumanModel()
+        self.layout = load_layout(self.config.layout)
+        self.fit = KeypointFit(model=self.model)
+        self.filter = OneEuroFilter(self.config.min_cutoff_hz, self.config.beta)
+        self.reach = ReachDetector(self.config.rule)
+        self.refused = dict.fromkeys(REASONS, 0)
+        self.accepted = self.bridged = self.reaches = 0
+        self._wrist = list(POINT_NAMES).index("r_wrist")
+        self._raw: tuple[float, np.ndarray] | None = None      # the last accepted fit (stamp, features)
+        self._out: tuple[float, np.ndarray] | None = None      # the last smoothed frame
+        self._dts: deque[float] = deque(maxlen=15)              # recent frame intervals: the sensor's period
+        self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
+        self.demo_id = -1
+        self._index = 0
+
+    def on_frame(self, stamp: float, names: list[str], positions: np.ndarray) -> TrackerOutput:
+        """One keypoint frame: ``names`` (K) and ``positions`` ``(K, 3)`` m, NaN where missing; ``stamp`` s."""
+        points = self.layout.to_model(list(names), np.asarray(positions, dtype=np.float64))
+        observed = np.all(np.isfinite(points), axis=-1)
+        missing = [p for p in REQUIRED if not observed[list(POINT_NAMES).index(p)]]
+        if missing:
+            return self._refuse("missing", f"required point(s) missing: {', '.join(missing)}")
+        prior = self._raw[1][None] if self._raw is not None and stamp - self._raw[0] <= self.config.max_gap_s else None
+        res = self.fit.fit(np.nan_to_num(points)[None], observed[None], prior)
+        f, rms = res.features[0], float(res.rms_m[0])
+        if rms > self.config.max_residual_m:
+            limit = self.config.max_residual_m * 100
+            return self._refuse("residual", f"fit residual {rms * 100:.1f} cm rms > {limit:g}")
+        out = TrackerOutput()
+        if self._raw is not None and stamp - self._raw[0] > self.config.max_gap_s:
+            out.messages += self._lost(self._raw[0])  # a long gap: the reach under way ends, everything starts afresh
+        elif self._raw is not None and stamp > self._raw[0]:
+            dt = stamp - self._raw[0]
+            speed = float(np.linalg.norm(f[:3] - self._raw[1][:3])) / dt
+            turn = float(np.max(np.abs(f[_ANGLES] - self._raw[1][_ANGLES]))) / dt
+            if speed > self.config.max_speed_mps or turn > self.config.max_turn_rad_s:
+                return self._refuse("jump", f"pelvis {speed:.1f} m/s, joints {turn:.1f} rad/s since the last frame")
+            self._dts.append(dt)
+        self._raw = (stamp, f)
+        self.accepted += 1
+        smooth = self.filter(f, stamp)
+        out.messages += self._bridge(stamp, smooth) + self._frame(stamp, smooth)
+        self._out = (stamp, smooth)
+        return out
+
+    # -- internals ---------------------------------------------------------------------------------
+
+    def _refuse(self, reason: str, why: str) -> TrackerOutput:
+        self.refused[reason] += 1
+        return TrackerOutput(refused=f"{reason}: {why}")
+
+    def _lost(self, last: float) -> list[Message]:
+        """A gap too long: end the reach under way (at the last frame), forget the past."""
+        msgs = self._end(last) if self.reach.active else []
+        self.reach.reset()
+        self.filter.reset()
+        self._recent.clear()
+        self._raw = self._out = None
+        return msgs
+
+    def _bridge(self, stamp: float, f: np.ndarray) -> list[Message]:
+        """Frames interpolated between the last smoothed one and this, at the sensor's period, across a gap."""
+        if self._out is None or len(self._dts) < 3:
+            return []
+        period = float(np.median(self._dts))
+        t0, f0 = self._out
+        n = int(round((stamp - t0) / period)) - 1
+        msgs: list[Message] = []
+        for k in range(1, n + 1):
+            a = k / (n + 1)
+            msgs += self._frame(t0 + a * (stamp - t0), f0 + a * (f - f0))
+            self.bridged += 1
+        return msgs
+
+    def _frame(self, t: float, f: np.ndarray) -> list[Message]:
+        """A smoothed frame through the reach rule: the markers and poses it gives."""
+        self._recent.append((t, f))
+        while self._recent and self._recent[0][0] < t - self.config.pre_s - 1e-9:
+            self._recent.popleft()
+        event = self.reach.update(self._body_wrist(f), t)
+        if event is not None and event.event == "start":
+            self.demo_id += 1
+            self.reaches += 1
+            self._index = 0
+            first = [(s, g) for s, g in self._recent if s >= event.stamp - 1e-9]
+            msgs: list[Message] = [DemoMarker(stamp=first[0][0], tick=-1, demo_id=self.demo_id, event="start",
+                                              true_class=-1, class_name="live", n_samples=0)]
+            return msgs + [self._pose(s, g) for s, g in first]
+        if not self.reach.active and event is None:
+            return []
+        msgs = [self._pose(t, f)]
+        return msgs + (self._end(t) if event is not None and event.event == "end" else [])
+
+    def _pose(self, t: float, f: np.ndarray) -> HumanPose:
+        pose = HumanPose(stamp=t, tick=-1, tick_last=True, demo_id=self.demo_id, index=self._index,
+                         features=np.asarray(f, dtype=np.float64).copy())
+        self._index += 1
+        return pose
+
+    def _end(self, t: float) -> list[Message]:
+        return [DemoMarker(stamp=t, tick=-1, demo_id=self.demo_id, event="end", true_class=-1, class_name="live",
+                           n_samples=self._index)]
+
+    def _body_wrist(self, f: np.ndarray) -> np.ndarray:
+        """The right wrist relative to the pelvis, in the body's frame (position and yaw taken out)."""
+        body = np.asarray(f, dtype=np.float64).copy()
+        body[:4] = 0.0
+        return self.model.joint_positions(body)[self._wrist]

@@ -1,0 +1,60 @@
+"""The One-Euro filter (Casiez, Roussel and Vogel, CHI 2012): jitter removed at rest, little lag in motion.
+
+A first-order low-pass filter per value whose cutoff rises with the value's speed: ``fc = min_cutoff +
+beta |dx/dt|`` (the speed itself low-passed at ``d_cutoff``). A sensor's centimetre jitter on a still person
+is smoothed at ``min_cutoff``; a reach, fast, passes with a high cutoff, so the prediction is not delayed by
+the smoothing. Frames may come at any interval (the smoothing factor follows each frame's own ``dt``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["OneEuroFilter"]
+
+
+def _alpha(cutoff_hz: np.ndarray | float, dt: float) -> np.ndarray | float:
+    tau = 1.0 / (2.0 * math.pi * np.asarray(cutoff_hz))
+    return 1.0 / (1.0 + tau / dt)
+
+
+class OneEuroFilter:
+    """A One-Euro filter over a vector of values.
+
+    Args:
+        min_cutoff_hz: Cutoff at rest (Hz): lower, smoother and more lag on a still person.
+        beta: How fast the cutoff rises with speed (per unit of the value's speed).
+        d_cutoff_hz: Cutoff of the speed estimate (Hz).
+    """
+
+    def __init__(self, min_cutoff_hz: float = 1.0, beta: float = 0.5, d_cutoff_hz: float = 1.0) -> None:
+        if not (min_cutoff_hz > 0 and d_cutoff_hz > 0 and beta >= 0):
+            raise ValueError(f"One-Euro filter: cutoffs must be > 0 and beta >= 0, got min_cutoff_hz={min_cutoff_hz}, "
+                             f"beta={beta}, d_cutoff_hz={d_cutoff_hz}")
+        self.min_cutoff_hz = min_cutoff_hz
+        self.beta = beta
+        self.d_cutoff_hz = d_cutoff_hz
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the past: the next value passes unchanged."""
+        self._x: np.ndarray | None = None
+        self._dx: np.ndarray | None = None
+        self._t: float | None = None
+
+    def __call__(self, x: np.ndarray, t: float) -> np.ndarray:
+        """The filtered value of ``x`` ``(N,)`` observed at time ``t`` (s; a time not after the last one resets)."""
+        x = np.asarray(x, dtype=np.float64)
+        if self._x is None or self._t is None or t <= self._t:
+            self._x, self._dx, self._t = x.copy(), np.zeros_like(x), t
+            return x.copy()
+        dt = t - self._t
+        dx = (x - self._x) / dt
+        assert self._dx is not None
+        self._dx = self._dx + _alpha(self.d_cutoff_hz, dt) * (dx - self._dx)
+        a = _alpha(self.min_cutoff_hz + self.beta * np.abs(self._dx), dt)
+        self._x = self._x + a * (x - self._x)
+        self._t = t
+        return self._x.copy()

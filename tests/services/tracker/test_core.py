@@ -1,0 +1,120 @@
+"""TrackerCore: keypoint frames -> reach markers and smoothed features; refusals, gaps, the One-Euro filter."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.tracker.core import TrackerConfig, TrackerCore
+from services.tracker.filters import OneEuroFilter
+from shared.config import ConfigError
+from shared.human import HumanModel
+from shared.keypoints.fit import POINT_NAMES
+from shared.protocol import DemoMarker, HumanPose
+from shared.synthetic import generate_library
+
+MODEL = HumanModel()
+NAMES = list(POINT_NAMES)
+RATE = 30.0
+
+
+@pytest.fixture(scope="module")
+def reach() -> np.ndarray:
+    """``(T, 12)``: a synthetic demonstration with a second of rest before and after it."""
+    d = generate_library(seed=0).demos[0]
+    return np.concatenate([np.repeat(d.features[:1], 30, 0), d.features, np.repeat(d.features[-1:], 40, 0)])
+
+
+def run(core: TrackerCore, feats: np.ndarray, skip: set[int] = frozenset(), edit=None) -> list:  # noqa: ANN001
+    """Feed the model's joint positions of ``feats`` at 30 Hz (frames in ``skip`` dropped); every output."""
+    outs = []
+    for i, p in enumerate(MODEL.joint_positions(feats)):
+        if i in skip:
+            continue
+        if edit is not None:
+            p = edit(i, p.copy())
+        outs.append((i, core.on_frame(i / RATE, NAMES, p)))
+    return outs
+
+
+def messages(outs) -> list:  # noqa: ANN001
+    return [m for _, o in outs for m in o.messages]
+
+
+def test_one_euro_smooths_jitter_and_follows_motion() -> None:
+    rng = np.random.default_rng(0)
+    f = OneEuroFilter(min_cutoff_hz=1.0, beta=0.3)
+    still = [f(np.array([1.0]) + rng.normal(0, 0.01, 1), t / 30) for t in range(90)]
+    assert np.std(np.array(still)[30:]) < 0.5 * 0.01  # jitter on a still value: smoothed
+    f.reset()
+    ramp = [f(np.array([t / 30.0]), t / 30) for t in range(60)]  # 1 unit/s
+    assert abs(ramp[-1][0] - 59 / 30) < 0.1  # in motion: little lag
+    assert np.array_equal(f(np.array([5.0]), 0.0), [5.0])  # time going back: starts over
+    with pytest.raises(ValueError, match="cutoffs"):
+        OneEuroFilter(min_cutoff_hz=0)
+
+
+def test_a_reach_gives_start_poses_end_with_the_recorded_features(reach) -> None:
+    core = TrackerCore()
+    msgs = messages(run(core, reach))
+    markers = [m for m in msgs if isinstance(m, DemoMarker)]
+    poses = [m for m in msgs if isinstance(m, HumanPose)]
+    assert markers[0].event == "start" and markers[-1].event == "end" and core.reaches >= 1
+    for demo in {p.demo_id for p in poses}:
+        idx = [p.index for p in poses if p.demo_id == demo]
+        assert idx == list(range(len(idx)))  # contiguous from 0
+        end = next(m for m in markers if m.demo_id == demo and m.event == "end")
+        assert end.n_samples == len(idx) and all(m.true_class == -1 for m in markers)
+    assert 25 <= round(poses[0].stamp * RATE) <= 50  # starts near the motion's onset (frame 30), not at rest
+    err = np.array([np.abs(p.features - reach[round(p.stamp * RATE)]) for p in poses])
+    assert np.median(err[:, :3]) < 0.01 and np.median(err[:, 3:]) < 0.05
+    assert core.refused == {"missing": 0, "residual": 0, "jump": 0} or sum(core.refused.values()) <= 2
+    before = [m for m in msgs if m.stamp < 25 / RATE]
+    assert not before  # nothing is published while the person rests
+
+
+def test_refused_frames_are_named_and_counted(reach) -> None:
+    core = TrackerCore()
+    pelvis, wrist = NAMES.index("pelvis"), NAMES.index("r_wrist")
+
+    def edit(i: int, p: np.ndarray) -> np.ndarray:
+        if i == 50:
+            p[wrist] = np.nan  # a required point missing
+        if i == 60:
+            p += [1.0, 0.0, 0.0]  # the whole body 1 m away in 1/30 s
+        if i == 70:
+            p[pelvis] += [0.0, 0.0, 0.5]  # one point wild: the fit cannot follow it
+        return p
+
+    outs = dict(run(core, reach, edit=edit))
+    assert outs[50].refused.startswith("missing: required point(s) missing: r_wrist")
+    assert outs[60].refused.startswith("jump: pelvis")
+    assert outs[70].refused.split(":")[0] in ("residual", "jump")
+    assert outs[61].refused is None and outs[71].refused is None  # the next frames are taken
+    assert core.refused["missing"] == 1 and core.refused["jump"] >= 1 and sum(core.refused.values()) >= 3
+
+
+def test_a_short_gap_is_bridged_a_long_one_ends_the_reach(reach) -> None:
+    core = TrackerCore()
+    poses = [m for m in messages(run(core, reach, skip={60, 61, 62})) if isinstance(m, HumanPose)]
+    assert core.bridged == 3
+    stamps = np.array([p.stamp for p in poses if p.demo_id == poses[0].demo_id])
+    assert np.allclose(np.diff(stamps), 1 / RATE, atol=1e-6)  # every period has its pose, the gap's interpolated
+    core = TrackerCore()
+    msgs = messages(run(core, reach, skip=set(range(60, 90))))  # a second without frames, mid-reach
+    ends = [m for m in msgs if isinstance(m, DemoMarker) and m.event == "end"]
+    assert ends[0].stamp == pytest.approx(59 / RATE) and core.bridged == 0
+
+
+def test_the_same_frames_give_the_same_messages(reach) -> None:
+    a = messages(run(TrackerCore(), reach))
+    b = messages(run(TrackerCore(), reach))
+    assert len(a) == len(b) and all(type(x) is type(y) and x.stamp == y.stamp for x, y in zip(a, b, strict=True))
+    assert all(np.array_equal(x.features, y.features) for x, y in zip(a, b, strict=True) if isinstance(x, HumanPose))
+
+
+def test_bad_options_are_named() -> None:
+    with pytest.raises(ConfigError, match="tracker.max_gap_s"):
+        TrackerConfig(max_gap_s=0).validate()
+    with pytest.raises(ConfigError, match="tracker.beta"):
+        TrackerConfig(beta=-1).validate()
