@@ -15,6 +15,8 @@ BENCHES: dict[str, tuple[str, str]] = {
     "predictor": ("services.predictor.bench", "one pose -> encoded occupancy message (64^3 grid)"),
     "planner": ("services.planner.bench", "one replanning step (STOMP over all goals)"),
     "faults": ("tools.faults", "kill -9 each service of a moving robot's run: hold and resume latency, MCAP recovery"),
+    "tracker": ("services.tracker.bench", "the live tracker's core on a library's reaches: lag, error, refusals, "
+                "time per frame"),
     "keypoints": ("shared.keypoints.bench", "fit the human model to a frame of body keypoints: live, baseline, batch"),
     "live": ("services.view.bench", "foresight demo in real time with and without a live Foxglove client: pose -> "
              "plan p99"),

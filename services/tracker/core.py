@@ -5,9 +5,10 @@ No Zenoh here. Per keypoint frame (names, positions (K, 3) in the sensor's frame
 1. the layout's table maps the sensor's points to the human model's (:mod:`shared.keypoints.layouts`); a frame
    without a required point is refused;
 2. the human model is fitted, warm-started from the last accepted frame (:class:`shared.keypoints.fit.KeypointFit`);
-3. a frame whose fit residual (rms) exceeds ``max_residual_m``, or whose pelvis moved faster than
-   ``max_speed_mps`` or any joint angle turned faster than ``max_turn_rad_s`` since the last accepted frame,
-   is refused (a swapped or wild point: sensors do that);
+3. a frame whose fit residual (rms) exceeds ``max_residual_m``, or one of whose fitted joints moved faster
+   than ``max_speed_mps`` since the last accepted frame, is refused (a swapped or wild point: sensors do
+   that). The check is on joint positions, not angles: the fit may split a turn between the pelvis yaw and
+   the torso twist differently from one frame to the next (docs/keypoints.md) without any joint moving;
 4. the features are smoothed by a One-Euro filter (:mod:`.filters`);
 5. a gap (dropped or refused frames) up to ``max_gap_s`` is bridged: the missing frames, at the sensor's
    period, are interpolated between the frames on either side; a longer gap ends the reach under way and
@@ -41,8 +42,6 @@ __all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS"]
 REASONS = ("missing", "residual", "jump")
 """Why a frame is refused: a required point missing, a fit too far from the points, an implausible jump."""
 
-_ANGLES = [3, 4, 5, 6, 7, 8, 9, 11]  # pelvis yaw, torso X Y Z, shoulder X Z Y, elbow (the arm translation is 10)
-
 
 @dataclass
 class TrackerConfig:
@@ -50,8 +49,8 @@ class TrackerConfig:
 
     layout: str = opt("foresight", choices=LAYOUTS, help="the sensor's skeleton layout (docs/keypoints.md)")
     max_residual_m: float = opt(0.08, help="refuse a frame whose fit leaves its points further than this (rms, m)")
-    max_speed_mps: float = opt(3.0, help="refuse a frame whose pelvis moved faster than this since the last (m/s)")
-    max_turn_rad_s: float = opt(20.0, help="refuse a frame with a joint angle turning faster than this (rad/s)")
+    max_speed_mps: float = opt(6.0, help="refuse a frame one of whose fitted joints moved faster than this since the "
+                               "last accepted frame (m/s; a fast reach's hand: 2-4)")
     max_gap_s: float = opt(0.3, help="bridge a gap in the frames up to this long (interpolated); a longer one "
                            "ends the reach under way")
     min_cutoff_hz: float = opt(1.5, help="One-Euro smoothing: the cutoff on a still person (Hz)")
@@ -60,12 +59,14 @@ class TrackerConfig:
     end_m: float = opt(0.03, help="a reach ends when the wrist stays within this of one place ...")
     end_s: float = opt(1.0, help="... for this long (s)")
     pre_s: float = opt(0.3, help="a reach's first pose is this long before the start threshold was crossed (s)")
+    rest_s: float = opt(1.0, help="the hand's rest position is learnt over this long after a (re)start; no reach "
+                        "starts before (s)")
     max_reach_s: float = opt(10.0, help="a reach ends after this long in any case (s)")
 
     def validate(self) -> None:
         """Check ranges; raises ConfigError naming the option."""
-        for name in ("max_residual_m", "max_speed_mps", "max_turn_rad_s", "max_gap_s", "min_cutoff_hz", "start_m",
-                     "end_m", "end_s", "max_reach_s"):
+        for name in ("max_residual_m", "max_speed_mps", "max_gap_s", "min_cutoff_hz", "start_m",
+                     "end_m", "end_s", "rest_s", "max_reach_s"):
             v = getattr(self, name)
             if not (v > 0 and math.isfinite(v)):
                 raise ConfigError(f"tracker.{name}: must be a finite number > 0, got {v}")
@@ -75,7 +76,7 @@ class TrackerConfig:
     @property
     def rule(self) -> ReachRule:
         """The reach rule's thresholds."""
-        return ReachRule(self.start_m, self.end_m, self.end_s, self.pre_s, 1.0, self.max_reach_s)
+        return ReachRule(self.start_m, self.end_m, self.end_s, self.pre_s, self.rest_s, self.max_reach_s)
 
 
 @dataclass
@@ -136,10 +137,10 @@ class TrackerCore:
             out.messages += self._lost(self._raw[0])  # a long gap: the reach under way ends, everything starts afresh
         elif self._raw is not None and stamp > self._raw[0]:
             dt = stamp - self._raw[0]
-            speed = float(np.linalg.norm(f[:3] - self._raw[1][:3])) / dt
-            turn = float(np.max(np.abs(f[_ANGLES] - self._raw[1][_ANGLES]))) / dt
-            if speed > self.config.max_speed_mps or turn > self.config.max_turn_rad_s:
-                return self._refuse("jump", f"pelvis {speed:.1f} m/s, joints {turn:.1f} rad/s since the last frame")
+            moved = np.linalg.norm(self.model.joint_positions(f) - self.model.joint_positions(self._raw[1]), axis=-1)
+            j = int(np.argmax(moved))
+            if moved[j] / dt > self.config.max_speed_mps:
+                return self._refuse("jump", f"{POINT_NAMES[j]} at {moved[j] / dt:.1f} m/s since the last frame")
             self._dts.append(dt)
         self._raw = (stamp, f)
         self.accepted += 1

@@ -2,7 +2,8 @@
 
 A live person gives no markers, and the predictor recognises a motion from its start. The rule: the right
 wrist, in the body's own frame (relative to the pelvis, turned by its yaw, so that walking or turning is not a
-reach), has a rest position - its running mean while no reach is under way. A reach **starts** when the
+reach), has a rest position - its mean over the first ``rest_s`` (no reach can start before), then its running
+mean while no reach is under way. A reach **starts** when the
 wrist is more than ``start_m`` from rest; its first pose is the one ``pre_s`` before that moment (the motion
 began before the threshold was crossed: the library's demonstrations start at rest). It **ends** when the
 wrist has stayed within ``end_m`` of a still position for ``end_s`` (the hand came to rest: at the goal or
@@ -54,6 +55,8 @@ class ReachDetector:
         self.active = False
         self._rest: np.ndarray | None = None
         self._t: float | None = None
+        self._since: float | None = None  # the first frame after a reset: the rest position is learnt from then
+        self._n = 0
         self._start_t = 0.0
         self._still_since: float | None = None
         self._still_at: np.ndarray | None = None
@@ -65,8 +68,12 @@ class ReachDetector:
         dt = 0.0 if self._t is None else max(0.0, t - self._t)
         self._t = t
         if not self.active:
-            if self._rest is None:
-                self._rest = w.copy()
+            if self._since is None or self._rest is None:
+                self._since, self._rest, self._n = t, w.copy(), 1
+                return None
+            if t - self._since < r.rest_s:  # learning where the hand rests: the mean of these frames
+                self._n += 1
+                self._rest = self._rest + (w - self._rest) / self._n
                 return None
             if np.linalg.norm(w - self._rest) > r.start_m:
                 self.active, self._start_t = True, t

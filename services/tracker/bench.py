@@ -1,0 +1,79 @@
+"""``foresight bench tracker``: the tracker's core on a library's demonstrations, as a sensor would give them.
+
+Each demonstration becomes keypoint frames (the human model's joint positions of its features, at ``--rate-hz``,
+with ``--rest-s`` of stillness before and after: a person stands before reaching), optionally with Gaussian noise
+per axis, and goes through :class:`~services.tracker.core.TrackerCore` frame by frame (one thread). Prints per
+demonstration the reaches found, the first pose's lag after the motion's onset, the features' median error
+against the recording, the frames refused; then the time per frame (median, p99) against the sensor's period.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+
+from shared.human import HumanModel
+from shared.keypoints.fit import POINT_NAMES
+from shared.native_threads import limit_blas_threads
+from shared.protocol import HumanPose
+
+from .core import TrackerCore
+
+__all__ = ["main"]
+
+
+def main(argv: list[str] | None = None, prog: str = "foresight bench tracker") -> int:
+    """Run the benchmark; returns the exit status."""
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser.add_argument("--library", default=None, help="motion library (default: the synthetic one, seed 0)")
+    parser.add_argument("--demos", type=int, default=6, help="demonstrations, the library's first")
+    parser.add_argument("--rate-hz", type=float, default=30.0, help="the sensor's frame rate")
+    parser.add_argument("--rest-s", type=float, default=1.0, help="stillness before and after each demonstration")
+    parser.add_argument("--noise-m", type=float, default=0.0, help="Gaussian noise per axis on the keypoints, m")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the noise")
+    args = parser.parse_args(argv)
+    limit_blas_threads(1)
+    if args.library:
+        from shared.library import load_library
+
+        lib = load_library(args.library, report=False)
+    else:
+        from shared.synthetic import generate_library
+
+        lib = generate_library(seed=0)
+    model, rng = HumanModel(), np.random.default_rng(args.seed)
+    rest, times = int(round(args.rest_s * args.rate_hz)), []
+    print(f"{prog}: {lib.source}, {args.rate_hz:g} Hz, {args.rest_s:g} s of rest around each, noise "
+          f"{args.noise_m * 100:g} cm per axis")
+    print(f"{'demo':<22}{'reaches':>8}{'lag frames':>11}{'pelvis mm':>10}{'angles rad':>11}  refused")
+    for d in lib.demos[:max(1, args.demos)]:
+        feats = np.concatenate([np.repeat(d.features[:1], rest, 0), d.features, np.repeat(d.features[-1:], rest, 0)])
+        points = model.joint_positions(feats)
+        if args.noise_m > 0:
+            points = points + rng.normal(0.0, args.noise_m, points.shape)
+        core, poses = TrackerCore(model=model), []
+        for i, p in enumerate(points):
+            t0 = time.perf_counter()
+            out = core.on_frame(i / args.rate_hz, list(POINT_NAMES), p)
+            times.append(time.perf_counter() - t0)
+            poses += [m for m in out.messages if isinstance(m, HumanPose)]
+        refused = ", ".join(f"{k} {n}" for k, n in core.refused.items() if n) or "-"
+        name = f"{d.class_name} #{d.index}"
+        if not poses:
+            print(f"{name:<22}{core.reaches:>8}{'-':>11}{'-':>10}{'-':>11}  {refused}")
+            continue
+        frame = [int(round(p.stamp * args.rate_hz)) for p in poses]
+        err = np.abs(np.array([p.features for p in poses]) - feats[frame])
+        print(f"{name:<22}{core.reaches:>8}{frame[0] - rest:>11}{np.median(err[:, :3]) * 1e3:>10.1f}"
+              f"{np.median(err[:, 3:]):>11.3f}  {refused}")
+    ms = np.array(times) * 1e3
+    print(f"time per frame: median {np.median(ms):.2f} ms, p99 {np.percentile(ms, 99):.2f} ms "
+          f"(the sensor's period: {1e3 / args.rate_hz:.1f} ms)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
