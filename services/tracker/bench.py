@@ -16,6 +16,7 @@ import time
 import numpy as np
 
 from shared.human import HumanModel
+from shared.keypoints.bench import add_source_options, source_library
 from shared.keypoints.fit import POINT_NAMES
 from shared.native_threads import limit_blas_threads
 from shared.protocol import HumanPose
@@ -28,22 +29,12 @@ __all__ = ["main"]
 def main(argv: list[str] | None = None, prog: str = "foresight bench tracker") -> int:
     """Run the benchmark; returns the exit status."""
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
-    parser.add_argument("--library", default=None, help="motion library (default: the synthetic one, seed 0)")
-    parser.add_argument("--demos", type=int, default=6, help="demonstrations, the library's first")
+    add_source_options(parser, demos=6)
     parser.add_argument("--rate-hz", type=float, default=30.0, help="the sensor's frame rate")
     parser.add_argument("--rest-s", type=float, default=1.0, help="stillness before and after each demonstration")
-    parser.add_argument("--noise-m", type=float, default=0.0, help="Gaussian noise per axis on the keypoints, m")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the noise")
     args = parser.parse_args(argv)
     limit_blas_threads(1)
-    if args.library:
-        from shared.library import load_library
-
-        lib = load_library(args.library, report=False)
-    else:
-        from shared.synthetic import generate_library
-
-        lib = generate_library(seed=0)
+    lib = source_library(args.library)
     model, rng = HumanModel(), np.random.default_rng(args.seed)
     rest, times = int(round(args.rest_s * args.rate_hz)), []
     print(f"{prog}: {lib.source}, {args.rate_hz:g} Hz, {args.rest_s:g} s of rest around each, noise "

@@ -16,11 +16,12 @@ import time
 import numpy as np
 
 from shared.human import HumanModel
+from shared.library import MotionLibrary
 from shared.native_threads import limit_blas_threads
 
 from .fit import KeypointFit
 
-__all__ = ["main"]
+__all__ = ["main", "add_source_options", "source_library"]
 
 
 def _per_frame(fit: KeypointFit, points: np.ndarray, warm: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -35,23 +36,32 @@ def _per_frame(fit: KeypointFit, points: np.ndarray, warm: bool) -> tuple[np.nda
     return np.array(times), np.array(feats)
 
 
+def add_source_options(parser: argparse.ArgumentParser, demos: int) -> None:
+    """The options of a benchmark on a library's demonstrations seen as keypoints: library, count, noise, seed."""
+    parser.add_argument("--library", default=None, help="motion library (default: the synthetic one, seed 0)")
+    parser.add_argument("--demos", type=int, default=demos, help="demonstrations, the library's first")
+    parser.add_argument("--noise-m", type=float, default=0.0, help="Gaussian noise per axis on the keypoints, m")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the noise")
+
+
+def source_library(path: str | None) -> MotionLibrary:
+    """The library a keypoint benchmark runs on: ``path``, or the synthetic one (seed 0) when None."""
+    if path:
+        from shared.library import load_library
+
+        return load_library(path, report=False)
+    from shared.synthetic import generate_library
+
+    return generate_library(seed=0)
+
+
 def main(argv: list[str] | None = None, prog: str = "foresight bench keypoints") -> int:
     """Run the benchmark; returns the exit status."""
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
-    parser.add_argument("--library", default=None, help="motion library (default: the synthetic one, seed 0)")
-    parser.add_argument("--demos", type=int, default=4, help="demonstrations to fit")
-    parser.add_argument("--noise-m", type=float, default=0.0, help="Gaussian noise per axis on the keypoints, m")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the noise")
+    add_source_options(parser, demos=4)
     args = parser.parse_args(argv)
     limit_blas_threads(1)
-    if args.library:
-        from shared.library import load_library
-
-        lib = load_library(args.library, report=False)
-    else:
-        from shared.synthetic import generate_library
-
-        lib = generate_library(seed=0)
+    lib = source_library(args.library)
     demos = lib.demos[:max(1, args.demos)]
     model = HumanModel()
     truth = [model.joint_positions(d.features) for d in demos]
