@@ -12,8 +12,9 @@ one BLAS thread; ``FORESIGHT_BLAS_THREADS`` overrides it (``0``: the libraries' 
 torch's intra-op threads are separate: the planner sets them (``PlannerConfig.threads``); a process whose
 torch work is a robot's forward kinematics for drawing (the executor, ``foresight view``) takes one with
 :func:`limit_torch_threads`: on such batches a second thread gains nothing and its OpenMP worker spins.
-Measured: drawing a real-time run's 913 messages took 2.16 s of process CPU with torch's default 2 threads
-and 1.06 s with 1, in the same 1.1 s of wall time (2026-11-26, this 2-core machine).
+Measured ad hoc (a replay of a real-time run's 913 messages through ``SceneStream``): 2.16 s of process CPU
+with torch's default 2 threads and 1.06 s with 1, in the same 1.1 s of wall time (2026-11-26, 2 cores);
+``foresight bench live`` shows the effect on the planning loop (docs/live-view.md).
 """
 
 from __future__ import annotations
