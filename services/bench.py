@@ -18,8 +18,8 @@ BENCHES: dict[str, tuple[str, str]] = {
     "tracker": ("services.tracker.bench", "the live tracker's core on a library's reaches: lag, error, refusals, "
                 "time per frame"),
     "keypoints": ("shared.keypoints.bench", "fit the human model to a frame of body keypoints: live, baseline, batch"),
-    "live": ("services.view.bench", "foresight demo in real time with and without a live Foxglove client: pose -> "
-             "plan p99"),
+    "live": ("services.view.bench", "foresight demo in real time without a live view, with --live, with foresight "
+             "view (a Foxglove client on each): pose -> plan p99"),
     "soak": ("tools.soak", "poses at 300 Hz for 60 s: predictor latency and drops, replanning period, RSS"),
     "viz": ("shared.foxglove.bench",
             "one occupancy update of the Foxglove scene: SDK protobuf vs the JSON path it replaced"),
