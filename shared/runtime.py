@@ -18,7 +18,7 @@ from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolv
 from shared.native_threads import limit_blas_threads
 
 __all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError", "service_main", "help_text",
-           "freeze_startup_heap", "watch_parent", "SHUTDOWN_GRACE_S", "FORCED_EXIT", "PARENT_ENV"]
+           "freeze_startup_heap", "watch_parent", "lower_priority", "SHUTDOWN_GRACE_S", "FORCED_EXIT", "PARENT_ENV"]
 
 SHUTDOWN_GRACE_S = 10.0
 """Seconds a process may take to stop after SIGINT/SIGTERM before it exits anyway (:func:`stop_on_signals`)."""
@@ -193,3 +193,14 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
         finally:
             restore()
     return 0
+
+
+def lower_priority(nice: int) -> None:
+    """Lower this process's CPU priority by ``nice`` (0: unchanged).
+
+    A command that only watches or republishes (``foresight ros2``, ``foresight view``) must not take CPU from the
+    planning loop on a shared machine. Call it from the command's own process only, never from a process it runs
+    inside of.
+    """
+    if nice:
+        os.nice(nice)

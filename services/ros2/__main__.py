@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import os
 import sys
 import threading
 from collections.abc import Callable
 
 from shared.config import ZenohConfig
-from shared.runtime import service_main
+from shared.runtime import lower_priority, service_main
 
 from .service import Ros2Service, Ros2ServiceConfig
 
@@ -24,8 +23,7 @@ Options: defaults < --config FILE ([ros2], [zenoh]) < env FORESIGHT_ROS2_<NAME> 
 
 def _make(cfg: Ros2ServiceConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
     service = Ros2Service(cfg, zcfg)
-    if cfg.nice:  # this process only (the gateway as `foresight ros2`), never a process it runs inside of
-        os.nice(cfg.nice)
+    lower_priority(cfg.nice)  # this process only (the gateway as `foresight ros2`)
     return lambda: service.run(stop)
 
 

@@ -112,7 +112,9 @@ class TrackerCore:
         self.refused = dict.fromkeys(REASONS, 0)
         self.accepted = self.bridged = self.reaches = 0
         self._wrist = list(POINT_NAMES).index("r_wrist")
+        self._required = {p: list(POINT_NAMES).index(p) for p in REQUIRED}
         self._raw: tuple[float, np.ndarray] | None = None      # the last accepted fit (stamp, features)
+        self._joints: np.ndarray | None = None                  # its joint positions (J, 3), for the jump check
         self._out: tuple[float, np.ndarray] | None = None      # the last smoothed frame
         self._dts: deque[float] = deque(maxlen=15)              # recent frame intervals: the sensor's period
         self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
@@ -123,7 +125,7 @@ class TrackerCore:
         """One keypoint frame: ``names`` (K) and ``positions`` ``(K, 3)`` m, NaN where missing; ``stamp`` s."""
         points = self.layout.to_model(list(names), np.asarray(positions, dtype=np.float64))
         observed = np.all(np.isfinite(points), axis=-1)
-        missing = [p for p in REQUIRED if not observed[list(POINT_NAMES).index(p)]]
+        missing = [p for p, j in self._required.items() if not observed[j]]
         if missing:
             return self._refuse("missing", f"required point(s) missing: {', '.join(missing)}")
         prior = self._raw[1][None] if self._raw is not None and stamp - self._raw[0] <= self.config.max_gap_s else None
@@ -133,16 +135,17 @@ class TrackerCore:
             limit = self.config.max_residual_m * 100
             return self._refuse("residual", f"fit residual {rms * 100:.1f} cm rms > {limit:g}")
         out = TrackerOutput()
+        joints = self.model.joint_positions(f)
         if self._raw is not None and stamp - self._raw[0] > self.config.max_gap_s:
             out.messages += self._lost(self._raw[0])  # a long gap: the reach under way ends, everything starts afresh
         elif self._raw is not None and stamp > self._raw[0]:
             dt = stamp - self._raw[0]
-            moved = np.linalg.norm(self.model.joint_positions(f) - self.model.joint_positions(self._raw[1]), axis=-1)
+            moved = np.linalg.norm(joints - self._joints, axis=-1)
             j = int(np.argmax(moved))
             if moved[j] / dt > self.config.max_speed_mps:
                 return self._refuse("jump", f"{POINT_NAMES[j]} at {moved[j] / dt:.1f} m/s since the last frame")
             self._dts.append(dt)
-        self._raw = (stamp, f)
+        self._raw, self._joints = (stamp, f), joints
         self.accepted += 1
         smooth = self.filter(f, stamp)
         out.messages += self._bridge(stamp, smooth) + self._frame(stamp, smooth)
@@ -161,7 +164,7 @@ class TrackerCore:
         self.reach.reset()
         self.filter.reset()
         self._recent.clear()
-        self._raw = self._out = None
+        self._raw = self._out = self._joints = None
         return msgs
 
     def _bridge(self, stamp: float, f: np.ndarray) -> list[Message]:

@@ -8,9 +8,9 @@ from collections.abc import Callable
 
 from shared.config import ZenohConfig
 from shared.native_threads import limit_torch_threads
-from shared.runtime import service_main
+from shared.runtime import lower_priority, service_main
 
-from .service import ViewConfig, ViewService, lower_priority
+from .service import ViewConfig, ViewService
 
 __all__ = ["main"]
 

@@ -9,7 +9,6 @@ for clients that connect later.
 from __future__ import annotations
 
 import logging
-import os
 import resource
 import threading
 
@@ -24,7 +23,7 @@ from shared.transport import open_session, subscribe
 from .config import ViewConfig
 from .core import ViewCore
 
-__all__ = ["ViewConfig", "ViewService", "lower_priority"]
+__all__ = ["ViewConfig", "ViewService"]
 
 log = logging.getLogger("foresight.view")
 
@@ -87,11 +86,5 @@ class ViewService:
                  ", ".join(f"{t} {n}" for t, n in sent.items()) or "nothing", usage.ru_utime + usage.ru_stime,
                  usage.ru_utime, usage.ru_stime)
         return sent
-
-
-def lower_priority(nice: int) -> None:
-    """Lower this process's CPU priority by ``nice`` (the command's own process only)."""
-    if nice:
-        os.nice(nice)
 
 

@@ -90,7 +90,6 @@ class McapLog:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.keys = keys
-        self.builder = builder
         self._stream = SceneStream(builder, viz_period_s) if builder is not None else None
         self._on_viz = on_viz
         self.flush_period_s = flush_period_s
