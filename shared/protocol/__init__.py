@@ -17,12 +17,13 @@ the services call). Import the names from here (``from shared.protocol import Pl
 """
 
 from .codec import decode, encode
-from .keys import ROUTES, SERVICES, Keys
+from .keys import HUMAN_SOURCES, ROUTES, SENSOR, SERVICES, Keys
 from .messages import (
     MESSAGE_TYPES,
     ClassPosterior,
     ClockTick,
     DemoMarker,
+    HumanKeypoints,
     HumanPose,
     OccupancyGrid,
     Plan,
@@ -38,6 +39,7 @@ __all__ = [
     "REASONS",
     "ArraySpec",
     "Message",
+    "HumanKeypoints",
     "HumanPose",
     "DemoMarker",
     "ClassPosterior",
@@ -48,6 +50,8 @@ __all__ = [
     "MESSAGE_TYPES",
     "Keys",
     "SERVICES",
+    "HUMAN_SOURCES",
+    "SENSOR",
     "ROUTES",
     "encode",
     "decode",

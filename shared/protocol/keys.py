@@ -2,26 +2,35 @@
 
 from __future__ import annotations
 
-from .messages import ClassPosterior, ClockTick, DemoMarker, HumanPose, OccupancyGrid, Plan, RobotState
+from .messages import ClassPosterior, ClockTick, DemoMarker, HumanKeypoints, HumanPose, OccupancyGrid, Plan, RobotState
 from .schema import Message
 
-__all__ = ["SERVICES", "ROUTES", "Keys"]
+__all__ = ["SERVICES", "HUMAN_SOURCES", "SENSOR", "ROUTES", "Keys"]
 
-SERVICES = ("replayer", "predictor", "planner", "executor")
+SERVICES = ("replayer", "tracker", "predictor", "planner", "executor")
+"""Foresight's services: each is a role of the access control and declares a liveliness token of its name."""
 
-ROUTES: dict[str, tuple[str, tuple[str, ...]]] = {
-    "pose": ("replayer", ("predictor", "executor")),
-    "demo": ("replayer", ("predictor", "planner", "executor")),
-    "posterior": ("predictor", ("executor",)),
-    "occupancy": ("predictor", ("planner", "executor")),
-    "plan": ("planner", ("executor",)),
-    "robot_state": ("executor", ("planner", "executor")),
-    "clock": ("executor", ("replayer", "planner", "executor")),
+HUMAN_SOURCES = ("replayer", "tracker")
+"""The services that publish the human (poses and markers): a recording, or a live person through the tracker.
+A deployment runs one of them; the contract allows either."""
+
+SENSOR = "sensor"
+"""The role of a body tracker's driver (and of ``foresight tracker --from``'s player): it publishes keypoints only."""
+
+ROUTES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "keypoints": ((SENSOR,), ("tracker", "executor")),
+    "pose": (HUMAN_SOURCES, ("predictor", "executor")),
+    "demo": (HUMAN_SOURCES, ("predictor", "planner", "executor")),
+    "posterior": (("predictor",), ("executor",)),
+    "occupancy": (("predictor",), ("planner", "executor")),
+    "plan": (("planner",), ("executor",)),
+    "robot_state": (("executor",), ("planner", "executor")),
+    "clock": (("executor",), ("replayer", "planner", "executor")),
 }
-"""Who publishes and who subscribes to each data key (an attribute of :class:`Keys`): ``(owner, consumers)``.
+"""Who publishes and who subscribes to each data key (an attribute of :class:`Keys`): ``(owners, consumers)``.
 
-Exactly one service owns (publishes) a key; the executor consumes every key, its own included (its
-MCAP log subscribes to ``<prefix>/**``).
+One service owns each key, except the human's, which either human source publishes; keypoints come from a
+sensor. The executor consumes every key, its own included (its MCAP log subscribes to ``<prefix>/**``).
 Displays and tools read as observers. The access control of :mod:`shared.security.acl` is generated
 from this table, and docs/protocol.md's key table states it.
 """
@@ -36,6 +45,7 @@ class Keys:
 
     def __init__(self, prefix: str = "foresight") -> None:
         self.prefix = prefix
+        self.keypoints = f"{prefix}/sensor/keypoints"
         self.pose = f"{prefix}/human/pose"
         self.demo = f"{prefix}/human/demo"
         self.posterior = f"{prefix}/prediction/posterior"
@@ -50,13 +60,14 @@ class Keys:
         """Liveliness token key of a service."""
         return f"{self.prefix}/alive/{service}"
 
-    def routes(self) -> dict[str, tuple[str, tuple[str, ...]]]:
+    def routes(self) -> dict[str, tuple[tuple[str, ...], tuple[str, ...]]]:
         """Every data key expression with its owner and consumers (:data:`ROUTES`)."""
         return {getattr(self, attr): route for attr, route in ROUTES.items()}
 
     def data_keys(self) -> dict[str, type[Message]]:
         """Every data key expression and the one message type it carries."""
         return {
+            self.keypoints: HumanKeypoints,
             self.pose: HumanPose,
             self.demo: DemoMarker,
             self.posterior: ClassPosterior,

@@ -17,8 +17,9 @@ from __future__ import annotations
 
 __all__ = [
     "MAX_PAYLOAD_BYTES", "MAX_STRING_CHARS", "MAX_CLASSES", "MAX_GOALS", "MAX_WAYPOINTS", "MAX_JOINTS",
-    "MAX_GRID_DIM", "MAX_GRID_CELLS", "AXIS_LIMITS", "MAX_TICK", "MAX_SAMPLES", "MAX_DEMO_ID",
-    "MIN_RESOLUTION_M", "MAX_RESOLUTION_M", "MAX_COORDINATE_M", "MIN_PERIOD_S", "MAX_PERIOD_S", "MIN_DT_S",
+    "MAX_GRID_DIM", "MAX_GRID_CELLS", "MAX_KEYPOINTS", "AXIS_LIMITS", "MAX_TICK", "MAX_SAMPLES", "MAX_DEMO_ID",
+    "MIN_RESOLUTION_M", "MAX_RESOLUTION_M", "MAX_COORDINATE_M", "MAX_KEYPOINT_M", "MAX_FRAME", "MIN_PERIOD_S",
+    "MAX_PERIOD_S", "MIN_DT_S",
     "MAX_DT_S", "MAX_PLANNING_MS", "MAX_ABS_COST", "MAX_ABS_JOINT", "MAX_ABS_JOINT_VELOCITY",
     "JOINT_LIMIT_TOL", "VELOCITY_LIMIT_TOL", "STAMP_FUTURE_S", "STAMP_PAST_S", "MAX_LOGICAL_STAMP_S",
     "LOGICAL_STAMP_TOL_S", "CLOCK_STAMP_RTOL",
@@ -43,8 +44,10 @@ MAX_GRID_DIM = 1024
 MAX_GRID_CELLS = 256 ** 3
 """Voxels of an occupancy grid, ``nx * ny * nz`` (a dense float32 copy is then at most 64 MiB); also
 axis ``N``, the non-zero voxels sent."""
+MAX_KEYPOINTS = 256
+"""Axis ``J``: points of a keypoint frame (body trackers give 15 to 70; marker sets up to ~100)."""
 AXIS_LIMITS: dict[str, int] = {"M": MAX_CLASSES, "K": MAX_GOALS, "T": MAX_WAYPOINTS, "D": MAX_JOINTS,
-                               "N": MAX_GRID_CELLS}
+                               "N": MAX_GRID_CELLS, "J": MAX_KEYPOINTS}
 """The largest length of each named array axis (the symbols of docs/protocol.md)."""
 
 # -- counters ---------------------------------------------------------------------------------------
@@ -64,6 +67,10 @@ MAX_RESOLUTION_M = 0.5
 """Coarsest voxel edge (m)."""
 MAX_COORDINATE_M = 100.0
 """Largest |coordinate| of a grid origin in the scene frame (m)."""
+MAX_KEYPOINT_M = 20.0
+"""Largest |coordinate| of a body keypoint in its sensor's frame (m): a room-sized workcell and then some."""
+MAX_FRAME = 2 ** 53
+"""Largest keypoint frame number (a 1 kHz sensor runs 285 000 years before it reaches this)."""
 MIN_PERIOD_S = 1e-3
 """Shortest lock-step period of a ClockTick (s)."""
 MAX_PERIOD_S = 60.0

@@ -15,10 +15,45 @@ from .limits import MAX_GRID_CELLS, MAX_GRID_DIM
 from .schema import Message, array
 from .schema import field_error as _err
 
-__all__ = ["N_FEATURES", "HumanPose", "DemoMarker", "ClassPosterior", "OccupancyGrid", "Plan", "RobotState",
+__all__ = ["N_FEATURES", "HumanKeypoints", "HumanPose", "DemoMarker", "ClassPosterior", "OccupancyGrid", "Plan",
+           "RobotState",
            "ClockTick", "MESSAGE_TYPES"]
 
 N_FEATURES = 12
+
+
+@dataclass
+class HumanKeypoints(Message):
+    """One frame of a body tracker: 3D positions of named body points (the tracker's input).
+
+    ``names[j]`` names the point whose position is ``positions[j]`` (m, in the coordinate frame
+    ``frame_id``); a point the sensor lost this frame is NaN (all three coordinates). Names are the
+    sensor layout's (docs/keypoints.md): the tracker maps them to the human model's points. ``frame``
+    numbers the sensor's frames (strictly increasing per sender; a gap is a dropped frame). ``tick``
+    is -1 (a sensor runs in real time).
+    """
+
+    TYPE: ClassVar[str] = "HumanKeypoints"
+    stamp: float
+    tick: int
+    frame: int
+    frame_id: str
+    names: list[str]
+    positions: np.ndarray = array("float64", "J", 3, finite=False)
+
+    def check(self) -> None:
+        """Validate this message's invariants (see the class docstring)."""
+        n = self.positions.shape[0]
+        if len(self.names) != n or n == 0:
+            raise _err(self.TYPE, "names", f"has {len(self.names)} names for {n} points (at least one point)")
+        if len(set(self.names)) != len(self.names) or not all(self.names):
+            raise _err(self.TYPE, "names", "must be distinct and non-empty")
+        if self.frame < 0:
+            raise _err(self.TYPE, "frame", f"must be >= 0, got {self.frame}")
+        partial = np.isnan(self.positions).any(axis=1) & ~np.isnan(self.positions).all(axis=1)
+        if np.any(np.isinf(self.positions)) or np.any(partial):
+            raise _err(self.TYPE, "positions", "a point is finite (x, y, z) or missing (NaN, NaN, NaN); "
+                       "infinity or a partly NaN point is neither", "non-finite")
 
 
 @dataclass
@@ -261,5 +296,5 @@ class ClockTick(Message):
 
 MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.TYPE: cls
-    for cls in (HumanPose, DemoMarker, ClassPosterior, OccupancyGrid, Plan, RobotState, ClockTick)
+    for cls in (HumanKeypoints, HumanPose, DemoMarker, ClassPosterior, OccupancyGrid, Plan, RobotState, ClockTick)
 }

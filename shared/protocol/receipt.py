@@ -12,7 +12,7 @@ Order rules, per key and sender:
 * ``tick`` (when >= 0) never decreases; ``ClockTick.tick`` strictly increases. A tick of 0 after a
   higher one starts a new lock-step run and resets that sender's record on that key.
 * ``HumanPose``: ``(demo_id, index)`` strictly increases; ``DemoMarker``: ``(demo_id, start < end)``
-  strictly increases; ``Plan.step`` strictly increases.
+  strictly increases; ``Plan.step`` and ``HumanKeypoints.frame`` strictly increase.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 from .codec import decode
-from .messages import ClockTick, DemoMarker, HumanPose, Plan
+from .messages import ClockTick, DemoMarker, HumanKeypoints, HumanPose, Plan
 from .schema import Message, ProtocolError
 from .validation import Expectations, check_values
 
@@ -47,6 +47,8 @@ def _sequence(msg: Message) -> tuple[int, ...] | None:
         return (msg.demo_id, 0 if msg.event == "start" else 1)
     if isinstance(msg, Plan):
         return (msg.step,)
+    if isinstance(msg, HumanKeypoints):
+        return (msg.frame,)
     return None
 
 

@@ -31,7 +31,7 @@ import numpy as np
 from shared.feature_sets import HERAKLES_NAMES, HERAKLES_RANGES
 
 from . import limits as L
-from .messages import ClassPosterior, ClockTick, DemoMarker, HumanPose, OccupancyGrid, Plan, RobotState
+from .messages import ClassPosterior, ClockTick, DemoMarker, HumanKeypoints, HumanPose, OccupancyGrid, Plan, RobotState
 from .schema import Message
 from .schema import field_error as _err
 
@@ -196,6 +196,15 @@ def _pose(msg: HumanPose, exp: Expectations) -> None:
                    f"range [{_FEATURE_LOW[j]:.4g}, {_FEATURE_HIGH[j]:.4g}]", "out-of-range")
 
 
+def _keypoints(msg: HumanKeypoints, exp: Expectations) -> None:
+    _counter(msg.TYPE, "frame", msg.frame, 0, L.MAX_FRAME)
+    seen = msg.positions[~np.isnan(msg.positions).any(axis=1)]
+    if seen.size and float(np.max(np.abs(seen))) > L.MAX_KEYPOINT_M:
+        j = int(np.argmax(np.where(np.isnan(msg.positions), 0.0, np.abs(msg.positions)).max(axis=1)))
+        raise _err(msg.TYPE, "positions", f"{msg.names[j]} at {msg.positions[j].round(3).tolist()} m, beyond "
+                   f"{L.MAX_KEYPOINT_M:g} m of the sensor", "out-of-range")
+
+
 def _marker(msg: DemoMarker, exp: Expectations) -> None:
     _counter(msg.TYPE, "demo_id", msg.demo_id, 0, L.MAX_DEMO_ID)
     _counter(msg.TYPE, "n_samples", msg.n_samples, 0, L.MAX_SAMPLES)
@@ -266,7 +275,8 @@ def _clock(msg: ClockTick, exp: Expectations) -> None:
 
 
 _RULES: dict[type, Callable[[Any, Expectations], None]] = {
-    HumanPose: _pose, DemoMarker: _marker, ClassPosterior: _posterior, OccupancyGrid: _occupancy, Plan: _plan,
+    HumanKeypoints: _keypoints, HumanPose: _pose, DemoMarker: _marker, ClassPosterior: _posterior,
+    OccupancyGrid: _occupancy, Plan: _plan,
     RobotState: _state, ClockTick: _clock,
 }
 

@@ -2,21 +2,21 @@
 
 Subjects are matched by the common name of the certificate a remote session presents (the role:
 :mod:`shared.security.certificates`). The rules are derived from :data:`shared.protocol.ROUTES`
-(each data key's one owner and its consumers) and nothing else; every message kind not allowed here
+(each data key's owners and consumers) and nothing else; every message kind not allowed here
 is denied (``default_permission: deny``). Zenoh applies them on every unicast link, in router, peer
 and client sessions alike, from the point of view of the session holding the config: *ingress*
 rules govern what a remote subject may send to it, *egress* rules what it may send to the subject.
 
-Per data key ``k`` with owner ``o`` and consumers ``C``:
+Per data key ``k`` with owners ``O`` and consumers ``C``:
 
-* ``put`` in from ``o`` (and from the router, which forwards it); ``put`` out to ``C``, the observer
+* ``put`` in from ``O`` (and from the router, which forwards it); ``put`` out to ``C``, the observer
   and the router;
 * ``declare_subscriber`` in from ``C``, the observer and the router (a subscription tells the
   publisher to send), out to every role (a session announces its own subscriptions to its peers).
 
 Liveliness (``<prefix>/alive/<service>``): each service declares its own token only (the router
 forwards all); every role may watch the tokens (``declare_liveliness_subscriber``,
-``liveliness_query``, its ``reply``). The observer declares no token and puts nothing.
+``liveliness_query``, its ``reply``). The sensor and the observer declare no token; the observer puts nothing.
 
 What a router certificate can do follows from forwarding: it may send any key. A stolen role key
 acts as that role (docs/security.md).
@@ -26,19 +26,20 @@ from __future__ import annotations
 
 from typing import Any
 
-from shared.protocol import SERVICES, Keys
+from shared.protocol import SENSOR, SERVICES, Keys
 
 __all__ = ["ROLES", "ROUTER", "OBSERVER", "access_control", "owned_keys", "consumed_keys", "subscription_exprs"]
 
 ROUTER = "router"
 OBSERVER = "observer"
-ROLES = (ROUTER, *SERVICES, OBSERVER)
-"""Every certificate role: the router, each service (:data:`shared.protocol.SERVICES`), the read-only observer."""
+ROLES = (ROUTER, *SERVICES, SENSOR, OBSERVER)
+"""Every certificate role: the router, each service (:data:`shared.protocol.SERVICES`), a body tracker's driver
+(:data:`shared.protocol.SENSOR`: keypoints only), the read-only observer."""
 
 
 def owned_keys(keys: Keys, role: str) -> list[str]:
     """The data keys ``role`` publishes."""
-    return [key for key, (owner, _) in keys.routes().items() if owner == role]
+    return [key for key, (owners, _) in keys.routes().items() if role in owners]
 
 
 def consumed_keys(keys: Keys, role: str) -> list[str]:

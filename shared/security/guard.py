@@ -42,7 +42,7 @@ def denied(session: Any, key: str, kind: str) -> str:
     if key not in routes:
         return ""
     if kind == "put" and key not in owned_keys(keys, role):
-        return f"role {role} may not put {key} (its owner is {routes[key][0]}): every peer drops it"
+        return f"role {role} may not put {key} (its owners: {', '.join(routes[key][0])}): every peer drops it"
     if kind == "subscribe" and key not in consumed_keys(keys, role):
         return f"role {role} may not subscribe to {key}: it will receive nothing"
     return ""

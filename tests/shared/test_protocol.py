@@ -16,6 +16,7 @@ from shared.protocol import (
     ClassPosterior,
     ClockTick,
     DemoMarker,
+    HumanKeypoints,
     HumanPose,
     Keys,
     Message,
@@ -37,7 +38,11 @@ def samples() -> dict[str, Message]:
     grid[1, 2, 3] = 0.5
     grid[3, 4, 5] = 1.0
     post = np.array([0.2, 0.3, 0.5])
+    points = rng.normal(size=(3, 3))
+    points[1] = np.nan  # a point the sensor lost
     return {
+        "HumanKeypoints": HumanKeypoints(stamp=1.4, tick=-1, frame=41, frame_id="recorder",
+                                         names=["pelvis", "r_wrist", "neck"], positions=points),
         "HumanPose": HumanPose(stamp=1.5, tick=3, tick_last=True, demo_id=2, index=7, features=rng.normal(size=12)),
         "DemoMarker": DemoMarker(stamp=1.0, tick=-1, demo_id=2, event="start", true_class=4, class_name="compound_4",
                                  n_samples=100),
@@ -67,6 +72,26 @@ def pack(d: dict) -> bytes:
 
 def test_samples_cover_every_message_type():
     assert set(samples()) == set(MESSAGE_TYPES)
+
+
+@pytest.mark.parametrize("change,match", [
+    ({"names": ["pelvis", "neck"]}, "2 names for 3 points"),
+    ({"names": ["pelvis", "pelvis", "neck"]}, "distinct"),
+    ({"frame": -1}, "frame: must be >= 0"),
+    ({"positions": np.array([[0.0, 0.0, np.inf], [0.0] * 3, [0.0] * 3])}, "infinity or a partly NaN point"),
+    ({"positions": np.array([[0.0, np.nan, 0.0], [0.0] * 3, [0.0] * 3])}, "infinity or a partly NaN point"),
+])
+def test_keypoint_invariants(change, match):
+    bad = dataclasses.replace(samples()["HumanKeypoints"], **change)
+    with pytest.raises(ProtocolError, match=match):
+        encode(bad)  # never sent
+    d = raw(samples()["HumanKeypoints"])
+    d.update({k: v for k, v in change.items() if k != "positions"})
+    if "positions" in change:
+        p = change["positions"].astype("<f8")
+        d["positions"] = {"dtype": p.dtype.str, "shape": list(p.shape), "data": p.tobytes()}
+    with pytest.raises(ProtocolError, match=match):
+        decode(pack(d), HumanKeypoints)  # nor taken in
 
 
 @pytest.mark.parametrize("name", sorted(MESSAGE_TYPES))

@@ -6,7 +6,17 @@ import msgpack
 import numpy as np
 import pytest
 
-from shared.protocol import REASONS, ClassPosterior, OccupancyGrid, Plan, ProtocolError, RobotState, decode, encode
+from shared.protocol import (
+    REASONS,
+    ClassPosterior,
+    HumanKeypoints,
+    OccupancyGrid,
+    Plan,
+    ProtocolError,
+    RobotState,
+    decode,
+    encode,
+)
 from shared.protocol import limits as L
 
 
@@ -71,7 +81,7 @@ def test_every_named_axis_is_bounded(axis, limit):
     # declared length over the limit with no data behind it: refused as too large, not as a size mismatch
     fields = {"M": (ClassPosterior, "posterior", [limit + 1]), "K": (Plan, "cost_total", [limit + 1]),
               "T": (Plan, "trajectories", [1, limit + 1, 1]), "D": (RobotState, "q", [limit + 1]),
-              "N": (OccupancyGrid, "indices", [limit + 1])}
+              "N": (OccupancyGrid, "indices", [limit + 1]), "J": (HumanKeypoints, "positions", [limit + 1, 3])}
     cls, name, shape = fields[axis]
     raw = msgpack.unpackb(encode(_valid(cls)), raw=False)
     raw[name] = _arr(raw[name]["dtype"], shape, b"")
@@ -125,6 +135,9 @@ def _valid(cls: type):
                     trajectories=np.zeros((1, 3, 1), np.float32), cost_smoothness=np.zeros(1),
                     cost_obstacle=np.zeros(1), cost_human=np.zeros(1), cost_total=np.zeros(1),
                     valid=np.ones(1, bool))
+    if cls is HumanKeypoints:
+        return HumanKeypoints(stamp=1.0, tick=-1, frame=0, frame_id="recorder", names=["pelvis"],
+                              positions=np.zeros((1, 3)))
     if cls is ClassPosterior:
         return ClassPosterior(stamp=1.0, tick=-1, demo_id=0, index=0, class_names=["a", "b"],
                               posterior=np.array([0.5, 0.5]), log_likelihood=np.zeros(2))

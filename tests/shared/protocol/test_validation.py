@@ -13,6 +13,7 @@ from shared.protocol import (
     DemoMarker,
     Expectations,
     GridSpec,
+    HumanKeypoints,
     HumanPose,
     OccupancyGrid,
     Plan,
@@ -175,6 +176,22 @@ def test_pose_features_within_their_plausible_range():
     refused(pose(features=np.r_[0.0, 0.0, 7.0, [0.1] * 7, 0.0, 0.5]), realtime(), "out-of-range", "pelvis_z")
     refused(pose(index=L.MAX_SAMPLES + 1), realtime(), "out-of-range", "index")
     refused(pose(demo_id=-3), realtime(), "out-of-range", "demo_id")
+
+
+def test_keypoints_within_range_of_the_sensor():
+    pts = np.array([[0.1, 0.2, 1.0], [np.nan] * 3, [0.4, 0.2, 1.3]])
+    kp = HumanKeypoints(stamp=NOW, tick=-1, frame=3, frame_id="recorder", names=["pelvis", "neck", "r_wrist"],
+                        positions=pts)
+    check_values(kp, realtime())  # a missing point is no error here (the tracker decides what it needs)
+    far = pts.copy()
+    far[2] = [1500.0, 0.0, 1.0]  # kilometres away
+    with pytest.raises(ProtocolError, match=r"r_wrist at \[1500.0, 0.0, 1.0\] m, beyond 20 m") as info:
+        check_values(dataclasses.replace(kp, positions=far), realtime())
+    assert info.value.reason == "out-of-range"
+    with pytest.raises(ProtocolError, match="frame") as info:
+        check_values(dataclasses.replace(kp, frame=L.MAX_FRAME + 1), realtime())
+    with pytest.raises(ProtocolError, match="stamp") as info:
+        check_values(dataclasses.replace(kp, stamp=NOW - 1000.0), realtime())
 
 
 def test_marker_counters():

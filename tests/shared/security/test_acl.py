@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from shared.protocol import ROUTES, SERVICES, Keys
+from shared.protocol import HUMAN_SOURCES, ROUTES, SENSOR, SERVICES, Keys
 from shared.security.acl import OBSERVER, ROLES, ROUTER, access_control, consumed_keys, owned_keys, subscription_exprs
 
 KEYS = Keys("cell")
@@ -18,14 +18,17 @@ def _rules_of(acl: dict, role: str, message: str, flow: str) -> set[str]:
     return exprs
 
 
-def test_every_data_key_has_exactly_one_owner_among_the_services() -> None:
+def test_every_data_key_has_its_owners_and_only_the_human_has_two() -> None:
     """A key added to Keys.data_keys without an owner in ROUTES fails here."""
     assert set(ROUTES) == {attr for attr in vars(KEYS) if getattr(KEYS, attr) in KEYS.data_keys()}
-    for attr, (owner, consumers) in ROUTES.items():
-        assert owner in SERVICES and set(consumers) <= set(SERVICES), attr
+    for attr, (owners, consumers) in ROUTES.items():
+        assert set(owners) <= {*SERVICES, SENSOR} and set(consumers) <= set(SERVICES), attr
+        assert len(owners) == 1 or owners == HUMAN_SOURCES, attr
         assert "executor" in consumers, f"{attr}: the executor logs every key"
-    owned = [k for role in SERVICES for k in owned_keys(KEYS, role)]
-    assert sorted(owned) == sorted(KEYS.data_keys())  # each key once
+    owned = {k for role in (*SERVICES, SENSOR) for k in owned_keys(KEYS, role)}
+    assert owned == set(KEYS.data_keys())
+    assert set(owned_keys(KEYS, "replayer")) == set(owned_keys(KEYS, "tracker")) == {KEYS.pose, KEYS.demo}
+    assert owned_keys(KEYS, SENSOR) == [KEYS.keypoints]
 
 
 def test_each_role_puts_only_what_it_owns_and_receives_what_it_consumes() -> None:
@@ -36,6 +39,8 @@ def test_each_role_puts_only_what_it_owns_and_receives_what_it_consumes() -> Non
         assert _rules_of(acl, role, "put", "ingress") == set(owned_keys(KEYS, role))
         assert _rules_of(acl, role, "put", "egress") == set(consumed_keys(KEYS, role))
         assert _rules_of(acl, role, "liveliness_token", "ingress") == {KEYS.alive(role)}
+    assert _rules_of(acl, SENSOR, "put", "ingress") == {KEYS.keypoints}  # keypoints only, no token
+    assert _rules_of(acl, SENSOR, "liveliness_token", "ingress") == set()
     assert _rules_of(acl, OBSERVER, "put", "ingress") == set()  # reads only
     assert _rules_of(acl, OBSERVER, "liveliness_token", "ingress") == set()
     assert _rules_of(acl, OBSERVER, "put", "egress") == set(KEYS.data_keys())

@@ -23,8 +23,8 @@ def test_denied_names_role_key_and_reason() -> None:
     remember(session, "planner", keys)
     try:
         assert denied(session, keys.plan, "put") == ""
-        assert denied(session, keys.pose, "put") == ("role planner may not put foresight/human/pose (its owner is "
-                                                     "replayer): every peer drops it")
+        assert denied(session, keys.pose, "put") == ("role planner may not put foresight/human/pose (its owners: "
+                                                     "replayer, tracker): every peer drops it")
         assert denied(session, keys.robot_state, "subscribe") == ""
         assert "may not subscribe to foresight/human/pose" in denied(session, keys.pose, "subscribe")
     finally:
@@ -53,6 +53,6 @@ def test_a_secure_service_logs_what_it_may_not_do(tmp_path: Path, caplog: pytest
         sub.undeclare()
         sub2.undeclare()
     lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("access control:")]
-    assert lines == ["access control: role planner may not put foresight/human/pose (its owner is replayer): every "
-                     "peer drops it", "access control: role planner may not subscribe to foresight/human/pose: it "
-                     "will receive nothing"]
+    assert lines == ["access control: role planner may not put foresight/human/pose (its owners: replayer, "
+                     "tracker): every peer drops it", "access control: role planner may not subscribe to "
+                     "foresight/human/pose: it will receive nothing"]
