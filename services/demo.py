@@ -89,7 +89,13 @@ class DemoConfig:
                           "the experiments', the paper's 50 STOMP iterations)")
     finish: bool = opt(True, help="lockstep: after the last step, the robot executes the rest of its last plan "
                        "(the executor's --finish-path), so that the run ends at the goal")
-    rate_hz: float = opt(30.0, help="real time: poses per second")
+    rate_hz: float = opt(30.0, help="real time: poses per second (keypoint frames with --human keypoints)")
+    human: str = opt("replayer", choices=("replayer", "keypoints"), help="how the human comes in: replayer, the "
+                     "demonstration's posture features; keypoints, the same demonstration as body keypoints (the "
+                     "human model's joint positions, see --keypoint-noise-m) played by `foresight tracker --from`, "
+                     "which fits the features back as it would a live person's (real time only; docs/keypoints.md)")
+    keypoint_noise_m: float = opt(0.0, help="--human keypoints: Gaussian noise per axis on the keypoints (m; a depth "
+                                  "camera's skeleton: about 0.02), seeded by --seed")
     models_dir: Path = opt(Path("models"), help="where trained models are cached")
     run_dir: Path = opt(Path("runs/demo"), help="service logs and the MCAP file go here")
     ros2: bool = opt(False, help="also run the ROS 2 gateway (foresight ros2): the run as ROS 2 topics over "
@@ -119,6 +125,11 @@ class DemoConfig:
             raise ConfigError(f"demo.steps: must be >= 1, got {self.steps}")
         if not (self.period_s > 0 and self.rate_hz > 0 and self.timeout > 0):
             raise ConfigError("demo.period_s, demo.rate_hz and demo.timeout must be > 0")
+        if self.human == "keypoints" and self.mode != "realtime":
+            raise ConfigError("demo.human = keypoints: the tracker takes a sensor's frames as they come, in real time; "
+                              "add --mode realtime")
+        if not (self.keypoint_noise_m >= 0 and self.keypoint_noise_m < 1):
+            raise ConfigError(f"demo.keypoint_noise_m: must be in [0, 1) m, got {self.keypoint_noise_m}")
         if not 0 < self.robot_speed <= 1:
             raise ConfigError(f"demo.robot_speed: must be in (0, 1], got {self.robot_speed}")
         if (self.ros2 or self.robot != "sim") and self.security is not None:

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import tomli_w
 
-from services.demo_run import SERVICES_IN_ORDER, prepare_inputs, service_options
+from services.demo_run import prepare_inputs, service_options, services_in_order
 from shared.config import add_config_arguments, resolve_config
 from shared.config_names import section_class
 from shared.config_tree import config_options
@@ -72,7 +72,8 @@ def prepare(cfg: DemoConfig, directory: Path, out: Callable[[str], None] = print
     scene = load_scene(cfg.scene or None)
     scenario, model, human = prepare_inputs(cfg, scene, Path(directory), out)
     options = service_options(cfg, model, human, scenario.samples_per_tick, mcap=None)
-    names = [*SERVICES_IN_ORDER, *(["ros2"] if cfg.ros2 else []), *(["simrobot"] if cfg.robot == "ros2-sim" else []),
+    names = [*services_in_order(cfg), *(["ros2"] if cfg.ros2 else []),
+             *(["simrobot"] if cfg.robot == "ros2-sim" else []),
              "view"]  # compose.yaml's optional live view (profile live) reads the scene from it
     tables = config_tables({name: options[name] for name in names})
     path = Path(directory) / CONFIG_NAME

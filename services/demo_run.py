@@ -42,7 +42,8 @@ from shared.transport import Presence, open_session, subscribe
 if TYPE_CHECKING:
     from services.demo import DemoConfig
 
-__all__ = ["SERVICES_IN_ORDER", "MODULES", "RunRecord", "run_once", "service_args", "service_options",
+__all__ = ["SERVICES_IN_ORDER", "KEYPOINTS_FILE", "services_in_order", "MODULES", "RunRecord", "run_once",
+           "service_args", "service_options",
            "prepare_inputs"]
 
 log = logging.getLogger("foresight.demo")
@@ -50,6 +51,17 @@ log = logging.getLogger("foresight.demo")
 
 SERVICES_IN_ORDER = ("predictor", "planner", "replayer", "executor")
 """Start order: the executor (simulation master) last, once the others listen."""
+
+KEYPOINTS_FILE = "human-keypoints.csv"
+"""``--human keypoints``: the human's demonstration as a keypoint recording, in the run's directory."""
+
+KEYPOINT_REST_S = 1.5
+"""``--human keypoints``: seconds the person stands still before and after the reach in the recording."""
+
+
+def services_in_order(cfg: DemoConfig) -> tuple[str, ...]:
+    """The demo's four services in start order, the tracker in the replayer's place with ``--human keypoints``."""
+    return tuple("tracker" if s == "replayer" and cfg.human == "keypoints" else s for s in SERVICES_IN_ORDER)
 
 
 def _library(cfg: DemoConfig, scene: Scene) -> MotionLibrary:
@@ -88,10 +100,13 @@ def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_
                     "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--cost.w-human", "0"]), *scene],
         "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
                      "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"])],
+        "tracker": ["--from-file", str(Path(replay_library).parent / KEYPOINTS_FILE), "--rate-hz", str(cfg.rate_hz),
+                    "--lead-s", "0", "--hold-s", "0", "--wait-for", "executor"],  # the rest is in the recording
         "ros2": [*scene, *([] if cfg.robot == "sim" else ["--no-joint-states"])],  # a ROS 2 robot has its own
         "simrobot": [*scene, "--sim-time" if lockstep else "--no-sim-time"],
         "view": ["--port", str(cfg.live or DEFAULT_PORT), *scene],
         "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
+                     *(["--wait-for", "tracker,predictor,planner"] if cfg.human == "keypoints" else []),
                      *([] if cfg.robot == "sim" else ["--robot", "ros2"]),
                      *(["--finish-path"] if lockstep and cfg.finish else []),
                      *(["--live-port", str(cfg.live)] if cfg.live else []),
@@ -155,8 +170,31 @@ def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable
     out(f"foresight demo: prediction model {model}")
     directory.mkdir(parents=True, exist_ok=True)
     human = directory / "human.npz"
-    save_library(MotionLibrary(class_names=list(lib.class_names), demos=[demo], issues=[],
-                               source=f"{lib.source} ({demo.class_name} #{demo.index})"), human)
+    one = MotionLibrary(class_names=list(lib.class_names), demos=[demo], issues=[],
+                        source=f"{lib.source} ({demo.class_name} #{demo.index})")
+    save_library(one, human)
+    if cfg.human == "keypoints":  # the same demonstration as a sensor would see it, for the tracker to play
+        import dataclasses as dc
+
+        import numpy as np
+
+        from shared.keypoints.library import write_keypoint_library
+
+        # the person stands still before and after the reach (the tracker learns the rest position, the reach ends);
+        # written into the recording, so that the sensor's noise goes on through the rest as it would
+        rest = round(KEYPOINT_REST_S * cfg.rate_hz)
+        padded = np.concatenate([np.repeat(demo.features[:1], rest, 0), demo.features,
+                                 np.repeat(demo.features[-1:], rest, 0)])
+        seen = dc.replace(one, demos=[dc.replace(demo, features=padded)])
+        for path in write_keypoint_library(seen, directory / "keypoints", noise_m=cfg.keypoint_noise_m, seed=cfg.seed):
+            if path.stem == demo.class_name:  # the one class with a demonstration; the other files are empty
+                path.replace(directory / KEYPOINTS_FILE)
+            else:
+                path.unlink()
+        (directory / "keypoints").rmdir()
+        noise = f", noise {cfg.keypoint_noise_m * 100:g} cm per axis" if cfg.keypoint_noise_m else ""
+        out(f"foresight demo: the human as body keypoints{noise}: {directory / KEYPOINTS_FILE} (foresight tracker "
+            "--from fits the posture features back)")
     return scenario, model, human
 
 
@@ -214,7 +252,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     status = 0
     # with --ros2 the ROS 2 gateway starts before the executor, so that it sees the whole run; so does the robot
     extra = [*(["ros2"] if cfg.ros2 else []), *(["simrobot"] if cfg.robot == "ros2-sim" else [])]
-    order = (*SERVICES_IN_ORDER[:-1], *extra, SERVICES_IN_ORDER[-1])
+    services = services_in_order(cfg)
+    order = (*services[:-1], *extra, services[-1])
     procs = {name: ServiceProcess(name, MODULES.get(name, f"services.{name}"), args[name], run_dir / f"{name}.log")
              for name in order}
     deadline = time.monotonic() + cfg.timeout

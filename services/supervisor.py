@@ -1,6 +1,6 @@
 """Watching a run's service processes: a service that dies is reported once and the run carries on.
 
-The executor holds the robot while the predictor, the planner or (mid-demonstration) the replayer is
+The executor holds the robot while the predictor, the planner or (mid-demonstration) the human's source is
 gone (its ``hold_without``) or its inputs are stale, so one dead service is a fault to report, not a
 reason to abort the run. With ``restart`` the supervisor starts it again (at most ``max_restarts``
 times per service), and the executor resumes once the service's outputs are fresh.
@@ -13,6 +13,7 @@ import signal
 from collections.abc import Callable, Mapping
 
 from services.processes import ServiceProcess
+from shared.protocol import HUMAN_SOURCES
 
 __all__ = ["Supervisor", "describe_exit"]
 
@@ -37,11 +38,11 @@ class Supervisor:
         out: Where to say it (one line per event).
         restart: Start a dead service again.
         max_restarts: Restarts per service at most.
-        expected: Services whose exit with status 0 is their normal end (the replayer's stream ends).
+        expected: Services whose exit with status 0 is their normal end (the human's source: its stream ends).
     """
 
     def __init__(self, procs: Mapping[str, ServiceProcess], out: Callable[[str], None], restart: bool = False,
-                 max_restarts: int = 3, expected: tuple[str, ...] = ("replayer",)) -> None:
+                 max_restarts: int = 3, expected: tuple[str, ...] = HUMAN_SOURCES) -> None:
         self.procs = procs
         self.out = out
         self.restart = restart

@@ -26,6 +26,7 @@ __all__ = ["SECTIONS", "OTHER_VARIABLES", "section_class", "check_file_sections"
 SECTIONS: dict[str, str] = {
     "zenoh": "shared.config:ZenohConfig",
     "replayer": "services.replayer.core:ReplayerConfig",
+    "tracker": "services.tracker.config:TrackerServiceConfig",
     "predictor": "services.predictor.core:PredictorConfig",
     "planner": "services.planner.config:PlannerServiceConfig",
     "executor": "services.executor.config:ExecutorConfig",

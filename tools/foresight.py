@@ -18,6 +18,8 @@ __all__ = ["COMMANDS", "SUBCOMMANDS", "subcommands", "main"]
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("services.demo", "run the whole system on this machine; compare planners (--compare); a PNG of the run"),
     "replayer": ("services.replayer.__main__", "stream recorded human poses over Zenoh"),
+    "tracker": ("services.tracker.__main__", "a live person's body keypoints -> human poses and reach markers "
+                "(--from FILE: a recording)"),
     "router": ("tools.router", "run a Zenoh router on loopback for local multi-process runs"),
     "library": ("tools.library", "inspect, validate, convert and generate motion libraries"),
     "planner": ("services.planner.__main__", "plan for every goal at once around the predicted occupancy"),

@@ -43,10 +43,11 @@ class ExecutorConfig:
     state_rate_hz: float = opt(50.0, help="RobotState publishing rate (per simulated second in lockstep)")
     stale_limit_s: float = opt(0.5, help="hold the robot when the latest plan or occupancy is older than this")
     require_occupancy: bool = opt(True, help="also hold when the occupancy prediction is missing or stale")
-    hold_without: list[str] = opt(default_factory=lambda: ["predictor", "planner", "replayer"],
+    hold_without: list[str] = opt(default_factory=lambda: ["predictor", "planner", "replayer", "tracker"],
                                   help="hold while one of these services, once seen, is gone (its liveliness "
-                                  "token lost: stopped or killed), before its inputs are stale; the replayer only "
-                                  "when it goes in the middle of a demonstration; empty = never")
+                                  "token lost: stopped or killed), before its inputs are stale; the human's source "
+                                  "(replayer, tracker) only when it goes in the middle of a demonstration or reach; "
+                                  "empty = never")
     goal_tolerance: float = opt(0.02, help="goal reached when every joint is within this of the goal (rad or m)")
     velocity_scale: float = opt(1.0, help="fraction of the robot's joint velocity limits the simulation may use")
     stop_on_goal: bool = opt(False, help="end the run at the end of the step in which the goal is reached")
@@ -102,7 +103,7 @@ class ExecutorConfig:
         if not all(w > 0 and math.isfinite(w) for w in self.path_weights):
             raise ConfigError(f"executor.path_weights: must be finite and > 0, got {self.path_weights}")
         for name in ("wait_for", "hold_without"):
-            unknown = set(getattr(self, name)) - {"replayer", "predictor", "planner"}
+            unknown = set(getattr(self, name)) - {"replayer", "tracker", "predictor", "planner"}
             if unknown:
                 raise ConfigError(f"executor.{name}: unknown service(s) {sorted(unknown)}")
         if not 0 <= self.ros2_domain_id <= 232:

@@ -26,14 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from shared.lockstep import FIRST_PLAN
-from shared.protocol import Plan, RobotState
+from shared.protocol import HUMAN_SOURCES, Plan, RobotState
 
 from .config import ExecutorConfig, ExecutorError
 from .reference import Reference
 
-__all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "reason_kind", "HUMAN_SOURCE"]
-
-HUMAN_SOURCE = "replayer"
+__all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "reason_kind"]
 """The service that streams the human's poses (its liveliness token holds the robot only mid-demonstration)."""
 
 
@@ -212,12 +210,12 @@ class ExecutorCore:
         """Record that ``service``'s liveliness token appeared (``alive``) or was lost.
 
         While a service of ``hold_without`` is gone the robot holds, whatever the age of its last output.
-        The human's source (:data:`HUMAN_SOURCE`) counts as gone only when it goes in the middle of a
-        demonstration: after its end marker the human stands still and its stream may end.
+        The human's source (the replayer or the tracker: ``shared.protocol.HUMAN_SOURCES``) counts as gone only when it
+        goes in the middle of a demonstration: after its end marker the human stands still and its stream may end.
         """
         if service not in self.config.hold_without:
             return
-        if service == HUMAN_SOURCE and not alive and self.fresh.demo_end is not None:
+        if service in HUMAN_SOURCES and not alive and self.fresh.demo_end is not None:
             return  # the human's stream ended (its end marker came first): the human stands still, no fault
         self.gone = self.gone - {service} if alive else self.gone | {service}
 

@@ -30,7 +30,7 @@ from shared.protocol import ClassPosterior, HumanPose, OccupancyGrid, Plan, Robo
 
 from .wire import data_key
 
-__all__ = ["Ros2Config", "Ros2Mapping", "Topic", "TOPICS", "Ros2InputError"]
+__all__ = ["Ros2Config", "Ros2Mapping", "Topic", "TOPICS", "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError"]
 
 STORE = "ros2_jazzy"
 """The rosbags type store the message definitions and hashes come from (ROS 2 Jazzy)."""
@@ -61,6 +61,9 @@ TOPICS = {
 ROBOT_TYPES = {"command": "trajectory_msgs/msg/JointTrajectory", "state": "sensor_msgs/msg/JointState",
                "clock": "rosgraph_msgs/msg/Clock"}
 """What the executor exchanges with a ROS 2 robot (``robot = "ros2"``): plans out, joint states in, /clock out."""
+
+KEYPOINTS_TYPE = "geometry_msgs/msg/PoseArray"
+"""A body tracker's keypoints, as the tracker takes them from ROS 2 (:mod:`services.ros2.keypoints`)."""
 
 
 @dataclass
@@ -122,7 +125,7 @@ class Ros2Mapping:
 
         self.config = config
         self.ts = get_typestore(Stores.ROS2_JAZZY)
-        types = {t.msgtype for t in TOPICS.values()} | set(ROBOT_TYPES.values())
+        types = {t.msgtype for t in TOPICS.values()} | set(ROBOT_TYPES.values()) | {KEYPOINTS_TYPE}
         self.hashes = {msgtype: self.ts.hash_rihs01(msgtype) for msgtype in sorted(types)}
 
     # -- keys -------------------------------------------------------------------------------------------------

@@ -1,17 +1,22 @@
 """When a reach begins and ends: the rule that stands in for the recorder's demonstration markers.
 
 A live person gives no markers, and the predictor recognises a motion from its start. The rule: the right
-wrist, in the body's own frame (relative to the pelvis, turned by its yaw, so that walking or turning is not a
-reach), has a rest position - its mean over the first ``rest_s`` (no reach can start before), then its running
-mean while no reach is under way. A reach **starts** when the
-wrist is more than ``start_m`` from rest; its first pose is the one ``pre_s`` before that moment (the motion
-began before the threshold was crossed: the library's demonstrations start at rest). It **ends** when the
-wrist has stayed within ``end_m`` of a still position for ``end_s`` (the hand came to rest: at the goal or
-back home), or after ``max_s``.
+wrist, in the body's own frame (relative to the pelvis, turned by the shoulder line's yaw, so that walking or
+turning is not a reach), has a rest position - its mean over the first ``rest_s`` (no reach can start before),
+then its running mean while no reach is under way. A reach **starts** when the wrist is more than ``start_m`` from
+rest; its first pose is the one ``pre_s`` before that moment (the motion began before the threshold was crossed:
+the library's demonstrations start at rest). It **ends** when the hand
+has come to rest (at the goal or back home): the wrist's positions over the last ``end_s`` lie within ``end_m``
+of their mean, as a root mean square - not every frame within it, because a sensor's centimetre noise, which the
+smoothing lets through at speed, kept a still hand "moving" (with 1 or 2 cm of noise per axis a reach never ended
+when the rule asked every frame to stay within 3 cm of one place), and not the drift of the mean alone, which a
+hand going out and back within the window does not show (the paper's motions ended mid-reach) - or after
+``max_s``.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +29,7 @@ class ReachRule:
     """The rule's thresholds (the tracker's config holds them)."""
 
     start_m: float = 0.10
-    end_m: float = 0.03
+    end_m: float = 0.02
     end_s: float = 0.5
     pre_s: float = 0.3
     rest_s: float = 1.0
@@ -58,8 +63,7 @@ class ReachDetector:
         self._since: float | None = None  # the first frame after a reset: the rest position is learnt from then
         self._n = 0
         self._start_t = 0.0
-        self._still_since: float | None = None
-        self._still_at: np.ndarray | None = None
+        self._window: deque[tuple[float, np.ndarray]] = deque()  # the wrist over the last end_s of the reach
 
     def update(self, wrist: np.ndarray, t: float) -> ReachEvent | None:
         """The event at this frame, if any (``wrist``: ``(3,)`` body-frame position, m; ``t``: s)."""
@@ -77,16 +81,25 @@ class ReachDetector:
                 return None
             if np.linalg.norm(w - self._rest) > r.start_m:
                 self.active, self._start_t = True, t
-                self._still_since, self._still_at = None, None
+                self._window.clear()
                 return ReachEvent("start", t - r.pre_s)
             a = min(1.0, dt / r.rest_s) if r.rest_s > 0 else 1.0  # the rest position follows a still hand
             self._rest = self._rest + a * (w - self._rest)
             return None
-        if self._still_at is None or np.linalg.norm(w - self._still_at) > r.end_m:
-            self._still_at, self._still_since = w.copy(), t
-        assert self._still_since is not None
-        if t - self._still_since >= r.end_s or t - self._start_t >= r.max_s:
+        self._window.append((t, w))
+        while len(self._window) > 1 and t - self._window[1][0] >= r.end_s:  # the oldest kept: end_s ago or more
+            self._window.popleft()
+        if self._still() or t - self._start_t >= r.max_s:
             self.active = False
-            self._rest = w.copy()  # where the hand came to rest is the new rest position
+            half = self._window[-1][0] - 0.5 * r.end_s  # where the hand came to rest (the window's recent half): rest
+            self._rest = np.mean([p for s, p in self._window if s >= half], axis=0)
             return ReachEvent("end", t)
         return None
+
+    def _still(self) -> bool:
+        """Whether the window spans ``end_s`` and its wrist positions lie within ``end_m`` (rms) of their mean."""
+        r = self.rule
+        if self._window[-1][0] - self._window[0][0] < r.end_s - 1e-9 or len(self._window) < 4:
+            return False
+        p = np.array([w for _, w in self._window])
+        return bool(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=-1))) < r.end_m)

@@ -45,6 +45,10 @@ class FitConfig:
     Attributes:
         iterations: Most Gauss-Newton steps per frame.
         tolerance_m: Stop when no feature moves more than this (m or rad) in a step.
+        rel_tolerance: Stop when a step lowers the cost by less than this fraction of it. With noisy points the
+            cost's floor is the noise, and steps that shave 0.1 % off it move the joints by micrometres: with
+            1e-8 a frame of 2 cm noise took 6 steps (median) and up to the 30 allowed, 19.6 ms p99; with 1e-3,
+            3 and 13, 13.9 ms, the joints' error unchanged (17.35 / 17.32 mm; clean points 0.035 mm both).
         prior: ``(12,)`` weight of each feature's pull towards the prior (previous frame).
         bounds: Feature name -> ``(low, high)``; features are kept inside.
         damping: Initial Levenberg-Marquardt damping.
@@ -52,6 +56,7 @@ class FitConfig:
 
     iterations: int = 30
     tolerance_m: float = 1e-4
+    rel_tolerance: float = 1e-3
     prior: list[float] = field(default_factory=_default_prior)
     bounds: dict[str, tuple[float, float]] = field(default_factory=lambda: dict(HERAKLES_RANGES))
     damping: float = 1e-3
@@ -174,7 +179,7 @@ class KeypointFit:
             r_new = self._residuals(f_new, y, w, f0)
             cost_new = np.sum(r_new ** 2, axis=-1)
             better = (cost_new <= cost) & active  # a frame that has converged stays as it is (batched == looped)
-            small = better & (cost - cost_new <= 1e-8 * cost)  # no longer worth a step (noisy points: the optimum)
+            small = better & (cost - cost_new <= self.config.rel_tolerance * cost)  # noisy points: at the optimum
             f = np.where(better[:, None], f_new, f)
             r = np.where(better[:, None], r_new, r)
             cost = np.where(better, cost_new, cost)

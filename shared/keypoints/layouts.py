@@ -3,7 +3,8 @@
 A layout is a small table (``shared/data/keypoints/<name>.toml``): each Foresight point
 (:data:`shared.keypoints.POINT_NAMES`) is the mean of the layout points listed for it, e.g. the pelvis is the
 mean of COCO's two hips. Foresight's own point names are the layout ``foresight`` (identity). Points a
-layout does not give are simply unobserved.
+layout does not give are simply unobserved. The table's ``ignored`` list names the layout's other points (a
+sensor sends them; Foresight does not use them), so that a name that is neither is an error, not a silent miss.
 """
 
 from __future__ import annotations
@@ -29,11 +30,22 @@ class Layout:
     name: str
     description: str
     points: dict[str, tuple[str, ...]]
+    ignored: tuple[str, ...] = ()
 
     @property
     def source_names(self) -> list[str]:
         """Every layout point the table uses, in a stable order."""
         return sorted({n for names in self.points.values() for n in names})
+
+    @property
+    def table_names(self) -> list[str]:
+        """Every layout point the table uses, in the table's order (Foresight's points' order for ``foresight``)."""
+        return list(dict.fromkeys(n for names in self.points.values() for n in names))
+
+    def unknown(self, names: list[str]) -> list[str]:
+        """The names in ``names`` that are not this layout's points (neither used nor ``ignored``)."""
+        known = {*self.source_names, *self.ignored}
+        return [n for n in names if n not in known]
 
     def to_model(self, names: list[str], positions: np.ndarray) -> np.ndarray:
         """Positions in the layout's names -> Foresight's points.
@@ -75,4 +87,4 @@ def load_layout(name: str) -> Layout:
     missing = [p for p in REQUIRED if p not in points]
     if missing:
         raise ValueError(f"keypoint layout {name}: gives none of the required {missing}")
-    return Layout(data["name"], data.get("description", ""), points)
+    return Layout(data["name"], data.get("description", ""), points, tuple(data.get("ignored", ())))

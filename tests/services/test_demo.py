@@ -131,3 +131,35 @@ def test_demo_live_takes_a_port_or_foxgloves_default(capsys: pytest.CaptureFixtu
     live = opts["executor"].index("--live-port")  # the executor serves the scene it logs
     assert opts["executor"][live + 1] == "8765" and "--live-port" not in service_options(
         DemoConfig(), Path("m.npz"), Path("h.npz"), 3, None)["executor"]
+
+
+def test_demo_human_as_keypoints_plays_them_through_the_tracker(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                                                  ) -> None:
+    """``--human keypoints``: the human's demonstration as a noisy keypoint recording, the tracker in the replayer's
+    place (its config from --prepare, which writes what the demo runs), real time only."""
+    import tomllib
+
+    import numpy as np
+
+    from services.demo_run import KEYPOINT_REST_S
+    from shared.keypoints.library import read_keypoint_csv
+    from shared.library import load_library
+
+    with pytest.raises(SystemExit):
+        main(["--human", "keypoints"])  # lock-step: the tracker runs on the wall clock
+    assert "add --mode realtime" in capsys.readouterr().err
+    lib = tmp_path / "lib.npz"
+    save_library(generate_library(8, 6, seed=3), lib)
+    out = tmp_path / "compose"
+    assert main(["--prepare", str(out), "--library", str(lib), "--components", "4", "--mode", "realtime",
+                 "--human", "keypoints", "--keypoint-noise-m", "0.02", "--models-dir", str(tmp_path / "models")]) == 0
+    config = tomllib.loads((out / "foresight.toml").read_text())
+    assert set(config) == {"predictor", "planner", "tracker", "executor", "view"}
+    assert config["executor"]["wait_for"] == ["tracker", "predictor", "planner"]
+    assert config["tracker"]["wait_for"] == ["executor"] and config["tracker"]["lead_s"] == 0.0
+    (demo,) = read_keypoint_csv(Path(config["tracker"]["from_file"]))
+    (human,) = load_library(out / "human.npz").demos
+    rest = round(KEYPOINT_REST_S * 30)
+    assert len(demo.frames) == human.n_samples + 2 * rest  # the person at rest before and after the reach
+    spread = np.std(demo.positions[:rest, 0], axis=0)  # fresh noise on every frame of the rest
+    assert np.all((spread > 0.01) & (spread < 0.03))

@@ -10,7 +10,11 @@ clock for all), so differences between log times are end-to-end latencies across
   (only plans published while a demonstration streams: after its end marker no pose is new);
 * occupancy -> plan: the same, from the OccupancyGrid the plan used;
 * the replanning period achieved: differences between consecutive Plans' log times;
-* planning time: ``Plan.planning_ms`` as the planner measured it.
+* planning time: ``Plan.planning_ms`` as the planner measured it;
+* with the tracker in the loop (a ``HumanKeypoints`` channel): keypoints -> pose, a HumanPose's log time minus that
+  of the keypoint frame it was fitted from (the frame with the pose's stamp; poses interpolated across a gap have
+  none), and keypoints -> plan, from that frame to the plan. A reach's first poses (``pre_s`` of them) are published
+  together when the reach is recognised, so they carry that wait.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from shared.protocol import DemoMarker, HumanPose, OccupancyGrid, Plan, ProtocolError, decode
+from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, OccupancyGrid, Plan, ProtocolError, decode
 
 __all__ = ["Stat", "run_latencies", "format_latencies"]
 
@@ -50,10 +54,12 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
     Args:
         messages: Log messages with ``topic``, ``log_time`` (ns) and ``data`` (msgpack payload), in file order.
         topics: Topic of each message type: keys ``"pose"``, ``"occupancy"``, ``"plan"`` and optionally
-            ``"demo"`` (DemoMarker: plans after a demonstration's end do not count for pose -> plan).
+            ``"demo"`` (DemoMarker: plans after a demonstration's end do not count for pose -> plan) and
+            ``"keypoints"`` (HumanKeypoints: the tracker's input).
 
     Returns:
-        ``{"pose_to_occupancy", "pose_to_plan", "occupancy_to_plan", "replanning_period", "planning"}``.
+        ``{"pose_to_occupancy", "pose_to_plan", "occupancy_to_plan", "replanning_period", "planning"}``, and with
+        ``"keypoints"`` also ``"keypoints_to_pose"`` and ``"keypoints_to_plan"``.
     """
     pose_time: dict[tuple[int, int], int] = {}
     occ_time: dict[tuple[int, int], int] = {}
@@ -62,16 +68,26 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
     occ_to_plan: list[float] = []
     plan_times: list[int] = []
     planning: list[float] = []
+    frame_time: dict[float, int] = {}   # keypoint frame stamp -> its log time
+    pose_frame: dict[tuple[int, int], int] = {}  # pose -> the log time of the frame it was fitted from
+    kp_to_pose: list[float] = []
+    kp_to_plan: list[float] = []
     current_demo = -1
     streaming = True
     for m in sorted(messages, key=lambda m: m.log_time):
         try:
-            if m.topic == topics.get("demo"):
+            if m.topic == topics.get("keypoints"):
+                frame_time[decode(m.data, HumanKeypoints).stamp] = m.log_time
+            elif m.topic == topics.get("demo"):
                 streaming = decode(m.data, DemoMarker).event == "start"
             elif m.topic == topics["pose"]:
                 pose = decode(m.data, HumanPose)
                 pose_time[(pose.demo_id, pose.index)] = m.log_time
                 current_demo = pose.demo_id
+                t_frame = frame_time.get(pose.stamp)
+                if t_frame is not None:
+                    pose_frame[(pose.demo_id, pose.index)] = t_frame
+                    kp_to_pose.append((m.log_time - t_frame) / 1e6)
             elif m.topic == topics["occupancy"]:
                 occ = decode(m.data, OccupancyGrid)
                 occ_time[(occ.demo_id, occ.index)] = m.log_time
@@ -89,12 +105,17 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
                     pose_to_plan.append((m.log_time - pose_time[key]) / 1e6)
                 if plan.occupancy_index >= 0 and key in occ_time:
                     occ_to_plan.append((m.log_time - occ_time[key]) / 1e6)
+                if plan.occupancy_index >= 0 and key in pose_frame:
+                    kp_to_plan.append((m.log_time - pose_frame[key]) / 1e6)
         except ProtocolError:
             continue
     period = list(np.diff(np.asarray(plan_times, dtype=np.float64)) / 1e6)
-    return {"pose_to_occupancy": Stat.of(pose_to_occ), "pose_to_plan": Stat.of(pose_to_plan),
-            "occupancy_to_plan": Stat.of(occ_to_plan), "replanning_period": Stat.of(period),
-            "planning": Stat.of(planning)}
+    stats = {"pose_to_occupancy": Stat.of(pose_to_occ), "pose_to_plan": Stat.of(pose_to_plan),
+             "occupancy_to_plan": Stat.of(occ_to_plan), "replanning_period": Stat.of(period),
+             "planning": Stat.of(planning)}
+    if "keypoints" in topics:
+        stats |= {"keypoints_to_pose": Stat.of(kp_to_pose), "keypoints_to_plan": Stat.of(kp_to_plan)}
+    return stats
 
 
 def format_latencies(stats: dict[str, Stat]) -> str:
@@ -113,12 +134,14 @@ def log_latencies(path: str | Path) -> dict[str, Stat]:
     """
     from shared.recording.reader import read_log
 
-    wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.DemoMarker"}
+    wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.DemoMarker",
+              "foresight.HumanKeypoints"}
     lf = read_log(path, keep=lambda ch: ch.schema_name in wanted and ch.message_encoding == "msgpack")
     topics = {}
     for ch in lf.channels.values():
         for key, schema in (("pose", "foresight.HumanPose"), ("occupancy", "foresight.OccupancyGrid"),
-                            ("plan", "foresight.Plan"), ("demo", "foresight.DemoMarker")):
+                            ("plan", "foresight.Plan"), ("demo", "foresight.DemoMarker"),
+                            ("keypoints", "foresight.HumanKeypoints")):
             if ch.schema_name == schema and ch.message_encoding == "msgpack":
                 topics[key] = ch.topic
     if not {"pose", "occupancy", "plan"} <= set(topics):

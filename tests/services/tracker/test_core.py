@@ -118,3 +118,19 @@ def test_bad_options_are_named() -> None:
         TrackerConfig(max_gap_s=0).validate()
     with pytest.raises(ConfigError, match="tracker.beta"):
         TrackerConfig(beta=-1).validate()
+
+
+@pytest.mark.parametrize("noise_m", [0.01, 0.02])
+def test_a_sensors_noise_makes_no_reach_and_ends_the_real_one(reach, noise_m) -> None:
+    # 2 cm per axis is a depth camera's skeleton; the wrist in the frame of the pelvis yaw feature swung 14.5 cm
+    # (p99) at rest under it, and a reach never ended by stillness when every frame had to stay within end_m
+    rng = np.random.default_rng(1)
+    still = np.repeat(reach[:1], 300, 0)  # 10 s of a person standing still
+    core = TrackerCore()
+    assert not [m for m in messages(run(core, still, edit=lambda i, p: p + rng.normal(0, noise_m, p.shape)))]
+    core = TrackerCore()
+    held = np.concatenate([reach, np.repeat(reach[-1:], 60, 0)])
+    markers = [m for m in messages(run(core, held, edit=lambda i, p: p + rng.normal(0, noise_m, p.shape)))
+               if isinstance(m, DemoMarker)]
+    assert [m.event for m in markers] == ["start", "end"]
+    assert markers[-1].stamp < (len(held) - 30) / RATE  # ended by stillness, not by the data's end

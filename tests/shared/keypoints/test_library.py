@@ -69,3 +69,16 @@ def test_every_layout_loads_and_maps_its_points() -> None:
     np.testing.assert_allclose(pelvis[POINT_NAMES.index("pelvis")], [0.0, 0.0, 1.0])
     with pytest.raises(ValueError, match="unknown"):
         load_layout("kinect_v1")
+
+
+def test_a_layout_knows_every_point_its_sensor_sends() -> None:
+    coco = load_layout("coco17")
+    every_coco_point = ["nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder", "right_shoulder",
+                        "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip",
+                        "left_knee", "right_knee", "left_ankle", "right_ankle"]
+    assert coco.unknown(every_coco_point) == []
+    assert coco.unknown(["right_wrist", "r_wrist", "RWRA"]) == ["r_wrist", "RWRA"]  # another layout's names
+    assert set(coco.ignored).isdisjoint(coco.source_names)
+    gait = load_layout("plugin_gait")
+    assert set(gait.ignored).isdisjoint(gait.source_names) and gait.unknown(["C7", "RFIN", "LKNE"]) == []
+    assert load_layout("foresight").unknown(["pelvis", "left_hip"]) == ["left_hip"]

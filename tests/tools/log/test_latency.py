@@ -62,3 +62,23 @@ def test_plans_after_the_demonstration_ended_do_not_count_for_pose_to_plan():
     stats = run_latencies(msgs, {"pose": "p", "occupancy": "o", "plan": "x", "demo": "d"})
     assert stats["pose_to_plan"] == Stat(1, 50.0, 50.0, 50.0)
     assert stats["replanning_period"].count == 1  # the period counts every plan
+
+
+def test_with_the_tracker_keypoints_to_pose_and_to_plan_follow_the_frame_each_pose_came_from():
+    from shared.protocol import HumanKeypoints
+
+    ms = 1_000_000
+    msgs = []
+    for i in range(3):  # frames at 0, 33, 66 ms; each pose 7 ms after its frame (stamp = the frame's)
+        stamp = 100.0 + i / 30
+        msgs.append(Msg("k", i * 33 * ms, encode(HumanKeypoints(stamp=stamp, tick=-1, frame=i, frame_id="recorder",
+                                                                names=["pelvis"], positions=np.zeros((1, 3))))))
+        msgs.append(Msg("p", (i * 33 + 7) * ms, encode(HumanPose(stamp=stamp, tick=-1, tick_last=True, demo_id=0,
+                                                                  index=i, features=np.zeros(12)))))
+    bridged = HumanPose(stamp=100.5, tick=-1, tick_last=True, demo_id=0, index=3, features=np.zeros(12))
+    msgs += [Msg("p", 120 * ms, encode(bridged)),  # interpolated across a gap: no frame of its own
+             Msg("x", 150 * ms, encode(_plan(2)))]
+    stats = run_latencies(msgs, {"pose": "p", "occupancy": "o", "plan": "x", "keypoints": "k"})
+    assert stats["keypoints_to_pose"] == Stat(3, 7.0, 7.0, 7.0)
+    assert stats["keypoints_to_plan"] == Stat(1, 150.0 - 66, 150.0 - 66, 150.0 - 66)
+    assert "keypoints_to_pose" not in run_latencies(msgs, {"pose": "p", "occupancy": "o", "plan": "x"})

@@ -1,0 +1,211 @@
+"""The tracker's Zenoh loop: keypoint frames in (Foresight's key or ROS 2), ``HumanPose`` and ``DemoMarker`` out.
+
+Each frame is checked on receipt (``shared.protocol.Receipt``: form, coordinates within range of the sensor,
+frame numbers increasing per sender), then goes through :class:`~services.tracker.core.TrackerCore` under a
+lock (Zenoh calls subscribers on threads of its own). A refused frame gets one logged line and is counted
+(per reason, in the shutdown line); nothing of it is published. With ``--from FILE`` a player thread plays a
+keypoint recording on the keypoints key in real time from a session of its own that presents the ``sensor``
+role, so the frames take the same way as a sensor driver's (:mod:`services.tracker.playback`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from shared.config import ConfigError, ZenohConfig
+from shared.human import HumanModel
+from shared.keypoints.library import read_keypoint_csv
+from shared.protocol import (
+    SENSOR,
+    DemoMarker,
+    Expectations,
+    HumanKeypoints,
+    HumanPose,
+    Keys,
+    ProtocolError,
+    Receipt,
+    check_values,
+)
+from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe
+
+from .config import TrackerServiceConfig
+from .core import REASONS, TrackerCore
+from .playback import Playback
+
+__all__ = ["TrackerService", "TrackerStats", "NODE_NAME"]
+
+log = logging.getLogger("foresight.tracker")
+
+NODE_NAME = "foresight_tracker"
+"""The tracker's ROS 2 node name (input ros2)."""
+
+
+@dataclass
+class TrackerStats:
+    """What a run took in and gave out."""
+
+    frames: int = 0
+    poses: int = 0
+    markers: int = 0
+    reaches: int = 0
+    played: int = 0
+    refused: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REASONS, 0))
+
+
+class TrackerService:
+    """A live person's keypoints -> the human's poses and reach markers on Foresight's keys.
+
+    Args:
+        config: The service's, the core's and the playback's options.
+        zenoh_config: Session options (endpoints, prefix, security).
+        model: The human model (default: ``HumanModel()``).
+
+    Raises:
+        ConfigError: ``--from`` names a file that is no keypoint recording, or a player without a router to reach.
+    """
+
+    def __init__(self, config: TrackerServiceConfig, zenoh_config: ZenohConfig,
+                 model: HumanModel | None = None) -> None:
+        config.validate()
+        self.config = config
+        self.zenoh_config = zenoh_config
+        self.keys = Keys(zenoh_config.prefix)
+        self.core = TrackerCore(config.tracker, model)
+        self.stats = TrackerStats()
+        self.rejects = RejectCounter("tracker")
+        self._lock = threading.Lock()
+        self._ros2_frame = 0
+        self._pubs: tuple[TypedPublisher[HumanPose], TypedPublisher[DemoMarker]] | None = None
+        self.playback: Playback | None = None
+        if config.from_file is not None:
+            try:
+                self.playback = Playback(read_keypoint_csv(config.from_file), config.playback)
+            except ValueError as exc:
+                raise ConfigError(f"tracker.from_file: {exc}") from None
+            if not zenoh_config.connect:
+                raise ConfigError("tracker.from_file: the player connects to the router in zenoh.connect; none given")
+
+    # -- frames ------------------------------------------------------------------------------------------------
+
+    def on_keypoints(self, msg: HumanKeypoints) -> None:
+        """One checked frame: through the core, its messages published, a refusal logged and counted."""
+        with self._lock:
+            self.stats.frames += 1
+            out = self.core.on_keypoints(msg)
+            if out.refused is not None:
+                reason = out.refused.split(":", 1)[0]
+                self.stats.refused[reason] += 1
+                log.warning("tracker: frame %d refused (%s); refused so far: %s", msg.frame, out.refused,
+                            ", ".join(f"{k} {v}" for k, v in self.stats.refused.items() if v))
+                return
+            assert self._pubs is not None
+            poses, markers = self._pubs
+            for m in out.messages:
+                if isinstance(m, HumanPose):
+                    poses.put(m)
+                    self.stats.poses += 1
+                else:
+                    assert isinstance(m, DemoMarker)
+                    markers.put(m)
+                    self.stats.markers += 1
+                    if m.event == "start":
+                        self.stats.reaches += 1
+                        log.info("tracker: reach %d starts (its first pose at %.3f)", m.demo_id, m.stamp)
+                    else:
+                        log.info("tracker: reach %d ends at %.3f after %d poses", m.demo_id, m.stamp, m.n_samples)
+
+    def _on_pose_array(self, mapping: Any, names: list[str], payload: bytes) -> None:
+        """A ROS 2 ``PoseArray``: as a ``HumanKeypoints`` frame, checked like one off Foresight's key."""
+        from services.ros2.keypoints import keypoints_in
+
+        stamp, frame_id, positions = keypoints_in(mapping, payload, len(names))  # Ros2InputError: counted
+        msg = HumanKeypoints(stamp=stamp or time.time(), tick=-1, frame=self._ros2_frame, frame_id=frame_id,
+                             names=names, positions=positions)
+        self._ros2_frame += 1
+        msg.check()  # ProtocolError (a ValueError): refused and counted by the node
+        check_values(msg, Expectations(clock="realtime"))
+        self.on_keypoints(msg)
+
+    # -- the loop ----------------------------------------------------------------------------------------------
+
+    def run(self, stop: threading.Event | None = None) -> TrackerStats:
+        """Serve until ``stop`` is set (or, with ``--from`` and no loop, shortly after the recording ends)."""
+        stop = stop or threading.Event()
+        cfg = self.config
+        with open_session(self.zenoh_config, stop, "tracker") as session:
+            self._pubs = (TypedPublisher(session, self.keys.pose, block=True),
+                          TypedPublisher(session, self.keys.demo, block=True))
+            closers = self._inputs(session)
+            presence = Presence(session, self.keys, "tracker", stop_with=cfg.stop_with, stop=stop)
+            log.info("tracker: %s keypoints (layout %s, frame %s) -> %s, session %s", self._source(),
+                     cfg.tracker.layout, cfg.tracker.frame_id, self.keys.pose, describe(session)["zid"])
+            try:
+                if self.playback is not None:
+                    presence.wait_for(cfg.wait_for, cfg.wait_timeout, stop)
+                    self._play(self.playback, stop)
+                    stop.wait(0.5)  # the last frames' poses and markers are delivered
+                else:
+                    stop.wait()
+            finally:
+                presence.close()
+                for close in closers:
+                    close()
+        self.stats.refused = dict(self.core.refused)
+        log.info("tracker: stopped after %d frames (%d played), %d reaches, %d poses, %d markers; refused: %s; "
+                 "rejected on receipt: %s", self.stats.frames, self.stats.played, self.stats.reaches, self.stats.poses,
+                 self.stats.markers, ", ".join(f"{k} {v}" for k, v in self.stats.refused.items()) or "none",
+                 self.rejects.summary())
+        return self.stats
+
+    def _source(self) -> str:
+        if self.config.input == "ros2":
+            return f"ROS 2 PoseArray on {self.config.ros2_topic} (domain {self.config.ros2_domain_id})"
+        return f"{self.keys.keypoints}" + (f" (playing {self.config.from_file})" if self.config.from_file else "")
+
+    def _inputs(self, session: Any) -> list[Any]:
+        """Subscribe to the configured input; returns what to close."""
+        cfg = self.config
+        if cfg.input == "zenoh":
+            sub = subscribe(session, self.keys.keypoints, HumanKeypoints, self.on_keypoints, self.rejects,
+                            Receipt(Expectations(clock="realtime")))
+            return [sub.undeclare]
+        from services.ros2.core import KEYPOINTS_TYPE, Ros2Config, Ros2Mapping
+        from services.ros2.node import Ros2Node
+
+        mapping = Ros2Mapping(Ros2Config(domain_id=cfg.ros2_domain_id))
+        names = list(cfg.ros2_points) or self.core.layout.table_names
+        node = Ros2Node(session, cfg.ros2_domain_id, "/", NODE_NAME, mapping.hashes, self.rejects)
+        node.subscription(cfg.ros2_topic, KEYPOINTS_TYPE, lambda payload: self._on_pose_array(mapping, names, payload))
+        log.info("tracker: ROS 2 node /%s takes %s, poses in the order %s", NODE_NAME, cfg.ros2_topic, names)
+        return [node.close]
+
+    def _play(self, playback: Playback, stop: threading.Event) -> None:
+        """Play the recording on the keypoints key in real time, as the ``sensor`` role."""
+        zcfg = dataclasses.replace(self.zenoh_config, role=SENSOR, listen=[],
+                                   mode="client" if self.zenoh_config.mode == "client" else "peer")
+        with open_session(zcfg, stop, "tracker player") as session:
+            pub: TypedPublisher[HumanKeypoints] = TypedPublisher(session, self.keys.keypoints, block=True)
+            log.info("tracker: playing %s: %d demonstrations, %.1f s a pass%s", self.config.from_file,
+                     len(playback.demos), playback.duration_s(), " (looping)" if playback.config.loop else "")
+            stop.wait(0.3)  # the subscription is known to the router before the first frame
+            start = time.monotonic()
+            for frame in playback.frames():
+                delay = start + frame.t - time.monotonic()
+                if delay > 0 and stop.wait(delay):
+                    break
+                if stop.is_set():
+                    break
+                try:
+                    pub.put(HumanKeypoints(stamp=time.time(), tick=-1, frame=frame.frame,
+                                           frame_id=self.config.tracker.frame_id, names=playback.names,
+                                           positions=frame.positions))
+                except ProtocolError as exc:  # the recording holds a frame the contract refuses: say so, go on
+                    log.warning("tracker: recording frame %d not sent: %s", frame.frame, exc)
+                    continue
+                self.stats.played += 1
+            log.info("tracker: played %d frames", self.stats.played)

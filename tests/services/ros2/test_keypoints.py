@@ -1,0 +1,29 @@
+"""Keypoints as a ROS 2 PoseArray: round trip through CDR, lost points as NaN, the count checked."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.ros2.core import KEYPOINTS_TYPE, Ros2Config, Ros2InputError, Ros2Mapping
+from services.ros2.keypoints import keypoints_in, keypoints_out
+
+
+def test_pose_array_round_trip_keeps_positions_lost_points_stamp_and_frame() -> None:
+    mapping = Ros2Mapping(Ros2Config())
+    pos = np.array([[0.1, 0.2, 1.0], [np.nan] * 3, [-0.3, 0.25, 1.4]])
+    payload = keypoints_out(mapping, pos, 1700000000.25, "recorder")
+    assert payload[:4] == b"\x00\x01\x00\x00"  # CDR little-endian
+    stamp, frame_id, back = keypoints_in(mapping, payload, 3)
+    assert stamp == pytest.approx(1700000000.25) and frame_id == "recorder"
+    np.testing.assert_array_equal(back, pos)
+    assert mapping.hashes[KEYPOINTS_TYPE].startswith("RIHS01_")
+
+
+def test_pose_array_of_another_size_or_type_is_refused() -> None:
+    mapping = Ros2Mapping(Ros2Config())
+    payload = keypoints_out(mapping, np.zeros((2, 3)), 1.0, "recorder")
+    with pytest.raises(Ros2InputError, match="2 poses, the tracker's point order has 3"):
+        keypoints_in(mapping, payload, 3)
+    with pytest.raises(Ros2InputError, match="PoseArray"):
+        keypoints_in(mapping, mapping.clock(1.0), 3)

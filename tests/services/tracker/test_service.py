@@ -1,0 +1,247 @@
+"""The tracker over Zenoh on loopback: keypoints in (Foresight's key, a recording, ROS 2), poses out; bad frames."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+import time
+from pathlib import Path
+
+import msgpack
+import numpy as np
+import pytest
+
+from services.experiments.harness import ServiceThread
+from services.ros2.core import KEYPOINTS_TYPE, Ros2Config, Ros2Mapping
+from services.ros2.keypoints import keypoints_out
+from services.ros2.node import Ros2Node
+from services.tracker.__main__ import main as tracker_main
+from services.tracker.config import PlaybackConfig, TrackerServiceConfig
+from services.tracker.core import TrackerConfig
+from services.tracker.service import TrackerService
+from shared.human import HumanModel
+from shared.keypoints.library import write_keypoint_library
+from shared.library import MotionLibrary
+from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Keys, encode
+from shared.rejects import RejectCounter
+from shared.synthetic import generate_library
+from shared.transport import Presence, TypedPublisher, open_session, subscribe_ordered
+
+MODEL = HumanModel()
+NAMES = list(MODEL.JOINT_NAMES)
+
+
+class Collector:
+    """Poses and markers in arrival order."""
+
+    def __init__(self, session, keys: Keys) -> None:
+        self.items: list = []
+        self.cond = threading.Condition()
+        self.sub = subscribe_ordered(session, keys.human_all, {keys.pose: HumanPose, keys.demo: DemoMarker}, self.add)
+
+    def add(self, msg) -> None:
+        with self.cond:
+            self.items.append(msg)
+            self.cond.notify_all()
+
+    def wait(self, predicate, timeout: float = 20.0) -> bool:
+        with self.cond:
+            return self.cond.wait_for(lambda: predicate(self.items), timeout=timeout)
+
+    def markers(self) -> list[DemoMarker]:
+        with self.cond:
+            return [m for m in self.items if isinstance(m, DemoMarker)]
+
+
+def _reach_frames(rate_hz: float = 30.0) -> np.ndarray:
+    """``(T, J, 3)`` joint positions of one synthetic reach, its first frame held 1.5 s before and after."""
+    demo = generate_library(2, 1, seed=4).demos[0]
+    joints = MODEL.joint_positions(demo.features)
+    hold = int(1.5 * rate_hz)
+    return np.concatenate([np.repeat(joints[:1], hold, 0), joints, np.repeat(joints[-1:], hold, 0)])
+
+
+def _service(hub, session=None, keys: Keys | None = None, **kw) -> tuple[TrackerService, ServiceThread]:
+    """A tracker in a thread; with ``session``, returns once its token (and so its subscription) is seen."""
+    cfg = TrackerServiceConfig(**kw)
+    service = TrackerService(cfg, hub())
+    thread = ServiceThread("tracker", service.run).start()
+    if session is not None:
+        presence = Presence(session, keys, "tester")
+        assert presence.wait_for(["tracker"], 20.0) == []
+        presence.close()
+        time.sleep(0.2)
+    return service, thread
+
+
+def _all_taken(service: TrackerService, n: int, timeout: float = 10.0) -> bool:
+    end = time.monotonic() + timeout
+    while service.stats.frames < n and time.monotonic() < end:
+        time.sleep(0.05)
+    return service.stats.frames >= n
+
+
+def _sensor(session, keys: Keys) -> TypedPublisher[HumanKeypoints]:
+    return TypedPublisher(session, keys.keypoints, block=True)
+
+
+def _kp(frame: int, positions: np.ndarray, names=None, frame_id: str = "recorder") -> HumanKeypoints:
+    return HumanKeypoints(stamp=time.time(), tick=-1, frame=frame, frame_id=frame_id, names=names or NAMES,
+                          positions=positions)
+
+
+def test_a_sensors_reach_becomes_poses_between_markers(zenoh_hub) -> None:
+    hub = zenoh_hub
+    tester = hub()
+    keys = Keys(tester.prefix)
+    frames = _reach_frames()
+    with open_session(tester) as session:
+        service, thread = _service(hub, session, keys)
+        try:
+            got = Collector(session, keys)
+            pub = _sensor(session, keys)
+            for i, pos in enumerate(frames):
+                pub.put(_kp(i, pos))
+                time.sleep(1 / 30)
+            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "end" for m in items))
+            assert _all_taken(service, len(frames))
+            items = list(got.items)
+        finally:
+            stats = thread.stop()
+    assert [(m.event, m.demo_id, m.true_class) for m in items if isinstance(m, DemoMarker)] == [
+        ("start", 0, -1), ("end", 0, -1)]
+    poses = [m for m in items if isinstance(m, HumanPose)]
+    assert isinstance(items[0], DemoMarker) and isinstance(items[-1], DemoMarker)
+    assert [p.index for p in poses] == list(range(len(poses))) and items[-1].n_samples == len(poses)
+    # the fitted poses put the wrist where the keypoints had it (smoothing lags a little)
+    wrist = NAMES.index("r_wrist")
+    fitted = np.stack([MODEL.joint_positions(p.features)[wrist] for p in poses])
+    nearest = np.min(np.linalg.norm(fitted[:, None] - frames[None, :, wrist], axis=-1), axis=1)
+    assert np.median(nearest) < 0.02
+    assert stats.frames == len(frames) and stats.reaches == 1 and sum(stats.refused.values()) == 0
+
+
+def test_bad_frames_get_one_line_each_are_never_published_and_the_tracker_goes_on(zenoh_hub, caplog) -> None:
+    hub = zenoh_hub
+    tester = hub()
+    keys = Keys(tester.prefix)
+    frames = _reach_frames()
+    good = frames[0]
+    caplog.set_level(logging.INFO)
+    with open_session(tester) as session:
+        service, thread = _service(hub, session, keys)
+        try:
+            got = Collector(session, keys)
+            pub = _sensor(session, keys)
+            raw = session.declare_publisher(keys.keypoints)
+            no_wrist = good.copy()
+            no_wrist[NAMES.index("r_wrist")] = np.nan
+            far = good.copy()
+            far[NAMES.index("r_hand")] = [1500.0, 0.0, 1.0]
+            pub.put(_kp(0, no_wrist))                                          # a required point missing
+            pub.put(_kp(1, good, names=[*NAMES[:-1], "left_pinky"]))          # a name the layout does not have
+            pub.put(_kp(2, good, frame_id="camera_link"))                      # another coordinate frame
+            for payload in (_wire(_kp(3, far)),                                # kilometres away
+                            _wire(_kp(4, good), names=NAMES[:5]),              # a frame of another size
+                            _wire(_kp(5, good), nan_x=True),                   # NaN in one coordinate
+                            b"\x93\x01\x02"):                                   # not a message
+                raw.put(payload)
+            time.sleep(0.5)
+            for i, pos in enumerate(frames):                                   # then a good reach
+                pub.put(_kp(10 + i, pos))
+                time.sleep(1 / 30)
+            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "end" for m in items))
+            raw.undeclare()
+        finally:
+            stats = thread.stop()
+    assert thread.error is None
+    assert stats.refused["missing"] == 1 and stats.refused["names"] == 1 and stats.refused["frame"] == 1
+    text = caplog.text
+    assert "frame 0 refused (missing: required point(s) missing: r_wrist)" in text
+    assert "'left_pinky', not points of the layout foresight" in text
+    assert "frame 2 refused (frame: frame 2 is in 'camera_link', the tracker takes 'recorder')" in text
+    assert "r_hand at [1500.0, 0.0, 1.0] m, beyond 20 m" in text
+    rejected = service.rejects.summary()
+    assert "out-of-range 1" in rejected and "invariant" in rejected and "malformed" in rejected
+    assert stats.reaches == 1  # the good reach went through: nothing of the bad frames was published
+
+
+def _wire(msg: HumanKeypoints, names=None, nan_x: bool = False) -> bytes:
+    """``msg``'s payload, altered after encoding (a sender that does not check what it sends)."""
+    d = msgpack.unpackb(encode(msg), raw=False)
+    if names is not None:
+        d["names"] = names
+    if nan_x:
+        pos = msg.positions.copy()
+        pos[0, 0] = np.nan
+        d["positions"]["data"] = pos.astype("<f8").tobytes()
+    return msgpack.packb(d, use_bin_type=True)
+
+
+def test_from_file_plays_a_recording_through_the_wire(zenoh_hub, tmp_path: Path) -> None:
+    hub = zenoh_hub
+    tester = hub()
+    keys = Keys(tester.prefix)
+    lib = generate_library(2, 2, seed=4)
+    write_keypoint_library(MotionLibrary(lib.class_names, lib.demos[:2], [], "test"), tmp_path / "kp")
+    recording = tmp_path / "kp" / f"{lib.demos[0].class_name}.csv"
+    play = PlaybackConfig(rate_hz=30.0, lead_s=1.2, hold_s=1.2, gap_s=0.6)
+    with open_session(tester) as session:
+        got = Collector(session, keys)
+        time.sleep(0.3)
+        service, thread = _service(hub, from_file=recording, playback=play)
+        stats = thread.join(60.0)  # ends on its own after the recording
+        assert got.wait(lambda items: sum(isinstance(m, DemoMarker) and m.event == "end" for m in items) >= 1)
+    n = sum(d.n_samples for d in lib.demos[:2] if d.class_name == lib.demos[0].class_name)
+    assert stats.played >= n and stats.frames == stats.played  # every played frame came back through Zenoh
+    starts = [m for m in got.markers() if m.event == "start"]
+    assert len(starts) == stats.reaches >= 1
+
+
+def test_ros2_pose_array_input(zenoh_hub) -> None:
+    hub = zenoh_hub
+    tester = hub()
+    keys = Keys(tester.prefix)
+    mapping = Ros2Mapping(Ros2Config())
+    frames = _reach_frames()
+    with open_session(tester) as session:
+        service, thread = _service(hub, session, keys, input="ros2", ros2_topic="/body/keypoints")
+        try:
+            got = Collector(session, keys)
+            node = Ros2Node(session, 0, "/", "skeleton_driver", mapping.hashes, RejectCounter("driver"))
+            pub = node.publisher("/body/keypoints", KEYPOINTS_TYPE)
+            time.sleep(0.3)
+            pub.put(keypoints_out(mapping, frames[0][:5], time.time(), "recorder"))  # 5 poses: not the point order
+            for pos in frames:
+                pub.put(keypoints_out(mapping, pos, time.time(), "recorder"))
+                time.sleep(1 / 30)
+            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "end" for m in items))
+            assert _all_taken(service, len(frames))
+            node.close()
+        finally:
+            stats = thread.stop()
+    assert stats.reaches == 1 and stats.frames == len(frames)
+    assert service.rejects.counts == {"/body/keypoints": 1}
+
+
+def test_cli_refuses_a_recording_that_is_not_one(tmp_path: Path, capsys) -> None:
+    bad = tmp_path / "reach.csv"
+    bad.write_text("time,x,y\n0,1,2\n")
+    with pytest.raises(SystemExit) as info:
+        tracker_main(["--from", str(bad), "--connect", "tcp/127.0.0.1:9"], prog="foresight tracker")
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "tracker.from_file" in err[0] and "header must be demo,frame" in err[0]
+    with pytest.raises(SystemExit):
+        tracker_main(["--from", str(tmp_path / "none.csv")], prog="foresight tracker")
+    assert "is not a file" in capsys.readouterr().err
+
+
+def test_config_checks() -> None:
+    with pytest.raises(Exception, match="ros2_topic"):
+        TrackerServiceConfig(ros2_topic="body").validate()
+    with pytest.raises(Exception, match="max_residual_m"):
+        TrackerServiceConfig(tracker=dataclasses.replace(TrackerConfig(), max_residual_m=0.0)).validate()
+    with pytest.raises(Exception, match="rate_hz"):
+        TrackerServiceConfig(playback=PlaybackConfig(rate_hz=-1.0)).validate()
