@@ -28,20 +28,8 @@ from shared.security import OBSERVER
 from shared.security.guard import denied, forget, remember
 from shared.security.tls import insecure_listen_warning, security_settings
 
-__all__ = [
-    "TransportError",
-    "zenoh_config",
-    "open_session",
-    "open_with_retry",
-    "TypedPublisher",
-    "subscribe",
-    "subscribe_ordered",
-    "LatestSubscriber",
-    "RejectCounter",
-    "sender_of",
-    "Presence",
-    "describe",
-]
+__all__ = ["TransportError", "zenoh_config", "open_session", "open_with_retry", "TypedPublisher", "subscribe",
+           "subscribe_ordered", "LatestSubscriber", "RejectCounter", "sender_of", "Presence", "describe"]
 
 log = logging.getLogger(__name__)
 M = TypeVar("M", bound=Message)
@@ -186,6 +174,10 @@ class TypedPublisher(Generic[M]):
         data = encode(msg)
         self._pub.put(data, attachment=self.sender.encode())
         return data
+
+    def matched(self) -> bool:
+        """Whether a subscriber (in any session Zenoh routes to) matches the key now."""
+        return bool(self._pub.matching_status.matching)
 
     def undeclare(self) -> None:
         """Release the publisher."""

@@ -192,7 +192,9 @@ class TrackerService:
             pub: TypedPublisher[HumanKeypoints] = TypedPublisher(session, self.keys.keypoints, block=True)
             log.info("tracker: playing %s: %d demonstrations, %.1f s a pass%s", self.config.from_file,
                      len(playback.demos), playback.duration_s(), " (looping)" if playback.config.loop else "")
-            stop.wait(0.3)  # the subscription is known to the router before the first frame
+            deadline = time.monotonic() + 10.0  # the first frames go once the tracker's subscription is routed here
+            while not pub.matched() and time.monotonic() < deadline and not stop.wait(0.05):
+                pass
             start = time.monotonic()
             for frame in playback.frames():
                 delay = start + frame.t - time.monotonic()

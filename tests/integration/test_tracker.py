@@ -74,7 +74,9 @@ def test_a_recorded_person_through_the_tracker_is_recognised_by_the_predictor(sy
     markers = [m for m in human_msgs if isinstance(m, DemoMarker)]
     assert [(m.event, m.demo_id) for m in markers] == [("start", 0), ("end", 0)]
     poses = [m for m in human_msgs if isinstance(m, HumanPose)]
-    assert len(poses) == markers[-1].n_samples >= 0.8 * human.demos[0].n_samples
+    # the reach ends once the wrist's last second spreads less than 2 cm (rms): this synthetic reach's slow final
+    # approach (minimum-jerk-like) does, before its last samples
+    assert len(poses) == markers[-1].n_samples >= 0.5 * human.demos[0].n_samples
     # the predictor took the reach's poses (the first ones arrive at once, the reach known only then: it predicts
     # for the newest of a burst) up to the last, and answered with its belief and occupancy
     indices = [p.index for p in posteriors if p.demo_id == 0]

@@ -77,6 +77,19 @@ def test_typed_pub_sub_and_rejects(zenoh_hub):
         assert rejects.counts == {keys.clock: 2}
 
 
+def test_a_publisher_knows_when_a_subscriber_matches(zenoh_hub):
+    a, b = zenoh_hub(), zenoh_hub()
+    keys = Keys("t5")
+    with open_session(a) as sa, open_session(b) as sb:
+        pub = TypedPublisher(sb, keys.clock)
+        time.sleep(0.3)
+        assert not pub.matched()  # nobody listens: what it puts is gone
+        sub = subscribe(sa, keys.clock, ClockTick, lambda m: None)
+        assert wait_until(pub.matched)
+        sub.undeclare()
+        assert wait_until(lambda: not pub.matched())
+
+
 def test_latest_subscriber_drops_stale(zenoh_hub):
     a, b = zenoh_hub(), zenoh_hub()
     keys = Keys("t2")
