@@ -174,8 +174,6 @@ def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable
                         source=f"{lib.source} ({demo.class_name} #{demo.index})")
     save_library(one, human)
     if cfg.human == "keypoints":  # the same demonstration as a sensor would see it, for the tracker to play
-        import dataclasses as dc
-
         import numpy as np
 
         from shared.keypoints.library import write_keypoint_library
@@ -185,7 +183,7 @@ def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable
         rest = round(KEYPOINT_REST_S * cfg.rate_hz)
         padded = np.concatenate([np.repeat(demo.features[:1], rest, 0), demo.features,
                                  np.repeat(demo.features[-1:], rest, 0)])
-        seen = dc.replace(one, demos=[dc.replace(demo, features=padded)])
+        seen = dataclasses.replace(one, demos=[dataclasses.replace(demo, features=padded)])
         for path in write_keypoint_library(seen, directory / "keypoints", noise_m=cfg.keypoint_noise_m, seed=cfg.seed):
             if path.stem == demo.class_name:  # the one class with a demonstration; the other files are empty
                 path.replace(directory / KEYPOINTS_FILE)

@@ -8,10 +8,11 @@ import time
 from dataclasses import dataclass
 
 from shared.config import ZenohConfig
+from shared.human_source import HumanPublisher
 from shared.library import MotionLibrary
 from shared.lockstep_followers import TickOrder, TickQueue
 from shared.protocol import ClockTick, DemoMarker, Expectations, HumanPose, Keys, Message, Receipt
-from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe
+from shared.transport import Presence, RejectCounter, describe, open_session, subscribe
 
 from .core import ReplayerConfig, ReplayerCore, load_replay_library, select_demos
 
@@ -59,8 +60,7 @@ class ReplayerService:
         cfg = self.config
         core = ReplayerCore(self.demos, loop=cfg.loop, max_demos=cfg.max_demos)
         with open_session(self.zenoh_config, stop, "replayer") as session:
-            pose_pub: TypedPublisher[HumanPose] = TypedPublisher(session, self.keys.pose, block=True)
-            demo_pub: TypedPublisher[DemoMarker] = TypedPublisher(session, self.keys.demo, block=True)
+            human = HumanPublisher(session, self.keys)
             # lock-step: listen to the clock before announcing ourselves, so no tick sent after our
             # liveliness token appears is missed
             ticks = TickQueue()
@@ -74,10 +74,10 @@ class ReplayerService:
                      describe(session)["zid"])
             try:
                 if clock_sub is not None:
-                    self._run_lockstep(ticks, core, pose_pub, demo_pub, stop)
+                    self._run_lockstep(ticks, core, human, stop)
                 else:
                     presence.wait_for(cfg.wait_for, cfg.wait_timeout, stop)
-                    self._run_realtime(core, pose_pub, demo_pub, stop)
+                    self._run_realtime(core, human, stop)
                 self.stats.finished = core.done
                 if core.done:
                     stop.wait(LINGER_S)
@@ -92,31 +92,24 @@ class ReplayerService:
 
     # ------------------------------------------------------------------------------------------
 
-    def _publish(self, msgs: list[Message], pose_pub: TypedPublisher[HumanPose],
-                 demo_pub: TypedPublisher[DemoMarker]) -> None:
+    def _publish(self, msgs: list[Message], human: HumanPublisher) -> None:
         for m in msgs:
-            if isinstance(m, HumanPose):
-                pose_pub.put(m)
-                self.stats.poses += 1
-            else:
-                assert isinstance(m, DemoMarker)
-                demo_pub.put(m)
-                self.stats.markers += 1
-                if m.event == "start":
-                    self.stats.demos += 1
-                    log.info("replayer: demo %d start: %s (class %d, %s), %d samples", m.demo_id, m.class_name,
-                             m.true_class, self._source(m), m.n_samples)
+            assert isinstance(m, HumanPose | DemoMarker)
+            human.put(m)
+            if isinstance(m, DemoMarker) and m.event == "start":
+                log.info("replayer: demo %d start: %s (class %d, %s), %d samples", m.demo_id, m.class_name,
+                         m.true_class, self._source(m), m.n_samples)
+        self.stats.poses, self.stats.markers, self.stats.demos = human.poses, human.markers, human.starts
 
     def _source(self, m: DemoMarker) -> str:
         d = self.demos[m.demo_id % len(self.demos)]
         return d.source
 
-    def _run_realtime(self, core: ReplayerCore, pose_pub: TypedPublisher[HumanPose],
-                      demo_pub: TypedPublisher[DemoMarker], stop: threading.Event) -> None:
+    def _run_realtime(self, core: ReplayerCore, human: HumanPublisher, stop: threading.Event) -> None:
         period = 1.0 / self.config.rate_hz
         next_t = time.monotonic()
         while not stop.is_set() and not core.done:
-            self._publish(core.step(1, stamp=time.time()), pose_pub, demo_pub)
+            self._publish(core.step(1, stamp=time.time()), human)
             next_t += period
             delay = next_t - time.monotonic()
             if delay > 0:
@@ -124,8 +117,8 @@ class ReplayerService:
             elif delay < -1.0:  # fell far behind (suspended?): do not burst to catch up
                 next_t = time.monotonic()
 
-    def _run_lockstep(self, ticks: TickQueue, core: ReplayerCore, pose_pub: TypedPublisher[HumanPose],
-                      demo_pub: TypedPublisher[DemoMarker], stop: threading.Event) -> None:
+    def _run_lockstep(self, ticks: TickQueue, core: ReplayerCore, human: HumanPublisher,
+                      stop: threading.Event) -> None:
         order = TickOrder()
         n = self.config.samples_per_tick
         while not stop.is_set() and not core.done:
@@ -138,4 +131,4 @@ class ReplayerService:
             if not take:
                 continue
             self.stats.ticks += 1
-            self._publish(core.step(n, stamp=tick.stamp, tick=tick.tick, dt=tick.period / n), pose_pub, demo_pub)
+            self._publish(core.step(n, stamp=tick.stamp, tick=tick.tick, dt=tick.period / n), human)

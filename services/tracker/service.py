@@ -19,6 +19,7 @@ from typing import Any
 
 from shared.config import ConfigError, ZenohConfig
 from shared.human import HumanModel
+from shared.human_source import HumanPublisher
 from shared.keypoints.library import read_keypoint_csv
 from shared.protocol import (
     SENSOR,
@@ -29,7 +30,6 @@ from shared.protocol import (
     Keys,
     ProtocolError,
     Receipt,
-    check_values,
 )
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe
 
@@ -80,7 +80,8 @@ class TrackerService:
         self.rejects = RejectCounter("tracker")
         self._lock = threading.Lock()
         self._ros2_frame = 0
-        self._pubs: tuple[TypedPublisher[HumanPose], TypedPublisher[DemoMarker]] | None = None
+        self._ros2_receipt = Receipt(Expectations(clock="realtime"))
+        self._human: HumanPublisher | None = None
         self.playback: Playback | None = None
         if config.from_file is not None:
             try:
@@ -98,26 +99,19 @@ class TrackerService:
             self.stats.frames += 1
             out = self.core.on_keypoints(msg)
             if out.refused is not None:
-                reason = out.refused.split(":", 1)[0]
-                self.stats.refused[reason] += 1
                 log.warning("tracker: frame %d refused (%s); refused so far: %s", msg.frame, out.refused,
-                            ", ".join(f"{k} {v}" for k, v in self.stats.refused.items() if v))
+                            ", ".join(f"{k} {v}" for k, v in self.core.refused.items() if v))
                 return
-            assert self._pubs is not None
-            poses, markers = self._pubs
+            human = self._human
+            assert human is not None
             for m in out.messages:
-                if isinstance(m, HumanPose):
-                    poses.put(m)
-                    self.stats.poses += 1
-                else:
-                    assert isinstance(m, DemoMarker)
-                    markers.put(m)
-                    self.stats.markers += 1
-                    if m.event == "start":
-                        self.stats.reaches += 1
-                        log.info("tracker: reach %d starts (its first pose at %.3f)", m.demo_id, m.stamp)
-                    else:
-                        log.info("tracker: reach %d ends at %.3f after %d poses", m.demo_id, m.stamp, m.n_samples)
+                assert isinstance(m, HumanPose | DemoMarker)
+                human.put(m)
+                if isinstance(m, DemoMarker) and m.event == "start":
+                    log.info("tracker: reach %d starts (its first pose at %.3f)", m.demo_id, m.stamp)
+                elif isinstance(m, DemoMarker):
+                    log.info("tracker: reach %d ends at %.3f after %d poses", m.demo_id, m.stamp, m.n_samples)
+            self.stats.poses, self.stats.markers, self.stats.reaches = human.poses, human.markers, human.starts
 
     def _on_pose_array(self, mapping: Any, names: list[str], payload: bytes) -> None:
         """A ROS 2 ``PoseArray``: as a ``HumanKeypoints`` frame, checked like one off Foresight's key."""
@@ -128,7 +122,7 @@ class TrackerService:
                              names=names, positions=positions)
         self._ros2_frame += 1
         msg.check()  # ProtocolError (a ValueError): refused and counted by the node
-        check_values(msg, Expectations(clock="realtime"))
+        self._ros2_receipt.check(self.config.ros2_topic, msg)
         self.on_keypoints(msg)
 
     # -- the loop ----------------------------------------------------------------------------------------------
@@ -138,8 +132,7 @@ class TrackerService:
         stop = stop or threading.Event()
         cfg = self.config
         with open_session(self.zenoh_config, stop, "tracker") as session:
-            self._pubs = (TypedPublisher(session, self.keys.pose, block=True),
-                          TypedPublisher(session, self.keys.demo, block=True))
+            self._human = HumanPublisher(session, self.keys)
             closers = self._inputs(session)
             presence = Presence(session, self.keys, "tracker", stop_with=cfg.stop_with, stop=stop)
             log.info("tracker: %s keypoints (layout %s, frame %s) -> %s, session %s", self._source(),
