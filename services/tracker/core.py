@@ -168,6 +168,10 @@ class TrackerCore:
         self._out = (stamp, smooth)
         return out
 
+    def finish(self) -> TrackerOutput:
+        """The frames have stopped for good (the tracker is stopping): end the reach under way, forget the past."""
+        return TrackerOutput(self._lost(self._raw[0]) if self._raw is not None else [])
+
     # -- internals ---------------------------------------------------------------------------------
 
     def _refuse(self, reason: str, why: str) -> TrackerOutput:

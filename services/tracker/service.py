@@ -102,16 +102,20 @@ class TrackerService:
                 log.warning("tracker: frame %d refused (%s); refused so far: %s", msg.frame, out.refused,
                             ", ".join(f"{k} {v}" for k, v in self.core.refused.items() if v))
                 return
-            human = self._human
-            assert human is not None
-            for m in out.messages:
-                assert isinstance(m, HumanPose | DemoMarker)
-                human.put(m)
-                if isinstance(m, DemoMarker) and m.event == "start":
-                    log.info("tracker: reach %d starts (its first pose at %.3f)", m.demo_id, m.stamp)
-                elif isinstance(m, DemoMarker):
-                    log.info("tracker: reach %d ends at %.3f after %d poses", m.demo_id, m.stamp, m.n_samples)
-            self.stats.poses, self.stats.markers, self.stats.reaches = human.poses, human.markers, human.starts
+            self._publish(out.messages)
+
+    def _publish(self, messages: list) -> None:
+        """The core's poses and markers on their keys (under the lock)."""
+        human = self._human
+        assert human is not None
+        for m in messages:
+            assert isinstance(m, HumanPose | DemoMarker)
+            human.put(m)
+            if isinstance(m, DemoMarker) and m.event == "start":
+                log.info("tracker: reach %d starts (its first pose at %.3f)", m.demo_id, m.stamp)
+            elif isinstance(m, DemoMarker):
+                log.info("tracker: reach %d ends at %.3f after %d poses", m.demo_id, m.stamp, m.n_samples)
+        self.stats.poses, self.stats.markers, self.stats.reaches = human.poses, human.markers, human.starts
 
     def _on_pose_array(self, mapping: Any, names: list[str], payload: bytes) -> None:
         """A ROS 2 ``PoseArray``: as a ``HumanKeypoints`` frame, checked like one off Foresight's key."""
@@ -145,9 +149,14 @@ class TrackerService:
                 else:
                     stop.wait()
             finally:
-                presence.close()
                 for close in closers:
                     close()
+                with self._lock:  # no frame comes any more: a reach under way ends, so the stream is whole
+                    last = self.core.finish().messages
+                    self._publish(last)
+                if last:
+                    time.sleep(0.2)  # delivered before the session closes
+                presence.close()
         self.stats.refused = dict(self.core.refused)
         log.info("tracker: stopped after %d frames (%d played), %d reaches, %d poses, %d markers; refused: %s; "
                  "rejected on receipt: %s", self.stats.frames, self.stats.played, self.stats.reaches, self.stats.poses,

@@ -134,3 +134,13 @@ def test_a_sensors_noise_makes_no_reach_and_ends_the_real_one(reach, noise_m) ->
                if isinstance(m, DemoMarker)]
     assert [m.event for m in markers] == ["start", "end"]
     assert markers[-1].stamp < (len(held) - 30) / RATE  # ended by stillness, not by the data's end
+
+
+def test_finish_ends_the_reach_under_way(reach) -> None:
+    core = TrackerCore()
+    outs = run(core, reach[: len(reach) // 2])  # stopped mid-reach
+    assert [m.event for m in messages(outs) if isinstance(m, DemoMarker)] == ["start"]
+    (end,) = core.finish().messages
+    poses = [m for m in messages(outs) if isinstance(m, HumanPose)]
+    assert isinstance(end, DemoMarker) and end.event == "end" and end.n_samples == len(poses)
+    assert core.finish().messages == []  # nothing under way any more
