@@ -3,7 +3,7 @@
 Each frame is checked on receipt (``shared.protocol.Receipt``: form, coordinates within range of the sensor,
 frame numbers increasing per sender), then goes through :class:`~services.tracker.core.TrackerCore` under a
 lock (Zenoh calls subscribers on threads of its own). A refused frame gets one logged line and is counted
-(per reason, in the shutdown line); nothing of it is published. With ``--from FILE`` a player thread plays a
+(per reason, in the shutdown line); nothing of it is published. With ``--from FILE`` the service plays a
 keypoint recording on the keypoints key in real time from a session of its own that presents the ``sensor``
 role, so the frames take the same way as a sensor driver's (:mod:`services.tracker.playback`).
 """
