@@ -2,9 +2,11 @@
 
 The default run is the one `foresight eval pace` found prediction to matter in: the scene of the
 paper's Table I (``pr2_two_cups_side``), the human reaching for the blue cup, across the robot's way
-to the red one, and the robot moving at 0.1 of the PR2's velocity limits with a replanning step of
-0.5 s (docs/experiments.md, "Across the robot's pace"). ``--compare`` runs it with the paper's
-baselines too and says whether prediction kept the robot further from the human.
+to the red one (the robot's one goal, ``--goals red_cup``, as in Table I and the pace sweep), and the
+robot moving at 0.1 of the PR2's velocity limits with a replanning step of 0.5 s (docs/experiments.md,
+"Across the robot's pace"). ``--compare`` runs it with the paper's baselines too and says whether
+prediction kept the robot further from the human. ``--goals blue_cup,red_cup`` lets the robot choose
+its cup each step too (the paper's Fig. 9).
 
 1. Load the motion library (default: the embedded synthetic one) and pick the demonstration the human
    performs (of ``--human-class``).
@@ -73,6 +75,10 @@ class DemoConfig:
     human_class: str = opt("blue_cup", help="class (name or index) the human performs; empty: red_cup, else the "
                            "last class. blue_cup: the reach of the paper's Table I, across the robot's way to the "
                            "red cup")
+    goals: str = opt("red_cup", help="cups the robot plans for, comma-separated, in order (empty: every cup of the "
+                     "scene). red_cup: the robot's one task in the paper's Table I, the situation "
+                     "`foresight eval pace` measured; blue_cup,red_cup: the robot also chooses the cup each step "
+                     "(the paper's Fig. 9)")
     scene: str = opt("pr2_two_cups_side", help="scene: an embedded name (pr2_two_cups, pr2_two_cups_facing, "
                      "pr2_two_cups_side, pr2_two_cups_side_parallel, or the paper's PR2TwoCups, PR2TwoCupsFacing, "
                      "PR2TwoCupsSide) or a scene TOML file; pr2_two_cups_side: the scene of the paper's Table I")

@@ -94,33 +94,47 @@ def measure_run(planner: str, states: list[RobotState], poses: list[HumanPose], 
                    summary.mcap_path)
 
 
+def _kept_further(main: Outcome, other: Outcome) -> bool:
+    """Whether ``main`` kept further from the real human than ``other``.
+
+    Less contact; on equal contact (neither touched, say), less time within 5 cm or a larger smallest clearance.
+    """
+    if not math.isclose(main.contact_s, other.contact_s, abs_tol=1e-9):
+        return main.contact_s < other.contact_s
+    return main.near_s < other.near_s or main.min_clearance_m > other.min_clearance_m
+
+
 def verdict(outcomes: list[Outcome]) -> str:
     """Whether the first (the prediction planner) interfered and came near the human less than every other, in words.
 
-    Contact decides where any planner touched the human; where none did, the time within 5 cm and the
-    smallest clearance tell them apart (said so).
+    Against each baseline, contact decides; where the contact ties (neither touched the human, say), the
+    time within 5 cm and the smallest clearance tell them apart, and the verdict says so.
     """
     main, others = outcomes[0], outcomes[1:]
     if not others:
         return ""
     names = " and ".join(o.planner for o in others)
     less_interference = all(main.interference < o.interference for o in others)
-    interference = (f"interference with the predicted motion {main.interference:.2f} against "
-                    f"{', '.join(f'{o.interference:.2f}' for o in others)}")
-    if any(o.contact_s > 0 for o in outcomes):
-        closer = all(main.contact_s < o.contact_s for o in others)
-        body = (f"touched the real human {main.contact_s:.1f} s against "
-                f"{', '.join(f'{o.contact_s:.1f} s' for o in others)}")
-    else:
-        closer = all(main.near_s < o.near_s or main.min_clearance_m > o.min_clearance_m for o in others)
-        body = (f"no planner touched the real human; the prediction planner kept {main.min_clearance_m * 100:.0f} cm "
-                f"from it (within 5 cm for {main.near_s:.1f} s), the others came to "
-                f"{', '.join(f'{o.min_clearance_m * 100:.0f} cm ({o.near_s:.1f} s)' for o in others)}")
-    if less_interference and closer:
-        return f"shown, against {names}: {interference}; {body}"
+    further = all(_kept_further(main, o) for o in others)
+
+    def against(values: list[str]) -> str:
+        return f"{values[0]} against {', '.join(values[1:])}"
+
+    touched = any(o.contact_s > 0 for o in outcomes)
+    contact = (f"touched the real human {against([f'{o.contact_s:.1f} s' for o in outcomes])}" if touched
+               else "no planner touched the real human")
+    body = (f"interference with the predicted motion {against([f'{o.interference:.2f}' for o in outcomes])}; "
+            f"{contact}; within 5 cm of it {against([f'{o.near_s:.1f} s' for o in outcomes])}; closest "
+            f"{against([f'{o.min_clearance_m * 100:.0f} cm' for o in outcomes])}")
+    ties = [o.planner for o in others if math.isclose(main.contact_s, o.contact_s, abs_tol=1e-9)]
+    if touched and ties:
+        body += (f" ({' and '.join(ties)} touched the human as long as the prediction planner: "
+                 "there the time within 5 cm and the closest approach tell them apart)")
+    if less_interference and further:
+        return f"shown, against {names}: {body}"
     missed = [what for what, ok in (("its interference was not the lowest", less_interference),
-                                    ("it did not stay further from the human", closer)) if not ok]
-    return (f"not shown in this run ({' and '.join(missed)}): {interference}; {body}. "
+                                    ("it did not stay further from the human", further)) if not ok]
+    return (f"not shown in this run ({' and '.join(missed)}): {body}. "
             "docs/experiments.md, 'Across the robot's pace': prediction pays off when the robot is slow "
             "relative to the human")
 

@@ -31,7 +31,7 @@ from services.scenario import (
 )
 from services.supervisor import Supervisor
 from services.view.config import DEFAULT_PORT
-from shared.config import ZenohConfig
+from shared.config import ConfigError, ZenohConfig
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyGrid, Plan, RobotState
@@ -96,7 +96,7 @@ def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_
     return {
         "predictor": ["--model", str(model), "--method", cfg.method, *scene],
         "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
-                    "--velocity-scale", str(cfg.robot_speed),
+                    "--velocity-scale", str(cfg.robot_speed), *(["--goals", cfg.goals] if cfg.goals else []),
                     "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--cost.w-human", "0"]), *scene],
         "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
                      "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"])],
@@ -160,6 +160,11 @@ def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable
     The library, the human's demonstration (``directory/human.npz``, a library of one) and the prediction model
     trained without it (cached in ``cfg.models_dir``).
     """
+    cups = [c.name for c in scene.cups]
+    unknown = [g for g in cfg.goals.split(",") if g.strip() and g.strip() not in cups]
+    if unknown:
+        raise ConfigError(f"demo.goals: {', '.join(map(repr, unknown))} not a cup of scene {scene.name} "
+                          f"(its cups: {', '.join(cups)})")
     lib = _library(cfg, scene)
     scenario = choose_demonstration(lib, cfg.steps, cfg.seed, cfg.human_class)
     demo = scenario.demo

@@ -65,6 +65,10 @@ def test_demo_bad_input_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[s
     with pytest.raises(SystemExit):
         main(["--steps", "0"])
     assert "demo.steps: must be >= 1" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--goals", "red_cup,green_cup", "--run-dir", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert "demo.goals: 'green_cup' not a cup of scene pr2_two_cups_side (its cups: blue_cup, red_cup)" in err
 
 
 def test_demo_drives_the_simulated_ros2_robot(tmp_path: Path) -> None:
@@ -113,6 +117,7 @@ def test_demo_prepare_writes_the_inputs_and_the_services_config(tmp_path: Path, 
     human = load_library(config["replayer"]["library"])
     assert len(human.demos) == 1 and config["replayer"]["samples_per_tick"] >= 1
     assert config["executor"]["steps"] == 5 and config["planner"]["velocity_scale"] == 0.1
+    assert config["planner"]["goals"] == ["red_cup"]  # Table I's one task, as the demo runs it
     assert "foresight.toml" in capsys.readouterr().out
     assert not list(tmp_path.glob("run*")), "nothing was run"
 

@@ -33,11 +33,25 @@ def test_verdict_by_contact_when_anyone_touched() -> None:
     assert verdict(higher).startswith("not shown in this run (its interference was not the lowest)")
 
 
+def test_verdict_on_a_contact_tie_with_one_baseline_goes_by_nearness() -> None:
+    # the demo's Table I situation: the current-occupancy planner does not touch the human either, but comes closer
+    runs = [_outcome("prediction", 0.55, 0.0, 0.0, 0.128), _outcome("current occupancy", 20.0, 0.0, 2.1, 0.019),
+            _outcome("no human cost", 60.5, 2.2, 3.4, -0.049)]
+    text = verdict(runs)
+    assert text.startswith("shown, against current occupancy and no human cost")
+    assert "touched the real human 0.0 s against 0.0 s, 2.2 s" in text
+    assert "current occupancy touched the human as long as the prediction planner" in text
+    assert "closest 13 cm against 2 cm, -5 cm" in text
+    nearer = [_outcome("prediction", 0.55, 0.0, 2.5, 0.01), *runs[1:]]  # a tie, and nearer than that baseline
+    assert verdict(nearer).startswith("not shown in this run (it did not stay further from the human)")
+
+
 def test_verdict_by_clearance_when_nobody_touched_says_so() -> None:
     runs = [_outcome("prediction", 0.01, 0.0, 0.0, 0.13), _outcome("current occupancy", 7.9, 0.0, 3.7, 0.01),
             _outcome("no human cost", 9.9, 0.0, 4.7, 0.01)]
     text = verdict(runs)
-    assert text.startswith("shown") and "no planner touched the real human" in text and "13 cm" in text
+    assert text.startswith("shown") and "no planner touched the real human" in text
+    assert "within 5 cm of it 0.0 s against 3.7 s, 4.7 s; closest 13 cm against 1 cm, 1 cm" in text
     assert verdict(runs[:1]) == ""  # one planner: nothing to compare
     lines = outcome_lines(runs)
     assert lines[-1] == f"verdict: {text}"
