@@ -12,8 +12,9 @@ explains the differences.
 class, Table I with 1 demonstration x 2 seeds, the switch with 2 demonstrations, 20 STOMP iterations per step,
 the pace sweep at each protocol's own pace only, the cost evaluated eagerly (no compile). The full report (20
 Gaussians, 5 demonstrations x 10 seeds, every demonstration of the class, each protocol's iterations, five paces
-per protocol with 3 demonstrations) runs both libraries side by side, one process per core (docs/experiments.md,
-"Run time"). ``--volume`` picks the product protocol's occupancy volume.
+per protocol with 3 demonstrations) runs in parts (each library's recognition, and each protocol's Table I,
+switch and pace sweep), one worker process per core, the longest expected first (docs/experiments.md, "Run
+time"). ``--volume`` picks the product protocol's occupancy volume.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from .heldout import SYNTHETIC
 from .pace import PaceConfig, PacePoint, PaceResult, plot_pace
 from .planners import Timing
 from .protocol import PROTOCOLS
-from .sections import library_part, library_section
+from .sections import library_part, library_section, part_names, part_weight
 from .verdicts import summary
 
 __all__ = ["ReportPlan", "QUICK", "FULL", "add_report_arguments", "run_report", "PAPER_LIBRARY"]
@@ -114,14 +115,14 @@ def run_report(args: argparse.Namespace) -> int:
     timing = Timing(iterations=plan.iterations)
     started = time.monotonic()
     # every library's recognition and each protocol are independent parts: one worker process per core
-    jobs = [(spec, part) for spec in libs for part in ("recognition", *protocols)]
+    jobs = [(spec, part) for spec in libs for part in part_names(protocols)]
     workers = min(len(jobs), max(1, (os.cpu_count() or 1)))
     done: dict[str, dict[str, tuple[list[str], dict[str, Any]]]] = {spec: {} for spec in libs}
     if workers > 1:
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=limit_blas_threads) as pool:
-            # the longest first (protocols, then recognition), so that the cores finish together
-            order = sorted(jobs, key=lambda job: job[1] == "recognition")
+            # the longest first, so that the cores finish together
+            order = sorted(jobs, key=lambda job: -part_weight(job[1], plan))
             futures = {job: pool.submit(library_part, job[0], job[1], plan, out, Path(args.models_dir), 1,
                                         args.volume) for job in order}
             for (spec, part), future in futures.items():
@@ -154,8 +155,9 @@ def run_report(args: argparse.Namespace) -> int:
         for prot in protocols:
             for k in ("K=1", "K=2"):
                 planning[f"{k}, {prot} protocol"] += d["protocols"][prot]["planning_ms"][k]
-    how = (f"as {len(jobs)} parts (each library's recognition and protocols) in {workers} worker processes, one per "
-           "core" if workers > 1 else "in one process")
+    how = (f"as {len(jobs)} parts (each library's recognition, and each protocol's Table I, switch and pace sweep) "
+           f"in {workers} worker processes, one per core, the longest expected first" if workers > 1
+           else "in one process")
     md += ["## Timing", "", f"{len(libs)} {'library' if len(libs) == 1 else 'libraries'} ran {how}.", "",
            "| measure | median | p90 | samples |", "|---|---|---|---|"]
     for k, v in planning.items():
@@ -165,8 +167,13 @@ def run_report(args: argparse.Namespace) -> int:
     for tag, d in data["libraries"].items():
         p = d["prediction_ms"]
         md.append(f"| prediction ms per pose ({tag}) | {p['median_ms']:.2f} | {p['p90_ms']:.2f} | {p['poses']} poses |")
-    md += ["", "The paper: about 500 ms per replanning step for one goal (50 iterations).",
-           "", f"Report made in {time.monotonic() - started:.0f} s.", ""]
+    md += ["", "The paper: about 500 ms per replanning step for one goal (50 iterations).", "",
+           "Each part's run time (s; the parts ran in parallel, so their sum is the cores' busy time):", "",
+           f"| library | {' | '.join(names := part_names(protocols))} | sum |", f"|---{'|---' * (len(names) + 1)}|"]
+    for tag, d in data["libraries"].items():
+        secs = [d["part_seconds"][part] for part in names]
+        md.append(f"| {tag} | {' | '.join(f'{v:.0f}' for v in secs)} | {sum(secs):.0f} |")
+    md += ["", f"Report made in {time.monotonic() - started:.0f} s.", ""]
     (out / "report.md").write_text("\n".join(md))
     (out / "report.json").write_text(json.dumps(data, default=_json_default))
     print(f"eval all: wrote {out / 'report.md'} and its PNGs in {time.monotonic() - started:.0f} s", flush=True)

@@ -1,6 +1,7 @@
 """The report's section of one library: recognition, each protocol's Table I and switch, the pace sweep.
 
-:func:`library_part` makes one independent part (``recognition`` or a protocol) and :func:`library_section`
+:func:`library_part` makes one independent part (``recognition``, or a protocol's Table I, switch or pace sweep:
+:func:`part_names`) and :func:`library_section`
 assembles a library's parts into its Markdown section and its data; :func:`services.experiments.report.run_report`
 runs the parts of every library in parallel, one worker process per core.
 """
@@ -38,7 +39,7 @@ from .verdicts import switch_verdict, table1_verdict
 if TYPE_CHECKING:
     from .report import ReportPlan
 
-__all__ = ["library_part", "library_section", "PROTOCOL_TEXT"]
+__all__ = ["PROTOCOL_PARTS", "part_names", "part_weight", "library_part", "library_section", "PROTOCOL_TEXT"]
 
 
 def _subset(lib: MotionLibrary, per_class: int) -> MotionLibrary:
@@ -160,22 +161,25 @@ def _prediction_ms(lib: MotionLibrary, models_dir: Path, components: int, volume
     return {"median_ms": float(np.median(times)), "p90_ms": float(np.percentile(times, 90)), "poses": len(times)}
 
 
-def _protocol_section(spec: str, prot: str, plan: ReportPlan, out: Path, models_dir: Path, volume: str, tag: str,
-                      say: Callable[[str], None]) -> tuple[list[str], dict[str, Any]]:
-    """Table I and the switch (mirrored where the robot's first choice is the other cup) under one protocol."""
-    proto = protocol(prot)
-    timing = Timing(iterations=plan.iterations)
-    common = {"library": spec, "timing": timing, "components": plan.components, "models_dir": models_dir,
-              "work_dir": out / "work", "volume": volume if prot == "product" else None, "protocol": prot}
-    suffix = "" if prot == "product" else f"-{prot}"
-    md = [f"### Protocol: {prot}", "", PROTOCOL_TEXT[prot], ""]
-    t1 = run_interference(InterferenceConfig(scene=proto.table1_scene, demos=plan.table1_demos,
+def _table1_part(spec: str, prot: str, plan: ReportPlan, out: Path, common: dict[str, Any],
+                 say: Callable[[str], None]) -> tuple[list[str], dict[str, Any]]:
+    """A protocol's Table I: its Markdown (under the protocol's heading) and data."""
+    t1 = run_interference(InterferenceConfig(scene=protocol(prot).table1_scene, demos=plan.table1_demos,
                                              seeds=plan.table1_seeds, **common), say, compile=plan.compile)
-    png1 = plot_interference(t1, out / f"interference-{tag}{suffix}.png")
-    md += [f"#### Interference (Table I), {prot} protocol", "", *_table1_section(t1, png1)]
+    png = plot_interference(t1, out / f"interference-{_tag(spec)}{_suffix(prot)}.png")
+    md = [f"### Protocol: {prot}", "", PROTOCOL_TEXT[prot], "",
+          f"#### Interference (Table I), {prot} protocol", "", *_table1_section(t1, png)]
+    return md, {"interference": t1.to_json(), "planning_ms": [r.planning_ms for r in t1.runs],
+                "verdict": table1_verdict(t1)}
+
+
+def _switch_part(spec: str, prot: str, plan: ReportPlan, out: Path, common: dict[str, Any],
+                 say: Callable[[str], None]) -> tuple[list[str], dict[str, Any]]:
+    """A protocol's goal switch, mirrored where the robot's first choice is the other cup: Markdown and data."""
+    tag, suffix = _tag(spec), _suffix(prot)
     sw = run_switch(SwitchConfig(demos=plan.switch_demos, **common), say, compile=plan.compile)
     png2 = plot_switch(sw, out / f"switch-{tag}{suffix}.png")
-    md += [f"#### Goal switch (Fig. 8-9), {prot} protocol", "", *_switch_section(sw, png2)]
+    md = [f"#### Goal switch (Fig. 8-9), {prot} protocol", "", *_switch_section(sw, png2)]
     first = {r.goals[0] for r in sw.runs if r.goals}
     mirrored = None
     if len(first) == 1 and sw.config.human_cup not in first:
@@ -191,13 +195,28 @@ def _protocol_section(spec: str, prot: str, plan: ReportPlan, out: Path, models_
                f"{sw.config.human_cup} neither planner has a reason to switch. The paper's Fig. 8-9 has the human "
                "reach for the cup the robot first goes for; this run does the same here (the class nearest "
                f"{cup}).", "", *_switch_section(mirrored, png3)]
-    data = {"interference": t1.to_json(), "switch": sw.to_json(),
-            "switch_mirrored": mirrored.to_json() if mirrored is not None else None,
-            "planning_ms": {"K=1": [r.planning_ms for r in t1.runs],
-                            "K=2": [r.planning_ms for r in sw.runs + (mirrored.runs if mirrored else [])]},
-            "verdicts": {"table1": table1_verdict(t1), "switch": switch_verdict(sw),
-                         "switch_mirrored": switch_verdict(mirrored) if mirrored is not None else None}}
-    return md, data
+    return md, {"switch": sw.to_json(), "switch_mirrored": mirrored.to_json() if mirrored is not None else None,
+                "planning_ms": [r.planning_ms for r in sw.runs + (mirrored.runs if mirrored else [])],
+                "verdicts": {"switch": switch_verdict(sw),
+                             "switch_mirrored": switch_verdict(mirrored) if mirrored is not None else None}}
+
+
+def _protocol_data(table1: dict[str, Any], switch: dict[str, Any]) -> dict[str, Any]:
+    """A protocol's section data from its Table I and switch parts (the report's JSON layout)."""
+    return {"interference": table1["interference"], "switch": switch["switch"],
+            "switch_mirrored": switch["switch_mirrored"],
+            "planning_ms": {"K=1": table1["planning_ms"], "K=2": switch["planning_ms"]},
+            "verdicts": {"table1": table1["verdict"], **switch["verdicts"]}}
+
+
+def _tag(spec: str) -> str:
+    """A library's name in file names and progress lines."""
+    return SYNTHETIC if spec == SYNTHETIC else Path(spec).name
+
+
+def _suffix(prot: str) -> str:
+    """The protocol's suffix of PNG names (none for the product's)."""
+    return "" if prot == "product" else f"-{prot}"
 
 
 PROTOCOL_TEXT = {
@@ -215,18 +234,46 @@ PROTOCOL_TEXT = {
 }
 
 
+PROTOCOL_PARTS = ("table1", "switch", "pace")
+"""What each protocol's work is split into (``PROT:table1`` ...), so that the cores share it evenly."""
+
+
+def part_names(protocols: tuple[str, ...]) -> list[str]:
+    """A library's parts: ``recognition`` and, per protocol, its Table I, switch and pace sweep."""
+    return ["recognition", *(f"{prot}:{what}" for prot in protocols for what in PROTOCOL_PARTS)]
+
+
+def part_weight(part: str, plan: ReportPlan) -> float:
+    """A part's expected planning work, to run the longest first: goal-steps planned, the paper protocol's x 1.6.
+
+    Runs x goals (the switch: 2, and room for its mirrored run); the paper protocol's step plans 101
+    waypoints where the product's plans 50 (1.6-1.9x the time, docs/experiments.md "Run time"). The
+    recognition plans nothing: 0, last.
+    """
+    if part == "recognition":
+        return 0.0
+    prot, what = part.split(":")
+    n_paces = len((plan.paces or DEFAULT_PACES)[prot])
+    runs = {"table1": plan.table1_demos * plan.table1_seeds * 3,
+            "switch": (plan.switch_demos or 25) * 2 * 2 * 2,
+            "pace": n_paces * plan.pace_demos * plan.pace_seeds * 2}[what]
+    return runs * (1.6 if prot == "paper" else 1.0)
+
+
 def library_part(spec: str, part: str, plan: ReportPlan, out: Path, models_dir: Path, n_jobs: int = 2,
                  volume: str = DEFAULT_VOLUME) -> tuple[list[str], dict[str, Any]]:
-    """One independent part of a library's section: ``"recognition"`` (with the prediction timing) or a protocol.
+    """One independent part of a library's section (one of :func:`part_names`), with its run time.
 
-    A protocol's part is its Table I and switch section and its points of the pace sweep. Parts share nothing
-    but the model cache (written atomically), so :func:`run_report` runs them in parallel, one per core.
+    Parts share nothing but the model cache (written atomically), so :func:`run_report` runs them in
+    parallel, one per core.
 
     Returns:
         ``(Markdown lines, data)``: for ``recognition`` the data has ``recognition`` and ``prediction_ms``; for
-        a protocol, the protocol's section data and ``pace_points``.
+        ``PROT:table1`` ``interference``, ``planning_ms`` and ``verdict``; for ``PROT:switch`` ``switch``,
+        ``switch_mirrored``, ``planning_ms`` and ``verdicts``; for ``PROT:pace`` ``pace_points``. Every part's data
+        has ``seconds``, its wall time.
     """
-    tag = SYNTHETIC if spec == SYNTHETIC else Path(spec).name
+    tag, started = _tag(spec), time.monotonic()
 
     def say(line: str) -> None:
         print(f"[{tag}] {line}", flush=True)
@@ -235,17 +282,26 @@ def library_part(spec: str, part: str, plan: ReportPlan, out: Path, models_dir: 
         lib = load_experiment_library(spec, load_scene(TABLE1_SCENE))
         say(f"recognition, leave-one-out on {lib.source}")
         lines, rec = _recognition(lib, plan, out, tag, n_jobs)
-        return ([f"## Library: {lib.source}", "", "### Recognition (Fig. 6)", "", *lines],
-                {"recognition": rec, "prediction_ms": _prediction_ms(lib, models_dir, plan.components, volume)})
-    lines, d = _protocol_section(spec, part, plan, out, models_dir, volume, tag, say)
-    say(f"Table I across the robot's pace ({part} protocol)")
-    pace = run_pace(PaceConfig(libraries=(spec,), protocols=(part,), paces=plan.paces or dict(DEFAULT_PACES),
-                               demos=plan.pace_demos, seeds=plan.pace_seeds,
-                               timing=Timing(iterations=plan.iterations),
-                               components=plan.components, models_dir=models_dir, work_dir=out / "work" / part),
-                    say, compile=plan.compile)
-    d["pace_points"] = pace.to_json()["points"]
-    return lines, d
+        md, d = ([f"## Library: {lib.source}", "", "### Recognition (Fig. 6)", "", *lines],
+                 {"recognition": rec, "prediction_ms": _prediction_ms(lib, models_dir, plan.components, volume)})
+    else:
+        prot, what = part.split(":")
+        if what == "pace":
+            say(f"Table I across the robot's pace ({prot} protocol)")
+            pace = run_pace(PaceConfig(libraries=(spec,), protocols=(prot,), paces=plan.paces or dict(DEFAULT_PACES),
+                                       demos=plan.pace_demos, seeds=plan.pace_seeds,
+                                       timing=Timing(iterations=plan.iterations), components=plan.components,
+                                       models_dir=models_dir, work_dir=out / "work" / prot),
+                            say, compile=plan.compile)
+            md, d = [], {"pace_points": pace.to_json()["points"]}
+        else:
+            common = {"library": spec, "timing": Timing(iterations=plan.iterations), "components": plan.components,
+                      "models_dir": models_dir, "work_dir": out / "work",
+                      "volume": volume if prot == "product" else None, "protocol": prot}
+            md, d = (_table1_part if what == "table1" else _switch_part)(spec, prot, plan, out, common, say)
+    d["seconds"] = time.monotonic() - started
+    say(f"{part} done in {d['seconds']:.0f} s")
+    return md, d
 
 
 def library_section(spec: str, plan: ReportPlan, out: Path, models_dir: Path, n_jobs: int = 2,
@@ -270,18 +326,20 @@ def library_section(spec: str, plan: ReportPlan, out: Path, models_dir: Path, n_
             made here.
     """
     parts = dict(parts or {})
-    for part in ("recognition", *protocols):
+    for part in part_names(protocols):
         if part not in parts:
             parts[part] = library_part(spec, part, plan, out, models_dir, n_jobs, volume)
     md, head = list(parts["recognition"][0]), parts["recognition"][1]
-    data: dict[str, Any] = {"recognition": head["recognition"], "protocols": {}}
+    data: dict[str, Any] = {"recognition": head["recognition"], "protocols": {},
+                            "part_seconds": {part: parts[part][1]["seconds"] for part in part_names(protocols)}}
     points: list[PacePoint] = []
     for prot in protocols:
-        lines, d = parts[prot]
-        md += lines
+        (t_md, table1), (s_md, switch) = parts[f"{prot}:table1"], parts[f"{prot}:switch"]
+        md += [*t_md, *s_md]
         points += [PacePoint(p["protocol"], p["library"], p["pace"], p["ratio"],
-                             {k: p[k] for k in ("basic", "least_penetration")}) for p in d.pop("pace_points")]
-        data["protocols"][prot] = d
+                             {k: p[k] for k in ("basic", "least_penetration")})
+                   for p in parts[f"{prot}:pace"][1]["pace_points"]]
+        data["protocols"][prot] = _protocol_data(table1, switch)
     data.update({k: data["protocols"][protocols[0]][k] for k in ("interference", "switch", "planning_ms")})
     pace = PaceResult(PaceConfig(libraries=(spec,), protocols=protocols, demos=plan.pace_demos, seeds=plan.pace_seeds))
     pace.points = points
