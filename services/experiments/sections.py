@@ -247,7 +247,7 @@ def part_weight(part: str, plan: ReportPlan) -> float:
     """A part's expected planning work, to run the longest first: goal-steps planned, the paper protocol's x 1.6.
 
     Runs x goals (the switch: 2, and room for its mirrored run); the paper protocol's step plans 101
-    waypoints where the product's plans 50 (1.6-1.9x the time, docs/experiments.md "Run time"). The
+    waypoints where the product's plans 40 (1.5-1.9x the time, docs/experiments.md "Run time"). The
     recognition plans nothing: 0, last.
     """
     if part == "recognition":
