@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 from services.experiments.cli import main
+from services.experiments.sections import part_names
 
 
 def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path):
@@ -22,3 +23,6 @@ def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path):
     assert set(lib) >= {"recognition", "interference", "switch", "prediction_ms"}
     assert len(lib["interference"]["basic"]) == 1
     assert "paper:" in text  # every section compares with the paper's numbers
+    # each part's run time, in the data and in the timing block
+    assert set(lib["part_seconds"]) == set(part_names(tuple(data["protocols"])))
+    assert all(v > 0 for v in lib["part_seconds"].values()) and "Each part's run time" in text
