@@ -27,8 +27,8 @@ from shared.library import Demonstration, MotionLibrary, load_library, save_libr
 from shared.runtime import UserError
 from shared.scene import Scene
 
-__all__ = ["SYNTHETIC", "load_experiment_library", "short_name", "CupClass", "cup_class", "HeldOutModels", "human_file",
-           "samples_per_tick", "class_at_cup", "human_class"]
+__all__ = ["SYNTHETIC", "load_experiment_library", "library_tag", "short_name", "CupClass", "cup_class",
+           "HeldOutModels", "human_file", "samples_per_tick", "class_at_cup", "human_class"]
 
 SHARED_FITS: dict[str, Any] = {}
 """``train_model``'s fit cache shared by every :class:`HeldOutModels` of this process (fits keyed by data + options)."""
@@ -44,6 +44,11 @@ def load_experiment_library(spec: str | Path, scene: Scene) -> MotionLibrary:
 
         return generate_library(seed=0, scene=scene)
     return load_library(spec)
+
+
+def library_tag(spec: str) -> str:
+    """A library spec's name in file names, report keys and progress lines: ``synthetic`` or its path's last part."""
+    return SYNTHETIC if spec == SYNTHETIC else Path(spec).name
 
 
 def short_name(source: str) -> str:

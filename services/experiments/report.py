@@ -36,7 +36,7 @@ from services.predictor.volumes import DEFAULT_VOLUME, VOLUMES
 from shared.native_threads import limit_blas_threads
 from shared.runtime import UserError
 
-from .heldout import SYNTHETIC
+from .heldout import SYNTHETIC, library_tag
 from .pace import PaceConfig, PacePoint, PaceResult, plot_pace
 from .planners import Timing
 from .protocol import PROTOCOLS
@@ -151,7 +151,7 @@ def run_report(args: argparse.Namespace) -> int:
     planning: dict[str, list[float]] = {f"{k}, {prot} protocol": [] for prot in protocols for k in ("K=1", "K=2")}
     for spec, (lines, d) in zip(libs, sections, strict=True):
         md += lines
-        data["libraries"][SYNTHETIC if spec == SYNTHETIC else Path(spec).name] = d
+        data["libraries"][library_tag(spec)] = d
         for prot in protocols:
             for k in ("K=1", "K=2"):
                 planning[f"{k}, {prot} protocol"] += d["protocols"][prot]["planning_ms"][k]

@@ -20,7 +20,7 @@ from services.predictor.volumes import DEFAULT_VOLUME
 from shared.library import MotionLibrary
 from shared.scene import load_scene
 
-from .heldout import SYNTHETIC, load_experiment_library
+from .heldout import library_tag, load_experiment_library
 from .interference import (
     PAPER_TABLE1,
     TABLE1_SCENE,
@@ -166,7 +166,7 @@ def _table1_part(spec: str, prot: str, plan: ReportPlan, out: Path, common: dict
     """A protocol's Table I: its Markdown (under the protocol's heading) and data."""
     t1 = run_interference(InterferenceConfig(scene=protocol(prot).table1_scene, demos=plan.table1_demos,
                                              seeds=plan.table1_seeds, **common), say, compile=plan.compile)
-    png = plot_interference(t1, out / f"interference-{_tag(spec)}{_suffix(prot)}.png")
+    png = plot_interference(t1, out / f"interference-{library_tag(spec)}{_suffix(prot)}.png")
     md = [f"### Protocol: {prot}", "", PROTOCOL_TEXT[prot], "",
           f"#### Interference (Table I), {prot} protocol", "", *_table1_section(t1, png)]
     return md, {"interference": t1.to_json(), "planning_ms": [r.planning_ms for r in t1.runs],
@@ -176,7 +176,7 @@ def _table1_part(spec: str, prot: str, plan: ReportPlan, out: Path, common: dict
 def _switch_part(spec: str, prot: str, plan: ReportPlan, out: Path, common: dict[str, Any],
                  say: Callable[[str], None]) -> tuple[list[str], dict[str, Any]]:
     """A protocol's goal switch, mirrored where the robot's first choice is the other cup: Markdown and data."""
-    tag, suffix = _tag(spec), _suffix(prot)
+    tag, suffix = library_tag(spec), _suffix(prot)
     sw = run_switch(SwitchConfig(demos=plan.switch_demos, **common), say, compile=plan.compile)
     png2 = plot_switch(sw, out / f"switch-{tag}{suffix}.png")
     md = [f"#### Goal switch (Fig. 8-9), {prot} protocol", "", *_switch_section(sw, png2)]
@@ -207,11 +207,6 @@ def _protocol_data(table1: dict[str, Any], switch: dict[str, Any]) -> dict[str, 
             "switch_mirrored": switch["switch_mirrored"],
             "planning_ms": {"K=1": table1["planning_ms"], "K=2": switch["planning_ms"]},
             "verdicts": {"table1": table1["verdict"], **switch["verdicts"]}}
-
-
-def _tag(spec: str) -> str:
-    """A library's name in file names and progress lines."""
-    return SYNTHETIC if spec == SYNTHETIC else Path(spec).name
 
 
 def _suffix(prot: str) -> str:
@@ -273,7 +268,7 @@ def library_part(spec: str, part: str, plan: ReportPlan, out: Path, models_dir: 
         ``switch_mirrored``, ``planning_ms`` and ``verdicts``; for ``PROT:pace`` ``pace_points``. Every part's data
         has ``seconds``, its wall time.
     """
-    tag, started = _tag(spec), time.monotonic()
+    tag, started = library_tag(spec), time.monotonic()
 
     def say(line: str) -> None:
         print(f"[{tag}] {line}", flush=True)

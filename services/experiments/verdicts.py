@@ -6,12 +6,11 @@ paper protocol's and the product protocol's side by side).
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .heldout import SYNTHETIC
+from .heldout import library_tag
 from .interference import PAPER_TABLE1, InterferenceResult, ratio_text
 from .switch import SwitchResult
 
@@ -64,7 +63,7 @@ def summary(libs: list[str], sections: list[tuple[list[str], dict[str, Any]]], p
           f"{paper_ratio:.0f}x | step 4 / 13 | |"]
     verdicts = []
     for spec, (_, d) in zip(libs, sections, strict=True):
-        tag = SYNTHETIC if spec == SYNTHETIC else Path(spec).name
+        tag = library_tag(spec)
         for prot in protocols:
             p = d["protocols"][prot]
             t1, sw, mi = p["interference"], p["switch"], p["switch_mirrored"]
