@@ -64,6 +64,8 @@ __all__ = ["ExecutorResult", "ExecutorService", "load_models", "start_configurat
 
 log = logging.getLogger("foresight.executor")
 
+LINGER_S = 0.3
+"""Seconds the session stays open after the run so that its last messages reach the log (none without one)."""
 POSES_KEPT = 4096
 """Arrival times of the newest poses kept to date the occupancy grids made from them (real time)."""
 
@@ -236,7 +238,8 @@ class ExecutorService:
                     self._run_lockstep(state_pub, clock_pub, presence)
                 else:
                     self._run_realtime(state_pub, presence)
-                time.sleep(0.3)  # let the last messages of the run reach the logger
+                if self.mcap is not None:
+                    time.sleep(LINGER_S)  # let the last messages of the run reach the logger
             finally:
                 presence.close()
                 sub.undeclare()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +39,9 @@ __all__ = ["RunSpec", "RunRecord", "ServiceThread", "run_lockstep", "JOIN_S"]
 log = logging.getLogger("foresight.experiments")
 
 JOIN_S = 60.0
+SETTLE_QUIET_S = 0.1
+"""A run's messages are all in once none came for this long after the executor's last (and its states are in)."""
+SETTLE_LIMIT_S = 2.0
 """Longest wait (s) for a service thread to stop."""
 
 
@@ -121,11 +125,15 @@ class _Collector:
 
     def __init__(self) -> None:
         self.lock = threading.Lock()
+        self.arrived = threading.Condition(self.lock)
         self.plans: dict[int, Plan] = {}
         self.record = RunRecord()
+        self.last_at = time.monotonic()
 
     def __call__(self, msg: Message) -> None:
         with self.lock:
+            self.last_at = time.monotonic()
+            self.arrived.notify_all()
             rec = self.record
             if isinstance(msg, Plan):
                 self.plans[msg.tick] = msg
@@ -138,6 +146,25 @@ class _Collector:
                     rec.occupancy[msg.tick] = msg
             elif isinstance(msg, ClassPosterior):
                 rec.posteriors[msg.tick] = msg
+
+    def settle(self, result: ExecutorResult, quiet_s: float = SETTLE_QUIET_S, limit_s: float = SETTLE_LIMIT_S) -> None:
+        """Wait until the run's last messages are in (at most ``limit_s``).
+
+        In: every state the executor published, the final grid of the newest tick a pose came for, and then
+        ``quiet_s`` without a message (the executor lingers only for a log of its own).
+        """
+        n_states = len(result.times)
+
+        def settled() -> bool:
+            rec = self.record
+            ticks = [p.tick for p in rec.poses]
+            return (len(rec.states) >= n_states and (not ticks or max(ticks) in rec.occupancy)
+                    and time.monotonic() - self.last_at >= quiet_s)
+
+        deadline = time.monotonic() + limit_s
+        with self.lock:
+            while not settled() and (left := deadline - time.monotonic()) > 0:
+                self.arrived.wait(min(left, quiet_s))
 
     def finish(self, result: ExecutorResult | None) -> RunRecord:
         with self.lock:
@@ -252,6 +279,7 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
             for t in threads:
                 t.start()
             result = threads[-1].join(spec.timeout_s)
+            collect.settle(result)  # the executor, with no log of its own to fill, does not linger
         finally:
             for t in threads:
                 t.stop_event.set()

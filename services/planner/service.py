@@ -169,7 +169,7 @@ class PlannerService:
                             stop_with=self.config.stop_with, stop=stop)
         try:
             while not stop.is_set():
-                tick = inbox.ticks.get(timeout=0.2)
+                tick = inbox.ticks.get(timeout=0.05)  # the stop event's latency
                 if tick is None:
                     continue
                 if tick.tick == 0:

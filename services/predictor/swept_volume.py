@@ -13,7 +13,7 @@ import numpy as np
 from shared.human import HumanModel, place_in_scene
 from shared.scene import Grid, Scene
 
-__all__ = ["posture_voxels", "swept_volume", "pack_volumes", "unpack_volumes"]
+__all__ = ["posture_voxels", "voxels_per_posture", "swept_volume", "pack_volumes", "unpack_volumes"]
 
 
 def _flat(points: np.ndarray, grid: Grid) -> np.ndarray:
@@ -29,6 +29,29 @@ def _flat(points: np.ndarray, grid: Grid) -> np.ndarray:
     x, y, z = f[:, 0], f[:, 1], f[:, 2]
     ok = (x >= 0) & (x < nx) & (y >= 0) & (y < ny) & (z >= 0) & (z < nz)
     return ((x[ok] * ny + y[ok]) * nz + z[ok]).astype(np.int64)
+
+
+def voxels_per_posture(points: np.ndarray, grid: Grid) -> list[np.ndarray]:
+    """The flat C-order indices of the voxels each posture's points fall in (points outside dropped; repeats kept).
+
+    One vectorised pass over ``points (C, P, 3)`` split per posture, rather than :func:`posture_voxels`
+    per posture: a sweep's inner loop, where a posture's voxels are only written (repeats are harmless) and
+    sorting them out costs more than the rest of the sweep (docs/predictor.md, "Swept volumes").
+
+    Returns:
+        C arrays of int64 indices, posture by posture.
+    """
+    pts = np.asarray(points)
+    c, p = pts.shape[0], int(np.prod(pts.shape[1:-1]))
+    f = pts.reshape(-1, 3) - grid.min
+    f /= grid.resolution
+    np.floor(f, out=f)
+    nx, ny, nz = grid.dims
+    x, y, z = f[:, 0], f[:, 1], f[:, 2]
+    ok = (x >= 0) & (x < nx) & (y >= 0) & (y < ny) & (z >= 0) & (z < nz)
+    flat = ((x[ok] * ny + y[ok]) * nz + z[ok]).astype(np.int64)
+    ends = np.cumsum(ok.reshape(c, p).sum(axis=1))
+    return np.split(flat, ends[:-1])
 
 
 def _mark(points: np.ndarray, grid: Grid, out: np.ndarray) -> None:

@@ -29,7 +29,7 @@ import numpy as np
 from shared.human import HumanModel, place_in_scene
 from shared.scene import Grid, Scene
 
-from .swept_volume import posture_voxels, swept_volume
+from .swept_volume import swept_volume, voxels_per_posture
 
 __all__ = ["VOLUMES", "DEFAULT_VOLUME", "Sweep", "sweep", "interpolate", "spread_volume",
            "demos_volume", "timed_volume", "digest"]
@@ -116,8 +116,8 @@ def sweep(motion: np.ndarray, scene: Scene, grid: Grid, human: HumanModel | None
     last = np.full(n, -1.0, dtype=np.float32)
     for s in range(0, len(placed), chunk):
         pts = human.surface_points(placed[s:s + chunk], spacing=spacing, interior=interior)  # (C, P, 3)
-        for j in range(len(pts)):
-            last[posture_voxels(pts[j], grid)] = times[s + j]  # times increase: the last write is the last hit
+        for j, voxels in enumerate(voxels_per_posture(pts, grid)):
+            last[voxels] = times[s + j]  # times increase: the last write is the last hit
     idx = np.flatnonzero(last >= 0)
     return Sweep(idx, last[idx])
 
