@@ -35,7 +35,9 @@ def test_the_synthetic_cup_classes_are_found_at_their_cups(name):
 def test_a_fit_cache_refits_only_the_changed_class_and_changes_nothing(tmp_path):
     scene = load_scene()
     lib = generate_library(8, 4, seed=1, scene=scene)
-    cfg = TrainConfig(gmm=GMMConfig(n_components=2), temperature=150.0, volume="spread")  # one volume per class
+    # one volume per class; a coarse grid and body sampling: the cache, not the volumes, is under test
+    cfg = TrainConfig(gmm=GMMConfig(n_components=2), temperature=150.0, volume="spread", resolution=0.1, spacing=0.06,
+                      oversample=1)
     out = lib.by_class(3)[0]
     demos = [d for d in lib.demos if d is not out]
     cache: dict = {}
@@ -48,6 +50,7 @@ def test_a_fit_cache_refits_only_the_changed_class_and_changes_nothing(tmp_path)
     cached = train_model(lib, scene, cfg, demos=demos, progress=False, fit_cache=cache)
     assert count("fit") == 9 and count("volume") == 9  # one refit and one new volume: class 3
     plain = train_model(lib, scene, cfg, demos=demos, progress=False)
+    assert all(v.any() for v in cached.volumes)  # every class has a volume to compare
     for field in ("weights", "means", "covariances", "motions", "volumes"):
         np.testing.assert_array_equal(getattr(cached, field), getattr(plain, field))
 
