@@ -107,8 +107,9 @@ def reconnect_previous(trajs: torch.Tensor, best_index: int | None, q_t: torch.T
     For the goal of tau_best (``best_index``, when the robot follows it: ``s_t`` given) the result is
     the remaining part of tau_best after ``q_t``, resampled to T waypoints. For every other goal, the
     straight line from ``q_t`` to each waypoint j of its previous trajectory, followed by the rest of
-    that trajectory (j..T-1), is a candidate; all K x T candidates are resampled to T waypoints,
-    costed in one call of ``cost_fn`` and the cheapest candidate per goal is kept.
+    that trajectory (j..T-1), is a candidate; the candidates of all these goals (T each) are resampled to T
+    waypoints, costed in one call of ``cost_fn`` and the cheapest candidate per goal is kept. tau_best's own
+    candidates are not costed while the robot follows it (with one goal, nothing is).
 
     Args:
         trajs: ``(K, T, D)`` previous trajectories (each ending at its goal).
@@ -116,7 +117,8 @@ def reconnect_previous(trajs: torch.Tensor, best_index: int | None, q_t: torch.T
         q_t: ``(D,)`` configuration the robot will have reached when the new plan starts.
         s_t: Fractional waypoint index of ``q_t`` along ``trajs[best_index]``, or None when the robot
             is not on tau_best (then tau_best's goal is reconnected like the others).
-        cost_fn: ``q (K, R', T, D) -> (K, R', T)`` per-waypoint total cost (here R' = T candidates).
+        cost_fn: ``q (K', R', T, D) -> (K', R', T)`` per-waypoint total cost (here K' goals reconnected, R' = T
+            candidates each).
 
     Returns:
         ``(K, T, D)`` trajectories starting exactly at ``q_t`` and ending at the previous goals.
@@ -124,16 +126,24 @@ def reconnect_previous(trajs: torch.Tensor, best_index: int | None, q_t: torch.T
     k, t, d = trajs.shape
     q_t = q_t.to(trajs)
     j = torch.arange(t, device=trajs.device)
-    # candidate c of goal g: vertices [q_t, q_t, ..., q_t (c times), trajs[g, c], ..., trajs[g, T-1]]
-    keep = (j[None, :] >= j[:, None])  # (C=T, T): vertex i of candidate c is trajs[g, i] when i >= c
-    verts = torch.where(keep[None, :, :, None], trajs[:, None], q_t)  # (K, C, T, D)
-    verts = torch.cat([q_t.expand(k, t, 1, d), verts], 2)  # (K, C, T+1, D)
-    cand = resample_path(verts, t)  # (K, C, T, D)
-    total = cost_fn(cand).sum(-1)  # (K, C)
-    total = torch.nan_to_num(total, nan=float("inf"))
-    pick = torch.argmin(total, dim=1)  # (K,)
-    out = cand[torch.arange(k, device=trajs.device), pick]  # (K, T, D)
-    if best_index is not None and s_t is not None:
+    follow = best_index is not None and s_t is not None
+    # the goals reconnected by candidates: all but tau_best's while the robot follows it (its T candidates would
+    # cost as much as a third of a step's STOMP iterations, to be replaced by the rest of tau_best)
+    others = torch.tensor([g for g in range(k) if not (follow and g == best_index)], dtype=torch.long,
+                          device=trajs.device)
+    out = trajs.clone()
+    if len(others):
+        prev = trajs[others]  # (K', T, D)
+        # candidate c of goal g: vertices [q_t, q_t, ..., q_t (c times), trajs[g, c], ..., trajs[g, T-1]]
+        keep = (j[None, :] >= j[:, None])  # (C=T, T): vertex i of candidate c is trajs[g, i] when i >= c
+        verts = torch.where(keep[None, :, :, None], prev[:, None], q_t)  # (K', C, T, D)
+        verts = torch.cat([q_t.expand(len(others), t, 1, d), verts], 2)  # (K', C, T+1, D)
+        cand = resample_path(verts, t)  # (K', C, T, D)
+        total = cost_fn(cand).sum(-1)  # (K', C)
+        total = torch.nan_to_num(total, nan=float("inf"))
+        pick = torch.argmin(total, dim=1)  # (K',)
+        out[others] = cand[torch.arange(len(others), device=trajs.device), pick]  # (K', T, D)
+    if follow:
         s_t = torch.as_tensor(s_t, dtype=trajs.dtype, device=trajs.device)
         rest = torch.where((j > s_t)[:, None], trajs[best_index], q_t)  # (T, D)
         out[best_index] = resample_path(torch.cat([q_t[None], rest], 0), t)

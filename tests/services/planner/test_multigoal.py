@@ -75,6 +75,29 @@ def test_reconnect_previous_starts_at_q_t_and_keeps_the_cheapest_line() -> None:
     assert torch.equal(out2[:, 0], off.expand(2, 2)) and torch.allclose(out2[:, -1], goals)
 
 
+def test_reconnect_costs_no_candidate_of_the_followed_trajectory_and_the_others_as_alone() -> None:
+    start = torch.tensor([0.0, 0.0])
+    goals = torch.tensor([[1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    prev = init_straight_lines(start, goals, T)
+    prev[2, 5:25] += torch.tensor([0.3, 0.0])  # a bent path: its candidates differ
+    s_t = torch.tensor(15.5)
+    q_t = interpolate_path(prev[1], s_t)  # the robot follows goal 1's
+    calls: list[tuple[int, ...]] = []
+
+    def cost(q: torch.Tensor) -> torch.Tensor:
+        calls.append(tuple(q.shape))
+        return _blob(q)
+
+    out = reconnect_previous(prev, 1, q_t, s_t, cost)
+    assert calls == [(2, T, T, 2)]  # goals 0 and 2 only, T candidates each
+    for g in (0, 2):  # each as if reconnected alone
+        assert torch.equal(out[g], reconnect_previous(prev[g:g + 1], None, q_t, None, cost)[0])
+    assert torch.allclose(out[1], init_straight_lines(q_t, goals[1:2], T)[0], atol=1e-5)
+    calls.clear()
+    one = reconnect_previous(prev[1:2], 0, q_t, s_t, cost)  # one goal, followed: nothing to cost
+    assert calls == [] and torch.equal(one[0], out[1])
+
+
 def test_best_picks_the_least_cost_valid_goal() -> None:
     total = torch.tensor([3.0, 1.0, 2.0, float("nan")])
     assert best(total, torch.tensor([True, True, True, True])) == 1
