@@ -39,10 +39,11 @@ __all__ = ["RunSpec", "RunRecord", "ServiceThread", "run_lockstep", "JOIN_S"]
 log = logging.getLogger("foresight.experiments")
 
 JOIN_S = 60.0
+"""Longest wait (s) for a service thread to stop."""
 SETTLE_QUIET_S = 0.1
 """A run's messages are all in once none came for this long after the executor's last (and its states are in)."""
 SETTLE_LIMIT_S = 2.0
-"""Longest wait (s) for a service thread to stop."""
+"""Longest wait (s) for a run's last messages after the executor's end (``_Collector.settle``)."""
 
 
 @dataclass(frozen=True)

@@ -127,8 +127,8 @@ def reconnect_previous(trajs: torch.Tensor, best_index: int | None, q_t: torch.T
     q_t = q_t.to(trajs)
     j = torch.arange(t, device=trajs.device)
     follow = best_index is not None and s_t is not None
-    # the goals reconnected by candidates: all but tau_best's while the robot follows it (its T candidates would
-    # cost as much as a third of a step's STOMP iterations, to be replaced by the rest of tau_best)
+    # the goals reconnected by candidates: all but tau_best's while the robot follows it (its T candidates, as
+    # many trajectories as 17 STOMP iterations cost at 101 waypoints, would be replaced by the rest of tau_best)
     others = torch.tensor([g for g in range(k) if not (follow and g == best_index)], dtype=torch.long,
                           device=trajs.device)
     out = trajs.clone()
