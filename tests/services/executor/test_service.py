@@ -178,6 +178,29 @@ def test_mcap_has_every_channel_decodable_with_schemas(zenoh_hub, pr2, tmp_path)
     assert b"pr2_two_cups" in lf.attachments["scene.toml"]
 
 
+def test_without_a_log_only_the_keys_it_uses_are_checked(zenoh_hub, pr2, tmp_path) -> None:
+    """With no MCAP log the executor decodes plans, poses, markers and grids only; its consumers check the rest."""
+    cfg = lockstep_config(tmp_path, steps=4, mcap="none")
+    exec_z = zenoh_hub()
+    fake = FakeSystem(zenoh_hub())
+    service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
+    keys = Keys(exec_z.prefix)
+    garbage = [b"", b"\x00\x01", msgpack.packb([1, 2, 3])]
+    with fake.running():
+        t = threading.Thread(target=service.run)
+        t.start()
+        deadline = time.monotonic() + 20
+        while not fake.ticks and time.monotonic() < deadline:
+            time.sleep(0.01)
+        for g in garbage:
+            for key in (keys.plan, keys.robot_state, keys.posterior, keys.clock):
+                fake.session.put(key, g)
+        t.join(timeout=30)
+    assert not t.is_alive()
+    assert service.result.steps == 4 and service.result.mcap_path is None
+    assert service.result.rejects == {keys.plan: len(garbage)}
+
+
 def test_realtime_run_starts_its_clock_once_the_wait_for_services_are_there(zenoh_hub, pr2) -> None:
     exec_z = zenoh_hub()
     cfg = ExecutorConfig(mode="realtime", steps=0, state_rate_hz=50.0, mcap="none", wait_for=["planner"])
