@@ -16,10 +16,11 @@ no host synchronisation (no ``.item()``, no data-dependent branching), so it run
 Each goal draws its exploration noise from its own ``torch.Generator`` seeded per goal, so a batch of
 K goals gives the same result as K separate runs with the same seeds.
 
-Step 1 and steps 2-4 after the cost call are two pure tensor functions (:func:`rollouts`, :func:`update`); with
-``StompConfig.compile`` each is one ``torch.compile``-d graph (about 20 small eager ops per iteration
-become two calls: on a CPU, where an eager op costs 5-20 us, that is most of what an iteration spends
-outside the cost). Compiled and eager give the same numbers to float rounding (tested).
+Step 1 and steps 2-4 after the cost call are pure tensor functions (:func:`rollouts`, :func:`update`, and with
+``reuse`` :func:`join_kept`, which joins the kept rollouts and keeps the best); with ``StompConfig.compile`` each
+is one ``torch.compile``-d graph (about 30 small eager ops per iteration become three calls: on a CPU, where an
+eager op costs 5-20 us, that is most of what an iteration spends outside the cost). Compiled and eager give the
+same numbers to float rounding (tested).
 """
 
 from __future__ import annotations
@@ -31,10 +32,18 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .stomp_steps import finite, finite_difference_matrix, keep_best, rollouts, update, with_ends
+from .stomp_steps import (
+    finite,
+    finite_difference_matrix,
+    join_kept,
+    keep_best,
+    rollouts,
+    update,
+    with_ends,
+)
 
 __all__ = ["StompConfig", "StompError", "StompResult", "Stomp", "finite_difference_matrix", "CostFn", "rollouts",
-           "update", "with_ends", "finite", "keep_best"]
+           "update", "join_kept", "with_ends", "finite", "keep_best"]
 
 log = logging.getLogger("foresight.planner")
 
@@ -129,16 +138,18 @@ class StompResult:
 
 
 _COMPILED: dict[str, Callable[..., tuple[torch.Tensor, ...]]] = {}
+_STEPS: dict[str, Callable[..., tuple[torch.Tensor, ...]]] = {"rollouts": rollouts, "update": update,
+                                                              "join_kept": join_kept}
 
 
 def _compiled(name: str) -> Callable[..., tuple[torch.Tensor, ...]]:
-    """``torch.compile`` of :func:`rollouts` or :func:`update`, made once per process.
+    """``torch.compile`` of :func:`rollouts`, :func:`update` or :func:`join_kept`, made once per process.
 
     One code object each, one graph per (K, R, T, D, dtype) seen (a service plans for one K; beyond torch's
     recompile limit, 8, a new shape runs eagerly).
     """
     if name not in _COMPILED:
-        _COMPILED[name] = torch.compile({"rollouts": rollouts, "update": update}[name], dynamic=False)
+        _COMPILED[name] = torch.compile(_STEPS[name], dynamic=False)
     return _COMPILED[name]
 
 
@@ -271,13 +282,13 @@ class Stomp:
                     q2, eps2 = self._step("rollouts", theta, noise[it, :, fresh:].contiguous(), start, goal,
                                           self.lower, self.upper)
                     q, eps = torch.cat([q, q2[:, 1:]], 1), torch.cat([eps, eps2], 1)
-            # 2. costs of the current trajectory (rollout 0) and of the new noisy rollouts
+            # 2. costs of the current trajectory (rollout 0) and of the new noisy rollouts (with reuse: and the
+            # previous iteration's best rollouts, with the costs they have; the best of them all are kept)
             cost = self._cost(cost_fn, q, k, q.shape[1])
-            if kept is not None:  # ... and the previous iteration's best rollouts, with the costs they have
-                eps = torch.cat([eps, kept[0] - theta[:, None]], 1)
-                cost = torch.cat([cost, kept[1]], 1)
             if c.reuse:
-                kept = keep_best(theta[:, None] + eps, cost[:, 1:], c.reuse)
+                eps, cost, kept_q, kept_cost = self._step("join_kept", theta, eps, cost, *(kept or (None, None)),
+                                                          c.reuse)
+                kept = (kept_q, kept_cost)
             # 2-4. keep the best, probabilities per waypoint, smoothed update within the limits
             theta, total, best_cost, best_theta = self._step("update", theta, eps, cost, best_cost, best_theta,
                                                              self.lower, self.upper, self.M, to_go, c.sensitivity)
@@ -314,12 +325,17 @@ class Stomp:
                                     self.upper)[1]
                          for r in ([c.rollouts] if not c.reuse else [c.rollouts - c.reuse, c.reuse])], 1)
         cost = torch.zeros(k, c.rollouts + 1, c.waypoints, device=self.device, dtype=self.dtype)
+        if c.reuse:  # the first iteration (R new rollouts, nothing kept yet), then the others (R - reuse new)
+            fresh = c.rollouts - c.reuse
+            kept = self._step("join_kept", theta, eps, cost, None, None, c.reuse)[2:]
+            self._step("join_kept", theta, eps[:, :fresh].contiguous(), cost[:, :fresh + 1].contiguous(), *kept,
+                       c.reuse)
         best = torch.full((k,), math.inf, device=self.device, dtype=self.dtype)
         self._step("update", theta, eps, cost, best, theta.clone(), self.lower, self.upper, self.M,
                    self.to_go if c.cost_to_go else None, c.sensitivity)
 
     def _step(self, name: str, *args: object) -> tuple[torch.Tensor, ...]:
-        """:func:`rollouts` or :func:`update`, compiled with ``config.compile`` (eager if compiling fails)."""
+        """One of the steps (:data:`_STEPS`), compiled with ``config.compile`` (eager if compiling fails)."""
         if self._compile:
             try:
                 return _compiled(name)(*args)
@@ -327,7 +343,7 @@ class Stomp:
                 log.warning("torch.compile of STOMP's %s step failed (%s: %s); running it eagerly", name,
                             type(exc).__name__, str(exc).splitlines()[0] if str(exc) else "")
                 self._compile = False
-        return (rollouts if name == "rollouts" else update)(*args)
+        return _STEPS[name](*args)
 
     def _cost(self, cost_fn: CostFn, q: torch.Tensor, k: int, r: int) -> torch.Tensor:
         cost = cost_fn(q)

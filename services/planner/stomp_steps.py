@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["finite_difference_matrix", "rollouts", "with_ends", "finite", "update", "keep_best"]
+__all__ = ["finite_difference_matrix", "rollouts", "with_ends", "finite", "update", "keep_best", "join_kept"]
 
 _NONFINITE_COST = 1e9  # a rollout whose cost is NaN/inf is treated as this costly per waypoint
 
@@ -118,3 +118,28 @@ def keep_best(interior: torch.Tensor, cost: torch.Tensor, n: int) -> tuple[torch
     order = torch.argsort(finite(cost).sum(-1), dim=1, stable=True)[:, :n]  # (K, n); ties: the first rollout
     kept = torch.gather(interior, 1, order[..., None, None].expand(-1, -1, *interior.shape[2:]))
     return kept, torch.gather(cost, 1, order[..., None].expand(-1, -1, cost.shape[-1]))
+
+
+
+def join_kept(theta: torch.Tensor, eps: torch.Tensor, cost: torch.Tensor, kept_q: torch.Tensor | None,
+              kept_cost: torch.Tensor | None, keep: int) -> tuple[torch.Tensor, ...]:
+    """With reuse (``StompConfig.reuse``): the kept rollouts join the new ones, and the best are kept for the next.
+
+    One function, so that compiled it is one call per iteration instead of a dozen eager ops.
+
+    Args:
+        theta: ``(K, N, D)`` current free waypoints.
+        eps: ``(K, R', N, D)`` the noise applied to this iteration's new rollouts.
+        cost: ``(K, R' + 1, N + 2)`` their per-waypoint costs (row 0: ``theta``).
+        kept_q: ``(K, keep, N, D)`` the previous iteration's best rollouts (absolute), or None (first iteration).
+        kept_cost: ``(K, keep, N + 2)`` their costs, or None.
+        keep: Rollouts kept for the next iteration.
+
+    Returns:
+        ``(eps, cost, kept_q', kept_cost')``: the noise and costs of every rollout of this iteration (the
+        kept ones last), for :func:`update`, and its ``keep`` best (:func:`keep_best`).
+    """
+    if kept_q is not None and kept_cost is not None:
+        eps = torch.cat([eps, kept_q - theta[:, None]], 1)
+        cost = torch.cat([cost, kept_cost], 1)
+    return (eps, cost, *keep_best(theta[:, None] + eps, cost[:, 1:], keep))
