@@ -14,7 +14,7 @@ import logging
 import math
 import os
 import threading
-from collections.abc import Sequence
+from collections.abc import MutableMapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -92,7 +92,7 @@ def _library_digest(library: MotionLibrary) -> str:
 
 def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Sequence[Demonstration],
               models_dir: Path, components: int | None = None, progress: bool = True,
-              fit_cache: dict[str, Any] | None = None, volume: str | None = None) -> Path:
+              fit_cache: MutableMapping[str, Any] | None = None, volume: str | None = None) -> Path:
     """The prediction model for a run: trained on ``library`` without ``held_out``, cached in ``models_dir``.
 
     The cache key covers the library's data, the held-out demonstrations, the scene and the training

@@ -7,14 +7,17 @@
   recorded library was not made in these scenes, so the distance is reported with the choice.
 * :class:`HeldOutModels` trains (and caches) prediction models without given demonstrations; with
   one model per held-out demonstration only that demonstration's class is refitted. Every instance
-  shares one process-wide fit cache (:data:`SHARED_FITS`): its entries are keyed by their data and
-  options, so Table I, the switch, its mirror and the timing reuse each other's class fits.
+  with the same models directory shares one fit cache, kept in its ``fits/`` and shared with the other
+  processes that use it (:func:`~services.experiments.fit_store.fit_store`): its entries are keyed by their
+  data and options, so Table I, the switch, its mirror and the timing, in any of the report's worker
+  processes, reuse each other's class fits and sweeps.
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import MutableMapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,11 +30,10 @@ from shared.library import Demonstration, MotionLibrary, load_library, save_libr
 from shared.runtime import UserError
 from shared.scene import Scene
 
+from .fit_store import fit_store
+
 __all__ = ["SYNTHETIC", "load_experiment_library", "library_tag", "short_name", "CupClass", "cup_class",
            "HeldOutModels", "human_file", "samples_per_tick", "class_at_cup", "human_class"]
-
-SHARED_FITS: dict[str, Any] = {}
-"""``train_model``'s fit cache shared by every :class:`HeldOutModels` of this process (fits keyed by data + options)."""
 
 SYNTHETIC = "synthetic"
 """Library name of the embedded synthetic library (generated for the experiment's scene)."""
@@ -154,6 +156,7 @@ class HeldOutModels:
         models_dir: Cache directory.
         components: Gaussians per class (None: the trainer's default, 20 as in the paper).
         volume: Volume method (None: the trainer's default).
+        fits: ``train_model``'s fit cache (None: the models directory's shared store, ``models_dir/fits``).
     """
 
     library: MotionLibrary
@@ -161,9 +164,10 @@ class HeldOutModels:
     models_dir: Path
     components: int | None = None
     volume: str | None = None
-    _fits: dict[str, Any] = field(default_factory=lambda: SHARED_FITS, repr=False)
+    fits: MutableMapping[str, Any] | None = field(default=None, repr=False)
 
     def without(self, demos: list[Demonstration]) -> Path:
         """The model file trained on every demonstration but ``demos``."""
+        fits = self.fits if self.fits is not None else fit_store(Path(self.models_dir) / "fits")
         return model_for(self.library, self.scene, demos, self.models_dir, self.components, progress=False,
-                         fit_cache=self._fits, volume=self.volume)
+                         fit_cache=fits, volume=self.volume)

@@ -20,6 +20,7 @@ import datetime
 import hashlib
 import logging
 import sys
+from collections.abc import Callable, MutableMapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -42,7 +43,7 @@ from .model import PredictionModel, TimedVolumes, quantised
 from .swept_volume import swept_volume
 from .volumes import DEFAULT_VOLUME, VOLUMES, Sweep, demos_volume, digest, spread_volume, sweep, timed_volume
 
-__all__ = ["TrainConfig", "train_model", "regress_motions", "default_library", "demo_sweep_key", "main"]
+__all__ = ["TrainConfig", "train_model", "regress_motions", "default_library", "demo_sweep_key", "cached", "main"]
 
 log = logging.getLogger("foresight.train")
 
@@ -121,7 +122,7 @@ def regress_motions(bank: MixtureBank, lengths: list[int], encoder: FeatureEncod
 
 def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None = None,
                 demos: list[Demonstration] | None = None, progress: bool = True,
-                fit_cache: dict[str, Any] | None = None) -> PredictionModel:
+                fit_cache: MutableMapping[str, Any] | None = None) -> PredictionModel:
     """Train a prediction model.
 
     Args:
@@ -131,9 +132,9 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
         demos: Demonstrations to train on (default: all of ``library``).
         progress: Show tqdm bars.
         fit_cache: Fitted class mixtures (and swept volumes) by a digest of their data and options. Pass
-            the same dict to several calls (e.g. one model per held-out demonstration) and only the
+            the same mapping to several calls (e.g. one model per held-out demonstration) and only the
             classes whose data changed are refitted; the fits are seeded, so the model is the same as
-            without the cache.
+            without the cache. A mapping with ``compute`` (:func:`cached`) can be shared between processes.
 
     Returns:
         The trained model (``volumes`` None when the library's features have no mapping to the human model).
@@ -158,13 +159,11 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     empty = [library.class_names[m] for m, ds in enumerate(by_class) if not ds]
     if empty:
         raise UserError(f"library {library.source}: no demonstrations for class(es) {', '.join(empty)}")
-    cache: dict[str, Any] = {} if fit_cache is None else fit_cache
+    cache: MutableMapping[str, Any] = {} if fit_cache is None else fit_cache
 
     def fit(data: np.ndarray) -> Any:
         key = hashlib.sha256(np.ascontiguousarray(data).tobytes() + repr(cfg.gmm).encode()).hexdigest()
-        if key not in cache:
-            cache[key] = fit_class_gmm(data, cfg.gmm)
-        return cache[key]
+        return cached(cache, key, lambda: fit_class_gmm(data, cfg.gmm))
 
     feats = [[encoder.batch(d.features) for d in ds] for ds in by_class]
     mixtures = [fit(np.vstack(f)) for f in tqdm(feats, desc="GMM per class", unit="class", disable=not progress)]
@@ -210,6 +209,21 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
                            timed=timed)
 
 
+def cached(cache: MutableMapping[str, Any], key: str, make: Callable[[], Any]) -> Any:
+    """``cache[key]``, made with ``make()`` if it is missing.
+
+    A cache with a ``compute(key, make)`` method (the report's
+    :class:`~services.experiments.fit_store.FitStore`, shared by its worker processes) makes each entry once
+    across processes; a dict, once per process.
+    """
+    compute = getattr(cache, "compute", None)
+    if compute is not None:
+        return compute(key, make)
+    if key not in cache:
+        cache[key] = make()
+    return cache[key]
+
+
 def _volume_key_parts(scene: Scene, grid, cfg: TrainConfig) -> tuple:
     pelvis = np.array([*scene.human.pelvis_xyz, scene.human.pelvis_yaw])
     return grid.min, grid.max, grid.resolution, pelvis, cfg.spacing, cfg.interior, cfg.oversample
@@ -228,20 +242,18 @@ def demo_sweep_key(features: np.ndarray, scene: Scene, grid, cfg: TrainConfig) -
 
 
 def _sweeps(demos: list[Demonstration], mapping: FeatureMapping, scene: Scene, grid, cfg: TrainConfig,
-            cache: dict[str, Any], human: HumanModel) -> list[Sweep]:
+            cache: MutableMapping[str, Any], human: HumanModel) -> list[Sweep]:
     """The (cached) sweep of every demonstration of ``demos``."""
     out = []
     for d in demos:
         key = demo_sweep_key(d.features, scene, grid, cfg)
-        if key not in cache:
-            cache[key] = sweep(mapping.to_human(d.features), scene, grid, human, cfg.spacing, cfg.interior,
-                               cfg.oversample)
-        out.append(cache[key])
+        out.append(cached(cache, key, lambda d=d: sweep(mapping.to_human(d.features), scene, grid, human, cfg.spacing,
+                                                        cfg.interior, cfg.oversample)))
     return out
 
 
 def _timed_volumes(mapping: FeatureMapping, scene: Scene, grid, cfg: TrainConfig, by_class: list[list[Demonstration]],
-                   cache: dict[str, Any], progress: bool) -> TimedVolumes:
+                   cache: MutableMapping[str, Any], progress: bool) -> TimedVolumes:
     """The ``timed`` volumes of every class on the union of their supports."""
     if cfg.time_bin < 1:
         raise UserError(f"time bin must be >= 1 sample, got {cfg.time_bin}")
@@ -257,8 +269,8 @@ def _timed_volumes(mapping: FeatureMapping, scene: Scene, grid, cfg: TrainConfig
 
 
 def _class_volumes(bank: MixtureBank, lengths: list[int], encoder: FeatureEncoder, mapping: FeatureMapping,
-                   scene: Scene, grid, cfg: TrainConfig, by_class: list[list[Demonstration]], cache: dict[str, Any],
-                   progress: bool) -> np.ndarray:
+                   scene: Scene, grid, cfg: TrainConfig, by_class: list[list[Demonstration]],
+                   cache: MutableMapping[str, Any], progress: bool) -> np.ndarray:
     """``(M, nx, ny, nz)`` float32 ``p(x|C_m)`` of each class by ``cfg.volume`` (human model via ``mapping``).
 
     Volumes are cached in ``cache`` by a digest of what they depend on (the class mixture or the
@@ -274,19 +286,19 @@ def _class_volumes(bank: MixtureBank, lengths: list[int], encoder: FeatureEncode
             out.append(demos_volume(_sweeps(by_class[m], mapping, scene, grid, cfg, cache, human), grid))
             continue
         key = f"volume:{cfg.volume}:" + digest(w, mu, cov, lengths[m], encoder.time_scale, *common)
-        if key not in cache:
-            n = lengths[m]
+
+        def make(w: np.ndarray = w, mu: np.ndarray = mu, cov: np.ndarray = cov, n: int = lengths[m]) -> np.ndarray:
             t = np.arange((n - 1) * cfg.oversample + 1) / cfg.oversample * encoder.time_scale
             if cfg.volume == "paper":
                 y = np.asarray(gmr(w, mu, cov, t))[:, cols.start - 1: cols.stop - 1]
-                cache[key] = swept_volume(mapping.to_human(y), scene, grid, human, cfg.spacing,
-                                          cfg.interior).astype(np.float32)
-            else:
-                y, c = gmr(w, mu, cov, t, return_covariance=True)
-                o = slice(cols.start - 1, cols.stop - 1)
-                cache[key] = spread_volume(y[:, o], c[:, o, o], scene, grid, human, cfg.spacing, cfg.interior,
-                                           to_human=mapping.to_human)
-        out.append(cache[key])
+                return swept_volume(mapping.to_human(y), scene, grid, human, cfg.spacing,
+                                    cfg.interior).astype(np.float32)
+            y, c = gmr(w, mu, cov, t, return_covariance=True)
+            o = slice(cols.start - 1, cols.stop - 1)
+            return spread_volume(y[:, o], c[:, o, o], scene, grid, human, cfg.spacing, cfg.interior,
+                                 to_human=mapping.to_human)
+
+        out.append(cached(cache, key, make))
     return np.stack(out)
 
 
