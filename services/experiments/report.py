@@ -13,8 +13,8 @@ class, Table I with 1 demonstration x 2 seeds, the switch with 2 demonstrations,
 the pace sweep at each protocol's own pace only, the cost evaluated eagerly (no compile). The full report (20
 Gaussians, 5 demonstrations x 10 seeds, every demonstration of the class, each protocol's iterations, five paces
 per protocol with 3 demonstrations) runs in parts (each library's recognition, and each protocol's Table I,
-switch and pace sweep), one worker process per core, the longest expected first (docs/experiments.md, "Run
-time"). ``--volume`` picks the product protocol's occupancy volume.
+switch and pace sweep), in one worker process per core plus one (``--workers``), the longest expected first
+(docs/experiments.md, "Run time"). ``--volume`` picks the product protocol's occupancy volume.
 """
 
 from __future__ import annotations
@@ -88,12 +88,32 @@ def add_report_arguments(p: argparse.ArgumentParser) -> None:
                    "the paper protocol always uses the paper's: paper)")
     p.add_argument("--protocols", default="product,paper", help="comma-separated protocols run side by side "
                    "(default: product,paper; docs/experiments.md)")
+    p.add_argument("--workers", type=int, default=0, help="worker processes for the parts (default 0: one per "
+                   "core plus one, since a lock-step run leaves its core idle while its messages travel; "
+                   "docs/experiments.md, 'Run time')")
+
+
+def report_workers(asked: int = 0) -> int:
+    """The report's worker processes: ``asked``, or (0) one per core plus one.
+
+    A lock-step run is a chain of messages between four services: while they travel, its process waits and
+    its core idles (the report at 2bb0292 kept its 2 workers busy for 2 x 1976 s and used 3354 CPU-seconds of
+    them, 85 %). One worker more fills those gaps: 2, 3 and 4 copies of one paper-protocol Table I command
+    (12 runs each, models cached) at once ran 0.44-0.47, 0.50 and 0.53 runs per second on this project's
+    2-core machine, the same numbers in every copy (docs/experiments.md, "Run time").
+
+    Raises:
+        UserError: If ``asked`` is negative.
+    """
+    if asked < 0:
+        raise UserError(f"--workers must be >= 0 (0: one per core plus one), got {asked}")
+    return asked or (os.cpu_count() or 1) + 1
 
 
 def run_report(args: argparse.Namespace) -> int:
     """Run every experiment and write ``report.md`` and its PNGs to ``args.out``; returns 0.
 
-    Each library's recognition and each protocol run as separate parts in worker processes, one per core.
+    Each library's recognition and each protocol run as separate parts in worker processes (:func:`report_workers`).
     """
     plan = QUICK if args.quick else FULL
     protocols = tuple(p.strip() for p in args.protocols.split(",") if p.strip())
@@ -116,7 +136,7 @@ def run_report(args: argparse.Namespace) -> int:
     started = time.monotonic()
     # every library's recognition and each protocol are independent parts: one worker process per core
     jobs = [(spec, part) for spec in libs for part in part_names(protocols)]
-    workers = min(len(jobs), max(1, (os.cpu_count() or 1)))
+    workers = min(len(jobs), report_workers(args.workers))
     done: dict[str, dict[str, tuple[list[str], dict[str, Any]]]] = {spec: {} for spec in libs}
     if workers > 1:
         ctx = multiprocessing.get_context("spawn")
@@ -156,7 +176,8 @@ def run_report(args: argparse.Namespace) -> int:
             for k in ("K=1", "K=2"):
                 planning[f"{k}, {prot} protocol"] += d["protocols"][prot]["planning_ms"][k]
     how = (f"as {len(jobs)} parts (each library's recognition, and each protocol's Table I, switch and pace sweep) "
-           f"in {workers} worker processes, one per core, the longest expected first" if workers > 1
+           f"in {workers} worker processes on {os.cpu_count() or 1} cores, the longest expected first (the planning "
+           "times below are measured there, the workers sharing the cores)" if workers > 1
            else "in one process")
     md += ["## Timing", "", f"{len(libs)} {'library' if len(libs) == 1 else 'libraries'} ran {how}.", "",
            "| measure | median | p90 | samples |", "|---|---|---|---|"]

@@ -3,7 +3,7 @@
 :func:`library_part` makes one independent part (``recognition``, or a protocol's Table I, switch or pace sweep:
 :func:`part_names`) and :func:`library_section`
 assembles a library's parts into its Markdown section and its data; :func:`services.experiments.report.run_report`
-runs the parts of every library in parallel, one worker process per core.
+runs the parts of every library in parallel, in worker processes (``report.report_workers``: one per core plus one).
 """
 
 from __future__ import annotations
@@ -260,7 +260,7 @@ def library_part(spec: str, part: str, plan: ReportPlan, out: Path, models_dir: 
     """One independent part of a library's section (one of :func:`part_names`), with its run time.
 
     Parts share nothing but the model cache (written atomically), so :func:`run_report` runs them in
-    parallel, one per core.
+    parallel (``report.report_workers``).
 
     Returns:
         ``(Markdown lines, data)``: for ``recognition`` the data has ``recognition`` and ``prediction_ms``; for

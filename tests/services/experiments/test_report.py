@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import json
+import os
+
+import pytest
 
 from services.experiments.cli import main
+from services.experiments.report import report_workers
 from services.experiments.sections import part_names
+from shared.runtime import UserError
 
 
 def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path):
@@ -26,3 +31,13 @@ def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path):
     # each part's run time, in the data and in the timing block
     assert set(lib["part_seconds"]) == set(part_names(tuple(data["protocols"])))
     assert all(v > 0 for v in lib["part_seconds"].values()) and "Each part's run time" in text
+
+
+def test_report_workers_default_to_one_per_core_plus_one(monkeypatch):
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    assert report_workers() == 3
+    assert report_workers(1) == 1 and report_workers(5) == 5
+    monkeypatch.setattr(os, "cpu_count", lambda: None)  # unknown: one core
+    assert report_workers() == 2
+    with pytest.raises(UserError, match="--workers must be >= 0"):
+        report_workers(-1)
