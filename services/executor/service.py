@@ -26,7 +26,6 @@ import threading
 import time
 from collections import OrderedDict
 from contextlib import ExitStack
-from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -56,11 +55,12 @@ from shared.transport import Presence, RejectCounter, TypedPublisher, describe, 
 
 from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, reason_kind
 from .models import HumanBody, PlaceInScene, RobotModel, load_models, start_configuration
+from .result import ExecutorResult
 
 if TYPE_CHECKING:
     from shared.foxglove.live import LiveServer
 
-__all__ = ["ExecutorResult", "ExecutorService", "load_models", "start_configuration"]  # the last two: .models
+__all__ = ["ExecutorResult", "ExecutorService", "load_models", "start_configuration"]  # all but one: .result, .models
 
 log = logging.getLogger("foresight.executor")
 
@@ -68,38 +68,6 @@ LINGER_S = 0.3
 """Seconds the session stays open after the run so that its last messages reach the log (none without one)."""
 POSES_KEPT = 4096
 """Arrival times of the newest poses kept to date the occupancy grids made from them (real time)."""
-
-
-@dataclass
-class ExecutorResult:
-    """What a run did.
-
-    Attributes:
-        steps: Replanning steps completed (lock-step) or periods elapsed (real time).
-        reached: Whether the goal was reached; ``reached_step`` the first step it was (-1: never).
-        goal_per_step: Goal index executed during each step (-1: none yet).
-        held_steps: Steps (lock-step) or state samples (real time) during which the robot held.
-        finish_steps: Steps after the last one that executed the rest of the last plan (``finish_path``).
-        plans: Plans adopted; ``plans_rejected``: plans with the wrong joints.
-        rejects: Payloads refused (decoding, values, order), per key; ``reject_reasons`` per
-            ``"key reason"``.
-        mcap_path: The log, or None.
-        times: ``(N,)`` stamps of the published states; ``q``: ``(N, D)`` their configurations.
-    """
-
-    steps: int = 0
-    reached: bool = False
-    reached_step: int = -1
-    goal_per_step: list[int] = field(default_factory=list)
-    held_steps: int = 0
-    finish_steps: int = 0
-    plans: int = 0
-    plans_rejected: int = 0
-    rejects: dict[str, int] = field(default_factory=dict)
-    reject_reasons: dict[str, int] = field(default_factory=dict)
-    mcap_path: str | None = None
-    times: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 class ExecutorService:

@@ -1,0 +1,41 @@
+"""What an executor run did: :class:`ExecutorResult` (``ExecutorService.run`` returns it)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["ExecutorResult"]
+
+
+@dataclass
+class ExecutorResult:
+    """What a run did.
+
+    Attributes:
+        steps: Replanning steps completed (lock-step) or periods elapsed (real time).
+        reached: Whether the goal was reached; ``reached_step`` the first step it was (-1: never).
+        goal_per_step: Goal index executed during each step (-1: none yet).
+        held_steps: Steps (lock-step) or state samples (real time) during which the robot held.
+        finish_steps: Steps after the last one that executed the rest of the last plan (``finish_path``).
+        plans: Plans adopted; ``plans_rejected``: plans with the wrong joints.
+        rejects: Payloads refused (decoding, values, order), per key; ``reject_reasons`` per
+            ``"key reason"``.
+        mcap_path: The log, or None.
+        times: ``(N,)`` stamps of the published states; ``q``: ``(N, D)`` their configurations.
+    """
+
+    steps: int = 0
+    reached: bool = False
+    reached_step: int = -1
+    goal_per_step: list[int] = field(default_factory=list)
+    held_steps: int = 0
+    finish_steps: int = 0
+    plans: int = 0
+    plans_rejected: int = 0
+    rejects: dict[str, int] = field(default_factory=dict)
+    reject_reasons: dict[str, int] = field(default_factory=dict)
+    mcap_path: str | None = None
+    times: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
