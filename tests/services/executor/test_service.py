@@ -136,6 +136,21 @@ def test_lockstep_holds_without_plans_then_resumes(zenoh_hub, pr2, tmp_path) -> 
     assert result.held_steps == 3
 
 
+def run_sending(service: ExecutorService, fake: FakeSystem, payloads: list[tuple[str, bytes]],
+                timeout: float = 30) -> None:
+    """Run ``service`` against ``fake`` and, once its first tick is out, put ``payloads`` ((key, bytes) pairs)."""
+    with fake.running():
+        t = threading.Thread(target=service.run)
+        t.start()
+        deadline = time.monotonic() + 20
+        while not fake.ticks and time.monotonic() < deadline:
+            time.sleep(0.01)
+        for key, payload in payloads:  # while it runs
+            fake.session.put(key, payload)
+        t.join(timeout=timeout)
+    assert not t.is_alive()
+
+
 def test_mcap_has_every_channel_decodable_with_schemas(zenoh_hub, pr2, tmp_path) -> None:
     cfg = lockstep_config(tmp_path, steps=5)
     exec_z = zenoh_hub()
@@ -143,17 +158,7 @@ def test_mcap_has_every_channel_decodable_with_schemas(zenoh_hub, pr2, tmp_path)
     service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
     keys = Keys(exec_z.prefix)
     garbage = [b"", b"\x00\x01", msgpack.packb({"_type": "Plan", "_v": 1}), msgpack.packb([1, 2, 3])]
-    with fake.running():
-        t = threading.Thread(target=service.run)
-        t.start()
-        deadline = time.monotonic() + 20
-        while not fake.ticks and time.monotonic() < deadline:
-            time.sleep(0.01)
-        for g in garbage:  # malformed payloads while it runs
-            fake.session.put(keys.plan, g)
-            fake.session.put(keys.occupancy, g)
-        t.join(timeout=30)
-    assert not t.is_alive()
+    run_sending(service, fake, [(key, g) for g in garbage for key in (keys.plan, keys.occupancy)])
     result = service.result
     assert result.steps == 5
     assert sum(result.rejects.values()) == 2 * len(garbage)
@@ -186,17 +191,8 @@ def test_without_a_log_only_the_keys_it_uses_are_checked(zenoh_hub, pr2, tmp_pat
     service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
     keys = Keys(exec_z.prefix)
     garbage = [b"", b"\x00\x01", msgpack.packb([1, 2, 3])]
-    with fake.running():
-        t = threading.Thread(target=service.run)
-        t.start()
-        deadline = time.monotonic() + 20
-        while not fake.ticks and time.monotonic() < deadline:
-            time.sleep(0.01)
-        for g in garbage:
-            for key in (keys.plan, keys.robot_state, keys.posterior, keys.clock):
-                fake.session.put(key, g)
-        t.join(timeout=30)
-    assert not t.is_alive()
+    run_sending(service, fake, [(key, g) for g in garbage
+                                for key in (keys.plan, keys.robot_state, keys.posterior, keys.clock)])
     assert service.result.steps == 4 and service.result.mcap_path is None
     assert service.result.rejects == {keys.plan: len(garbage)}
 
@@ -308,20 +304,9 @@ def test_fuzzed_input_on_every_key_is_rejected_and_the_run_completes(zenoh_hub, 
     service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
     keys = Keys(exec_z.prefix)
     rng = np.random.default_rng(0)
-    sent: dict[str, int] = {}
-    with fake.running():
-        t = threading.Thread(target=service.run)
-        t.start()
-        deadline = time.monotonic() + 20
-        while not fake.ticks and time.monotonic() < deadline:
-            time.sleep(0.01)
-        for key in keys.data_keys():
-            payloads = fuzz_payloads(rng, key, keys, 100)
-            for p in payloads:
-                fake.session.put(key, p)
-            sent[key] = len(payloads)
-        t.join(timeout=60)
-    assert not t.is_alive()
+    payloads = [(key, p) for key in keys.data_keys() for p in fuzz_payloads(rng, key, keys, 100)]
+    sent = {key: sum(k == key for k, _ in payloads) for key in keys.data_keys()}
+    run_sending(service, fake, payloads, timeout=60)
     assert service.result.steps == 6 and service.result.plans == 5
     assert service.result.rejects == sent
     lf = read_log(cfg.mcap)
