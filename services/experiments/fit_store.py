@@ -12,6 +12,11 @@ Entries are stored as plain arrays (``np.load`` with ``allow_pickle=False``): a 
 constructor parameters and its learned attributes, a :class:`~services.predictor.volumes.Sweep` as its two
 arrays, a volume as itself. Read back, each is the same to the bit, so a model trained from the store is the one
 trained without it (tested).
+
+The keys name the data and options of a fit, not the code that made it, so the entries live in a subdirectory
+named for what else decides them (:func:`store_tag`: the model version, bumped when training changes, and the
+scikit-learn and numpy versions): entries of other code are never read, and a directory of an old tag can be
+deleted. An entry that cannot be read (cut short by a crash, damaged, foreign) is made again.
 """
 
 from __future__ import annotations
@@ -20,27 +25,37 @@ import fcntl
 import hashlib
 import json
 import os
+import zipfile
 from collections.abc import Callable, Iterator, MutableMapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import sklearn
 from sklearn.mixture import GaussianMixture
 
+from services.predictor.model import MODEL_VERSION
 from services.predictor.volumes import Sweep
 
-__all__ = ["FitStore", "fit_store"]
+__all__ = ["FitStore", "fit_store", "store_tag"]
 
 _STORES: dict[str, FitStore] = {}
+_FORMAT = 1  # how entries are written (:func:`_encode`)
+_UNREADABLE = (OSError, EOFError, ValueError, KeyError, TypeError, zipfile.BadZipFile)
+
+
+def store_tag() -> str:
+    """The subdirectory of a store whose entries this code may read: store format, model, sklearn, numpy versions."""
+    return f"f{_FORMAT}-model{MODEL_VERSION}-sklearn{sklearn.__version__}-numpy{np.__version__}"
 
 
 def fit_store(directory: Path) -> FitStore:
     """The process's :class:`FitStore` of ``directory`` (one per directory, shared by every caller)."""
-    key = str(Path(directory).resolve())
-    if key not in _STORES:
-        _STORES[key] = FitStore(Path(directory))
-    return _STORES[key]
+    path = Path(directory).resolve()
+    if str(path) not in _STORES:
+        _STORES[str(path)] = FitStore(path)
+    return _STORES[str(path)]
 
 
 def _encode(value: Any) -> dict[str, np.ndarray]:
@@ -78,11 +93,12 @@ class FitStore(MutableMapping[str, Any]):
     """Fit cache entries in memory and in ``directory`` (one ``.npz`` per key), shared between processes.
 
     Args:
-        directory: Where the entries live (created when the first is written).
+        directory: The store; its entries live in ``directory / store_tag()`` (created when the first is written).
     """
 
     def __init__(self, directory: Path) -> None:
-        self.directory = Path(directory)
+        self.root = Path(directory)
+        self.directory = self.root / store_tag()
         self._memory: dict[str, Any] = {}
 
     def _path(self, key: str) -> Path:
@@ -98,7 +114,7 @@ class FitStore(MutableMapping[str, Any]):
         try:
             with np.load(path, allow_pickle=False) as arrays:
                 self._memory[key] = _decode(arrays)
-        except (OSError, ValueError, KeyError, TypeError):  # unreadable (e.g. a foreign file): computed again
+        except _UNREADABLE:  # cut short, damaged or foreign (np.load raises each of these): computed again
             return False
         return True
 
@@ -116,7 +132,10 @@ class FitStore(MutableMapping[str, Any]):
         self.directory.mkdir(parents=True, exist_ok=True)
         path = self._path(key)
         tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
-        np.savez(tmp, **arrays)
+        with open(tmp, "wb") as handle:
+            np.savez(handle, **arrays)
+            handle.flush()
+            os.fsync(handle.fileno())  # on disk before it takes the entry's name, so a crash leaves no short entry
         os.replace(tmp, path)  # atomic: a reader sees the whole entry or none
 
     def __delitem__(self, key: str) -> None:

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import services.experiments.fit_store as fit_store_module
 import services.predictor.train as train
-from services.experiments.fit_store import FitStore
+from services.experiments.fit_store import FitStore, store_tag
 from services.predictor.gmm import GMMConfig, fit_class_gmm
 from services.predictor.train import TrainConfig, train_model
 from services.predictor.volumes import Sweep
@@ -28,7 +29,8 @@ def test_a_model_from_the_store_read_back_is_the_model_without_it(tmp_path, monk
     cfg = TrainConfig(volume=volume, **COARSE)  # temperature "auto": its fold fits go through the store too
     plain = train_model(lib, scene, cfg, progress=False)
     train_model(lib, scene, cfg, progress=False, fit_cache=FitStore(tmp_path))
-    assert len(list(tmp_path.glob("*.npz"))) > 8  # every class fit, fold fit and volume or sweep, one file each
+    # every class fit, fold fit and volume or sweep, one file each
+    assert len(list((tmp_path / store_tag()).glob("*.npz"))) > 8
 
     def refused(*_a, **_k):
         raise AssertionError("the store should have given this")
@@ -63,11 +65,23 @@ def test_entries_read_back_to_the_bit(tmp_path):
     assert "v" not in FitStore(tmp_path)
 
 
-def test_an_unreadable_entry_is_made_again(tmp_path):
+@pytest.mark.parametrize("damage", ["foreign", "empty", "cut short", "a byte flipped"])
+def test_an_unreadable_entry_is_made_again(tmp_path, damage):
     store = FitStore(tmp_path)
-    store["v"] = np.arange(3.0)
-    for f in tmp_path.glob("*.npz"):
-        f.write_bytes(b"not an npz")
+    store["v"] = np.arange(1000.0)
+    (entry,) = store.directory.glob("*.npz")
+    data = entry.read_bytes()
+    entry.write_bytes({"foreign": b"not an npz", "empty": b"", "cut short": data[:len(data) // 2],
+                       "a byte flipped": data[:200] + bytes([data[200] ^ 0xFF]) + data[201:]}[damage])
+    assert FitStore(tmp_path).compute("v", lambda: np.arange(4.0)).shape == (4,)
+    np.testing.assert_array_equal(FitStore(tmp_path)["v"], np.arange(4.0))  # and written again, whole
+
+
+def test_entries_of_other_code_are_not_read(tmp_path, monkeypatch):
+    FitStore(tmp_path)["v"] = np.arange(3.0)
+    assert store_tag() in {p.name for p in tmp_path.iterdir()}
+    monkeypatch.setattr(fit_store_module, "MODEL_VERSION", fit_store_module.MODEL_VERSION + 1)  # training changed
+    assert "v" not in FitStore(tmp_path)
     assert FitStore(tmp_path).compute("v", lambda: np.arange(4.0)).shape == (4,)
 
 
