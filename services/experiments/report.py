@@ -25,10 +25,10 @@ import math
 import multiprocessing
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -43,7 +43,9 @@ from .protocol import PROTOCOLS
 from .sections import library_part, library_section, part_names, part_weight
 from .verdicts import summary
 
-__all__ = ["ReportPlan", "QUICK", "FULL", "add_report_arguments", "run_report", "PAPER_LIBRARY"]
+__all__ = ["ReportPlan", "QUICK", "FULL", "add_report_arguments", "run_report", "run_parts", "PAPER_LIBRARY"]
+
+T = TypeVar("T")
 
 PAPER_LIBRARY = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "paper-library"
 """Where the paper's library lies beside a checkout (``../shared/data/paper-library``)."""
@@ -110,6 +112,25 @@ def report_workers(asked: int = 0) -> int:
     return asked or (os.cpu_count() or 1) + 1
 
 
+def run_parts(fn: Callable[..., T], jobs: Sequence[tuple[Any, ...]], workers: int, context: str = "spawn") -> list[T]:
+    """``fn(*job)`` for every job in ``workers`` processes, handed out in the order given; results in that order.
+
+    The first job to raise ends them all: its exception is raised here at once, and the worker processes, with the
+    jobs they are running, are terminated (a full report's parts run for minutes; waiting for them would only
+    delay the error). ``context``: the multiprocessing start method.
+    """
+    results: list[Any] = [None] * len(jobs)
+    with multiprocessing.get_context(context).Pool(workers, initializer=limit_blas_threads) as pool:  # exit: terminate
+        for i, result in pool.imap_unordered(_indexed, [(fn, i, job) for i, job in enumerate(jobs)]):
+            results[i] = result
+    return results
+
+
+def _indexed(task: tuple[Callable[..., Any], int, tuple[Any, ...]]) -> tuple[int, Any]:
+    fn, i, job = task
+    return i, fn(*job)
+
+
 def run_report(args: argparse.Namespace) -> int:
     """Run every experiment and write ``report.md`` and its PNGs to ``args.out``; returns 0.
 
@@ -139,14 +160,11 @@ def run_report(args: argparse.Namespace) -> int:
     workers = min(len(jobs), report_workers(args.workers))
     done: dict[str, dict[str, tuple[list[str], dict[str, Any]]]] = {spec: {} for spec in libs}
     if workers > 1:
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=limit_blas_threads) as pool:
-            # the longest first, so that the cores finish together
-            order = sorted(jobs, key=lambda job: -part_weight(job[1], plan))
-            futures = {job: pool.submit(library_part, job[0], job[1], plan, out, Path(args.models_dir), 1,
-                                        args.volume) for job in order}
-            for (spec, part), future in futures.items():
-                done[spec][part] = future.result()
+        order = sorted(jobs, key=lambda job: -part_weight(job[1], plan))  # the longest first: the cores end together
+        results = run_parts(library_part, [(spec, part, plan, out, Path(args.models_dir), 1, args.volume)
+                                           for spec, part in order], workers)
+        for (spec, part), result in zip(order, results, strict=True):
+            done[spec][part] = result
     sections = [library_section(spec, plan, out, Path(args.models_dir), volume=args.volume, protocols=protocols,
                                 parts=done[spec]) for spec in libs]
     pace = PaceResult(PaceConfig(libraries=tuple(libs), protocols=protocols, demos=plan.pace_demos,

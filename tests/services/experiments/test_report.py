@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import json
 import os
+import time
+from pathlib import Path
 
 import pytest
 
 from services.experiments.cli import main
-from services.experiments.report import report_workers
+from services.experiments.report import report_workers, run_parts
 from services.experiments.sections import part_names
 from shared.runtime import UserError
 
@@ -41,3 +43,24 @@ def test_report_workers_default_to_one_per_core_plus_one(monkeypatch):
     assert report_workers() == 2
     with pytest.raises(UserError, match="--workers must be >= 0"):
         report_workers(-1)
+
+
+def _fail_or_run_long(i: int, directory: str) -> int:
+    """Job 0 fails once the others run; every other job runs for a minute, then leaves a mark."""
+    if i == 0:
+        time.sleep(0.5)
+        raise ValueError("part 0 failed")
+    Path(directory, f"{i}.started").touch()
+    end = time.monotonic() + 60
+    while time.monotonic() < end:
+        time.sleep(0.05)
+    Path(directory, f"{i}.finished").touch()
+    return i
+
+
+def test_a_failed_part_ends_the_report_at_once_and_the_parts_still_running(tmp_path):
+    with pytest.raises(ValueError, match="part 0 failed"):
+        run_parts(_fail_or_run_long, [(i, str(tmp_path)) for i in range(5)], workers=3, context="fork")
+    assert list(tmp_path.glob("*.started"))  # others were running beside it...
+    assert not list(tmp_path.glob("*.finished"))  # ...and were ended with it, not waited for
+    assert run_parts(divmod, [(7, 2), (9, 4), (1, 1)], workers=2, context="fork") == [(3, 1), (2, 1), (1, 0)]
