@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import hashlib
 import logging
 import sys
 from collections.abc import Callable, MutableMapping
@@ -162,7 +161,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     cache: MutableMapping[str, Any] = {} if fit_cache is None else fit_cache
 
     def fit(data: np.ndarray) -> Any:
-        key = hashlib.sha256(np.ascontiguousarray(data).tobytes() + repr(cfg.gmm).encode()).hexdigest()
+        key = "gmm:" + digest(data, repr(cfg.gmm))
         return cached(cache, key, lambda: fit_class_gmm(data, cfg.gmm))
 
     feats = [[encoder.batch(d.features) for d in ds] for ds in by_class]

@@ -42,10 +42,20 @@ SPREAD_SAMPLES = 16
 
 
 def digest(*parts: object) -> str:
-    """A short hash of arrays and values (cache keys)."""
+    """A short hash of arrays and values (cache keys): each array's dtype, shape and bytes, each value's repr.
+
+    Every part is framed by its kind and length, so two different lists of parts never hash the same bytes
+    (e.g. one array of 6 values and two of 3 with the same bytes).
+    """
     h = hashlib.sha256()
     for p in parts:
-        h.update(np.ascontiguousarray(p).tobytes() if isinstance(p, np.ndarray) else repr(p).encode())
+        if isinstance(p, np.ndarray):
+            a = np.ascontiguousarray(p)
+            head, body = f"array {a.dtype.str} {a.shape}", a.tobytes()
+        else:
+            head, body = "value", repr(p).encode()
+        h.update(f"{head} {len(body)}:".encode())
+        h.update(body)
     return h.hexdigest()[:24]
 
 

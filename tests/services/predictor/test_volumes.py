@@ -13,7 +13,7 @@ from services.predictor.gmm import GMMConfig
 from services.predictor.model import PredictionModel
 from services.predictor.swept_volume import swept_volume
 from services.predictor.train import TrainConfig, train_model
-from services.predictor.volumes import VOLUMES, demos_volume, interpolate, spread_volume, sweep, timed_volume
+from services.predictor.volumes import VOLUMES, demos_volume, digest, interpolate, spread_volume, sweep, timed_volume
 from shared.human import HumanModel
 
 SMALL = TrainConfig(gmm=GMMConfig(n_components=4, max_iter=50), resolution=0.1, oversample=2, temperature=20.0)
@@ -109,3 +109,11 @@ def test_version_1_model_files_still_load(models, tmp_path) -> None:
     np.savez(old, **data)
     back = PredictionModel.load(old)
     assert back.volume_method == "paper" and np.array_equal(back.volumes, models["paper"].volumes)
+
+
+def test_digest_tells_apart_arrays_of_the_same_bytes():
+    a = np.arange(6.0)
+    keys = {digest(a), digest(a.reshape(2, 3)), digest(a[:3], a[3:]), digest(a.view(np.int64)),
+            digest(a, 1), digest(a, "1")}
+    assert len(keys) == 6
+    assert digest(a.reshape(2, 3)) == digest(np.arange(6.0).reshape(2, 3))  # a key: the same parts, the same digest
