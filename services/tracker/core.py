@@ -6,14 +6,18 @@ No Zenoh here. Per keypoint frame (``HumanKeypoints``: names, positions (K, 3) i
 1. the layout's table maps the sensor's points to the human model's (:mod:`shared.keypoints.layouts`); a frame
    without a required point is refused;
 2. the human model is fitted, warm-started from the last accepted frame (:class:`shared.keypoints.fit.KeypointFit`);
-3. a frame whose fit residual (rms) exceeds ``max_residual_m``, or one of whose fitted joints moved faster
+3. a frame not stamped after the last accepted one is refused (the jump check and the smoothing need time to
+   pass; frame numbers are checked on receipt, stamps here). A frame whose fit residual (rms) exceeds
+   ``max_residual_m``, or one of whose fitted joints moved faster
    than ``max_speed_mps`` since the last accepted frame, is refused (a swapped or wild point: sensors do
    that). The check is on joint positions, not angles: the fit may split a turn between the pelvis yaw and
    the torso twist differently from one frame to the next (docs/keypoints.md) without any joint moving;
 4. the features are smoothed by a One-Euro filter (:mod:`.filters`);
 5. a gap (dropped or refused frames) up to ``max_gap_s`` is bridged: the missing frames, at the sensor's
    period, are interpolated between the frames on either side; a longer gap ends the reach under way and
-   starts afresh;
+   starts afresh. The period is the median of the recent intervals, leaving out those under half of it or
+   under :data:`MIN_PERIOD_S` (frames that came in a burst, e.g. after a network stall), so a burst never
+   makes the bridge invent frames between the next regular ones;
 6. the reach rule (:mod:`.reach`) says when a reach starts and ends: ``DemoMarker`` start and end, the poses
    in between as ``HumanPose`` (index 0, 1, ... from the start; ``demo_id`` one per reach). Between reaches
    nothing is published: the predictor recognises reaches, as it does the recorder's demonstrations.
@@ -38,11 +42,14 @@ from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Message
 from .filters import OneEuroFilter
 from .reach import ReachDetector, ReachRule
 
-__all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS"]
+__all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S"]
 
-REASONS = ("frame", "names", "missing", "residual", "jump")
+REASONS = ("frame", "names", "missing", "order", "residual", "jump")
 """Why a frame is refused: another coordinate frame, a point the layout does not have, a required point missing, a
-fit too far from the points, an implausible jump."""
+stamp not after the last accepted frame's, a fit too far from the points, an implausible jump."""
+
+MIN_PERIOD_S = 1.0 / 500
+"""The shortest frame interval taken for the sensor's period (500 Hz): shorter ones are frames of a burst."""
 
 
 @dataclass
@@ -144,6 +151,9 @@ class TrackerCore:
         missing = [p for p, j in self._required.items() if not observed[j]]
         if missing:
             return self._refuse("missing", f"required point(s) missing: {', '.join(missing)}")
+        if self._raw is not None and not stamp > self._raw[0]:
+            return self._refuse("order", f"stamp {stamp:.6f} s is not after the last accepted frame's "
+                                f"({self._raw[0]:.6f} s)")
         prior = self._raw[1][None] if self._raw is not None and stamp - self._raw[0] <= self.config.max_gap_s else None
         res = self.fit.fit(np.nan_to_num(points)[None], observed[None], prior)
         f, rms = res.features[0], float(res.rms_m[0])
@@ -154,13 +164,14 @@ class TrackerCore:
         joints = self.model.joint_positions(f)
         if self._raw is not None and stamp - self._raw[0] > self.config.max_gap_s:
             out.messages += self._lost(self._raw[0])  # a long gap: the reach under way ends, everything starts afresh
-        elif self._raw is not None and stamp > self._raw[0]:
+        elif self._raw is not None:  # stamp > the last accepted one (refused above otherwise)
             dt = stamp - self._raw[0]
             moved = np.linalg.norm(joints - self._joints, axis=-1)
             j = int(np.argmax(moved))
             if moved[j] / dt > self.config.max_speed_mps:
                 return self._refuse("jump", f"{POINT_NAMES[j]} at {moved[j] / dt:.1f} m/s since the last frame")
-            self._dts.append(dt)
+            if dt >= MIN_PERIOD_S and (len(self._dts) < 3 or dt >= 0.5 * float(np.median(self._dts))):
+                self._dts.append(dt)  # the sensor's period; a burst's intervals are left out
         self._raw, self._joints = (stamp, f), joints
         self.accepted += 1
         smooth = self.filter(f, stamp)
@@ -184,6 +195,7 @@ class TrackerCore:
         self.reach.reset()
         self.filter.reset()
         self._recent.clear()
+        self._dts.clear()  # the next frames may come from a sensor restarted at another rate
         self._raw = self._out = self._joints = None
         return msgs
 

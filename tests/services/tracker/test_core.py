@@ -144,3 +144,33 @@ def test_finish_ends_the_reach_under_way(reach) -> None:
     poses = [m for m in messages(outs) if isinstance(m, HumanPose)]
     assert isinstance(end, DemoMarker) and end.event == "end" and end.n_samples == len(poses)
     assert core.finish().messages == []  # nothing under way any more
+
+
+def test_a_frame_not_after_the_last_accepted_is_refused(reach) -> None:
+    core = TrackerCore()
+    joints = MODEL.joint_positions(reach)
+    for i in range(40):
+        assert core.on_frame(i / RATE, NAMES, joints[i]).refused is None
+    moved = joints[40] + [1.0, 0.0, 0.0]  # the body 1 m away: with a later stamp the jump check refuses it
+    for stamp in (39 / RATE, 30 / RATE):  # the same stamp, an earlier one: refused before any check needing time
+        out = core.on_frame(stamp, NAMES, moved)
+        assert out.refused.startswith("order: stamp") and not out.messages
+    assert core.on_frame(40 / RATE, NAMES, moved).refused.startswith("jump: ")
+    assert core.refused["order"] == 2 and core.on_frame(40 / RATE, NAMES, joints[40]).refused is None
+
+
+def test_a_burst_of_frames_makes_the_bridge_invent_nothing(reach) -> None:
+    core = TrackerCore()
+    joints = MODEL.joint_positions(reach)
+    stamps = [i / RATE for i in range(45)]
+    stamps += [44 / RATE + k * 1e-3 for k in range(1, 16)]  # 15 frames 1 ms apart (a stalled link flushing)
+    stamps += [(44 + k) / RATE for k in range(1, 30)]  # then the sensor's 30 Hz again
+    frames = [joints[min(round(t * RATE), len(joints) - 1)] for t in stamps]
+    outs = [core.on_frame(t, NAMES, p) for t, p in zip(stamps, frames, strict=True)]
+    assert all(o.refused is None for o in outs) and core.bridged == 0  # no gap, so nothing interpolated
+    poses = [m for o in outs for m in o.messages if isinstance(m, HumanPose)]
+    assert len(poses) <= len(stamps)  # a pose per frame at most
+    core = TrackerCore()  # and a real gap after a burst is bridged at the sensor's period, not the burst's
+    outs = [core.on_frame(t, NAMES, p) for t, p in zip(stamps[:60], frames[:60], strict=True)]
+    core.on_frame(48 / RATE, NAMES, joints[48])  # 118 ms after the burst's last frame
+    assert core.bridged == round((48 / RATE - stamps[59]) * RATE) - 1 == 3  # at 1 ms it would have been 117
