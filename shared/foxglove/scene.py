@@ -12,7 +12,6 @@ and :class:`PlaceInScene`.
 from __future__ import annotations
 
 import logging
-import math
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -35,6 +34,7 @@ from foxglove.messages import (
     Timestamp,
     Vector3,
 )
+from scipy.spatial.transform import Rotation
 
 from shared.protocol import HumanPose, OccupancyGrid, Plan, RobotState
 from shared.scene import Scene
@@ -121,13 +121,13 @@ def _pose_at(p: np.ndarray | list[float], q: Quaternion | None = None) -> Pose:
 
 
 def _quat_from_matrix(r: np.ndarray) -> Quaternion:
-    """Unit quaternion of a ``(3, 3)`` rotation matrix."""
-    w = math.sqrt(max(0.0, 1.0 + r[0, 0] + r[1, 1] + r[2, 2])) / 2
-    x = math.copysign(math.sqrt(max(0.0, 1.0 + r[0, 0] - r[1, 1] - r[2, 2])) / 2, r[2, 1] - r[1, 2])
-    y = math.copysign(math.sqrt(max(0.0, 1.0 - r[0, 0] + r[1, 1] - r[2, 2])) / 2, r[0, 2] - r[2, 0])
-    z = math.copysign(math.sqrt(max(0.0, 1.0 - r[0, 0] - r[1, 1] + r[2, 2])) / 2, r[1, 0] - r[0, 1])
-    n = math.sqrt(w * w + x * x + y * y + z * z) or 1.0
-    return Quaternion(x=x / n, y=y / n, z=z / n, w=w / n)
+    """Unit quaternion of a ``(3, 3)`` rotation matrix.
+
+    scipy's conversion: right at half turns too, where signs taken from the off-diagonal differences (all zero
+    there) are not.
+    """
+    x, y, z, w = Rotation.from_matrix(np.asarray(r, dtype=np.float64)[:3, :3]).as_quat()
+    return Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
 
 
 def probability_color(p: np.ndarray) -> np.ndarray:

@@ -122,3 +122,15 @@ def test_every_topic_has_a_schema_and_a_bad_message_is_named() -> None:
     with pytest.raises(SceneDecodeError, match="not protobuf or jsonschema"):
         SchemaDecoder().decode("/x", "x", "flatbuffer", b"", b"")
     json.loads(SCHEMAS["/viz/costs"].data)
+
+
+def test_the_base_transform_is_right_at_a_half_turn_about_a_tilted_axis(builder, monkeypatch) -> None:
+    a = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0)
+    t = np.eye(4)
+    t[:3, :3], t[:3, 3] = 2.0 * np.outer(a, a) - np.eye(3), [0.1, 0.2, 0.3]  # 180 degrees about a
+    monkeypatch.setattr(type(builder.scene.robot), "base_transform", lambda _self: t)
+    (tf,) = decoded(SceneStream(builder).static(T))["/tf"].transforms  # decoded with the SDK's schema
+    q = tf.rotation
+    w, v = q.w, np.array([q.x, q.y, q.z])
+    back = (w * w - v @ v) * np.eye(3) + 2.0 * np.outer(v, v) + 2.0 * w * np.cross(np.eye(3), v)
+    assert np.allclose(back, t[:3, :3], atol=1e-12)  # signs from the off-diagonal differences gave an error of 2
