@@ -120,6 +120,10 @@ def _pose_at(p: np.ndarray | list[float], q: Quaternion | None = None) -> Pose:
     return Pose(position=_v(p), orientation=q or Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
 
 
+_KEEP_FIRST_POSES = 4
+"""Demonstrations whose first pose the scene builder keeps (the current one, and a few late poses of the last)."""
+
+
 def _quat_from_matrix(r: np.ndarray) -> Quaternion:
     """Unit quaternion of a ``(3, 3)`` rotation matrix.
 
@@ -181,7 +185,18 @@ class SceneBuilder:
         self.place = place
         self.min_probability = min_probability
         self.max_voxels = max_voxels
-        self._first_pose: dict[int, np.ndarray] = {}
+        self._first_pose: dict[int, np.ndarray] = {}  # the placement reference of the last few demonstrations
+
+    def note_pose(self, pose: HumanPose) -> None:
+        """Every pose, drawn or not: a demonstration's first (index 0) is where the human is placed from.
+
+        The view draws the human at most every ``viz_period_s``, so the first pose is often not drawn; the
+        predictor places the human from it, and so must the picture.
+        """
+        if pose.index == 0:
+            self._first_pose[pose.demo_id] = pose.features.copy()
+            while len(self._first_pose) > _KEEP_FIRST_POSES:  # a long session: keep the last few
+                del self._first_pose[next(iter(self._first_pose))]
 
     # -- static scene ----------------------------------------------------------------------------
 
@@ -310,8 +325,9 @@ class SceneBuilder:
         """
         if self.human is None or self.place is None:
             return None
-        first = self._first_pose.setdefault(pose.demo_id, pose.features.copy())
-        if pose.index == 0:
+        self.note_pose(pose)
+        first = self._first_pose.get(pose.demo_id)
+        if first is None:  # joined after the demonstration's first pose: placed from the first one seen
             self._first_pose[pose.demo_id] = first = pose.features.copy()
         feats = self.place(pose.features, first, self.scene)
         ends, radii = self.human.capsules(feats)  # (S, 2, 3), (S,)

@@ -108,7 +108,13 @@ class SceneStream:
                 VizMessage("/tf", self.builder.base_transform(t).encode(), log_time)]
 
     def due(self, msg: Message) -> str | None:
-        """The topic that would draw ``msg`` now (None: nothing draws it, or its topic was drawn too recently)."""
+        """The topic that would draw ``msg`` now (None: nothing draws it, or its topic was drawn too recently).
+
+        Every human pose passes here, drawn or not: the builder keeps each demonstration's first as the human's
+        placement reference (:meth:`SceneBuilder.note_pose`).
+        """
+        if isinstance(msg, HumanPose):
+            self.builder.note_pose(msg)
         topic = _kind(msg)
         if topic is None or topic in _EVERY:
             return topic

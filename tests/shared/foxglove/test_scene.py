@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from shared.foxglove.decode import SceneDecodeError, SchemaDecoder
-from shared.foxglove.stream import SCHEMAS, SceneStream
+from shared.foxglove.stream import SCHEMAS, SceneStream, VizMessage
+from shared.protocol import HumanPose
 
 from .conftest import SCENE, occupancy, plan, pose, posterior, state
 
@@ -134,3 +135,30 @@ def test_the_base_transform_is_right_at_a_half_turn_about_a_tilted_axis(builder,
     w, v = q.w, np.array([q.x, q.y, q.z])
     back = (w * w - v @ v) * np.eye(3) + 2.0 * np.outer(v, v) + 2.0 * w * np.cross(np.eye(3), v)
     assert np.allclose(back, t[:3, :3], atol=1e-12)  # signs from the off-diagonal differences gave an error of 2
+
+
+def test_the_human_is_placed_from_its_first_pose_even_when_that_pose_is_not_drawn() -> None:
+    from shared.foxglove.scene import default_builder
+
+    def at(demo: int, index: int, stamp: float, shift: float) -> HumanPose:
+        f = pose().features.copy()
+        f[:2] += shift  # the pelvis walks: the placement reference matters
+        return HumanPose(stamp=stamp, tick=-1, tick_last=True, demo_id=demo, index=index, features=f)
+
+    viewed, reference = default_builder(SCENE), default_builder(SCENE)
+    stream = SceneStream(viewed, viz_period_s=0.5)
+    drawn = []
+    for p in (at(1, 7, 0.95, 0.0), at(2, 0, 1.0, 0.3), at(2, 1, 1.5, 0.4)):  # demo 2's first pose comes too soon
+        topic = stream.due(p)
+        if topic is not None:
+            stream.mark(topic, p)
+            drawn.append(p.index)
+            body = decoded(stream.draw(p, T))["/viz/human"].entities[0].lines
+    assert drawn == [7, 1]
+    reference.human_body(at(2, 0, 1.0, 0.3))
+    want = decoded([VizMessage("/viz/human", reference.human_body(at(2, 1, 1.5, 0.4)).encode(), T)])
+    assert [xyz(q) for ln in body for q in ln.points] == [xyz(q) for ln in want["/viz/human"].entities[0].lines
+                                                          for q in ln.points]
+    for demo in range(3, 10):  # a long session keeps a few references, not one per demonstration
+        viewed.note_pose(at(demo, 0, float(demo), 0.0))
+    assert len(viewed._first_pose) <= 4
