@@ -179,6 +179,11 @@ class TrackerCore:
         self._out = (stamp, smooth)
         return out
 
+    @property
+    def tracking(self) -> bool:
+        """Whether a frame was accepted since the start or the last loss (the core keeps a past to continue)."""
+        return self._raw is not None
+
     def finish(self) -> TrackerOutput:
         """The frames have stopped for good (the tracker is stopping): end the reach under way, forget the past."""
         return TrackerOutput(self._lost(self._raw[0]) if self._raw is not None else [])

@@ -80,6 +80,7 @@ class TrackerService:
         self.rejects = RejectCounter("tracker")
         self._lock = threading.Lock()
         self._ros2_frame = 0
+        self._accepted_at = time.monotonic()  # when the core last took a frame (check_silence)
         self._ros2_receipt = Receipt(Expectations(clock="realtime"))
         self._human: HumanPublisher | None = None
         self.playback: Playback | None = None
@@ -102,7 +103,23 @@ class TrackerService:
                 log.warning("tracker: frame %d refused (%s); refused so far: %s", msg.frame, out.refused,
                             ", ".join(f"{k} {v}" for k, v in self.core.refused.items() if v))
                 return
+            self._accepted_at = time.monotonic()
             self._publish(out.messages)
+
+    def check_silence(self) -> bool:
+        """End the reach under way if no frame was taken for longer than ``max_gap_s``; whether it did.
+
+        The sensor stopped, or every frame is refused: the reach ends now, at its last frame, while its end marker
+        is fresh for the receivers (they refuse old stamps). The core alone would end it only when the next frame
+        comes, which may be minutes later.
+        """
+        with self._lock:
+            quiet = time.monotonic() - self._accepted_at
+            if not self.core.tracking or quiet <= self.config.tracker.max_gap_s:
+                return False
+            self._publish(self.core.finish().messages)
+        log.info("tracker: no frame taken for %.1f s: starting afresh with the next", quiet)
+        return True
 
     def _publish(self, messages: list) -> None:
         """The core's poses and markers on their keys (under the lock)."""
@@ -147,7 +164,8 @@ class TrackerService:
                     self._play(self.playback, stop)
                     stop.wait(0.5)  # the last frames' poses and markers are delivered
                 else:
-                    stop.wait()
+                    while not stop.wait(min(0.1, cfg.tracker.max_gap_s / 3)):
+                        self.check_silence()
             finally:
                 for close in closers:
                     close()

@@ -122,6 +122,32 @@ def test_a_sensors_reach_becomes_poses_between_markers(zenoh_hub) -> None:
     assert stats.frames == len(frames) and stats.reaches == 1 and sum(stats.refused.values()) == 0
 
 
+def test_a_sensor_gone_quiet_mid_reach_ends_the_reach_at_once(zenoh_hub) -> None:
+    hub = zenoh_hub
+    tester = hub()
+    keys = Keys(tester.prefix)
+    frames = _reach_frames()
+    half = 45 + (len(frames) - 90) // 2  # the hold, then half of the reach: then the sensor stops
+    with open_session(tester) as session:
+        service, thread = _service(hub, session, keys)
+        try:
+            got = Collector(session, keys)
+            pub = _sensor(session, keys)
+            sent = []
+            for i, pos in enumerate(frames[:half]):
+                sent.append(_kp(i, pos))
+                pub.put(sent[-1])
+                time.sleep(1 / 30)
+            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "start" for m in items))
+            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "end" for m in items),
+                            timeout=10.0)  # no further frame came: the silence ended it
+            assert thread.thread.is_alive()  # the tracker goes on, ready for the next reach
+            end = got.markers()[-1]
+        finally:
+            thread.stop()
+    assert end.stamp == sent[-1].stamp and end.n_samples == sum(isinstance(m, HumanPose) for m in got.items)
+
+
 def test_bad_frames_get_one_line_each_are_never_published_and_the_tracker_goes_on(zenoh_hub, caplog) -> None:
     hub = zenoh_hub
     tester = hub()
