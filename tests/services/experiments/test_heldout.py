@@ -43,12 +43,12 @@ def test_a_fit_cache_refits_only_the_changed_class_and_changes_nothing(tmp_path)
     cache: dict = {}
 
     def count(kind: str) -> int:
-        return sum(k.split(":")[0] == kind if ":" in k else kind == "fit" for k in cache)
+        return sum(k.split(":")[0] == kind for k in cache)
 
     train_model(lib, scene, cfg, progress=False, fit_cache=cache)
-    assert count("fit") == 8 and count("volume") == 8
+    assert count("gmm") == 8 and count("volume") == 8
     cached = train_model(lib, scene, cfg, demos=demos, progress=False, fit_cache=cache)
-    assert count("fit") == 9 and count("volume") == 9  # one refit and one new volume: class 3
+    assert count("gmm") == 9 and count("volume") == 9  # one refit and one new volume: class 3
     plain = train_model(lib, scene, cfg, demos=demos, progress=False)
     assert all(v.any() for v in cached.volumes)  # every class has a volume to compare
     for field in ("weights", "means", "covariances", "motions", "volumes"):
