@@ -25,10 +25,15 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-__all__ = ["Issued", "make_authority", "issue", "init_security_dir", "read_role", "verify_role", "LOOPBACK_HOSTS"]
+__all__ = ["Issued", "CertificateError", "make_authority", "issue", "init_security_dir", "read_role", "verify_role",
+           "LOOPBACK_HOSTS"]
 
 LOOPBACK_HOSTS = ("localhost", "127.0.0.1")
 """Names every certificate carries, so that a run on one machine verifies."""
+
+
+class CertificateError(ValueError):
+    """A role's certificate or key that cannot be used; the message names the file and what is wrong."""
 
 
 @dataclass(frozen=True)
@@ -116,12 +121,18 @@ def issue(authority: Issued, role: str, hosts: Sequence[str] = (), days: int = 3
 
 
 def _write(path: Path, data: bytes, private: bool) -> None:
+    """Write ``data`` to ``path`` whole (a temporary file renamed), 0600 if ``private`` before a byte is written."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC
-    fd = os.open(path, flags, 0o600 if private else 0o644)
-    with os.fdopen(fd, "wb") as f:
-        f.write(data)
-    os.chmod(path, 0o600 if private else 0o644)  # also when the file existed with other permissions
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o644)
+    try:
+        os.fchmod(fd, 0o600 if private else 0o644)  # whatever the umask or a stale temporary file had
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)  # an existing file, whatever its permissions, is replaced, never written into
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], hosts: Sequence[str] = (),
@@ -134,17 +145,29 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
         hosts: Host names or addresses the sessions listen on beyond loopback (beside localhost), in every
             certificate: the router's in client mode, each peer's too in peer mode.
         days: Validity of the role certificates (the CA: ten years).
-        force: Replace an existing authority (without it an existing ``ca.key`` is reused, so that
-            running it again re-issues the role certificates under the same CA: rotation).
+        force: Replace an existing authority (without it an existing ``ca.crt`` and ``ca.key`` are reused, so
+            that running it again re-issues the role certificates under the same CA: rotation).
 
     Raises:
-        FileExistsError: Never with ``force``; see above.
+        FileExistsError: Without ``force``, the directory holds one of ``ca.crt`` and ``ca.key`` but not the
+            other (a cell machine holds only ``ca.crt``: a new authority there would lock it out of its cell), or
+            a ``ca.key`` that does not match ``ca.crt``.
     """
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     ca_crt, ca_key = d / "ca.crt", d / "ca.key"
+    if not force and ca_crt.is_file() != ca_key.is_file():
+        have, lacks = (ca_crt, ca_key) if ca_crt.is_file() else (ca_key, ca_crt)
+        raise FileExistsError(f"security directory {d} holds {have.name} without {lacks.name}: certificates are "
+                              f"issued where both are (copy the role files from there), or --force makes a new "
+                              "authority, which every machine of the cell must then get")
     if ca_crt.is_file() and ca_key.is_file() and not force:
         authority = Issued(ca_crt.read_bytes(), ca_key.read_bytes())
+        ca_public = x509.load_pem_x509_certificate(authority.cert_pem).public_key()
+        key_public = serialization.load_pem_private_key(authority.key_pem, password=None).public_key()
+        if ca_public.public_bytes(serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo) != \
+                key_public.public_bytes(serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo):
+            raise FileExistsError(f"security directory {d}: ca.key is not the key of ca.crt")
     else:
         authority = make_authority()
         _write(ca_crt, authority.cert_pem, private=False)
@@ -170,7 +193,8 @@ def read_role(directory: str | os.PathLike[str], role: str) -> tuple[Path, Path,
     for f in files:
         if not f.is_file():
             raise FileNotFoundError(f"security directory {d}: {f.name} is missing (make the certificates with "
-                                    f"`foresight security init {d}`)")
+                                    f"`foresight security init DIR` where the cell's ca.key is, and copy ca.crt "
+                                    f"and this role's files here)")
     return files
 
 
@@ -179,7 +203,8 @@ def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime |
 
     Raises:
         FileNotFoundError: A file is missing.
-        ValueError: Naming what is wrong (signature, common name, validity, key mismatch).
+        CertificateError: Naming what is wrong (signature, common name, validity, a key that is not the
+            certificate's or that cannot be read without a password).
     """
     ca_path, cert_path, key_path = read_role(directory, role)
     ca = x509.load_pem_x509_certificate(ca_path.read_bytes())
@@ -187,16 +212,20 @@ def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime |
     try:
         cert.verify_directly_issued_by(ca)
     except (ValueError, TypeError, InvalidSignature) as exc:
-        raise ValueError(f"{cert_path.name} is not signed by {ca_path.name} ({type(exc).__name__})") from None
+        raise CertificateError(f"{cert_path.name} is not signed by {ca_path.name} ({type(exc).__name__})") from None
     names = [a.value for a in cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)]
     if names != [role]:
-        raise ValueError(f"{cert_path.name}: common name {names} is not [{role!r}]")
+        raise CertificateError(f"{cert_path.name}: common name {names} is not [{role!r}]")
     now = now or dt.datetime.now(dt.UTC)
     if not cert.not_valid_before_utc <= now <= cert.not_valid_after_utc:
-        raise ValueError(f"{cert_path.name}: not valid now (valid {cert.not_valid_before_utc:%Y-%m-%d} .. "
-                         f"{cert.not_valid_after_utc:%Y-%m-%d})")
-    key = serialization.load_pem_private_key(key_path.read_bytes(), password=None)
+        raise CertificateError(f"{cert_path.name}: not valid now (valid {cert.not_valid_before_utc:%Y-%m-%d} .. "
+                               f"{cert.not_valid_after_utc:%Y-%m-%d})")
+    try:
+        key = serialization.load_pem_private_key(key_path.read_bytes(), password=None)
+    except (ValueError, TypeError) as exc:  # TypeError: the key is encrypted (a session cannot ask for a password)
+        raise CertificateError(f"{key_path.name}: cannot be read without a password or is not a key "
+                               f"({str(exc).splitlines()[0][:80]})") from None
     der, spki = serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo
     if key.public_key().public_bytes(der, spki) != cert.public_key().public_bytes(der, spki):
-        raise ValueError(f"{key_path.name} does not belong to {cert_path.name}")
+        raise CertificateError(f"{key_path.name} does not belong to {cert_path.name}")
     return cert

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from shared.protocol import Keys
 
 from .acl import OBSERVER, access_control
-from .certificates import read_role
+from .certificates import read_role, verify_role
 
 if TYPE_CHECKING:
     from shared.config import ZenohConfig
@@ -20,11 +20,18 @@ __all__ = ["tls_settings", "secure_endpoints", "insecure_listen_warning", "secur
 def tls_settings(security_dir: str | os.PathLike[str], role: str) -> dict[str, Any]:
     """Zenoh's ``transport/link/tls`` section: mutual TLS with the role's certificate, names verified.
 
+    The certificate is checked first (:func:`verify_role`), so a session with an expired, foreign or mismatched
+    one fails at once with one line naming it, rather than retrying a link the other side refuses. A link is
+    closed when its certificate expires (Zenoh keeps it open otherwise).
+
     Raises:
         FileNotFoundError: If the CA or the role's certificate or key is missing (naming it).
+        CertificateError: If the certificate or key cannot be used now (naming what is wrong).
     """
+    verify_role(security_dir, role)
     ca, cert, key = read_role(security_dir, role)
     return {
+        "close_link_on_expiration": True,
         "root_ca_certificate": str(ca),
         "enable_mtls": True,
         "listen_private_key": str(key),

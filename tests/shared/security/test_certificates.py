@@ -56,3 +56,28 @@ def test_check_names_what_is_wrong(tmp_path: Path) -> None:
         verify_role(other, "planner")
     with pytest.raises(FileNotFoundError, match="observer.crt is missing .*foresight security init"):
         read_role(d, "observer")
+
+
+def test_a_cell_machine_without_the_ca_key_is_never_given_a_new_authority(tmp_path: Path) -> None:
+    admin, cell = tmp_path / "admin", tmp_path / "cell"
+    init_security_dir(admin, ["planner"])
+    cell.mkdir()
+    (cell / "ca.crt").write_bytes((admin / "ca.crt").read_bytes())  # ca.key stays offline, as docs/security.md says
+    with pytest.raises(FileExistsError, match="holds ca.crt without ca.key"):
+        init_security_dir(cell, ["tracker"])
+    assert (cell / "ca.crt").read_bytes() == (admin / "ca.crt").read_bytes() and not (cell / "ca.key").exists()
+    other = tmp_path / "other"
+    init_security_dir(other, [])
+    (admin / "ca.key").write_bytes((other / "ca.key").read_bytes())  # a key of another authority
+    with pytest.raises(FileExistsError, match="ca.key is not the key of ca.crt"):
+        init_security_dir(admin, ["planner"])
+
+
+def test_a_key_file_that_was_readable_is_replaced_private(tmp_path: Path) -> None:
+    init_security_dir(tmp_path, ["planner"])
+    key = tmp_path / "planner.key"
+    key.chmod(0o644)
+    old = key.read_bytes()
+    init_security_dir(tmp_path, ["planner"])  # rotation
+    assert stat.S_IMODE(key.stat().st_mode) == 0o600 and key.read_bytes() != old
+    assert verify_role(tmp_path, "planner") and not list(tmp_path.glob(".*.tmp"))

@@ -23,7 +23,8 @@ import zenoh
 from services.processes import free_port
 from shared.config import ZenohConfig
 from shared.security.acl import ROLES
-from shared.security.certificates import Issued, init_security_dir, issue
+from shared.security.certificates import CertificateError, Issued, init_security_dir, issue
+from shared.security.tls import tls_settings
 from shared.transport import open_session
 
 POSE, STATE, PLAN = "foresight/human/pose", "foresight/robot/state", "foresight/planner/plan"
@@ -72,13 +73,17 @@ def _session(stack: contextlib.ExitStack, endpoint: str, role: str, security: Pa
     return stack.enter_context(open_session(cfg))
 
 
-def _raw_tls_without_certificate(endpoint: str, ca: Path) -> zenoh.Session:
+def _raw_tls(endpoint: str, ca: Path, cert: Path | None = None, key: Path | None = None) -> zenoh.Session:
+    """A session built by hand, not by Foresight's (which refuses an expired certificate before connecting)."""
     conf = zenoh.Config()
     conf.insert_json5("mode", '"peer"')
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("listen/endpoints", "[]")
     conf.insert_json5("connect/endpoints", json.dumps([endpoint.replace("tcp/", "tls/")]))
-    conf.insert_json5("transport/link/tls", json.dumps({"root_ca_certificate": str(ca)}))
+    tls = {"root_ca_certificate": str(ca)}
+    if cert is not None and key is not None:
+        tls.update(enable_mtls=True, connect_certificate=str(cert), connect_private_key=str(key))
+    conf.insert_json5("transport/link/tls", json.dumps(tls))
     return zenoh.open(conf)
 
 
@@ -115,9 +120,12 @@ def test_refused_sessions_read_and_write_nothing(intruder: str, dirs: dict[str, 
         logged = Inbox()
         executor.declare_subscriber("foresight/**", logged)
         if intruder == "no certificate":
-            bad = stack.enter_context(_raw_tls_without_certificate(endpoint, dirs["good"] / "ca.crt"))
+            bad = stack.enter_context(_raw_tls(endpoint, dirs["good"] / "ca.crt"))
+        elif intruder == "expired":
+            d = dirs["expired"]
+            bad = stack.enter_context(_raw_tls(endpoint, d / "ca.crt", d / "replayer.crt", d / "replayer.key"))
         else:
-            security = {"another CA": dirs["other"], "expired": dirs["expired"], "plain TCP": None}[intruder]
+            security = {"another CA": dirs["other"], "plain TCP": None}[intruder]
             bad = _session(stack, endpoint, "replayer", security)
         seen = Inbox()
         bad.declare_subscriber("foresight/**", seen)
@@ -128,3 +136,12 @@ def test_refused_sessions_read_and_write_nothing(intruder: str, dirs: dict[str, 
         time.sleep(1.0)
         assert logged.payloads() == {"genuine pose"}
         assert seen.payloads() <= {"intruder pose"}  # at most its own put, delivered in its own process
+
+
+def test_a_session_with_an_expired_certificate_fails_at_once_naming_it(dirs: dict[str, Path]) -> None:
+    cfg = ZenohConfig(mode="client", listen=[], connect=["tcp/127.0.0.1:9"], security_dir=str(dirs["expired"]),
+                      role="replayer")
+    with pytest.raises(CertificateError, match="replayer.crt: not valid now"):
+        with open_session(cfg):
+            pass
+    assert tls_settings(dirs["good"], "replayer")["close_link_on_expiration"] is True  # and a link ends with it
