@@ -159,7 +159,7 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
     if not force and ca_crt.is_file() != ca_key.is_file():
         have, lacks = (ca_crt, ca_key) if ca_crt.is_file() else (ca_key, ca_crt)
         raise FileExistsError(f"security directory {d} holds {have.name} without {lacks.name}: certificates are "
-                              f"issued where both are (copy the role files from there), or --force makes a new "
+                              f"issued where both are (copy the role files from there), or --new-ca makes a new "
                               "authority, which every machine of the cell must then get")
     if ca_crt.is_file() and ca_key.is_file() and not force:
         authority = Issued(ca_crt.read_bytes(), ca_key.read_bytes())

@@ -66,6 +66,9 @@ def test_a_cell_machine_without_the_ca_key_is_never_given_a_new_authority(tmp_pa
     with pytest.raises(FileExistsError, match="holds ca.crt without ca.key"):
         init_security_dir(cell, ["tracker"])
     assert (cell / "ca.crt").read_bytes() == (admin / "ca.crt").read_bytes() and not (cell / "ca.key").exists()
+    with pytest.raises(SystemExit) as stopped:  # the command: one line, status 2
+        main(["init", str(cell)])
+    assert stopped.value.code == 2 and not (cell / "ca.key").exists()
     other = tmp_path / "other"
     init_security_dir(other, [])
     (admin / "ca.key").write_bytes((other / "ca.key").read_bytes())  # a key of another authority
