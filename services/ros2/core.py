@@ -20,6 +20,7 @@ Frames: everything in the scene's frame, ``frame_id`` (default ``world``, as in 
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -66,6 +67,10 @@ KEYPOINTS_TYPE = "geometry_msgs/msg/PoseArray"
 """A body tracker's keypoints, as the tracker takes them from ROS 2 (:mod:`services.ros2.keypoints`)."""
 
 
+_ROS_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+"""A ROS 2 node name or one namespace token (https://design.ros2.org/articles/topic_and_service_names.html)."""
+
+
 @dataclass
 class Ros2Config:
     """Options of ``foresight ros2`` (``[ros2]``)."""
@@ -83,10 +88,13 @@ class Ros2Config:
         """Check ranges and names."""
         if not 0 <= self.domain_id <= 232:
             raise ConfigError(f"ros2.domain_id: must be 0..232, got {self.domain_id}")
-        if not self.namespace.startswith("/"):
-            raise ConfigError(f"ros2.namespace: must start with '/', got {self.namespace!r}")
-        if not self.node or "/" in self.node:
-            raise ConfigError(f"ros2.node: a name without '/', got {self.node!r}")
+        parts = self.namespace.strip("/").split("/") if self.namespace != "/" else []
+        if not self.namespace.startswith("/") or not all(_ROS_NAME.fullmatch(p) for p in parts):
+            raise ConfigError(f"ros2.namespace: '/' or /name/... with names of letters, digits and '_' not "
+                              f"starting with a digit (ROS 2's rule), got {self.namespace!r}")
+        if not _ROS_NAME.fullmatch(self.node):
+            raise ConfigError(f"ros2.node: a name of letters, digits and '_' not starting with a digit (ROS 2's "
+                              f"rule), got {self.node!r}")
         if not 0.0 <= self.min_probability <= 1.0:
             raise ConfigError(f"ros2.min_probability: must be in [0, 1], got {self.min_probability}")
 

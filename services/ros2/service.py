@@ -113,7 +113,9 @@ class Ros2Service:
 
         if isinstance(msg, DemoMarker):
             return
-        first = self._first_pose.setdefault(msg.demo_id, np.asarray(msg.features, dtype=np.float64))
+        if msg.index == 0 or msg.demo_id not in self._first_pose:  # a demonstration's first pose places the human
+            self._first_pose = {msg.demo_id: np.asarray(msg.features, dtype=np.float64)}  # (ids restart with a run)
+        first = self._first_pose[msg.demo_id]
         if self._due("human"):
             self._put("human", self.mapping.human(msg, place_in_scene(msg.features, first, self.scene)))
 

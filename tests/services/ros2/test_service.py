@@ -96,3 +96,24 @@ def test_every_sample_decodes_with_its_attachment_and_every_topic_has_a_token(
     for role, topic in TOPICS.items():
         mangled = service.config.topic(role).replace("/", "%")
         assert sum(f"/{mangled}/" in t and t.split("/")[-2] == TS.hash_rihs01(topic.msgtype) for t in publishers) == 1
+
+
+def test_the_human_is_placed_from_its_demonstrations_first_pose_when_demo_ids_restart(zenoh_hub, monkeypatch) -> None:
+    features = np.array([0.0, 0.0, 0.95, 0.0, 0.0, 0.0, 0.0, 0.2, 0.1, 0.3, 0.0, 0.5])
+
+    def pose(index: int, shift: float) -> HumanPose:
+        f = features.copy()
+        f[:2] += shift  # the pelvis elsewhere: the placement reference matters
+        return HumanPose(stamp=1.0 + index, tick=-1, tick_last=True, demo_id=0, index=index, features=f)
+
+    def published(poses: list[HumanPose]) -> list[bytes]:
+        service, out = Ros2Service(Ros2ServiceConfig(), zenoh_hub()), []
+        monkeypatch.setattr(service, "_due", lambda _role: True)
+        monkeypatch.setattr(service, "_put", lambda _role, payload: out.append(payload))
+        for p in poses:
+            service.on_human(p)
+        return out
+
+    long_running = published([pose(0, 0.0), pose(1, 0.0), pose(0, 0.3), pose(1, 0.35)])  # a new run: ids restart
+    fresh = published([pose(0, 0.3), pose(1, 0.35)])
+    assert long_running[-1] == fresh[-1]  # placed from the new run's first pose, not the old run's
