@@ -43,7 +43,18 @@ def tls_settings(security_dir: str | os.PathLike[str], role: str) -> dict[str, A
 
 
 def secure_endpoints(endpoints: list[str]) -> list[str]:
-    """``tcp/HOST:PORT`` -> ``tls/HOST:PORT`` (other protocols unchanged): no plain-text link when secure."""
+    """``tcp/HOST:PORT`` -> ``tls/HOST:PORT``, ``tls/`` kept: no plain-text link when secure.
+
+    Raises:
+        ConfigError: An endpoint of another protocol (``udp/``, ``ws/``, ``unixsock-stream/`` ...), which would
+            carry plain text beside the TLS links (access control would cut its peers off, silently).
+    """
+    from shared.config import ConfigError
+
+    plain = [ep for ep in endpoints if not ep.startswith(("tcp/", "tls/"))]
+    if plain:
+        raise ConfigError(f"zenoh endpoints: with security every link is TLS (tcp/HOST:PORT becomes tls/); "
+                          f"{', '.join(plain)} would not be")
     return [f"tls/{ep[4:]}" if ep.startswith("tcp/") else ep for ep in endpoints]
 
 

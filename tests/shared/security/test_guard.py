@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from services.processes import free_port
-from shared.config import ZenohConfig
+from shared.config import ConfigError, ZenohConfig
 from shared.protocol import HumanPose, Keys, RobotState
 from shared.security.acl import ROLES
 from shared.security.certificates import init_security_dir
@@ -33,8 +33,9 @@ def test_denied_names_role_key_and_reason() -> None:
 
 
 def test_endpoints_and_the_plain_tcp_warning() -> None:
-    assert secure_endpoints(["tcp/127.0.0.1:7447", "tls/h:1", "udp/h:2"]) == ["tls/127.0.0.1:7447", "tls/h:1",
-                                                                              "udp/h:2"]
+    assert secure_endpoints(["tcp/127.0.0.1:7447", "tls/h:1"]) == ["tls/127.0.0.1:7447", "tls/h:1"]
+    with pytest.raises(ConfigError, match="with security every link is TLS .* udp/h:2, ws/h:3 would not be"):
+        secure_endpoints(["tcp/127.0.0.1:7447", "udp/h:2", "ws/h:3"])  # plain text beside the TLS links
     assert insecure_listen_warning(["tcp/127.0.0.1:0", "tcp/localhost:7447", "tcp/[::1]:7447"]) == ""
     text = insecure_listen_warning(["tcp/0.0.0.0:7447", "tcp/127.0.0.1:0"])
     assert text.startswith("listening on tcp/0.0.0.0:7447 without security") and "--security DIR" in text
