@@ -23,6 +23,7 @@ from cryptography import x509
 from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.hazmat.primitives.asymmetric.types import PrivateKeyTypes
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 __all__ = ["Issued", "CertificateError", "make_authority", "issue", "init_security_dir", "read_role", "verify_role",
@@ -163,10 +164,8 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
                               "authority, which every machine of the cell must then get")
     if ca_crt.is_file() and ca_key.is_file() and not force:
         authority = Issued(ca_crt.read_bytes(), ca_key.read_bytes())
-        ca_public = x509.load_pem_x509_certificate(authority.cert_pem).public_key()
-        key_public = serialization.load_pem_private_key(authority.key_pem, password=None).public_key()
-        if ca_public.public_bytes(serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo) != \
-                key_public.public_bytes(serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo):
+        key = serialization.load_pem_private_key(authority.key_pem, password=None)
+        if not _same_key(x509.load_pem_x509_certificate(authority.cert_pem), key):
             raise FileExistsError(f"security directory {d}: ca.key is not the key of ca.crt")
     else:
         authority = make_authority()
@@ -225,7 +224,12 @@ def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime |
     except (ValueError, TypeError) as exc:  # TypeError: the key is encrypted (a session cannot ask for a password)
         raise CertificateError(f"{key_path.name}: cannot be read without a password or is not a key "
                                f"({str(exc).splitlines()[0][:80]})") from None
-    der, spki = serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo
-    if key.public_key().public_bytes(der, spki) != cert.public_key().public_bytes(der, spki):
+    if not _same_key(cert, key):
         raise CertificateError(f"{key_path.name} does not belong to {cert_path.name}")
     return cert
+
+
+def _same_key(cert: x509.Certificate, key: PrivateKeyTypes) -> bool:
+    """Whether ``key`` is the private key of ``cert`` (their public keys are the same)."""
+    der, spki = serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo
+    return bool(key.public_key().public_bytes(der, spki) == cert.public_key().public_bytes(der, spki))
