@@ -75,7 +75,7 @@ class Ros2Service:
         self.stats = Ros2Stats({role: 0 for role in TOPICS})
         self._lock = threading.Lock()
         self._pubs: dict[str, Ros2Publisher] = {}
-        self._first_pose: dict[int, np.ndarray] = {}
+        self._first_pose: tuple[int, np.ndarray] | None = None  # (demo id, its first pose): the human's placement
         self._last_viz: dict[str, float] = {}
 
     def _put(self, role: str, payload: bytes) -> None:
@@ -113,9 +113,9 @@ class Ros2Service:
 
         if isinstance(msg, DemoMarker):
             return
-        if msg.index == 0 or msg.demo_id not in self._first_pose:  # a demonstration's first pose places the human
-            self._first_pose = {msg.demo_id: np.asarray(msg.features, dtype=np.float64)}  # (ids restart with a run)
-        first = self._first_pose[msg.demo_id]
+        if msg.index == 0 or self._first_pose is None or self._first_pose[0] != msg.demo_id:  # ids restart with a run
+            self._first_pose = (msg.demo_id, np.asarray(msg.features, dtype=np.float64))
+        first = self._first_pose[1]
         if self._due("human"):
             self._put("human", self.mapping.human(msg, place_in_scene(msg.features, first, self.scene)))
 
