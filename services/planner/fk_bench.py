@@ -38,9 +38,9 @@ def _robot(device: str, dtype: torch.dtype, compiled: bool) -> PR2:
     return _ROBOTS[key]
 
 
-def _sync(device: str) -> None:
-    if device.startswith("cuda"):
-        torch.cuda.synchronize()
+def _sync(device: str | torch.device) -> None:
+    if torch.device(device).type == "cuda":
+        torch.cuda.synchronize(device)
 
 
 def _call(method: str, robot: PR2) -> Callable[[torch.Tensor], object]:
@@ -81,12 +81,12 @@ def fk_time_ms(n_configs: int, method: str = "spheres", device: str = "cpu", dty
     with torch.no_grad():
         for _ in range(2):
             fn(q)
-        _sync(device)
+        _sync(robot.device)  # the robot's device: a robot passed in may not be on ``device``
         times = []
         for _ in range(repeats):
             t0 = time.perf_counter()
             fn(q)
-            _sync(device)
+            _sync(robot.device)
             times.append((time.perf_counter() - t0) * 1e3)
     return min(times) if stat == "min" else statistics.median(times)
 
