@@ -25,7 +25,9 @@ def test_freeze_startup_heap_collects_garbage_then_freezes_the_rest() -> None:
         assert cycle() is not None
         frozen = freeze_startup_heap()
         assert cycle() is None  # collected before the freeze, not frozen as garbage
-        assert frozen == gc.get_freeze_count() >= len(kept)
+        # the count at the freeze: another thread of this process (pytest-xdist's I/O thread, say) may free a
+        # frozen object before the next line reads the count again, so that one may be a little lower
+        assert frozen >= len(kept) and 0 < gc.get_freeze_count() <= frozen
         assert not any(o is kept[0] for o in gc.get_objects())  # out of every generation (identity only:
         # probing the other objects' classes would trip lazy module attributes that warn)
     finally:
