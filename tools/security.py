@@ -42,8 +42,8 @@ def _init(args: argparse.Namespace) -> int:
         raise UserError(f"--days must be >= 1, got {args.days}")
     try:
         written = init_security_dir(args.dir, ROLES, hosts=hosts, days=args.days, force=args.new_ca)
-    except FileExistsError as exc:  # half an authority, or a key that is not the certificate's: nothing written
-        raise UserError(str(exc)) from None
+    except (FileExistsError, ValueError) as exc:  # half an authority, a key that is not the certificate's, a host
+        raise UserError(str(exc)) from None  # that is no host: nothing written
     for name, path in written.items():
         print(f"{path}{'  (private, 0600)' if name.endswith('.key') else ''}")
     print(f"roles: {', '.join(ROLES)}; hosts: localhost, 127.0.0.1{''.join(', ' + h for h in hosts)}; "

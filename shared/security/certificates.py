@@ -15,6 +15,7 @@ from __future__ import annotations
 import datetime as dt
 import ipaddress
 import os
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +28,7 @@ from cryptography.hazmat.primitives.asymmetric.types import PrivateKeyTypes
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 __all__ = ["Issued", "CertificateError", "make_authority", "issue", "init_security_dir", "read_role", "verify_role",
-           "LOOPBACK_HOSTS"]
+           "check_host", "LOOPBACK_HOSTS"]
 
 LOOPBACK_HOSTS = ("localhost", "127.0.0.1")
 """Names every certificate carries, so that a run on one machine verifies."""
@@ -55,9 +56,36 @@ def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
                              serialization.NoEncryption())
 
 
+_LABEL = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)")
+
+
+def check_host(host: str) -> str:
+    """``host`` if it is an IP address or a DNS name a certificate can carry, else a ``ValueError`` saying why.
+
+    An address is written bare (``::1``, not ``[::1]``) and a name has no port: a certificate names hosts,
+    and a name it does not match exactly is refused by the peer at the first connection, far from here.
+    A DNS name is dot-separated labels of letters, digits and inner hyphens (RFC 1123), the first may be
+    ``*`` (a wildcard).
+    """
+    try:
+        return str(ipaddress.ip_address(host))
+    except ValueError:
+        pass
+    if host.startswith("[") and "]" in host:
+        raise ValueError(f"host {host!r}: write an IPv6 address without brackets or port "
+                         f"({host[1:host.index(']')]!r})")
+    if host.count(":") == 1 and host.rsplit(":", 1)[1].isdigit():
+        raise ValueError(f"host {host!r}: a certificate names hosts, not ports (give {host.rsplit(':', 1)[0]!r})")
+    labels = host.rstrip(".").split(".")
+    if len(host) > 253 or not all(_LABEL.fullmatch(lab) or (i == 0 and lab == "*") for i, lab in enumerate(labels)):
+        raise ValueError(f"host {host!r} is neither an IP address nor a DNS name (letters, digits and inner hyphens "
+                         "between dots, e.g. robot.local)")
+    return host
+
+
 def _san(hosts: Iterable[str]) -> x509.SubjectAlternativeName:
     names: list[x509.GeneralName] = []
-    for host in dict.fromkeys(hosts):
+    for host in dict.fromkeys(check_host(h) for h in hosts):
         try:
             names.append(x509.IPAddress(ipaddress.ip_address(host)))
         except ValueError:
@@ -153,7 +181,9 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
         FileExistsError: Without ``force``, the directory holds one of ``ca.crt`` and ``ca.key`` but not the
             other (a cell machine holds only ``ca.crt``: a new authority there would lock it out of its cell), or
             a ``ca.key`` that does not match ``ca.crt``.
+        ValueError: A host that is neither an IP address nor a DNS name (:func:`check_host`); nothing written.
     """
+    hosts = [check_host(h) for h in hosts]
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     ca_crt, ca_key = d / "ca.crt", d / "ca.key"

@@ -84,3 +84,35 @@ def test_a_key_file_that_was_readable_is_replaced_private(tmp_path: Path) -> Non
     init_security_dir(tmp_path, ["planner"])  # rotation
     assert stat.S_IMODE(key.stat().st_mode) == 0o600 and key.read_bytes() != old
     assert verify_role(tmp_path, "planner") and not list(tmp_path.glob(".*.tmp"))
+
+
+@pytest.mark.parametrize(("host", "match"), [
+    ("[::1]", r"without brackets or port \('::1'\)"),
+    ("[fe80::1]:7447", r"without brackets or port \('fe80::1'\)"),
+    ("robot.local:7447", r"names hosts, not ports \(give 'robot.local'\)"),
+    ("robot local", "neither an IP address nor a DNS name"),
+    ("-robot.local", "neither an IP address nor a DNS name"),
+    ("robot..local", "neither an IP address nor a DNS name"),
+    ("a." * 127 + "b", "neither an IP address nor a DNS name"),
+])
+def test_a_host_a_certificate_cannot_name_is_refused_before_anything_is_written(tmp_path: Path, host: str,
+                                                                                 match: str, capsys) -> None:
+    d = tmp_path / "sec"
+    with pytest.raises(ValueError, match=match):
+        init_security_dir(d, ["planner"], hosts=[host])
+    assert not d.exists() or not any(d.iterdir())
+    with pytest.raises(SystemExit) as stopped:  # the command: one line, status 2
+        main(["init", str(d), "--hosts", f"robot.local,{host}"])
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and host in err[0], err
+    assert not d.exists() or not any(d.iterdir())
+
+
+def test_addresses_and_names_a_certificate_can_carry(tmp_path: Path) -> None:
+    hosts = ["::1", "fe80::1", "10.0.0.5", "robot.local", "robot.local.", "*.cell.local", "r2-d2"]
+    init_security_dir(tmp_path, ["router"], hosts=hosts)
+    san = verify_role(tmp_path, "router").extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert {"robot.local", "robot.local.", "*.cell.local", "r2-d2", "localhost"} <= set(
+        san.get_values_for_type(x509.DNSName))
+    assert {str(a) for a in san.get_values_for_type(x509.IPAddress)} == {"::1", "fe80::1", "10.0.0.5", "127.0.0.1"}
