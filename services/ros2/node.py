@@ -11,6 +11,8 @@ logged line each (rate-limited), counted by reason.
 from __future__ import annotations
 
 import hashlib
+import itertools
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -20,7 +22,22 @@ from shared.rejects import RejectCounter
 
 from .wire import Attachment, AttachmentError, data_key, endpoint_token, node_token, qos_chunk
 
-__all__ = ["Ros2Node", "Ros2Publisher"]
+__all__ = ["Ros2Node", "Ros2Publisher", "next_entity_id"]
+
+log = logging.getLogger("foresight.ros2")
+
+_IDS: dict[str, itertools.count] = {}
+_IDS_LOCK = threading.Lock()
+
+
+def next_entity_id(zid: str) -> int:
+    """The next id of a node or an entity (publisher, subscription) on the session ``zid``, from 0.
+
+    Unique within the session, as rmw_zenoh numbers them from one counter per context: two nodes on one
+    session have distinct graph tokens and their publishers distinct GIDs.
+    """
+    with _IDS_LOCK:
+        return next(_IDS.setdefault(zid, itertools.count()))
 
 
 class Ros2Publisher:
@@ -65,19 +82,20 @@ class Ros2Node:
         self.hashes = hashes
         self.rejects = rejects
         self.zid = str(session.zid())
-        self._entities = 0
-        self._tokens = [session.liveliness().declare_token(node_token(domain_id, self.zid, 0, namespace, name))]
+        self.node_id = next_entity_id(self.zid)
+        self._tokens = [session.liveliness().declare_token(node_token(domain_id, self.zid, self.node_id, namespace,
+                                                                      name))]
         self._undeclare: list[Any] = []
         self._handlers: dict[str, tuple[str, str, Callable[[bytes], None]]] = {}
         self._subscriber: Any = None
         self.ordered = ordered
 
     def _token(self, kind: str, topic: str, msgtype: str) -> int:
-        self._entities += 1
+        entity = next_entity_id(self.zid)
         self._tokens.append(self.session.liveliness().declare_token(endpoint_token(
-            self.domain_id, self.zid, 0, self._entities, kind, self.namespace, self.name, topic, msgtype,
+            self.domain_id, self.zid, self.node_id, entity, kind, self.namespace, self.name, topic, msgtype,
             self.hashes[msgtype], qos_chunk(depth=10))))
-        return self._entities
+        return entity
 
     def publisher(self, topic: str, msgtype: str) -> Ros2Publisher:
         """A publisher of ``msgtype`` on the absolute ``topic``, with its ``MP`` token."""
@@ -90,7 +108,8 @@ class Ros2Node:
     def subscription(self, topic: str, msgtype: str, callback: Callable[[bytes], None]) -> None:
         """Call ``callback(payload)`` per sample of ``msgtype`` on ``topic`` with the type's hash and an attachment.
 
-        The subscription's ``MS`` token is declared; the callback may raise ``ValueError`` to refuse a sample.
+        The subscription's ``MS`` token is declared; the callback may raise ``ValueError`` to refuse a sample (any
+        other exception is logged with its traceback and counted as reason ``handler``; the node goes on).
         With ``ordered``, all of a node's subscriptions share one Zenoh subscriber (on the domain's keys), so that
         its callbacks run one at a time in the order the samples arrived (Zenoh calls each subscriber's callback on
         a thread of its own: a command and the ``/clock`` after it could otherwise be handled the other way round).
@@ -125,6 +144,9 @@ class Ros2Node:
             callback(sample.payload.to_bytes())
         except ValueError as exc:  # Ros2InputError: not the type's CDR, or values the receiver refuses
             self.rejects.reject(topic, exc)
+        except Exception as exc:  # the receiver's fault, not the sample's: counted, and logged with its traceback
+            log.exception("%s: handling a %s sample failed", topic, msgtype)
+            self.rejects.reject(topic, f"{type(exc).__name__}: {exc}", reason="handler")
 
     def close(self) -> None:
         """Undeclare the subscriptions, publishers and tokens."""
