@@ -18,9 +18,10 @@ STAMP  := $(VENV)/.installed
 DEMO_ARGS ?=
 TORCH_VERSION ?= 2.13.0
 TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
-# `make test` runs the tests in this many worker processes (pytest-xdist): one per core this process may use, at
-# most 4 (each worker imports torch; the suite's own multi-process tests add to it). TEST_WORKERS=0: one process.
-TEST_WORKERS ?= $(shell $(PYTHON) -c "import os; n = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count() or 1; print(min(n, 4))" 2>/dev/null || echo 2)
+# `make test` runs the tests in this many worker processes (pytest-xdist): one per CPU this process may use (its
+# affinity and its cgroup's quota: tools/cpus.py), at most 4 (each worker imports torch; the suite's own
+# multi-process tests add to it). TEST_WORKERS=0: one process.
+TEST_WORKERS ?= $(shell $(PYTHON) tools/cpus.py --max 4 2>/dev/null || echo 2)
 
 .PHONY: demo test setup lint clean compose-check
 
