@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import subprocess
@@ -93,18 +94,21 @@ def test_realtime_every_pose_in_order(zenoh_hub, small_lib):
     assert [(d.label, d.index) for d in service.demos] == [(0, 1), (0, 2), (2, 1), (2, 2)]
 
 
-def test_lockstep_replayer_stops_with_the_executor(zenoh_hub, small_lib):
+def test_lockstep_replayer_stops_with_the_executor(zenoh_hub, small_lib, caplog):
     """``stop_with=[executor]``: the run's master ends before the demonstrations do; the replayer ends too."""
     sub_cfg, rep_cfg = zenoh_hub(), zenoh_hub()
     keys = Keys(sub_cfg.prefix)
     service = ReplayerService(ReplayerConfig(mode="lockstep", stop_with=["executor"]), rep_cfg, small_lib)
     stop = threading.Event()
+    caplog.set_level(logging.INFO, logger="shared.transport")
     with open_session(sub_cfg) as session:
         presence = Presence(session, keys, "executor")
         th = run_in_thread(service, stop)
         deadline = time.monotonic() + 10
-        while not presence.is_alive("replayer"):
-            assert time.monotonic() < deadline, "replayer never appeared"
+        # the replayer stops when a peer it has seen goes: wait until it has seen the executor, not only until the
+        # executor sees it (under load its liveliness history arrived after the token was gone: it never stopped)
+        while not any(r.getMessage() == "replayer: peer executor appeared" for r in caplog.records):
+            assert time.monotonic() < deadline, "the replayer never saw the executor"
             time.sleep(0.01)
         TypedPublisher(session, keys.clock).put(ClockTick(stamp=0.0, tick=0, period=0.2))
         presence.close()  # the executor is done after one tick
