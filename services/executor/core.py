@@ -152,10 +152,14 @@ class ExecutorCore:
     # inputs
 
     def check_plan(self, plan: Plan) -> None:
-        """Raise ExecutorError if ``plan`` does not fit this arm (joint names/order)."""
+        """Raise ExecutorError if ``plan`` does not fit this arm (joint names/order; a chosen path of 2+ waypoints)."""
         if tuple(plan.joint_names) != self.limits.joint_names:
             raise ExecutorError(f"Plan.joint_names: {list(plan.joint_names)} do not match the executor's "
                                 f"{list(self.limits.joint_names)}")
+        shape = np.shape(plan.trajectories)
+        if len(shape) != 3 or shape[1] < 2 or not 0 <= plan.chosen < shape[0]:
+            raise ExecutorError(f"Plan.trajectories: shape {shape} with chosen {plan.chosen}: the executor needs the "
+                                "chosen trajectory with at least 2 waypoints")
 
     def adopt(self, plan: Plan, stamp: float | None = None) -> None:
         """Start executing ``plan``'s chosen trajectory now (at ``self.t``).

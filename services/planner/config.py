@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from shared.config import ConfigError, nested, opt
+from shared.protocol.limits import JOINT_LIMIT_TOL
 from shared.scene import SCENE_HELP
 
 from .costs import CostConfig
@@ -66,7 +67,9 @@ class PlannerConfig:
                                       "iterations (0: always run stomp.iterations; real time only, lock-step "
                                       "always runs them all)")
     off_path_tol: float = opt(0.05, help="joint-space distance beyond which the robot is taken as off tau_best")
-    limit_tol: float = opt(1e-3, help="start configurations this far outside the limits are clamped, not refused")
+    limit_tol: float = opt(JOINT_LIMIT_TOL, help="start configurations this far outside the limits are clamped, not "
+                           "refused (default: the wire's JOINT_LIMIT_TOL, so a RobotState the planner accepts is one "
+                           "it can plan from)")
     stomp: StompConfig = nested(
         StompConfig, help="STOMP, the optimiser of every goal's trajectory (its seed, device and dtype are the "
         "planner's)", hide=("seed", "device", "dtype", "compile"),

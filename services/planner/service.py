@@ -214,6 +214,8 @@ class PlannerService:
         def newer_waiting() -> bool:  # anytime: a prediction newer than the one being planned against
             return trigger.newer_than_planned(occupancy_identity(occupancy.latest))
 
+        failed_from: RobotState | None = None  # the state a step failed from: no departure step again from it
+
         try:
             while not stop.is_set():
                 wake.clear()
@@ -224,8 +226,8 @@ class PlannerService:
                 occ = occupancy.latest
                 ident = occupancy_identity(occ)
                 departed = False
-                if trigger.mode == "event":
-                    dist = self.planner.departure(robot.q)
+                if trigger.mode == "event" and robot is not failed_from:  # else a failing step would restart at
+                    dist = self.planner.departure(robot.q)  # once, as fast as it fails, until the next state
                     departed = dist is not None and dist > tol
                 now = time.monotonic()
                 reason = trigger.reason(now, ident, departed)
@@ -240,6 +242,7 @@ class PlannerService:
                                     lookahead_s=lookahead)
                 if result is not None:
                     recent.append(result.planning_ms / 1e3)
+                failed_from = robot if result is None else None
         finally:
             log.info("planner: real-time steps by trigger: %s", ", ".join(f"{k} {v}" for k, v in
                                                                           trigger.counts.items()))

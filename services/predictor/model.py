@@ -220,7 +220,10 @@ class PredictionModel:
         if str(data.get("format", "")) != MODEL_FORMAT:
             raise ModelError(f"model file {str(p)!r} is not a Foresight prediction model (format "
                              f"{str(data.get('format', 'missing'))!r})")
-        version = int(data["version"]) if "version" in data else None
+        try:
+            version = int(data["version"]) if "version" in data else None
+        except (TypeError, ValueError):
+            version = str(data["version"])[:40]  # type: ignore[assignment]
         if version not in READABLE_VERSIONS:
             raise ModelError(f"model file {str(p)!r} has version {version}, this build reads versions "
                              f"{', '.join(map(str, READABLE_VERSIONS))}; retrain with `foresight train`")
@@ -252,7 +255,8 @@ class PredictionModel:
             support, q = d["timed_support"].astype(np.int64), d["timed_values"]
             n = int(np.prod(dims))
             if q.dtype != np.uint8 or q.ndim != 3 or q.shape[0] != m or q.shape[2] != support.shape[0] \
-                    or (support.size and (support.min() < 0 or support.max() >= n)) or int(d["time_bin"]) < 1:
+                    or (support.size and (support.min() < 0 or support.max() >= n)) or int(d["time_bin"]) < 1 \
+                    or np.any(np.diff(support) <= 0):  # looked up with searchsorted: sorted, each cell once
                 raise ValueError(f"timed volumes {q.shape} / support {support.shape} do not fit {m} classes on a "
                                  f"{dims} grid")
             timed = TimedVolumes(support, from_bytes(q), int(d["time_bin"]))
@@ -270,8 +274,13 @@ class PredictionModel:
                 raise ValueError(f"volumes of shape {packed.shape} do not fit {m} classes on a {dims} grid")
             volumes = unpack_volumes(packed, dims).astype(np.float32)
         temperature = float(d["temperature"]) if "temperature" in d else 1.0
-        if not (temperature > 0 and np.isfinite(temperature)):
-            raise ValueError(f"temperature must be a finite number > 0, got {temperature}")
+        for name, value in (("temperature", temperature), ("time_scale", float(d["time_scale"])),
+                            ("velocity_scale", float(d["velocity_scale"])), ("spacing", float(d["spacing"]))):
+            if not (value > 0 and np.isfinite(value)):
+                raise ValueError(f"{name} must be a finite number > 0, got {value}")
+        pelvis = d["human_pelvis"]
+        if pelvis.shape != (4,) or not np.all(np.isfinite(pelvis)):
+            raise ValueError(f"human_pelvis must be 4 finite numbers (x, y, z, yaw), got shape {pelvis.shape}")
         motions = d["motions"].astype(np.float64)
         lengths = d["motion_lengths"].astype(np.int64)
         if motions.shape[0] != m or motions.shape[2] != len(feature_names) or lengths.shape != (m,) \

@@ -31,6 +31,7 @@ class PredictorStats:
     rejected: int = 0
     coalesced: int = 0
     dropped: int = 0
+    unprocessed: int = 0
 
 
 class PredictorService:
@@ -152,15 +153,26 @@ class PredictorService:
             owed = self.pacer.wait_s(time.monotonic())
             batch = self.backlog.take_all(0.1 if owed is None else min(0.1, owed))
             now = time.monotonic()
-            outs = self.handle_batch(batch, now) if batch else []
             streaming = any(isinstance(m, HumanPose) and m.tick < 0 for m in batch)
-            if not streaming:
-                outs += self.flush(now)  # the stream paused: the newest pose gets its grid once due
+            try:
+                outs = self.handle_batch(batch, now) if batch else []
+                if not streaming:
+                    outs += self.flush(now)  # the stream paused: the newest pose gets its grid once due
+            except Exception as exc:  # a fault of this service, not of the input: said, counted, and it goes on
+                log.exception("predictor: processing %d message(s) failed", len(batch))
+                self.rejects.reject(self.keys.pose, f"{type(exc).__name__}: {exc}", reason="handler")
+                outs = []
             for out in outs:
                 pub = self._post_pub if isinstance(out, ClassPosterior) else self._occ_pub
-                if pub is not None:
-                    pub.put(out)
-                    self.stats.published += isinstance(out, OccupancyGrid)
+                if pub is None:
+                    continue
+                try:
+                    pub.put(out)  # encodes: a message that breaks the wire contract is refused here
+                except Exception as exc:
+                    log.exception("predictor: publishing a %s failed", out.TYPE)
+                    self.rejects.reject(pub.key, f"{type(exc).__name__}: {exc}", reason="handler")
+                    continue
+                self.stats.published += isinstance(out, OccupancyGrid)
             self.stats.dropped = self.backlog.dropped
             waiting = len(batch)
             if waiting > 1 and streaming and now - self._behind_logged > 5.0:
@@ -194,11 +206,13 @@ class PredictorService:
                 sub.undeclare()
                 self.backlog.wake()
                 worker.join(10.0)
+                self.stats.dropped = self.backlog.dropped
+                self.stats.unprocessed = len(self.backlog)  # arrived, never processed: stopped first
                 self._post_pub.undeclare()
                 self._occ_pub.undeclare()
                 self._post_pub = self._occ_pub = None
         log.info("predictor: stopped after %d poses (%d grids published, %d poses without their own grid while "
-                 "behind, %d dropped from a full backlog, %d resets, %d rejected: %s)", self.stats.poses,
-                 self.stats.published, self.stats.coalesced, self.stats.dropped, self.stats.resets,
-                 self.rejects.total, self.rejects.summary())
+                 "behind, %d dropped from a full backlog, %d left unprocessed at stop, %d resets, %d rejected: %s)",
+                 self.stats.poses, self.stats.published, self.stats.coalesced, self.stats.dropped,
+                 self.stats.unprocessed, self.stats.resets, self.rejects.total, self.rejects.summary())
         return self.stats

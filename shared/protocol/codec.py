@@ -44,7 +44,12 @@ def encode(msg: Message) -> bytes:
         value = getattr(msg, f.name)
         spec = f.metadata.get("array")
         if spec is not None:
-            arr = np.ascontiguousarray(value, dtype=np.dtype(spec.dtype).newbyteorder("<"))
+            src = np.asarray(value)
+            arr = np.ascontiguousarray(src, dtype=np.dtype(spec.dtype).newbyteorder("<"))
+            if arr.dtype.kind in "iub" and arr.shape == src.shape and not np.array_equal(arr, src):
+                i = int(np.flatnonzero(arr.ravel() != src.ravel())[0])  # wrapped, truncated or not 0/1
+                raise _err(msg.TYPE, f.name, f"{src.ravel()[i].item()!r} does not fit {spec.dtype} (it would be "
+                           f"sent as {arr.ravel()[i].item()!r})", "malformed")
             out[f.name] = {"dtype": arr.dtype.str, "shape": list(arr.shape), "data": arr.tobytes()}
         elif isinstance(value, np.generic):
             out[f.name] = value.item()
@@ -161,13 +166,17 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     cls = MESSAGE_TYPES[t]
     if expected is not None and cls is not expected:
         raise ProtocolError(f"message._type: got {t}, expected {expected.TYPE}", "wrong-type")
-    if raw.get("_v") != SCHEMA_VERSION:
+    if type(raw.get("_v")) is not int or raw["_v"] != SCHEMA_VERSION:  # not True, not 1.0
         raise ProtocolError(f"{t}._v: schema version {str(raw.get('_v'))[:40]}, this build speaks "
                             f"{SCHEMA_VERSION}", "version")
     hints = _hints(cls)
     kwargs: dict[str, Any] = {}
     dims: dict[str, int] = {}
-    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+    fields = dataclasses.fields(cls)  # type: ignore[arg-type]
+    unknown = set(raw) - {"_type", "_v"} - {f.name for f in fields}
+    if unknown:
+        raise ProtocolError(f"{t}: unknown field(s) {', '.join(sorted(map(str, unknown))[:5])[:200]}", "malformed")
+    for f in fields:
         if f.name not in raw:
             raise _err(t, f.name, "missing", "malformed")
         spec = f.metadata.get("array")

@@ -237,7 +237,9 @@ class Plan(Message):
 
     def check(self) -> None:
         """Validate this message's invariants (see the class docstring)."""
-        k, _, d = self.trajectories.shape
+        k, t, d = self.trajectories.shape
+        if t < 2:
+            raise _err(self.TYPE, "trajectories", f"has {t} waypoint(s) per trajectory; at least 2 (its start and end)")
         if len(self.goal_names) != k:
             raise _err(self.TYPE, "goal_names", f"has {len(self.goal_names)} names for {k} trajectories")
         if len(self.joint_names) != d:
@@ -246,8 +248,8 @@ class Plan(Message):
             raise _err(self.TYPE, "chosen", f"{self.chosen} is not a valid goal index")
         for name in ("cost_smoothness", "cost_obstacle", "cost_human", "cost_total"):
             cost = getattr(self, name)
-            if np.any(np.isnan(cost)) or not np.all(np.isfinite(cost[self.valid])) or np.any(cost == -np.inf):
-                raise _err(self.TYPE, name, "must be finite for valid goals (+inf allowed for invalid ones), no NaN")
+            if not np.all(np.isfinite(cost[self.valid])) or not np.all(cost[~self.valid] == np.inf):
+                raise _err(self.TYPE, name, "must be finite for valid goals and +inf for invalid ones")
         if not (self.dt > 0 and math.isfinite(self.dt)):
             raise _err(self.TYPE, "dt", f"must be > 0, got {self.dt}")
 

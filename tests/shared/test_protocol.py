@@ -146,6 +146,52 @@ def test_wrong_version():
         decode(pack(d))
 
 
+@pytest.mark.parametrize("version", [True, 1.0, "1", None])
+def test_a_version_that_only_compares_equal_is_refused(version):
+    d = raw(samples()["HumanPose"])
+    d["_v"] = version
+    with pytest.raises(ProtocolError, match=r"HumanPose\._v: schema version") as err:
+        decode(pack(d))
+    assert err.value.reason == "version"
+
+
+def test_a_field_the_type_does_not_have_is_refused():
+    d = raw(samples()["Plan"])
+    d["goal_name"] = ["typo"]
+    with pytest.raises(ProtocolError, match=r"^Plan: unknown field\(s\) goal_name$") as err:
+        decode(pack(d))
+    assert err.value.reason == "malformed"
+
+
+def test_an_invalid_goal_with_plus_inf_costs_is_accepted():
+    plan = samples()["Plan"]
+    inf = np.array([np.inf, 1.0])
+    ok = dataclasses.replace(plan, valid=np.array([False, True]), cost_smoothness=inf, cost_obstacle=inf,
+                             cost_human=inf, cost_total=inf)
+    assert decode(encode(ok)).valid.tolist() == [False, True]
+
+
+@pytest.mark.parametrize(("field", "value", "match"), [
+    ("dims", np.array([4.9, 5, 6]), r"OccupancyGrid\.dims: 4\.9 does not fit int32 \(it would be sent as 4\)"),
+    ("values", np.array([300, 0], np.int64),
+     r"OccupancyGrid\.values: 300 does not fit uint8 \(it would be sent as 44\)"),
+])
+def test_encode_refuses_a_cast_that_changes_a_value(field, value, match):
+    msg = samples()["OccupancyGrid"]
+    if field == "values":
+        value = np.resize(value, msg.values.shape)
+    with pytest.raises(ProtocolError, match=match):
+        encode(dataclasses.replace(msg, **{field: value}))
+    assert decode(encode(dataclasses.replace(msg, dims=msg.dims.astype(np.float64)))).dims.dtype == msg.dims.dtype
+
+
+def test_encode_refuses_a_bool_field_that_is_not_0_or_1():
+    plan = samples()["Plan"]
+    with pytest.raises(ProtocolError, match=r"Plan\.valid: 2 does not fit bool"):
+        encode(dataclasses.replace(plan, valid=np.array([1, 2])))
+    assert decode(encode(dataclasses.replace(plan, valid=np.array([1, 1])))).valid.dtype == bool
+
+
 @pytest.mark.parametrize("name", sorted(MESSAGE_TYPES))
 def test_missing_field(name):
     msg = samples()[name]
@@ -234,6 +280,10 @@ def test_invariants():
         (dataclasses.replace(s["Plan"], chosen=2), r"Plan\.chosen"),
         (dataclasses.replace(s["RobotState"], joint_names=["a"]), r"RobotState\.joint_names"),
         (dataclasses.replace(s["OccupancyGrid"], method="guess"), r"OccupancyGrid\.method"),
+        (dataclasses.replace(s["Plan"], trajectories=np.zeros((2, 1, 8), np.float32)),
+         r"Plan\.trajectories: has 1 waypoint\(s\) per trajectory; at least 2"),
+        (dataclasses.replace(s["Plan"], trajectories=np.zeros((2, 0, 8), np.float32)), r"Plan\.trajectories"),
+        (dataclasses.replace(s["Plan"], valid=np.array([False, True])), r"Plan\.cost_smoothness: .* \+inf for invalid"),
     ]
     for msg, pattern in cases:
         with pytest.raises(ProtocolError, match=pattern):

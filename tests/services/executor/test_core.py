@@ -172,6 +172,15 @@ def test_plan_with_other_joints_is_rejected() -> None:
     assert core.plan is None
 
 
+@pytest.mark.parametrize("t", [0, 1])
+def test_plan_without_a_path_is_rejected_not_crashed_on(t: int) -> None:
+    """A Plan built in-process (no decode, so no wire check) with fewer than 2 waypoints: an ExecutorError."""
+    core = ExecutorCore(LIMITS, np.zeros(3))
+    with pytest.raises(ExecutorError, match=rf"Plan\.trajectories: shape \(1, {t}, 3\)"):
+        core.adopt(make_plan(np.zeros(3), [np.ones(3)], t=t))
+    assert core.plan is None
+
+
 def test_bad_inputs_are_named() -> None:
     with pytest.raises(ExecutorError, match="start configuration"):
         ExecutorCore(LIMITS, np.zeros(2))

@@ -97,3 +97,56 @@ def test_cli_missing_model_is_one_line_error(tmp_path, capsys) -> None:
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "foresight train" in err[0]
+
+
+def test_a_fault_in_processing_or_publishing_is_logged_counted_and_the_worker_goes_on(
+        zenoh_hub, small_model, small_library, wait_until, caplog) -> None:
+    """The worker thread used to die on any exception but a PredictorError: no log line, no more grids."""
+    svc_cfg, cli_cfg = zenoh_hub(), zenoh_hub()
+    keys = Keys(cli_cfg.prefix)
+    service = PredictorService(PredictorConfig(), svc_cfg, model=small_model)
+    handle, log_likelihood = service.handle_batch, service.core.log_likelihood
+
+    def failing_handle(batch, now):
+        if any(isinstance(m, HumanPose) and m.index == 3 for m in batch):
+            raise RuntimeError("a bug while processing")
+        return handle(batch, now)
+
+    def failing_log_likelihood():
+        ll = log_likelihood()
+        return np.full_like(ll, np.nan) if service.core.n_observed == 6 else ll  # pose 6 (3 was never observed)
+
+    service.handle_batch = failing_handle
+    service.core.log_likelihood = failing_log_likelihood
+    stop, ready = threading.Event(), threading.Event()
+    th = threading.Thread(target=service.run, args=(stop, ready), daemon=True)
+    th.start()
+    try:
+        assert ready.wait(15.0)
+        grids, posts = Inbox(), Inbox()
+        with open_session(cli_cfg) as session:
+            s1 = subscribe(session, keys.occupancy, OccupancyGrid, grids.add)
+            s2 = subscribe(session, keys.posterior, ClassPosterior, posts.add)
+            presence = Presence(session, keys, "tester")
+            assert wait_until(lambda: presence.is_alive("predictor"), 10.0, 0.02)
+            time.sleep(0.3)
+            pose_pub = TypedPublisher(session, keys.pose, block=True)
+            demo = small_library.by_class(1)[0]
+            for i in range(10):
+                pose_pub.put(_pose(5, i, demo.features[i], tick=i))
+                time.sleep(0.05)  # one pose per batch
+            assert grids.wait(9), [g.index for g in grids.items]
+            time.sleep(0.3)
+            for s in (s1, s2):
+                s.undeclare()
+            presence.close()
+    finally:
+        stop.set()
+        th.join(10.0)
+    assert not th.is_alive()
+    assert [g.index for g in grids.items] == [i for i in range(10) if i != 3]  # pose 3 lost to the fault, said so
+    assert [p.index for p in posts.items] == [0, 1, 2, 4, 5, 7, 8, 9]  # 6's posterior broke the wire contract
+    assert service.rejects.by_reason == {(keys.pose, "handler"): 1, (keys.posterior, "handler"): 1}
+    messages = [r.getMessage() for r in caplog.records if r.exc_info]
+    assert any("processing 1 message(s) failed" in m for m in messages)
+    assert any("publishing a ClassPosterior failed" in m for m in messages)

@@ -32,7 +32,8 @@ def plan(pr2, chosen: int = 1) -> Plan:
     cost = np.array([np.inf, 2.0])
     return Plan(stamp=1.0, tick=5, step=3, goal_names=["blue_cup", "red_cup"], joint_names=list(pr2.joint_names),
                 dt=0.1, chosen=chosen, planning_ms=12.5, occupancy_tick=5, occupancy_index=40, trajectories=traj,
-                cost_smoothness=cost, cost_obstacle=np.zeros(2), cost_human=cost, cost_total=2 * cost,
+                cost_smoothness=cost, cost_obstacle=np.where(np.isinf(cost), np.inf, 0.0), cost_human=cost,
+                cost_total=2 * cost,
                 valid=np.array([False, True]))
 
 
