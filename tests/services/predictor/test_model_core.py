@@ -8,7 +8,7 @@ import pytest
 from services.predictor.core import PredictorConfig, PredictorCore, PredictorError
 from services.predictor.features import VARIANTS, FeatureEncoder
 from services.predictor.gmm import GMMConfig, MixtureBank, fit_class_gmm
-from services.predictor.model import PredictionModel
+from services.predictor.model import ModelError, PredictionModel
 from shared.human import HumanModel, place_in_scene
 from shared.protocol import OccupancyGrid, decode, encode
 
@@ -219,3 +219,22 @@ def test_mean_evidence_is_the_softmax_of_the_per_frame_mean(small_model: Predict
         assert np.array_equal(a.log_likelihood, b.log_likelihood)  # the evidence is the same, its weight is not
         assert np.allclose(b.posterior, posterior_from_log_likelihood(a.log_likelihood / (i + 1)))
     assert b.posterior.max() < a.posterior.max()  # the authors' mean is less confident than the paper's product
+
+
+@pytest.mark.parametrize(("key", "value", "match"), [
+    ("time_scale", np.array(np.nan), "time_scale must be a finite number > 0"),
+    ("velocity_scale", np.array(np.inf), "velocity_scale must be a finite number > 0"),
+    ("spacing", np.array(0.0), "spacing must be a finite number > 0"),
+    ("human_pelvis", np.zeros(3), r"human_pelvis must be 4 finite numbers .* shape \(3,\)"),
+    ("version", np.array("abc"), "has version abc"),
+])
+def test_a_model_file_with_a_bad_scalar_is_a_model_error(small_model, tmp_path, key, value, match) -> None:
+    """These used to load (and fail at run time) or end in a ValueError traceback, not a ModelError."""
+    small_model.save(tmp_path / "m.npz")
+    with np.load(tmp_path / "m.npz", allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays[key] = value
+    np.savez(tmp_path / "bad.npz", **arrays)
+    with pytest.raises(ModelError, match=match):
+        PredictionModel.load(tmp_path / "bad.npz")
+

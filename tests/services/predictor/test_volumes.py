@@ -10,7 +10,7 @@ import pytest
 from services.predictor.calibration import TEMPERATURE_GRID
 from services.predictor.core import PredictorCore
 from services.predictor.gmm import GMMConfig
-from services.predictor.model import PredictionModel
+from services.predictor.model import ModelError, PredictionModel
 from services.predictor.swept_volume import swept_volume
 from services.predictor.train import TrainConfig, train_model
 from services.predictor.volumes import VOLUMES, demos_volume, digest, interpolate, spread_volume, sweep, timed_volume
@@ -117,3 +117,13 @@ def test_digest_tells_apart_arrays_of_the_same_bytes():
             digest(a, 1), digest(a, "1")}
     assert len(keys) == 6
     assert digest(a.reshape(2, 3)) == digest(np.arange(6.0).reshape(2, 3))  # a key: the same parts, the same digest
+
+
+def test_a_timed_support_out_of_order_is_a_model_error(models, tmp_path) -> None:
+    models["timed"].save(tmp_path / "m.npz")
+    with np.load(tmp_path / "m.npz", allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["timed_support"] = arrays["timed_support"][::-1].copy()
+    np.savez(tmp_path / "bad.npz", **arrays)
+    with pytest.raises(ModelError, match="timed volumes"):
+        PredictionModel.load(tmp_path / "bad.npz")
