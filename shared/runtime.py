@@ -58,6 +58,9 @@ def cli_errors(prog: str) -> Iterator[None]:
         yield
     except (ConfigError, UserError, FileNotFoundError) as exc:
         raise SystemExit(fail(prog, str(exc))) from None
+    except OSError as exc:  # a path that is a directory, under a file, not writable; a full disk
+        where = f"{exc.filename}: " if exc.filename else ""
+        raise SystemExit(fail(prog, f"{where}{exc.strerror or exc}")) from None
     except ValueError as exc:
         # Validation errors of our own modules (SceneError, LibraryError, ProtocolError, ...) are ValueErrors
         if type(exc).__module__.startswith(("shared", "services")):

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from shared.config import ConfigError, opt
+from shared.devices import check_device
 from shared.scene import SCENE_HELP
 
 __all__ = ["ExecutorConfig", "ExecutorError", "ROBOTS", "check_robot_names"]
@@ -115,6 +116,7 @@ class ExecutorConfig:
             raise ConfigError("executor.live_port: the live scene is the log's; it needs the MCAP log (mcap is 'none')")
         if not all(math.isfinite(v) for v in self.start_q):
             raise ConfigError(f"executor.start_q: values must be finite, got {self.start_q}")
+        check_device(self.device, "executor.device")
 
     @property
     def substeps(self) -> int:

@@ -22,7 +22,7 @@ class ExecutorResult:
         plans: Plans adopted; ``plans_rejected``: plans with the wrong joints.
         rejects: Payloads refused (decoding, values, order), per key; ``reject_reasons`` per
             ``"key reason"``.
-        mcap_path: The log, or None.
+        mcap_path: The log, or None; ``log_write_failures``: messages the log could not take (a full disk).
         times: ``(N,)`` stamps of the published states; ``q``: ``(N, D)`` their configurations.
     """
 
@@ -36,6 +36,7 @@ class ExecutorResult:
     plans_rejected: int = 0
     rejects: dict[str, int] = field(default_factory=dict)
     reject_reasons: dict[str, int] = field(default_factory=dict)
+    log_write_failures: int = 0
     mcap_path: str | None = None
     times: np.ndarray = field(default_factory=lambda: np.zeros(0))
     q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))

@@ -25,6 +25,7 @@ import math
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from contextlib import ExitStack
 from datetime import UTC, datetime
 from pathlib import Path
@@ -142,11 +143,23 @@ class ExecutorService:
                 log.exception("executor: checking a message on %s failed unexpectedly", key)
             self.rejects.reject(key, exc)  # counted per reason, logged (rate-limited)
             if self.mcap is not None:  # never on the key's data channel: the rejects channel only
-                self.mcap.reject(key, payload, str(exc), quiet=True, reason=getattr(exc, "reason", "malformed"))
+                mcap, why, reason = self.mcap, str(exc), getattr(exc, "reason", "malformed")
+                self._write(lambda: mcap.reject(key, payload, why, quiet=True, reason=reason))
             return
         if self.mcap is not None:
-            self.mcap.log_message(key, payload, msg)
-        self._dispatch(key, msg)
+            mcap = self.mcap
+            self._write(lambda: mcap.log_message(key, payload, msg))
+        self._dispatch(key, msg)  # the robot gets its input whether or not the log could take it
+
+    def _write(self, write: Callable[[], None]) -> None:
+        """Write to the log; a failure (a full disk) is logged, the first and every 100th, and counted."""
+        try:
+            write()
+        except Exception as exc:
+            self.result.log_write_failures += 1
+            n = self.result.log_write_failures
+            if n == 1 or n % 100 == 0:
+                log.error("executor: writing the MCAP log failed (%d so far): %s: %s", n, type(exc).__name__, exc)
 
     def _dispatch(self, key: str, msg: Message) -> None:
         if key == self.keys.plan and isinstance(msg, Plan):

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from shared.config import ConfigError, nested, opt
+from shared.devices import check_device
 from shared.protocol.limits import JOINT_LIMIT_TOL
 from shared.scene import SCENE_HELP
 
@@ -97,7 +98,7 @@ class PlannerConfig:
         for name, ok in checks:
             if not ok:
                 raise ConfigError(f"planner.{name}: bad value {getattr(self, name)!r}")
-        check_device(self.device)
+        check_device(self.device, "planner.device")
 
     def stomp_config(self, joint_noise_scale: Sequence[float] | None = None) -> StompConfig:
         """``stomp`` with the planner's seed, device and dtype (``joint_noise_scale`` if not configured)."""
@@ -141,20 +142,3 @@ class PlannerServiceConfig:
             return dataclasses.replace(self.planner, lookahead_s=0.0)
         return self.planner
 
-
-def check_device(device: str) -> None:
-    """Raise :class:`ConfigError` if ``device`` is not a torch device this machine has (e.g. ``cuda`` without a GPU)."""
-    import torch
-
-    try:
-        dev = torch.device(device)
-    except (RuntimeError, ValueError) as exc:
-        raise ConfigError(f"planner.device: {device!r} is not a torch device ({exc})") from None
-    if dev.type == "cuda":
-        if not torch.cuda.is_available():
-            raise ConfigError(f"planner.device: {device!r} asked for, but torch sees no CUDA device here "
-                              f"(torch {torch.__version__}, CUDA build: {torch.version.cuda or 'no'})")
-        if dev.index is not None and dev.index >= torch.cuda.device_count():
-            raise ConfigError(f"planner.device: {device!r}: only {torch.cuda.device_count()} CUDA device(s)")
-    elif dev.type != "cpu":
-        raise ConfigError(f"planner.device: {device!r}: only cpu and cuda are supported")

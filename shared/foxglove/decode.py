@@ -8,7 +8,6 @@ consumer would. The tests use it to check what the SDK wrote; ``foresight log sn
 from __future__ import annotations
 
 import json
-import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,10 +15,11 @@ from typing import Any
 
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from google.protobuf.message import DecodeError, Message
-from mcap.exceptions import McapError
 from mcap.records import Channel, Schema
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
+
+from shared.recording.reader import DAMAGED
 
 __all__ = ["SceneRecord", "SceneDecodeError", "SchemaDecoder", "read_scene", "scene_stamps"]
 
@@ -92,7 +92,7 @@ def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[Sce
     raw: list[tuple[int, int, int, bytes]] = []  # (log_time, publish_time, channel id, data)
     with open(path, "rb") as f:
         try:
-            for rec in StreamReader(f, record_size_limit=1 << 31).records:
+            for rec in StreamReader(f, validate_crcs=True, record_size_limit=1 << 31).records:
                 if isinstance(rec, Schema):
                     schemas[rec.id] = rec
                 elif isinstance(rec, Channel) and rec.schema_id in schemas:
@@ -102,7 +102,7 @@ def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[Sce
                         channels[rec.id] = (rec, schemas[rec.schema_id])
                 elif isinstance(rec, McapMessage) and rec.channel_id in channels:
                     raw.append((rec.log_time, rec.publish_time, rec.channel_id, bytes(rec.data)))
-        except (McapError, struct.error, ValueError, EOFError):
+        except DAMAGED:
             if not schemas:  # not an MCAP file at all
                 raise
             # else a truncated end: what was read stands (foresight log info says whether a file is complete)

@@ -13,13 +13,20 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import zstandard
 from mcap.exceptions import McapError
 from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from shared.runtime import UserError
 
-__all__ = ["LogChannel", "LogMessage", "LogFile", "read_log"]
+__all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "DAMAGED"]
+
+DAMAGED = (McapError, struct.error, ValueError, EOFError, zstandard.ZstdError, RuntimeError)
+"""What reading a damaged MCAP raises: the mcap library's errors, a record cut short (``struct.error``,
+``EOFError``), a chunk whose CRC does not match (``CRCValidationError``, a ``ValueError``), and a compressed chunk
+that does not decompress (zstandard's ``ZstdError``; lz4 raises ``RuntimeError``). Every reader of the logs reads
+with ``validate_crcs=True`` and stops at the first of these: what came before stands."""
 
 
 @dataclass
@@ -94,7 +101,7 @@ def read_log(path: str | Path, keep: Callable[[LogChannel], bool] | None = None)
     out = LogFile(str(p), p.stat().st_size)
     schemas: dict[int, Schema] = {}
     with p.open("rb") as f:
-        reader = StreamReader(f, record_size_limit=1 << 31)
+        reader = StreamReader(f, validate_crcs=True, record_size_limit=1 << 31)
         try:
             for rec in reader.records:
                 if isinstance(rec, Header):
@@ -122,7 +129,7 @@ def read_log(path: str | Path, keep: Callable[[LogChannel], bool] | None = None)
                     out.metadata[rec.name] = dict(rec.metadata)
                 elif isinstance(rec, Footer):
                     out.complete = True
-        except (McapError, struct.error, ValueError, EOFError) as exc:
+        except DAMAGED as exc:
             if not out.channels and not out.profile and not out.complete:
                 if isinstance(exc, McapError) and "magic" in str(exc).lower():
                     raise UserError(f"{p}: not an MCAP file ({exc})") from None

@@ -14,12 +14,11 @@ import typing
 from dataclasses import dataclass
 from pathlib import Path
 
-from mcap.exceptions import McapError
 from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
-from shared.recording.reader import read_log
+from shared.recording.reader import DAMAGED, read_log
 from shared.recording.writer import COMPRESSION
 from shared.runtime import UserError
 
@@ -64,36 +63,40 @@ def compress_log(src: str | Path, dst: str | Path, compression: str = "zstd",
     channels: dict[int, int] = {}
     messages = 0
     complete = started = False
-    with src.open("rb") as f_in, dst.open("wb") as f_out:
-        writer = Writer(typing.cast(io.BufferedWriter, f_out), chunk_size=chunk_size,
-                        compression=COMPRESSION[compression])
-        try:
-            for rec in StreamReader(f_in, record_size_limit=1 << 31).records:
-                if isinstance(rec, Header):
-                    writer.start(profile=rec.profile, library=rec.library)
-                    started = True
-                elif isinstance(rec, Schema) and rec.id not in schemas:
-                    schemas[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
-                elif isinstance(rec, Channel) and rec.id not in channels:
-                    channels[rec.id] = writer.register_channel(rec.topic, rec.message_encoding,
-                                                               schemas.get(rec.schema_id, 0), dict(rec.metadata))
-                elif isinstance(rec, Message):
-                    writer.add_message(channels[rec.channel_id], rec.log_time, rec.data, rec.publish_time,
-                                       rec.sequence)
-                    messages += 1
-                elif isinstance(rec, Attachment):
-                    writer.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type, rec.data)
-                elif isinstance(rec, Metadata):
-                    writer.add_metadata(rec.name, dict(rec.metadata))
-                elif isinstance(rec, Footer):
-                    complete = True
-        except (McapError, EOFError, ValueError) as exc:
+    try:
+        with src.open("rb") as f_in, dst.open("wb") as f_out:
+            writer = Writer(typing.cast(io.BufferedWriter, f_out), chunk_size=chunk_size,
+                            compression=COMPRESSION[compression])
+            try:
+                for rec in StreamReader(f_in, validate_crcs=True, record_size_limit=1 << 31).records:
+                    if isinstance(rec, Header):
+                        writer.start(profile=rec.profile, library=rec.library)
+                        started = True
+                    elif isinstance(rec, Schema) and rec.id not in schemas:
+                        schemas[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
+                    elif isinstance(rec, Channel) and rec.id not in channels:
+                        channels[rec.id] = writer.register_channel(rec.topic, rec.message_encoding,
+                                                                   schemas.get(rec.schema_id, 0), dict(rec.metadata))
+                    elif isinstance(rec, Message):
+                        writer.add_message(channels[rec.channel_id], rec.log_time, rec.data, rec.publish_time,
+                                           rec.sequence)
+                        messages += 1
+                    elif isinstance(rec, Attachment):
+                        writer.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type, rec.data)
+                    elif isinstance(rec, Metadata):
+                        writer.add_metadata(rec.name, dict(rec.metadata))
+                    elif isinstance(rec, Footer):
+                        complete = True
+            except DAMAGED as exc:
+                if not started:
+                    raise UserError(f"{src}: not an MCAP file ({type(exc).__name__}: {exc})") from None
+                # truncated: what was read is copied
             if not started:
-                raise UserError(f"{src}: not an MCAP file ({type(exc).__name__}: {exc})") from None
-            # truncated: what was read is copied
-        if not started:
-            raise UserError(f"{src}: not an MCAP file (no header)")
-        writer.finish()
+                raise UserError(f"{src}: not an MCAP file (no header)")
+            writer.finish()
+    except BaseException:  # nothing half-written is left behind: not an MCAP file, a full disk, Ctrl-C
+        dst.unlink(missing_ok=True)
+        raise
     return CompressResult(src.stat().st_size, dst.stat().st_size, messages, complete, same_messages(src, dst))
 
 

@@ -9,16 +9,15 @@ occupancy cloud in a perspective view and a top view.
 from __future__ import annotations
 
 import math
-import struct
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mcap.exceptions import McapError
 
 from shared.foxglove.decode import SceneDecodeError, SceneRecord, read_scene
+from shared.recording.reader import DAMAGED
 from shared.runtime import UserError
 
 __all__ = ["SceneState", "scene_at", "draw_snapshot"]
@@ -136,7 +135,9 @@ def _records(path: Path, topics: set[str] | None = None) -> Iterator[SceneRecord
     """:func:`read_scene`, its read errors as one :class:`UserError` (a log without its summary is unreadable)."""
     try:
         yield from read_scene(path, topics)
-    except (McapError, struct.error, EOFError, OSError) as exc:
+    except SceneDecodeError:
+        raise
+    except (*DAMAGED, OSError) as exc:
         why = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         raise UserError(f"{path}: not a readable MCAP file, or truncated ({why})") from None
 

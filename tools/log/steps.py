@@ -14,6 +14,7 @@ from typing import Any
 
 from shared.protocol import HumanPose, OccupancyGrid, Plan, ProtocolError, RobotState, decode
 from shared.recording.reader import LogFile
+from shared.runtime import UserError
 from shared.scene import Scene, load_scene, parse_scene
 
 __all__ = ["StepView", "step_views", "step_title", "scene_of", "decode_all"]
@@ -87,7 +88,11 @@ def scene_of(lf: LogFile) -> Scene:
     text = lf.attachments.get("scene.toml")
     if text is None:
         return load_scene(None)
-    return parse_scene(tomllib.loads(text.decode()), "scene.toml (attached)")
+    try:
+        data = tomllib.loads(text.decode())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise UserError(f"{lf.path}: its scene.toml attachment is unreadable ({exc})") from None
+    return parse_scene(data, "scene.toml (attached)")
 
 
 def step_title(view: StepView) -> str:

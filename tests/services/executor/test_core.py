@@ -292,3 +292,13 @@ def test_reason_kind_ignores_the_ages():
     assert reason_kind("plan is 0.61 s old (limit 0.50 s)") == reason_kind("plan is 12.00 s old (limit 0.50 s)")
     assert reason_kind("plan is 0.61 s old (limit 0.50 s)") != reason_kind("occupancy is 0.61 s old (limit 0.50 s)")
     assert reason_kind("") == ""
+
+
+@pytest.mark.parametrize(("device", "match"), [("nonsense", "not a torch device"), ("meta", "only cpu and cuda")])
+def test_a_device_the_machine_lacks_is_a_config_error(device: str, match: str) -> None:
+    """It ended in a torch traceback when the executor built its robot model."""
+    with pytest.raises(ConfigError, match=rf"^executor\.device: '{device}'.*{match}"):
+        ExecutorConfig(device=device).validate()
+    if not __import__("torch").cuda.is_available():
+        with pytest.raises(ConfigError, match="torch sees no CUDA device"):
+            ExecutorConfig(device="cuda").validate()

@@ -313,3 +313,33 @@ def test_fuzzed_input_on_every_key_is_rejected_and_the_run_completes(zenoh_hub, 
     assert lf.complete
     assert {k: int(v) for k, v in lf.metadata["foresight.rejects"].items()} == sent
     assert {c.topic: c.count for c in lf.channels.values()}["/foresight/rejected"] == sum(sent.values())
+
+
+def test_a_log_that_cannot_be_written_costs_the_robot_nothing(pr2, tmp_path, caplog) -> None:
+    """A full disk under the MCAP: the plan still reaches the robot; the failures are counted and said."""
+    from shared.config import ZenohConfig
+    from shared.protocol import Plan, encode
+    from shared.recording.writer import McapLog
+
+    service = ExecutorService(ExecutorConfig(mcap=str(tmp_path / "run.mcap")), ZenohConfig(listen=[], connect=[]),
+                              robot=pr2, human=(None, None), scene=SCENE)
+    service.mcap = McapLog(str(tmp_path / "run.mcap"), service.keys, None, flush_period_s=0.0)
+
+    def full_disk(*args, **kwargs) -> None:
+        raise OSError(28, "No space left on device")
+
+    service.mcap.log_message = full_disk
+    service.mcap.reject = full_disk
+    q0 = service.core.q.astype(np.float64)
+    traj = np.stack([np.linspace(q0, q0 + 0.1, 15)] * 2).astype(np.float32)
+    plan = Plan(stamp=0.0, tick=0, step=0, goal_names=["a", "b"], joint_names=list(service.limits.joint_names),
+                dt=0.1, chosen=0, planning_ms=1.0, occupancy_tick=0, occupancy_index=0, trajectories=traj,
+                cost_smoothness=np.ones(2), cost_obstacle=np.ones(2), cost_human=np.ones(2), cost_total=np.ones(2),
+                valid=np.ones(2, bool))
+    with caplog.at_level(logging.ERROR, logger="foresight.executor"):
+        service._on_sample(service.keys.plan, encode(plan), "planner")  # as Zenoh's callback would
+        service._on_sample(service.keys.plan, b"\x00garbage", "planner")  # refused: its record fails too
+    assert service.inbox.latest().plan is not None  # the robot has its plan
+    assert service.result.log_write_failures == 2
+    assert ["writing the MCAP log failed (1 so far): OSError: [Errno 28] No space left on device"] == [
+        r.getMessage().split("executor: ", 1)[1] for r in caplog.records if "MCAP log failed" in r.getMessage()]

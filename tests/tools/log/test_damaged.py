@@ -1,0 +1,92 @@
+"""Every `foresight log` command on a damaged log: one line or a partial result, never a traceback."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from shared.recording.reader import read_log
+from tools.log.cli import main
+from tools.log.compress import compress_log
+
+FRAME_MAGIC = {"zstd": b"\x28\xb5\x2f\xfd", "lz4": b"\x04\x22\x4d\x18"}
+
+
+def _chunks_flipped(src: Path, dst: Path, compression: str, tmp_path: Path) -> None:
+    """A copy of ``src`` with ``compression`` chunks, one of them damaged.
+
+    Compressed: the frame descriptor after the second chunk's frame magic is garbled, so that the chunk does not
+    decompress (zstandard and lz4 raise their own errors); uncompressed: one byte in the middle of the file flipped.
+    """
+    packed = tmp_path / f"packed-{compression}.mcap"
+    compress_log(src, packed, compression, chunk_size=4096)
+    data = bytearray(packed.read_bytes())
+    if compression in FRAME_MAGIC:
+        at = data.find(FRAME_MAGIC[compression], data.find(FRAME_MAGIC[compression]) + 1)
+        assert at > 0
+        data[at + 4: at + 8] = b"\xff\xff\xff\xff"
+    else:
+        data[len(data) // 2] ^= 0xFF
+    dst.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+@pytest.mark.parametrize("command", ["info", "latency", "table", "render", "snapshot", "compress"])
+def test_a_damaged_chunk_is_reported_not_raised(run_log: Path, tmp_path: Path, capsys, compression: str,
+                                                command: str) -> None:
+    bad = tmp_path / "bad.mcap"
+    _chunks_flipped(run_log, bad, compression, tmp_path)
+    args = {"info": [str(bad)], "latency": [str(bad)], "table": [str(bad)],
+            "render": [str(bad), "--out", str(tmp_path / "r.png")],
+            "snapshot": [str(bad), "--out", str(tmp_path / "s.png")],
+            "compress": [str(bad), str(tmp_path / "c.mcap")]}[command]
+    try:
+        rc = main([command, *args])
+    except SystemExit as stop:  # a one-line error, status 2
+        rc = stop.code
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 2 and len(err) == 1 and err[0].startswith("foresight log: error:"), err
+    assert rc in (0, 2)
+
+
+def test_a_flipped_byte_is_found_by_the_chunk_crc(run_log: Path, tmp_path: Path, capsys) -> None:
+    """Uncompressed chunks carry a CRC: a changed payload is reported, not read as complete and identical."""
+    bad = tmp_path / "bad.mcap"
+    _chunks_flipped(run_log, bad, "none", tmp_path)
+    log = read_log(bad)
+    assert not log.complete and "crc" in log.error.lower()
+    assert log.message_count < read_log(run_log).message_count
+
+
+def test_compress_of_a_log_cut_anywhere_leaves_a_readable_copy_or_nothing(run_log: Path, tmp_path: Path) -> None:
+    data = run_log.read_bytes()
+    for cut in range(8, len(data), max(1, len(data) // 97)):
+        src, dst = tmp_path / "cut.mcap", tmp_path / "out.mcap"
+        src.write_bytes(data[:cut])
+        try:
+            main(["compress", str(src), str(dst)])
+        except SystemExit as stop:
+            assert stop.code == 2, cut
+            assert not dst.exists(), cut  # nothing half-written left behind
+            continue
+        assert read_log(dst).complete, cut
+
+
+def test_a_path_that_cannot_be_written_is_one_line(run_log: Path, tmp_path: Path, capsys) -> None:
+    (tmp_path / "afile").write_text("")
+    for out in (tmp_path, tmp_path / "afile" / "x.mcap"):
+        with pytest.raises(SystemExit) as stop:
+            main(["compress", str(run_log), str(out)])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert stop.value.code == 2 and len(err) == 1 and str(out.parent if out.name == "x.mcap" else out) in err[0]
+
+
+@pytest.mark.parametrize("text", [b"not [[ toml", b"\xff\xfe scene"])
+def test_an_unreadable_scene_attachment_is_named(text: bytes) -> None:
+    from shared.recording.reader import LogFile
+    from shared.runtime import UserError
+    from tools.log.steps import scene_of
+
+    with pytest.raises(UserError, match=r"^run\.mcap: its scene\.toml attachment is unreadable"):
+        scene_of(LogFile("run.mcap", 0, attachments={"scene.toml": text}))
