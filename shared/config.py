@@ -103,9 +103,10 @@ class ZenohConfig:
         if self.role and self.role not in ROLES:
             raise ConfigError(f"zenoh.role: {self.role!r} is no role{closest(self.role, ROLES)} "
                               f"(roles: {', '.join(ROLES)})")
-        if not self.prefix or self.prefix.startswith("/") or self.prefix.endswith("/") or "*" in self.prefix:
-            raise ConfigError(f"zenoh.prefix: {self.prefix!r} must be a non-empty key without wildcards "
-                              "or leading/trailing '/'")
+        bad = sorted(set(self.prefix) & set("*$#?"))
+        if not self.prefix or "" in self.prefix.split("/") or bad:
+            raise ConfigError(f"zenoh.prefix: {self.prefix!r} must be a Zenoh key: non-empty '/'-separated chunks "
+                              "without '*', '$', '#' or '?'" + (f" (it has {' '.join(bad)})" if bad else ""))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -124,7 +125,7 @@ def load_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
     try:
         with p.open("rb") as f:
             return tomllib.load(f)
-    except tomllib.TOMLDecodeError as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, OSError) as exc:  # not TOML, not UTF-8, unreadable
         raise ConfigError(f"config file {str(p)!r}: {exc}") from None
 
 

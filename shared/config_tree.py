@@ -129,6 +129,12 @@ def parse_value(name: str, tp: Any, raw: Any, choices: Sequence[Any] | None = No
             if value != value or value in (float("inf"), float("-inf")):
                 raise ValueError
         elif inner is Path:
+            if not isinstance(raw, str | Path):
+                raise ValueError
+            if not str(raw).strip():  # FORESIGHT_REPLAYER_LIBRARY= : unset, not the current directory
+                if type(None) in typing.get_args(tp):
+                    return None
+                raise ConfigError(f"{name}: an empty path")
             value = Path(str(raw)).expanduser()
         elif inner is str:
             if not isinstance(raw, str):

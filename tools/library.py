@@ -105,6 +105,8 @@ def _generate_args(p: argparse.ArgumentParser) -> None:
 
 def _cmd_generate(args: argparse.Namespace) -> int:
     """Run ``foresight library generate`` with parsed ``args``; returns the exit status."""
+    if args.seed < 0:
+        raise LibraryError(f"--seed: must be >= 0, got {args.seed}")
     scene = load_scene(args.scene) if args.scene else None
     lay = load_layout(args.layout, scene)
     cfg = SyntheticConfig(return_to_rest=bool(args.return_to_rest))
@@ -158,6 +160,8 @@ def _to_keypoints_args(p: argparse.ArgumentParser) -> None:
 def _cmd_to_keypoints(args: argparse.Namespace) -> int:
     from shared.keypoints.library import write_keypoint_library
 
+    if args.seed < 0:
+        raise LibraryError(f"--seed: must be >= 0, got {args.seed}")
     for name in ("noise_m", "drop", "missing"):
         value = getattr(args, name)
         if not (value >= 0 and (name == "noise_m" or value < 1)):

@@ -9,6 +9,7 @@ clock tick in lock-step).
 from __future__ import annotations
 
 import dataclasses
+import difflib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,9 +19,14 @@ import numpy as np
 from shared.config import ConfigError, opt
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
-from shared.protocol import DemoMarker, HumanPose, Message
+from shared.protocol import SERVICES, DemoMarker, HumanPose, Message
 
 __all__ = ["ReplayerConfig", "ReplayEvent", "ReplayerCore", "select_demos", "load_replay_library"]
+
+PEERS = tuple(s for s in SERVICES if s != "replayer")
+"""The services ``wait_for`` and ``stop_with`` may name (the wire contract's, but itself)."""
+MIN_RATE_HZ, MAX_RATE_HZ = 0.01, 10_000.0
+"""``rate_hz``'s range: a pose at least every 100 s (a slower rate overflowed the stream's wait), at most 10 kHz."""
 
 
 @dataclasses.dataclass
@@ -28,7 +34,8 @@ class ReplayerConfig:
     """Options of the replayer (``[replayer]`` in the TOML file)."""
 
     library: Path | None = opt(None, help="motion library: a directory of compound_*.csv or a .npz; "
-                                    "unset = the embedded synthetic library (shared.synthetic, seeded by --seed)")
+                                    "unset = the embedded synthetic library (shared.synthetic, seed 0: the one "
+                                    "`foresight train` trains on by default)")
     mode: str = opt("realtime", choices=("realtime", "lockstep"),
                     help="realtime: publish at --rate-hz; lockstep: publish --samples-per-tick poses per ClockTick")
     rate_hz: float = opt(30.0, help="real-time publishing rate (poses per second)")
@@ -39,7 +46,7 @@ class ReplayerConfig:
                                                         "class (comma-separated; empty = all)")
     heldout: int = opt(0, help="stream only a held-out random set of N demonstrations per class (chosen by --seed "
                                "like shared.library.heldout_split; 0 = no held-out selection)")
-    seed: int = opt(0, help="seed of the held-out selection, the shuffle and the embedded synthetic library")
+    seed: int = opt(0, help="seed of the held-out selection and the shuffle (>= 0)")
     shuffle: bool = opt(False, help="stream the selected demonstrations in a seeded random order")
     loop: bool = opt(False, help="start over after the last demonstration (until stopped)")
     max_demos: int = opt(0, help="stop after this many demonstrations (0 = no limit)")
@@ -52,8 +59,17 @@ class ReplayerConfig:
 
     def validate(self) -> None:
         """Check value ranges."""
-        if not self.rate_hz > 0:
-            raise ConfigError(f"replayer.rate_hz: must be > 0, got {self.rate_hz}")
+        if not MIN_RATE_HZ <= self.rate_hz <= MAX_RATE_HZ:
+            raise ConfigError(f"replayer.rate_hz: must be in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}], got {self.rate_hz}")
+        if self.seed < 0:
+            raise ConfigError(f"replayer.seed: must be >= 0, got {self.seed}")
+        for name in ("wait_for", "stop_with"):
+            for peer in getattr(self, name):
+                if peer not in PEERS:
+                    close = difflib.get_close_matches(peer, PEERS, n=1)
+                    raise ConfigError(f"replayer.{name}: unknown service {peer!r}"
+                                      + (f" (did you mean {close[0]!r}?)" if close else
+                                         f" (one of {', '.join(PEERS)})"))
         if self.samples_per_tick < 1:
             raise ConfigError(f"replayer.samples_per_tick: must be >= 1, got {self.samples_per_tick}")
         for name in ("heldout", "max_demos"):
@@ -82,7 +98,7 @@ def load_replay_library(cfg: ReplayerConfig) -> MotionLibrary:
         raise ConfigError("replayer.library: no library given and the embedded synthetic library "
                           "(shared.synthetic) is not available in this build; pass --library DIR_OR_NPZ, "
                           "e.g. --library ../shared/data/paper-library") from None
-    return generate_library(seed=cfg.seed)
+    return generate_library(seed=0)  # what `foresight train` trains on by default: --seed selects from it
 
 
 def select_demos(lib: MotionLibrary, cfg: ReplayerConfig) -> list[Demonstration]:

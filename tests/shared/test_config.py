@@ -98,6 +98,10 @@ def test_section_field_shadowing_a_zenoh_flag():
     ([], {"FORESIGHT_ZENOH_MODE": "hub"}, r"^FORESIGHT_ZENOH_MODE: 'hub' is not one of"),
     (["--connect", "localhost"], {}, r"zenoh\.connect: endpoint 'localhost' is not of the form"),
     (["--prefix", "a/*"], {}, r"zenoh\.prefix"),
+    (["--prefix", "a//b"], {}, r"^zenoh\.prefix: 'a//b' must be a Zenoh key"),
+    (["--prefix", "cell#1"], {}, r"^zenoh\.prefix: 'cell#1' must be a Zenoh key.*\(it has #\)"),
+    (["--prefix", "robot?x"], {}, r"\(it has \?\)"),
+    (["--prefix", "lab$1"], {}, r"\(it has \$\)"),
 ])
 def test_bad_values(argv, env, pattern):
     with pytest.raises(ConfigError, match=pattern):
@@ -256,3 +260,21 @@ def test_service_help_shows_every_option_of_its_config_tree(service, capsys) -> 
         assert {("planner",), ("planner", "stomp"), ("planner", "cost")} == tables
         assert "--stomp.iterations" in out and "--cost.w-human" in out
     assert ":meth:" not in out and "``" not in out  # docstring markup is made plain
+
+
+def test_a_prefix_zenoh_takes_is_taken():
+    _, z = resolve_config("demo", DemoCfg, parse(["--prefix", "cell-1/robot_2"]), env={})
+    assert z.prefix == "cell-1/robot_2"
+
+
+def test_a_config_file_that_is_not_utf8_is_named(tmp_path):
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes("[demo]\nmode = 'caf\xe9'\n".encode("latin-1"))
+    with pytest.raises(ConfigError, match=r"^config file '.*latin1\.toml': .*utf-8"):
+        resolve_config("demo", DemoCfg, parse(["--config", str(bad)]), env={})
+
+
+def test_an_empty_path_from_the_environment_is_unset_and_a_number_is_no_path(tmp_path):
+    assert resolve_config("demo", DemoCfg, parse([]), env={"FORESIGHT_DEMO_LIBRARY": ""})[0].library is None
+    with pytest.raises(ConfigError, match=r"demo\.library: expected Path, got 5"):
+        resolve_config("demo", DemoCfg, parse(["--config", str(write(tmp_path, "[demo]\nlibrary = 5\n"))]), env={})

@@ -119,3 +119,16 @@ def test_cli_to_and_from_keypoints(tmp_path, capsys) -> None:
         with pytest.raises(SystemExit) as exc:
             library_main(argv)
         assert exc.value.code == 2 and text in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [["generate", "--seed", "-1", "--out", "{d}/l.npz"],
+                                  ["generate", "--out", "{d}/adir.npz"],
+                                  ["generate", "--out", "{d}/afile/l.npz"]])
+def test_generate_bad_seed_or_output_is_one_line(tmp_path, capsys, argv) -> None:
+    """A negative seed was a numpy traceback; an output that is a directory or under a file an OSError traceback."""
+    (tmp_path / "afile").write_text("")
+    (tmp_path / "adir.npz").mkdir()
+    with pytest.raises(SystemExit) as e:
+        library_main([a.replace("{d}", str(tmp_path)) for a in argv])
+    err = capsys.readouterr().err.strip()
+    assert e.value.code == 2 and err.count("\n") == 0 and err, err

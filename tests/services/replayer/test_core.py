@@ -127,3 +127,26 @@ def test_load_replay_library(small_lib, tmp_path):
             load_replay_library(ReplayerConfig())
     else:
         assert load_replay_library(ReplayerConfig()).n_classes >= 1
+
+
+@pytest.mark.parametrize(("change", "match"), [
+    ({"seed": -1}, r"^replayer\.seed: must be >= 0, got -1$"),
+    ({"rate_hz": 1e-12}, r"^replayer\.rate_hz: must be in \[0\.01, 10000\]"),
+    ({"rate_hz": 0.0}, r"^replayer\.rate_hz: must be in"),
+    ({"stop_with": ["exeuctor"]}, r"^replayer\.stop_with: unknown service 'exeuctor' \(did you mean 'executor'\?\)$"),
+    ({"wait_for": ["predictr"]}, r"^replayer\.wait_for: unknown service 'predictr' \(did you mean 'predictor'\?\)$"),
+    ({"wait_for": ["replayer"]}, r"^replayer\.wait_for: unknown service 'replayer'"),
+])
+def test_values_that_used_to_fail_later_are_config_errors(change, match) -> None:
+    """A negative seed was a numpy traceback, a tiny rate an OverflowError mid-stream, a misspelt --stop-with a run
+    that never ended."""
+    with pytest.raises(ConfigError, match=match):
+        ReplayerConfig(**change).validate()
+    ReplayerConfig(wait_for=["predictor", "planner"], stop_with=["executor"], rate_hz=0.01).validate()
+
+
+def test_the_embedded_library_is_the_trainers_whatever_the_seed() -> None:
+    """--seed selects and shuffles; the library it selects from is the one `foresight train` fits (seed 0)."""
+    a, b = load_replay_library(ReplayerConfig(seed=0)), load_replay_library(ReplayerConfig(seed=3))
+    assert len(a.demos) == len(b.demos)
+    assert all(np.array_equal(x.features, y.features) for x, y in zip(a.demos, b.demos, strict=True))

@@ -78,11 +78,11 @@ def run_in_thread(service: ReplayerService, stop: threading.Event) -> threading.
 def test_realtime_every_pose_in_order(zenoh_hub, small_lib):
     sub_cfg, rep_cfg = zenoh_hub(), zenoh_hub()
     keys = Keys(sub_cfg.prefix)
-    cfg = ReplayerConfig(rate_hz=400.0, classes=[0, 2], indices=[1, 2], wait_for=["tester"], wait_timeout=10.0)
+    cfg = ReplayerConfig(rate_hz=400.0, classes=[0, 2], indices=[1, 2], wait_for=["predictor"], wait_timeout=10.0)
     service = ReplayerService(cfg, rep_cfg, small_lib)
     with open_session(sub_cfg) as session:
         col = Collector(session, keys)
-        presence = Presence(session, keys, "tester")
+        presence = Presence(session, keys, "predictor")  # the peer it waits for
         stop = threading.Event()
         th = run_in_thread(service, stop)
         assert col.wait(ends(4), timeout=20.0), f"received {len(col.items)} messages"
@@ -181,9 +181,9 @@ def test_subprocess_replayer(zenoh_hub, small_lib, tmp_path):
     keys = Keys(sub_cfg.prefix)
     with open_session(sub_cfg) as session:
         col = Collector(session, keys)
-        presence = Presence(session, keys, "tester")
+        presence = Presence(session, keys, "predictor")  # the peer it waits for
         proc = _spawn(["--library", str(tmp_path / "lib.npz"), "--classes", "2", "--rate-hz", "300", "--loop",
-                       "--wait-for", "tester", "--listen", "tcp/127.0.0.1:0", "--connect", sub_cfg.listen[0]])
+                       "--wait-for", "predictor", "--listen", "tcp/127.0.0.1:0", "--connect", sub_cfg.listen[0]])
         try:
             ok = col.wait(ends(5), timeout=30.0)
         finally:
@@ -204,7 +204,7 @@ def test_subprocess_replayer(zenoh_hub, small_lib, tmp_path):
 
 def test_subprocess_bad_input_one_line(tmp_path):
     for args, pattern in ((["--library", str(tmp_path / "missing")], "missing' not found"),
-                          (["--rate-hz", "-3", "--library", str(tmp_path)], "rate_hz: must be > 0")):
+                          (["--rate-hz", "-3", "--library", str(tmp_path)], "rate_hz: must be in [0.01, 10000]")):
         proc = _spawn(args)
         try:
             _, err = proc.communicate(timeout=30.0)
