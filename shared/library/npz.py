@@ -64,7 +64,10 @@ def load_npz(path: Path) -> MotionLibrary:
         LibraryError: If the file is unreadable, not a Foresight library npz, or of another format version.
     """
     try:
-        with np.load(path, allow_pickle=False) as z:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):  # one .npy array under an .npz name
+            raise LibraryError(f"library file {str(path)!r}: one array, not a Foresight library npz")
+        with loaded as z:
             missing = [k for k in _NPZ_KEYS if k not in z.files]
             if missing:
                 raise LibraryError(f"library file {str(path)!r}: not a Foresight library npz "
@@ -75,6 +78,23 @@ def load_npz(path: Path) -> MotionLibrary:
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
         raise LibraryError(f"library file {str(path)!r}: unreadable npz ({type(exc).__name__}: {exc})") from None
     where = f"library file {str(path)!r}"
+    try:
+        return _library(path, data, where)
+    except (TypeError, ValueError, IndexError, OverflowError) as exc:  # a field of the wrong kind or dimensions
+        if isinstance(exc, LibraryError):
+            raise
+        raise LibraryError(f"{where}: inconsistent ({type(exc).__name__}: {exc})") from None
+
+
+def _library(path: Path, data: dict[str, np.ndarray], where: str) -> MotionLibrary:
+    """The library in ``data`` (the npz's arrays); raises LibraryError or, on an ill-kinded field, a ValueError."""
+    for key in ("feature_names", "class_names", "demo_label", "demo_index", "demo_length", "demo_source",
+                "issue_class", "issue_block", "issue_reason"):
+        if data[key].ndim != 1:
+            raise LibraryError(f"{where}: {key} must be a list (1-d), got {data[key].ndim}-d")
+    for key in ("demo_label", "demo_index", "demo_length", "issue_block"):
+        if data[key].size and data[key].dtype.kind not in "iu":
+            raise LibraryError(f"{where}: {key} must hold integers, got {data[key].dtype}")
     if int(data["format_version"]) != NPZ_FORMAT:
         raise LibraryError(f"{where}: format_version {int(data['format_version'])}, this build reads {NPZ_FORMAT}")
     feature_names = tuple(str(s) for s in data["feature_names"].tolist())
@@ -100,12 +120,15 @@ def load_npz(path: Path) -> MotionLibrary:
                   strict=False)]
     demos: list[Demonstration] = []
     offsets = np.concatenate([[0], np.cumsum(lengths)])
+    seen: dict[int, int] = {}  # demonstrations of each class so far: a block's number within its class
     for k in range(n):
         f = feats[offsets[k]:offsets[k + 1]].copy()
         reasons = validate_block(f, feature_names)
         label = int(labels[k])
+        block = seen[label] = seen.get(label, -1) + 1
         if reasons:  # a hand-edited npz gets the same scrutiny as a CSV
-            issues.append(LibraryIssue(names[label], k, f"npz demonstration {k}: " + "; ".join(reasons)))
+            issues.append(LibraryIssue(names[label], block, f"{path.name}: npz demonstration {block} of "
+                                       f"{names[label]}: " + "; ".join(reasons)))
             continue
         f.setflags(write=False)
         demos.append(Demonstration(label, names[label], int(indices[k]), f, sources[k]))

@@ -95,7 +95,7 @@ def _is_float(text: str) -> bool:
 def _read_lines(p: Path) -> list[tuple[int, str]]:
     """The non-blank lines of a class file with their 1-based line numbers."""
     try:
-        text = p.read_text(encoding="utf-8", errors="replace")
+        text = p.read_text(encoding="utf-8-sig", errors="replace")  # a byte-order mark is not part of line 1
     except OSError as exc:
         raise LibraryError(f"cannot read library file {str(p)!r}: {exc.strerror or exc}") from None
     return [(n, line) for n, line in enumerate(text.splitlines(), start=1) if line.strip()]
@@ -154,9 +154,14 @@ def _parse_class(p: Path, lines: list[tuple[int, str]], label: int, name: str, n
                  ) -> tuple[list[Demonstration], list[LibraryIssue]]:
     feature_names = _feature_names_for(n_cols)
     blocks: list[_Block] = []
+    if lines and not any(_is_float(f) for f in lines[0][1].split(",")):
+        lines = lines[1:]  # a header line (column names): not a demonstration
     for lineno, line in lines:
         values, problem = _parse_row(line)
-        idx: float | None = values[0] if values else None
+        # a row that does not parse still starts a demonstration when its sample index is 0: else the row and
+        # the demonstration after it would be merged into the one before
+        first = line.split(",", 1)[0]
+        idx: float | None = values[0] if values else (float(first) if _is_float(first) else None)
         starts = idx == 0.0 or not blocks
         if starts:
             blocks.append(_Block(first_line=lineno))

@@ -130,6 +130,28 @@ def test_non_numeric_value(tmp_path):
     check_one_issue(tmp_path, "compound_1", 3, r"line 131: non-numeric value 'abc'")
 
 
+def test_a_bad_value_in_a_demonstrations_first_row_loses_that_demonstration_only(tmp_path):
+    """The row still starts its demonstration (its index 0 is read alone): it and the next were merged into the
+    one before, 3 demonstrations lost where 1 was bad."""
+    make_lib(tmp_path)
+    write_class(tmp_path / "compound_1.csv", blocks())
+    lines = (tmp_path / "compound_1.csv").read_text().splitlines()
+    parts = lines[40].split(",")  # line 41: sample 0 of block 1
+    parts[5] = "x"
+    lines[40] = ",".join(parts)
+    (tmp_path / "compound_1.csv").write_text("\n".join(lines) + "\n")
+    check_one_issue(tmp_path, "compound_1", 1, r"lines 41-80: line 41: non-numeric value 'x'")
+
+
+@pytest.mark.parametrize("prefix", ["\ufeff", "index,pelvis_x,pelvis_y\n", "\ufeffidx,a,b,c\n"])
+def test_a_byte_order_mark_or_a_header_line_is_no_demonstration(tmp_path, prefix):
+    make_lib(tmp_path)
+    path = tmp_path / "compound_1.csv"
+    path.write_text(prefix + path.read_text(), encoding="utf-8")
+    lib = load_library(tmp_path)
+    assert lib.issues == [] and lib.counts() == [4, 4, 4]
+
+
 def test_index_gap(tmp_path):
     make_lib(tmp_path)
     write_class(tmp_path / "compound_0.csv", blocks())
@@ -232,3 +254,42 @@ def test_paper_library(paper_library, tmp_path):
     save_library(lib, tmp_path / "paper.npz")
     back = load_library(tmp_path / "paper.npz")
     assert back.counts() == [25] * 8 and back.issues == lib.issues
+
+
+@pytest.mark.parametrize(("key", "value", "match"), [
+    (None, None, "one array, not a Foresight library npz"),
+    ("format_version", np.array([1, 1]), "inconsistent"),
+    ("demo_length", "float", "demo_length must hold integers"),
+    ("class_names", np.array("compound_0"), "class_names must be a list"),
+    ("issue_block", np.array(["x"]), "issue_block must hold integers"),
+])
+def test_a_malformed_npz_is_a_library_error(tmp_path, key, value, match):
+    """Each of these was a TypeError or ValueError traceback (a 0-d class_names: single-letter classes)."""
+    make_lib(tmp_path / "csv")
+    save_library(load_library(tmp_path / "csv"), tmp_path / "l.npz")
+    with np.load(tmp_path / "l.npz", allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    bad = tmp_path / "bad.npz"
+    if key is None:
+        with bad.open("wb") as f:
+            np.save(f, arrays["features"])
+    else:
+        arrays[key] = arrays[key].astype(np.float64) if isinstance(value, str) else value
+        if key == "issue_block":
+            arrays["issue_class"], arrays["issue_reason"] = np.array(["compound_0"]), np.array(["r"])
+        np.savez(bad, **arrays)
+    with pytest.raises(LibraryError, match=rf"library file '.*bad\.npz'.*{match}"):
+        load_library(bad)
+
+
+def test_a_bad_demonstration_in_an_npz_is_numbered_within_its_class(tmp_path):
+    make_lib(tmp_path / "csv")
+    save_library(load_library(tmp_path / "csv"), tmp_path / "l.npz")
+    with np.load(tmp_path / "l.npz", allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    start = int(arrays["demo_length"][:6].sum())  # class 1's third demonstration (4 per class)
+    arrays["features"][start + 2, 3] = np.nan
+    np.savez(tmp_path / "edited.npz", **arrays)
+    lib = load_library(tmp_path / "edited.npz")
+    assert [(i.class_name, i.block) for i in lib.issues] == [("compound_1", 2)]
+    assert lib.issues[0].reason.startswith("edited.npz: npz demonstration 2 of compound_1: ")
