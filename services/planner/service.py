@@ -114,9 +114,10 @@ class PlannerService:
         self.planner = planner or Planner(self.scene, config.planner_config())
         self.keys = Keys(zenoh.prefix)
         self.rejects = RejectCounter("planner")
-        # what arrives is checked against this planner's robot and scene grid (shared.protocol.receipt)
+        # what arrives is checked against this planner's robot and scene grid (shared.protocol.receipt); a grid
+        # finer than half the scene grid's resolution (8x its voxels) is refused: its lookup tables are the cost
         self.receipt = Receipt(Expectations(clock=config.mode, robot=RobotSpec.from_robot(self.planner.robot),
-                                            grid=GridSpec.from_grid(self.scene.grid)))
+                                            grid=GridSpec.from_grid(self.scene.grid, self.scene.grid.resolution / 2)))
         self.stats = PlannerStats()
         self._empty = np.zeros(self.scene.grid.dims, dtype=np.float32)
         self.trigger: ReplanTrigger | None = None  # real-time mode: when steps start (and why, counted)

@@ -333,7 +333,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
     parser.add_argument("--components", type=int, default=20, help="Gaussians per class; 0 = choose by BIC "
                         "(default: 20, as in the paper)")
     parser.add_argument("--resolution", type=float, default=None, help="voxel edge in metres (default: the "
-                        "scene's [grid], 0.05)")
+                        "scene's [grid], 0.05; the planner takes grids down to half the scene's)")
     parser.add_argument("--features", choices=VARIANTS, default=DEFAULT_FEATURES,
                         help=f"feature variant (default: {DEFAULT_FEATURES})")
     parser.add_argument("--reg-covar", type=float, default=GMMConfig.reg_covar,

@@ -222,6 +222,16 @@ def test_occupancy_geometry_and_the_receivers_grid():
     refused(dataclasses.replace(small, origin=np.array([1e6, 0.0, 0.0])), realtime(), "out-of-range", "origin")
 
 
+def test_a_grid_finer_than_the_receiver_takes_is_refused():
+    """The planner takes at most half its scene grid's resolution: a 283-byte grid at 0.01 m cost it 760 MB."""
+    grid = load_scene().grid
+    exp = realtime(grid=GridSpec.from_grid(grid, grid.resolution / 2))
+    check_values(grid_msg(grid, resolution=grid.resolution / 2), exp)
+    check_values(grid_msg(grid, resolution=0.1), exp)
+    refused(grid_msg(grid, resolution=0.01), exp, "mismatch", "0.01 m is finer than the 0.025 m this receiver takes")
+    check_values(grid_msg(grid, resolution=0.01), realtime(grid=GridSpec.from_grid(grid)))  # no floor: any
+
+
 def test_occupancy_values_are_probabilities_by_construction():
     grid = load_scene().grid
     msg = grid_msg(grid)
