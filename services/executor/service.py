@@ -318,7 +318,7 @@ class ExecutorService:
             if cfg.stop_on_goal and step.reached:
                 return  # at the goal: nothing left to finish
             flush = self.mcap.flush_if_due if self.mcap is not None else None
-            if not self.inbox.wait_plan(n, cfg.lockstep_timeout_s, self.stop, idle=flush):
+            if not self.inbox.wait_plan(n, cfg.lockstep_timeout_s, self.stop, idle=flush) and not self.stop.is_set():
                 log.warning("executor: no plan for tick %d within %.1f s; going on", n, cfg.lockstep_timeout_s)
             n += 1
         if cfg.finish_path and not self.stop.is_set():

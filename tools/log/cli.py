@@ -99,6 +99,8 @@ def _main_snapshot(args: argparse.Namespace) -> int:
 
     file = Path(args.file)
     out = Path(args.out) if args.out else file.with_name(f"{file.stem}-snapshot.png")
+    if out.suffix.lower() != ".png":
+        raise UserError(f"--out {str(out)!r}: a .png file (the snapshot is a PNG)")
     state = scene_at(file, args.at)
     draw_snapshot(state, out, title=file.name)
     print(f"wrote {out} ({state.summary()})")
@@ -110,8 +112,9 @@ def _main_latency(args: argparse.Namespace) -> int:
         stats = log_latencies(args.file)
     except ValueError as exc:
         raise UserError(str(exc)) from exc
-    if args.json:
-        print(json.dumps({k: dataclasses.asdict(v) for k, v in stats.items()}))
+    if args.json:  # strict JSON: a series without samples has null statistics, not NaN
+        print(json.dumps({k: {f: (None if isinstance(x, float) and not math.isfinite(x) else x)
+                              for f, x in dataclasses.asdict(v).items()} for k, v in stats.items()}))
     else:
         print(format_latencies(stats))
     return 0

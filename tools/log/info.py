@@ -55,7 +55,7 @@ def format_info(lf: LogFile) -> str:
         "up to the last whole chunk")
     lines = [f"file:      {lf.path} ({lf.size / 1e6:.2f} MB, {state})",
              f"profile:   {lf.profile or '-'}   library: {lf.library or '-'}",
-             f"time:      {d['start']} .. {d['end']} ({d['duration_s']:.2f} s)",
+             f"time:      {d['start']} .. {d['end']} ({d['duration_s']:.2f} s)" if d["start"] else "time:      -",
              f"messages:  {d['messages']} on {len(lf.channels) - (d['rejected_records'] > 0)} channels"
              + (f" (and {d['rejected_records']} refused payloads on {REJECTED_TOPIC}, not counted)"
                 if d["rejected_records"] else ""), ""]

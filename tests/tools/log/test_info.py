@@ -21,3 +21,31 @@ def test_info_counts_the_foxglove_updates(run_log) -> None:
     """A log whose Foxglove updates were built on the writer's thread says how many were dropped."""
     text = format_info(read_log(run_log))
     assert "foxglove:  dropped 0, unfinished 0, errors 0" in text
+
+
+def test_info_of_a_log_without_messages(tmp_path, capsys) -> None:
+    """An empty log: no 'time: None .. None'."""
+    from shared.protocol import Keys
+    from shared.recording.writer import McapLog
+    from tools.log.cli import main
+
+    path = tmp_path / "empty.mcap"
+    McapLog(path, Keys()).close()
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "time:      -" in out and "None" not in out
+
+
+def test_latency_json_is_strict_json_when_a_series_is_empty(monkeypatch, capsys) -> None:
+    """A series without samples (no occupancy in the log, say) printed NaN, which strict JSON parsers refuse."""
+    import json
+
+    import tools.log.cli as cli
+    from tools.log.latency import Stat
+
+    monkeypatch.setattr(cli, "log_latencies", lambda path: {"pose_to_plan": Stat.of([4.5]),
+                                                            "occupancy_to_plan": Stat.of([])})
+    assert cli.main(["latency", "any.mcap", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out, parse_constant=lambda c: (_ for _ in ()).throw(ValueError(c)))
+    assert out["occupancy_to_plan"]["count"] == 0 and out["occupancy_to_plan"]["p50"] is None
+    assert out["pose_to_plan"]["p50"] == 4.5

@@ -112,13 +112,14 @@ def test_human_and_posterior_are_drawn(robot, tmp_path) -> None:
     (["snapshot", "{log}", "--at", "-1"], "--at must be a finite time >= 0"),
     (["snapshot", "{log}", "--at", "inf"], "--at must be a finite time >= 0"),
     (["snapshot", "{empty}"], "no scene channels"),
+    (["snapshot", "{log}", "--out", "{tmp}/notapng"], "a .png file"),  # it said 'wrote notapng', wrote notapng.png
 ])
 def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(b"hello, this is not mcap at all")
     empty = tmp_path / "empty.mcap"
     McapLog(empty, KEYS).close()
-    argv = [a.format(log=run_log, bad=bad, empty=empty) for a in argv]
+    argv = [a.format(log=run_log, bad=bad, empty=empty, tmp=tmp_path) for a in argv]
     with pytest.raises(SystemExit) as exc:
         main(argv)
     assert exc.value.code not in (0, None)
