@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
+from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -35,11 +38,13 @@ def _pose(demo_id: int, i: int, f: np.ndarray, tick: int = -1) -> HumanPose:
     return HumanPose(stamp=stamp, tick=tick, tick_last=True, demo_id=demo_id, index=i, features=f)
 
 
-def test_service_publishes_grid_per_pose_and_survives_bad_input(zenoh_hub, small_model, small_library,
-                                                                 wait_until) -> None:
-    svc_cfg, cli_cfg = zenoh_hub(), zenoh_hub()
+@contextlib.contextmanager
+def served(service: PredictorService, cli_cfg: Any, wait_until: Any) -> Iterator[tuple[Any, Inbox, Inbox]]:
+    """``service`` running on its thread, and a session subscribed to its grids and posteriors once it is seen.
+
+    Yields ``(session, grids, posteriors)``; on exit the subscriptions close and the service stops (bounded).
+    """
     keys = Keys(cli_cfg.prefix)
-    service = PredictorService(PredictorConfig(), svc_cfg, model=small_model)
     stop, ready = threading.Event(), threading.Event()
     th = threading.Thread(target=service.run, args=(stop, ready), daemon=True)
     th.start()
@@ -47,49 +52,59 @@ def test_service_publishes_grid_per_pose_and_survives_bad_input(zenoh_hub, small
         assert ready.wait(15.0)
         grids, posts = Inbox(), Inbox()
         with open_session(cli_cfg) as session:
-            s1 = subscribe(session, keys.occupancy, OccupancyGrid, grids.add)
-            s2 = subscribe(session, keys.posterior, ClassPosterior, posts.add)
+            subs = [subscribe(session, keys.occupancy, OccupancyGrid, grids.add),
+                    subscribe(session, keys.posterior, ClassPosterior, posts.add)]
             presence = Presence(session, keys, "tester")
             assert wait_until(lambda: presence.is_alive("predictor"), 10.0, 0.02)
             time.sleep(0.3)  # let the subscriptions propagate
-            pose_pub = TypedPublisher(session, keys.pose, block=True)
-            demo_pub = TypedPublisher(session, keys.demo, block=True)
-            raw = session.declare_publisher(keys.pose)
-            demo = small_library.by_class(1)[0]
-            n = 30
-            demo_pub.put(DemoMarker(stamp=time.time(), tick=-1, demo_id=5, event="start", true_class=1, class_name="x",
-                                    n_samples=demo.n_samples))
-            for i in range(n):
-                pose_pub.put(_pose(5, i, demo.features[i], tick=i))
-                if i == 10:  # malformed payloads in the middle of the stream
-                    raw.put(b"\x00garbage")
-                    bad = bytearray(encode(_pose(5, 999, demo.features[0])))
-                    raw.put(bytes(bad[:-7]))
-            assert grids.wait(n) and posts.wait(n), f"got {len(grids.items)} grids, {len(posts.items)} posteriors"
-            time.sleep(0.2)
-            assert len(grids.items) == n
-            assert [g.index for g in grids.items] == list(range(n))
-            assert [g.tick for g in grids.items] == list(range(n))
-            assert all(g.demo_id == 5 and g.method == "prediction" for g in grids.items)
-            assert tuple(grids.items[0].dims) == small_model.grid.dims
-            assert all(np.isclose(p.posterior.sum(), 1.0) for p in posts.items)
-            assert service.rejects.total == 2
-            # a new demonstration after a start marker starts from scratch
-            demo_pub.put(DemoMarker(stamp=time.time(), tick=-1, demo_id=6, event="start", true_class=1, class_name="x",
-                                    n_samples=demo.n_samples))
-            pose_pub.put(_pose(6, 0, demo.features[0]))
-            assert posts.wait(n + 1)
-            assert posts.items[-1].demo_id == 6
-            assert np.allclose(posts.items[-1].log_likelihood, posts.items[0].log_likelihood)
-            for s in (s1, s2):
-                s.undeclare()
-            presence.close()
+            try:
+                yield session, grids, posts
+            finally:
+                for sub in subs:
+                    sub.undeclare()
+                presence.close()
     finally:
         stop.set()
         th.join(10.0)
     assert not th.is_alive()
-    assert service.stats.resets == 2
 
+
+def test_service_publishes_grid_per_pose_and_survives_bad_input(zenoh_hub, small_model, small_library,
+                                                                 wait_until) -> None:
+    svc_cfg, cli_cfg = zenoh_hub(), zenoh_hub()
+    keys = Keys(cli_cfg.prefix)
+    service = PredictorService(PredictorConfig(), svc_cfg, model=small_model)
+    with served(service, cli_cfg, wait_until) as (session, grids, posts):
+        pose_pub = TypedPublisher(session, keys.pose, block=True)
+        demo_pub = TypedPublisher(session, keys.demo, block=True)
+        raw = session.declare_publisher(keys.pose)
+        demo = small_library.by_class(1)[0]
+        n = 30
+        demo_pub.put(DemoMarker(stamp=time.time(), tick=-1, demo_id=5, event="start", true_class=1, class_name="x",
+                                n_samples=demo.n_samples))
+        for i in range(n):
+            pose_pub.put(_pose(5, i, demo.features[i], tick=i))
+            if i == 10:  # malformed payloads in the middle of the stream
+                raw.put(b"\x00garbage")
+                bad = bytearray(encode(_pose(5, 999, demo.features[0])))
+                raw.put(bytes(bad[:-7]))
+        assert grids.wait(n) and posts.wait(n), f"got {len(grids.items)} grids, {len(posts.items)} posteriors"
+        time.sleep(0.2)
+        assert len(grids.items) == n
+        assert [g.index for g in grids.items] == list(range(n))
+        assert [g.tick for g in grids.items] == list(range(n))
+        assert all(g.demo_id == 5 and g.method == "prediction" for g in grids.items)
+        assert tuple(grids.items[0].dims) == small_model.grid.dims
+        assert all(np.isclose(p.posterior.sum(), 1.0) for p in posts.items)
+        assert service.rejects.total == 2
+        # a new demonstration after a start marker starts from scratch
+        demo_pub.put(DemoMarker(stamp=time.time(), tick=-1, demo_id=6, event="start", true_class=1, class_name="x",
+                                n_samples=demo.n_samples))
+        pose_pub.put(_pose(6, 0, demo.features[0]))
+        assert posts.wait(n + 1)
+        assert posts.items[-1].demo_id == 6
+        assert np.allclose(posts.items[-1].log_likelihood, posts.items[0].log_likelihood)
+    assert service.stats.resets == 2
 
 def test_cli_missing_model_is_one_line_error(tmp_path, capsys) -> None:
     with pytest.raises(SystemExit) as exc:
@@ -118,32 +133,14 @@ def test_a_fault_in_processing_or_publishing_is_logged_counted_and_the_worker_go
 
     service.handle_batch = failing_handle
     service.core.log_likelihood = failing_log_likelihood
-    stop, ready = threading.Event(), threading.Event()
-    th = threading.Thread(target=service.run, args=(stop, ready), daemon=True)
-    th.start()
-    try:
-        assert ready.wait(15.0)
-        grids, posts = Inbox(), Inbox()
-        with open_session(cli_cfg) as session:
-            s1 = subscribe(session, keys.occupancy, OccupancyGrid, grids.add)
-            s2 = subscribe(session, keys.posterior, ClassPosterior, posts.add)
-            presence = Presence(session, keys, "tester")
-            assert wait_until(lambda: presence.is_alive("predictor"), 10.0, 0.02)
-            time.sleep(0.3)
-            pose_pub = TypedPublisher(session, keys.pose, block=True)
-            demo = small_library.by_class(1)[0]
-            for i in range(10):
-                pose_pub.put(_pose(5, i, demo.features[i], tick=i))
-                time.sleep(0.05)  # one pose per batch
-            assert grids.wait(9), [g.index for g in grids.items]
-            time.sleep(0.3)
-            for s in (s1, s2):
-                s.undeclare()
-            presence.close()
-    finally:
-        stop.set()
-        th.join(10.0)
-    assert not th.is_alive()
+    with served(service, cli_cfg, wait_until) as (session, grids, posts):
+        pose_pub = TypedPublisher(session, keys.pose, block=True)
+        demo = small_library.by_class(1)[0]
+        for i in range(10):
+            pose_pub.put(_pose(5, i, demo.features[i], tick=i))
+            time.sleep(0.05)  # one pose per batch
+        assert grids.wait(9), [g.index for g in grids.items]
+        time.sleep(0.3)
     assert [g.index for g in grids.items] == [i for i in range(10) if i != 3]  # pose 3 lost to the fault, said so
     assert [p.index for p in posts.items] == [0, 1, 2, 4, 5, 7, 8, 9]  # 6's posterior broke the wire contract
     assert service.rejects.by_reason == {(keys.pose, "handler"): 1, (keys.posterior, "handler"): 1}
