@@ -49,7 +49,7 @@ from services.demo_outcome import measure_run, outcome_lines, verdict
 from services.demo_run import SERVICES_IN_ORDER, RunRecord, run_once
 from services.scenario import Summary
 from services.view.config import DEFAULT_PORT
-from shared.config import ConfigError, add_config_arguments, opt, resolve_config
+from shared.config import ConfigError, add_config_arguments, check_prefix, opt, resolve_config
 from shared.config_names import SECTIONS, check_environment, section_class
 from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
 from shared.scene import load_scene
@@ -129,6 +129,7 @@ class DemoConfig:
         """Check value ranges."""
         if self.steps < 1:
             raise ConfigError(f"demo.steps: must be >= 1, got {self.steps}")
+        check_prefix(self.prefix, "demo.prefix")
         if not (self.period_s > 0 and self.rate_hz > 0 and self.timeout > 0):
             raise ConfigError("demo.period_s, demo.rate_hz and demo.timeout must be > 0")
         if self.human == "keypoints" and self.mode != "realtime":
@@ -196,6 +197,8 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
                                   run_dir=root / name.replace(" ", "-") if cfg.compare else root)
         status, record = run_once(sub, name, stop, out)
         if record is None:
+            if records:  # interrupted before this planner's first plan: what the earlier ones did still counts
+                break
             return status or 1, None
         records.append(record)
         if status != 0:

@@ -44,11 +44,16 @@ def _hand_path(poses: list[HumanPose], scene: Scene) -> tuple[np.ndarray, tuple[
     return hands, (np.asarray(ends), np.asarray(radii))
 
 
+def _seconds(o: Outcome) -> np.ndarray:
+    """The states' times from the run's first state (s): a real-time run stamps the wall clock, lock-step from 0."""
+    return o.stamps - o.stamps[0] if len(o.stamps) else o.stamps
+
+
 def _step_points(o: Outcome, steps: int, period_s: float) -> np.ndarray:
     """The end-effector position at the start of each replanning step (``(S, 3)``)."""
     if len(o.stamps) == 0:
         return np.zeros((0, 3))
-    idx = np.searchsorted(o.stamps, np.arange(steps) * period_s, side="left").clip(0, len(o.stamps) - 1)
+    idx = np.searchsorted(_seconds(o), np.arange(steps) * period_s, side="left").clip(0, len(o.stamps) - 1)
     return o.ee_path[idx]
 
 
@@ -116,7 +121,7 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
             marks = _step_points(o, len(o.chosen_goal_per_step), period_s)
             top.scatter(marks[:, 0], marks[:, 1], c=[_goal_color(g) for g in o.chosen_goal_per_step], s=22,
                         edgecolors=col, linewidths=0.8, zorder=7)
-            clear.plot(o.stamps, o.clearance, color=col, lw=1.8, label=o.planner)
+            clear.plot(_seconds(o), o.clearance, color=col, lw=1.8, label=o.planner)
         goals.scatter(np.arange(len(o.chosen_goal_per_step)), np.full(len(o.chosen_goal_per_step), k),
                       c=[_goal_color(g) for g in o.chosen_goal_per_step], s=70, marker="s")
     top.set_aspect("equal")

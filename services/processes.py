@@ -57,7 +57,12 @@ class ServiceProcess:
     def start(self) -> ServiceProcess:
         """Start the process (returns self)."""
         self.log_path.parent.mkdir(parents=True, exist_ok=True)
-        with self.log_path.open("wb") as out:
+        again = self.proc is not None  # a restart: the log of the run that ended (its crash) is kept above
+        with self.log_path.open("ab" if again else "wb") as out:
+            if again:
+                out.write(f"\n--- {self.name} started again (the run above exited with status "
+                          f"{self.proc.returncode}) ---\n".encode())
+                out.flush()
             self.proc = subprocess.Popen(self.command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                          process_group=0,
                                          env={**os.environ, "PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid()),

@@ -64,9 +64,22 @@ __all__ = [
     "resolve_config",
     "load_toml",
     "parse_value",
+    "check_prefix",
 ]
 
 T = TypeVar("T")
+
+
+def check_prefix(prefix: str, option: str) -> None:
+    """Raise :class:`ConfigError` naming ``option`` unless ``prefix`` is a key Zenoh takes under the run's keys.
+
+    Non-empty ``/``-separated chunks without the wildcard and special characters ``*``, ``$``, ``#`` and ``?``
+    (else Zenoh refuses it with a ``ZError`` when a session first declares a key under it).
+    """
+    bad = sorted(set(prefix) & set("*$#?"))
+    if not prefix or "" in prefix.split("/") or bad:
+        raise ConfigError(f"{option}: {prefix!r} must be a Zenoh key: non-empty '/'-separated chunks without '*', "
+                          "'$', '#' or '?'" + (f" (it has {' '.join(bad)})" if bad else ""))
 
 
 @dataclasses.dataclass
@@ -103,10 +116,7 @@ class ZenohConfig:
         if self.role and self.role not in ROLES:
             raise ConfigError(f"zenoh.role: {self.role!r} is no role{closest(self.role, ROLES)} "
                               f"(roles: {', '.join(ROLES)})")
-        bad = sorted(set(self.prefix) & set("*$#?"))
-        if not self.prefix or "" in self.prefix.split("/") or bad:
-            raise ConfigError(f"zenoh.prefix: {self.prefix!r} must be a Zenoh key: non-empty '/'-separated chunks "
-                              "without '*', '$', '#' or '?'" + (f" (it has {' '.join(bad)})" if bad else ""))
+        check_prefix(self.prefix, "zenoh.prefix")
 
 
 # ----------------------------------------------------------------------------------------------

@@ -129,8 +129,17 @@ def watch_parent(stop: threading.Event, period_s: float = 0.5) -> int | None:
         parent = int(os.environ.get(PARENT_ENV, ""))
     except ValueError:
         return None
-    if os.getppid() != parent:  # already gone (or a grandchild inherited the variable): nothing to watch
-        return None
+    if os.getppid() != parent:
+        try:
+            os.kill(parent, 0)
+        except ProcessLookupError:  # it died while this process was starting (importing): stop now, never orphaned
+            logging.getLogger("foresight").warning("the process that started this one (pid %d) has exited; "
+                                                   "stopping", parent)
+            stop.set()
+            return parent
+        except PermissionError:  # alive, another user's: not this process's parent
+            pass
+        return None  # alive but not the parent: a grandchild inherited the variable, nothing to watch
 
     def watch() -> None:
         while not stop.wait(period_s):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -168,3 +169,13 @@ def test_demo_human_as_keypoints_plays_them_through_the_tracker(tmp_path: Path, 
     assert len(demo.frames) == human.n_samples + 2 * rest  # the person at rest before and after the reach
     spread = np.std(demo.positions[:rest, 0], axis=0)  # fresh noise on every frame of the rest
     assert np.all((spread > 0.01) & (spread < 0.03))
+
+
+def test_a_prefix_zenoh_refuses_is_a_config_error() -> None:
+    """It reached the router's first key declaration and ended in a 29-line ZError traceback."""
+    from services.demo import DemoConfig
+    from shared.config import ConfigError
+
+    for prefix in ("a*b", "a//b"):
+        with pytest.raises(ConfigError, match=rf"^demo\.prefix: '{re.escape(prefix)}' must be a Zenoh key"):
+            DemoConfig(prefix=prefix).validate()

@@ -35,3 +35,16 @@ def test_draws_one_png_for_one_or_three_planners(tmp_path: Path) -> None:
     assert out.read_bytes()[:8] == PNG
     one = draw_outcomes(three[:1], scene, None, [], tmp_path / "sub" / "one.png", period_s=0.5)
     assert one.read_bytes()[:8] == PNG and one.parent.name == "sub"
+
+
+def test_step_marks_follow_the_runs_own_clock_in_real_time() -> None:
+    """Real-time states are stamped with the wall clock: the step marks all sat on the first point."""
+    import time
+
+    from services.demo_figure import _step_points
+
+    n = 40
+    ee = np.c_[np.arange(n), np.zeros(n), np.zeros(n)].astype(float)
+    for t0 in (0.0, time.time()):
+        o = Outcome("p", 0.0, 0.0, 0.0, 1.0, None, None, ["red_cup"] * 3, t0 + np.arange(n) * 0.1, ee, np.zeros(n))
+        assert _step_points(o, 3, 0.5)[:, 0].tolist() == [0.0, 5.0, 10.0]

@@ -34,3 +34,20 @@ def test_service_process_stop_is_bounded(tmp_path):
     assert code is not None and code < 0 and not proc.running
     assert time.monotonic() - t0 < 10
     assert proc.command[:3] == [sys.executable, "-m", "stubborn"]
+
+
+def test_a_restart_keeps_the_log_of_the_run_that_ended(tmp_path):
+    """The supervisor's restart truncated the log: the crash's traceback, the one thing to read, was lost."""
+    (tmp_path / "crashy.py").write_text("import os, sys\nif not os.path.exists(sys.argv[1]):\n"
+                                        "    open(sys.argv[1], 'w').close()\n    raise RuntimeError('the cause')\n"
+                                        "print('second start: fine')\n")
+    proc = ServiceProcess("planner", "crashy", [str(tmp_path / "flag")], tmp_path / "planner.log",
+                          env={"PYTHONPATH": str(tmp_path)})
+    proc.start()
+    proc.proc.wait(30)
+    proc.start()
+    proc.proc.wait(30)
+    text = (tmp_path / "planner.log").read_text()
+    assert "RuntimeError: the cause" in text and "second start: fine" in text
+    assert text.index("the cause") < text.index("planner started again (the run above exited with status 1)") \
+        < text.index("second start: fine")

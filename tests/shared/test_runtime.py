@@ -35,3 +35,26 @@ def test_freeze_startup_heap_collects_garbage_then_freezes_the_rest() -> None:
         if enabled:
             gc.enable()
     assert any(o is kept[0] for o in gc.get_objects())  # tracked again
+
+
+def test_watch_parent_stops_at_once_when_the_parent_died_during_start_up(monkeypatch) -> None:
+    """A service still importing when the demo died used to find 'nothing to watch' and run on, orphaned."""
+    import os
+    import subprocess
+    import sys
+    import threading
+
+    from shared.runtime import PARENT_ENV, watch_parent
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
+                          timeout=30, check=True)
+    monkeypatch.setenv(PARENT_ENV, gone.stdout.strip())  # a pid that has exited: the parent is gone
+    stop = threading.Event()
+    assert watch_parent(stop) == int(gone.stdout) and stop.is_set()
+    monkeypatch.setenv(PARENT_ENV, str(os.getpid()))  # alive, but not the parent: inherited by a grandchild
+    stop = threading.Event()
+    assert watch_parent(stop) is None and not stop.is_set()
+    monkeypatch.setenv(PARENT_ENV, str(os.getppid()))  # the parent, alive: watched on a thread
+    stop = threading.Event()
+    assert watch_parent(stop, period_s=0.05) == os.getppid() and not stop.wait(0.2)
+    stop.set()  # ends the watching thread
