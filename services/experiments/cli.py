@@ -286,6 +286,10 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
                   "components": args.components, "models_dir": args.models_dir, "work_dir": args.work_dir,
                   "w_human": args.w_human, "volume": args.volume, "protocol": args.protocol,
                   "trials": args.trials}
+        if args.what == "interference" and (args.demos < 1 or args.seeds < 1):
+            raise UserError(f"--demos and --seeds must be >= 1, got {args.demos} and {args.seeds}")
+        if args.what == "switch" and (args.demos < 0 or args.seed < 0):
+            raise UserError(f"--demos must be >= 0 (0: all) and --seed >= 0, got {args.demos} and {args.seed}")
         if args.what == "interference":
             res = run_interference(InterferenceConfig(robot_cup=args.robot_cup, human_cup=args.human_cup,
                                                       demos=args.demos, seeds=args.seeds, **common),

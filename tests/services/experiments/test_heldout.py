@@ -109,3 +109,21 @@ def test_a_given_class_takes_the_cup_nearest_its_reach_unless_one_is_named():
     assert class_at_cup(lib, scene, None, red.label) == red  # its own cup, at the same distance
     named = class_at_cup(lib, scene, "blue_cup", red.label)
     assert named.cup == "blue_cup" and named.distance > red.distance
+
+
+def test_a_human_file_written_by_many_at_once_is_always_whole(tmp_path) -> None:
+    """Report workers share the humans directory: a reader could load a file another writer had half-written."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    lib = generate_library(2, 3, seed=0)
+    demo = lib.demos[0]
+
+    def write_and_read(_: int) -> int:
+        return len(load_library(human_file(lib, demo, tmp_path)).demos)
+
+    for _ in range(5):
+        for f in tmp_path.glob("*.npz"):
+            f.unlink()
+        with ThreadPoolExecutor(8) as pool:
+            assert list(pool.map(write_and_read, range(16))) == [1] * 16
+    assert [f.name for f in tmp_path.iterdir() if f.name.startswith(".")] == []  # no temporary file left
