@@ -31,7 +31,7 @@ from shared.runtime import cli_errors, help_text
 from shared.scene import Scene, load_scene
 
 from .core import GoalSet, Planner, PlannerConfig
-from .fk_bench import fk_time_ms
+from .fk_bench import fk_time_ms, synchronize
 from .stomp import StompConfig, rollouts
 
 __all__ = ["main", "bench_goals", "blob_occupancy", "run_bench", "convergence"]
@@ -110,24 +110,19 @@ def convergence(histories: list[np.ndarray], checkpoints: tuple[int, ...] = CHEC
     return [round(float(np.median([r[j] for r in ratios])), 3) for j in range(n)]
 
 
-def _sync(device: Any) -> None:
-    if torch.device(device).type == "cuda":
-        torch.cuda.synchronize(device)
-
-
 def _time_fk(robot: Any, n: int, iterations: int, repeats: int, seed: int) -> tuple[float, float]:
     """Median wall and process-CPU ms of ``iterations`` calls of ``robot.fk_links`` on ``n`` configurations."""
     gen = torch.Generator(device=robot.lower.device).manual_seed(seed)
     q = robot.lower + (robot.upper - robot.lower) * torch.rand(n, robot.lower.shape[0], generator=gen,
                                                                device=robot.lower.device, dtype=robot.lower.dtype)
     robot.fk_links(q)
-    _sync(q.device)
+    synchronize(q.device)
     times, cpu = [], []
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
         for _ in range(iterations):
             robot.fk_links(q)
-        _sync(q.device)
+        synchronize(q.device)
         times.append((time.perf_counter() - t0) * 1e3)
         cpu.append((time.process_time() - c0) * 1e3)
     return statistics.median(times), statistics.median(cpu)
@@ -148,13 +143,13 @@ def _time_cost(planner: Planner, res: Any, repeats: int) -> float:
     start, goal, theta = trajs[:, :1].contiguous(), trajs[:, -1:].contiguous(), trajs[:, 1:-1].contiguous()
     qs = [rollouts(theta, noise[i], start, goal, st.lower, st.upper)[0] for i in range(noise.shape[0])]
     planner.waypoint_cost(qs[0])
-    _sync(planner.device)
+    synchronize(planner.device)
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
         for q in qs:
             planner.waypoint_cost(q)
-        _sync(planner.device)
+        synchronize(planner.device)
         times.append((time.perf_counter() - t0) * 1e3)
     return statistics.median(times)
 

@@ -25,7 +25,7 @@ import torch
 
 from shared.robot import PR2
 
-__all__ = ["fk_time_ms", "METHODS", "main"]
+__all__ = ["fk_time_ms", "synchronize", "METHODS", "main"]
 
 METHODS = ("pk", "fused", "spheres", "fused_compiled", "spheres_compiled")
 _ROBOTS: dict[tuple[str, str, bool], PR2] = {}
@@ -38,7 +38,8 @@ def _robot(device: str, dtype: torch.dtype, compiled: bool) -> PR2:
     return _ROBOTS[key]
 
 
-def _sync(device: str | torch.device) -> None:
+def synchronize(device: str | torch.device) -> None:
+    """Wait for ``device``'s queued work (a CUDA device; nothing to wait for on the CPU): timings end here."""
     if torch.device(device).type == "cuda":
         torch.cuda.synchronize(device)
 
@@ -81,12 +82,12 @@ def fk_time_ms(n_configs: int, method: str = "spheres", device: str = "cpu", dty
     with torch.no_grad():
         for _ in range(2):
             fn(q)
-        _sync(robot.device)  # the robot's device: a robot passed in may not be on ``device``
+        synchronize(robot.device)  # the robot's device: a robot passed in may not be on ``device``
         times = []
         for _ in range(repeats):
             t0 = time.perf_counter()
             fn(q)
-            _sync(robot.device)
+            synchronize(robot.device)
             times.append((time.perf_counter() - t0) * 1e3)
     return min(times) if stat == "min" else statistics.median(times)
 
