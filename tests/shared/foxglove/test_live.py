@@ -54,9 +54,23 @@ def test_the_server_stops_with_its_owner_and_its_clients_are_disconnected(builde
         while not client.closed and time.monotonic() < deadline:
             client.receive(0.2)
         assert client.closed
-    with socket.socket() as s:  # the port is free again
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        s.bind(("127.0.0.1", server.port))
+    assert _bindable_within(server.port, 10.0)  # the port is free again
+
+
+def _bindable_within(port: int, timeout_s: float) -> bool:
+    """Whether 127.0.0.1:port can be bound within timeout_s: the server's socket may close a moment after
+    its clients are told, and under xdist another worker can hold the same ephemeral port for a while."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        with socket.socket() as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind(("127.0.0.1", port))
+                return True
+            except OSError:
+                if time.monotonic() > deadline:
+                    return False
+        time.sleep(0.1)
 
 
 def test_a_taken_port_is_named() -> None:
