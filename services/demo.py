@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import logging
 import os
 import sys
@@ -49,6 +48,7 @@ from services.demo_outcome import measure_run, outcome_lines, verdict
 from services.demo_run import SERVICES_IN_ORDER, RunRecord, run_once
 from services.scenario import Summary
 from services.view.config import DEFAULT_PORT
+from shared import strict_json
 from shared.config import ConfigError, add_config_arguments, check_prefix, opt, resolve_config
 from shared.config_names import SECTIONS, check_environment, section_class
 from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
@@ -282,7 +282,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
             restore()
         if summary is not None:
             if cfg.json:
-                print(json.dumps(summary.to_json()))
+                print(strict_json.dumps(summary.to_json()))
             else:
                 for line in _closing_lines(cfg, summary):
                     print(line)

@@ -15,12 +15,12 @@ the release check and the MCAP recovery; ``--json`` prints one object.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
+from shared import strict_json
 from shared.recording.reader import read_log
 from shared.runtime import cli_errors, setup_logging
 
@@ -165,7 +165,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench faults") ->
         finally:
             results["exit"] = system.close()
     if args.json:
-        print(json.dumps(results))
+        print(strict_json.dumps(results))
         return 0
     print(f"  releases with an input older than {spec.stale_limit_s:g} + {SLACK_S:g} s: "
           f"{len(results['stale_releases'])}")

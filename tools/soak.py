@@ -17,7 +17,6 @@ records every pose, occupancy grid, plan and robot state. It prints:
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections import Counter
@@ -27,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from services.executor.core import reason_kind
+from shared import strict_json
 from shared.runtime import cli_errors, setup_logging
 
 from .faults import demo_model
@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> i
             r_exit = system.close()
     r["exit"] = r_exit
     if args.json:
-        print(json.dumps(r))
+        print(strict_json.dumps(r))
     else:
         print(f"window {r['window_s']:.1f} s: {r['poses']} poses ({r['pose_rate_hz']:.0f} Hz), "
               f"{r['occupancy_received']} occupancy grids received, of them for the window's poses "

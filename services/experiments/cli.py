@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 from services.predictor.volumes import VOLUMES
+from shared import strict_json
 from shared.runtime import UserError, cli_errors, help_text, setup_logging
 from shared.scene import SCENE_HELP
 
@@ -198,7 +198,7 @@ def _occupancy(args: argparse.Namespace, out) -> int:
                                                     n_jobs=args.n_jobs, example=args.example), out)
     png = plot_occupancy(res, Path(args.out) / f"occupancy-{short_name(lib.source)}.png")
     if args.json:
-        print(json.dumps({**res.to_json(), "plot": str(png)}))
+        print(strict_json.dumps({**res.to_json(), "plot": str(png)}))
     else:
         print("\n".join([*res.lines(), f"plot: {png}"]))
     return 0
@@ -218,7 +218,7 @@ def _volumes(args: argparse.Namespace, out) -> int:
                                     models_dir=args.models_dir, work_dir=args.work_dir), out,
                       compile=not args.no_compile)
     if args.json:
-        print(json.dumps(res.to_json()))
+        print(strict_json.dumps(res.to_json()))
     else:
         print("\n".join(res.lines()))
     return 0
@@ -252,7 +252,7 @@ def _pace(args: argparse.Namespace, out) -> int:
                    out, compile=not args.no_compile)
     png = plot_pace(res, args.plot)
     if args.json:
-        print(json.dumps({**res.to_json(), "plot": str(png)}))
+        print(strict_json.dumps({**res.to_json(), "plot": str(png)}))
     else:
         print("\n".join([*res.lines(), f"plot: {png}"]))
     return 0
@@ -301,7 +301,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             png = plot_switch(sres, args.plot)
             lines, data = [*sres.lines(), f"plot: {png}"], {**sres.to_json(), "plot": str(png)}
         if args.json:
-            print(json.dumps(data))
+            print(strict_json.dumps(data))
         else:
             print("\n".join(lines))
     return 0

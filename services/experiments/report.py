@@ -20,8 +20,6 @@ switch and pace sweep), in one worker process per core plus one (``--workers``),
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import multiprocessing
 import os
 import time
@@ -33,6 +31,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from services.predictor.volumes import DEFAULT_VOLUME, VOLUMES
+from shared import strict_json
 from shared.native_threads import limit_blas_threads
 from shared.runtime import UserError
 
@@ -214,16 +213,7 @@ def run_report(args: argparse.Namespace) -> int:
         md.append(f"| {tag} | {' | '.join(f'{v:.0f}' for v in secs)} | {sum(secs):.0f} |")
     md += ["", f"Report made in {time.monotonic() - started:.0f} s.", ""]
     (out / "report.md").write_text("\n".join(md))
-    (out / "report.json").write_text(json.dumps(data, default=_json_default))
+    (out / "report.json").write_text(strict_json.dumps(data))
     print(f"eval all: wrote {out / 'report.md'} and its PNGs in {time.monotonic() - started:.0f} s", flush=True)
     return 0
 
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, Path):
-        return str(o)
-    if isinstance(o, float) and math.isnan(o):
-        return None
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from shared import strict_json
 from shared.runtime import cli_errors, help_text
 from shared.scene import Scene, load_scene
 
@@ -334,7 +335,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
             report["peak_rss_mb"] = round(peak_memory_mb(max(ks), config), 1)
             report["peak_rss_K"] = max(ks)
         if args.json:
-            print(json.dumps(report))
+            print(strict_json.dumps(report))
         else:
             print(f"planner step ({config.stomp.iterations} STOMP iterations, R={config.stomp.rollouts}, "
                   f"T={config.stomp.waypoints}, "

@@ -16,13 +16,13 @@ Timings on a shared machine are noisy: the median of ``repeats`` calls after a w
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
 from collections.abc import Callable
 
 import torch
 
+from shared import strict_json
 from shared.robot import PR2
 
 __all__ = ["fk_time_ms", "synchronize", "METHODS", "main"]
@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m services.planner.
                 compile_s.setdefault(m, []).append(time.perf_counter() - t0)
             rows[m].append(fk_time_ms(n, m, device=args.device, repeats=args.repeats, stat=args.stat))
     if args.json:
-        print(json.dumps({"n": args.n, "threads": torch.get_num_threads(), "stat": args.stat,
+        print(strict_json.dumps({"n": args.n, "threads": torch.get_num_threads(), "stat": args.stat,
                           **{f"{m}_ms": v for m, v in rows.items()},
                           **{f"{m}_first_call_s": v for m, v in compile_s.items()}}))
         return 0

@@ -10,13 +10,13 @@ timed in the same process, and the ``current`` (posture-only) method too.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from shared import strict_json
 from shared.protocol import OccupancyGrid, encode
 from shared.runtime import cli_errors
 from shared.scene import Grid, Scene, load_scene
@@ -133,7 +133,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench predictor")
         poses = [d.features for d in lib.demos[::step][: args.demos]]
         res = run_bench(model, scene, poses, args.repeats)
         if args.json:
-            print(json.dumps(res))
+            print(strict_json.dumps(res))
         else:
             print(f"{model.volume_method} volumes: predictor update on a {'x'.join(map(str, res['grid_dims']))} "
                   f"grid at {res['resolution']:.4f} m, "

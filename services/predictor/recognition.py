@@ -10,7 +10,6 @@ curve(s) and, with ``--json``, prints one JSON object.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ import numpy as np
 from joblib import Parallel, delayed
 from tqdm import tqdm
 
+from shared import strict_json
 from shared.feature_sets import describe_features
 from shared.library import MotionLibrary, load_library
 from shared.runtime import UserError, cli_errors
@@ -312,7 +312,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
                    "plot": str(png), "calibration_plot": str(cal)}
             if len(results) > 1:
                 out["variants"] = {r.name: r.rates for r in results}
-            print(json.dumps(out))
+            print(strict_json.dumps(out))
         else:
             print(f"leave-one-out recognition on {lib.source}: {len(lib.demos)} demonstrations, "
                   f"{lib.n_classes} classes, features {describe_features(lib.feature_names)}")

@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 import sys
 from pathlib import Path
 
+from shared import strict_json
 from shared.recording.reader import read_log
 from shared.runtime import UserError, cli_errors
 
@@ -48,7 +48,7 @@ SUBCOMMANDS: dict[str, str] = {
 def _main_info(args: argparse.Namespace) -> int:
     lf = read_log(args.file)
     if args.json:
-        print(json.dumps(info_dict(lf), indent=2))
+        print(strict_json.dumps(info_dict(lf), indent=2))
     else:
         print(format_info(lf))
     return 0
@@ -90,7 +90,7 @@ def _main_table(args: argparse.Namespace) -> int:
     summary = run_summary(lf)
     if not summary.steps:
         raise UserError(f"{args.file}: no plans logged")
-    print(json.dumps(summary.to_json()) if args.json else "\n".join(table_lines(summary)))
+    print(strict_json.dumps(summary.to_json()) if args.json else "\n".join(table_lines(summary)))
     return 0
 
 
@@ -113,8 +113,7 @@ def _main_latency(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UserError(str(exc)) from exc
     if args.json:  # strict JSON: a series without samples has null statistics, not NaN
-        print(json.dumps({k: {f: (None if isinstance(x, float) and not math.isfinite(x) else x)
-                              for f, x in dataclasses.asdict(v).items()} for k, v in stats.items()}))
+        print(strict_json.dumps({k: dataclasses.asdict(v) for k, v in stats.items()}))
     else:
         print(format_latencies(stats))
     return 0

@@ -25,7 +25,7 @@ def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path):
     for png in ("recognition-synthetic.png", "interference-synthetic.png", "switch-synthetic.png"):
         assert (out / png).stat().st_size > 10_000, png
         assert f"]({png})" in text
-    data = json.loads((out / "report.json").read_text())
+    data = json.loads((out / "report.json").read_text(), parse_constant=_refuse)  # strict JSON: no NaN
     lib = data["libraries"]["synthetic"]
     assert set(lib) >= {"recognition", "interference", "switch", "prediction_ms"}
     assert len(lib["interference"]["basic"]) == 1
@@ -33,6 +33,10 @@ def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path):
     # each part's run time, in the data and in the timing block
     assert set(lib["part_seconds"]) == set(part_names(tuple(data["protocols"])))
     assert all(v > 0 for v in lib["part_seconds"].values()) and "Each part's run time" in text
+
+
+def _refuse(word: str) -> None:
+    raise AssertionError(f"report.json holds {word}, which strict JSON parsers refuse")
 
 
 def test_report_workers_default_to_one_per_core_plus_one(monkeypatch):
