@@ -150,6 +150,11 @@ def run_report(args: argparse.Namespace) -> int:
         libs = [SYNTHETIC, args.library]
     if not libs:
         libs = [SYNTHETIC] + ([] if args.quick or not PAPER_LIBRARY.is_dir() else [str(PAPER_LIBRARY)])
+    tags = [library_tag(spec) for spec in libs]
+    if clash := sorted({t for t in tags if tags.count(t) > 1}):  # one name per library in file names and keys
+        raise UserError(f"--libraries: {len(libs)} libraries but the name {clash[0]!r} is given twice ("
+                        f"{', '.join(s for s, t in zip(libs, tags, strict=True) if t == clash[0])}); the report "
+                        "names each library by its folder's name: give each library a different folder name")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     timing = Timing(iterations=plan.iterations)

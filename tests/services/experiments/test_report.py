@@ -68,3 +68,14 @@ def test_a_failed_part_ends_the_report_at_once_and_the_parts_still_running(tmp_p
     assert list(tmp_path.glob("*.started"))  # others were running beside it...
     assert not list(tmp_path.glob("*.finished"))  # ...and were ended with it, not waited for
     assert run_parts(divmod, [(7, 2), (9, 4), (1, 1)], workers=2, context="fork") == [(3, 1), (2, 1), (1, 0)]
+
+
+@pytest.mark.parametrize("libraries", ["synthetic,synthetic", "a/lib,b/lib", "synthetic,data/synthetic"])
+def test_two_libraries_with_one_name_are_refused_before_anything_runs(tmp_path, capsys, libraries):
+    out = tmp_path / "report"  # both would write the same PNGs and the same report.json key: the first lost
+    with pytest.raises(SystemExit) as stop:
+        main(["all", "--quick", "--libraries", libraries, "--out", str(out)])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is given twice" in err[0] and "different folder name" in err[0]
+    assert not out.exists()
