@@ -65,15 +65,22 @@ def _common(p: argparse.ArgumentParser, scene: str) -> None:
 
 @contextlib.contextmanager
 def _user_errors() -> Iterator[None]:
-    """Bad scene, library or model files are the user's to fix: one line, not a traceback."""
+    """User-fixable failures in one line, not a traceback.
+
+    Bad scene, library or model files, and a run whose planner failed (no reachable goal in the scene, say).
+    """
     from services.predictor.model import ModelError
     from shared.library import LibraryError
     from shared.scene import SceneError
+
+    from .harness import PlanningFailed
 
     try:
         yield
     except (SceneError, LibraryError, ModelError) as exc:
         raise UserError(str(exc)) from None
+    except PlanningFailed as exc:
+        raise UserError(f"a run failed: {exc}") from None
 
 
 def _timing(args: argparse.Namespace) -> Timing:

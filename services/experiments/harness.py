@@ -34,7 +34,7 @@ from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyG
 from shared.scene import Scene
 from shared.transport import open_session, subscribe
 
-__all__ = ["RunSpec", "RunRecord", "ServiceThread", "run_lockstep", "JOIN_S"]
+__all__ = ["RunSpec", "RunRecord", "ServiceThread", "run_lockstep", "PlanningFailed", "JOIN_S"]
 
 log = logging.getLogger("foresight.experiments")
 
@@ -219,6 +219,27 @@ class ServiceThread:
         return self.result
 
 
+class PlanningFailed(RuntimeError):
+    """A lock-step run's planner failed a step: the run measures a robot without plans, so it is no measurement."""
+
+
+def _join_unless_planning_fails(executor: ServiceThread, planner: PlannerService, timeout_s: float) -> Any:
+    """The executor's result once it ends; at once :class:`PlanningFailed` if a planner step failed before.
+
+    Without it a failed step left the executor waiting ``lockstep_timeout_s`` for that tick's plan and the
+    run was measured as if the robot had stood still on purpose.
+    """
+    deadline = time.monotonic() + timeout_s
+    while not planner.stats.failures and executor.thread.is_alive() and time.monotonic() < deadline:
+        executor.thread.join(0.05)
+    if planner.stats.failures:
+        raise PlanningFailed(f"the planner failed {planner.stats.failures} step(s) of the run "
+                             f"({planner.stats.plans} planned); last: {planner.stats.last_error}")
+    if executor.thread.is_alive():
+        raise TimeoutError(f"{executor.name} did not stop within {timeout_s:g} s")
+    return executor.join(0)
+
+
 _EXECUTOR_MODELS: dict[int, tuple[Scene, Any, Any]] = {}
 
 
@@ -245,6 +266,7 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
 
     Raises:
         TimeoutError: If the run or a service's shutdown overran its time limit.
+        PlanningFailed: If a planner step failed (bad input or no plan), as soon as it did.
     """
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     hub = ZenohConfig(mode="peer", listen=[endpoint], connect=[], multicast_scouting=False)
@@ -279,7 +301,7 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
         try:
             for t in threads:
                 t.start()
-            result = threads[-1].join(spec.timeout_s)
+            result = _join_unless_planning_fails(threads[-1], planner_svc, spec.timeout_s)
             collect.settle(result)  # the executor, with no log of its own to fill, does not linger
         finally:
             for t in threads:

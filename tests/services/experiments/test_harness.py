@@ -5,14 +5,16 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import time
 
 import numpy as np
 import pytest
 
 from services.experiments.cli import main
-from services.experiments.harness import RunSpec, run_lockstep
+from services.experiments.harness import PlanningFailed, RunSpec, run_lockstep
 from services.experiments.heldout import HeldOutModels, human_file, samples_per_tick
 from services.experiments.planners import Timing, build_planner
+from services.planner.core import PlannerError
 from shared.scene import load_scene
 from shared.synthetic import generate_library
 
@@ -145,3 +147,16 @@ def test_pace_command_prints_a_point_per_protocol_library_and_pace(tmp_path, cap
             assert set(p[name]) >= {"contact_s", "min_clearance_m", "reached_step"}
     assert data["operating_point"]["paper"] == pytest.approx(0.05)
     assert png.is_file() and png.stat().st_size > 10_000
+
+
+def test_a_run_whose_planner_fails_a_step_fails_at_once_naming_why(small_run, monkeypatch):
+    spec, planner = small_run
+
+    def fail(*args, **kwargs):
+        raise PlannerError("no reachable goal: red_cup: outside the limits")
+
+    monkeypatch.setattr(planner, "step", fail)  # the executor would wait lockstep_timeout_s (60 s) per tick
+    started = time.monotonic()
+    with pytest.raises(PlanningFailed, match=r"failed 1 step\(s\) of the run \(0 planned\); last: no reachable goal"):
+        run_lockstep(spec, planner)
+    assert time.monotonic() - started < 30
