@@ -156,16 +156,22 @@ class _Collector:
         """
         n_states = len(result.times)
 
-        def settled() -> bool:
+        def missing() -> str:
             rec = self.record
             ticks = [p.tick for p in rec.poses]
-            return (len(rec.states) >= n_states and (not ticks or max(ticks) in rec.occupancy)
-                    and time.monotonic() - self.last_at >= quiet_s)
+            gaps = [f"{len(rec.states)} of {n_states} robot states"] if len(rec.states) < n_states else []
+            return ", ".join(gaps + ([f"no final grid of tick {max(ticks)}"]
+                                     if ticks and max(ticks) not in rec.occupancy else []))
 
         deadline = time.monotonic() + limit_s
         with self.lock:
-            while not settled() and (left := deadline - time.monotonic()) > 0:
+            while missing() or time.monotonic() - self.last_at < quiet_s:
+                if (left := deadline - time.monotonic()) <= 0:
+                    break
                 self.arrived.wait(min(left, quiet_s))
+            if gap := missing():
+                log.warning("experiments: the run's last messages were not all in after %.1f s (%s); measuring what "
+                            "came", limit_s, gap)
 
     def finish(self, result: ExecutorResult | None) -> RunRecord:
         with self.lock:

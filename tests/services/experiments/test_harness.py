@@ -6,12 +6,13 @@ import dataclasses
 import json
 import math
 import time
+import types
 
 import numpy as np
 import pytest
 
 from services.experiments.cli import main
-from services.experiments.harness import PlanningFailed, RunSpec, run_lockstep
+from services.experiments.harness import PlanningFailed, RunSpec, _Collector, run_lockstep
 from services.experiments.heldout import HeldOutModels, human_file, samples_per_tick
 from services.experiments.planners import Timing, build_planner
 from services.planner.core import PlannerError
@@ -160,3 +161,13 @@ def test_a_run_whose_planner_fails_a_step_fails_at_once_naming_why(small_run, mo
     with pytest.raises(PlanningFailed, match=r"failed 1 step\(s\) of the run \(0 planned\); last: no reachable goal"):
         run_lockstep(spec, planner)
     assert time.monotonic() - started < 30
+
+
+def test_a_run_whose_last_messages_never_come_is_measured_with_a_warning_naming_what_is_missing(caplog):
+    collect = _Collector()
+    result = types.SimpleNamespace(times=np.zeros(3))  # the executor published 3 states; none came
+    started = time.monotonic()
+    with caplog.at_level("WARNING", logger="foresight.experiments"):
+        collect.settle(result, quiet_s=0.02, limit_s=0.2)
+    assert time.monotonic() - started < 5
+    assert "not all in after 0.2 s (0 of 3 robot states)" in caplog.text
