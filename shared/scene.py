@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from shared.data_files import finite_vector, read_toml
+from shared.protocol.limits import MAX_GOALS, MAX_STRING_CHARS
 
 __all__ = ["SceneError", "Box", "Cup", "Grid", "HumanPlacement", "RobotPlacement", "Scene", "load_scene",
            "DEFAULT_SCENE", "PAPER_SCENES", "embedded_scenes", "SCENE_HELP"]
@@ -223,11 +224,22 @@ def parse_scene(data: dict[str, Any], source: str = "<scene>") -> Scene:
                         _vec(f"{where}.goal_arm", c["goal_arm"], 7) if "goal_arm" in c else None))
     if len({c.name for c in cups}) != len(cups):
         raise SceneError(f"{source}: cup names must be unique")
+    _check_goals(source, cups)
     grid = _grid(f"{source}: grid", _table(source, data, "grid"))
     workspace = _grid(f"{source}: workspace", data.get("workspace", {"min": grid.min, "max": grid.max}),
                       grid.resolution)
     return Scene(str(data.get("name", Path(source).stem)), human, robot, tuple(boxes), tuple(cups), grid,
                  workspace, source, str(data.get("paper_name", "")))
+
+
+def _check_goals(source: str, cups: list[Cup]) -> None:
+    """Refuse cups a plan could not carry: every cup is a goal, its name sent with every plan (docs/protocol.md)."""
+    if len(cups) > MAX_GOALS:
+        raise SceneError(f"{source}: {len(cups)} cups, over the wire's limit of {MAX_GOALS} goals per plan")
+    for i, c in enumerate(cups):
+        if not c.name or len(c.name) > MAX_STRING_CHARS:
+            raise SceneError(f"{source}: cups[{i}].name has {len(c.name)} characters; goal names are sent with every "
+                             f"plan and must have 1 to {MAX_STRING_CHARS}")
 
 
 def load_scene(path: str | Path | None = None) -> Scene:

@@ -39,6 +39,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from shared.protocol.limits import MAX_CLASSES, MAX_STRING_CHARS
+
 from .motions import (
     FEATURE_NAMES,
     FEATURE_UNITS,
@@ -93,9 +95,22 @@ def load_library(path: str | Path, report: bool = True) -> MotionLibrary:
         LibraryError: If the path does not exist, holds no class files, or is not a valid npz.
     """
     lib = _read(Path(path).expanduser())
+    _check_wire_limits(lib, path)
     if report:
         report_drops(lib)
     return lib
+
+
+def _check_wire_limits(lib: MotionLibrary, path: str | Path) -> None:
+    """Refuse a library whose classes the predictor could not publish (docs/protocol.md's limits)."""
+    if lib.n_classes > MAX_CLASSES:
+        raise LibraryError(f"library {str(path)!r}: {lib.n_classes} classes, over the wire's limit of {MAX_CLASSES} "
+                           "(a ClassPosterior carries one probability per class)")
+    for name in lib.class_names:
+        if not name or len(name) > MAX_STRING_CHARS:
+            raise LibraryError(f"library {str(path)!r}: class name {name[:40]!r}{'...' if len(name) > 40 else ''} "
+                               f"has {len(name)} characters; class names are sent with every posterior and must "
+                               f"have 1 to {MAX_STRING_CHARS}")
 
 
 def _read(p: Path) -> MotionLibrary:

@@ -110,3 +110,15 @@ def test_the_authors_table1_scene_matches_its_move3d_file():
         q = torch.tensor([[0.31, *np.radians(arm)]], dtype=torch.float32)
         ee = robot.end_effector(q)[0, :3, 3].double().numpy()
         assert np.linalg.norm(ee - np.array(frame)) < 0.02, (ee, frame)  # the gripper where Move3D put it
+
+
+
+@pytest.mark.parametrize("name, match", [("r" * 257, r"cups\[1\].name has 257 characters"),
+                                         ("", r"cups\[1\].name has 0 characters")])
+def test_a_cup_whose_name_no_plan_could_carry_is_refused(tmp_path, name, match):
+    embedded = Path(__file__).resolve().parents[2] / "shared" / "data" / "scenes" / "pr2_two_cups_side.toml"
+    text = embedded.read_text()
+    assert text.count('name = "red_cup"') == 1  # every cup is a goal whose name goes with every plan
+    (tmp_path / "scene.toml").write_text(text.replace('name = "red_cup"', f'name = "{name}"'))
+    with pytest.raises(SceneError, match=match):
+        load_scene(str(tmp_path / "scene.toml"))

@@ -293,3 +293,14 @@ def test_a_bad_demonstration_in_an_npz_is_numbered_within_its_class(tmp_path):
     lib = load_library(tmp_path / "edited.npz")
     assert [(i.class_name, i.block) for i in lib.issues] == [("compound_1", 2)]
     assert lib.issues[0].reason.startswith("edited.npz: npz demonstration 2 of compound_1: ")
+
+
+@pytest.mark.parametrize("names, match", [(["a" * 257, "b"], "has 257 characters"), (["", "b"], "has 0 characters"),
+                                          ([f"c{i}" for i in range(257)], "257 classes, over the wire's limit")])
+def test_a_library_whose_classes_could_not_be_published_is_refused(tmp_path, names, match):
+    lib = load_library(make_lib(tmp_path / "csv"))  # the predictor would train on it, then fail every posterior
+    lib.class_names = names
+    lib.demos = [d for d in lib.demos if d.label < len(names)]
+    save_library(lib, tmp_path / "lib.npz")
+    with pytest.raises(LibraryError, match=match):
+        load_library(tmp_path / "lib.npz")
