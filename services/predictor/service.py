@@ -20,6 +20,9 @@ __all__ = ["PredictorService", "PredictorStats"]
 
 log = logging.getLogger("foresight.predictor")
 
+WORKER_JOIN_S = 10.0
+"""Longest wait at stop for the worker to finish the batch it is processing (s)."""
+
 
 @dataclass
 class PredictorStats:
@@ -205,7 +208,10 @@ class PredictorService:
                 presence.close()
                 sub.undeclare()
                 self.backlog.wake()
-                worker.join(10.0)
+                worker.join(WORKER_JOIN_S)
+                if worker.is_alive():  # its outputs from now on find no publisher: dropped, and said so
+                    log.warning("predictor: the worker was still processing %g s after stop; what it still "
+                                "computes is not published", WORKER_JOIN_S)
                 self.stats.dropped = self.backlog.dropped
                 self.stats.unprocessed = len(self.backlog)  # arrived, never processed: stopped first
                 self._post_pub.undeclare()

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from services.predictor import service as predictor_service
 from services.predictor.__main__ import main as predictor_main
 from services.predictor.core import PredictorConfig
 from services.predictor.service import PredictorService
@@ -147,3 +148,27 @@ def test_a_fault_in_processing_or_publishing_is_logged_counted_and_the_worker_go
     messages = [r.getMessage() for r in caplog.records if r.exc_info]
     assert any("processing 1 message(s) failed" in m for m in messages)
     assert any("publishing a ClassPosterior failed" in m for m in messages)
+
+
+def test_a_worker_still_busy_at_stop_is_said_and_what_it_computes_later_is_not_published(
+        zenoh_hub, small_model, small_library, wait_until, caplog, monkeypatch) -> None:
+    svc_cfg, cli_cfg = zenoh_hub(), zenoh_hub()
+    keys = Keys(cli_cfg.prefix)
+    service = PredictorService(PredictorConfig(), svc_cfg, model=small_model)
+    monkeypatch.setattr(predictor_service, "WORKER_JOIN_S", 0.2)
+    handle, busy, release = service.handle_batch, threading.Event(), threading.Event()
+
+    def slow_handle(batch, now):
+        busy.set()
+        release.wait(10.0)  # still processing when the service stops
+        return handle(batch, now)
+
+    service.handle_batch = slow_handle
+    with served(service, cli_cfg, wait_until) as (session, grids, posts):
+        TypedPublisher(session, keys.pose, block=True).put(
+            _pose(5, 0, small_library.by_class(1)[0].features[0], tick=0))
+        assert busy.wait(10.0)
+    assert "the worker was still processing 0.2 s after stop" in caplog.text
+    release.set()
+    time.sleep(0.3)
+    assert grids.items == [] and posts.items == [] and service.stats.published == 0
