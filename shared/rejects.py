@@ -33,6 +33,7 @@ class RejectCounter:
         self._clock = clock
         self._by_reason: dict[tuple[str, str], int] = {}
         self._last_log: dict[str, float] = {}
+        self._traced: set[str] = set()
         self._lock = threading.Lock()
 
     def reject(self, key: str, error: Exception | str, reason: str | None = None) -> None:
@@ -53,8 +54,28 @@ class RejectCounter:
             counts = {r: n for (k, r), n in self._by_reason.items() if k == key}
         total = sum(counts.values())
         detail = ", ".join(f"{r} {n}" for r, n in sorted(counts.items()))
-        log.warning("%s: rejected a message on %s (%s): %s [%d so far: %s]", self.service, key, why,
-                    str(error)[:300], total, detail)
+        text = str(error)[:300].replace("\r", "\\r").replace("\n", "\\n")  # a peer's text never starts a log line
+        log.warning("%s: rejected a message on %s (%s): %s [%d so far: %s]", self.service, key, why, text, total,
+                    detail)
+
+    def unexpected(self, key: str, error: Exception, what: str) -> None:
+        """Record a message refused by a bug of this process, not by the wire contract.
+
+        Its traceback is logged the first time on each key (a peer repeating the message cannot flood the
+        log with tracebacks), then it is counted and rate-limited like any :meth:`reject`.
+
+        Args:
+            key: The key expression it arrived on.
+            error: The exception the bug raised.
+            what: What failed, e.g. ``"decoding a message"``.
+        """
+        with self._lock:
+            first = key not in self._traced
+            self._traced.add(key)
+        if first:
+            log.error("%s: %s on %s failed unexpectedly (this traceback once per key; later ones are counted)",
+                      self.service, what, key, exc_info=error)
+        self.reject(key, error)
 
     @property
     def counts(self) -> dict[str, int]:

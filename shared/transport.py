@@ -233,10 +233,11 @@ def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str,
             payload = sample.payload.to_bytes()
             msg = (receipt.accept(key, payload, cls, sender_of(sample)) if receipt is not None
                    else decode(payload, cls))
-        except Exception as exc:  # ProtocolError; anything else is a decoder bug, refused all the same
-            if not isinstance(exc, ProtocolError):
-                log.exception("decoding a message on %s failed unexpectedly", key)
+        except ProtocolError as exc:
             (rejects or default_rejects).reject(key, exc)  # counted, one log line per key per second
+            return
+        except Exception as exc:  # a decoder bug: refused all the same, its traceback once
+            (rejects or default_rejects).unexpected(key, exc, "decoding a message")
             return
         try:
             callback(msg)

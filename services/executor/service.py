@@ -139,9 +139,10 @@ class ExecutorService:
         try:
             msg = self.receipt.accept(key, payload, self._expected.get(key), sender)
         except Exception as exc:  # ProtocolError; anything else is a decoder bug, refused all the same
-            if not isinstance(exc, ProtocolError):
-                log.exception("executor: checking a message on %s failed unexpectedly", key)
-            self.rejects.reject(key, exc)  # counted per reason, logged (rate-limited)
+            if isinstance(exc, ProtocolError):
+                self.rejects.reject(key, exc)  # counted per reason, logged (rate-limited)
+            else:
+                self.rejects.unexpected(key, exc, "checking a message")  # its traceback once per key
             if self.mcap is not None:  # never on the key's data channel: the rejects channel only
                 mcap, why, reason = self.mcap, str(exc), getattr(exc, "reason", "malformed")
                 self._write(lambda: mcap.reject(key, payload, why, quiet=True, reason=reason))

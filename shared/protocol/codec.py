@@ -17,7 +17,7 @@ from typing import Any, TypeVar
 import msgpack
 import numpy as np
 
-from .limits import AXIS_LIMITS, MAX_PAYLOAD_BYTES, MAX_STRING_CHARS
+from .limits import AXIS_LIMITS, MAX_CLASSES, MAX_GOALS, MAX_KEYPOINTS, MAX_PAYLOAD_BYTES, MAX_STRING_CHARS
 from .messages import MESSAGE_TYPES
 from .schema import SCHEMA_VERSION, ArraySpec, Message, ProtocolError
 from .schema import field_error as _err
@@ -25,6 +25,45 @@ from .schema import field_error as _err
 __all__ = ["encode", "decode"]
 
 M = TypeVar("M", bound=Message)
+
+_MAX_LIST = max(MAX_CLASSES, MAX_GOALS, MAX_KEYPOINTS)
+"""Longest msgpack array of a message: its string lists (names of M classes, K goals, J keypoints)."""
+_MAX_MAP = 64
+"""Most keys of a msgpack map: three times the largest message's fields, so a few unknown fields are still
+named as such (a sender of a newer schema) rather than refused as malformed msgpack."""
+_MAX_ITEMS = 4096
+"""Most elements, over all msgpack maps and arrays of one payload (a message has about 20 plus its names).
+
+msgpack builds every object before a field can be checked: without this bound, 16 MiB of one-byte empty maps
+would become 16 million Python objects (about 1.2 GB) before the message is refused."""
+
+
+class _TooMany(ValueError):
+    """A msgpack container, or all of them together, over its bound: the message is too large."""
+
+
+class _ItemBudget:
+    """Counts the elements of the containers msgpack builds for one payload; raises past :data:`_MAX_ITEMS`."""
+
+    def __init__(self) -> None:
+        self.left = _MAX_ITEMS
+
+    def take(self, items: Any) -> Any:
+        self.left -= len(items) + 1
+        if self.left < 0:
+            raise _TooMany(f"more than {_MAX_ITEMS} msgpack objects")
+        return items
+
+    def map(self, pairs: list[tuple[Any, Any]]) -> dict[Any, Any]:
+        return self.take(dict(pairs))
+
+
+def _unpack(data: bytes) -> Any:
+    """The msgpack object tree of ``data``, every container bounded before it is built."""
+    budget = _ItemBudget()
+    return msgpack.unpackb(data, raw=False, strict_map_key=True, max_str_len=4 * MAX_STRING_CHARS,
+                           max_bin_len=MAX_PAYLOAD_BYTES, max_array_len=_MAX_LIST, max_map_len=_MAX_MAP,
+                           max_ext_len=0, list_hook=budget.take, object_pairs_hook=budget.map)
 
 
 @functools.cache
@@ -46,7 +85,7 @@ def encode(msg: Message) -> bytes:
         if spec is not None:
             src = np.asarray(value)
             arr = np.ascontiguousarray(src, dtype=np.dtype(spec.dtype).newbyteorder("<"))
-            if arr.dtype.kind in "iub" and arr.shape == src.shape and not np.array_equal(arr, src):
+            if arr.dtype.kind in "iub" and arr.size == src.size and not np.array_equal(arr.ravel(), src.ravel()):
                 i = int(np.flatnonzero(arr.ravel() != src.ravel())[0])  # wrapped, truncated or not 0/1
                 raise _err(msg.TYPE, f.name, f"{src.ravel()[i].item()!r} does not fit {spec.dtype} (it would be "
                            f"sent as {arr.ravel()[i].item()!r})", "malformed")
@@ -63,15 +102,12 @@ def encode(msg: Message) -> bytes:
 def _decode_array(t: str, name: str, raw: Any, spec: ArraySpec, dims: dict[str, int]) -> np.ndarray:
     if not isinstance(raw, dict) or set(raw) != {"dtype", "shape", "data"}:
         raise _err(t, name, "array must be a map with keys dtype, shape, data", "malformed")
-    if not isinstance(raw["dtype"], str) or len(raw["dtype"]) > 16:
-        raise _err(t, name, f"dtype must be a short string, got {type(raw['dtype']).__name__}", "malformed")
-    try:
-        dtype = np.dtype(raw["dtype"])
-    except (TypeError, ValueError):
-        raise _err(t, name, f"unknown dtype {raw['dtype']!r}", "shape") from None
     want = np.dtype(spec.dtype)
-    if dtype.kind != want.kind or dtype.itemsize != want.itemsize:
-        raise _err(t, name, f"dtype {dtype.name} where {want.name} is required", "shape")
+    dtype = want.newbyteorder("<")  # what encode writes; nothing else is parsed (numpy's parser is no validator)
+    if not isinstance(raw["dtype"], str):
+        raise _err(t, name, f"dtype must be a string, got {type(raw['dtype']).__name__}", "malformed")
+    if raw["dtype"] != dtype.str:
+        raise _err(t, name, f"dtype {raw['dtype'][:16]!r} where {dtype.str!r} ({want.name}) is required", "shape")
     shape = raw["shape"]
     if not isinstance(shape, list) or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0
                                               for s in shape):
@@ -155,9 +191,11 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     if len(data) > MAX_PAYLOAD_BYTES:
         raise ProtocolError(f"message: {len(data)} bytes exceed the limit of {MAX_PAYLOAD_BYTES}", "too-large")
     try:
-        raw = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True)
+        raw = _unpack(bytes(data))
     except Exception as exc:  # msgpack raises several unrelated types for bad input
-        raise ProtocolError(f"message: not valid msgpack ({type(exc).__name__}: {str(exc)[:120]})") from None
+        over = isinstance(exc, _TooMany) or (isinstance(exc, ValueError) and "exceeds max_" in str(exc))
+        raise ProtocolError(f"message: {'too many msgpack objects' if over else 'not valid msgpack'} "
+                            f"({type(exc).__name__}: {str(exc)[:120]})", "too-large" if over else "malformed") from None
     if not isinstance(raw, dict):
         raise ProtocolError(f"message: expected a map, got {type(raw).__name__}")
     t = raw.get("_type")
@@ -167,7 +205,7 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     if expected is not None and cls is not expected:
         raise ProtocolError(f"message._type: got {t}, expected {expected.TYPE}", "wrong-type")
     if type(raw.get("_v")) is not int or raw["_v"] != SCHEMA_VERSION:  # not True, not 1.0
-        raise ProtocolError(f"{t}._v: schema version {str(raw.get('_v'))[:40]}, this build speaks "
+        raise ProtocolError(f"{t}._v: schema version {str(raw.get('_v'))[:40]!r}, this build speaks "
                             f"{SCHEMA_VERSION}", "version")
     hints = _hints(cls)
     kwargs: dict[str, Any] = {}
@@ -175,7 +213,8 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     fields = dataclasses.fields(cls)  # type: ignore[arg-type]
     unknown = set(raw) - {"_type", "_v"} - {f.name for f in fields}
     if unknown:
-        raise ProtocolError(f"{t}: unknown field(s) {', '.join(sorted(map(str, unknown))[:5])[:200]}", "malformed")
+        raise ProtocolError(f"{t}: unknown field(s) {', '.join(repr(k[:40]) for k in sorted(unknown)[:5])}",
+                            "malformed")
     for f in fields:
         if f.name not in raw:
             raise _err(t, f.name, "missing", "malformed")

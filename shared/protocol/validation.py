@@ -204,7 +204,7 @@ def _keypoints(msg: HumanKeypoints, exp: Expectations) -> None:
     seen = msg.positions[~np.isnan(msg.positions).any(axis=1)]
     if seen.size and float(np.max(np.abs(seen))) > L.MAX_KEYPOINT_M:
         j = int(np.argmax(np.where(np.isnan(msg.positions), 0.0, np.abs(msg.positions)).max(axis=1)))
-        raise _err(msg.TYPE, "positions", f"{msg.names[j]} at {msg.positions[j].round(3).tolist()} m, beyond "
+        raise _err(msg.TYPE, "positions", f"{msg.names[j]!r} at {msg.positions[j].round(3).tolist()} m, beyond "
                    f"{L.MAX_KEYPOINT_M:g} m of the sensor", "out-of-range")
 
 

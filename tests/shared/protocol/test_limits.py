@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import struct
+import tracemalloc
+
 import msgpack
 import numpy as np
 import pytest
 
 from shared.protocol import (
     REASONS,
+    SCHEMA_VERSION,
     ClassPosterior,
     HumanKeypoints,
+    HumanPose,
     OccupancyGrid,
     Plan,
     ProtocolError,
@@ -143,3 +148,28 @@ def _valid(cls: type):
                               posterior=np.array([0.5, 0.5]), log_likelihood=np.zeros(2))
     return OccupancyGrid.from_dense(np.ones((2, 2, 2)), np.zeros(3), 0.1, stamp=1.0, tick=-1, tick_last=True,
                                     demo_id=0, index=0, method="prediction")
+
+
+def _header(n_fields: int) -> bytes:
+    """A msgpack map of ``n_fields`` entries starting with HumanPose's ``_type`` and ``_v``."""
+    return bytes([0x80 | n_fields]) + msgpack.packb({"_type": "HumanPose", "_v": SCHEMA_VERSION})[1:]
+
+
+@pytest.mark.parametrize("junk", [
+    b"\xdd" + struct.pack(">I", 1_000_000) + b"\x80" * 1_000_000,  # a million empty maps in one array
+    b"\xdc\x01\x00" + (b"\xdc\x01\x00" + b"\x90" * 256) * 256,  # 256 arrays of 256 empty arrays
+    b"\x91" * 500_000 + b"\xc0",  # half a million nested one-element arrays
+])
+def test_a_payload_of_many_small_objects_is_refused_before_they_are_built(junk):
+    """Each byte can be a msgpack container (72 bytes as a Python dict): 16 MiB of them was 1.2 GB of objects."""
+    payload = _header(3) + msgpack.packb("junk") + junk
+    assert len(payload) <= L.MAX_PAYLOAD_BYTES
+    tracemalloc.start()
+    try:
+        with pytest.raises(ProtocolError, match="^message: (too many msgpack objects|not valid msgpack)") as err:
+            decode(payload, HumanPose)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert err.value.reason in ("too-large", "malformed")  # the deep nesting: msgpack's own depth limit
+    assert peak < 2 * len(payload) + 5_000_000, f"{peak / 1e6:.1f} MB built for a {len(payload) / 1e6:.1f} MB payload"

@@ -185,7 +185,7 @@ def test_keypoints_within_range_of_the_sensor():
     check_values(kp, realtime())  # a missing point is no error here (the tracker decides what it needs)
     far = pts.copy()
     far[2] = [1500.0, 0.0, 1.0]  # kilometres away
-    with pytest.raises(ProtocolError, match=r"r_wrist at \[1500.0, 0.0, 1.0\] m, beyond 20 m") as info:
+    with pytest.raises(ProtocolError, match=r"'r_wrist' at \[1500.0, 0.0, 1.0\] m, beyond 20 m") as info:
         check_values(dataclasses.replace(kp, positions=far), realtime())
     assert info.value.reason == "out-of-range"
     with pytest.raises(ProtocolError, match="frame") as info:
