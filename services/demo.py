@@ -49,8 +49,9 @@ from services.demo_run import SERVICES_IN_ORDER, RunRecord, run_once
 from services.scenario import Summary
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
-from shared.config import ConfigError, add_config_arguments, check_prefix, opt, resolve_config
+from shared.config import LOG_LEVELS, ConfigError, add_config_arguments, check_prefix, opt, resolve_config
 from shared.config_names import SECTIONS, check_environment, section_class
+from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
 from shared.scene import load_scene
 
@@ -123,7 +124,7 @@ class DemoConfig:
     restart: bool = opt(False, help="start a service that dies during the run again (at most 3 times); without "
                         "it the run carries on without the service (the executor holds the robot)")
     json: bool = opt(False, help="print one JSON object with the summary (progress goes to stderr)")
-    log_level: str = opt("WARNING", choices=("DEBUG", "INFO", "WARNING", "ERROR"), help="log level of the demo")
+    log_level: str = opt("WARNING", choices=LOG_LEVELS, help="log level of the demo")
 
     def validate(self) -> None:
         """Check value ranges."""
@@ -132,6 +133,14 @@ class DemoConfig:
         check_prefix(self.prefix, "demo.prefix")
         if not (self.period_s > 0 and self.rate_hz > 0 and self.timeout > 0):
             raise ConfigError("demo.period_s, demo.rate_hz and demo.timeout must be > 0")
+        if not MIN_PERIOD_S <= self.period_s <= MAX_PERIOD_S:  # the clock tick's period on the wire
+            raise ConfigError(f"demo.period_s: must be in [{MIN_PERIOD_S:g}, {MAX_PERIOD_S:g}] s (a clock tick's "
+                              f"period, docs/protocol.md), got {self.period_s}")
+        if self.seed < 0:
+            raise ConfigError(f"demo.seed: must be >= 0, got {self.seed}")
+        if self.components < -1:
+            raise ConfigError(f"demo.components: must be -1 (the trainer's default), 0 (chosen by BIC) or more, got "
+                              f"{self.components}")
         if self.human == "keypoints" and self.mode != "realtime":
             raise ConfigError("demo.human = keypoints: the tracker takes a sensor's frames as they come, in real time; "
                               "add --mode realtime")

@@ -65,9 +65,13 @@ __all__ = [
     "load_toml",
     "parse_value",
     "check_prefix",
+    "LOG_LEVELS",
 ]
 
 T = TypeVar("T")
+
+LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
+"""The ``log_level`` choices of every section."""
 
 
 def check_prefix(prefix: str, option: str) -> None:
@@ -80,6 +84,9 @@ def check_prefix(prefix: str, option: str) -> None:
     if not prefix or "" in prefix.split("/") or bad:
         raise ConfigError(f"{option}: {prefix!r} must be a Zenoh key: non-empty '/'-separated chunks without '*', "
                           "'$', '#' or '?'" + (f" (it has {' '.join(bad)})" if bad else ""))
+    if any(c.isspace() or not c.isprintable() for c in prefix):  # "foresight " would be a key space of its own
+        raise ConfigError(f"{option}: {prefix!r} has a space or a control character; a prefix differing by one "
+                          "from the other services' would never meet them")
 
 
 @dataclasses.dataclass
@@ -207,18 +214,21 @@ def _add_flag(group: ArgumentGroup, flag: str, o: Option) -> None:
         group.add_argument(flag, dest=o.dest, metavar=metavar, default=argparse.SUPPRESS, help=text)
 
 
-def _check_tables(section: str, cls: type, data: dict[str, Any]) -> None:
-    """Raise ConfigError for unknown keys and non-table values of sub-tables in ``data`` (the section's table)."""
+def _check_tables(section: str, cls: type, data: dict[str, Any], source: str) -> None:
+    """Raise ConfigError for unknown keys and non-table values of sub-tables in ``data`` (the section's table).
+
+    ``source`` starts each message: the file that holds the table.
+    """
     for table, (_, allowed) in config_tables(section, cls).items():
         values: Any = data
         for step in table[1:]:
             values = values.get(step, {}) if isinstance(values, dict) else {}
         if not isinstance(values, dict):
-            raise ConfigError(f"[{'.'.join(table)}]: must be a table, got {values!r}")
+            raise ConfigError(f"{source}[{'.'.join(table)}]: must be a table, got {values!r}")
         unknown = sorted(set(values) - allowed)
         if unknown:
             hint = closest(unknown[0], allowed)
-            raise ConfigError(f"[{'.'.join(table)}]: unknown option(s) {', '.join(unknown)}{hint}")
+            raise ConfigError(f"{source}[{'.'.join(table)}]: unknown option(s) {', '.join(unknown)}{hint}")
 
 
 def _file_value(data: dict[str, Any], o: Option) -> Any:
@@ -261,10 +271,10 @@ def _validate(obj: Any, name: str) -> None:
 
 def _resolve_section(section: str, cls: type[T], file_values: dict[str, Any],
                      env: typing.Mapping[str, str], cli: dict[str, Any], base: T | None = None,
-                     cli_names: dict[str, str] | None = None) -> T:
+                     cli_names: dict[str, str] | None = None, source: str = "") -> T:
     if not isinstance(file_values, dict):
-        raise ConfigError(f"config file: [{section}] must be a table")
-    _check_tables(section, cls, file_values)
+        raise ConfigError(f"{source}[{section}] must be a table")
+    _check_tables(section, cls, file_values, source)
     changes: dict[tuple[str, ...], Any] = {}
     for o in config_options(section, cls):
         flag = (cli_names or {}).get(o.field, o.flag)
@@ -275,7 +285,7 @@ def _resolve_section(section: str, cls: type[T], file_values: dict[str, Any],
         else:
             raw = _file_value(file_values, o)
             if raw is not dataclasses.MISSING:
-                changes[o.attrs] = parse_value(o.name, o.tp, raw, o.choices)
+                changes[o.attrs] = parse_value(f"{source}{o.name}", o.tp, raw, o.choices)
     obj = _apply(base if base is not None else cls(), changes)
     _validate(obj, section)
     return obj
@@ -306,15 +316,16 @@ def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None =
     cli = dict(vars(args)) if args is not None else {}
     path = config_file or cli.get("config") or env.get(f"{ENV_PREFIX}_CONFIG")
     data = load_toml(path) if path else {}
+    source = f"config file {str(path)!r}: " if path else ""  # starts each message about what the file holds
     for key, value in data.items():
         if not isinstance(value, dict):
-            raise ConfigError(f"config file: top-level key {key!r} must be a table like [{key}]")
+            raise ConfigError(f"{source}top-level key {key!r} must be a table like [{key}]")
     if section in SECTIONS:  # a section of the product (tests resolve sections of their own)
         check_file_sections(data, str(path))
     check_environment(env, {section: cls, **({"zenoh": ZenohConfig} if with_zenoh else {})})
-    sec = _resolve_section(section, cls, data.get(section, {}), env, cli)
+    sec = _resolve_section(section, cls, data.get(section, {}), env, cli, source=source)
     names = _zenoh_flags({o.flag for o in config_options(section, cls)})
-    zen = (_resolve_section("zenoh", ZenohConfig, data.get("zenoh", {}), env, cli, zenoh_base, names)
+    zen = (_resolve_section("zenoh", ZenohConfig, data.get("zenoh", {}), env, cli, zenoh_base, names, source)
            if with_zenoh else ZenohConfig())
     if not zen.role:  # the certificate a command presents by default: its own role, else the read-only observer
         zen = dataclasses.replace(zen, role=section if section in ROLES else OBSERVER)

@@ -23,6 +23,11 @@ __all__ = ["ENV_PREFIX", "ConfigError", "opt", "nested", "parse_value", "base_ty
 
 ENV_PREFIX = "FORESIGHT"
 
+_INT = re.compile(r"[ \t]*[+-]?[0-9]+(\.0*)?[ \t]*")
+"""An integer written as text (a variable, a flag): ASCII digits, perhaps ``.0`` as a file may write it."""
+_FLOAT = re.compile(r"[ \t]*[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?[ \t]*")
+"""A number written as text: decimal or exponent notation in ASCII (no ``_``, ``inf`` or ``nan``)."""
+
 
 class ConfigError(ValueError):
     """A configuration value is missing, malformed or out of range; the message names it."""
@@ -121,9 +126,13 @@ def parse_value(name: str, tp: Any, raw: Any, choices: Sequence[Any] | None = No
         elif inner is int:
             if isinstance(raw, bool) or (isinstance(raw, float) and not raw.is_integer()):
                 raise ValueError
+            if isinstance(raw, str):  # a variable or a flag: what a file may hold, 5 or 5.0, but no 1_000 or "٣"
+                if not _INT.fullmatch(raw):
+                    raise ValueError
+                raw = raw.strip().split(".")[0]
             value = int(raw)
         elif inner is float:
-            if isinstance(raw, bool):
+            if isinstance(raw, bool) or (isinstance(raw, str) and not _FLOAT.fullmatch(raw)):
                 raise ValueError
             value = float(raw)
             if value != value or value in (float("inf"), float("-inf")):

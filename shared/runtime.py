@@ -38,10 +38,17 @@ def help_text(doc: str) -> str:
 
 
 def setup_logging(level: str = "INFO") -> None:
-    """Log to stderr with time, logger name and level (idempotent)."""
+    """Log to stderr with time, logger name and level (idempotent).
+
+    Raises:
+        ValueError: If ``level`` is not a level name (a section's ``log_level`` is checked against its choices;
+            a typo must not fall back to INFO without a word).
+    """
+    if not isinstance(logging.getLevelName(level.upper()), int):
+        raise ValueError(f"log level {level!r}: not one of DEBUG, INFO, WARNING, ERROR")
     root = logging.getLogger()
     if not root.handlers:
-        logging.basicConfig(level=getattr(logging, level.upper(), logging.INFO),
+        logging.basicConfig(level=getattr(logging, level.upper()),
                             format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
 
 

@@ -6,8 +6,9 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from shared.config import ConfigError, opt
+from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.devices import check_device
+from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.scene import SCENE_HELP
 
 __all__ = ["ExecutorConfig", "ExecutorError", "ROBOTS", "check_robot_names"]
@@ -85,7 +86,7 @@ class ExecutorConfig:
                                "/<controller>/joint_trajectory (trajectory_msgs/JointTrajectory)")
     ros2_joint_states: str = opt("/joint_states", help="robot=ros2: the robot's sensor_msgs/JointState topic")
     ros2_domain_id: int = opt(0, help="robot=ros2: the ROS 2 domain id (ROS_DOMAIN_ID)")
-    log_level: str = opt("INFO", help="log level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    log_level: str = opt("INFO", help="log level", choices=LOG_LEVELS)
 
     def validate(self) -> None:
         """Check ranges; raises ConfigError naming the option."""
@@ -95,6 +96,9 @@ class ExecutorConfig:
             value = getattr(self, name)
             if not (value > 0 and math.isfinite(value)):
                 raise ConfigError(f"executor.{name}: must be > 0, got {value}")
+        if not MIN_PERIOD_S <= self.step_period_s <= MAX_PERIOD_S:  # the clock tick's period on the wire
+            raise ConfigError(f"executor.step_period_s: must be in [{MIN_PERIOD_S:g}, {MAX_PERIOD_S:g}] s (a clock "
+                              f"tick's period, docs/protocol.md), got {self.step_period_s}")
         if self.steps < 0:
             raise ConfigError(f"executor.steps: must be >= 0, got {self.steps}")
         if self.velocity_scale > 1.0:

@@ -18,9 +18,9 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from shared.config import ConfigError, nested, opt
+from shared.config import LOG_LEVELS, ConfigError, nested, opt
 from shared.devices import check_device
-from shared.protocol.limits import JOINT_LIMIT_TOL
+from shared.protocol.limits import JOINT_LIMIT_TOL, MAX_DT_S, MAX_WAYPOINTS, MIN_DT_S
 from shared.scene import SCENE_HELP
 
 from .costs import CostConfig
@@ -92,12 +92,15 @@ class PlannerConfig:
                   ("goal_dwell_s", math.isfinite(self.goal_dwell_s) and self.goal_dwell_s >= 0),
                   ("cost_chunk_goals", self.cost_chunk_goals >= 0),
                   ("anytime_min_iterations", self.anytime_min_iterations >= 0),
-                  ("velocity_scale", 0 < self.velocity_scale <= 1), ("min_dt", self.min_dt > 0),
+                  ("velocity_scale", 0 < self.velocity_scale <= 1), ("min_dt", MIN_DT_S <= self.min_dt <= MAX_DT_S),
                   ("off_path_tol", self.off_path_tol >= 0), ("limit_tol", self.limit_tol >= 0),
                   ("goal_tol", self.goal_tol >= 0), ("goal_choice", self.goal_choice in ("total", "human"))]
         for name, ok in checks:
             if not ok:
                 raise ConfigError(f"planner.{name}: bad value {getattr(self, name)!r}")
+        if self.stomp.waypoints > MAX_WAYPOINTS:  # a plan carries every waypoint of every goal
+            raise ConfigError(f"planner.stomp.waypoints: at most {MAX_WAYPOINTS} (a plan's limit, docs/protocol.md), "
+                              f"got {self.stomp.waypoints}")
         check_device(self.device, "planner.device")
 
     def stomp_config(self, joint_noise_scale: Sequence[float] | None = None) -> StompConfig:
@@ -121,7 +124,7 @@ class PlannerServiceConfig:
     scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")
     stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
                                "disappears after it was seen (comma-separated; how a compose run ends)")
-    log_level: str = opt("INFO", help="log level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    log_level: str = opt("INFO", help="log level", choices=LOG_LEVELS)
     planner: PlannerConfig = nested(PlannerConfig, inline=True, help="the planner's settings")
 
     def validate(self) -> None:

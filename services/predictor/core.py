@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.config import ConfigError, opt
+from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.human import HumanModel, place_in_scene
 from shared.protocol import OccupancyGrid
@@ -62,7 +62,7 @@ class PredictorConfig:
                        "oldest are dropped and counted")
     stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
                                "disappears after it was seen (comma-separated; how a compose run ends)")
-    log_level: str = opt("INFO", help="logging level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    log_level: str = opt("INFO", help="logging level", choices=LOG_LEVELS)
 
     def validate(self) -> None:
         """Check the options."""

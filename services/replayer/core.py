@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.config import ConfigError, opt
+from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
 from shared.protocol import SERVICES, DemoMarker, HumanPose, Message
@@ -55,7 +55,7 @@ class ReplayerConfig:
     wait_timeout: float = opt(60.0, help="seconds to wait for --wait-for services before streaming anyway")
     stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
                                "disappears after it was seen (comma-separated; how a compose run ends)")
-    log_level: str = opt("INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"), help="log level")
+    log_level: str = opt("INFO", choices=LOG_LEVELS, help="log level")
 
     def validate(self) -> None:
         """Check value ranges."""

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from shared.config import ConfigError, opt
+from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.protocol import ClassPosterior, HumanPose, OccupancyGrid, Plan, RobotState
 
 from .wire import data_key
@@ -82,7 +82,7 @@ class Ros2Config:
     joint_states: bool = opt(True, help="publish /joint_states from Foresight's executor (off when a real robot "
                              "publishes them)")
     min_probability: float = opt(0.05, help="occupancy markers: voxels below this probability are left out")
-    log_level: str = opt("INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"), help="log level")
+    log_level: str = opt("INFO", choices=LOG_LEVELS, help="log level")
 
     def validate(self) -> None:
         """Check ranges and names."""

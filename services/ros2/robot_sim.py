@@ -21,7 +21,7 @@ from typing import Any
 from services.executor.config import ExecutorConfig, check_robot_names
 from services.executor.core import ArmLimits
 from services.executor.models import load_models, start_configuration
-from shared.config import ConfigError, ZenohConfig, opt
+from shared.config import LOG_LEVELS, ConfigError, ZenohConfig, opt
 from shared.protocol import Keys
 from shared.rejects import RejectCounter
 from shared.scene import SCENE_HELP, load_scene
@@ -49,7 +49,7 @@ class RobotSimConfig:
     scene: str = opt("", help=SCENE_HELP + " (the start configuration, as the executor's; empty: pr2_two_cups)")
     start_q: list[float] = opt(default_factory=list, help="start configuration (empty: the executor's default)")
     stop_with: str = opt("", help="stop when this Foresight service's liveliness token goes away (e.g. executor)")
-    log_level: str = opt("INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"), help="log level")
+    log_level: str = opt("INFO", choices=LOG_LEVELS, help="log level")
 
     def validate(self) -> None:
         """Check ranges and names."""

@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from shared.config import ConfigError, nested, opt
+from shared.config import LOG_LEVELS, ConfigError, nested, opt
 
 from .core import TrackerConfig
 
@@ -58,7 +58,7 @@ class TrackerServiceConfig:
     wait_for: list[str] = opt(default_factory=list, help="--from: wait for the liveliness tokens of these services "
                               "(e.g. executor) before playing")
     wait_timeout: float = opt(60.0, help="seconds to wait for --wait-for services before playing anyway")
-    log_level: str = opt("INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"), help="log level")
+    log_level: str = opt("INFO", choices=LOG_LEVELS, help="log level")
     tracker: TrackerConfig = nested(TrackerConfig, inline=True, help="the tracker's fit, checks, smoothing and reach "
                                     "rule")
     playback: PlaybackConfig = nested(PlaybackConfig, inline=True, help="how --from plays a recording")

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from shared.config import ConfigError, opt
+from shared.config import LOG_LEVELS, ConfigError, opt
+from shared.devices import check_device
 from shared.scene import SCENE_HELP
 
 __all__ = ["ViewConfig", "DEFAULT_PORT"]
@@ -28,7 +29,7 @@ class ViewConfig:
                     "take CPU from the planning loop on a shared machine")
     write_layout: str = opt("", help="write the Foxglove layout for this scene (3D panel, posterior and cost plots) "
                             "to this file and exit")
-    log_level: str = opt("INFO", help="log level (DEBUG, INFO, WARNING, ERROR)")
+    log_level: str = opt("INFO", help="log level", choices=LOG_LEVELS)
 
     def validate(self) -> None:
         """Check ranges; raises ConfigError naming the option."""
@@ -39,3 +40,4 @@ class ViewConfig:
                 raise ConfigError(f"view.{name}: must be > 0, got {getattr(self, name)}")
         if not 0 <= self.nice <= 19:
             raise ConfigError(f"view.nice: must be 0..19, got {self.nice}")
+        check_device(self.device, "view.device")

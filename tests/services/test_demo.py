@@ -179,3 +179,6 @@ def test_a_prefix_zenoh_refuses_is_a_config_error() -> None:
     for prefix in ("a*b", "a//b"):
         with pytest.raises(ConfigError, match=rf"^demo\.prefix: '{re.escape(prefix)}' must be a Zenoh key"):
             DemoConfig(prefix=prefix).validate()
+    for prefix in ("foresight ", "fore\tsight", "a\x00b"):  # Zenoh takes them: a key space no other service meets
+        with pytest.raises(ConfigError, match=r"^demo\.prefix: .* has a space or a control character"):
+            DemoConfig(prefix=prefix).validate()

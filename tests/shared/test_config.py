@@ -133,6 +133,21 @@ def test_parse_value_types():
     assert parse_value("x", list[str], "a, b,") == ["a", "b"]
 
 
+@pytest.mark.parametrize(("tp", "text", "value"), [(int, "5", 5), (int, "5.0", 5), (int, " -3 ", -3),
+                                                   (float, "1e3", 1000.0), (float, ".5", 0.5), (float, "-2.25", -2.25)])
+def test_numbers_as_text_read_as_a_file_would_hold_them(tp, text, value):
+    assert parse_value("x", tp, text) == value and type(parse_value("x", tp, text)) is tp
+
+
+@pytest.mark.parametrize(("tp", "text"), [(int, "1_000"), (int, "\u0663"), (int, "0x10"), (int, "5.5"), (int, ""),
+                                          (float, "1_0.5"), (float, "\u0663"), (float, "inf"), (float, "nan"),
+                                          (float, "1e999")])
+def test_numbers_python_would_read_but_no_file_holds_are_refused(tp, text):
+    """int() and float() take underscores and any script's digits: FORESIGHT_X=1_000 was 1000."""
+    with pytest.raises(ConfigError, match=f"x: expected {tp.__name__}, got"):
+        parse_value("x", tp, text)
+
+
 # ----------------------------------------------------------------------------------------------
 # nested component configs
 
@@ -191,12 +206,15 @@ def test_nested_precedence_file_env_flag(tmp_path) -> None:
     assert (cfg.core.device, cfg.core.inner.steps, cfg.core.inner.gain, cfg.period_s) == ("cpu", 8, 4.0, 2.0)
 
 
+# [svc.inner] device is hidden (set by the parent); [svc] core is inline, no table of its own
 @pytest.mark.parametrize(("text", "argv", "env", "pattern"), [
     ("[svc.inner]\nsteps = 0\n", [], {}, r"^svc: inner\.steps must be >= 1, got 0$"),
-    ("[svc.inner]\nspeed = 1\n", [], {}, r"^\[svc\.inner\]: unknown option\(s\) speed$"),
-    ("[svc.inner]\ndevice = 'cuda'\n", [], {}, r"^\[svc\.inner\]: unknown option\(s\) device$"),  # hidden
-    ("[svc]\ninner = 3\n", [], {}, r"^\[svc\.inner\]: must be a table"),
-    ("[svc]\ncore = {}\n", [], {}, r"^\[svc\]: unknown option\(s\) core$"),  # inline: no table of its own
+    ("[svc.inner]\nspeed = 1\n", [], {}, r"^config file '.*c\.toml': \[svc\.inner\]: unknown option\(s\) speed$"),
+    ("[svc.inner]\ndevice = 'cuda'\n", [], {},
+     r"^config file '.*c\.toml': \[svc\.inner\]: unknown option\(s\) device$"),
+    ("[svc]\ninner = 3\n", [], {}, r"^config file '.*c\.toml': \[svc\.inner\]: must be a table"),
+    ("[svc]\ncore = {}\n", [], {}, r"^config file '.*c\.toml': \[svc\]: unknown option\(s\) core$"),
+    ("[svc.inner]\nsteps = 'many'\n", [], {}, r"^config file '.*c\.toml': svc\.inner\.steps: expected int"),
     ("", ["--inner.steps", "x"], {}, r"^--inner\.steps: expected int, got 'x'$"),
     ("", [], {"FORESIGHT_SVC_INNER_GAIN": "fast"}, r"^FORESIGHT_SVC_INNER_GAIN: expected float"),
 ])

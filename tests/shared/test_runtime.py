@@ -5,7 +5,9 @@ from __future__ import annotations
 import gc
 import weakref
 
-from shared.runtime import freeze_startup_heap
+import pytest
+
+from shared.runtime import freeze_startup_heap, setup_logging
 
 
 class _Node:
@@ -58,3 +60,8 @@ def test_watch_parent_stops_at_once_when_the_parent_died_during_start_up(monkeyp
     stop = threading.Event()
     assert watch_parent(stop, period_s=0.05) == os.getppid() and not stop.wait(0.2)
     stop.set()  # ends the watching thread
+
+
+def test_a_log_level_that_is_no_level_is_refused_rather_than_read_as_info() -> None:
+    with pytest.raises(ValueError, match="log level 'DEBGU': not one of DEBUG, INFO, WARNING, ERROR"):
+        setup_logging("DEBGU")

@@ -187,7 +187,7 @@ def test_bad_frames_get_one_line_each_are_never_published_and_the_tracker_goes_o
     assert "frame 0 refused (missing: required point(s) missing: r_wrist)" in text
     assert "'left_pinky', not points of the layout foresight" in text
     assert "frame 2 refused (frame: frame 2 is in 'camera_link', the tracker takes 'recorder')" in text
-    assert "r_hand at [1500.0, 0.0, 1.0] m, beyond 20 m" in text
+    assert "'r_hand' at [1500.0, 0.0, 1.0] m, beyond 20 m" in text
     rejected = service.rejects.summary()
     assert "out-of-range 1" in rejected and "invariant" in rejected and "malformed" in rejected
     assert stats.reaches == 1  # the good reach went through: nothing of the bad frames was published

@@ -44,6 +44,7 @@ def test_the_live_scene_is_what_the_log_records(builder) -> None:
 
 def test_bad_options_are_named() -> None:
     for kwargs, name in (({"port": 70000}, "view.port"), ({"viz_rate_hz": 0}, "view.viz_rate_hz"),
-                         ({"nice": 25}, "view.nice")):
+                         ({"nice": 25}, "view.nice"), ({"device": ""}, "view.device"),
+                         ({"device": "gpu"}, "view.device")):
         with pytest.raises(ConfigError, match=name):
             ViewConfig(**kwargs).validate()

@@ -9,6 +9,11 @@ import msgpack
 import numpy as np
 import pytest
 
+from services.demo import DemoConfig
+from services.executor.config import ExecutorConfig
+from services.planner.config import PlannerConfig
+from services.planner.stomp import StompConfig
+from shared.config import ConfigError
 from shared.protocol import (
     REASONS,
     SCHEMA_VERSION,
@@ -173,3 +178,17 @@ def test_a_payload_of_many_small_objects_is_refused_before_they_are_built(junk):
         tracemalloc.stop()
     assert err.value.reason in ("too-large", "malformed")  # the deep nesting: msgpack's own depth limit
     assert peak < 2 * len(payload) + 5_000_000, f"{peak / 1e6:.1f} MB built for a {len(payload) / 1e6:.1f} MB payload"
+
+
+@pytest.mark.parametrize(("make", "match"), [
+    (lambda: ExecutorConfig(step_period_s=120.0), r"executor\.step_period_s: must be in \[0\.001, 60\]"),
+    (lambda: ExecutorConfig(step_period_s=0.0005), r"executor\.step_period_s: must be in \[0\.001, 60\]"),
+    (lambda: DemoConfig(period_s=100.0), r"demo\.period_s: must be in \[0\.001, 60\]"),
+    (lambda: PlannerConfig(stomp=StompConfig(waypoints=5000)), r"planner\.stomp\.waypoints: at most 4096"),
+    (lambda: PlannerConfig(min_dt=100.0), r"planner\.min_dt: bad value 100\.0"),
+    (lambda: DemoConfig(seed=-1), r"demo\.seed: must be >= 0"),
+])
+def test_a_config_whose_messages_every_peer_would_refuse_is_refused_itself(make, match):
+    """A clock period, a waypoint count or a time step past the wire's limits stalled a run at its timeouts."""
+    with pytest.raises(ConfigError, match=match):
+        make().validate()
