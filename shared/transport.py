@@ -23,16 +23,21 @@ import zenoh
 from shared.config import ZenohConfig
 from shared.connectivity import retry_config, watched
 from shared.protocol import Keys, Message, ProtocolError, Receipt, decode, encode
+from shared.protocol.limits import MAX_PAYLOAD_BYTES
 from shared.rejects import RejectCounter
 from shared.security import OBSERVER
 from shared.security.guard import denied, forget, remember
 from shared.security.tls import insecure_listen_warning, security_settings
 
-__all__ = ["TransportError", "zenoh_config", "open_session", "open_with_retry", "TypedPublisher", "subscribe",
-           "subscribe_ordered", "LatestSubscriber", "RejectCounter", "sender_of", "Presence", "describe"]
+__all__ = ["TransportError", "MAX_MESSAGE_BYTES", "zenoh_config", "open_session", "open_with_retry", "TypedPublisher",
+           "subscribe", "subscribe_ordered", "LatestSubscriber", "RejectCounter", "sender_of", "Presence", "describe"]
 
 log = logging.getLogger(__name__)
 M = TypeVar("M", bound=Message)
+
+
+MAX_MESSAGE_BYTES = MAX_PAYLOAD_BYTES + 2 ** 20
+"""Largest message a session receives: a payload at the wire's limit plus room for its key and attachment."""
 
 
 def zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
@@ -49,6 +54,8 @@ def zenoh_config(cfg: ZenohConfig) -> zenoh.Config:
     # Shared memory leaves segments in /dev/shm; our large messages are compact, so TCP on loopback is
     # enough (measured ~2.5 ms for 1 MB).
     conf.insert_json5("transport/shared_memory/enabled", "false")
+    # a larger message is dropped by the link, which stays up (Zenoh's default took 1 GiB before decode refused it)
+    conf.insert_json5("transport/link/rx/max_message_size", json.dumps(MAX_MESSAGE_BYTES))
     return conf
 
 

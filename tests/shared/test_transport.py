@@ -11,11 +11,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import zenoh
 
 from services.processes import free_port
 from shared.config import ZenohConfig
 from shared.protocol import ClockTick, DemoMarker, HumanPose, Keys, encode
+from shared.protocol.limits import MAX_PAYLOAD_BYTES
 from shared.transport import (
+    MAX_MESSAGE_BYTES,
     LatestSubscriber,
     Presence,
     RejectCounter,
@@ -53,6 +56,33 @@ def test_zenoh_config_has_scouting_off(zenoh_hub):
     conf = zenoh_config(zenoh_hub())
     assert conf.get_json("scouting/multicast/enabled") == "false"
     assert "127.0.0.1" in conf.get_json("listen/endpoints")
+
+
+def test_a_message_over_the_limit_is_dropped_by_the_link_and_the_next_one_arrives(zenoh_hub):
+    """Zenoh's default took messages of up to 1 GiB in full before decode() could refuse them."""
+    listener = zenoh_hub()
+    assert zenoh_config(listener).get_json("transport/link/rx/max_message_size") == str(MAX_MESSAGE_BYTES)
+    got: list[int] = []
+    with open_session(listener) as rx, open_session(zenoh_hub()) as tx:
+        sub = rx.declare_subscriber("test/big", lambda sample: got.append(len(sample.payload)))
+        pub = tx.declare_publisher("test/big", congestion_control=zenoh.CongestionControl.BLOCK)
+        assert publish_raw_until(pub, b"a", lambda: got)
+        pub.put(b"\0" * (MAX_MESSAGE_BYTES + 1))
+        pub.put(b"b" * MAX_PAYLOAD_BYTES)  # the largest a decoder takes still arrives
+        pub.put(b"c")
+        assert wait_until(lambda: got[-1:] == [1] and len(got) >= 3, 20.0), got
+        sub.undeclare()
+    assert MAX_MESSAGE_BYTES + 1 not in got and MAX_PAYLOAD_BYTES in got
+
+
+def publish_raw_until(pub, payload: bytes, cond, timeout: float = 10.0) -> bool:
+    """Put ``payload`` every 50 ms until ``cond()`` holds (the subscription has reached the publisher)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        pub.put(payload)
+        if wait_until(cond, 0.05):
+            return True
+    return False
 
 
 def test_typed_pub_sub_and_rejects(zenoh_hub):
