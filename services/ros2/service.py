@@ -17,7 +17,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from shared.config import ConfigError, ZenohConfig, opt
-from shared.protocol import ClassPosterior, DemoMarker, HumanPose, Keys, OccupancyGrid, Plan, RobotState
+from shared.protocol import (
+    ClassPosterior,
+    DemoMarker,
+    Expectations,
+    HumanPose,
+    Keys,
+    OccupancyGrid,
+    Plan,
+    Receipt,
+    RobotState,
+)
 from shared.rejects import RejectCounter
 from shared.scene import SCENE_HELP, load_scene
 from shared.transport import Presence, open_session, subscribe
@@ -72,6 +82,7 @@ class Ros2Service:
         self.mapping = Ros2Mapping(config)
         self.scene = load_scene(config.scene or None)
         self.rejects = RejectCounter("ros2")
+        self.receipt = Receipt(Expectations(clock="auto"))  # values, stamps and each sender's order, as any service
         self.stats = Ros2Stats({role: 0 for role in TOPICS})
         self._lock = threading.Lock()
         self._pubs: dict[str, Ros2Publisher] = {}
@@ -133,11 +144,11 @@ class Ros2Service:
             for role, topic in TOPICS.items():
                 if role != "joint_states" or cfg.joint_states:
                     self._pubs[role] = node.publisher(cfg.topic(role), topic.msgtype)
-            subs = [subscribe(session, self.keys.plan, Plan, self.on_plan, self.rejects),
-                    subscribe(session, self.keys.robot_state, RobotState, self.on_state, self.rejects),
-                    subscribe(session, self.keys.occupancy, OccupancyGrid, self.on_occupancy, self.rejects),
-                    subscribe(session, self.keys.posterior, ClassPosterior, self.on_posterior, self.rejects),
-                    subscribe(session, self.keys.pose, HumanPose, self.on_human, self.rejects)]
+            k = self.keys
+            subs = [subscribe(session, key, cls, handler, self.rejects, self.receipt) for key, cls, handler in (
+                (k.plan, Plan, self.on_plan), (k.robot_state, RobotState, self.on_state),
+                (k.occupancy, OccupancyGrid, self.on_occupancy), (k.posterior, ClassPosterior, self.on_posterior),
+                (k.pose, HumanPose, self.on_human))]
             ends = [cfg.stop_with] if cfg.stop_with else []  # one service's name, not its letters
             presence = Presence(session, self.keys, "ros2", stop_with=ends, stop=stop)
             log.info("ros2: node %s%s on domain %d, topics %s, session %s", cfg.namespace.rstrip("/") + "/", cfg.node,

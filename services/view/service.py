@@ -15,7 +15,17 @@ import threading
 from shared.config import ZenohConfig
 from shared.foxglove.live import LiveServer
 from shared.foxglove.scene import default_builder
-from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyGrid, Plan, RobotState
+from shared.protocol import (
+    ClassPosterior,
+    Expectations,
+    HumanPose,
+    Keys,
+    Message,
+    OccupancyGrid,
+    Plan,
+    Receipt,
+    RobotState,
+)
 from shared.rejects import RejectCounter
 from shared.scene import load_scene
 from shared.transport import open_session, subscribe
@@ -44,6 +54,7 @@ class ViewService:
         self.core = ViewCore(default_builder(load_scene(config.scene or None), config.device),
                              viz_period_s=1.0 / config.viz_rate_hz)
         self.rejects = RejectCounter("view")
+        self.receipt = Receipt(Expectations(clock="auto"))  # values, stamps and each sender's order, as any service
         self.server: LiveServer | None = None
         self.failures = 0
 
@@ -68,7 +79,7 @@ class ViewService:
               open_session(self.zenoh, stop, "view") as session):
             self.server = server
             k = self.keys
-            subs = [subscribe(session, key, cls, self._on, self.rejects)
+            subs = [subscribe(session, key, cls, self._on, self.rejects, self.receipt)
                     for key, cls in ((k.plan, Plan), (k.robot_state, RobotState), (k.occupancy, OccupancyGrid),
                                      (k.posterior, ClassPosterior), (k.pose, HumanPose))]
             log.info("view: serving %s to the Foxglove app (Open connection -> Foxglove WebSocket; layout: "
