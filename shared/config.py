@@ -108,9 +108,8 @@ class ZenohConfig:
     security_dir: str = opt("", help="mutual TLS and access control: the directory of `foresight security init` "
                             "(ca.crt, <role>.crt, <role>.key); tcp/ endpoints become tls/. Empty: plain TCP "
                             "(loopback only)")
-    role: str = opt("", help="with security_dir: the certificate this session presents (router, replayer, "
-                    "predictor, planner, executor, observer); empty: the command's own (a service its name, "
-                    "tools observer)")
+    role: str = opt("", help=f"with security_dir: the certificate this session presents ({', '.join(ROLES)}); "
+                    "empty: the command's own (a service its name, tools observer)")
 
     def validate(self) -> None:
         """Check endpoint syntax, the prefix and the connect timeout."""

@@ -1,12 +1,13 @@
 """``foresight security``: certificates for mutual TLS, and the access control the sessions apply.
 
 * ``foresight security init DIR [--hosts H1,H2] [--days N]``: a certificate authority and one
-  certificate per role (router, replayer, predictor, planner, executor, observer) in DIR; run again,
-  it re-issues the role certificates under the same authority (rotation; ``--new-ca`` replaces it).
+  certificate per role (``shared.security.acl.ROLES``) in DIR; run again, it re-issues the role certificates
+  under the same authority and for the same hosts unless ``--hosts`` is given (rotation; ``--new-ca``
+  replaces the authority).
 * ``foresight security acl [--prefix P]``: the generated ``access_control`` section (JSON), e.g. for
   a zenohd router's config file.
-* ``foresight security check DIR``: each certificate's role, validity and whether it verifies
-  against the directory's CA.
+* ``foresight security check DIR [--role R]``: each certificate found (a machine holds its own roles'),
+  its validity, its hosts and whether it verifies against the directory's CA.
 
 Every service, ``foresight router`` and ``foresight demo`` take ``--security DIR`` (``[zenoh]
 security_dir``, ``FORESIGHT_ZENOH_SECURITY_DIR``); docs/security.md has the threat model and a
@@ -21,10 +22,12 @@ import json
 import sys
 from pathlib import Path
 
+from cryptography import x509
+
 from shared.protocol import Keys
 from shared.runtime import UserError, cli_errors, help_text
 from shared.security.acl import ROLES, access_control
-from shared.security.certificates import init_security_dir, verify_role
+from shared.security.certificates import CA_DAYS, init_security_dir, issued_hosts, verify_role
 
 __all__ = ["main", "SUBCOMMANDS"]
 
@@ -37,10 +40,15 @@ SUBCOMMANDS: dict[str, str] = {
 
 
 def _init(args: argparse.Namespace) -> int:
-    hosts = [h.strip() for h in args.hosts.split(",") if h.strip()]
     if args.days < 1:
         raise UserError(f"--days must be >= 1, got {args.days}")
     try:
+        if args.hosts is None:  # rotation keeps the cell's hosts; a first init has none beyond loopback
+            hosts = issued_hosts(args.dir, ROLES) if args.dir.is_dir() and not args.new_ca else []
+            if hosts:
+                print(f"hosts kept from the certificates replaced: {', '.join(hosts)} (--hosts gives others)")
+        else:
+            hosts = [h.strip() for h in args.hosts.split(",") if h.strip()]
         written = init_security_dir(args.dir, ROLES, hosts=hosts, days=args.days, force=args.new_ca)
     except (FileExistsError, ValueError) as exc:  # half an authority, a key that is not the certificate's, a host
         raise UserError(str(exc)) from None  # that is no host: nothing written
@@ -59,15 +67,27 @@ def _acl(args: argparse.Namespace) -> int:
 
 def _check(args: argparse.Namespace) -> int:
     now = dt.datetime.now(dt.UTC)
+    if not args.dir.is_dir():
+        raise UserError(f"security directory {args.dir} does not exist")
+    if args.role is not None and args.role not in ROLES:
+        raise UserError(f"--role {args.role!r}: not one of {', '.join(ROLES)}")
+    here = [r for r in ROLES if any((args.dir / f"{r}.{ext}").exists() for ext in ("crt", "key"))]
+    roles = [args.role] if args.role else here  # a machine holds its own roles only (docs/security.md)
+    if not roles:
+        raise UserError(f"security directory {args.dir}: no role's certificate ({', '.join(ROLES)})")
     bad = 0
-    for role in ROLES:
+    for role in roles:
         try:
             cert = verify_role(args.dir, role, now=now)
-        except (FileNotFoundError, ValueError) as exc:
+        except (OSError, ValueError) as exc:  # a missing or unreadable file, or what verify_role refuses
             print(f"{role}: {exc}")
             bad += 1
             continue
-        print(f"{role}: ok, valid until {cert.not_valid_after_utc:%Y-%m-%d %H:%M} UTC")
+        san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+        print(f"{role}: ok, valid until {cert.not_valid_after_utc:%Y-%m-%d %H:%M} UTC, hosts "
+              f"{', '.join(str(n.value) for n in san)}")
+    if not args.role:
+        print(f"not on this machine: {', '.join(r for r in ROLES if r not in here) or 'none'}")
     return 1 if bad else 0
 
 
@@ -78,14 +98,17 @@ def main(argv: list[str] | None = None, prog: str = "foresight security") -> int
     sub = parser.add_subparsers(dest="cmd", required=True, metavar="{" + ",".join(SUBCOMMANDS) + "}")
     p = sub.add_parser("init", help=SUBCOMMANDS["init"])
     p.add_argument("dir", type=Path, help="directory for ca.crt, ca.key and <role>.crt / <role>.key")
-    p.add_argument("--hosts", default="", help="comma-separated host names or addresses the sessions listen on "
-                   "beyond loopback (e.g. the router's), written into every certificate")
-    p.add_argument("--days", type=int, default=365, help="validity of the role certificates (default: 365)")
+    p.add_argument("--hosts", default=None, help="comma-separated host names or addresses the sessions listen on "
+                   "beyond loopback (e.g. the router's), written into every certificate (default: those of the "
+                   "certificates being replaced, none at first)")
+    p.add_argument("--days", type=int, default=365, help=f"validity of the role certificates (default: 365, at "
+                   f"most the authority's {CA_DAYS})")
     p.add_argument("--new-ca", action="store_true", help="make a new authority even if DIR has one")
     p = sub.add_parser("acl", help=SUBCOMMANDS["acl"])
     p.add_argument("--prefix", default="foresight", help="key-expression prefix (default: foresight)")
     p = sub.add_parser("check", help=SUBCOMMANDS["check"])
     p.add_argument("dir", type=Path, help="security directory")
+    p.add_argument("--role", default=None, help="check this role only (default: every role with files in DIR)")
     args = parser.parse_args(argv)
     with cli_errors(f"{prog} {args.cmd}"):
         return {"init": _init, "acl": _acl, "check": _check}[args.cmd](args)

@@ -16,6 +16,7 @@ import datetime as dt
 import ipaddress
 import os
 import re
+import tempfile
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,10 +29,12 @@ from cryptography.hazmat.primitives.asymmetric.types import PrivateKeyTypes
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 __all__ = ["Issued", "CertificateError", "make_authority", "issue", "init_security_dir", "read_role", "verify_role",
-           "check_host", "LOOPBACK_HOSTS"]
+           "check_host", "check_directory", "issued_hosts", "LOOPBACK_HOSTS", "CA_DAYS"]
 
 LOOPBACK_HOSTS = ("localhost", "127.0.0.1")
 """Names every certificate carries, so that a run on one machine verifies."""
+CA_DAYS = 3650
+"""Validity of a new authority (days); no role certificate outlives it."""
 
 
 class CertificateError(ValueError):
@@ -65,7 +68,8 @@ def check_host(host: str) -> str:
     An address is written bare (``::1``, not ``[::1]``) and a name has no port: a certificate names hosts,
     and a name it does not match exactly is refused by the peer at the first connection, far from here.
     A DNS name is dot-separated labels of letters, digits and inner hyphens (RFC 1123), the first may be
-    ``*`` (a wildcard).
+    ``*`` (a wildcard) when others follow, and the last is not all digits (``192.168.1.300`` is a mistyped
+    address, not a name); a trailing dot (the DNS root) is dropped, since peers never match it.
     """
     try:
         return str(ipaddress.ip_address(host))
@@ -76,11 +80,16 @@ def check_host(host: str) -> str:
                          f"({host[1:host.index(']')]!r})")
     if host.count(":") == 1 and host.rsplit(":", 1)[1].isdigit():
         raise ValueError(f"host {host!r}: a certificate names hosts, not ports (give {host.rsplit(':', 1)[0]!r})")
-    labels = host.rstrip(".").split(".")
-    if len(host) > 253 or not all(_LABEL.fullmatch(lab) or (i == 0 and lab == "*") for i, lab in enumerate(labels)):
+    name = host[:-1] if host.endswith(".") else host
+    labels = name.split(".")
+    if len(name) > 253 or not all(_LABEL.fullmatch(lab) or (i == 0 and lab == "*" and len(labels) > 1)
+                                  for i, lab in enumerate(labels)):
         raise ValueError(f"host {host!r} is neither an IP address nor a DNS name (letters, digits and inner hyphens "
-                         "between dots, e.g. robot.local)")
-    return host
+                         "between dots, e.g. robot.local; a wildcard only as *.robot.local)")
+    if labels[-1].isdigit():
+        raise ValueError(f"host {host!r} is no IP address (four numbers 0-255, e.g. 192.168.1.10) and a DNS name "
+                         "does not end in a number")
+    return name
 
 
 def _san(hosts: Iterable[str]) -> x509.SubjectAlternativeName:
@@ -93,7 +102,7 @@ def _san(hosts: Iterable[str]) -> x509.SubjectAlternativeName:
     return x509.SubjectAlternativeName(names)
 
 
-def make_authority(name: str = "Foresight CA", days: int = 3650,
+def make_authority(name: str = "Foresight CA", days: int = CA_DAYS,
                    now: dt.datetime | None = None) -> Issued:
     """A self-signed certificate authority (may sign certificates, not be a TLS peer)."""
     now = now or dt.datetime.now(dt.UTC)
@@ -152,8 +161,8 @@ def issue(authority: Issued, role: str, hosts: Sequence[str] = (), days: int = 3
 def _write(path: Path, data: bytes, private: bool) -> None:
     """Write ``data`` to ``path`` whole (a temporary file renamed), 0600 if ``private`` before a byte is written."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o644)
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)  # a new file, 0600:
+    tmp = Path(name)  # never one planted there (a symbolic link would have been followed)
     try:
         os.fchmod(fd, 0o600 if private else 0o644)  # whatever the umask or a stale temporary file had
         with os.fdopen(fd, "wb") as f:
@@ -162,6 +171,45 @@ def _write(path: Path, data: bytes, private: bool) -> None:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _load_cert(path: Path) -> x509.Certificate:
+    try:
+        return x509.load_pem_x509_certificate(path.read_bytes())
+    except ValueError as exc:  # cryptography's text names no file
+        raise CertificateError(f"{path}: not a PEM certificate ({str(exc).splitlines()[0][:80]})") from None
+
+
+def check_directory(directory: str | os.PathLike[str]) -> None:
+    """Refuse a security directory that someone else may write: they could put their own authority in ca.crt.
+
+    Raises:
+        CertificateError: The directory is writable by its group or others, or belongs to another user (root
+            excepted).
+    """
+    d = Path(directory)
+    st = d.stat()
+    if st.st_mode & 0o022:
+        raise CertificateError(f"security directory {d}: writable by {'others' if st.st_mode & 0o002 else 'its group'}"
+                               f" (mode {st.st_mode & 0o777:o}); whoever can write it can replace ca.crt with an "
+                               f"authority of their own: chmod go-w {d}")
+    if st.st_uid not in (os.getuid(), 0):
+        raise CertificateError(f"security directory {d}: belongs to user id {st.st_uid}, not to this user "
+                               f"({os.getuid()}) or root; its owner could replace ca.crt")
+
+
+def issued_hosts(directory: str | os.PathLike[str], roles: Sequence[str]) -> list[str]:
+    """The hosts (beyond loopback) the directory's certificates name: the router's, else the first role's found.
+
+    ``foresight security init`` run again without ``--hosts`` keeps them (rotation must not drop the cell's hosts).
+    """
+    d = Path(directory)
+    for role in ("router", *roles):
+        if (d / f"{role}.crt").is_file():
+            san = _load_cert(d / f"{role}.crt").extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+            names = [str(n.value) for n in san]
+            return [h for h in names if h not in LOOPBACK_HOSTS]
+    return []
 
 
 def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], hosts: Sequence[str] = (),
@@ -181,11 +229,13 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
         FileExistsError: Without ``force``, the directory holds one of ``ca.crt`` and ``ca.key`` but not the
             other (a cell machine holds only ``ca.crt``: a new authority there would lock it out of its cell), or
             a ``ca.key`` that does not match ``ca.crt``.
-        ValueError: A host that is neither an IP address nor a DNS name (:func:`check_host`); nothing written.
+        ValueError: A host that is neither an IP address nor a DNS name (:func:`check_host`), ``days`` past the
+            authority's end, or a directory others may write (:func:`check_directory`); nothing written.
     """
     hosts = [check_host(h) for h in hosts]
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
+    check_directory(d)
     ca_crt, ca_key = d / "ca.crt", d / "ca.key"
     if not force and ca_crt.is_file() != ca_key.is_file():
         have, lacks = (ca_crt, ca_key) if ca_crt.is_file() else (ca_key, ca_crt)
@@ -194,9 +244,20 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
                               "authority, which every machine of the cell must then get")
     if ca_crt.is_file() and ca_key.is_file() and not force:
         authority = Issued(ca_crt.read_bytes(), ca_key.read_bytes())
-        key = serialization.load_pem_private_key(authority.key_pem, password=None)
-        if not _same_key(x509.load_pem_x509_certificate(authority.cert_pem), key):
+        try:
+            key = serialization.load_pem_private_key(authority.key_pem, password=None)
+        except (ValueError, TypeError) as exc:
+            raise CertificateError(f"{ca_key}: not a PEM key readable without a password "
+                                   f"({str(exc).splitlines()[0][:80]})") from None
+        ca = _load_cert(ca_crt)
+        if not _same_key(ca, key):
             raise FileExistsError(f"security directory {d}: ca.key is not the key of ca.crt")
+        left = ca.not_valid_after_utc - dt.datetime.now(dt.UTC)
+        if dt.timedelta(days=days) > left:
+            raise CertificateError(f"--days {days}: the authority (ca.crt) ends on {ca.not_valid_after_utc:%Y-%m-%d}, "
+                                   f"in {left.days} days; a certificate cannot outlive it (--new-ca makes a new one)")
+    elif days > CA_DAYS:
+        raise CertificateError(f"--days {days}: at most {CA_DAYS}, the validity of a new authority")
     else:
         authority = make_authority()
         _write(ca_crt, authority.cert_pem, private=False)
@@ -218,6 +279,8 @@ def read_role(directory: str | os.PathLike[str], role: str) -> tuple[Path, Path,
         FileNotFoundError: Naming the missing file and how to make it.
     """
     d = Path(directory)
+    if not d.is_dir():
+        raise FileNotFoundError(f"security directory {d} does not exist (make one with `foresight security init DIR`)")
     files = (d / "ca.crt", d / f"{role}.crt", d / f"{role}.key")
     for f in files:
         if not f.is_file():
@@ -232,12 +295,15 @@ def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime |
 
     Raises:
         FileNotFoundError: A file is missing.
-        CertificateError: Naming what is wrong (signature, common name, validity, a key that is not the
-            certificate's or that cannot be read without a password).
+        CertificateError: Naming what is wrong (a file that is not PEM, signature, common name, validity, a key
+            that is not the certificate's, that others may read or that cannot be read without a password, a
+            directory others may write).
     """
     ca_path, cert_path, key_path = read_role(directory, role)
-    ca = x509.load_pem_x509_certificate(ca_path.read_bytes())
-    cert = x509.load_pem_x509_certificate(cert_path.read_bytes())
+    check_directory(directory)
+    ca, cert = _load_cert(ca_path), _load_cert(cert_path)
+    if (mode := key_path.stat().st_mode & 0o777) & 0o077:  # a key others can read is no longer this role's alone
+        raise CertificateError(f"{key_path}: others than its owner may read it (mode {mode:o}): chmod 600 {key_path}")
     try:
         cert.verify_directly_issued_by(ca)
     except (ValueError, TypeError, InvalidSignature) as exc:

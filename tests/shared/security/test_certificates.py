@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import os
 import stat
 from pathlib import Path
 
@@ -11,7 +12,15 @@ from cryptography import x509
 from cryptography.x509.oid import NameOID
 
 from shared.security.acl import ROLES
-from shared.security.certificates import init_security_dir, issue, make_authority, read_role, verify_role
+from shared.security.certificates import (
+    CertificateError,
+    init_security_dir,
+    issue,
+    issued_hosts,
+    make_authority,
+    read_role,
+    verify_role,
+)
 from tools.security import main
 
 
@@ -94,6 +103,9 @@ def test_a_key_file_that_was_readable_is_replaced_private(tmp_path: Path) -> Non
     ("-robot.local", "neither an IP address nor a DNS name"),
     ("robot..local", "neither an IP address nor a DNS name"),
     ("a." * 127 + "b", "neither an IP address nor a DNS name"),
+    ("*", "a wildcard only as"),  # peers (rustls) never match these two
+    ("192.168.1.300", "no IP address"),
+    ("10.0.0", "no IP address"),
 ])
 def test_a_host_a_certificate_cannot_name_is_refused_before_anything_is_written(tmp_path: Path, host: str,
                                                                                  match: str, capsys) -> None:
@@ -110,9 +122,83 @@ def test_a_host_a_certificate_cannot_name_is_refused_before_anything_is_written(
 
 
 def test_addresses_and_names_a_certificate_can_carry(tmp_path: Path) -> None:
-    hosts = ["::1", "fe80::1", "10.0.0.5", "robot.local", "robot.local.", "*.cell.local", "r2-d2"]
+    hosts = ["::1", "fe80::1", "10.0.0.5", "robot.local", "cell.local.", "*.cell.local", "r2-d2"]
     init_security_dir(tmp_path, ["router"], hosts=hosts)
     san = verify_role(tmp_path, "router").extensions.get_extension_for_class(x509.SubjectAlternativeName).value
-    assert {"robot.local", "robot.local.", "*.cell.local", "r2-d2", "localhost"} <= set(
-        san.get_values_for_type(x509.DNSName))
+    assert set(san.get_values_for_type(x509.DNSName)) == {"robot.local", "cell.local", "*.cell.local", "r2-d2",
+                                                          "localhost"}  # the DNS root's dot dropped: peers match
     assert {str(a) for a in san.get_values_for_type(x509.IPAddress)} == {"::1", "fe80::1", "10.0.0.5", "127.0.0.1"}
+
+
+def test_rotation_without_hosts_keeps_the_hosts_of_the_certificates_it_replaces(tmp_path: Path, capsys) -> None:
+    """Run again as the docs say, init re-issued the router's certificate for loopback only: the cell locked out."""
+    assert main(["init", str(tmp_path), "--hosts", "robot.local,192.168.1.10"]) == 0
+    capsys.readouterr()
+    assert main(["init", str(tmp_path)]) == 0
+    assert "hosts kept from the certificates replaced: robot.local, 192.168.1.10" in capsys.readouterr().out
+    assert issued_hosts(tmp_path, ROLES) == ["robot.local", "192.168.1.10"]
+    assert main(["init", str(tmp_path), "--hosts", "cell.local"]) == 0  # given: they replace the old ones
+    assert issued_hosts(tmp_path, ROLES) == ["cell.local"]
+
+
+def test_a_directory_others_may_write_is_refused_and_no_planted_link_is_followed(tmp_path: Path) -> None:
+    d = tmp_path / "sec"
+    init_security_dir(d, ["planner"])
+    d.chmod(0o777)  # anyone could put an authority of their own in ca.crt
+    with pytest.raises(CertificateError, match=r"writable by others \(mode 777\).*chmod go-w"):
+        verify_role(d, "planner")
+    with pytest.raises(CertificateError, match="writable by others"):
+        init_security_dir(d, ["planner"])
+    d.chmod(0o755)
+    victim = tmp_path / "victim.txt"
+    victim.write_text("mine")
+    for pid in range(os.getpid() - 2, os.getpid() + 3):  # the old temporary name was .<name>.<pid>.tmp
+        (d / f".planner.crt.{pid}.tmp").symlink_to(victim)
+    init_security_dir(d, ["planner"])
+    assert victim.read_text() == "mine" and verify_role(d, "planner")
+
+
+def test_a_private_key_others_may_read_is_refused_naming_the_fix(tmp_path: Path) -> None:
+    init_security_dir(tmp_path, ["planner"])
+    (tmp_path / "planner.key").chmod(0o644)
+    with pytest.raises(CertificateError, match=r"planner\.key: others than its owner may read it \(mode 644\): "
+                                               r"chmod 600"):
+        verify_role(tmp_path, "planner")
+
+
+def test_a_file_that_is_not_pem_is_named(tmp_path: Path) -> None:
+    init_security_dir(tmp_path, ["planner"])
+    (tmp_path / "planner.crt").write_text("not a certificate")
+    with pytest.raises(CertificateError, match=r"planner\.crt: not a PEM certificate"):
+        verify_role(tmp_path, "planner")
+    (tmp_path / "ca.key").write_text("garbage")
+    with pytest.raises(CertificateError, match=r"ca\.key: not a PEM key"):
+        init_security_dir(tmp_path, ["planner"])
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        verify_role(tmp_path / "typo", "planner")
+
+
+def test_days_past_the_authority_are_refused_before_anything_is_written(tmp_path: Path) -> None:
+    with pytest.raises(CertificateError, match="at most 3650"):
+        init_security_dir(tmp_path / "new", ["planner"], days=10**6)
+    assert not any((tmp_path / "new").iterdir())
+    init_security_dir(tmp_path / "old", ["planner"])
+    with pytest.raises(CertificateError, match="cannot outlive it"):
+        init_security_dir(tmp_path / "old", ["planner"], days=4000)
+
+
+def test_check_on_a_cell_machine_checks_the_roles_it_holds_and_names_their_hosts(tmp_path: Path, capsys) -> None:
+    """docs/security.md copies a machine's own roles only: check failed on every role the machine lacks."""
+    full, robot = tmp_path / "full", tmp_path / "robot"
+    assert main(["init", str(full), "--hosts", "robot.local"]) == 0
+    robot.mkdir(mode=0o755)
+    for name in ("ca.crt", "router.crt", "router.key", "executor.crt", "executor.key"):
+        (robot / name).write_bytes((full / name).read_bytes())
+        (robot / name).chmod((full / name).stat().st_mode)
+    capsys.readouterr()
+    assert main(["check", str(robot)]) == 0
+    out = capsys.readouterr().out
+    assert "router: ok, valid until" in out and "hosts robot.local, localhost, 127.0.0.1" in out
+    assert "executor: ok" in out and "planner" not in out.split("not on this machine:")[0]
+    assert main(["check", str(robot), "--role", "planner"]) == 1  # asked for: missing is an error
+    assert "planner.crt is missing" in capsys.readouterr().out
