@@ -48,6 +48,12 @@ def retry_config() -> dict[str, object]:
     return {"period_init_ms": RETRY_FIRST_MS, "period_max_ms": RETRY_MAX_MS, "period_increase_factor": 2}
 
 
+def tls_hint(cfg: ZenohConfig) -> str:
+    """What a link that never comes up means under mutual TLS (appended to the warnings), or ``""`` without it."""
+    return (f" (mutual TLS as {cfg.role or 'observer'}: a refused certificate - another CA, expired, or the peer's "
+            "name not in it - looks like this; `foresight security check DIR`)" if cfg.security_dir else "")
+
+
 class ConnectionWatch:
     """A thread that reports a session without router or peer (see the module docstring).
 
@@ -129,9 +135,7 @@ class ConnectionWatch:
         if waited >= self._next_report:
             self.warnings += 1
             what = "no router or peer" if not self._ever_up else "still no router or peer"
-            hint = (f" (mutual TLS as {self.cfg.role or 'observer'}: a refused certificate - another CA, expired, "
-                    "or the peer's name not in it - looks like this; `foresight security check DIR`)"
-                    if self.cfg.security_dir else "")
+            hint = tls_hint(self.cfg)
             log.warning("%s: %s at %s after %.0f s; Zenoh retries every %g-%g s; next report in %.0f s%s",
                         self.name, what, self._where, waited, RETRY_FIRST_MS / 1000, RETRY_MAX_MS / 1000,
                         self._interval, hint)

@@ -21,7 +21,7 @@ from typing import Any, Generic, TypeVar
 import zenoh
 
 from shared.config import ZenohConfig
-from shared.connectivity import retry_config, watched
+from shared.connectivity import retry_config, tls_hint, watched
 from shared.protocol import Keys, Message, ProtocolError, Receipt, decode, encode
 from shared.protocol.limits import MAX_PAYLOAD_BYTES
 from shared.rejects import RejectCounter
@@ -105,11 +105,11 @@ def open_with_retry(cfg: ZenohConfig, sleep: Callable[[float], None] | None = No
                 if attempt > 1:
                     why = ("stopped" if stop.is_set() else
                            f"gave up after {attempt} attempts in {cfg.connect_timeout_s:g} s")
-                    raise TransportError(f"{exc} ({why})") from None
+                    raise TransportError(f"{exc} ({why}){tls_hint(cfg)}") from None
                 raise
             pause = min(delay, left)
-            log.warning("zenoh: router %s not reachable yet (attempt %d); retrying in %.2g s, for at most %g s in all",
-                        ",".join(cfg.connect), attempt, pause, cfg.connect_timeout_s)
+            log.warning("zenoh: router %s not reachable yet (attempt %d); retrying in %.2g s, at most %g s in all%s",
+                        ",".join(cfg.connect), attempt, pause, cfg.connect_timeout_s, tls_hint(cfg))
             sleep(pause)
             delay, attempt = min(2 * delay, RETRY_MAX_S), attempt + 1
     if attempt > 1:

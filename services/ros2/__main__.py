@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 from shared.config import ZenohConfig
 from shared.runtime import lower_priority, service_main
+from shared.security.acl import refuse_ros2_keys
 
 from .service import Ros2Service, Ros2ServiceConfig
 
@@ -22,6 +23,7 @@ Options: defaults < --config FILE ([ros2], [zenoh]) < env FORESIGHT_ROS2_<NAME> 
 
 
 def _make(cfg: Ros2ServiceConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
+    refuse_ros2_keys(zcfg.security_dir, "foresight ros2")
     service = Ros2Service(cfg, zcfg)
     lower_priority(cfg.nice)  # this process only (the gateway as `foresight ros2`)
     return lambda: service.run(stop)

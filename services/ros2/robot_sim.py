@@ -148,8 +148,10 @@ Options: defaults < --config FILE ([simrobot], [zenoh]) < env FORESIGHT_SIMROBOT
 def main(argv: list[str] | None = None, prog: str = "python -m services.ros2.robot_sim") -> int:
     """Run the simulated robot; returns the exit status (0 stopped, 2 bad input)."""
     from shared.runtime import service_main
+    from shared.security.acl import refuse_ros2_keys
 
     def make(cfg: RobotSimConfig, zcfg: ZenohConfig, stop: threading.Event) -> Any:
+        refuse_ros2_keys(zcfg.security_dir, "foresight simrobot")
         sim = RobotSim(cfg, zcfg)
         return lambda: sim.run(stop)
 

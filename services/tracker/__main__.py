@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 from shared.config import ZenohConfig
 from shared.runtime import service_main
+from shared.security.acl import refuse_ros2_keys
 
 from .config import TrackerServiceConfig
 from .service import TrackerService
@@ -24,6 +25,8 @@ dataclass defaults < --config FILE ([tracker], [zenoh]) < env FORESIGHT_TRACKER_
 
 
 def _make(cfg: TrackerServiceConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
+    if cfg.input == "ros2":
+        refuse_ros2_keys(zcfg.security_dir, "foresight tracker --input ros2")
     service = TrackerService(cfg, zcfg)
     return lambda: service.run(stop)
 

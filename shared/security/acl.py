@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from shared.config_tree import ConfigError
 from shared.protocol import SENSOR, SERVICES, Keys
 
 __all__ = ["ROLES", "ROUTER", "OBSERVER", "access_control", "owned_keys", "consumed_keys", "subscription_exprs"]
@@ -35,6 +36,16 @@ OBSERVER = "observer"
 ROLES = (ROUTER, *SERVICES, SENSOR, OBSERVER)
 """Every certificate role: the router, each service (:data:`shared.protocol.SERVICES`), a body tracker's driver
 (:data:`shared.protocol.SENSOR`: keypoints only), the read-only observer."""
+
+
+def refuse_ros2_keys(security_dir: str, what: str) -> None:
+    """Raise a ConfigError when ``what`` (a command that speaks ROS 2 keys) is asked to run under access control.
+
+    The rules cover the wire contract's keys only; every peer would drop a ROS 2 key's messages without a word.
+    """
+    if security_dir:
+        raise ConfigError(f"{what} with --security: ROS 2 keys have no role in the access control yet (docs/ros2.md); "
+                          "run one or the other")
 
 
 def owned_keys(keys: Keys, role: str) -> list[str]:

@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+import importlib
+
+import pytest
+
 from shared.protocol import HUMAN_SOURCES, ROUTES, SENSOR, SERVICES, Keys
 from shared.security.acl import OBSERVER, ROLES, ROUTER, access_control, consumed_keys, owned_keys, subscription_exprs
+from shared.security.certificates import init_security_dir
 
 KEYS = Keys("cell")
 
@@ -52,3 +57,18 @@ def test_wildcard_subscriptions_only_where_every_matched_key_is_consumed() -> No
     assert "cell/**" in subscription_exprs(KEYS, "executor")  # its log
     assert "cell/**" not in subscription_exprs(KEYS, "planner")
     assert "cell/human/*" not in subscription_exprs(KEYS, "planner")  # it does not consume poses
+
+
+@pytest.mark.parametrize(("main", "argv", "what"), [
+    ("services.ros2.__main__", [], "foresight ros2"),
+    ("services.tracker.__main__", ["--input", "ros2"], "foresight tracker --input ros2"),
+    ("services.ros2.robot_sim", [], "foresight simrobot"),
+])
+def test_a_command_speaking_ros2_keys_is_refused_under_access_control(tmp_path, capsys, main, argv, what) -> None:
+    """It ran and did nothing: the rules drop every key outside the wire contract, without a word."""
+    init_security_dir(tmp_path, ROLES)
+    with pytest.raises(SystemExit) as stopped:
+        importlib.import_module(main).main([*argv, "--security", str(tmp_path)])
+    assert stopped.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert f"{what} with --security: ROS 2 keys have no role in the access control yet" in line

@@ -25,7 +25,7 @@ from shared.config import ZenohConfig
 from shared.security.acl import ROLES
 from shared.security.certificates import CertificateError, Issued, init_security_dir, issue
 from shared.security.tls import tls_settings
-from shared.transport import open_session
+from shared.transport import TransportError, open_session, open_with_retry
 
 POSE, STATE, PLAN = "foresight/human/pose", "foresight/robot/state", "foresight/planner/plan"
 
@@ -145,3 +145,14 @@ def test_a_session_with_an_expired_certificate_fails_at_once_naming_it(dirs: dic
         with open_session(cfg):
             pass
     assert tls_settings(dirs["good"], "replayer")["close_link_on_expiration"] is True  # and a link ends with it
+
+
+def test_a_client_that_never_reaches_its_router_under_tls_is_told_what_that_may_mean(dirs, caplog) -> None:
+    """The documented deployment (clients): a refused certificate looked like "router not reachable"."""
+    cfg = ZenohConfig(mode="client", listen=[], connect=[f"tcp/127.0.0.1:{free_port()}"], multicast_scouting=False,
+                      security_dir=str(dirs["good"]), role="planner", connect_timeout_s=0.3)
+    with caplog.at_level("WARNING", logger="shared.transport"), pytest.raises(TransportError) as err:
+        open_with_retry(cfg, sleep=lambda _s: None)
+    hint = "mutual TLS as planner: a refused certificate"
+    assert hint in str(err.value) and "foresight security check DIR" in str(err.value)
+    assert any(hint in r.getMessage() for r in caplog.records if "not reachable yet" in r.getMessage())
