@@ -17,9 +17,8 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from google.protobuf.message import DecodeError, Message
 from mcap.records import Channel, Schema
 from mcap.records import Message as McapMessage
-from mcap.stream_reader import StreamReader
 
-from shared.recording.reader import DAMAGED
+from shared.recording.reader import DAMAGED, open_records
 
 __all__ = ["SceneRecord", "SceneDecodeError", "SchemaDecoder", "read_scene", "scene_stamps"]
 
@@ -85,14 +84,14 @@ def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[Sce
     Raises:
         SceneDecodeError: A message does not decode under its channel's schema.
         OSError: The file cannot be read.
-        mcap.exceptions.McapError: The file is not an MCAP file.
+        shared.runtime.UserError: The file is missing or not an MCAP file (:func:`open_records`).
     """
     schemas: dict[int, Schema] = {}
     channels: dict[int, tuple[Channel, Schema]] = {}
     raw: list[tuple[int, int, int, bytes]] = []  # (log_time, publish_time, channel id, data)
-    with open(path, "rb") as f:
+    with open_records(path) as reader:
         try:
-            for rec in StreamReader(f, validate_crcs=True, record_size_limit=1 << 31).records:
+            for rec in reader.records:
                 if isinstance(rec, Schema):
                     schemas[rec.id] = rec
                 elif isinstance(rec, Channel) and rec.schema_id in schemas:

@@ -2,45 +2,115 @@
 
 The ``mcap`` writer buffers a whole chunk itself; a second buffer in between would hold back the end
 of a log from a reader, and from a crash.
+
+A write the OS refuses (a full disk) is not half-done: the bytes it did not take are held, in order, and
+written before anything else once it takes them again, so a log whose disk was full for a while is whole
+once space returns. Only past :data:`MAX_HELD_BYTES` held does a write fail, and every later one: the
+file then ends where the disk stopped taking bytes, which readers treat like the end of a killed run.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
-__all__ = ["DirectFile"]
+__all__ = ["DirectFile", "MAX_HELD_BYTES"]
+
+log = logging.getLogger("foresight.recording")
+
+MAX_HELD_BYTES = 64 * 2 ** 20
+"""Most bytes held in memory while the OS refuses them (about a minute of a real-time run's log)."""
 
 
 class DirectFile:
-    """A binary file whose writes go straight to the OS (the mcap writer buffers a chunk itself)."""
+    """A binary file whose writes go straight to the OS (the mcap writer buffers a chunk itself).
+
+    Attributes:
+        refusals: Writes the OS refused (their bytes held, then written once it took them again).
+    """
 
     def __init__(self, path: Path) -> None:
+        self._path = path
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         self._pos = 0
+        self._held = bytearray()
+        self._failed: OSError | None = None
+        self.refusals = 0
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
-        """Write all of ``data``; returns its length."""
-        view = memoryview(data)
-        while view:
-            n = os.write(self._fd, view)
-            view = view[n:]
-            self._pos += n
+        """Take all of ``data``; returns its length.
+
+        Raises:
+            OSError: The OS refused bytes and :data:`MAX_HELD_BYTES` are held, or it did before (the file
+                ends where it stopped taking them).
+        """
+        if self._failed is not None:
+            raise OSError(self._failed.errno, f"{self._path}: the log ended at {self._pos - len(self._held)} bytes "
+                          f"({self._failed.strerror})")
+        if self._held:
+            self._held += data
+        else:
+            self._write_through(memoryview(data).cast("B"))
+        self._pos += len(data)
+        self._drain()
         return len(data)
 
+    def _write_through(self, view: memoryview) -> None:
+        while view:
+            try:
+                n = os.write(self._fd, view)
+            except OSError:
+                self._held += view  # the rest, in order: written first once the OS takes bytes again
+                return
+            view = view[n:]
+
+    def _drain(self) -> None:
+        while self._held:
+            try:
+                n = os.write(self._fd, self._held)
+            except OSError as exc:
+                self.refusals += 1
+                if self.refusals == 1 or len(self._held) > MAX_HELD_BYTES:
+                    log.warning("mcap log %s: the OS refused a write (%s); %d bytes held until it takes them",
+                                self._path, exc.strerror, len(self._held))
+                if len(self._held) > MAX_HELD_BYTES:
+                    self._failed = exc
+                    raise OSError(exc.errno, f"{self._path}: {len(self._held)} bytes refused by the OS "
+                                  f"({exc.strerror}); the log ends at {self._pos - len(self._held)} bytes") from None
+                return
+            del self._held[:n]
+            if not self._held and self.refusals:
+                log.warning("mcap log %s: the OS takes writes again; nothing held is lost", self._path)
+
+    @property
+    def held(self) -> int:
+        """Bytes taken but not yet written (the OS refused them)."""
+        return len(self._held)
+
     def tell(self) -> int:
-        """Bytes written so far."""
+        """Bytes taken so far (written or held)."""
         return self._pos
 
     def flush(self) -> None:
-        """Nothing is buffered here."""
+        """Try to write what is held; nothing else is buffered here."""
+        if self._held and self._failed is None:
+            self._drain()
 
     def fsync(self) -> None:
-        """Ask the OS to put what was written on the disk."""
+        """Write what is held and ask the OS to put the file on the disk.
+
+        Raises:
+            OSError: Bytes are still held (the OS refuses them): the file ends before them.
+        """
+        self.flush()
+        if self._held:
+            raise OSError(28, f"{self._path}: {len(self._held)} bytes could not be written; the log ends at "
+                          f"{self._pos - len(self._held)} bytes")
         os.fsync(self._fd)
 
     def close(self) -> None:
-        """Close the file (once)."""
+        """Close the file (once); what is still held is lost (:meth:`fsync` first says so)."""
         if self._fd >= 0:
             os.close(self._fd)
             self._fd = -1

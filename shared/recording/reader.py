@@ -8,8 +8,12 @@ False and ``LogFile.error`` says why reading stopped). The records it understand
 
 from __future__ import annotations
 
+import io
+import os
 import struct
-from collections.abc import Callable
+import typing
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,13 +24,56 @@ from mcap.stream_reader import StreamReader
 
 from shared.runtime import UserError
 
-__all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "DAMAGED"]
+__all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "open_records", "DAMAGED", "MAGIC"]
 
-DAMAGED = (McapError, struct.error, ValueError, EOFError, zstandard.ZstdError, RuntimeError)
+MAGIC = b"\x89MCAP0\r\n"
+"""The first (and last) eight bytes of an MCAP file."""
+
+DAMAGED = (McapError, struct.error, ValueError, EOFError, zstandard.ZstdError, RuntimeError, MemoryError,
+           OverflowError)
 """What reading a damaged MCAP raises: the mcap library's errors, a record cut short (``struct.error``,
 ``EOFError``), a chunk whose CRC does not match (``CRCValidationError``, a ``ValueError``), and a compressed chunk
-that does not decompress (zstandard's ``ZstdError``; lz4 raises ``RuntimeError``). Every reader of the logs reads
-with ``validate_crcs=True`` and stops at the first of these: what came before stands."""
+that does not decompress (zstandard's ``ZstdError``; lz4 raises ``RuntimeError``), and, as a backstop, a damaged
+length that asks for more memory than there is. Every reader of the logs reads through :func:`open_records`
+(``validate_crcs=True``, no read past the file's end) and stops at the first of these: what came before stands."""
+
+
+class _Bounded:
+    """A file whose reads never ask for more than the bytes it has left.
+
+    A damaged length inside a record (an attachment's, say) then reads to the end of the file and fails
+    there, instead of allocating exabytes.
+    """
+
+    def __init__(self, f: io.BufferedReader, size: int) -> None:
+        self._f, self._left = f, size
+
+    def read(self, n: int = -1) -> bytes:
+        data = self._f.read(self._left if n is None or n < 0 else min(n, self._left))
+        self._left -= len(data)
+        return data
+
+
+@contextmanager
+def open_records(path: str | Path) -> Iterator[StreamReader]:
+    """The records of an MCAP file, read in file order with CRCs checked, for every reader of the logs.
+
+    Raises:
+        UserError: The path is missing, a directory, empty, or does not start with the MCAP magic.
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise UserError(f"log file {str(p)!r} is a directory")
+    if not p.is_file():
+        raise UserError(f"log file {str(p)!r} not found")
+    size = p.stat().st_size
+    with p.open("rb") as f:
+        head = f.read(len(MAGIC))
+        if head != MAGIC:
+            raise UserError(f"{p}: not an MCAP file ({'empty' if not size else 'no MCAP magic at its start'})")
+        f.seek(0, os.SEEK_SET)
+        yield StreamReader(typing.cast(typing.IO[bytes], _Bounded(f, size)), validate_crcs=True,
+                           record_size_limit=1 << 31)
 
 
 @dataclass
@@ -96,12 +143,10 @@ def read_log(path: str | Path, keep: Callable[[LogChannel], bool] | None = None)
         UserError: If the file is missing or not an MCAP file at all.
     """
     p = Path(path)
-    if not p.is_file():
-        raise UserError(f"log file {str(p)!r} not found")
-    out = LogFile(str(p), p.stat().st_size)
     schemas: dict[int, Schema] = {}
-    with p.open("rb") as f:
-        reader = StreamReader(f, validate_crcs=True, record_size_limit=1 << 31)
+    footer = False
+    with open_records(p) as reader:
+        out = LogFile(str(p), p.stat().st_size)
         try:
             for rec in reader.records:
                 if isinstance(rec, Header):
@@ -128,10 +173,8 @@ def read_log(path: str | Path, keep: Callable[[LogChannel], bool] | None = None)
                 elif isinstance(rec, Metadata):
                     out.metadata[rec.name] = dict(rec.metadata)
                 elif isinstance(rec, Footer):
-                    out.complete = True
+                    footer = True
+            out.complete = footer  # and the closing magic after it: a copy cut within it is not complete
         except DAMAGED as exc:
-            if not out.channels and not out.profile and not out.complete:
-                if isinstance(exc, McapError) and "magic" in str(exc).lower():
-                    raise UserError(f"{p}: not an MCAP file ({exc})") from None
             out.error = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
     return out

@@ -97,7 +97,7 @@ class McapLog:
         self._lock = threading.RLock()
         self._file = DirectFile(self.path)
         self._writer = Writer(typing.cast(io.BufferedWriter, self._file), chunk_size=chunk_size,
-                              compression=COMPRESSION[compression])
+                              compression=COMPRESSION[compression], enable_data_crcs=True)  # damage outside chunks
         self._writer.start(profile=PROFILE, library="foresight executor")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
@@ -281,17 +281,19 @@ class McapLog:
         with self._lock:
             if self._closed:
                 return
-            if self._viz is not None:  # unfinished: still queued when the worker's close timed out
-                self._writer.add_metadata("foresight.viz", {"dropped": str(self._viz.dropped),
-                                                            "unfinished": str(self._viz.pending),
-                                                            "errors": str(self.viz_errors)})
-            self._writer.add_metadata("foresight.rejects", {k: str(v) for k, v in sorted(self.rejects.items())})
-            self._writer.add_metadata("foresight.rejects.reasons",
-                                      {k: str(v) for k, v in sorted(self.reject_reasons.items())})
-            self._writer.finish()
-            self._file.fsync()
-            self._file.close()
-            self._closed = True
+            self._closed = True  # first: a close that fails (a full disk) is not repeated over what it half-wrote
+            try:
+                if self._viz is not None:  # unfinished: still queued when the worker's close timed out
+                    self._writer.add_metadata("foresight.viz", {"dropped": str(self._viz.dropped),
+                                                                "unfinished": str(self._viz.pending),
+                                                                "errors": str(self.viz_errors)})
+                self._writer.add_metadata("foresight.rejects", {k: str(v) for k, v in sorted(self.rejects.items())})
+                self._writer.add_metadata("foresight.rejects.reasons",
+                                          {k: str(v) for k, v in sorted(self.reject_reasons.items())})
+                self._writer.finish()
+                self._file.fsync()
+            finally:
+                self._file.close()
         log.info("mcap log: wrote %s (%d messages on %d channels, %d rejected, %d scene updates dropped)",
                  self.path, sum(self.counts.values()), len(self.counts), sum(self.rejects.values()), self.viz_dropped)
 

@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 
 from shared import strict_json
-from shared.recording.reader import read_log
+from shared.recording.reader import LogFile, read_log
 from shared.runtime import UserError, cli_errors
 
 from .compress import compress_log
@@ -78,9 +78,15 @@ def _main_render(args: argparse.Namespace, prog: str) -> int:
         out = Path(args.out) / f"step_{n:03d}.png" if args.all else Path(args.out)
         render_step(views[n], scene, out, robot=robot, min_probability=args.min_probability)
         print(out)
-    if not lf.complete:
-        print(f"{prog}: note: {args.file} is truncated ({lf.error or 'no footer'})", file=sys.stderr)
+    _note_truncated(lf)
     return 0
+
+
+def _note_truncated(lf: LogFile) -> None:
+    """Say on stderr that a log is truncated: what the tools print of it stops where the file does."""
+    if not lf.complete:
+        print(f"foresight log: note: {lf.path} is truncated ({lf.error or 'no footer'}): what follows covers the "
+              "run up to its last whole chunk only", file=sys.stderr)
 
 
 def _main_table(args: argparse.Namespace) -> int:
@@ -90,7 +96,9 @@ def _main_table(args: argparse.Namespace) -> int:
     summary = run_summary(lf)
     if not summary.steps:
         raise UserError(f"{args.file}: no plans logged")
-    print(strict_json.dumps(summary.to_json()) if args.json else "\n".join(table_lines(summary)))
+    _note_truncated(lf)
+    print(strict_json.dumps({**summary.to_json(), "complete": lf.complete, "error": lf.error}) if args.json
+          else "\n".join(table_lines(summary)))
     return 0
 
 
@@ -103,17 +111,21 @@ def _main_snapshot(args: argparse.Namespace) -> int:
         raise UserError(f"--out {str(out)!r}: a .png file (the snapshot is a PNG)")
     state = scene_at(file, args.at)
     draw_snapshot(state, out, title=file.name)
+    _note_truncated(read_log(file))  # the scene reader stops at a damaged chunk without a word
     print(f"wrote {out} ({state.summary()})")
     return 0
 
 
 def _main_latency(args: argparse.Namespace) -> int:
     try:
-        stats = log_latencies(args.file)
+        read: list[LogFile] = []
+        stats = log_latencies(args.file, read)
     except ValueError as exc:
         raise UserError(str(exc)) from exc
+    _note_truncated(read[0])
     if args.json:  # strict JSON: a series without samples has null statistics, not NaN
-        print(strict_json.dumps({k: dataclasses.asdict(v) for k, v in stats.items()}))
+        print(strict_json.dumps({**{k: dataclasses.asdict(v) for k, v in stats.items()}, "complete": read[0].complete,
+                                 "error": read[0].error}))
     else:
         print(format_latencies(stats))
     return 0

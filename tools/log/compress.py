@@ -10,19 +10,26 @@ Logs written before the executor compressed its chunks (issue 24) shrink about 1
 from __future__ import annotations
 
 import io
+import os
+import tempfile
 import typing
 from dataclasses import dataclass
 from pathlib import Path
 
+from mcap.exceptions import McapError
 from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
-from shared.recording.reader import DAMAGED, read_log
+from shared.recording.reader import DAMAGED, open_records, read_log
 from shared.recording.writer import COMPRESSION
 from shared.runtime import UserError
 
-__all__ = ["CompressResult", "compress_log", "same_messages"]
+__all__ = ["CompressResult", "compress_log", "same_messages", "SOURCE_METADATA"]
+
+SOURCE_METADATA = "foresight.compress"
+"""Metadata record of a copy made from a truncated or damaged log: ``source``, ``source_complete`` = "false" and
+``source_error`` (``foresight log info`` shows it: the copy is whole, what it was copied from was not)."""
 
 
 @dataclass
@@ -34,11 +41,13 @@ class CompressResult:
     messages: int
     input_complete: bool
     identical: bool
+    input_error: str = ""
 
     def line(self, src: Path, dst: Path) -> str:
         """One line for the user."""
         ratio = self.size_in / max(self.size_out, 1)
-        state = "" if self.input_complete else " (the input is truncated: copied up to its last complete chunk)"
+        state = "" if self.input_complete else (f" (the input is truncated ({self.input_error or 'no footer'}): copied "
+                                                "up to its last complete chunk, and the copy says so)")
         same = "identical" if self.identical else "NOT IDENTICAL"
         return (f"{src} ({self.size_in / 1e6:.2f} MB) -> {dst} ({self.size_out / 1e6:.2f} MB, {ratio:.1f}x smaller); "
                 f"{self.messages} messages read back {same}{state}")
@@ -54,50 +63,65 @@ def compress_log(src: str | Path, dst: str | Path, compression: str = "zstd",
     src, dst = Path(src), Path(dst)
     if compression not in COMPRESSION:
         raise UserError(f"--compression must be one of {', '.join(COMPRESSION)}, got {compression!r}")
-    if not src.is_file():
-        raise UserError(f"log file {str(src)!r} not found")
-    if dst.resolve() == src.resolve():
+    if dst.is_dir():
+        raise UserError(f"{dst} is a directory: give the output file's name")
+    if dst.exists() and src.exists() and os.path.samefile(src, dst):  # a hard link too: writing it empties the input
         raise UserError("the output must be another file than the input")
-    dst.parent.mkdir(parents=True, exist_ok=True)
+    with open_records(src) as reader:  # the input checked (an MCAP file) before the output is touched
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=f".{dst.name}.", suffix=".tmp", dir=dst.parent)
+        tmp = Path(name)
+        try:  # written beside dst and renamed onto it: a failure leaves an existing dst as it was
+            with os.fdopen(fd, "wb") as f_out:
+                messages, complete, error = _copy(reader, f_out, compression, chunk_size, src)
+            os.chmod(tmp, 0o644)
+            os.replace(tmp, dst)
+        except BaseException:  # nothing half-written is left behind: not an MCAP file, a full disk, Ctrl-C
+            tmp.unlink(missing_ok=True)
+            raise
+    return CompressResult(src.stat().st_size, dst.stat().st_size, messages, complete, same_messages(src, dst), error)
+
+
+def _copy(reader: StreamReader, f_out: typing.BinaryIO, compression: str, chunk_size: int,
+          src: Path) -> tuple[int, bool, str]:
+    """Copy ``reader``'s records into a new MCAP on ``f_out``; returns (messages, input complete, why it ended)."""
+    writer = Writer(typing.cast(io.BufferedWriter, f_out), chunk_size=chunk_size, compression=COMPRESSION[compression],
+                    enable_data_crcs=True)
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
-    messages = 0
-    complete = started = False
+    messages, footer, started, error = 0, False, False, ""
     try:
-        with src.open("rb") as f_in, dst.open("wb") as f_out:
-            writer = Writer(typing.cast(io.BufferedWriter, f_out), chunk_size=chunk_size,
-                            compression=COMPRESSION[compression])
-            try:
-                for rec in StreamReader(f_in, validate_crcs=True, record_size_limit=1 << 31).records:
-                    if isinstance(rec, Header):
-                        writer.start(profile=rec.profile, library=rec.library)
-                        started = True
-                    elif isinstance(rec, Schema) and rec.id not in schemas:
-                        schemas[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
-                    elif isinstance(rec, Channel) and rec.id not in channels:
-                        channels[rec.id] = writer.register_channel(rec.topic, rec.message_encoding,
-                                                                   schemas.get(rec.schema_id, 0), dict(rec.metadata))
-                    elif isinstance(rec, Message):
-                        writer.add_message(channels[rec.channel_id], rec.log_time, rec.data, rec.publish_time,
-                                           rec.sequence)
-                        messages += 1
-                    elif isinstance(rec, Attachment):
-                        writer.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type, rec.data)
-                    elif isinstance(rec, Metadata):
-                        writer.add_metadata(rec.name, dict(rec.metadata))
-                    elif isinstance(rec, Footer):
-                        complete = True
-            except DAMAGED as exc:
-                if not started:
-                    raise UserError(f"{src}: not an MCAP file ({type(exc).__name__}: {exc})") from None
-                # truncated: what was read is copied
-            if not started:
-                raise UserError(f"{src}: not an MCAP file (no header)")
-            writer.finish()
-    except BaseException:  # nothing half-written is left behind: not an MCAP file, a full disk, Ctrl-C
-        dst.unlink(missing_ok=True)
-        raise
-    return CompressResult(src.stat().st_size, dst.stat().st_size, messages, complete, same_messages(src, dst))
+        for rec in reader.records:
+            if isinstance(rec, Header):
+                writer.start(profile=rec.profile, library=rec.library)
+                started = True
+            elif isinstance(rec, Schema) and rec.id not in schemas:
+                schemas[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
+            elif isinstance(rec, Channel) and rec.id not in channels:
+                channels[rec.id] = writer.register_channel(rec.topic, rec.message_encoding,
+                                                           schemas.get(rec.schema_id, 0), dict(rec.metadata))
+            elif isinstance(rec, Message):
+                if rec.channel_id not in channels:
+                    raise McapError(f"message on unknown channel {rec.channel_id}")
+                writer.add_message(channels[rec.channel_id], rec.log_time, rec.data, rec.publish_time, rec.sequence)
+                messages += 1
+            elif isinstance(rec, Attachment):
+                writer.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type, rec.data)
+            elif isinstance(rec, Metadata):
+                writer.add_metadata(rec.name, dict(rec.metadata))
+            elif isinstance(rec, Footer):
+                footer = True
+    except DAMAGED as exc:  # truncated or damaged: what was read is copied, and the copy says so
+        if not started:
+            raise UserError(f"{src}: not an MCAP file ({type(exc).__name__}: {exc})") from None
+        error = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    if not started:
+        raise UserError(f"{src}: not an MCAP file (no header)")
+    if error or not footer:
+        writer.add_metadata(SOURCE_METADATA, {"source": str(src), "source_complete": "false",
+                                              "source_error": error or "no footer"})
+    writer.finish()
+    return messages, footer and not error, error
 
 
 def same_messages(a: str | Path, b: str | Path) -> bool:
@@ -107,6 +131,9 @@ def same_messages(a: str | Path, b: str | Path) -> bool:
     def records(lf: typing.Any) -> list[tuple[str, int, int, bytes]]:
         return [(m.topic, m.log_time, m.publish_time, m.data) for m in lf.messages]
 
-    return (records(la) == records(lb) and la.attachments == lb.attachments and la.metadata == lb.metadata
+    def metadata(lf: typing.Any) -> dict[str, dict[str, str]]:  # a copy's note on its source is no difference
+        return {k: v for k, v in lf.metadata.items() if k != SOURCE_METADATA}
+
+    return (records(la) == records(lb) and la.attachments == lb.attachments and metadata(la) == metadata(lb)
             and sorted((c.topic, c.message_encoding, c.schema_name) for c in la.channels.values())
             == sorted((c.topic, c.message_encoding, c.schema_name) for c in lb.channels.values()))

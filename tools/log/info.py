@@ -50,7 +50,10 @@ def info_dict(lf: LogFile) -> dict[str, Any]:
 def format_info(lf: LogFile) -> str:
     """Human-readable summary: file state, time range, one line per channel, attachments, metadata."""
     d = info_dict(lf)
-    state = "complete" if lf.complete else (
+    source = lf.metadata.get("foresight.compress", {})  # a whole copy of a log that was not
+    state = (f"complete; copied from a TRUNCATED log ({source.get('source_error', 'no footer')}): what the run wrote "
+             "after its last whole chunk is not here" if lf.complete and source.get("source_complete") == "false"
+             else "complete") if lf.complete else (
         f"TRUNCATED ({lf.error or 'no footer'}): recovered {lf.message_count} messages, {d['duration_s']:.2f} s, "
         "up to the last whole chunk")
     lines = [f"file:      {lf.path} ({lf.size / 1e6:.2f} MB, {state})",

@@ -19,6 +19,7 @@ clock for all), so differences between log times are end-to-end latencies across
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -122,12 +123,17 @@ def format_latencies(stats: dict[str, Stat]) -> str:
     """A table of :func:`run_latencies`' result."""
     lines = [f"{'latency (ms)':<22}{'count':>7}{'p50':>10}{'p99':>10}{'max':>10}"]
     for name, s in stats.items():
-        lines.append(f"{name.replace('_', ' '):<22}{s.count:>7}{s.p50:>10.1f}{s.p99:>10.1f}{s.max:>10.1f}")
+        cells = "".join(f"{v:>10.1f}" if math.isfinite(v) else f"{'-':>10}" for v in (s.p50, s.p99, s.max))
+        lines.append(f"{name.replace('_', ' '):<22}{s.count:>7}{cells}")
     return "\n".join(lines)
 
 
-def log_latencies(path: str | Path) -> dict[str, Stat]:
+def log_latencies(path: str | Path, read: list[Any] | None = None) -> dict[str, Stat]:
     """:func:`run_latencies` of an MCAP log's Foresight channels.
+
+    Args:
+        path: The log.
+        read: If given, the :class:`~shared.recording.reader.LogFile` read is appended (whether it was complete).
 
     Raises:
         ValueError: The log lacks the HumanPose, OccupancyGrid or Plan channel.
@@ -137,6 +143,8 @@ def log_latencies(path: str | Path) -> dict[str, Stat]:
     wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.DemoMarker",
               "foresight.HumanKeypoints"}
     lf = read_log(path, keep=lambda ch: ch.schema_name in wanted and ch.message_encoding == "msgpack")
+    if read is not None:
+        read.append(lf)
     topics = {}
     for ch in lf.channels.values():
         for key, schema in (("pose", "foresight.HumanPose"), ("occupancy", "foresight.OccupancyGrid"),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -90,3 +91,34 @@ def test_an_unreadable_scene_attachment_is_named(text: bytes) -> None:
 
     with pytest.raises(UserError, match=r"^run\.mcap: its scene\.toml attachment is unreadable"):
         scene_of(LogFile("run.mcap", 0, attachments={"scene.toml": text}))
+
+
+def test_compress_leaves_an_existing_output_alone_when_the_input_is_bad_and_refuses_a_hard_link(
+        run_log: Path, tmp_path: Path, capsys) -> None:
+    """OUT was emptied before IN was read: a typo in IN deleted yesterday's log; a hard link emptied IN."""
+    kept = tmp_path / "yesterday.mcap"
+    kept.write_bytes(run_log.read_bytes())
+    (tmp_path / "typo.txt").write_text("not a log")
+    for bad in (tmp_path / "typo.txt", tmp_path / "missing.mcap"):
+        with pytest.raises(SystemExit):
+            main(["compress", str(bad), str(kept)])
+        assert kept.read_bytes() == run_log.read_bytes()
+    link = tmp_path / "link.mcap"
+    os.link(kept, link)
+    with pytest.raises(SystemExit):
+        main(["compress", str(kept), str(link)])
+    assert "another file than the input" in capsys.readouterr().err
+    assert kept.read_bytes() == run_log.read_bytes() and not list(tmp_path.glob(".*.tmp"))
+
+
+def test_a_copy_of_a_truncated_log_says_so_and_the_tools_note_a_truncated_log(run_log: Path, tmp_path: Path,
+                                                                              capsys) -> None:
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(run_log.read_bytes()[: run_log.stat().st_size * 2 // 3])
+    res = compress_log(cut, tmp_path / "copy.mcap")
+    assert not res.input_complete and res.identical
+    capsys.readouterr()
+    assert main(["info", str(tmp_path / "copy.mcap")]) == 0
+    assert "complete; copied from a TRUNCATED log" in capsys.readouterr().out
+    assert main(["table", str(cut)]) == 0  # it printed a killed run's table as if the run had ended there
+    assert "is truncated" in capsys.readouterr().err

@@ -41,11 +41,15 @@ def test_latency_json_is_strict_json_when_a_series_is_empty(monkeypatch, capsys)
     import json
 
     import tools.log.cli as cli
+    from shared.recording.reader import LogFile
     from tools.log.latency import Stat
 
-    monkeypatch.setattr(cli, "log_latencies", lambda path: {"pose_to_plan": Stat.of([4.5]),
-                                                            "occupancy_to_plan": Stat.of([])})
+    def latencies(path, read):
+        read.append(LogFile(str(path), 0, complete=True))
+        return {"pose_to_plan": Stat.of([4.5]), "occupancy_to_plan": Stat.of([])}
+
+    monkeypatch.setattr(cli, "log_latencies", latencies)
     assert cli.main(["latency", "any.mcap", "--json"]) == 0
     out = json.loads(capsys.readouterr().out, parse_constant=lambda c: (_ for _ in ()).throw(ValueError(c)))
     assert out["occupancy_to_plan"]["count"] == 0 and out["occupancy_to_plan"]["p50"] is None
-    assert out["pose_to_plan"]["p50"] == 4.5
+    assert out["pose_to_plan"]["p50"] == 4.5 and out["complete"] is True

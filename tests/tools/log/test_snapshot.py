@@ -108,7 +108,7 @@ def test_human_and_posterior_are_drawn(robot, tmp_path) -> None:
 
 @pytest.mark.parametrize("argv, message", [
     (["snapshot", "/nonexistent.mcap"], "not found"),
-    (["snapshot", "{bad}"], "not a readable MCAP file"),
+    (["snapshot", "{bad}"], "not an MCAP file"),
     (["snapshot", "{log}", "--at", "-1"], "--at must be a finite time >= 0"),
     (["snapshot", "{log}", "--at", "inf"], "--at must be a finite time >= 0"),
     (["snapshot", "{empty}"], "no scene channels"),

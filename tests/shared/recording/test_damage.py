@@ -1,0 +1,122 @@
+"""A log survives a disk that is full for a while, and damage anywhere in a file is reported, never crashed on."""
+
+from __future__ import annotations
+
+import errno
+import os
+from pathlib import Path
+
+import pytest
+
+import shared.recording.direct_file as direct_file
+from shared.protocol import Keys
+from shared.recording.reader import read_log
+from shared.recording.writer import McapLog
+from shared.runtime import UserError
+
+from .conftest import sample_messages
+
+KEYS = Keys()
+
+
+def _full_disk_for(calls: range, monkeypatch) -> list[int]:
+    """os.write in the log's file refuses the calls in ``calls`` (counted from 0) as a full disk does; the
+    first of them writes half of what it is given before refusing the rest."""
+    real, n = os.write, [0]
+
+    def write(fd: int, data) -> int:
+        i = n[0]
+        n[0] += 1
+        if i in calls:
+            if i == calls.start and len(data) > 1:
+                return real(fd, memoryview(data)[: len(data) // 2])  # part taken, the rest refused next call
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(fd, data)
+
+    monkeypatch.setattr(direct_file.os, "write", write)
+    return n
+
+
+def _log(path: Path, pr2, rounds: int) -> list[tuple[str, bytes]]:
+    log = McapLog(path, KEYS, None, chunk_size=2048, clock=iter(range(10**9, 2 * 10**9, 1000)).__next__)
+    sent = []
+    for _ in range(rounds):
+        for key, payload in sample_messages(pr2):
+            log.on_sample(key, payload)
+            sent.append((key, payload))
+    log.close()
+    return sent
+
+
+def test_a_disk_full_for_a_while_loses_nothing_once_space_returns(tmp_path, pr2, monkeypatch) -> None:
+    """A refused write left half a chunk in the file: every reader stopped there, and all that came after was lost."""
+    _full_disk_for(range(5, 25), monkeypatch)
+    sent = _log(tmp_path / "run.mcap", pr2, rounds=30)
+    lf = read_log(tmp_path / "run.mcap", keep=lambda ch: True)
+    assert lf.complete and lf.error == ""
+    assert [(m.topic, m.data) for m in lf.messages] == sent
+
+
+def test_a_disk_that_stays_full_ends_the_log_where_it_stopped_and_close_is_not_repeated(tmp_path, pr2,
+                                                                                       monkeypatch) -> None:
+    monkeypatch.setattr(direct_file, "MAX_HELD_BYTES", 4096)
+    _full_disk_for(range(5, 10**9), monkeypatch)
+    log = McapLog(tmp_path / "run.mcap", KEYS, None, chunk_size=2048)
+    failures = 0
+    for _ in range(30):
+        for key, payload in sample_messages(pr2):
+            try:
+                log.on_sample(key, payload)
+            except OSError:
+                failures += 1
+    with pytest.raises(OSError):
+        log.close()
+    log.close()  # once: nothing written again over the end it could not write
+    assert failures > 0
+    lf = read_log(tmp_path / "run.mcap")
+    assert not lf.complete and lf.error  # a truncated log, read up to where the disk stopped taking bytes
+
+
+def test_damage_outside_the_chunks_is_reported(tmp_path, pr2) -> None:
+    """The scene attachment and the metadata had no checksum: a flipped byte there read as a complete log."""
+    path = tmp_path / "run.mcap"
+    log = McapLog(path, KEYS, None, scene_text="name = 'scene'\n" * 20)
+    for key, payload in sample_messages(pr2):
+        log.on_sample(key, payload)
+    log.close()
+    data = bytearray(path.read_bytes())
+    at = data.index(b"name = 'scene'") + 3
+    data[at] ^= 0x20
+    path.write_bytes(bytes(data))
+    lf = read_log(path)
+    assert not lf.complete and "CRC" in lf.error
+
+
+def test_a_damaged_length_inside_a_record_is_damage_not_a_memory_error(tmp_path, pr2) -> None:
+    path = tmp_path / "run.mcap"
+    log = McapLog(path, KEYS, None, scene_text="name = 'scene'\n")
+    log.close()
+    data = bytearray(path.read_bytes())
+    length_at = data.index(b"name = 'scene'") - 8  # the attachment's data length, just before its data
+    for value in (2**40, 2**63 + 5):  # exabytes asked for; past an index-sized int
+        data[length_at:length_at + 8] = value.to_bytes(8, "little")
+        path.write_bytes(bytes(data))
+        lf = read_log(path)
+        assert not lf.complete and lf.error
+
+
+@pytest.mark.parametrize("content", [b"", b"hi\n", b"{}\n", b"\x89MCAP0\r"])
+def test_a_short_file_is_not_an_mcap_file(tmp_path, content) -> None:
+    (tmp_path / "x.mcap").write_bytes(content)
+    with pytest.raises(UserError, match="not an MCAP file"):
+        read_log(tmp_path / "x.mcap")
+    with pytest.raises(UserError, match="is a directory"):
+        read_log(tmp_path)
+
+
+def test_a_copy_cut_within_its_closing_magic_is_not_complete(tmp_path, pr2) -> None:
+    path = tmp_path / "run.mcap"
+    _log(path, pr2, rounds=2)
+    path.write_bytes(path.read_bytes()[:-3])
+    lf = read_log(path)
+    assert not lf.complete and lf.error
