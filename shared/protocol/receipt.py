@@ -73,12 +73,13 @@ class SenderOrder:
         tick = int(getattr(msg, "tick", -1))
         seq = _sequence(msg)
         with self._lock:
-            last = self._last.get((key, sender))
+            last = self._last.pop((key, sender), None)  # re-inserted below: the dict's order is least recent first
             if last is None:
                 if len(self._last) >= MAX_SENDERS:  # read at call time, so tests can lower it
-                    self._last.pop(next(iter(self._last)))
-                last = self._last[(key, sender)] = _Last()
-            elif tick == 0 and last.tick > 0:  # a new lock-step run
+                    self._last.pop(next(iter(self._last)))  # the sender heard from least recently, not the oldest:
+                last = _Last()  # a flood of made-up sender ids cannot push out a sender that is talking
+            self._last[(key, sender)] = last
+            if tick == 0 and last.tick > 0:  # a new lock-step run
                 last.tick, last.seq = -1, None
             t = msg.TYPE
             if tick >= 0 and last.tick >= 0:

@@ -96,6 +96,18 @@ def test_sender_memory_is_bounded(monkeypatch):
     assert len(order) == 4
 
 
+def test_made_up_sender_ids_cannot_push_out_a_sender_that_is_talking(monkeypatch):
+    """The oldest record was evicted: 4 fresh ids between two of a sender's messages reset its order."""
+    monkeypatch.setattr(receipt_module, "MAX_SENDERS", 4)
+    order = SenderOrder()
+    order.check("k", "real", pose(5, 0, 7))
+    for i in range(4):  # one made-up id between two of the real sender's messages
+        order.check("k", f"fake{i}", pose(5, 0, 0))
+        if i < 3:
+            order.check("k", "real", pose(5, 0, 8 + i))  # talking: its record stays the most recent
+    order_refused(order, "k", "real", pose(5, 0, 7), "sequence-order")  # an old pose is still refused
+
+
 def test_receipt_decodes_checks_values_then_order():
     receipt = Receipt(Expectations(clock="lockstep", period_s=0.2))
     st = RobotState(stamp=0.4, tick=1, joint_names=["a"], goal=-1, reached=False, holding=True, reason="x",
