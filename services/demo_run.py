@@ -22,6 +22,7 @@ from services.scenario import (
     RunRecorder,
     Scenario,
     Summary,
+    belief,
     choose_demonstration,
     model_for,
     step_entry,
@@ -123,13 +124,6 @@ def _log_state(mcap: Path) -> str:
     lf = read_log(mcap)
     state = "complete" if lf.complete else f"TRUNCATED ({lf.error or 'no footer'})"
     return f"log {mcap}: {state}, {lf.message_count} messages"
-
-
-def _belief(posterior: ClassPosterior | None) -> str:
-    if posterior is None:
-        return ""
-    k = int(posterior.posterior.argmax())
-    return f"{posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
 
 
 def _run_length(cfg: DemoConfig) -> str:
@@ -245,7 +239,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
             if not header_printed[0]:
                 out(table_header(list(msg.goal_names)))
                 header_printed[0] = True
-            out(table_row(step_entry(msg, t0), list(msg.goal_names), _belief(latest_posterior[0])))
+            out(table_row(step_entry(msg, t0), list(msg.goal_names), belief(latest_posterior[0])))
 
     def on_other(msg: Message) -> None:
         if isinstance(msg, ClassPosterior):

@@ -28,7 +28,7 @@ from shared.runtime import UserError
 from shared.scene import Scene
 
 __all__ = ["Scenario", "choose_demonstration", "model_for", "RunRecorder", "Summary", "summarise",
-           "DEFAULT_HUMAN_CLASS", "step_entry", "table_header", "table_row"]
+           "DEFAULT_HUMAN_CLASS", "step_entry", "table_header", "table_row", "belief"]
 
 log = logging.getLogger("foresight.scenario")
 
@@ -252,7 +252,7 @@ class Summary:
             The lines: the table, then the switch, the goal, the recognition, the interference cost, the log.
         """
         names = self.goal_names
-        out = [table_header(names), *(table_row(s, names) for s in self.steps)] if table else []
+        out = [table_header(names), *(table_row(s, names, s.get("belief", "")) for s in self.steps)] if table else []
         by_step = {s["step"]: s for s in self.steps}
         if self.switch_step is None:
             out.append("switch step: none (never switched)")
@@ -271,6 +271,27 @@ class Summary:
         out.append(f"interference cost of the executed trajectory (final prediction): {self.interference_cost:.4f}")
         out.append(f"MCAP log: {self.mcap_path}")
         return out
+
+
+def belief(posterior: ClassPosterior | None) -> str:
+    """The table's "human (belief)" cell: the most probable class and its probability, or ``""``."""
+    if posterior is None:
+        return ""
+    k = int(np.argmax(posterior.posterior))
+    return f"{posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
+
+
+def _posterior_for(plan: Plan, posteriors: dict[int, ClassPosterior]) -> ClassPosterior | None:
+    """The belief a plan was made with.
+
+    Lock-step: the posterior of the tick before the plan's (the occupancy it planned against); real time: the
+    newest posterior stamped before the plan.
+    """
+    if plan.tick >= 0:
+        earlier = [t for t, p in posteriors.items() if p.tick < plan.tick]
+        return posteriors[max(earlier, key=lambda t: posteriors[t].tick)] if earlier else None
+    before = [p for p in posteriors.values() if p.stamp <= plan.stamp]
+    return max(before, key=lambda p: p.stamp) if before else None
 
 
 def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: OccupancyGrid | None,
@@ -299,6 +320,8 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     if t0 is None:
         t0 = (states[0].stamp if states else ordered[0].stamp) if realtime else 0.0
     steps = [step_entry(p, t0) for p in ordered]
+    for entry, plan in zip(steps, ordered, strict=True):
+        entry["belief"] = belief(_posterior_for(plan, posteriors))
     chosen = [s["chosen"] for s in steps]
     switch = None
     for i in range(1, len(chosen)):

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from services.scenario import Summary, choose_demonstration, summarise, table_header
-from shared.protocol import OccupancyGrid, Plan, RobotState
+from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.synthetic import generate_library
 
@@ -87,3 +87,19 @@ def test_realtime_summary_counts_time_from_the_run_start_and_names_the_step_of_t
     assert "goal reached: yes, during step 3 (t = 0.66 s)" in s.lines()
     assert s.to_json()["reached_t_s"] == pytest.approx(0.66)
     assert all(str(int(t0)) not in ln for ln in s.lines())  # no raw epoch anywhere
+
+
+def _posterior(tick: int, stamp: float, p: list[float]) -> ClassPosterior:
+    return ClassPosterior(stamp=stamp, tick=tick, demo_id=1, index=0, class_names=["far_left", "blue_cup"],
+                          posterior=np.array(p), log_likelihood=np.log(np.array(p)))
+
+
+def test_each_row_shows_the_belief_its_plan_was_made_with():
+    """`foresight log table` left the human (belief) column empty that the demo's table fills."""
+    posts = {0: _posterior(0, 0.1, [0.7, 0.3]), 1: _posterior(1, 0.3, [0.2, 0.8])}
+    s = summarise([_plan(t, 0, [1.0, 2.0]) for t in range(3)], [], None, posts, None, "blue_cup", None)
+    assert [e["belief"] for e in s.steps] == ["", "far_left p=0.70", "blue_cup p=0.80"]  # the tick before's
+    assert s.lines()[2].endswith("far_left p=0.70")
+    realtime = summarise([_plan(-1, 0, [1.0, 2.0], stamp=t) for t in (0.05, 0.2, 0.5)], [], None,
+                         {0: _posterior(-1, 0.1, [0.7, 0.3]), 1: _posterior(-1, 0.3, [0.2, 0.8])}, None, "x", None)
+    assert [e["belief"] for e in realtime.steps] == ["", "far_left p=0.70", "blue_cup p=0.80"]  # the newest before
