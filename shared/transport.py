@@ -27,7 +27,7 @@ from shared.protocol.limits import MAX_PAYLOAD_BYTES
 from shared.rejects import RejectCounter
 from shared.security import OBSERVER
 from shared.security.guard import denied, forget, remember
-from shared.security.tls import insecure_listen_warning, security_settings
+from shared.security.tls import listen_warning, security_settings
 
 __all__ = ["TransportError", "MAX_MESSAGE_BYTES", "zenoh_config", "open_session", "open_with_retry", "TypedPublisher",
            "subscribe", "subscribe_ordered", "LatestSubscriber", "RejectCounter", "sender_of", "Presence", "describe"]
@@ -132,7 +132,7 @@ def open_session(cfg: ZenohConfig, stop: threading.Event | None = None, name: st
     Raises:
         TransportError: If Zenoh refuses to open the session, or (on exit) the watch gave up (one line).
     """
-    warning = "" if cfg.security_dir else insecure_listen_warning(list(cfg.listen))
+    warning = listen_warning(cfg)  # beyond loopback without security, or on a host the certificate does not name
     if warning:  # once per session, not once per connection attempt of a retrying client
         log.warning("%s", warning)
     session = open_with_retry(cfg, stop=stop)

@@ -29,7 +29,7 @@ from cryptography.hazmat.primitives.asymmetric.types import PrivateKeyTypes
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 __all__ = ["Issued", "CertificateError", "make_authority", "issue", "init_security_dir", "read_role", "verify_role",
-           "check_host", "check_directory", "issued_hosts", "LOOPBACK_HOSTS", "CA_DAYS"]
+           "check_host", "check_directory", "issued_hosts", "certificate_hosts", "LOOPBACK_HOSTS", "CA_DAYS"]
 
 LOOPBACK_HOSTS = ("localhost", "127.0.0.1")
 """Names every certificate carries, so that a run on one machine verifies."""
@@ -206,10 +206,22 @@ def issued_hosts(directory: str | os.PathLike[str], roles: Sequence[str]) -> lis
     d = Path(directory)
     for role in ("router", *roles):
         if (d / f"{role}.crt").is_file():
-            san = _load_cert(d / f"{role}.crt").extensions.get_extension_for_class(x509.SubjectAlternativeName).value
-            names = [str(n.value) for n in san]
-            return [h for h in names if h not in LOOPBACK_HOSTS]
+            return [h for h in certificate_hosts(d / f"{role}.crt") if h not in LOOPBACK_HOSTS]
     return []
+
+
+def certificate_hosts(path: str | os.PathLike[str]) -> list[str]:
+    """The DNS names and IP addresses a certificate names (its subject alternative names), as text.
+
+    Raises:
+        CertificateError: The file is not a PEM certificate.
+    """
+    cert = _load_cert(Path(path))
+    try:
+        san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    except x509.ExtensionNotFound:
+        return []
+    return [str(n.value) for n in san]
 
 
 def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], hosts: Sequence[str] = (),

@@ -9,12 +9,12 @@ from typing import TYPE_CHECKING, Any
 from shared.protocol import Keys
 
 from .acl import OBSERVER, access_control
-from .certificates import read_role, verify_role
+from .certificates import certificate_hosts, read_role, verify_role
 
 if TYPE_CHECKING:
     from shared.config import ZenohConfig
 
-__all__ = ["tls_settings", "secure_endpoints", "insecure_listen_warning", "security_settings"]
+__all__ = ["tls_settings", "secure_endpoints", "insecure_listen_warning", "listen_warning", "security_settings"]
 
 
 def tls_settings(security_dir: str | os.PathLike[str], role: str) -> dict[str, Any]:
@@ -79,6 +79,38 @@ def insecure_listen_warning(listen: list[str]) -> str:
         return ""
     return (f"listening on {', '.join(exposed)} without security: anyone who reaches it may read and write every "
             "key; use --security DIR (foresight security init, docs/security.md)")
+
+
+def listen_warning(cfg: ZenohConfig) -> str:
+    """The one warning a session's listen endpoints call for, or "".
+
+    Without security: listening beyond loopback (:func:`insecure_listen_warning`). With it: listening on a host
+    its certificate does not name, which every peer connecting there refuses (``verify_name_on_connect``).
+    """
+    if not cfg.security_dir:
+        return insecure_listen_warning(list(cfg.listen))
+    role = cfg.role or OBSERVER
+    _, cert, _ = read_role(cfg.security_dir, role)
+    named = set()
+    for h in certificate_hosts(cert):
+        try:
+            named.add(str(ipaddress.ip_address(h)))
+        except ValueError:
+            named.add(h.lower())
+    unnamed = []
+    for ep in cfg.listen:
+        host = _host(ep).lower()
+        try:
+            host = str(ipaddress.ip_address(host))
+        except ValueError:
+            pass
+        if host not in ("0.0.0.0", "::", "") and host not in named:
+            unnamed.append(ep)
+    if not unnamed:
+        return ""
+    return (f"listening on {', '.join(unnamed)}, which {role}.crt does not name (it names {', '.join(sorted(named))}): "
+            "a peer connecting there refuses the link; make the certificates with --hosts naming it "
+            "(foresight security init, docs/security.md)")
 
 
 def security_settings(cfg: ZenohConfig) -> tuple[list[str], list[str], dict[str, Any]]:

@@ -24,7 +24,7 @@ from services.processes import free_port
 from shared.config import ZenohConfig
 from shared.security.acl import ROLES
 from shared.security.certificates import CertificateError, Issued, init_security_dir, issue
-from shared.security.tls import tls_settings
+from shared.security.tls import listen_warning, tls_settings
 from shared.transport import TransportError, open_session, open_with_retry
 
 POSE, STATE, PLAN = "foresight/human/pose", "foresight/robot/state", "foresight/planner/plan"
@@ -156,3 +156,17 @@ def test_a_client_that_never_reaches_its_router_under_tls_is_told_what_that_may_
     hint = "mutual TLS as planner: a refused certificate"
     assert hint in str(err.value) and "foresight security check DIR" in str(err.value)
     assert any(hint in r.getMessage() for r in caplog.records if "not reachable yet" in r.getMessage())
+
+
+def test_a_session_listening_on_a_host_its_certificate_does_not_name_is_warned(dirs) -> None:
+    """Every peer connecting there refuses the link (names are verified): said at start, not at the first link."""
+    def cfg(*listen: str) -> ZenohConfig:
+        return ZenohConfig(mode="peer", listen=list(listen), connect=[], multicast_scouting=False,
+                           security_dir=str(dirs["good"]), role="router")
+
+    assert listen_warning(cfg("tcp/127.0.0.1:0", "tcp/localhost:7447", "tcp/0.0.0.0:7447", "tcp/[::]:7447")) == ""
+    warning = listen_warning(cfg("tcp/127.0.0.1:0", "tcp/192.168.1.10:7447"))
+    assert warning.startswith("listening on tcp/192.168.1.10:7447, which router.crt does not name (it names "
+                              "127.0.0.1, localhost)") and "--hosts" in warning
+    plain = ZenohConfig(mode="peer", listen=["tcp/192.168.1.10:7447"], connect=[], multicast_scouting=False)
+    assert "without security" in listen_warning(plain)
