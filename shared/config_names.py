@@ -93,7 +93,7 @@ def _section_of(variable: str, sections: Iterable[str]) -> str | None:
 
 
 def check_environment(env: typing.Mapping[str, str], checked: typing.Mapping[str, type]) -> None:
-    """Raise ConfigError for a ``FORESIGHT_*`` variable that matches no option.
+    """Raise ConfigError for a ``FORESIGHT_*`` variable that matches no option, or one written in lower case.
 
     Variables of the ``checked`` sections must name one of their options; those of another section of
     :data:`SECTIONS` are left to the command that reads it; any other ``FORESIGHT_*`` variable must be
@@ -106,6 +106,9 @@ def check_environment(env: typing.Mapping[str, str], checked: typing.Mapping[str
     every_section = {*SECTIONS, *checked}
     known: dict[str, set[str]] = {}
     for variable in sorted(env):
+        if variable.upper().startswith(f"{ENV_PREFIX}_") and not variable.startswith(f"{ENV_PREFIX}_"):
+            raise ConfigError(f"environment: {variable} is read as nothing: Foresight's variables are upper case "
+                              f"({variable.upper()})")
         if not variable.startswith(f"{ENV_PREFIX}_") or variable in OTHER_VARIABLES \
                 or variable.startswith(TEST_PREFIX):
             continue

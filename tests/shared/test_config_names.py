@@ -46,6 +46,10 @@ def test_misspelt_variable_names_the_closest_option() -> None:
     with pytest.raises(ConfigError, match=r"FORESIGHT_REPLAYR_RATE_HZ is no Foresight option; did you mean "
                                           r"FORESIGHT_REPLAYER_RATE_HZ\?"):
         check_environment({"FORESIGHT_REPLAYR_RATE_HZ": "3"}, checked)
+    # lower case: the environment's names are case-sensitive, so it was ignored without a word
+    with pytest.raises(ConfigError, match=r"foresight_replayer_rate_hz is read as nothing: .* upper case "
+                                          r"\(FORESIGHT_REPLAYER_RATE_HZ\)"):
+        check_environment({"foresight_replayer_rate_hz": "3"}, checked)
 
 
 def test_valid_and_foreign_variables_pass() -> None:
