@@ -101,8 +101,8 @@ def read_keypoint_csv(path: Path) -> list[KeypointDemo]:
         ValueError: A header without ``demo,frame`` and ``<point>_x/_y/_z`` triplets, a cell that is not a number,
             frames not increasing within a demonstration (the message names the file and line).
     """
-    with path.open(newline="") as f:
-        rows = list(csv.reader(f))
+    with path.open(newline="", encoding="utf-8-sig") as f:  # a byte-order mark is no part of the header
+        rows = [row for row in csv.reader(f) if any(cell.strip() for cell in row)]  # blank lines: nothing
     if not rows or rows[0][:2] != ["demo", "frame"] or (len(rows[0]) - 2) % 3:
         raise ValueError(f"{path}: header must be demo,frame,<point>_x,<point>_y,<point>_z,... (got "
                          f"{','.join(rows[0][:5]) if rows else 'an empty file'})")
@@ -110,15 +110,24 @@ def read_keypoint_csv(path: Path) -> list[KeypointDemo]:
     names = [c[:-2] for c in cols[::3]]
     if any(cols[3 * i:3 * i + 3] != [f"{n}_x", f"{n}_y", f"{n}_z"] for i, n in enumerate(names)):
         raise ValueError(f"{path}: columns must come as <point>_x,<point>_y,<point>_z triplets")
+    if twice := sorted({n for n in names if names.count(n) > 1}):  # the last would silently stand for both
+        raise ValueError(f"{path}: point(s) {', '.join(twice)} given twice in the header")
     by_demo: dict[int, list[tuple[int, list[float]]]] = {}
+    last_demo: int | None = None
     for line, row in enumerate(rows[1:], start=2):
         try:
             demo, frame = int(row[0]), int(row[1])
             values = [float(v) if v.strip() else np.nan for v in row[2:]]
         except (ValueError, IndexError) as exc:
             raise ValueError(f"{path}:{line}: {exc}") from None
+        if any(np.isinf(values)):  # a missing point is an empty cell; infinity is a sensor's or a writer's bug
+            raise ValueError(f"{path}:{line}: a coordinate is infinite")
         if len(values) != len(cols):
             raise ValueError(f"{path}:{line}: {len(values)} values, the header has {len(cols)}")
+        if demo in by_demo and demo != last_demo:
+            raise ValueError(f"{path}:{line}: demo {demo} again after demo {last_demo} (a demonstration's rows "
+                             "come together)")
+        last_demo = demo
         frames = by_demo.setdefault(demo, [])
         if frames and frame <= frames[-1][0]:
             raise ValueError(f"{path}:{line}: frame {frame} of demo {demo} after frame {frames[-1][0]}")
@@ -145,7 +154,11 @@ def fit_keypoint_library(directory: Path, layout: str = "foresight", config: Fit
     demos: list[tuple[int, str, KeypointDemo, np.ndarray]] = []
     for label, path in enumerate(files):
         for kd in read_keypoint_csv(path):
+            if unknown := lay.unknown(kd.names):  # a typo would be a point never observed, without a word
+                raise ValueError(f"{path}: point(s) {', '.join(unknown)} are not layout {lay.name}'s")
             demos.append((label, path.stem, kd, lay.to_model(kd.names, kd.positions)))
+    if not demos:
+        raise ValueError(f"keypoint library {directory}: no demonstration in any of its {len(files)} CSV files")
     required = [POINT_NAMES.index(p) for p in REQUIRED]
     usable = [np.all(np.isfinite(pts[:, required]).all(-1), axis=-1) for *_, pts in demos]
     for (_, name, kd, pts), ok in zip(demos, usable, strict=True):

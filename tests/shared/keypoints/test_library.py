@@ -53,6 +53,34 @@ def test_bad_csvs_are_named(tmp_path: Path) -> None:
         read_keypoint_csv(bad)
     with pytest.raises(ValueError, match="no <class>.csv files"):
         fit_keypoint_library(tmp_path / "nothing")
+    head = "demo,frame,pelvis_x,pelvis_y,pelvis_z,head_x,head_y,head_z"
+    bad.write_text(f"{head}\n0,0,1,2,3,1,2,3\n1,0,1,2,3,1,2,3\n0,1,1,2,3,1,2,3\n")  # demo 0's rows split
+    with pytest.raises(ValueError, match="a.csv:4: demo 0 again after demo 1"):
+        read_keypoint_csv(bad)
+    bad.write_text(f"{head}\n0,0,1,2,inf,1,2,3\n")
+    with pytest.raises(ValueError, match="a.csv:2: a coordinate is infinite"):
+        read_keypoint_csv(bad)
+    bad.write_text("demo,frame,pelvis_x,pelvis_y,pelvis_z,pelvis_x,pelvis_y,pelvis_z\n0,0,1,2,3,4,5,6\n")
+    with pytest.raises(ValueError, match="point.s. pelvis given twice"):  # the last stood for both
+        read_keypoint_csv(bad)
+    bad.write_text(f"\ufeff{head}\n0,0,1,2,3,1,2,3\n\n")  # a byte-order mark and a trailing blank line
+    (demo,) = read_keypoint_csv(bad)
+    assert demo.names == ["pelvis", "head"] and demo.positions.shape == (1, 2, 3)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    (empty / "a.csv").write_text(f"{head}\n")
+    with pytest.raises(ValueError, match="no demonstration in any of its 1 CSV files"):
+        fit_keypoint_library(empty)
+
+
+def test_a_point_the_layout_does_not_know_is_refused(small, tmp_path: Path) -> None:
+    """A misspelt column was a point never observed: fitted without a word, 50 mm off at the median."""
+    write_keypoint_library(small, tmp_path / "lib")
+    first = sorted((tmp_path / "lib").glob("*.csv"))[0]
+    text = first.read_text().replace("r_hand_", "rhand_")
+    first.write_text(text)
+    with pytest.raises(ValueError, match="point.s. rhand are not layout foresight's"):
+        fit_keypoint_library(tmp_path / "lib")
 
 
 def test_every_layout_loads_and_maps_its_points() -> None:
