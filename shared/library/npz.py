@@ -95,8 +95,9 @@ def _library(path: Path, data: dict[str, np.ndarray], where: str) -> MotionLibra
     for key in ("demo_label", "demo_index", "demo_length", "issue_block"):
         if data[key].size and data[key].dtype.kind not in "iu":
             raise LibraryError(f"{where}: {key} must hold integers, got {data[key].dtype}")
-    if int(data["format_version"]) != NPZ_FORMAT:
-        raise LibraryError(f"{where}: format_version {int(data['format_version'])}, this build reads {NPZ_FORMAT}")
+    version = data["format_version"]
+    if version.dtype.kind not in "iu" or version.ndim != 0 or int(version) != NPZ_FORMAT:
+        raise LibraryError(f"{where}: format_version {version.tolist()!r}, this build reads {NPZ_FORMAT}")
     feature_names = tuple(str(s) for s in data["feature_names"].tolist())
     if not feature_names or len(set(feature_names)) != len(feature_names):
         raise LibraryError(f"{where}: feature_names must be unique names of at least one feature, got "
@@ -111,7 +112,13 @@ def _library(path: Path, data: dict[str, np.ndarray], where: str) -> MotionLibra
                            f"{len(feature_names)} feature_names")
     if not (len(indices) == len(lengths) == len(sources) == n):
         raise LibraryError(f"{where}: demo_label/demo_index/demo_length/demo_source lengths differ")
-    if n and (lengths.min() < 1 or int(lengths.sum()) != feats.shape[0]):
+    if not names or len(set(names)) != len(names):  # a class is named by its name everywhere (posteriors, goals)
+        raise LibraryError(f"{where}: class_names must be unique names of at least one class, got {names[:10]}")
+    if len({(int(a), int(b)) for a, b in zip(labels, indices, strict=True)}) != n:  # held-out splits key on it
+        raise LibraryError(f"{where}: two demonstrations have the same class and index")
+    if not (len(data["issue_class"]) == len(data["issue_block"]) == len(data["issue_reason"])):
+        raise LibraryError(f"{where}: issue_class/issue_block/issue_reason lengths differ")
+    if (n and lengths.min() < 1) or int(lengths.sum()) != feats.shape[0]:
         raise LibraryError(f"{where}: demo_length does not add up to the {feats.shape[0]} feature rows")
     if n and (labels.min() < 0 or labels.max() >= len(names)):
         raise LibraryError(f"{where}: demo_label outside 0..{len(names) - 1}")

@@ -258,7 +258,11 @@ def test_paper_library(paper_library, tmp_path):
 
 @pytest.mark.parametrize(("key", "value", "match"), [
     (None, None, "one array, not a Foresight library npz"),
-    ("format_version", np.array([1, 1]), "inconsistent"),
+    ("format_version", np.array([1, 1]), r"format_version \[1, 1\]"),
+    ("format_version", np.array(1.9), "format_version 1.9, this build reads 1"),  # it read as 1
+    ("class_names", np.array(["a", "a"]), "class_names must be unique"),
+    ("demo_index", "zeros", "two demonstrations have the same class and index"),
+    ("issue_reason", np.array(["r", "s", "t"]), "lengths differ"),
     ("demo_length", "float", "demo_length must hold integers"),
     ("class_names", np.array("compound_0"), "class_names must be a list"),
     ("issue_block", np.array(["x"]), "issue_block must hold integers"),
@@ -274,7 +278,8 @@ def test_a_malformed_npz_is_a_library_error(tmp_path, key, value, match):
         with bad.open("wb") as f:
             np.save(f, arrays["features"])
     else:
-        arrays[key] = arrays[key].astype(np.float64) if isinstance(value, str) else value
+        arrays[key] = (np.zeros_like(arrays[key]) if value == "zeros" else arrays[key].astype(np.float64)) \
+            if isinstance(value, str) else value
         if key == "issue_block":
             arrays["issue_class"], arrays["issue_reason"] = np.array(["compound_0"]), np.array(["r"])
         np.savez(bad, **arrays)
