@@ -54,6 +54,7 @@ from shared.config_names import SECTIONS, check_environment, section_class
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
 from shared.scene import load_scene
+from shared.security.acl import refuse_ros2_keys
 
 __all__ = ["DemoConfig", "run_demo", "main", "SERVICES_IN_ORDER"]
 
@@ -148,9 +149,9 @@ class DemoConfig:
             raise ConfigError(f"demo.keypoint_noise_m: must be in [0, 1) m, got {self.keypoint_noise_m}")
         if not 0 < self.robot_speed <= 1:
             raise ConfigError(f"demo.robot_speed: must be in (0, 1], got {self.robot_speed}")
-        if (self.ros2 or self.robot != "sim") and self.security is not None:
-            raise ConfigError(f"demo.{'ros2' if self.ros2 else 'robot'} with demo.security: ROS 2 keys have no role in "
-                              "the access control yet (docs/ros2.md); run one or the other")
+        if self.ros2 or self.robot != "sim":
+            refuse_ros2_keys("" if self.security is None else str(self.security),
+                             f"demo.{'ros2' if self.ros2 else 'robot'}", "demo.security")
         if self.security is not None and not Path(self.security).is_dir():
             raise ConfigError(f"demo.security: {self.security} is not a directory (make one with `foresight security "
                               "init DIR`)")

@@ -22,12 +22,10 @@ import json
 import sys
 from pathlib import Path
 
-from cryptography import x509
-
 from shared.protocol import Keys
 from shared.runtime import UserError, cli_errors, help_text
 from shared.security.acl import ROLES, access_control
-from shared.security.certificates import CA_DAYS, init_security_dir, issued_hosts, verify_role
+from shared.security.certificates import CA_DAYS, certificate_hosts, init_security_dir, issued_hosts, verify_role
 
 __all__ = ["main", "SUBCOMMANDS"]
 
@@ -83,9 +81,8 @@ def _check(args: argparse.Namespace) -> int:
             print(f"{role}: {exc}")
             bad += 1
             continue
-        san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
         print(f"{role}: ok, valid until {cert.not_valid_after_utc:%Y-%m-%d %H:%M} UTC, hosts "
-              f"{', '.join(str(n.value) for n in san)}")
+              f"{', '.join(certificate_hosts(args.dir / f'{role}.crt'))}")
     if not args.role:
         print(f"not on this machine: {', '.join(r for r in ROLES if r not in here) or 'none'}")
     return 1 if bad else 0

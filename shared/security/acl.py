@@ -38,13 +38,13 @@ ROLES = (ROUTER, *SERVICES, SENSOR, OBSERVER)
 (:data:`shared.protocol.SENSOR`: keypoints only), the read-only observer."""
 
 
-def refuse_ros2_keys(security_dir: str, what: str) -> None:
+def refuse_ros2_keys(security_dir: str, what: str, option: str = "--security") -> None:
     """Raise a ConfigError when ``what`` (a command that speaks ROS 2 keys) is asked to run under access control.
 
     The rules cover the wire contract's keys only; every peer would drop a ROS 2 key's messages without a word.
     """
     if security_dir:
-        raise ConfigError(f"{what} with --security: ROS 2 keys have no role in the access control yet (docs/ros2.md); "
+        raise ConfigError(f"{what} with {option}: ROS 2 keys have no role in the access control yet (docs/ros2.md); "
                           "run one or the other")
 
 

@@ -81,6 +81,14 @@ def insecure_listen_warning(listen: list[str]) -> str:
             "key; use --security DIR (foresight security init, docs/security.md)")
 
 
+def _canonical(host: str) -> str:
+    """A host as a certificate's names compare: an address in its one written form, a DNS name in lower case."""
+    try:
+        return str(ipaddress.ip_address(host))
+    except ValueError:
+        return host.lower()
+
+
 def listen_warning(cfg: ZenohConfig) -> str:
     """The one warning a session's listen endpoints call for, or "".
 
@@ -91,21 +99,9 @@ def listen_warning(cfg: ZenohConfig) -> str:
         return insecure_listen_warning(list(cfg.listen))
     role = cfg.role or OBSERVER
     _, cert, _ = read_role(cfg.security_dir, role)
-    named = set()
-    for h in certificate_hosts(cert):
-        try:
-            named.add(str(ipaddress.ip_address(h)))
-        except ValueError:
-            named.add(h.lower())
-    unnamed = []
-    for ep in cfg.listen:
-        host = _host(ep).lower()
-        try:
-            host = str(ipaddress.ip_address(host))
-        except ValueError:
-            pass
-        if host not in ("0.0.0.0", "::", "") and host not in named:
-            unnamed.append(ep)
+    named = {_canonical(h) for h in certificate_hosts(cert)}
+    unnamed = [ep for ep in cfg.listen if (host := _canonical(_host(ep))) not in ("0.0.0.0", "::", "")
+               and host not in named]
     if not unnamed:
         return ""
     return (f"listening on {', '.join(unnamed)}, which {role}.crt does not name (it names {', '.join(sorted(named))}): "
