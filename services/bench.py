@@ -17,8 +17,8 @@ BENCHES: dict[str, tuple[str, str]] = {
     "faults": ("tools.faults", "kill -9 each service of a moving robot's run: hold and resume latency, MCAP recovery"),
     "tracker": ("services.tracker.bench", "the live tracker's core on a library's reaches: lag, error, refusals, "
                 "time per frame"),
-    "human": ("services.tracker.demo_bench", "foresight demo in real time, the human from the replayer against "
-              "through the tracker (keypoints, clean and noisy): pose -> plan p99, keypoints -> pose"),
+    "human": ("services.tracker.demo_bench", "foresight demo in real time, the human from the replayer against the "
+              "human through the tracker (keypoints, clean and noisy): pose -> plan p99, keypoints -> pose"),
     "keypoints": ("shared.keypoints.bench", "fit the human model to a frame of body keypoints: live, baseline, batch"),
     "live": ("services.view.bench", "foresight demo in real time without a live view, with --live, with foresight "
              "view (a Foxglove client on each): pose -> plan p99"),

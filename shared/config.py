@@ -169,13 +169,14 @@ def _zenoh_flags(section_flags: set[str]) -> dict[str, str]:
 
 
 def add_config_arguments(parser: argparse.ArgumentParser, section: str, cls: type,
-                         with_zenoh: bool = True) -> None:
+                         with_zenoh: bool = True, zenoh_base: ZenohConfig | None = None) -> None:
     """Add ``--config``, one flag per field of ``cls``'s tree and the Zenoh flags to ``parser``.
 
     Flags default to ``argparse.SUPPRESS`` so that only given flags override file and env. Options
     are grouped by TOML table (``[planner]``, ``[planner.stomp]``, ...), each group naming its
     environment variables. The Zenoh session mode is always ``--zenoh-mode``; any other Zenoh field
-    whose flag a section field already uses is offered as ``--zenoh-<name>`` instead.
+    whose flag a section field already uses is offered as ``--zenoh-<name>`` instead. ``zenoh_base``:
+    the command's own Zenoh defaults (as given to :func:`resolve_config`), shown in the help.
     """
     try:
         parser.add_argument("--config", metavar="FILE", default=None,
@@ -198,13 +199,14 @@ def add_config_arguments(parser: argparse.ArgumentParser, section: str, cls: typ
         names = _zenoh_flags({o.flag for o in options})
         group = parser.add_argument_group(f"[zenoh] options (env {ENV_PREFIX}_ZENOH_<NAME>)")
         for o in config_options("zenoh", ZenohConfig):
-            _add_flag(group, names[o.field], o)
+            shown = o if zenoh_base is None else dataclasses.replace(o, default=getattr(zenoh_base, o.field))
+            _add_flag(group, names[o.field], shown)
 
 
 def _add_flag(group: ArgumentGroup, flag: str, o: Option) -> None:
     inner, is_list = base_type(o.tp)
     shown = ",".join(map(str, o.default)) if is_list else o.default
-    text = f"{o.help} (default: {shown})".replace("%", "%%")
+    text = f"{o.help} (default: {'empty' if shown == '' else shown})".replace("%", "%%")
     if inner is bool and not is_list:
         group.add_argument(flag, dest=o.dest, action=argparse.BooleanOptionalAction, default=argparse.SUPPRESS,
                            help=text)

@@ -24,7 +24,7 @@ from shared import strict_json
 from shared.recording.reader import read_log
 from shared.runtime import cli_errors, setup_logging
 
-from .system import ProcessSystem, SystemSpec, Watcher
+from .system import PROCESSES, ProcessSystem, SystemSpec, Watcher, positive_number
 
 __all__ = ["measure_kill", "stale_releases", "recover_after_kill", "demo_model", "main", "SLACK_S"]
 
@@ -55,12 +55,12 @@ def measure_kill(system: ProcessSystem, watcher: Watcher, victim: str, down_s: f
     Returns:
         ``victim``; ``hold_s`` (kill -> first holding state, None: never held) and ``hold_reason``;
         ``moved_while_down`` (states not holding between the hold and the restart); ``back_s``
-        (restart -> liveliness token back; the router has none: 0); ``resume_s`` (token back -> first
-        state not holding after the restart), ``resume_after_start_s`` and ``resume_after_output_s``
-        (its first plan or occupancy after its return -> moving); ``events`` in order.
+        (restart -> liveliness token back; the router has none: 0; None: the token never came back);
+        ``resume_s`` (token back -> first state not holding after the restart), ``resume_after_start_s``
+        and ``resume_after_output_s`` (its first plan or occupancy after its return -> moving); ``events``
+        in order.
     """
-    if not watcher.wait(watcher.moving, timeout):
-        raise RuntimeError(f"the robot did not move within {timeout:g} s before killing {victim}")
+    system.wait_moving(watcher, timeout, before=f" (before killing {victim})")
     t_kill = time.monotonic()
     system.kill(victim)
     watcher.wait(lambda: _first(watcher.snapshot(watcher.states), t_kill, lambda m: m.holding) is not None,
@@ -71,7 +71,8 @@ def measure_kill(system: ProcessSystem, watcher: Watcher, victim: str, down_s: f
     if victim != "router":
         watcher.wait(lambda: any(t > t_start and s == victim and up for t, s, up in watcher.snapshot(watcher.tokens)),
                      timeout)
-    back = next((t for t, s, up in watcher.snapshot(watcher.tokens) if t > t_start and s == victim and up), t_start)
+    token = next((t for t, s, up in watcher.snapshot(watcher.tokens) if t > t_start and s == victim and up), None)
+    back = t_start if token is None else token
     watcher.wait(lambda: _first(watcher.snapshot(watcher.states), back, lambda m: not m.holding) is not None, timeout)
     states = watcher.snapshot(watcher.states)
     hold = _first(states, t_kill, lambda m: m.holding)
@@ -82,12 +83,15 @@ def measure_kill(system: ProcessSystem, watcher: Watcher, victim: str, down_s: f
     events = [("kill", 0.0)]
     if hold:
         events.append(("hold", hold[0] - t_kill))
-    events += [("restart", t_start - t_kill), ("back", back - t_kill)]
+    returned = token is not None or victim == "router"
+    events.append(("restart", t_start - t_kill))
+    if returned:
+        events.append(("back", back - t_kill))
     if resume:
         events.append(("resume", resume[0] - t_kill))
     return {"victim": victim, "hold_s": hold[0] - t_kill if hold else None,
             "hold_reason": hold[1].reason if hold else "", "moved_while_down": moved,
-            "back_s": back - t_start, "resume_s": resume[0] - back if resume else None,
+            "back_s": back - t_start if returned else None, "resume_s": resume[0] - back if resume else None,
             "resume_after_start_s": resume[0] - t_start if resume else None,
             "resume_after_output_s": resume[0] - first_out if resume and first_out else None,
             "events": sorted(events, key=lambda e: e[1])}
@@ -119,10 +123,10 @@ def stale_releases(watcher: Watcher, limit: float, slack: float = SLACK_S) -> li
 def recover_after_kill(system: ProcessSystem) -> dict[str, Any]:
     """SIGKILL the executor and read its MCAP back (up to the last complete chunk)."""
     system.kill("executor")
-    lf = read_log(system.spec.mcap_path)
+    lf = read_log(system.mcap_path)
     lasts = [c.last_time for c in lf.channels.values() if c.last_time is not None]
     firsts = [c.first_time for c in lf.channels.values() if c.first_time is not None]
-    return {"path": str(system.spec.mcap_path), "size_bytes": lf.size, "complete": lf.complete, "error": lf.error,
+    return {"path": str(system.mcap_path), "size_bytes": lf.size, "complete": lf.complete, "error": lf.error,
             "messages": lf.message_count, "channels": len(lf.channels),
             "duration_s": (max(lasts) - min(firsts)) / 1e9 if lasts else 0.0}
 
@@ -140,13 +144,19 @@ def _line(r: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None, prog: str = "foresight bench faults") -> int:
     """Run the fault injection; returns 0 when it ran (the numbers are the result)."""
     p = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--victims", default="predictor,planner,replayer,router", help="what to kill, in order")
-    p.add_argument("--down-s", type=float, default=3.0, help="seconds each victim stays dead")
+    p.add_argument("--victims", default="predictor,planner,replayer,router",
+                   help=f"what to kill, in order (comma-separated, of {', '.join(PROCESSES)})")
+    p.add_argument("--down-s", type=positive_number(inclusive=True), default=3.0, help="seconds each victim stays dead")
     p.add_argument("--run-dir", type=Path, default=Path("runs/faults"), help="logs and the MCAP")
     p.add_argument("--models-dir", type=Path, default=Path("models"), help="model cache")
-    p.add_argument("--timeout", type=float, default=240.0, help="longest wait for any one event (s)")
+    p.add_argument("--timeout", type=positive_number(), default=240.0, help="longest wait for any one event (s)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     args = p.parse_args(argv)
+    victims = [v.strip() for v in args.victims.split(",") if v.strip()]
+    unknown = [v for v in victims if v not in PROCESSES]
+    if unknown or not victims:
+        p.error(f"--victims {args.victims!r}: {'unknown ' + ', '.join(map(repr, unknown)) if unknown else 'empty'}"
+                f" (choose from {', '.join(PROCESSES)})")
     setup_logging("WARNING")
     with cli_errors(prog):
         spec = SystemSpec(run_dir=args.run_dir, model=demo_model(args.models_dir))
@@ -155,7 +165,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench faults") ->
         try:
             with Watcher(system.endpoint) as watcher:
                 system.start_all()
-                for victim in [v for v in args.victims.split(",") if v]:
+                for victim in victims:
                     r = measure_kill(system, watcher, victim, args.down_s, args.timeout)
                     results["kills"].append(r)
                     if not args.json:

@@ -86,7 +86,7 @@ def _dispatch(argv: list[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = _parser()
     if not argv or argv[0] in ("-h", "--help"):
-        parser.print_help()
+        parser.print_help(sys.stdout if argv else sys.stderr)  # no command is an error: its help goes to stderr
         return 0 if argv else 2
     command, rest = argv[0], argv[1:]
     if command not in COMMANDS:

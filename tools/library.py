@@ -9,11 +9,16 @@ means writing its ``add_arguments``/``run`` pair and one entry there):
 - ``convert PATH --out FILE.npz``: write the native npz (valid demonstrations and the issue list).
 - ``generate --classes 8 --demos 25 --seed 0 --out PATH``: a synthetic library (shared/synthetic.py),
   as the native npz or the paper's CSV files.
+- ``to-keypoints PATH --out DIR``: the library as 3D body keypoints, one CSV per class.
+- ``from-keypoints DIR --out FILE.npz``: the 12 features fitted to a keypoint library.
+
+An output directory is the library's own: an earlier library's class files in it are replaced.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -29,7 +34,7 @@ from shared.scene import load_scene
 from shared.synthetic import FEATURE_SETS, SyntheticConfig, generate_library, load_layout, pelvis_frame
 from shared.synthetic_wide import WIDE_FEATURE_NAMES, generate_wide_library
 
-from .reach import plot_reach_points
+from .reach import check_png, plot_reach_points
 
 __all__ = ["main", "SUBCOMMANDS", "format_info"]
 
@@ -55,6 +60,19 @@ def _info_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("path", help="library: a directory of compound_*.csv or a .npz")
 
 
+def _out_path(text: str) -> Path:
+    """An output path given on the command line; an empty one would be the current directory."""
+    if not text.strip():
+        raise LibraryError("--out: empty; give the file or directory to write")
+    return Path(text)
+
+
+def _replaced(stale: set[Path]) -> str:
+    """A note on an earlier library's files removed from the output directory."""
+    return f"; removed {len(stale)} file(s) of an earlier library: {', '.join(sorted(p.name for p in stale))}" \
+        if stale else ""
+
+
 def _cmd_info(args: argparse.Namespace) -> int:
     print(format_info(load_library(args.path, report=False)))
     return 0
@@ -75,10 +93,13 @@ def _convert_args(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_convert(args: argparse.Namespace) -> int:
-    out = Path(args.out)
+    out = _out_path(args.out)
     if out.suffix != ".npz":
         raise LibraryError(f"--out {str(out)!r}: the native format is a .npz file")
     lib = load_library(args.path, report=False)
+    if not lib.demos:
+        raise LibraryError(f"library {lib.source}: no valid demonstration, nothing to convert "
+                           f"({len(lib.issues)} issue(s); `foresight library validate {args.path}` lists them)")
     save_library(lib, out)
     print(f"wrote {out}: {len(lib.demos)} demonstrations in {lib.n_classes} classes "
           f"({len(lib.issues)} issue(s) recorded, malformed demonstrations left out)")
@@ -107,6 +128,11 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     """Run ``foresight library generate`` with parsed ``args``; returns the exit status."""
     if args.seed < 0:
         raise LibraryError(f"--seed: must be >= 0, got {args.seed}")
+    out = _out_path(args.out)
+    if out.suffix and out.suffix != ".npz":
+        raise LibraryError(f"--out {str(out)!r}: give a .npz file or a directory (no extension)")
+    if args.plot is not None:
+        check_png(args.plot, "--plot")
     scene = load_scene(args.scene) if args.scene else None
     lay = load_layout(args.layout, scene)
     cfg = SyntheticConfig(return_to_rest=bool(args.return_to_rest))
@@ -119,15 +145,13 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     else:
         lib = generate_library(args.classes, args.demos, args.seed, lay, scene, cfg)
     took = time.perf_counter() - start
-    out = Path(args.out)
     if out.suffix == ".npz":
         save_library(lib, out)
         what = f"{out}"
-    elif out.suffix:
-        raise LibraryError(f"--out {str(out)!r}: give a .npz file or a directory (no extension)")
     else:
+        before = set(out.glob("compound_*.csv")) if out.is_dir() else set()
         files = write_csv_dir(lib, out)
-        what = f"{out}/ ({len(files)} CSV files)"
+        what = f"{out}/ ({len(files)} CSV files{_replaced(before - set(files))})"
     print(f"wrote {what}: {len(lib.demos)} demonstrations in {lib.n_classes} classes "
           f"({', '.join(lib.class_names)}), {cfg.n_samples} samples of {lib.n_features} features each, "
           f"seed {args.seed}, generated in {took:.2f} s")
@@ -164,12 +188,18 @@ def _cmd_to_keypoints(args: argparse.Namespace) -> int:
         raise LibraryError(f"--seed: must be >= 0, got {args.seed}")
     for name in ("noise_m", "drop", "missing"):
         value = getattr(args, name)
-        if not (value >= 0 and (name == "noise_m" or value < 1)):
+        if not (math.isfinite(value) and value >= 0 and (name == "noise_m" or value < 1)):
             raise LibraryError(f"--{name.replace('_', '-')}: must be >= 0{'' if name == 'noise_m' else ' and < 1'}, "
                                f"got {value}")
+    out = _out_path(args.out)
     lib = load_library(args.path, report=False)
-    files = write_keypoint_library(lib, Path(args.out), args.noise_m, args.drop, args.missing, args.seed)
-    print(f"wrote {len(files)} keypoint files to {args.out}: {len(lib.demos)} demonstrations")
+    before = set(out.glob("*.csv")) if out.is_dir() else set()
+    try:
+        files = write_keypoint_library(lib, out, args.noise_m, args.drop, args.missing, args.seed)
+    except ValueError as exc:  # no mapping to the human model: nothing was written
+        raise LibraryError(str(exc)) from None
+    print(f"wrote {len(files)} keypoint files to {out}: {len(lib.demos)} demonstrations"
+          f"{_replaced(before - set(files))}")
     return 0
 
 
@@ -184,7 +214,7 @@ def _from_keypoints_args(p: argparse.ArgumentParser) -> None:
 def _cmd_from_keypoints(args: argparse.Namespace) -> int:
     from shared.keypoints.library import fit_keypoint_library
 
-    out = Path(args.out)
+    out = _out_path(args.out)
     if out.suffix != ".npz":
         raise LibraryError(f"--out {str(out)!r}: the native format is a .npz file")
     if not Path(args.path).is_dir():

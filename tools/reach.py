@@ -18,10 +18,10 @@ import numpy as np
 from shared.feature_sets import require_mapping
 from shared.human import HumanModel, reach_points
 from shared.library import load_library
-from shared.runtime import cli_errors, help_text
+from shared.runtime import UserError, cli_errors, help_text
 from shared.scene import load_scene
 
-__all__ = ["plot_reach_points", "main"]
+__all__ = ["plot_reach_points", "check_png", "main"]
 
 
 def plot_reach_points(reach: np.ndarray, labels: np.ndarray, scene, path, title: str = "",
@@ -71,6 +71,19 @@ def plot_reach_points(reach: np.ndarray, labels: np.ndarray, scene, path, title:
     plt.close(fig)
 
 
+def check_png(path: str, option: str) -> None:
+    """Refuse a plot path that would not become the PNG named (before any work is done).
+
+    Raises:
+        UserError: ``path`` is empty (the current directory) or does not end in ``.png`` (matplotlib would
+            refuse the format, or add ``.png`` to a name without one).
+    """
+    if not path.strip():
+        raise UserError(f"{option}: empty; give the PNG file to write")
+    if Path(path).suffix.lower() != ".png":
+        raise UserError(f"{option} {path!r}: the plot is a PNG; give a file name ending in .png")
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m tools.reach") -> int:
     """``python -m tools.reach LIBRARY --out PNG``: plot a library's reach points placed in a scene.
 
@@ -83,7 +96,11 @@ def main(argv: list[str] | None = None, prog: str = "python -m tools.reach") -> 
     parser.add_argument("--out", default="runs/plots/human_goals.png", help="output PNG")
     args = parser.parse_args(argv)
     with cli_errors(prog):
+        check_png(args.out, "--out")
         lib = load_library(args.library)
+        if not lib.demos:
+            raise UserError(f"library {lib.source}: no valid demonstration to draw ({len(lib.issues)} issue(s); "
+                            f"`foresight library validate {args.library}` lists them)")
         mapping = require_mapping(lib.feature_names, prog, f"library {lib.source}")
         scene = load_scene(args.scene)
         reach, index = reach_points(HumanModel(), [mapping.to_human(d.features) for d in lib.demos], scene)

@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
+import re
 import threading
 
-from shared.config import ZenohConfig, add_config_arguments, resolve_config
+from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
 from shared.runtime import cli_errors, setup_logging, stop_on_signals
 from shared.transport import describe, open_session
 
-__all__ = ["RouterConfig", "main", "ROUTER_ENDPOINT"]
+__all__ = ["RouterConfig", "main", "check_listen", "ROUTER_ENDPOINT"]
 
 ROUTER_ENDPOINT = "tcp/127.0.0.1:7447"
 log = logging.getLogger("foresight.router")
@@ -25,14 +26,30 @@ class RouterConfig:
                                                                  "choices": ("DEBUG", "INFO", "WARNING")})
 
 
+def check_listen(listen: list[str]) -> None:
+    """A router must listen on a port its peers can be told.
+
+    Raises:
+        ConfigError: ``listen`` is empty (the router would be reachable by no one) or names port 0 (a port
+            picked at start that no peer can know, and Zenoh cannot report).
+    """
+    if not listen:
+        raise ConfigError(f"zenoh.listen: empty; a router must listen on an endpoint, e.g. {ROUTER_ENDPOINT}")
+    for ep in listen:
+        if re.search(r":0(?:[/#?]|$)", ep.split("/", 1)[1]):
+            raise ConfigError(f"zenoh.listen: {ep!r} asks for a free port, which the services could not be told; "
+                              f"give the port they connect to, e.g. {ROUTER_ENDPOINT}")
+
+
 def main(argv: list[str] | None = None, prog: str = "foresight router") -> int:
     """Run a router until SIGINT/SIGTERM. Listens on tcp/127.0.0.1:7447 unless --listen says otherwise."""
     parser = argparse.ArgumentParser(prog=prog, description=main.__doc__)
-    add_config_arguments(parser, "router", RouterConfig)
+    base = ZenohConfig(mode="router", listen=[ROUTER_ENDPOINT], connect=[])
+    add_config_arguments(parser, "router", RouterConfig, zenoh_base=base)
     args = parser.parse_args(argv)
     with cli_errors(prog):
-        base = ZenohConfig(mode="router", listen=[ROUTER_ENDPOINT], connect=[])
         cfg, zcfg = resolve_config("router", RouterConfig, args, zenoh_base=base)
+        check_listen(zcfg.listen)
     setup_logging(cfg.log_level)
     stop = threading.Event()
     restore = stop_on_signals(stop)

@@ -26,11 +26,12 @@ from typing import Any
 import numpy as np
 
 from services.executor.core import reason_kind
+from services.replayer.core import MAX_RATE_HZ, MIN_RATE_HZ
 from shared import strict_json
 from shared.runtime import cli_errors, setup_logging
 
 from .faults import demo_model
-from .system import ProcessSystem, SystemSpec, Watcher
+from .system import ProcessSystem, SystemSpec, Watcher, positive_number
 
 __all__ = ["soak", "summarise", "main"]
 
@@ -90,8 +91,7 @@ def summarise(watcher: Watcher, t0: float, t1: float) -> dict[str, Any]:
 
 def soak(system: ProcessSystem, watcher: Watcher, duration_s: float, timeout: float = 240.0) -> dict[str, Any]:
     """Wait for the robot to move, then measure ``duration_s`` seconds; RSS at both ends."""
-    if not watcher.wait(watcher.moving, timeout):
-        raise RuntimeError(f"the robot did not move within {timeout:g} s")
+    system.wait_moving(watcher, timeout)
     t0 = time.monotonic()
     rss0 = system.rss()
     time.sleep(duration_s)
@@ -103,6 +103,10 @@ def soak(system: ProcessSystem, watcher: Watcher, duration_s: float, timeout: fl
     return out
 
 
+def _ms(x: float | None) -> str:
+    return "-" if x is None else f"{x * 1e3:.0f} ms"
+
+
 def _fmt(d: dict[str, float | None], scale: float = 1e3, unit: str = "ms") -> str:
     return " / ".join("-" if d[k] is None else f"{d[k] * scale:.0f}" for k in ("p50", "p99", "max")) + f" {unit}"
 
@@ -110,8 +114,10 @@ def _fmt(d: dict[str, float | None], scale: float = 1e3, unit: str = "ms") -> st
 def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> int:
     """Run the soak; returns 0 when every process was still running at the end."""
     p = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--rate-hz", type=float, default=300.0, help="poses per second")
-    p.add_argument("--duration-s", type=float, default=60.0, help="measured window")
+    p.add_argument("--rate-hz", type=positive_number(MIN_RATE_HZ, MAX_RATE_HZ, inclusive=True), default=300.0,
+                   help="poses per second")
+    p.add_argument("--duration-s", type=positive_number(), default=60.0, help="measured window")
+    p.add_argument("--timeout", type=positive_number(), default=240.0, help="longest wait for the robot to move (s)")
     p.add_argument("--run-dir", type=Path, default=Path("runs/soak"), help="logs and the MCAP")
     p.add_argument("--models-dir", type=Path, default=Path("models"), help="model cache")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -123,7 +129,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> i
         try:
             with Watcher(system.endpoint, poses=True) as watcher:
                 system.start_all()
-                r = soak(system, watcher, args.duration_s)
+                r = soak(system, watcher, args.duration_s, args.timeout)
         finally:
             r_exit = system.close()
     r["exit"] = r_exit
@@ -134,8 +140,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> i
               f"{r['occupancy_received']} occupancy grids received, of them for the window's poses "
               f"{r['occupancy_for_poses']}; poses without a grid of their own by the end: {r['dropped']}")
         print(f"predictor latency p50/p99/max {_fmt(r['latency_s'])}; p50 first tenth "
-              f"{(r['latency_first_tenth_p50_s'] or 0) * 1e3:.0f} ms, last tenth "
-              f"{(r['latency_last_tenth_p50_s'] or 0) * 1e3:.0f} ms")
+              f"{_ms(r['latency_first_tenth_p50_s'])}, last tenth {_ms(r['latency_last_tenth_p50_s'])}")
         print(f"reaction latency (pose -> a grid for it or a later pose) p50/p99/max "
               f"{_fmt(r['reaction_latency_s'])}; poses never covered: {r['poses_never_covered']}")
         print(f"plans {r['plans']}: period p50/p99/max {_fmt(r['replan_period_s'])}, planning "

@@ -10,7 +10,9 @@ liveliness tokens.
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -19,11 +21,28 @@ from pathlib import Path
 from services.processes import ServiceProcess, free_port
 from shared.config import ZenohConfig
 from shared.protocol import HumanPose, Keys, OccupancyGrid, Plan, RobotState
+from shared.runtime import UserError
 from shared.transport import Presence, open_session, subscribe
 
-__all__ = ["SystemSpec", "ProcessSystem", "Watcher", "rss_mb", "SERVICES"]
+__all__ = ["SystemSpec", "ProcessSystem", "Watcher", "rss_mb", "positive_number", "SERVICES", "PROCESSES"]
 
 SERVICES = ("predictor", "planner", "replayer", "executor")
+PROCESSES = ("router", *SERVICES)
+"""Every process of the system: what ``foresight bench faults --victims`` may name."""
+
+
+def positive_number(low: float = 0.0, high: float = math.inf, inclusive: bool = False) -> Callable[[str], float]:
+    """An argparse ``type``: a finite number above ``low`` (or equal to it with ``inclusive``) and at most ``high``."""
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not (math.isfinite(x) and (low <= x if inclusive else low < x) and x <= high):
+            bound = f"{'>=' if inclusive else '>'} {low:g}" + (f" and <= {high:g}" if high < math.inf else "")
+            raise argparse.ArgumentTypeError(f"{text!r}: must be a finite number {bound}")
+        return x
+    return parse
 
 
 def rss_mb(pid: int) -> float:
@@ -87,12 +106,21 @@ class ProcessSystem:
         }
         self.procs: dict[str, ServiceProcess] = {}
         self.starts: dict[str, int] = {}
+        self.mcap_path = spec.mcap_path
+        """The MCAP the executor now running writes (``run-<n>.mcap`` after the n-th restart)."""
 
     def start(self, name: str) -> ServiceProcess:
-        """Start (or start again) one process; its log is ``run_dir/<name>[-<n>].log``."""
+        """Start (or start again) one process.
+
+        Its log is ``run_dir/<name>[-<n>].log``; the executor started again writes ``run_dir/run-<n>.mcap``, so
+        that every run's record is kept.
+        """
         n = self.starts.get(name, 0)
         self.starts[name] = n + 1
         module, args = self.args[name]
+        if name == "executor" and n > 0 and self.spec.mcap:  # its own log: opening run.mcap again would empty it
+            self.mcap_path = self.spec.run_dir / f"run-{n}.mcap"
+            args = [str(self.mcap_path) if a == str(self.spec.mcap_path) else a for a in args]
         log = self.spec.run_dir / (f"{name}.log" if n == 0 else f"{name}-{n}.log")
         self.procs[name] = ServiceProcess(name, module, args, log).start()
         return self.procs[name]
@@ -113,6 +141,25 @@ class ProcessSystem:
     def rss(self) -> dict[str, float]:
         """Resident memory (MB) of every running process."""
         return {n: rss_mb(p.proc.pid) for n, p in self.procs.items() if p.running and p.proc is not None}
+
+    def exited(self) -> dict[str, int]:
+        """The processes that have exited, with their exit statuses."""
+        return {n: p.returncode for n, p in self.procs.items() if p.returncode is not None}
+
+    def wait_moving(self, watcher: Watcher, timeout: float, before: str = "") -> None:
+        """Wait until the robot moves; stop waiting as soon as a process has exited.
+
+        Raises:
+            UserError: The robot did not move within ``timeout`` s, or a process exited first; the message
+                names the processes that exited, their last log line, and where the logs are.
+        """
+        watcher.wait(lambda: watcher.moving() or bool(self.exited()), timeout)
+        if watcher.moving() and not self.exited():
+            return
+        gone = self.exited()
+        why = "; ".join(f"{n} exited with status {c} ({self.procs[n].tail(1) or 'no output'})"
+                        for n, c in gone.items()) if gone else f"the robot did not move within {timeout:g} s"
+        raise UserError(f"{why}{before}; the logs are in {self.spec.run_dir}")
 
     def close(self, timeout: float = 15.0) -> dict[str, int | None]:
         """Stop everything (SIGTERM, then SIGKILL after ``timeout``); returns the exit statuses."""
@@ -151,12 +198,17 @@ class Watcher:
     def __enter__(self) -> Watcher:
         session = self._ctx.__enter__()
         k = self.keys
-        self._subs = [subscribe(session, k.robot_state, RobotState, self._rec(self.states)),
-                      subscribe(session, k.occupancy, OccupancyGrid, self._rec(self.occupancy)),
-                      subscribe(session, k.plan, Plan, self._rec(self.plans))]
-        if self._poses:
-            self._subs.append(subscribe(session, k.pose, HumanPose, self._rec(self.poses)))
-        self.presence = Presence(session, k, "watcher", on_change=self._token)
+        self._subs: list = []
+        self.presence: Presence | None = None
+        try:  # a failed declaration closes what was opened (the session above all)
+            wanted = [(k.robot_state, RobotState, self.states), (k.occupancy, OccupancyGrid, self.occupancy),
+                      (k.plan, Plan, self.plans)] + ([(k.pose, HumanPose, self.poses)] if self._poses else [])
+            for key, kind, items in wanted:
+                self._subs.append(subscribe(session, key, kind, self._rec(items)))
+            self.presence = Presence(session, k, "watcher", on_change=self._token)
+        except BaseException:
+            self.__exit__()
+            raise
         return self
 
     def _token(self, service: str, alive: bool) -> None:
@@ -164,10 +216,13 @@ class Watcher:
             self.tokens.append((time.monotonic(), service, alive))
 
     def __exit__(self, *exc: object) -> None:
-        self.presence.close()
-        for s in self._subs:
-            s.undeclare()
-        self._ctx.__exit__(None, None, None)
+        try:
+            if self.presence is not None:
+                self.presence.close()
+            for s in self._subs:
+                s.undeclare()
+        finally:
+            self._ctx.__exit__(None, None, None)
 
     def snapshot(self, items: list) -> list:
         """A copy of one of the lists."""

@@ -24,7 +24,6 @@ from __future__ import annotations
 import fcntl
 import hashlib
 import json
-import os
 import zipfile
 from collections.abc import Callable, Iterator, MutableMapping
 from contextlib import contextmanager
@@ -37,6 +36,7 @@ from sklearn.mixture import GaussianMixture
 
 from services.predictor.model import MODEL_VERSION
 from services.predictor.volumes import Sweep
+from shared.atomic_file import atomic_write
 
 __all__ = ["FitStore", "fit_store", "store_tag"]
 
@@ -129,14 +129,8 @@ class FitStore(MutableMapping[str, Any]):
     def __setitem__(self, key: str, value: Any) -> None:
         arrays = _encode(value)  # refuses what it cannot store before anything changes
         self._memory[key] = value
-        self.directory.mkdir(parents=True, exist_ok=True)
-        path = self._path(key)
-        tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
-        with open(tmp, "wb") as handle:
+        with atomic_write(self._path(key), fsync=True) as handle:  # a reader (or a crash) sees the whole entry or none
             np.savez(handle, **arrays)
-            handle.flush()
-            os.fsync(handle.fileno())  # on disk before it takes the entry's name, so a crash leaves no short entry
-        os.replace(tmp, path)  # atomic: a reader sees the whole entry or none
 
     def __delitem__(self, key: str) -> None:
         self._memory.pop(key, None)

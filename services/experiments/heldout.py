@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import os
-import threading
 from collections.abc import MutableMapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -141,12 +139,9 @@ def human_file(library: MotionLibrary, demo: Demonstration, directory: Path) -> 
     tag = hashlib.sha256(np.ascontiguousarray(demo.features, dtype=np.float64).tobytes()
                          + f"{demo.class_name}|{demo.label}|{demo.index}".encode()).hexdigest()[:12]
     path = Path(directory) / f"human-{demo.label}-{demo.index}-{tag}.npz"
-    if not path.is_file():  # written whole, then renamed: report workers running in parallel share the directory
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.stem}.{os.getpid()}.{threading.get_ident()}.npz")
+    if not path.is_file():  # save_library writes whole, then renames: report workers share the directory
         save_library(MotionLibrary(class_names=list(library.class_names), demos=[demo], issues=[],
-                                   source=f"{library.source} ({demo.class_name} #{demo.index})"), tmp)
-        os.replace(tmp, path)
+                                   source=f"{library.source} ({demo.class_name} #{demo.index})"), path)
     return path
 
 

@@ -13,11 +13,14 @@ fitted features).
 from __future__ import annotations
 
 import csv
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from shared.atomic_file import make_parent
+from shared.feature_sets import require_mapping
 from shared.human import HumanModel
 from shared.library import Demonstration, MotionLibrary
 
@@ -66,11 +69,20 @@ def write_keypoint_library(lib: MotionLibrary, out: Path, noise_m: float = 0.0, 
         seed: Seed of the noise, drops and missing points.
 
     Returns:
-        The CSV files written.
+        The CSV files written. Any other ``*.csv`` in ``out`` (an earlier library's classes) is removed: the
+        reader takes every one, and would mix the two libraries.
+
+    Raises:
+        ValueError: The library's features have no mapping to the human model (checked before anything is
+            written), or ``noise_m`` is not finite.
     """
+    mapping = require_mapping(lib.feature_names, "a keypoint library (the human model's joint positions)",
+                    f"library {lib.source}")
+    if not (math.isfinite(noise_m) and noise_m >= 0):
+        raise ValueError(f"noise_m: must be a finite number >= 0, got {noise_m}")
     rng = np.random.default_rng(seed)
     model = HumanModel()
-    out.mkdir(parents=True, exist_ok=True)
+    make_parent(out / "x.csv")
     header = ["demo", "frame", *(f"{p}_{a}" for p in POINT_NAMES for a in "xyz")]
     written = []
     for label, name in enumerate(lib.class_names):
@@ -79,7 +91,7 @@ def write_keypoint_library(lib: MotionLibrary, out: Path, noise_m: float = 0.0, 
             w = csv.writer(f)
             w.writerow(header)
             for demo in (d for d in lib.demos if d.label == label):
-                pts = model.joint_positions(demo.features)  # (T, J, 3)
+                pts = model.joint_positions(mapping.to_human(demo.features))  # (T, J, 3)
                 pts = pts + rng.normal(0.0, noise_m, pts.shape) if noise_m > 0 else pts
                 keep = rng.random(len(pts)) >= drop
                 keep[0] = True
@@ -91,6 +103,8 @@ def write_keypoint_library(lib: MotionLibrary, out: Path, noise_m: float = 0.0, 
                         row[3 * which[t]:3 * which[t] + 3] = ["", "", ""]
                     w.writerow([demo.index, t, *row])
         written.append(path)
+    for stale in set(out.glob("*.csv")) - set(written):
+        stale.unlink()
     return written
 
 

@@ -92,8 +92,11 @@ def load_library(path: str | Path, report: bool = True) -> MotionLibrary:
         The library.
 
     Raises:
-        LibraryError: If the path does not exist, holds no class files, or is not a valid npz.
+        LibraryError: If the path is empty (it would read the current directory), does not exist, holds no
+            class files, or is not a valid npz.
     """
+    if not str(path).strip():
+        raise LibraryError("library path: empty (give a directory of compound_*.csv or a .npz)")
     lib = _read(Path(path).expanduser())
     _check_wire_limits(lib, path)
     if report:

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from shared.atomic_file import atomic_write
+
 from .motions import Demonstration, LibraryError, LibraryIssue, MotionLibrary
 from .validation import validate_block
 
@@ -26,35 +28,42 @@ def save_library(lib: MotionLibrary, path: str | Path) -> None:
 
     Args:
         lib: The library.
-        path: Output file; ``.npz`` is appended by numpy if missing. Parent directories are created.
+        path: Output file; ``.npz`` is appended if missing. Parent directories are created. Written whole
+            (a temporary file renamed): an existing library is replaced only by a complete one.
     """
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
+    if p.suffix != ".npz":
+        p = p.with_name(p.name + ".npz")
     feats = (np.concatenate([d.features for d in lib.demos]).astype(np.float64)
              if lib.demos else np.zeros((0, lib.n_features)))
 
     def strings(items: list[str]) -> np.ndarray:
         return np.array(items, dtype=np.str_) if items else np.zeros(0, dtype="<U1")
 
-    np.savez_compressed(
-        p,
-        format_version=np.int64(NPZ_FORMAT),
-        feature_names=strings(list(lib.feature_names)),
-        class_names=strings(list(lib.class_names)),
-        features=feats,
-        demo_label=np.array([d.label for d in lib.demos], dtype=np.int64),
-        demo_index=np.array([d.index for d in lib.demos], dtype=np.int64),
-        demo_length=np.array([d.n_samples for d in lib.demos], dtype=np.int64),
-        demo_source=strings([d.source for d in lib.demos]),
-        issue_class=strings([i.class_name for i in lib.issues]),
-        issue_block=np.array([i.block for i in lib.issues], dtype=np.int64),
-        issue_reason=strings([i.reason for i in lib.issues]),
-        source=np.array(lib.source, dtype=np.str_),
-    )
+    with atomic_write(p) as f:
+        np.savez_compressed(
+            f,
+            format_version=np.int64(NPZ_FORMAT),
+            feature_names=strings(list(lib.feature_names)),
+            class_names=strings(list(lib.class_names)),
+            features=feats,
+            demo_label=np.array([d.label for d in lib.demos], dtype=np.int64),
+            demo_index=np.array([d.index for d in lib.demos], dtype=np.int64),
+            demo_length=np.array([d.n_samples for d in lib.demos], dtype=np.int64),
+            demo_source=strings([d.source for d in lib.demos]),
+            issue_class=strings([i.class_name for i in lib.issues]),
+            issue_block=np.array([i.block for i in lib.issues], dtype=np.int64),
+            issue_reason=strings([i.reason for i in lib.issues]),
+            source=np.array(lib.source, dtype=np.str_),
+        )
 
 
 _NPZ_KEYS = ("format_version", "feature_names", "class_names", "features", "demo_label", "demo_index",
              "demo_length", "demo_source", "issue_class", "issue_block", "issue_reason", "source")
+
+
+def _starts(head: bytes) -> str:
+    return "; the file is empty" if not head else f"; it starts with {head!r}"
 
 
 def load_npz(path: Path) -> MotionLibrary:
@@ -64,6 +73,10 @@ def load_npz(path: Path) -> MotionLibrary:
         LibraryError: If the file is unreadable, not a Foresight library npz, or of another format version.
     """
     try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+        if head not in (b"PK\x03\x04", b"PK\x05\x06") and not head.startswith(b"\x93NUM"):
+            raise LibraryError(f"library file {str(path)!r}: not an npz archive (a zip file){_starts(head)}")
         loaded = np.load(path, allow_pickle=False)
         if not isinstance(loaded, np.lib.npyio.NpzFile):  # one .npy array under an .npz name
             raise LibraryError(f"library file {str(path)!r}: one array, not a Foresight library npz")

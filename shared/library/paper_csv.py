@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from shared.atomic_file import make_parent
 from shared.feature_sets import generic_names
 
 from .motions import FEATURE_NAMES, Demonstration, LibraryError, LibraryIssue, MotionLibrary
@@ -283,10 +284,11 @@ def write_csv_dir(lib: MotionLibrary, directory: str | Path) -> list[Path]:
         directory: Output directory (created).
 
     Returns:
-        The files written.
+        The files written. Any other ``compound_*.csv`` in ``directory`` (an earlier, larger library's) is
+        removed: the reader takes every one, and would mix the two libraries.
     """
     out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
+    make_parent(out / "compound_0.csv")
     files = []
     for m in range(lib.n_classes):
         rows = [np.column_stack([np.arange(d.n_samples), d.features]) for d in lib.by_class(m)]
@@ -294,4 +296,6 @@ def write_csv_dir(lib: MotionLibrary, directory: str | Path) -> list[Path]:
         np.savetxt(path, np.concatenate(rows) if rows else np.zeros((0, 1 + lib.n_features)), delimiter=",",
                    fmt=["%d"] + ["%.9g"] * lib.n_features)
         files.append(path)
+    for stale in set(out.glob("compound_*.csv")) - set(files):
+        stale.unlink()
     return files

@@ -16,7 +16,6 @@ import datetime as dt
 import ipaddress
 import os
 import re
-import tempfile
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +26,8 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.hazmat.primitives.asymmetric.types import PrivateKeyTypes
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+from ..atomic_file import atomic_write
 
 __all__ = ["Issued", "CertificateError", "make_authority", "issue", "init_security_dir", "read_role", "verify_role",
            "check_host", "check_directory", "issued_hosts", "certificate_hosts", "LOOPBACK_HOSTS", "CA_DAYS"]
@@ -160,17 +161,8 @@ def issue(authority: Issued, role: str, hosts: Sequence[str] = (), days: int = 3
 
 def _write(path: Path, data: bytes, private: bool) -> None:
     """Write ``data`` to ``path`` whole (a temporary file renamed), 0600 if ``private`` before a byte is written."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)  # a new file, 0600:
-    tmp = Path(name)  # never one planted there (a symbolic link would have been followed)
-    try:
-        os.fchmod(fd, 0o600 if private else 0o644)  # whatever the umask or a stale temporary file had
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)  # an existing file, whatever its permissions, is replaced, never written into
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_write(path, mode=0o600 if private else 0o644) as f:
+        f.write(data)
 
 
 def _load_cert(path: Path) -> x509.Certificate:

@@ -38,3 +38,13 @@ def test_help_has_no_rest_markup(argv, capsys) -> None:
     assert exc.value.code == 0
     out = capsys.readouterr().out
     assert out.startswith("usage: foresight") and "``" not in out
+
+
+def test_no_command_is_an_error_with_the_help_on_stderr(capsys) -> None:
+    from tools.foresight import main
+
+    assert main([]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and "commands:" in err
+    assert main(["--help"]) == 0
+    assert "commands:" in capsys.readouterr().out

@@ -132,3 +132,71 @@ def test_generate_bad_seed_or_output_is_one_line(tmp_path, capsys, argv) -> None
         library_main([a.replace("{d}", str(tmp_path)) for a in argv])
     err = capsys.readouterr().err.strip()
     assert e.value.code == 2 and err.count("\n") == 0 and err, err
+
+
+def test_an_output_directory_is_the_librarys_own(tmp_path, capsys) -> None:
+    """A smaller library written where a larger one was leaves none of the larger one's classes behind."""
+    out = tmp_path / "lib"
+    assert library_main(["generate", "--classes", "3", "--demos", "1", "--out", str(out)]) == 0
+    assert library_main(["generate", "--classes", "2", "--demos", "1", "--out", str(out)]) == 0
+    assert "removed 1 file(s) of an earlier library: compound_2.csv" in capsys.readouterr().out
+    assert load_library(out).n_classes == 2
+    kp = tmp_path / "kp"
+    assert library_main(["to-keypoints", str(tmp_path / "lib"), "--out", str(kp)]) == 0
+    (kp / "an_old_class.csv").write_text("demo,frame\n")
+    assert library_main(["to-keypoints", str(tmp_path / "lib"), "--out", str(kp)]) == 0
+    assert "removed 1 file(s) of an earlier library: an_old_class.csv" in capsys.readouterr().out
+    assert len(list(kp.glob("*.csv"))) == 2
+
+
+def test_to_keypoints_refuses_before_writing(wide, tmp_path, capsys) -> None:
+    """A 16-feature library used to leave a header-only CSV behind; infinite noise wrote a library of inf."""
+    write_csv_dir(wide, tmp_path / "wide")
+    wide = tmp_path / "wide"
+    for argv, text in (([str(wide), "--out", str(tmp_path / "kp")], "needs a mapping"),
+                       ([str(wide), "--out", str(tmp_path / "kp"), "--noise-m", "inf"], "--noise-m"),
+                       ([str(wide), "--out", ""], "--out: empty")):
+        with pytest.raises(SystemExit) as exc:
+            library_main(["to-keypoints", *argv])
+        err = capsys.readouterr().err.strip()
+        assert exc.value.code == 2 and err.count("\n") == 0 and text in err, err
+    assert not (tmp_path / "kp").exists()
+
+
+@pytest.mark.parametrize("plot, text", [("top.txt", "ending in .png"), ("top", "ending in .png"),
+                                        ("", "--plot: empty")])
+def test_generate_refuses_a_plot_it_could_not_write_before_writing_the_library(tmp_path, capsys, plot, text):
+    with pytest.raises(SystemExit) as exc:
+        library_main(["generate", "--classes", "1", "--demos", "1", "--out", str(tmp_path / "l.npz"),
+                      "--plot", str(tmp_path / plot) if plot else ""])
+    assert exc.value.code == 2 and text in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv", [["info", ""], ["validate", " "], ["generate", "--out", ""],
+                                  ["convert", "x", "--out", ""]])
+def test_an_empty_path_is_not_the_current_directory(tmp_path, monkeypatch, capsys, argv) -> None:
+    monkeypatch.chdir(tmp_path)
+    write_csv_dir(generate_library(1, 1, seed=0), tmp_path)  # what an empty path used to read (or scatter over)
+    with pytest.raises(SystemExit) as exc:
+        library_main(argv)
+    assert exc.value.code == 2 and "empty" in capsys.readouterr().err
+
+
+def test_convert_refuses_a_library_without_a_valid_demonstration(tmp_path, capsys) -> None:
+    d = tmp_path / "bad"
+    d.mkdir()
+    (d / "compound_0.csv").write_text("0," + ",".join(["nan"] * 12) + "\n")
+    with pytest.raises(SystemExit) as exc:
+        library_main(["convert", str(d), "--out", str(tmp_path / "out.npz")])
+    assert exc.value.code == 2 and "no valid demonstration, nothing to convert" in capsys.readouterr().err
+    assert not (tmp_path / "out.npz").exists()
+
+
+def test_a_file_in_the_way_of_the_output_is_named(tmp_path, capsys) -> None:
+    (tmp_path / "afile").write_text("")
+    for argv in (["generate", "--classes", "1", "--demos", "1", "--out", str(tmp_path / "afile" / "sub" / "l.npz")],
+                 ["generate", "--classes", "1", "--demos", "1", "--out", str(tmp_path / "afile" / "dir")]):
+        with pytest.raises(SystemExit):
+            library_main(argv)
+        assert f"{tmp_path / 'afile'}: a file is in the way" in capsys.readouterr().err

@@ -38,3 +38,21 @@ def test_missing_library_is_one_line(tmp_path, capsys) -> None:
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not found" in err[0]
+
+
+@pytest.mark.parametrize("out, text", [("reach", "ending in .png"), ("reach.txt", "ending in .png"), ("", "empty")])
+def test_an_output_that_would_not_be_the_png_named_is_refused_first(tmp_path, capsys, out, text) -> None:
+    """matplotlib wrote reach.png for --out reach (the tool printed 'wrote reach'), or refused .txt in a traceback."""
+    lib = tmp_path / "lib.npz"
+    save_library(generate_library(1, 1, seed=0), lib)
+    with pytest.raises(SystemExit) as exc:
+        main([str(lib), "--out", str(tmp_path / out) if out else ""])
+    assert exc.value.code == 2 and text in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lib.npz"]
+
+
+def test_a_library_without_a_valid_demonstration_is_refused(tmp_path, capsys) -> None:
+    (tmp_path / "compound_0.csv").write_text("0," + ",".join(["nan"] * 12) + "\n")
+    with pytest.raises(SystemExit) as exc:
+        main([str(tmp_path), "--out", str(tmp_path / "r.png")])
+    assert exc.value.code == 2 and "no valid demonstration to draw" in capsys.readouterr().err

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import io
 import os
-import tempfile
 import typing
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +20,7 @@ from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata,
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
+from shared.atomic_file import atomic_write
 from shared.recording.reader import DAMAGED, open_records, read_log
 from shared.recording.writer import COMPRESSION
 from shared.runtime import UserError
@@ -68,17 +68,9 @@ def compress_log(src: str | Path, dst: str | Path, compression: str = "zstd",
     if dst.exists() and src.exists() and os.path.samefile(src, dst):  # a hard link too: writing it empties the input
         raise UserError("the output must be another file than the input")
     with open_records(src) as reader:  # the input checked (an MCAP file) before the output is touched
-        dst.parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(prefix=f".{dst.name}.", suffix=".tmp", dir=dst.parent)
-        tmp = Path(name)
-        try:  # written beside dst and renamed onto it: a failure leaves an existing dst as it was
-            with os.fdopen(fd, "wb") as f_out:
-                messages, complete, error = _copy(reader, f_out, compression, chunk_size, src)
-            os.chmod(tmp, 0o644)
-            os.replace(tmp, dst)
-        except BaseException:  # nothing half-written is left behind: not an MCAP file, a full disk, Ctrl-C
-            tmp.unlink(missing_ok=True)
-            raise
+        # written beside dst and renamed onto it: a failure (a full disk, Ctrl-C) leaves an existing dst as it was
+        with atomic_write(dst) as f_out:
+            messages, complete, error = _copy(reader, f_out, compression, chunk_size, src)
     return CompressResult(src.stat().st_size, dst.stat().st_size, messages, complete, same_messages(src, dst), error)
 
 

@@ -198,8 +198,18 @@ def test_missing_paths(tmp_path):
     with pytest.raises(LibraryError, match="neither a directory"):
         load_library(tmp_path / "x.txt")
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
-    with pytest.raises(LibraryError, match="bad.npz.*unreadable npz"):
+    with pytest.raises(LibraryError, match=r"bad.npz.*not an npz archive \(a zip file\); it starts with b'not '"):
         load_library(tmp_path / "bad.npz")
+    (tmp_path / "empty.npz").write_bytes(b"")
+    with pytest.raises(LibraryError, match="not an npz archive .*; the file is empty"):
+        load_library(tmp_path / "empty.npz")
+    (tmp_path / "cut.npz").write_bytes(b"PK\x03\x04" + bytes(40))  # a zip cut short: numpy's error, named
+    with pytest.raises(LibraryError, match="cut.npz.*unreadable npz"):
+        load_library(tmp_path / "cut.npz")
+    (tmp_path / "text.npz").write_text("# the README, saved under the library's name\n")
+    with pytest.raises(LibraryError, match="not an npz archive") as exc:  # numpy would advise allow_pickle
+        load_library(tmp_path / "text.npz")
+    assert "pickle" not in str(exc.value)
     np.savez(tmp_path / "other.npz", a=np.zeros(3))
     with pytest.raises(LibraryError, match="not a Foresight library npz"):
         load_library(tmp_path / "other.npz")
@@ -309,3 +319,24 @@ def test_a_library_whose_classes_could_not_be_published_is_refused(tmp_path, nam
     save_library(lib, tmp_path / "lib.npz")
     with pytest.raises(LibraryError, match=match):
         load_library(tmp_path / "lib.npz")
+
+
+def test_save_library_replaces_a_library_only_with_a_whole_one(tmp_path, monkeypatch):
+    """A write that fails (a full disk, Ctrl-C) leaves the earlier library readable and no temporary file."""
+    from shared.library import npz
+    from shared.synthetic import generate_library
+
+    path = tmp_path / "lib.npz"
+    save_library(generate_library(2, 1, seed=0), path)
+
+    def interrupted(f, **arrays):
+        f.write(b"PK\x03\x04 half a zip")
+        raise KeyboardInterrupt
+    monkeypatch.setattr(npz.np, "savez_compressed", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        save_library(generate_library(3, 1, seed=1), path)
+    assert load_library(path).n_classes == 2
+    assert [p.name for p in tmp_path.iterdir()] == ["lib.npz"]
+    monkeypatch.undo()
+    save_library(generate_library(3, 1, seed=1), tmp_path / "noext")
+    assert load_library(tmp_path / "noext.npz").n_classes == 3

@@ -1,0 +1,62 @@
+"""Files written whole: a temporary file beside the target, renamed onto it when complete.
+
+A reader (or a crash, a full disk, Ctrl-C) never sees half a file: the target is either the old file
+or the new one. Used for every output a later run reads back (libraries, certificates, compressed
+logs, cached fits).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import BinaryIO
+
+__all__ = ["atomic_write", "make_parent"]
+
+
+def make_parent(path: str | os.PathLike[str]) -> Path:
+    """Create ``path``'s parent directories; returns ``path`` as a :class:`Path`.
+
+    Raises:
+        NotADirectoryError: A part of the parent path is a file (mkdir's own error says "File exists").
+    """
+    p = Path(path)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):  # mkdir says "File exists" or "Not a directory", naming no culprit
+        blocker = next((a for a in reversed(p.parents) if a.exists() and not a.is_dir()), p.parent)
+        raise NotADirectoryError(errno.ENOTDIR, "a file is in the way (a directory is needed there)",
+                                 str(blocker)) from None
+    return p
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | os.PathLike[str], mode: int = 0o644, fsync: bool = False) -> Iterator[BinaryIO]:
+    """Yield a binary file that takes ``path``'s name only when the ``with`` block ends without an error.
+
+    Args:
+        path: The target (its parent directories are created); an existing file is replaced, never written
+            into, whatever its permissions.
+        mode: Permissions of the new file, set before a byte is written (0o600 for a private key).
+        fsync: Flush the file to disk before the rename (a crash then leaves the old file or the whole new one).
+
+    On an error (or Ctrl-C) in the block the temporary file is removed and ``path`` is left as it was.
+    """
+    p = make_parent(path)
+    fd, name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)  # a new file: never one planted
+    tmp = Path(name)
+    try:
+        os.fchmod(fd, mode)  # whatever the umask gave
+        with os.fdopen(fd, "wb") as f:
+            yield f
+            if fsync:
+                f.flush()
+                os.fsync(f.fileno())
+        os.replace(tmp, p)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
