@@ -27,6 +27,7 @@ __all__ = [
     "HERAKLES_NAMES",
     "HERAKLES_UNITS",
     "HERAKLES_RANGES",
+    "herakles_out_of_range",
     "FeatureMapping",
     "HERAKLES",
     "MAPPINGS",
@@ -77,6 +78,22 @@ HERAKLES_RANGES: dict[str, tuple[float, float]] = {
     "r_elbow_z": (-_TWO_PI, _TWO_PI),
 }
 """Per-feature ``(low, high)`` bounds of a plausible human posture (recorder frame)."""
+
+
+def herakles_out_of_range(features: np.ndarray) -> str | None:
+    """The first of the paper's 12 features outside its plausible range (:data:`HERAKLES_RANGES`), described.
+
+    Args:
+        features: ``(12,)`` a posture in the paper's feature order.
+
+    Returns:
+        ``"<name> = <value> outside its plausible range [low, high]"``, or None when every feature is inside.
+    """
+    for name, value in zip(HERAKLES_NAMES, np.asarray(features, dtype=np.float64), strict=True):
+        low, high = HERAKLES_RANGES[name]
+        if not low <= value <= high:
+            return f"{name} = {value:.6g} outside its plausible range [{low:.4g}, {high:.4g}]"
+    return None
 
 
 class MappingError(ValueError):

@@ -263,16 +263,21 @@ class ExecutorCore:
         else:
             self.holding, self.reason = False, ""
             if self.config.path_per_step > 0:  # the paper authors' pace: a fixed length of the path per step
-                self.tau += self.config.path_per_step * h / self.config.step_period_s
-                target = self.reference.at_length(self.tau)
+                advance, at = self.config.path_per_step * h / self.config.step_period_s, self.reference.at_length
             else:
-                self.tau += h
-                target = self.reference.at(self.tau)
-            v = (target - self.q) / h
+                advance, at = h, self.reference.at
+            target = at(self.tau + advance)
             vmax = self.limits.velocity * self.config.velocity_scale
+            v = (target - self.q) / h
             scale = float(np.max(np.abs(v) / vmax))
-            if scale > 1.0:
-                v = v / scale
+            if scale > 1.0:  # the limits slow the arm: the reference advances only as far as the arm can follow
+                advance /= scale  # (time scaling), so the arm stays on the path at a bend instead of cutting it
+                target = at(self.tau + advance)
+                v = (target - self.q) / h
+                scale = float(np.max(np.abs(v) / vmax))
+                if scale > 1.0:
+                    v = v / scale
+            self.tau += advance
             q_new = self.limits.clamp(self.q + v * h)
             self.qd = (q_new - self.q) / h
             self.q = q_new

@@ -55,6 +55,6 @@ class Reference:
         if tau >= self.duration:
             return self.waypoints[-1].copy()
         x = tau / self.dt
-        i = int(math.floor(x))
+        i = min(int(math.floor(x)), len(self.waypoints) - 2)  # tau just below duration may round to the last index
         a = x - i
         return (1.0 - a) * self.waypoints[i] + a * self.waypoints[i + 1]

@@ -284,7 +284,7 @@ class Planner:
         return interpolate_path(tau, s_t), s_t
 
     def departure(self, q_current: Any) -> float | None:
-        """Distance (rad, the max-norm of :func:`project_onto_path`) of ``q_current`` ``(D,)`` from tau_best.
+        """Distance (rad, the Euclidean norm of :func:`project_onto_path`) of ``q_current`` ``(D,)`` from tau_best.
 
         None before the first step. Beyond ``off_path_tol`` the robot has left the plan (the real-time
         service replans at once, ``services.planner.replan``).

@@ -24,6 +24,7 @@ read only public tables: the robot's ``ChainTables``/``SphereTables``, the field
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -61,12 +62,19 @@ class CostConfig:
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first bad value."""
-        checks = [("w_smooth", self.w_smooth >= 0), ("w_obstacle", self.w_obstacle >= 0),
-                  ("w_human", self.w_human >= 0), ("clearance", self.clearance > 0),
-                  ("sdf_resolution", self.sdf_resolution > 0), ("human_points", self.human_points in (1, 7)),
+        def finite(x: float) -> bool:  # an infinite weight or margin makes every cost inf * 0 or inf - inf: NaN
+            return math.isfinite(x)
+
+        checks = [("w_smooth", finite(self.w_smooth) and self.w_smooth >= 0),
+                  ("w_obstacle", finite(self.w_obstacle) and self.w_obstacle >= 0),
+                  ("w_human", finite(self.w_human) and self.w_human >= 0),
+                  ("clearance", finite(self.clearance) and self.clearance > 0),
+                  ("self_clearance", finite(self.self_clearance)),
+                  ("sdf_resolution", finite(self.sdf_resolution) and self.sdf_resolution > 0),
+                  ("human_points", self.human_points in (1, 7)),
                   ("human_point_radius", 0 <= self.human_point_radius <= 1),
                   ("human_interp", self.human_interp in ("trilinear", "nearest")),
-                  ("torso_table_step", self.torso_table_step >= 0)]
+                  ("torso_table_step", finite(self.torso_table_step) and self.torso_table_step >= 0)]
         for name, ok in checks:
             if not ok:
                 raise ValueError(f"costs.{name}: bad value {getattr(self, name)!r}")

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from shared.config import LOG_LEVELS, ConfigError, opt
-from shared.feature_sets import LIVE_MAPPING, require_mapping
+from shared.feature_sets import LIVE_MAPPING, herakles_out_of_range, require_mapping
 from shared.human import HumanModel, place_in_scene
 from shared.protocol import OccupancyGrid
 from shared.scene import SCENE_HELP, Grid, Scene
@@ -212,12 +212,16 @@ class PredictorCore:
             ``(M,)`` the class posterior p(C_m | xi) after it.
 
         Raises:
-            PredictorError: If ``features`` is not 12 finite numbers or ``index`` is negative.
+            PredictorError: If ``features`` is not 12 finite numbers, one is outside its plausible range
+                (``shared.feature_sets.HERAKLES_RANGES``, as on the wire), or ``index`` is negative.
         """
         f = np.asarray(features, dtype=np.float64)
         if f.shape != (12,) or not np.all(np.isfinite(f)):
             raise PredictorError(f"features: expected 12 finite numbers, got shape {f.shape}"
                                  + ("" if f.shape != (12,) else " with NaN/inf"))
+        out = herakles_out_of_range(f)  # an absurd posture would make every class's evidence -inf for good
+        if out:
+            raise PredictorError(f"features: {out}; the posture is not observed")
         t = self._count if index is None else int(index)
         if t < 0:
             raise PredictorError(f"index must be >= 0, got {t}")
@@ -259,7 +263,8 @@ class PredictorCore:
             The updated prediction.
 
         Raises:
-            PredictorError: If ``features`` is not 12 finite numbers or ``index`` is negative.
+            PredictorError: If ``features`` is not 12 finite numbers, one is outside its plausible range
+                (``shared.feature_sets.HERAKLES_RANGES``, as on the wire), or ``index`` is negative.
         """
         self.observe(features, index)
         return self.predict()

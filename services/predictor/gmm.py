@@ -172,7 +172,7 @@ def posterior_from_log_likelihood(log_likelihood: np.ndarray, log_prior: np.ndar
         temperature: tau > 0, the divisor of the log-likelihoods.
 
     Returns:
-        ``(..., M)`` posteriors summing to 1 over the last axis.
+        ``(..., M)`` posteriors summing to 1 over the last axis; uniform in a row without a finite value.
 
     Raises:
         ValueError: If ``temperature`` is not a finite number > 0.
@@ -184,6 +184,6 @@ def posterior_from_log_likelihood(log_likelihood: np.ndarray, log_prior: np.ndar
         ll = ll / temperature
     if log_prior is not None:
         ll = ll + log_prior
-    if not np.any(np.isfinite(ll)):
-        return np.full(ll.shape, 1.0 / ll.shape[-1])
-    return np.exp(ll - logsumexp(ll, axis=-1, keepdims=True))
+    known = np.isfinite(ll).any(axis=-1, keepdims=True)  # a row with no finite value: no evidence, uniform
+    ll = np.where(known, ll, 0.0)
+    return np.where(known, np.exp(ll - logsumexp(ll, axis=-1, keepdims=True)), 1.0 / ll.shape[-1])

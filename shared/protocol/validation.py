@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from shared.feature_sets import HERAKLES_NAMES, HERAKLES_RANGES
+from shared.feature_sets import herakles_out_of_range
 
 from . import limits as L
 from .messages import ClassPosterior, ClockTick, DemoMarker, HumanKeypoints, HumanPose, OccupancyGrid, Plan, RobotState
@@ -36,9 +36,6 @@ from .schema import Message
 from .schema import field_error as _err
 
 __all__ = ["RobotSpec", "GridSpec", "Expectations", "check_values"]
-
-_FEATURE_LOW = np.array([HERAKLES_RANGES[n][0] for n in HERAKLES_NAMES])
-_FEATURE_HIGH = np.array([HERAKLES_RANGES[n][1] for n in HERAKLES_NAMES])
 
 
 def _numpy(x: Any) -> np.ndarray:
@@ -192,11 +189,9 @@ def _velocity(t: str, qd: np.ndarray, exp: Expectations) -> None:
 def _pose(msg: HumanPose, exp: Expectations) -> None:
     _counter(msg.TYPE, "demo_id", msg.demo_id, 0, L.MAX_DEMO_ID)
     _counter(msg.TYPE, "index", msg.index, 0, L.MAX_SAMPLES)
-    out = np.nonzero((msg.features < _FEATURE_LOW) | (msg.features > _FEATURE_HIGH))[0]
-    if out.size:
-        j = int(out[0])
-        raise _err(msg.TYPE, "features", f"{HERAKLES_NAMES[j]} = {msg.features[j]:.6g} outside its plausible "
-                   f"range [{_FEATURE_LOW[j]:.4g}, {_FEATURE_HIGH[j]:.4g}]", "out-of-range")
+    out = herakles_out_of_range(msg.features)
+    if out:
+        raise _err(msg.TYPE, "features", out, "out-of-range")
 
 
 def _keypoints(msg: HumanKeypoints, exp: Expectations) -> None:

@@ -302,3 +302,20 @@ def test_a_device_the_machine_lacks_is_a_config_error(device: str, match: str) -
     if not __import__("torch").cuda.is_available():
         with pytest.raises(ConfigError, match="torch sees no CUDA device"):
             ExecutorConfig(device="cuda").validate()
+
+
+def test_a_lagging_arm_stays_on_the_path_at_a_bend() -> None:
+    """The velocity limits slow the arm: the reference waits for it (it used to run on, and the arm cut the
+    corner of an L-shaped path by 0.46 rad)."""
+    limits = ArmLimits(("a", "b"), np.array([-5.0, -5.0]), np.array([5.0, 5.0]), np.array([1.0, 1.0]))
+    core = ExecutorCore(limits, np.zeros(2), ExecutorConfig(stale_limit_s=100.0, require_occupancy=False))
+    plan = make_plan(np.zeros(2), [np.zeros(2)], names=("a", "b"))
+    plan.trajectories = np.array([[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]], np.float32)  # 10x the limits
+    core.adopt(plan)
+    worst = 0.0
+    for _ in range(300):
+        core.step(0.01)
+        x, y = core.q
+        worst = max(worst, min(np.hypot(x - np.clip(x, 0, 1), y), np.hypot(x - 1, y - np.clip(y, 0, 1))))
+        assert np.all(np.abs(core.qd) <= limits.velocity + 1e-9)
+    assert core.reached and worst < 0.02, worst

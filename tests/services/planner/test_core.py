@@ -240,6 +240,8 @@ def test_config_resolves_and_names_bad_values() -> None:
         PlannerConfig(cost=CostConfig(w_human=-1)).validate()
     with pytest.raises(ConfigError, match="planner.velocity_scale"):
         PlannerConfig(velocity_scale=0).validate()
+    with pytest.raises(ConfigError, match="planner.seed: bad value -1"):  # every step failed in SeedSequence
+        PlannerConfig(seed=-1).validate()
     with pytest.raises(ConfigError, match=r"^--stomp\.iterations: expected int"):
         resolve_config("planner", PlannerServiceConfig, parser.parse_args(["--stomp.iterations", "x"]), env={})
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -123,6 +125,12 @@ def test_config_validation() -> None:
         CostConfig(human_points=3).validate()
     with pytest.raises(ValueError, match="clearance"):
         CostConfig(clearance=0).validate()
+    # an infinite weight or margin made every step's costs NaN (inf * 0, inf - inf): no plan could be sent
+    for field in ("w_smooth", "w_obstacle", "w_human", "clearance", "self_clearance", "sdf_resolution",
+                  "torso_table_step"):
+        for bad in (math.inf, math.nan):
+            with pytest.raises(ValueError, match=rf"costs\.{field}: bad value"):
+                CostConfig(**{field: bad}).validate()
 
 
 def test_torso_tables_match_direct_evaluation(scene, robot) -> None:

@@ -66,3 +66,12 @@ def test_tempered_posterior() -> None:
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="temperature"):
             posterior_from_log_likelihood(ll, temperature=bad)
+
+
+def test_a_row_without_evidence_is_uniform_in_a_batch_too() -> None:
+    """The fallback used to be global: a batch with one such row gave NaN there (and a NaN log loss)."""
+    ll = np.array([[0.0, -2.0], [-np.inf, -np.inf]])
+    p = posterior_from_log_likelihood(ll)
+    np.testing.assert_allclose(p[1], [0.5, 0.5])
+    np.testing.assert_allclose(p[0], posterior_from_log_likelihood(ll[0]))
+    np.testing.assert_allclose(posterior_from_log_likelihood(ll[1]), [0.5, 0.5])

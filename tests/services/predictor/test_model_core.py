@@ -132,13 +132,25 @@ def test_current_occupancy_is_the_posture(small_model: PredictionModel, small_li
     assert occ[max(pelvis[0] - 2, 0):pelvis[0] + 3, max(pelvis[1] - 2, 0):pelvis[1] + 3].sum() > 0
 
 
-def test_bad_input_rejected(small_model: PredictionModel, scene) -> None:
+def test_bad_input_rejected(small_model: PredictionModel, small_library, scene) -> None:
     core = PredictorCore(small_model, scene)
     core.reset(0)
     with pytest.raises(PredictorError, match="12 finite"):
         core.update(np.zeros(11))
     with pytest.raises(PredictorError, match="NaN"):
         core.update(np.full(12, np.nan))
+    demo = small_library.demos[0].features
+    core.observe(demo[0])
+    huge = demo[1].copy()
+    huge[0] = 1e200  # finite, but every class's log-likelihood overflowed to -inf and stayed so for good
+    with pytest.raises(PredictorError, match=r"pelvis_x = 1e\+200 outside its plausible range"):
+        core.observe(huge)
+    after = core.observe(demo[1])  # the refused posture left no trace
+    twin = PredictorCore(small_model, scene)
+    twin.reset(0)
+    twin.observe(demo[0])
+    np.testing.assert_array_equal(after, twin.observe(demo[1]))
+    assert not np.allclose(after, 1.0 / len(after))
     with pytest.raises(PredictorError, match="method"):
         PredictorCore(small_model, scene, PredictorConfig(method="bogus"))
 
