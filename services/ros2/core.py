@@ -20,7 +20,9 @@ Frames: everything in the scene's frame, ``frame_id`` (default ``world``, as in 
 
 from __future__ import annotations
 
+import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,7 +33,8 @@ from shared.protocol import ClassPosterior, HumanPose, OccupancyGrid, Plan, Robo
 
 from .wire import data_key
 
-__all__ = ["Ros2Config", "Ros2Mapping", "Topic", "TOPICS", "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError"]
+__all__ = ["Ros2Config", "ros_domain_id", "Ros2Mapping", "Topic", "TOPICS", "ROBOT_TYPES", "KEYPOINTS_TYPE",
+           "Ros2InputError"]
 
 STORE = "ros2_jazzy"
 """The rosbags type store the message definitions and hashes come from (ROS 2 Jazzy)."""
@@ -71,11 +74,29 @@ _ROS_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 """A ROS 2 node name or one namespace token (https://design.ros2.org/articles/topic_and_service_names.html)."""
 
 
+def ros_domain_id(env: Mapping[str, str] | None = None) -> int:
+    """The ROS 2 domain of this shell: ``ROS_DOMAIN_ID`` as ROS 2's own tools read it (0 when unset or empty).
+
+    A shell set up for ROS 2 runs Foresight's nodes on the domain its ``ros2`` commands use; a
+    ``FORESIGHT_*_DOMAIN_ID`` variable, the config file or ``--domain-id`` still take precedence.
+
+    Raises:
+        ConfigError: ``ROS_DOMAIN_ID`` is set to something that is not a domain id (0..232).
+    """
+    raw = (os.environ if env is None else env).get("ROS_DOMAIN_ID", "").strip()
+    if not raw:
+        return 0
+    if not raw.isdigit() or not raw.isascii() or int(raw) > 232:
+        raise ConfigError(f"ROS_DOMAIN_ID={raw!r}: not a ROS 2 domain id (0..232)")
+    return int(raw)
+
+
 @dataclass
 class Ros2Config:
     """Options of ``foresight ros2`` (``[ros2]``)."""
 
-    domain_id: int = opt(0, help="ROS 2 domain id (ROS_DOMAIN_ID)")
+    domain_id: int = opt(default_factory=lambda: ros_domain_id(), help="ROS 2 domain id (default: $ROS_DOMAIN_ID, "
+                         "else 0)")
     namespace: str = opt("/", help="namespace of the node and of its relative topics")
     node: str = opt("foresight", help="ROS 2 node name")
     frame_id: str = opt("world", help="frame of the markers and the trajectory header (the scene's frame)")
@@ -298,11 +319,14 @@ class Ros2Mapping:
             ``(N, len(columns))``; ``times`` ``(N,)`` seconds from the start, increasing (no points: hold).
 
         Raises:
-            Ros2InputError: A joint the controller does not have, a point of the wrong length, NaN, times not
-                increasing.
+            Ros2InputError: No joint names, a joint the controller does not have, a point of the wrong length,
+                NaN, times not increasing.
         """
         msg = self.decode(payload, ROBOT_TYPES["command"])
         names = list(msg.joint_names)
+        if not names:  # as ros2_controllers' trajectory controller: a command names the joints it moves
+            raise Ros2InputError("JointTrajectory: no joint_names (a command names the joints it moves; no points: "
+                                 "hold)")
         unknown = [n for n in names if n not in joint_names]
         if unknown or len(set(names)) != len(names):
             raise Ros2InputError(f"JointTrajectory: joints {unknown or names} unknown or repeated (controller has "

@@ -28,7 +28,7 @@ from shared.scene import SCENE_HELP, load_scene
 from shared.transport import Presence, open_session
 
 from .controller import SimulatedController
-from .core import ROBOT_TYPES, Ros2Config, Ros2Mapping
+from .core import ROBOT_TYPES, Ros2Config, Ros2Mapping, ros_domain_id
 from .node import Ros2Node
 
 __all__ = ["RobotSimConfig", "RobotSim"]
@@ -40,7 +40,8 @@ log = logging.getLogger("foresight.simrobot")
 class RobotSimConfig:
     """Options of ``foresight simrobot`` (``[simrobot]``)."""
 
-    domain_id: int = opt(0, help="ROS 2 domain id (ROS_DOMAIN_ID)")
+    domain_id: int = opt(default_factory=lambda: ros_domain_id(), help="ROS 2 domain id (default: $ROS_DOMAIN_ID, "
+                         "else 0)")
     node: str = opt("pr2_sim", help="ROS 2 node name")
     controller: str = opt("r_arm_controller", help="the controller: commands on /<controller>/joint_trajectory")
     joint_states: str = opt("/joint_states", help="where the joint states go")

@@ -3,7 +3,8 @@
 A ROS 2 node named ``config.node`` (liveliness token ``NN``), one publisher token (``MP``) per topic,
 and per published sample the rmw_zenoh attachment (per-topic sequence number from 1, source time,
 the publisher's 16-byte GID). The occupancy and the human are markers for RViz and are sent at most
-``viz_rate_hz`` times a second each (the newest one; encoding thousands of points is not free); the
+``viz_rate_hz`` times a second each (encoding thousands of points is not free): one that comes sooner is
+held, replaced by any newer one, and sent when its window has passed, so the newest is always shown; the
 plan, goal, joint states and posterior go out as they come.
 """
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -88,6 +90,7 @@ class Ros2Service:
         self._pubs: dict[str, Ros2Publisher] = {}
         self._first_pose: tuple[int, np.ndarray] | None = None  # (demo id, its first pose): the human's placement
         self._last_viz: dict[str, float] = {}
+        self._pending: dict[str, Callable[[], bytes]] = {}  # role -> the newest marker held back by the rate limit
 
     def _put(self, role: str, payload: bytes) -> None:
         pub = self._pubs.get(role)
@@ -95,13 +98,31 @@ class Ros2Service:
             pub.put(payload)
             self.stats.sent[role] = pub.sent
 
-    def _due(self, role: str) -> bool:
+    def _viz(self, role: str, make: Callable[[], bytes]) -> None:
+        """Send a marker now, or hold it (encoded later) until its rate window has passed; a newer one replaces it."""
         now = time.monotonic()
         with self._lock:
             if now - self._last_viz.get(role, -1e9) < 1.0 / self.config.viz_rate_hz:
-                return False
+                self._pending[role] = make
+                return
             self._last_viz[role] = now
-            return True
+            self._pending.pop(role, None)
+        self._put(role, make())
+
+    def flush_viz(self, force: bool = False) -> None:
+        """Send each held marker whose window has passed (all of them with ``force``): the newest is never lost.
+
+        Without this, RViz kept showing an older occupancy or body when the stream paused or ended.
+        """
+        now = time.monotonic()
+        with self._lock:
+            due = [(r, m) for r, m in self._pending.items()
+                   if force or now - self._last_viz.get(r, -1e9) >= 1.0 / self.config.viz_rate_hz]
+            for r, _ in due:
+                del self._pending[r]
+                self._last_viz[r] = now
+        for role, make in due:
+            self._put(role, make())
 
     def on_plan(self, plan: Plan) -> None:
         """The chosen trajectory and goal."""
@@ -115,8 +136,7 @@ class Ros2Service:
 
     def on_occupancy(self, grid: OccupancyGrid) -> None:
         """The predicted occupancy (rate-limited)."""
-        if self._due("occupancy"):
-            self._put("occupancy", self.mapping.occupancy(grid))
+        self._viz("occupancy", lambda: self.mapping.occupancy(grid))
 
     def on_human(self, msg: HumanPose | DemoMarker) -> None:
         """The human's body, placed as the predictor places it (relative to the demonstration's first pose)."""
@@ -127,8 +147,7 @@ class Ros2Service:
         if msg.index == 0 or self._first_pose is None or self._first_pose[0] != msg.demo_id:  # ids restart with a run
             self._first_pose = (msg.demo_id, np.asarray(msg.features, dtype=np.float64))
         first = self._first_pose[1]
-        if self._due("human"):
-            self._put("human", self.mapping.human(msg, place_in_scene(msg.features, first, self.scene)))
+        self._viz("human", lambda: self.mapping.human(msg, place_in_scene(msg.features, first, self.scene)))
 
     def on_posterior(self, post: ClassPosterior) -> None:
         """The class posterior."""
@@ -154,8 +173,10 @@ class Ros2Service:
             log.info("ros2: node %s%s on domain %d, topics %s, session %s", cfg.namespace.rstrip("/") + "/", cfg.node,
                      cfg.domain_id, ", ".join(cfg.topic(r) for r in TOPICS), zid)
             try:
-                stop.wait()
+                while not stop.wait(0.5 / cfg.viz_rate_hz):
+                    self.flush_viz()
             finally:
+                self.flush_viz(force=True)  # the last occupancy and body stay on show
                 presence.close()
                 for s in subs:
                     s.undeclare()

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from services.ros2.core import ros_domain_id
 from shared.config import LOG_LEVELS, ConfigError, nested, opt
 
 from .core import TrackerConfig
@@ -50,7 +51,8 @@ class TrackerServiceConfig:
                                  "real time as the sensor would, on the keypoints key; the tracker takes it from "
                                  "there (--from FILE)")
     ros2_topic: str = opt("/foresight/keypoints", help="input ros2: the PoseArray topic")
-    ros2_domain_id: int = opt(0, help="input ros2: the ROS 2 domain id")
+    ros2_domain_id: int = opt(default_factory=lambda: ros_domain_id(), help="input ros2: the ROS 2 domain id "
+                              "(default: $ROS_DOMAIN_ID, else 0)")
     ros2_points: list[str] = opt(default_factory=list, help="input ros2: the name of each pose of the PoseArray, in "
                                  "order (comma-separated; empty: the layout's points in its table's order)")
     stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "

@@ -128,13 +128,18 @@ class TrackerCore:
         self._raw: tuple[float, np.ndarray] | None = None      # the last accepted fit (stamp, features)
         self._joints: np.ndarray | None = None                  # its joint positions (J, 3), for the jump check
         self._out: tuple[float, np.ndarray] | None = None      # the last smoothed frame
+        self._frame_no: int | None = None                       # the last accepted frame's number (if given)
+        self._ended_at = -math.inf                              # the last reach's end stamp
         self._dts: deque[float] = deque(maxlen=15)              # recent frame intervals: the sensor's period
         self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
         self.demo_id = -1
         self._index = 0
 
-    def on_keypoints(self, msg: HumanKeypoints) -> TrackerOutput:
-        """One frame off the wire (decoded and checked): its coordinate frame and names, then :meth:`on_frame`."""
+    def on_keypoints(self, msg: HumanKeypoints, numbered: bool = True) -> TrackerOutput:
+        """One frame off the wire (decoded and checked): its coordinate frame and names, then :meth:`on_frame`.
+
+        ``numbered``: ``msg.frame`` is the sensor's frame number (False: it only counts arrivals, as for ROS 2).
+        """
         if msg.frame_id != self.config.frame_id:
             return self._refuse("frame", f"frame {msg.frame} is in {msg.frame_id!r}, the tracker takes "
                                 f"{self.config.frame_id!r}")
@@ -142,10 +147,15 @@ class TrackerCore:
         if unknown:
             return self._refuse("names", f"frame {msg.frame} names {', '.join(map(repr, unknown[:4]))}, not points of "
                                 f"the layout {self.layout.name} (e.g. {', '.join(self.layout.source_names[:4])})")
-        return self.on_frame(msg.stamp, list(msg.names), msg.positions)
+        return self.on_frame(msg.stamp, list(msg.names), msg.positions, msg.frame if numbered else None)
 
-    def on_frame(self, stamp: float, names: list[str], positions: np.ndarray) -> TrackerOutput:
-        """One keypoint frame: ``names`` (K) and ``positions`` ``(K, 3)`` m, NaN where missing; ``stamp`` s."""
+    def on_frame(self, stamp: float, names: list[str], positions: np.ndarray,
+                 frame: int | None = None) -> TrackerOutput:
+        """One keypoint frame: ``names`` (K) and ``positions`` ``(K, 3)`` m, NaN where missing; ``stamp`` s.
+
+        ``frame``: the sensor's frame number, where it numbers them; a gap is then bridged with no more poses
+        than the frames it dropped.
+        """
         points = self.layout.to_model(list(names), np.asarray(positions, dtype=np.float64))
         observed = np.all(np.isfinite(points), axis=-1)
         missing = [p for p, j in self._required.items() if not observed[j]]
@@ -172,10 +182,11 @@ class TrackerCore:
                 return self._refuse("jump", f"{POINT_NAMES[j]} at {moved[j] / dt:.1f} m/s since the last frame")
             if dt >= MIN_PERIOD_S and (len(self._dts) < 3 or dt >= 0.5 * float(np.median(self._dts))):
                 self._dts.append(dt)  # the sensor's period; a burst's intervals are left out
-        self._raw, self._joints = (stamp, f), joints
+        dropped = None if frame is None or self._frame_no is None or self._raw is None else frame - self._frame_no - 1
+        self._raw, self._joints, self._frame_no = (stamp, f), joints, frame
         self.accepted += 1
         smooth = self.filter(f, stamp)
-        out.messages += self._bridge(stamp, smooth) + self._frame(stamp, smooth)
+        out.messages += self._bridge(stamp, smooth, dropped) + self._frame(stamp, smooth)
         self._out = (stamp, smooth)
         return out
 
@@ -201,16 +212,26 @@ class TrackerCore:
         self.filter.reset()
         self._recent.clear()
         self._dts.clear()  # the next frames may come from a sensor restarted at another rate
-        self._raw = self._out = self._joints = None
+        self._raw = self._out = self._joints = self._frame_no = None
         return msgs
 
-    def _bridge(self, stamp: float, f: np.ndarray) -> list[Message]:
-        """Frames interpolated between the last smoothed one and this, at the sensor's period, across a gap."""
+    def _bridge(self, stamp: float, f: np.ndarray, dropped: int | None = None) -> list[Message]:
+        """Frames interpolated between the last smoothed one and this, at the sensor's period, across a gap.
+
+        Only while the period is known: three intervals at least, the last three of them within half of it
+        either way (a backlog flushed after a stall, arrival-stamped a few ms apart, is no sensor's period),
+        and never more than ``dropped`` frames where the sensor numbers its frames.
+        """
         if self._out is None or len(self._dts) < 3:
             return []
         period = float(np.median(self._dts))
+        last = list(self._dts)[-4:-1] if len(self._dts) > 3 else list(self._dts)[:3]
+        if any(not 0.5 * period <= dt <= 1.5 * period for dt in last):
+            return []
         t0, f0 = self._out
         n = int(round((stamp - t0) / period)) - 1
+        if dropped is not None:
+            n = min(n, dropped)
         msgs: list[Message] = []
         for k in range(1, n + 1):
             a = k / (n + 1)
@@ -228,14 +249,17 @@ class TrackerCore:
             self.demo_id += 1
             self.reaches += 1
             self._index = 0
-            first = [(s, g) for s, g in self._recent if s >= event.stamp - 1e-9]
+            first = [(s, g) for s, g in self._recent if s >= event.stamp - 1e-9 and s > self._ended_at]
             msgs: list[Message] = [DemoMarker(stamp=first[0][0], tick=-1, demo_id=self.demo_id, event="start",
                                               true_class=-1, class_name="live", n_samples=0)]
             return msgs + [self._pose(s, g) for s, g in first]
         if not self.reach.active and event is None:
             return []
         msgs = [self._pose(t, f)]
-        return msgs + (self._end(t) if event is not None and event.event == "end" else [])
+        if event is not None and event.event == "end":
+            self._ended_at = t  # no pose of the ended reach is a pose of the next one
+            return msgs + self._end(t)
+        return msgs
 
     def _pose(self, t: float, f: np.ndarray) -> HumanPose:
         pose = HumanPose(stamp=t, tick=-1, tick_last=True, demo_id=self.demo_id, index=self._index,

@@ -11,7 +11,9 @@ of their mean, as a root mean square - not every frame within it, because a sens
 smoothing lets through at speed, kept a still hand "moving" (with 1 or 2 cm of noise per axis a reach never ended
 when the rule asked every frame to stay within 3 cm of one place), and not the drift of the mean alone, which a
 hand going out and back within the window does not show (the paper's motions ended mid-reach) - or after
-``max_s``.
+``max_s``. After such a forced end the hand may still move, so its rest position is learnt again (over
+``rest_s``, no reach starting meanwhile) rather than taken from a moving hand, which started a new reach at
+once with the ended one's last poses.
 """
 
 from __future__ import annotations
@@ -89,10 +91,14 @@ class ReachDetector:
         self._window.append((t, w))
         while len(self._window) > 1 and t - self._window[1][0] >= r.end_s:  # the oldest kept: end_s ago or more
             self._window.popleft()
-        if self._still() or t - self._start_t >= r.max_s:
+        still = self._still()
+        if still or t - self._start_t >= r.max_s:
             self.active = False
-            half = self._window[-1][0] - 0.5 * r.end_s  # where the hand came to rest (the window's recent half): rest
-            self._rest = np.mean([p for s, p in self._window if s >= half], axis=0)
+            if still:
+                half = self._window[-1][0] - 0.5 * r.end_s  # where the hand came to rest (the window's recent half)
+                self._rest = np.mean([p for s, p in self._window if s >= half], axis=0)
+            else:  # ended by max_s while the hand still moves: where it rests is learnt again, over rest_s
+                self._since = self._rest = None
             return ReachEvent("end", t)
         return None
 

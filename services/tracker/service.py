@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -42,6 +43,8 @@ __all__ = ["TrackerService", "TrackerStats", "NODE_NAME"]
 log = logging.getLogger("foresight.tracker")
 
 NODE_NAME = "foresight_tracker"
+REFUSAL_LOG_PERIOD_S = 1.0
+"""At most one log line per refusal reason in this time (every refusal is counted)."""
 """The tracker's ROS 2 node name (input ros2)."""
 
 
@@ -81,6 +84,7 @@ class TrackerService:
         self._lock = threading.Lock()
         self._ros2_frame = 0
         self._accepted_at = time.monotonic()  # when the core last took a frame (check_silence)
+        self._refusal_logged: dict[str, float] = {}  # reason -> when a refusal of it was last logged
         self._ros2_receipt = Receipt(Expectations(clock="realtime"))
         self._human: HumanPublisher | None = None
         self.playback: Playback | None = None
@@ -94,14 +98,21 @@ class TrackerService:
 
     # -- frames ------------------------------------------------------------------------------------------------
 
-    def on_keypoints(self, msg: HumanKeypoints) -> None:
-        """One checked frame: through the core, its messages published, a refusal logged and counted."""
+    def on_keypoints(self, msg: HumanKeypoints, numbered: bool = True) -> None:
+        """One checked frame: through the core, its messages published, a refusal logged and counted.
+
+        ``numbered``: ``msg.frame`` is the sensor's own frame number (a gap is a dropped frame); a ROS 2 frame
+        has none, its number only counts arrivals.
+        """
         with self._lock:
             self.stats.frames += 1
-            out = self.core.on_keypoints(msg)
+            out = self.core.on_keypoints(msg, numbered)
             if out.refused is not None:
-                log.warning("tracker: frame %d refused (%s); refused so far: %s", msg.frame, out.refused,
-                            ", ".join(f"{k} {v}" for k, v in self.core.refused.items() if v))
+                reason, now = out.refused.split(":", 1)[0], time.monotonic()
+                if now - self._refusal_logged.get(reason, -math.inf) >= REFUSAL_LOG_PERIOD_S:  # a sensor with no
+                    self._refusal_logged[reason] = now  # one in view refuses 30 frames a second: one line a second
+                    log.warning("tracker: frame %d refused (%s); refused so far: %s", msg.frame, out.refused,
+                                ", ".join(f"{k} {v}" for k, v in self.core.refused.items() if v))
                 return
             self._accepted_at = time.monotonic()
             self._publish(out.messages)
@@ -144,7 +155,7 @@ class TrackerService:
         self._ros2_frame += 1
         msg.check()  # ProtocolError (a ValueError): refused and counted by the node
         self._ros2_receipt.check(self.config.ros2_topic, msg)
-        self.on_keypoints(msg)
+        self.on_keypoints(msg, numbered=False)
 
     # -- the loop ----------------------------------------------------------------------------------------------
 
@@ -204,6 +215,19 @@ class TrackerService:
         log.info("tracker: ROS 2 node /%s takes %s, poses in the order %s", NODE_NAME, cfg.ros2_topic, names)
         return [node.close]
 
+    def _wait_until(self, when: float, stop: threading.Event) -> bool:
+        """Wait until monotonic time ``when``, ending a reach across a silence meanwhile; whether stop was set.
+
+        A recording's missing frames are a silence like a live sensor's: :meth:`check_silence` runs as in the
+        live loop, so the reach ends within ``max_gap_s`` of its last frame, not at the next frame.
+        """
+        poll = min(0.1, self.config.tracker.max_gap_s / 3)
+        while (delay := when - time.monotonic()) > 0:
+            if stop.wait(min(delay, poll)):
+                return True
+            self.check_silence()
+        return stop.is_set()
+
     def _play(self, playback: Playback, stop: threading.Event) -> None:
         """Play the recording on the keypoints key in real time, as the ``sensor`` role."""
         zcfg = dataclasses.replace(self.zenoh_config, role=SENSOR, listen=[],
@@ -217,10 +241,7 @@ class TrackerService:
                 pass
             start = time.monotonic()
             for frame in playback.frames():
-                delay = start + frame.t - time.monotonic()
-                if delay > 0 and stop.wait(delay):
-                    break
-                if stop.is_set():
+                if self._wait_until(start + frame.t, stop):
                     break
                 try:
                     pub.put(HumanKeypoints(stamp=time.time(), tick=-1, frame=frame.frame,

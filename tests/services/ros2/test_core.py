@@ -126,6 +126,8 @@ def test_commands_and_clock_round_trip_and_bad_commands_are_named(mapping: Ros2M
     with pytest.raises(Ros2InputError, match="non-finite positions"):
         mapping.trajectory_in(mapping.command(JOINTS, pos * np.nan, np.array([1.0, 2.0])), JOINTS)
     assert mapping.trajectory_in(mapping.command(JOINTS, np.zeros((0, 3)), np.zeros(0)), JOINTS)[1].shape == (0, 3)
+    with pytest.raises(Ros2InputError, match="no joint_names"):  # numpy's reshape error before
+        mapping.trajectory_in(mapping.command([], np.zeros((0, 0)), np.zeros(0)), JOINTS)
     key = mapping.robot_key("/r_arm_controller/joint_trajectory", "command")
     assert key == ("0/r_arm_controller/joint_trajectory/trajectory_msgs::msg::dds_::JointTrajectory_/"
                    + TS.hash_rihs01("trajectory_msgs/msg/JointTrajectory"))
@@ -140,3 +142,20 @@ def test_bad_config_is_named() -> None:
             Ros2Config(**kwargs).validate()
     for ns in ("/", "/cell", "/cell/arm_2/"):
         Ros2Config(namespace=ns, node="foresight_1").validate()
+
+
+def test_the_shells_ros_domain_id_is_the_default_domain(monkeypatch) -> None:
+    """A shell set up for ROS 2 ran Foresight's nodes on domain 0 whatever its ROS_DOMAIN_ID said."""
+    from services.ros2.core import Ros2Config, ros_domain_id
+    from services.ros2.robot_sim import RobotSimConfig
+    from services.tracker.config import TrackerServiceConfig
+    from shared.config import ConfigError
+
+    assert ros_domain_id({}) == 0 and ros_domain_id({"ROS_DOMAIN_ID": " "}) == 0
+    assert ros_domain_id({"ROS_DOMAIN_ID": "42"}) == 42
+    for bad in ("-1", "233", "x", "٣"):
+        with pytest.raises(ConfigError, match="ROS_DOMAIN_ID"):
+            ros_domain_id({"ROS_DOMAIN_ID": bad})
+    monkeypatch.setenv("ROS_DOMAIN_ID", "5")
+    assert Ros2Config().domain_id == RobotSimConfig().domain_id == TrackerServiceConfig().ros2_domain_id == 5
+    assert Ros2Config(domain_id=7).domain_id == 7  # a flag, variable or file still decides

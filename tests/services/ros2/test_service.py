@@ -108,8 +108,7 @@ def test_the_human_is_placed_from_its_demonstrations_first_pose_when_demo_ids_re
 
     def published(poses: list[HumanPose]) -> list[bytes]:
         service, out = Ros2Service(Ros2ServiceConfig(), zenoh_hub()), []
-        monkeypatch.setattr(service, "_due", lambda _role: True)
-        monkeypatch.setattr(service, "_put", lambda _role, payload: out.append(payload))
+        monkeypatch.setattr(service, "_viz", lambda _role, make: out.append(make()))
         for p in poses:
             service.on_human(p)
         return out
@@ -117,3 +116,35 @@ def test_the_human_is_placed_from_its_demonstrations_first_pose_when_demo_ids_re
     long_running = published([pose(0, 0.0), pose(1, 0.0), pose(0, 0.3), pose(1, 0.35)])  # a new run: ids restart
     fresh = published([pose(0, 0.3), pose(1, 0.35)])
     assert long_running[-1] == fresh[-1]  # placed from the new run's first pose, not the old run's
+
+
+def test_the_newest_marker_held_back_by_the_rate_limit_is_sent_when_its_window_passes() -> None:
+    """The rate limit used to drop what came within a window for good: RViz kept an older occupancy on show."""
+    from shared.config import ZenohConfig
+    from shared.protocol import OccupancyGrid
+
+    class Pub:
+        def __init__(self) -> None:
+            self.sent, self.payloads = 0, []
+
+        def put(self, payload: bytes) -> None:
+            self.sent += 1
+            self.payloads.append(payload)
+
+    svc = Ros2Service(Ros2ServiceConfig(viz_rate_hz=1e-3), ZenohConfig())  # a window far longer than the test
+    svc._pubs = {"occupancy": Pub()}
+    grids = []
+    for i in range(3):
+        dense = np.zeros((8, 8, 8))
+        dense[i, 3, 4] = 0.9
+        grids.append(OccupancyGrid.from_dense(dense, np.zeros(3), 0.05, stamp=1.0 + 0.05 * i, tick=-1,
+                                              tick_last=True, demo_id=0, index=i, method="prediction"))
+        svc.on_occupancy(grids[-1])
+    pub = svc._pubs["occupancy"]
+    assert pub.payloads == [svc.mapping.occupancy(grids[0])]  # the first at once; 1 and 2 inside its window
+    svc.flush_viz()
+    assert pub.sent == 1  # the window has not passed: still held
+    svc.flush_viz(force=True)  # as at its window's end (or at shutdown): the newest, not the one between
+    assert pub.payloads == [svc.mapping.occupancy(grids[0]), svc.mapping.occupancy(grids[2])]
+    svc.flush_viz(force=True)
+    assert pub.sent == 2  # sent once

@@ -68,7 +68,7 @@ def test_a_reach_gives_start_poses_end_with_the_recorded_features(reach) -> None
     assert 25 <= round(poses[0].stamp * RATE) <= 50  # starts near the motion's onset (frame 30), not at rest
     err = np.array([np.abs(p.features - reach[round(p.stamp * RATE)]) for p in poses])
     assert np.median(err[:, :3]) < 0.01 and np.median(err[:, 3:]) < 0.05
-    assert core.refused == {"missing": 0, "residual": 0, "jump": 0} or sum(core.refused.values()) <= 2
+    assert sum(core.refused.values()) <= 2, core.refused
     before = [m for m in msgs if m.stamp < 25 / RATE]
     assert not before  # nothing is published while the person rests
 
@@ -174,3 +174,56 @@ def test_a_burst_of_frames_makes_the_bridge_invent_nothing(reach) -> None:
     outs = [core.on_frame(t, NAMES, p) for t, p in zip(stamps[:60], frames[:60], strict=True)]
     core.on_frame(48 / RATE, NAMES, joints[48])  # 118 ms after the burst's last frame
     assert core.bridged == round((48 / RATE - stamps[59]) * RATE) - 1 == 3  # at 1 ms it would have been 117
+
+
+def test_a_backlog_after_a_stall_sets_no_period_of_its_own(reach) -> None:
+    """Arrival-stamped frames flushed 5 ms apart after a stall used to become the sensor's period: the next
+    30 Hz frames had 25 poses invented between them. Now the period must hold for the last three intervals,
+    and a sensor's frame numbers bound what is bridged."""
+    joints = MODEL.joint_positions(reach)
+    stamps = [i / RATE for i in range(40)]
+    t = stamps[-1] + 0.5  # a stall longer than max_gap_s: the core starts afresh
+    stamps += [t + k * 0.005 for k in range(6)]
+    stamps += [stamps[-1] + k / RATE for k in range(1, 30)]
+    frames = [joints[min(round(s * RATE), len(joints) - 1)] for s in stamps]
+    core = TrackerCore()
+    assert all(core.on_frame(s, NAMES, p).refused is None for s, p in zip(stamps, frames, strict=True))
+    assert core.bridged <= 6  # one interval at most, before the backlog's intervals leave the last three
+    numbered = TrackerCore()  # the sensor numbers its frames: none was dropped, so nothing is invented
+    for n, (s, p) in enumerate(zip(stamps, frames, strict=True)):
+        assert numbered.on_frame(s, NAMES, p, frame=n).refused is None
+    assert numbered.bridged == 0
+
+
+def test_frame_numbers_bound_a_bridged_gap(reach) -> None:
+    joints = MODEL.joint_positions(reach)
+    core = TrackerCore()
+    for i, p in enumerate(joints[:70]):
+        if i in (60, 61, 62):
+            continue
+        core.on_frame(i / RATE, NAMES, p, frame=i if i < 60 else i - 2)  # the sensor says 1 frame was dropped
+    assert core.bridged == 1  # the stamps alone would say 3
+
+
+def test_a_reach_ended_by_its_time_limit_gives_its_poses_to_no_other_reach(reach) -> None:
+    """The hand keeps waving past max_s: the next reach used to start at once, with the ended one's last 0.3 s."""
+    feats = np.repeat(reach[:1], int(16 * RATE), 0)
+    t = np.arange(len(feats)) / RATE
+    wave = np.where(t > 1.5, np.sin(2 * np.pi * 0.7 * (t - 1.5)), 0.0)
+    feats[:, 7] += 0.6 * wave
+    feats[:, 11] += 0.5 * wave
+    core = TrackerCore()
+    msgs = messages(run(core, feats))
+    markers = [m for m in msgs if isinstance(m, DemoMarker)]
+    first_end = next(m for m in markers if m.event == "end")
+    assert first_end.stamp - markers[0].stamp >= core.config.rule.max_s - 0.5  # ended by the limit
+    # the rest position is learnt again (rest_s) before the next reach can start
+    later_starts = [m for m in markers if m.event == "start" and m.demo_id > first_end.demo_id]
+    rule = core.config.rule
+    assert later_starts and all(m.stamp >= first_end.stamp + rule.rest_s - rule.pre_s for m in later_starts)
+    stamps: dict[int, set[float]] = {}
+    for m in msgs:
+        if isinstance(m, HumanPose):
+            stamps.setdefault(m.demo_id, set()).add(m.stamp)
+    ids = sorted(stamps)
+    assert all(not stamps[a] & stamps[b] for a, b in zip(ids, ids[1:], strict=False))

@@ -20,6 +20,7 @@ from services.tracker.__main__ import main as tracker_main
 from services.tracker.config import PlaybackConfig, TrackerServiceConfig
 from services.tracker.core import TrackerConfig
 from services.tracker.service import TrackerService
+from shared.config import ZenohConfig
 from shared.human import HumanModel
 from shared.keypoints.library import write_keypoint_library
 from shared.library import MotionLibrary
@@ -271,3 +272,51 @@ def test_config_checks() -> None:
         TrackerServiceConfig(tracker=dataclasses.replace(TrackerConfig(), max_residual_m=0.0)).validate()
     with pytest.raises(Exception, match="rate_hz"):
         TrackerServiceConfig(playback=PlaybackConfig(rate_hz=-1.0)).validate()
+
+
+def test_refusals_are_counted_each_but_logged_once_a_second_per_reason(caplog) -> None:
+    """A sensor with nobody in view refuses 30 frames a second: that was 30 warning lines a second."""
+    service = TrackerService(TrackerServiceConfig(), ZenohConfig())
+    caplog.set_level(logging.WARNING, logger="foresight.tracker")
+    nobody = np.full((len(NAMES), 3), np.nan)
+    for i in range(90):
+        service.on_keypoints(_kp(i, nobody))
+    service.on_keypoints(_kp(90, _reach_frames()[0], frame_id="camera_link"))  # another reason: its own line
+    lines = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
+    assert service.core.refused["missing"] == 90 and len(lines) == 2, lines
+    assert "frame 0 refused (missing" in lines[0] and "frame 90 refused (frame:" in lines[1]
+
+
+def test_a_recordings_silence_ends_the_reach_before_its_next_frame(zenoh_hub, tmp_path: Path) -> None:
+    """Frames missing from a recording are a silence like a live sensor's; playback did not check for it, so the
+    reach stayed open until the next frame, seconds later."""
+    hub = zenoh_hub
+    tester = hub()
+    keys = Keys(tester.prefix)
+    frames = _reach_frames()
+    half = len(frames) // 2
+    recording = tmp_path / "gap.csv"
+    with recording.open("w") as f:  # 2 s of frames dropped in the middle of the reach
+        f.write(",".join(["demo", "frame", *(f"{p}_{a}" for p in NAMES for a in "xyz")]) + "\n")
+        for i, pos in enumerate(frames):
+            n = i if i < half else i + 60
+            f.write(",".join(map(str, [0, n, *np.round(pos.reshape(-1), 5)])) + "\n")
+    play = PlaybackConfig(rate_hz=30.0, lead_s=0.5, hold_s=0.5, gap_s=0.5)
+    played_at_end: list[int] = []
+    with open_session(tester) as session:
+        got = Collector(session, keys)
+        time.sleep(0.3)
+        service, thread = _service(hub, from_file=recording, playback=play)
+        add = got.add
+
+        def note(msg) -> None:  # how far the playback was when the end marker came
+            if isinstance(msg, DemoMarker) and msg.event == "end":
+                played_at_end.append(service.stats.played)
+            add(msg)
+        got.add = note
+        got.sub.undeclare()
+        got.sub = subscribe_ordered(session, keys.human_all, {keys.pose: HumanPose, keys.demo: DemoMarker}, note)
+        thread.join(60.0)
+        assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "end" for m in items))
+    lead = round(play.lead_s * play.rate_hz)
+    assert played_at_end and played_at_end[0] <= lead + half  # it ended before a frame after the silence was played
