@@ -122,8 +122,7 @@ def _log_state(mcap: Path) -> str:
     from shared.recording.reader import read_log
 
     lf = read_log(mcap)
-    state = "complete" if lf.complete else f"TRUNCATED ({lf.error or 'no footer'})"
-    return f"log {mcap}: {state}, {lf.message_count} messages"
+    return f"log {mcap}: {lf.state}, {lf.message_count} messages"
 
 
 def _run_length(cfg: DemoConfig) -> str:

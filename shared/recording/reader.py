@@ -123,6 +123,11 @@ class LogFile:
     error: str = ""
 
     @property
+    def state(self) -> str:
+        """``"complete"``, or ``"TRUNCATED (<why reading stopped>)"``: how every tool names a log's state."""
+        return "complete" if self.complete else f"TRUNCATED ({self.error or 'no footer'})"
+
+    @property
     def message_count(self) -> int:
         """Messages read on all channels."""
         return sum(c.count for c in self.channels.values())

@@ -85,8 +85,8 @@ def _main_render(args: argparse.Namespace, prog: str) -> int:
 def _note_truncated(lf: LogFile) -> None:
     """Say on stderr that a log is truncated: what the tools print of it stops where the file does."""
     if not lf.complete:
-        print(f"foresight log: note: {lf.path} is truncated ({lf.error or 'no footer'}): what follows covers the "
-              "run up to its last whole chunk only", file=sys.stderr)
+        print(f"foresight log: note: {lf.path} is {lf.state}: what follows covers the run up to its last whole "
+              "chunk only", file=sys.stderr)
 
 
 def _main_table(args: argparse.Namespace) -> int:

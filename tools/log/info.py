@@ -54,7 +54,7 @@ def format_info(lf: LogFile) -> str:
     state = (f"complete; copied from a TRUNCATED log ({source.get('source_error', 'no footer')}): what the run wrote "
              "after its last whole chunk is not here" if lf.complete and source.get("source_complete") == "false"
              else "complete") if lf.complete else (
-        f"TRUNCATED ({lf.error or 'no footer'}): recovered {lf.message_count} messages, {d['duration_s']:.2f} s, "
+        f"{lf.state}: recovered {lf.message_count} messages, {d['duration_s']:.2f} s, "
         "up to the last whole chunk")
     lines = [f"file:      {lf.path} ({lf.size / 1e6:.2f} MB, {state})",
              f"profile:   {lf.profile or '-'}   library: {lf.library or '-'}",

@@ -121,4 +121,4 @@ def test_a_copy_of_a_truncated_log_says_so_and_the_tools_note_a_truncated_log(ru
     assert main(["info", str(tmp_path / "copy.mcap")]) == 0
     assert "complete; copied from a TRUNCATED log" in capsys.readouterr().out
     assert main(["table", str(cut)]) == 0  # it printed a killed run's table as if the run had ended there
-    assert "is truncated" in capsys.readouterr().err
+    assert "is TRUNCATED (" in capsys.readouterr().err
