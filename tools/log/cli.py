@@ -111,7 +111,7 @@ def _main_snapshot(args: argparse.Namespace) -> int:
         raise UserError(f"--out {str(out)!r}: a .png file (the snapshot is a PNG)")
     state = scene_at(file, args.at)
     draw_snapshot(state, out, title=file.name)
-    _note_truncated(read_log(file))  # the scene reader stops at a damaged chunk without a word
+    _note_truncated(read_log(file, keep=lambda ch: False))  # whether the scene reader stopped at a damaged chunk
     print(f"wrote {out} ({state.summary()})")
     return 0
 
