@@ -30,7 +30,7 @@ from services.scenario import (
     table_header,
     table_row,
 )
-from services.supervisor import Supervisor
+from services.supervisor import Supervisor, describe_exit
 from services.view.config import DEFAULT_PORT
 from shared.config import ConfigError, ZenohConfig
 from shared.feature_sets import LIVE_MAPPING, require_mapping
@@ -271,19 +271,24 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 elif name != "executor":
                     procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout), stop=stop)
             executor = procs["executor"]
-            supervisor = Supervisor(procs, out, restart=cfg.restart)
+            supervisor = Supervisor(procs, out, restart=cfg.restart, fatal=cfg.mode == "lockstep")
             while not stop.is_set() and executor.running:
                 if time.monotonic() > deadline:
                     out(f"foresight demo: timeout after {cfg.timeout:g} s")
                     status = 1
                     break
-                supervisor.check()  # a dead service is reported (and restarted), the run goes on
+                supervisor.check()  # a dead service is reported (and restarted); in real time the run goes on
+                if supervisor.fatal_fault is not None:
+                    status = 1
+                    break
                 stop.wait(0.1)
             if stop.is_set():
                 out("foresight demo: interrupted; stopping the services (the executor first: it closes the log)")
                 status = 130
             elif executor.returncode not in (0, None):
-                out(f"foresight demo: executor exited with status {executor.returncode}: {executor.tail(2)}")
+                code = executor.returncode  # a killed process's last line is not why it died: only an error's is
+                said = f": {executor.tail(1)}" if code > 0 and executor.tail(1) else ""
+                out(f"foresight demo: executor {describe_exit(code)}{said}")
                 status = 1
             if supervisor.faults:
                 out("foresight demo: faults during the run: " + ", ".join(
@@ -298,9 +303,9 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
             for s in subs:
                 s.undeclare()
     plans, states, final, posteriors = recorder.snapshot()
-    if status == 130:
+    if status:  # interrupted, a dead service, the executor's own failure, a timeout: what the log holds
         done = f"{len(plans)} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{len(plans)} plans"
-        out(f"foresight demo: interrupted after {done}; {_log_state(mcap)}")
+        out(f"foresight demo: {'interrupted' if status == 130 else 'stopped'} after {done}; {_log_state(mcap)}")
     if not plans:
         if status != 130:
             out("foresight demo: no plan was received; see the service logs in " + str(run_dir))

@@ -169,3 +169,29 @@ def _services_of(demo_pid: int) -> set[int]:
         if mark in env and state != "Z":
             pids.add(int(entry.name))
     return pids
+
+
+def test_a_service_killed_mid_lockstep_run_ends_the_run_with_its_log_complete(demo_inputs: tuple[Path, Path],
+                                                                               tmp_path: Path) -> None:
+    """Without the planner every later tick waited 30 s for its plan: the demo went quiet for minutes."""
+    lib, models = demo_inputs
+    run_dir = tmp_path / "run"
+    lines: list[str] = []
+    with _demo_run(lib, models, run_dir, "lockstep") as proc:
+        assert proc.stdout is not None
+        killed = False
+        for line in proc.stdout:
+            lines.append(line.rstrip("\n"))
+            if not killed and line.startswith(_row(1)):
+                planner = [pid for pid in _services_of(proc.pid)
+                           if b"services.planner" in Path(f"/proc/{pid}/cmdline").read_bytes()]
+                assert planner, "\n".join(lines)
+                os.kill(planner[0], signal.SIGKILL)
+                killed = True
+        proc.wait(timeout=120)  # the run stops (it used to wait 30 s a tick, far beyond this)
+    text = "\n".join(lines)
+    assert killed and proc.returncode == 1, text[-3000:]
+    assert "planner was killed (SIGKILL)" in text and "cannot go on without it" in text, text[-3000:]
+    stopped = [ln for ln in lines if ln.startswith("foresight demo: stopped after")]
+    assert stopped and "complete" in stopped[0], text[-3000:]
+    assert all(read_log(m).complete for m in run_dir.rglob("*.mcap"))

@@ -56,3 +56,20 @@ def test_restart_brings_a_dead_service_back_a_bounded_number_of_times():
     assert "restarting it (1 of 2)" in lines[0] and "restarting it (2 of 2)" in lines[1]
     assert "carrying on without it" in lines[2] and len(lines) == 3
     assert describe_exit(-15) == "was killed (SIGTERM)" and describe_exit(2) == "exited with status 2"
+
+
+def test_in_lock_step_a_dead_service_ends_the_run_unless_it_is_restarted():
+    """Every tick waits for every service: without the planner the run crawled on, one 30 s timeout a tick."""
+    lines: list[str] = []
+    procs = {"planner": FakeProcess(), "replayer": FakeProcess(), "executor": FakeProcess()}
+    sup = Supervisor(procs, lines.append, fatal=True)
+    procs["replayer"].code = 0  # its stream ended: the run goes on
+    sup.check()
+    assert sup.fatal_fault is None and lines == []
+    procs["planner"].code = -9
+    sup.check()
+    assert sup.fatal_fault == "planner" and "cannot go on without it" in lines[0] and "--restart" in lines[0]
+    restarting = Supervisor({"planner": FakeProcess(-9), "executor": FakeProcess()}, lines.append, restart=True,
+                            fatal=True)
+    restarting.check()
+    assert restarting.fatal_fault is None  # started again instead
