@@ -178,20 +178,22 @@ class RunRecorder:
             return sorted(self.poses, key=lambda p: (p.stamp, p.index))
 
 
-def step_entry(plan: Plan, t0: float) -> dict[str, Any]:
+def step_entry(plan: Plan, t0: float, step: int | None = None) -> dict[str, Any]:
     """One row of the run's table (and of ``--json``'s ``steps``) for ``plan``.
 
     Args:
         plan: The plan.
         t0: Start of the run on the plans' clock (0 in lock-step; the executor's first state in real time).
+        step: The row's number (default: the tick in lock-step, the planner's own step count in real time).
 
     Returns:
-        ``step`` (the planner's step), ``tick`` (-1 in real time), ``t_s`` (seconds into the run the
-        plan was made), ``chosen``, ``planning_ms``, ``occupancy_tick``, and ``cost_total`` /
-        ``cost_human`` by goal name for the valid goals.
+        ``step``, ``tick`` (-1 in real time), ``t_s`` (seconds into the run the plan was made), ``chosen``,
+        ``planning_ms``, ``occupancy_tick``, and ``cost_total`` / ``cost_human`` by goal name for the valid goals.
     """
     names = list(plan.goal_names)
-    return {"step": plan.step, "tick": plan.tick, "t_s": float(plan.stamp - t0), "chosen": names[plan.chosen],
+    if step is None:  # the tick in lock-step: a restarted planner counts its own steps from 0 again
+        step = plan.tick if plan.tick >= 0 else plan.step
+    return {"step": step, "tick": plan.tick, "t_s": float(plan.stamp - t0), "chosen": names[plan.chosen],
             "planning_ms": plan.planning_ms, "occupancy_tick": plan.occupancy_tick,
             "cost_total": {n: float(c) for n, c, v in zip(names, plan.cost_total, plan.valid, strict=True) if v},
             "cost_human": {n: float(c) for n, c, v in zip(names, plan.cost_human, plan.valid, strict=True) if v}}
@@ -314,12 +316,13 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     by_tick: dict[int, Plan] = {}
     for p in plans:
         by_tick[p.tick if p.tick >= 0 else len(by_tick)] = p
-    ordered = [by_tick[t] for t in sorted(by_tick)]
+    keys = sorted(by_tick)
+    ordered = [by_tick[t] for t in keys]
     states = sorted(states, key=lambda s: s.stamp)
     realtime = bool(ordered) and all(p.tick < 0 for p in ordered)
     if t0 is None:
         t0 = (states[0].stamp if states else ordered[0].stamp) if realtime else 0.0
-    steps = [step_entry(p, t0) for p in ordered]
+    steps = [step_entry(p, t0, k) for k, p in zip(keys, ordered, strict=True)]  # ticks, or the plans' order
     for entry, plan in zip(steps, ordered, strict=True):
         entry["belief"] = belief(_posterior_for(plan, posteriors))
     chosen = [s["chosen"] for s in steps]

@@ -103,3 +103,16 @@ def test_each_row_shows_the_belief_its_plan_was_made_with():
     realtime = summarise([_plan(-1, 0, [1.0, 2.0], stamp=t) for t in (0.05, 0.2, 0.5)], [], None,
                          {0: _posterior(-1, 0.1, [0.7, 0.3]), 1: _posterior(-1, 0.3, [0.2, 0.8])}, None, "x", None)
     assert [e["belief"] for e in realtime.steps] == ["", "far_left p=0.70", "blue_cup p=0.80"]  # the newest before
+
+
+def test_a_restarted_planner_does_not_renumber_the_lockstep_steps():
+    """A planner started again counts its own steps from 0: the rows read 6, 0, 1, ... and the switch step was
+    the planner's count, not the tick."""
+    plans = [_plan(t, 1 if t < 8 else 0, [2.0, 1.0] if t < 8 else [1.0, 2.0], step=t if t < 6 else t - 6)
+             for t in range(10)]
+    s = summarise(plans, [], None, {}, PointRobot(), "red_cup", None)
+    assert [e["step"] for e in s.steps] == list(range(10))
+    assert s.switch_step == 8
+    realtime = [_plan(-1, 0, [1.0, 2.0], stamp=0.1 * i, step=i % 3) for i in range(5)]  # restarts twice
+    assert [e["step"] for e in summarise(realtime, [], None, {}, PointRobot(), "red_cup", None).steps] == \
+        list(range(5))
