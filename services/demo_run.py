@@ -36,6 +36,7 @@ from shared.config import ConfigError, ZenohConfig
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library, save_library
 from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyGrid, Plan, RobotState
+from shared.runtime import interruptible
 from shared.scene import Scene, load_scene
 from shared.security import secure_endpoints
 from shared.transport import Presence, open_session, subscribe
@@ -199,7 +200,13 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     """One run of the scenario in ``cfg.run_dir``; returns ``(exit status, its record or None)``."""
     scene = load_scene(cfg.scene or None)
     run_dir = Path(cfg.run_dir)
-    scenario, model, replay_lib = prepare_inputs(cfg, scene, run_dir, out)
+    try:
+        with interruptible(stop):  # training checks no stop event: Ctrl-C cuts it short at once
+            scenario, model, replay_lib = prepare_inputs(cfg, scene, run_dir, out)
+    except KeyboardInterrupt:
+        out("foresight demo: interrupted while preparing the run (a model cut short is not written); "
+            "no service had started, nothing was recorded")
+        return 130, None
     demo = scenario.demo
     if stop.is_set():
         out("foresight demo: interrupted before the services started; nothing was recorded")

@@ -17,8 +17,9 @@ from typing import Any
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
 from shared.native_threads import limit_blas_threads
 
-__all__ = ["setup_logging", "fail", "stop_on_signals", "cli_errors", "UserError", "service_main", "help_text",
-           "freeze_startup_heap", "watch_parent", "lower_priority", "SHUTDOWN_GRACE_S", "FORCED_EXIT", "PARENT_ENV"]
+__all__ = ["setup_logging", "fail", "stop_on_signals", "interruptible", "cli_errors", "UserError", "service_main",
+           "help_text", "freeze_startup_heap", "watch_parent", "lower_priority", "SHUTDOWN_GRACE_S", "FORCED_EXIT",
+           "PARENT_ENV"]
 
 SHUTDOWN_GRACE_S = 10.0
 """Seconds a process may take to stop after SIGINT/SIGTERM before it exits anyway (:func:`stop_on_signals`)."""
@@ -73,6 +74,32 @@ def cli_errors(prog: str) -> Iterator[None]:
         if type(exc).__module__.startswith(("shared", "services")):
             raise SystemExit(fail(prog, str(exc))) from None
         raise
+
+
+@contextmanager
+def interruptible(stop: threading.Event) -> Iterator[None]:
+    """Within the block, SIGINT/SIGTERM set ``stop`` and interrupt the main thread at once (``KeyboardInterrupt``).
+
+    For work that checks no stop event and leaves nothing to close or finalise when cut short (training a
+    prediction model, written whole or not at all, before any service has started): Ctrl-C then takes effect
+    at once, not after a minute of training. Outside the main thread it changes nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    def handler(signum: int, frame: object) -> None:
+        stop.set()
+        raise KeyboardInterrupt
+
+    for s in old:
+        signal.signal(s, handler)
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
 
 
 def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Callable[[], None]:

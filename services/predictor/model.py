@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from shared.atomic_file import atomic_write
 from shared.feature_sets import HERAKLES_NAMES, MAPPINGS, count_features, mapping_for
 from shared.scene import Grid, Scene
 
@@ -172,7 +173,6 @@ class PredictionModel:
     def save(self, path: str | Path) -> None:
         """Write the model file (compressed npz)."""
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
         arrays = {
             "format": np.array(MODEL_FORMAT), "version": np.array(MODEL_VERSION, dtype=np.int64),
             "class_names": np.array(self.class_names, dtype=np.str_),
@@ -196,10 +196,8 @@ class PredictionModel:
             arrays["volumes"] = pack_volumes(self.volumes > 0.5)
         elif self.volumes is not None:
             arrays["volume_probabilities"] = to_bytes(self.volumes).reshape(self.n_classes, -1)
-        tmp = p.with_name(p.name + ".tmp.npz")
-        with tmp.open("wb") as f:
+        with atomic_write(p) as f:  # an interrupted save leaves no half model in the cache
             np.savez_compressed(f, **arrays)
-        tmp.replace(p)
 
     @classmethod
     def load(cls, path: str | Path) -> PredictionModel:

@@ -195,3 +195,19 @@ def test_a_service_killed_mid_lockstep_run_ends_the_run_with_its_log_complete(de
     stopped = [ln for ln in lines if ln.startswith("foresight demo: stopped after")]
     assert stopped and "complete" in stopped[0], text[-3000:]
     assert all(read_log(m).complete for m in run_dir.rglob("*.mcap"))
+
+
+def test_ctrl_c_while_training_stops_at_once_and_caches_no_half_model(demo_inputs: tuple[Path, Path],
+                                                                     tmp_path: Path) -> None:
+    """Training checks no stop event: Ctrl-C used to take effect only when it had finished, a minute later."""
+    lib, _ = demo_inputs
+    models, run_dir = tmp_path / "cold-models", tmp_path / "run"
+    with _demo_run(lib, models, run_dir, "lockstep") as proc:
+        lines, sent, _ = _interrupt_at(proc, "foresight demo: library", 0.0, signal.SIGINT, group=True)
+    text = "\n".join(lines)
+    assert sent and proc.returncode == 130, text[-3000:]
+    assert any(ln.startswith("foresight demo: interrupted while preparing the run") for ln in lines), text[-3000:]
+    assert not any(ln.startswith("foresight demo: prediction model") for ln in lines), text[-3000:]
+    assert "Traceback" not in text and "status 3" not in text
+    assert not list(models.glob("*.npz"))  # no model, whole or half
+    assert not list(run_dir.rglob("*.mcap"))
