@@ -51,7 +51,8 @@ class ViewService:
         self.config = config
         self.zenoh = zenoh
         self.keys = Keys(zenoh.prefix)
-        self.core = ViewCore(default_builder(load_scene(config.scene or None), config.device),
+        self.scene = load_scene(config.scene or None)
+        self.core = ViewCore(default_builder(self.scene, config.device),
                              viz_period_s=1.0 / config.viz_rate_hz)
         self.rejects = RejectCounter("view")
         self.receipt = Receipt(Expectations(clock="auto"))  # values, stamps and each sender's order, as any service
@@ -84,7 +85,8 @@ class ViewService:
                                      (k.posterior, ClassPosterior), (k.pose, HumanPose))]
             log.info("view: serving %s to the Foxglove app (Open connection -> Foxglove WebSocket; layout: "
                      "docs/foresight.foxglove.json); prefix %r", server.url, self.zenoh.prefix)
-            print(f"foresight view: watch live at {server.url}", flush=True)
+            print(f"foresight view: watch live at {server.url}; drawing scene {self.scene.name} (--scene: the "
+                  "system's own, e.g. pr2_two_cups_side for foresight demo and docker compose)", flush=True)
             try:
                 stop.wait()
             finally:

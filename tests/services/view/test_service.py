@@ -1,0 +1,29 @@
+"""The view service on loopback: it serves, says which scene it draws, and stops when asked."""
+
+from __future__ import annotations
+
+import threading
+
+from services.view.config import ViewConfig
+from services.view.service import ViewService
+
+
+def test_the_view_says_which_scene_it_draws_and_stops(zenoh_hub, capsys) -> None:
+    """The wire carries no scene: a view of another scene than the system's drew the cups where they are not,
+    without a word (the demo and compose run pr2_two_cups_side, the view's default is pr2_two_cups)."""
+    service = ViewService(ViewConfig(port=0, scene="pr2_two_cups_side"), zenoh_hub())
+    stop = threading.Event()
+    thread = threading.Thread(target=service.run, args=(stop,), daemon=True)
+    thread.start()
+    out = ""
+    try:
+        for _ in range(400):
+            out += capsys.readouterr().out
+            if "watch live at" in out:
+                break
+            stop.wait(0.05)
+    finally:
+        stop.set()
+        thread.join(30.0)
+    assert not thread.is_alive()
+    assert "watch live at ws://127.0.0.1:" in out and "drawing scene pr2_two_cups_side" in out, out
