@@ -253,11 +253,15 @@ def _closing_lines(cfg: DemoConfig, summary: Summary) -> list[str]:
 
 
 def _bare_live(argv: list[str]) -> list[str]:
-    """``--live`` without a port means Foxglove's default port (8765)."""
+    """``--live`` without a port means Foxglove's default port (8765).
+
+    "Without a port": last, or followed by another option (``--...``). Anything else after it is its value, checked
+    as one (``--live -1`` and ``--live abc`` are one-line errors, not a stray argument).
+    """
     out = []
     for i, a in enumerate(argv):
         out.append(a)
-        if a == "--live" and (i + 1 == len(argv) or not argv[i + 1].isdigit()):
+        if a == "--live" and (i + 1 == len(argv) or argv[i + 1].startswith("--")):
             out.append(str(LIVE_PORT))
     return out
 

@@ -130,9 +130,12 @@ def test_demo_live_takes_a_port_or_foxgloves_default(capsys: pytest.CaptureFixtu
     with pytest.raises(SystemExit):
         main(["--live", "--steps", "0"])  # a bare --live does not swallow the next option
     assert "demo.steps: must be >= 1" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        main(["--live", "70000"])
-    assert "demo.live: must be a port" in capsys.readouterr().err
+    for value, message in (("70000", "demo.live: must be a port"), ("-1", "demo.live: must be a port"),
+                           ("abc", "--live: expected int, got 'abc'")):  # a usage and "unrecognized arguments"
+        with pytest.raises(SystemExit):
+            main(["--live", value])
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
     opts = service_options(DemoConfig(live=8765), Path("m.npz"), Path("h.npz"), 3, None)
     live = opts["executor"].index("--live-port")  # the executor serves the scene it logs
     assert opts["executor"][live + 1] == "8765" and "--live-port" not in service_options(
