@@ -37,6 +37,8 @@ import argparse
 import dataclasses
 import logging
 import os
+import shutil
+import socket
 import sys
 import threading
 from collections.abc import Callable
@@ -49,6 +51,7 @@ from services.demo_run import SERVICES_IN_ORDER, RunRecord, run_once
 from services.scenario import Summary
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
+from shared.atomic_file import make_parent
 from shared.config import LOG_LEVELS, ConfigError, add_config_arguments, check_prefix, opt, resolve_config
 from shared.config_names import SECTIONS, check_environment, section_class
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
@@ -177,14 +180,48 @@ def _run_root(cfg: DemoConfig) -> Path:
         n += 1
         run = root / f"{stamp}-{cfg.mode}{'-compare' if cfg.compare else ''}-{n}"
     run.mkdir(parents=True)
-    latest = root / "latest"
+    return run
+
+
+def _point_latest(run: Path) -> None:
+    """``latest`` beside ``run`` points to it (once the run has started: a failed start leaves it as it was)."""
+    latest = run.parent / "latest"
     try:
         if latest.is_symlink() or not latest.exists():
             latest.unlink(missing_ok=True)
             latest.symlink_to(run.name, target_is_directory=True)
     except OSError:  # a file system without symlinks: the directory names still sort by time
         pass
-    return run
+
+
+def _discard_unstarted(run: Path) -> None:
+    """Remove a run directory that no service wrote into (it failed or was interrupted before the services)."""
+    if run.is_dir() and not any(p.suffix in (".log", ".mcap") for p in run.rglob("*")):
+        shutil.rmtree(run, ignore_errors=True)
+
+
+def _check_live_port(cfg: DemoConfig) -> None:
+    """``--live PORT`` must be free before the services start: the executor found out 20 s later."""
+    if not cfg.live:
+        return
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # a port in TIME_WAIT is free to the server
+        try:
+            probe.bind(("127.0.0.1", cfg.live))
+        except OSError as exc:
+            raise ConfigError(f"demo.live: port {cfg.live} on 127.0.0.1 is taken ({exc.strerror}); give another "
+                              "(--live PORT)") from None
+
+
+def _check_models_dir(cfg: DemoConfig) -> None:
+    """The model cache must be usable before a minute of training, not after it."""
+    models = Path(cfg.models_dir)
+    try:
+        make_parent(models / "model.npz")
+    except OSError as exc:
+        raise ConfigError(f"demo.models_dir: {exc.filename or models}: {exc.strerror or exc}") from None
+    if not os.access(models, os.W_OK | os.X_OK):
+        raise ConfigError(f"demo.models_dir: {models} is not writable (the prediction model is cached there)")
 
 
 def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] = print) -> tuple[int, Summary | None]:
@@ -195,24 +232,31 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     """
     from shared.robot import PR2
 
-    root = _run_root(cfg)
+    _check_models_dir(cfg)
+    _check_live_port(cfg)
     scene = load_scene(cfg.scene or None)
+    root = _run_root(cfg)
     variants = VARIANTS if cfg.compare else ((_variant_name(cfg), {}),)
     records: list[RunRecord] = []
     status = 0
-    for name, changes in variants:
-        if cfg.compare:
-            out(f"foresight demo: --- {name} ---")
-        sub = dataclasses.replace(cfg, compare=False, **changes,
-                                  run_dir=root / name.replace(" ", "-") if cfg.compare else root)
-        status, record = run_once(sub, name, stop, out)
-        if record is None:
-            if records:  # interrupted before this planner's first plan: what the earlier ones did still counts
+    try:
+        for name, changes in variants:
+            if cfg.compare:
+                out(f"foresight demo: --- {name} ---")
+            sub = dataclasses.replace(cfg, compare=False, **changes,
+                                      run_dir=root / name.replace(" ", "-") if cfg.compare else root)
+            status, record = run_once(sub, name, stop, out)
+            if record is None:
+                if records:  # interrupted before this planner's first plan: what the earlier ones did still counts
+                    break
+                return status or 1, None
+            records.append(record)
+            if status != 0:
                 break
-            return status or 1, None
-        records.append(record)
-        if status != 0:
-            break
+    finally:
+        _discard_unstarted(root)  # a bad option found late, Ctrl-C while training: no empty run directory
+        if root.is_dir():
+            _point_latest(root)
     robot = PR2.from_scene(scene)
     reference = records[0].final  # the final prediction of the paper's method
     outcomes = [measure_run(r.name, r.states, r.poses, reference, robot, scene, r.summary) for r in records]
@@ -223,10 +267,23 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
         summary.extra["verdict"] = verdict(outcomes)
     title = (f"foresight demo: {summary.human_class} reach, scene {scene.name}, robot at {cfg.robot_speed:g} of its "
              f"velocity limits, {cfg.steps} steps of {cfg.period_s:g} s")
-    figure = draw_outcomes(outcomes, scene, reference, records[0].poses, root / "run.png", cfg.period_s, title)
-    summary.extra["figure"] = str(figure)
     summary.extra["outcome_lines"] = outcome_lines(outcomes)
+    figure = _picture(lambda png: draw_outcomes(outcomes, scene, reference, records[0].poses, png, cfg.period_s,
+                                                title), root / "run.png", out)
+    if figure is not None:
+        summary.extra["figure"] = str(figure)
     return status, summary
+
+
+def _picture(draw: Callable[[Path], Path], png: Path, out: Callable[[str], None]) -> Path | None:
+    """``draw(png)``; a failure to write it (a full disk) is one warning: the run's outcome is printed regardless."""
+    try:
+        return draw(png)
+    except OSError as exc:
+        png.unlink(missing_ok=True)
+        out(f"foresight demo: warning: the picture of the run was not drawn: {exc.filename or png}: "
+            f"{exc.strerror or exc}")
+        return None
 
 
 def _variant_name(cfg: DemoConfig) -> str:

@@ -185,3 +185,55 @@ def test_a_prefix_zenoh_refuses_is_a_config_error() -> None:
     for prefix in ("foresight ", "fore\tsight", "a\x00b"):  # Zenoh takes them: a key space no other service meets
         with pytest.raises(ConfigError, match=r"^demo\.prefix: .* has a space or a control character"):
             DemoConfig(prefix=prefix).validate()
+
+
+def test_a_run_that_fails_before_its_services_leaves_no_run_directory(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """A bad option found while preparing left an empty run directory, and moved `latest` to it."""
+    runs = tmp_path / "runs"
+    (runs / "20260101T000000Z-lockstep").mkdir(parents=True)
+    (runs / "latest").symlink_to("20260101T000000Z-lockstep", target_is_directory=True)
+    for _ in range(3):
+        with pytest.raises(SystemExit):
+            main(["--goals", "red_cup,green_cup", "--run-dir", str(runs), "--models-dir", str(tmp_path / "m")])
+    assert "green_cup" in capsys.readouterr().err
+    assert sorted(p.name for p in runs.iterdir()) == ["20260101T000000Z-lockstep", "latest"]
+    assert (runs / "latest").resolve() == (runs / "20260101T000000Z-lockstep").resolve()
+
+
+def test_unusable_models_dir_and_taken_live_port_are_found_before_any_work(tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """Both were found only after training (about 50 s) or after the four services had started."""
+    import socket
+
+    (tmp_path / "afile").write_text("")
+    with pytest.raises(SystemExit) as exc:
+        main(["--models-dir", str(tmp_path / "afile" / "models"), "--run-dir", str(tmp_path / "runs")])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "demo.models_dir" in err and "a file is in the way" in err, err
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(SystemExit) as exc:
+            main(["--live", str(port), "--run-dir", str(tmp_path / "runs"), "--models-dir", str(tmp_path / "m")])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and f"demo.live: port {port} on 127.0.0.1 is taken" in err, err
+    assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
+
+
+def test_a_picture_that_cannot_be_written_costs_a_warning_not_the_runs_outcome(tmp_path: Path) -> None:
+    """A full disk used to end the demo in 'error: No space left on device', its 20 steps' outcome lost."""
+    from services.demo import _picture
+
+    lines: list[str] = []
+    png = tmp_path / "run.png"
+
+    def full_disk(path: Path) -> Path:
+        path.write_bytes(b"")  # what matplotlib leaves: an empty file
+        raise OSError(28, "No space left on device", str(path))
+
+    assert _picture(full_disk, png, lines.append) is None
+    assert lines == [f"foresight demo: warning: the picture of the run was not drawn: {png}: No space left on device"]
+    assert not png.exists()
+    assert _picture(lambda p: p, png, lines.append) == png and len(lines) == 1
