@@ -37,6 +37,7 @@ from shared.config import ZenohConfig
 from shared.foxglove.scene import SceneBuilder
 from shared.lockstep import FIRST_PLAN, Adoption, LockstepMaster, PlanInbox, StepClock
 from shared.protocol import (
+    HUMAN_SOURCES,
     DemoMarker,
     Expectations,
     GridSpec,
@@ -187,9 +188,12 @@ class ExecutorService:
     def _on_peer(self, service: str, alive: bool) -> None:
         if self.config.mode == "lockstep":
             return  # the clock protocol decides; a liveliness event's timing must not change a lock-step run
-        if service in self.config.hold_without and (service in self.core.gone) == alive:
+        was_gone = service in self.core.gone
+        self.core.note_peer(service, alive)  # the human's source ending its stream after its end marker is no fault
+        if (service in self.core.gone) != was_gone:
             log.warning("executor: %s %s", service, "is back" if alive else "is gone: holding the robot")
-        self.core.note_peer(service, alive)
+        elif service in HUMAN_SOURCES and service in self.config.hold_without and not alive:
+            log.info("executor: %s ended its stream after the demonstration's end: the robot goes on", service)
 
     # -- run -------------------------------------------------------------------------------------
 

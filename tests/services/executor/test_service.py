@@ -343,3 +343,23 @@ def test_a_log_that_cannot_be_written_costs_the_robot_nothing(pr2, tmp_path, cap
     assert service.result.log_write_failures == 2
     assert ["writing the MCAP log failed (1 so far): OSError: [Errno 28] No space left on device"] == [
         r.getMessage().split("executor: ", 1)[1] for r in caplog.records if "MCAP log failed" in r.getMessage()]
+
+
+def test_the_human_source_ending_its_stream_is_not_reported_as_gone(pr2, caplog) -> None:
+    """The replayer's normal end after its end marker was logged "replayer is gone: holding the robot"."""
+    from shared.config import ZenohConfig
+
+    service = ExecutorService(ExecutorConfig(mode="realtime"), ZenohConfig(), robot=pr2, human=(None, None),
+                              scene=SCENE)
+    caplog.set_level(logging.INFO, logger="foresight.executor")
+    service._on_peer("replayer", True)
+    service.core.note_demonstration("end", demo_id=0, n_samples=10)
+    service._on_peer("replayer", False)
+    assert "replayer" not in service.core.gone
+    text = caplog.text
+    assert "is gone" not in text and "replayer ended its stream after the demonstration's end" in text
+    service._on_peer("planner", True)
+    service._on_peer("planner", False)  # a fault: said so
+    assert "planner is gone: holding the robot" in caplog.text and "planner" in service.core.gone
+    service._on_peer("planner", True)
+    assert "planner is back" in caplog.text
