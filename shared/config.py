@@ -286,7 +286,7 @@ def _resolve_section(section: str, cls: type[T], file_values: dict[str, Any],
         else:
             raw = _file_value(file_values, o)
             if raw is not dataclasses.MISSING:
-                changes[o.attrs] = parse_value(f"{source}{o.name}", o.tp, raw, o.choices)
+                changes[o.attrs] = parse_value(f"{source}{o.name}", o.tp, raw, o.choices, typed=True)
     obj = _apply(base if base is not None else cls(), changes)
     _validate(obj, section)
     return obj

@@ -88,7 +88,7 @@ def base_type(tp: Any) -> tuple[Any, bool]:
     return tp, False
 
 
-def parse_value(name: str, tp: Any, raw: Any, choices: Sequence[Any] | None = None) -> Any:
+def parse_value(name: str, tp: Any, raw: Any, choices: Sequence[Any] | None = None, typed: bool = False) -> Any:
     """Convert ``raw`` (a string from env/CLI, or a TOML value) to the field type ``tp``.
 
     Args:
@@ -96,6 +96,8 @@ def parse_value(name: str, tp: Any, raw: Any, choices: Sequence[Any] | None = No
         tp: The field's annotation (resolved).
         raw: The value to convert.
         choices: Allowed values, if any.
+        typed: ``raw`` comes from a file that has types of its own (TOML): a number or a boolean written as a
+            string (``steps = "20"``) is refused, as TOML's own readers would (only env and flags are text).
 
     Returns:
         The converted value.
@@ -111,7 +113,10 @@ def parse_value(name: str, tp: Any, raw: Any, choices: Sequence[Any] | None = No
             items = list(raw)
         else:
             raise ConfigError(f"{name}: expected a list, got {raw!r}")
-        return [parse_value(name, inner, item, choices) for item in items]
+        return [parse_value(name, inner, item, choices, typed) for item in items]
+    if typed and isinstance(raw, str) and inner in (bool, int, float):
+        raise ConfigError(f"{name}: expected {inner.__name__}, got the string {raw!r} (in TOML write "
+                          f"{'true or false' if inner is bool else 'the number'} without quotes)")
     value: Any
     try:
         if inner is bool:

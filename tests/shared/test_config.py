@@ -120,6 +120,11 @@ def test_bad_files(tmp_path):
                        env={})
     with pytest.raises(ConfigError, match="top-level key 'rate_hz'"):
         resolve_config("demo", DemoCfg, parse(["--config", str(write(tmp_path, "rate_hz = 3\n"))]), env={})
+    # a number or a boolean written as a string in TOML was read as one; as text only env and flags are
+    for line, kind in (('rate_hz = "3"', "float"), ('loop = "true"', "bool"), ('classes = ["1"]', "int")):
+        with pytest.raises(ConfigError, match=rf"expected {kind}, got the string .* without quotes"):
+            resolve_config("demo", DemoCfg, parse(["--config", str(write(tmp_path, f"[demo]\n{line}\n"))]), env={})
+    assert resolve_config("demo", DemoCfg, parse([]), env={"FORESIGHT_DEMO_RATE_HZ": "3"})[0].rate_hz == 3.0
 
 
 def test_parse_value_types():
