@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import shutil
 import threading
 import time
 from collections.abc import Callable
@@ -188,7 +189,7 @@ def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable
                 path.replace(directory / KEYPOINTS_FILE)
             else:
                 path.unlink()
-        (directory / "keypoints").rmdir()
+        shutil.rmtree(directory / "keypoints")  # what is left: the class order of a library of one
         noise = f", noise {cfg.keypoint_noise_m * 100:g} cm per axis" if cfg.keypoint_noise_m else ""
         out(f"foresight demo: the human as body keypoints{noise}: {directory / KEYPOINTS_FILE} (foresight tracker "
             "--from fits the posture features back)")

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.atomic_file import make_parent
+from shared.atomic_file import atomic_write, make_parent
 from shared.feature_sets import require_mapping
 from shared.human import HumanModel
 from shared.library import Demonstration, MotionLibrary
@@ -27,7 +27,8 @@ from shared.library import Demonstration, MotionLibrary
 from .fit import POINT_NAMES, REQUIRED, FitConfig, KeypointFit
 from .layouts import load_layout
 
-__all__ = ["write_keypoint_library", "read_keypoint_csv", "fit_keypoint_library", "KeypointDemo", "FitReport"]
+__all__ = ["write_keypoint_library", "read_keypoint_csv", "fit_keypoint_library", "KeypointDemo", "FitReport",
+           "CLASS_ORDER_FILE"]
 
 
 @dataclass
@@ -69,8 +70,8 @@ def write_keypoint_library(lib: MotionLibrary, out: Path, noise_m: float = 0.0, 
         seed: Seed of the noise, drops and missing points.
 
     Returns:
-        The CSV files written. Any other ``*.csv`` in ``out`` (an earlier library's classes) is removed: the
-        reader takes every one, and would mix the two libraries.
+        The CSV files written (and :data:`CLASS_ORDER_FILE`, the classes' order). Any other ``*.csv`` in ``out``
+        (an earlier library's classes) is removed: the reader takes every one, and would mix the two libraries.
 
     Raises:
         ValueError: The library's features have no mapping to the human model (checked before anything is
@@ -105,6 +106,8 @@ def write_keypoint_library(lib: MotionLibrary, out: Path, noise_m: float = 0.0, 
         written.append(path)
     for stale in set(out.glob("*.csv")) - set(written):
         stale.unlink()
+    with atomic_write(out / CLASS_ORDER_FILE) as f:  # the labels' order: sorted names would reorder the classes
+        f.write("".join(f"{name}\n" for name in lib.class_names).encode())
     return written
 
 
@@ -151,6 +154,30 @@ def read_keypoint_csv(path: Path) -> list[KeypointDemo]:
             for d, fr in by_demo.items()]
 
 
+CLASS_ORDER_FILE = "classes.txt"
+"""A keypoint library's class order, one class name a line (``to-keypoints`` writes it; without it: sorted)."""
+
+
+def _class_files(directory: Path) -> list[Path]:
+    """The library's ``<class>.csv`` files in its class order (:data:`CLASS_ORDER_FILE`, else sorted by name).
+
+    Raises:
+        ValueError: No CSV, or an order file whose names are not exactly the CSVs' classes.
+    """
+    files = sorted(directory.glob("*.csv"))
+    if not files:
+        raise ValueError(f"keypoint library {directory}: no <class>.csv files")
+    order = directory / CLASS_ORDER_FILE
+    if not order.is_file():
+        return files
+    names = [n.strip() for n in order.read_text(encoding="utf-8").splitlines() if n.strip()]
+    stems = {p.stem for p in files}
+    if len(set(names)) != len(names) or set(names) != stems:
+        raise ValueError(f"{order}: lists {', '.join(names) or 'nothing'}, but the CSV files are "
+                         f"{', '.join(sorted(stems))} (one name a line, each CSV once)")
+    return [directory / f"{n}.csv" for n in names]
+
+
 def fit_keypoint_library(directory: Path, layout: str = "foresight", config: FitConfig | None = None
                          ) -> tuple[MotionLibrary, FitReport]:
     """Fit the 12 features to every demonstration of a keypoint library; returns the motion library and a report.
@@ -161,9 +188,7 @@ def fit_keypoint_library(directory: Path, layout: str = "foresight", config: Fit
     Raises:
         ValueError: No CSV in ``directory``, or a malformed one.
     """
-    files = sorted(Path(directory).glob("*.csv"))
-    if not files:
-        raise ValueError(f"keypoint library {directory}: no <class>.csv files")
+    files = _class_files(Path(directory))
     lay = load_layout(layout)
     demos: list[tuple[int, str, KeypointDemo, np.ndarray]] = []
     for label, path in enumerate(files):

@@ -106,13 +106,20 @@ def test_cli_to_and_from_keypoints(tmp_path, capsys) -> None:
     from shared.library import save_library
 
     lib = tmp_path / "lib.npz"
-    save_library(generate_library(2, 2, seed=2), lib)
+    save_library(generate_library(4, 1, seed=2), lib)  # classes not in sorted order: blue, red, near_left, far_left
     assert library_main(["to-keypoints", str(lib), "--out", str(tmp_path / "kp"), "--noise-m", "0.01"]) == 0
-    assert sorted(p.name for p in (tmp_path / "kp").iterdir()) == [f"{c}.csv" for c in
-                                                                   sorted(load_library(lib).class_names)]
+    assert sorted(p.name for p in (tmp_path / "kp").glob("*.csv")) == [f"{c}.csv" for c in
+                                                                       sorted(load_library(lib).class_names)]
     assert library_main(["from-keypoints", str(tmp_path / "kp"), "--out", str(tmp_path / "back.npz")]) == 0
     out = capsys.readouterr().out
-    assert "fit residual median" in out and len(load_library(tmp_path / "back.npz").demos) == 4
+    back = load_library(tmp_path / "back.npz")
+    assert "fit residual median" in out and len(back.demos) == 4
+    assert back.class_names == load_library(lib).class_names  # the labels' order survives (it was sorted by name)
+    assert [d.label for d in back.demos] == [d.label for d in load_library(lib).demos]
+    (tmp_path / "kp" / "classes.txt").write_text("red_cup\nnot_a_class\n")
+    with pytest.raises(SystemExit):
+        library_main(["from-keypoints", str(tmp_path / "kp"), "--out", str(tmp_path / "bad.npz")])
+    assert "classes.txt: lists red_cup, not_a_class, but the CSV files are" in capsys.readouterr().err
     for argv, text in ((["to-keypoints", str(lib), "--out", str(tmp_path / "x"), "--drop", "1.5"], "--drop"),
                        (["from-keypoints", str(tmp_path / "none"), "--out", str(tmp_path / "y.npz")],
                         "not a directory")):
@@ -146,7 +153,7 @@ def test_an_output_directory_is_the_librarys_own(tmp_path, capsys) -> None:
     (kp / "an_old_class.csv").write_text("demo,frame\n")
     assert library_main(["to-keypoints", str(tmp_path / "lib"), "--out", str(kp)]) == 0
     assert "removed 1 file(s) of an earlier library: an_old_class.csv" in capsys.readouterr().out
-    assert len(list(kp.glob("*.csv"))) == 2
+    assert len(list(kp.glob("*.csv"))) == 2 and (kp / "classes.txt").read_text().count("\n") == 2
 
 
 def test_to_keypoints_refuses_before_writing(wide, tmp_path, capsys) -> None:
