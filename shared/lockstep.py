@@ -88,6 +88,7 @@ class PlanInbox:
     def __init__(self) -> None:
         self._cond = threading.Condition()
         self._now = Received()
+        self._end_tick: int | None = None  # tick of the observed demonstration's last pose, once it ended
 
     def put_plan(self, plan: Plan) -> None:
         """A valid plan arrived (its joints already checked)."""
@@ -102,6 +103,12 @@ class PlanInbox:
             self._now = Received(now.plan, now.seq, max(now.occupancy_tick, tick), arrival)
             self._cond.notify_all()
 
+    def put_marker(self, event: str, tick: int) -> None:
+        """A demonstration marker arrived: an end carries the tick of the demonstration's last pose."""
+        with self._cond:
+            self._end_tick = tick if event == "end" else None
+            self._cond.notify_all()
+
     def latest(self) -> Received:
         """What has arrived so far."""
         with self._cond:
@@ -111,19 +118,38 @@ class PlanInbox:
                   idle: Callable[[], None] | None = None) -> bool:
         """Whether a plan of ``tick`` or later arrived within ``timeout`` wall s (``stop`` ends the wait).
 
-        ``idle`` is called about every 0.1 s while waiting (e.g. to flush a log).
+        ``idle`` is called about every 0.1 s while waiting (e.g. to flush a log), never under the inbox's lock: the
+        transport's thread delivering the plan does not wait for it.
         """
+        return self._wait(lambda: self._now.plan is not None and self._now.plan.tick >= tick, timeout, stop, idle)
+
+    def wait_occupancy(self, tick: int, timeout: float, stop: threading.Event,
+                       idle: Callable[[], None] | None = None) -> bool:
+        """Whether the grid of ``tick`` (or later) arrived, or none will: the demonstration ended before ``tick``.
+
+        The prediction of tick n is made while plan n is, from the same tick's poses: which of the two reaches the
+        executor first is up to the machine. Step n+1 judges the grid's age, so it waits for both, and a run
+        holds or moves the same way on every machine.
+        """
+        def done() -> bool:
+            return self._now.occupancy_tick >= tick or (self._end_tick is not None and self._end_tick < tick)
+
+        return self._wait(done, timeout, stop, idle)
+
+    def _wait(self, done: Callable[[], bool], timeout: float, stop: threading.Event,
+              idle: Callable[[], None] | None) -> bool:
         deadline = time.monotonic() + timeout
-        with self._cond:
-            while not stop.is_set():
-                if self._now.plan is not None and self._now.plan.tick >= tick:
+        while not stop.is_set():
+            with self._cond:
+                if done():
                     return True
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False
-                self._cond.wait(min(left, 0.1))
-                if idle is not None:
-                    idle()
+                if self._cond.wait_for(done, min(left, 0.1)):
+                    return True
+            if idle is not None:
+                idle()
         return False
 
 

@@ -40,7 +40,14 @@ class TickOrder:
         self.last = -1
 
     def accept(self, tick: int) -> tuple[bool, str]:
-        """Whether to act on ``tick``, and what to report ("" when all is in order)."""
+        """Whether to act on ``tick``, and what to report ("" when all is in order).
+
+        Tick 0 after a later one is a new run (the executor started again, as the receiving checks take it): it is
+        acted on, and reported; it used to be ignored, with every tick of the new run up to the old one's last.
+        """
+        if tick == 0 and self.last > 0:
+            self.last = 0
+            return True, "clock restarted at tick 0 (a new run: the executor started again)"
         if tick <= self.last:
             return False, f"ignoring clock tick {tick} (already at tick {self.last})"
         note = f"clock jumped from tick {self.last} to {tick}" if tick != self.last + 1 and self.last >= 0 else ""
@@ -87,16 +94,28 @@ class TickInbox:
         self.keep = keep
 
     def _trim(self, d: dict[int, object]) -> None:
-        while len(d) > self.keep:
-            d.pop(min(d))
+        while len(d) > self.keep:  # the first received goes first: a new run's low ticks are no older than the last
+            d.pop(next(iter(d)))
+
+    def _new_run(self) -> None:
+        """Forget the last run's states, grids and end (its ticks and simulated stamps are the new run's too)."""
+        self.states.clear()
+        self.occupancy.clear()
+        self.end_tick = None
 
     def add_tick(self, msg: ClockTick) -> None:
         """A clock tick arrived."""
         self.ticks.put(msg)
 
     def add_state(self, msg: RobotState) -> None:
-        """A robot state arrived; the latest-stamped one of each tick is kept."""
+        """A robot state arrived; the latest-stamped one of each tick is kept.
+
+        A state of tick 0 or -1 after later ones starts a new run (the executor started again): what the inbox
+        held of the last run is forgotten, or its states and grids would answer the new run's ticks.
+        """
         with self.cond:
+            if msg.tick <= 0 < max(self.states, default=0):  # the first state of a new run (tick -1, then 0)
+                self._new_run()
             old = self.states.get(msg.tick)
             if old is None or msg.stamp >= old.stamp:
                 self.states[msg.tick] = msg

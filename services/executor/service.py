@@ -174,6 +174,7 @@ class ExecutorService:
             self.inbox.put_plan(msg)
         elif key == self.keys.demo and isinstance(msg, DemoMarker):
             self.core.note_demonstration(msg.event, msg.demo_id, msg.n_samples)
+            self.inbox.put_marker(msg.event, msg.tick)
         elif key == self.keys.pose and isinstance(msg, HumanPose):
             self._pose_arrival[(msg.demo_id, msg.index)] = time.monotonic()
             if len(self._pose_arrival) > POSES_KEPT:
@@ -325,6 +326,9 @@ class ExecutorService:
             flush = self.mcap.flush_if_due if self.mcap is not None else None
             if not self.inbox.wait_plan(n, cfg.lockstep_timeout_s, self.stop, idle=flush) and not self.stop.is_set():
                 log.warning("executor: no plan for tick %d within %.1f s; going on", n, cfg.lockstep_timeout_s)
+            elif cfg.require_occupancy and not self.inbox.wait_occupancy(n, cfg.lockstep_timeout_s, self.stop,
+                                                                         idle=flush) and not self.stop.is_set():
+                log.warning("executor: no prediction for tick %d within %.1f s; going on", n, cfg.lockstep_timeout_s)
             n += 1
         if cfg.finish_path and not self.stop.is_set():
             self._finish_path(master, state_pub, n)

@@ -82,7 +82,7 @@ class ReplanTrigger:
         self.counts[reason] = self.counts.get(reason, 0) + 1
 
     def wait_s(self, now: float) -> float:
-        """Seconds until the period forces the next step (0 when due; ``period_s`` before the first)."""
+        """Seconds until the period forces the next step (0 when due, and before the first step)."""
         if self.last_start is None:
             return 0.0
         return max(0.0, self.last_start + self.period_s - now)

@@ -95,10 +95,10 @@ def test_master_holds_without_occupancy_when_required() -> None:
 def test_plan_inbox_waits_for_the_plan_of_a_tick() -> None:
     inbox, stop = PlanInbox(), threading.Event()
     assert not inbox.wait_plan(0, timeout=0.01, stop=stop)
-    idle: list[int] = []
-    threading.Timer(0.05, inbox.put_plan, (plan(0),)).start()
-    assert inbox.wait_plan(0, timeout=30.0, stop=stop, idle=lambda: idle.append(1))
-    assert inbox.latest().seq == 1 and idle
+    idle: list[bool] = []  # per call: whether it ran under the inbox's lock (it blocked the delivering thread)
+    threading.Timer(0.25, inbox.put_plan, (plan(0),)).start()
+    assert inbox.wait_plan(0, timeout=30.0, stop=stop, idle=lambda: idle.append(inbox._cond._is_owned()))
+    assert inbox.latest().seq == 1 and idle and not any(idle)
     stop.set()
     assert not inbox.wait_plan(5, timeout=30.0, stop=stop)  # stopped: no wait
     inbox.put_occupancy(3, 1.0)
@@ -153,3 +153,18 @@ def test_the_rest_of_the_path_is_the_last_steps_plan() -> None:
         master.finish(n, inbox.latest() if n == 2 else None)
         n += 1
     np.testing.assert_allclose(core.q, [0.5, -0.2], atol=1e-6)  # the newest plan's goal, not plan 0's
+
+
+def test_the_executor_waits_for_the_prediction_of_a_tick_unless_the_human_has_ended() -> None:
+    """Plan n and the grid of tick n are made at once: which reached the executor first decided whether step n+1
+    held (the grid's age), so the same seed could give another run."""
+    inbox, stop = PlanInbox(), threading.Event()
+    assert not inbox.wait_occupancy(3, timeout=0.01, stop=stop)
+    threading.Timer(0.05, inbox.put_occupancy, (3, 1.0)).start()
+    assert inbox.wait_occupancy(3, timeout=30.0, stop=stop)
+    assert not inbox.wait_occupancy(4, timeout=0.01, stop=stop)
+    inbox.put_marker("end", 3)  # the demonstration's last pose was of tick 3: no grid of tick 4 will come
+    assert inbox.wait_occupancy(4, timeout=30.0, stop=stop) and inbox.wait_occupancy(9, timeout=30.0, stop=stop)
+    assert inbox.wait_occupancy(3, timeout=30.0, stop=stop)
+    inbox.put_marker("start", 5)  # another demonstration: its grids are awaited again
+    assert not inbox.wait_occupancy(6, timeout=0.01, stop=stop)

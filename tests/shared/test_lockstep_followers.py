@@ -72,3 +72,30 @@ def test_inboxes_keep_only_recent_ticks() -> None:
         inbox.add_state(state(t, t * 0.2))
         inbox.add_occupancy(grid(t))
     assert sorted(inbox.states) == [2, 3] and sorted(inbox.occupancy) == [2, 3]
+
+
+def test_a_restarted_clock_is_a_new_run_for_the_replayer() -> None:
+    """Tick 0 after a later tick: the replayer ignored every tick of the new run up to the old run's last."""
+    order = TickOrder()
+    for t in range(20):
+        order.accept(t)
+    took, note = order.accept(0)
+    assert took and "new run" in note
+    assert order.accept(1) == (True, "")
+
+
+def test_a_new_run_does_not_get_the_last_runs_states_and_grids() -> None:
+    """A planner outliving a run kept its inbox: the new run's low ticks were dropped at once (the lowest tick went
+    first) and its later ticks were answered with the old run's states and grids."""
+    inbox = TickInbox(keep=8)
+    for t in range(20):  # run A
+        inbox.add_state(state(t, (t + 1) * 0.2))
+        inbox.add_occupancy(grid(t))
+    inbox.add_state(state(-1, 0.0))  # run B: the executor's initial state, then tick 0
+    inbox.add_state(state(0, 0.2))
+    assert sorted(inbox.states) == [-1, 0] and inbox.occupancy == {}
+    got = inbox.inputs(ClockTick(stamp=2.6, tick=13, period=0.2), timeout=0.0)
+    assert got.state is None and got.occupancy is None  # nothing of run A answers run B's tick 13
+    for t in range(1, 12):  # run B goes on: its own ticks are kept
+        inbox.add_state(state(t, (t + 1) * 0.2))
+    assert sorted(inbox.states) == list(range(4, 12))
