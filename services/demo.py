@@ -184,7 +184,7 @@ def _run_root(cfg: DemoConfig) -> Path:
 
 
 def _point_latest(run: Path) -> None:
-    """``latest`` beside ``run`` points to it (once the run has started: a failed start leaves it as it was)."""
+    """``latest`` beside ``run`` points to it (called as its services start: a failed start leaves it as it was)."""
     latest = run.parent / "latest"
     try:
         if latest.is_symlink() or not latest.exists():
@@ -245,7 +245,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
                 out(f"foresight demo: --- {name} ---")
             sub = dataclasses.replace(cfg, compare=False, **changes,
                                       run_dir=root / name.replace(" ", "-") if cfg.compare else root)
-            status, record = run_once(sub, name, stop, out)
+            status, record = run_once(sub, name, stop, out, started=lambda: _point_latest(root))
             if record is None:
                 if records:  # interrupted before this planner's first plan: what the earlier ones did still counts
                     break
@@ -254,9 +254,8 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
             if status != 0:
                 break
     finally:
-        _discard_unstarted(root)  # a bad option found late, Ctrl-C while training: no empty run directory
-        if root.is_dir():
-            _point_latest(root)
+        if not records:  # a bad option found late, Ctrl-C while training: no run directory without a run in it
+            _discard_unstarted(root)
     robot = PR2.from_scene(scene)
     reference = records[0].final  # the final prediction of the paper's method
     outcomes = [measure_run(r.name, r.states, r.poses, reference, robot, scene, r.summary) for r in records]

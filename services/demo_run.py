@@ -196,9 +196,12 @@ def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable
     return scenario, model, human
 
 
-def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable[[str], None]
-              ) -> tuple[int, RunRecord | None]:
-    """One run of the scenario in ``cfg.run_dir``; returns ``(exit status, its record or None)``."""
+def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable[[str], None],
+             started: Callable[[], None] | None = None) -> tuple[int, RunRecord | None]:
+    """One run of the scenario in ``cfg.run_dir``; returns ``(exit status, its record or None)``.
+
+    ``started`` is called once its inputs are ready, as its services are about to start.
+    """
     scene = load_scene(cfg.scene or None)
     run_dir = Path(cfg.run_dir)
     try:
@@ -212,6 +215,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     if stop.is_set():
         out("foresight demo: interrupted before the services started; nothing was recorded")
         return 130, None
+    if started is not None:
+        started()
     mcap = run_dir / f"{run_dir.name}.mcap"
     endpoint = f"tcp/127.0.0.1:{cfg.port or free_port()}"
     keys = Keys(cfg.prefix)

@@ -105,7 +105,7 @@ def test_compare_interrupted_before_a_later_planners_first_plan_keeps_the_finish
 
     calls = []
 
-    def run_once(cfg, name, stop, out):
+    def run_once(cfg, name, stop, out, started=None):
         calls.append(name)
         if name == "prediction":
             s = Summary(steps=[], chosen_goal_per_step=["red_cup"], switch_step=None, interference_cost=0.0,
