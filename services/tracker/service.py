@@ -239,12 +239,12 @@ class TrackerService:
             deadline = time.monotonic() + 10.0  # the first frames go once the tracker's subscription is routed here
             while not pub.matched() and time.monotonic() < deadline and not stop.wait(0.05):
                 pass
-            start = time.monotonic()
+            start, wall = time.monotonic(), time.time()
             for frame in playback.frames():
                 if self._wait_until(start + frame.t, stop):
                     break
-                try:
-                    pub.put(HumanKeypoints(stamp=time.time(), tick=-1, frame=frame.frame,
+                try:  # stamped when due, not when sent: frames sent late in a burst are still 1/rate apart, not a jump
+                    pub.put(HumanKeypoints(stamp=wall + frame.t, tick=-1, frame=frame.frame,
                                            frame_id=self.config.tracker.frame_id, names=playback.names,
                                            positions=frame.positions))
                 except ProtocolError as exc:  # the recording holds a frame the contract refuses: say so, go on

@@ -320,3 +320,40 @@ def test_a_recordings_silence_ends_the_reach_before_its_next_frame(zenoh_hub, tm
         assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "end" for m in items))
     lead = round(play.lead_s * play.rate_hz)
     assert played_at_end and played_at_end[0] <= lead + half  # it ended before a frame after the silence was played
+
+
+def test_playback_stamps_each_frame_when_due_even_when_it_is_sent_late(zenoh_hub, tmp_path: Path, monkeypatch) -> None:
+    """Frames sent late in a burst (a loaded machine) were stamped when sent: a few ms apart, they read as a jump
+    of the body and were refused (seen once in CI)."""
+    from shared.transport import subscribe
+
+    hub = zenoh_hub
+    tester = hub()
+    keys = Keys(tester.prefix)
+    frames = _reach_frames()[:40]
+    recording = tmp_path / "late.csv"
+    with recording.open("w") as f:
+        f.write(",".join(["demo", "frame", *(f"{p}_{a}" for p in NAMES for a in "xyz")]) + "\n")
+        for i, pos in enumerate(frames):
+            f.write(",".join(map(str, [0, i, *np.round(pos.reshape(-1), 5)])) + "\n")
+    calls = []
+
+    def late(self, when: float, stop) -> bool:  # the first frame after a 0.5 s stall, the rest at once: all late
+        if not calls:
+            time.sleep(0.5)
+        calls.append(when)
+        return stop.is_set()
+
+    monkeypatch.setattr(TrackerService, "_wait_until", late)
+    sent: list[HumanKeypoints] = []
+    with open_session(tester) as session:
+        sub = subscribe(session, keys.keypoints, HumanKeypoints, sent.append)
+        time.sleep(0.3)
+        play = PlaybackConfig(rate_hz=30.0, lead_s=0.0, hold_s=0.0, gap_s=0.5)
+        service, thread = _service(hub, from_file=recording, playback=play)
+        stats = thread.join(60.0)
+        sub.undeclare()
+    assert stats is not None and len(sent) == stats.played >= 30
+    gaps = np.diff([m.stamp for m in sorted(sent, key=lambda m: m.frame)])
+    assert np.allclose(gaps, 1 / 30, atol=1e-6), gaps
+    assert sum(stats.refused.values()) == 0, stats.refused
