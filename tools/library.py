@@ -34,7 +34,8 @@ from shared.scene import load_scene
 from shared.synthetic import FEATURE_SETS, SyntheticConfig, generate_library, load_layout, pelvis_frame
 from shared.synthetic_wide import WIDE_FEATURE_NAMES, generate_wide_library
 
-from .reach import check_png, plot_reach_points
+from .png import check_png
+from .reach import plot_reach_points
 
 __all__ = ["main", "SUBCOMMANDS", "format_info"]
 

@@ -21,7 +21,9 @@ from shared.library import load_library
 from shared.runtime import UserError, cli_errors, help_text
 from shared.scene import load_scene
 
-__all__ = ["plot_reach_points", "check_png", "main"]
+from .png import check_png
+
+__all__ = ["plot_reach_points", "main"]
 
 
 def plot_reach_points(reach: np.ndarray, labels: np.ndarray, scene, path, title: str = "",
@@ -69,19 +71,6 @@ def plot_reach_points(reach: np.ndarray, labels: np.ndarray, scene, path, title:
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
-
-
-def check_png(path: str, option: str) -> None:
-    """Refuse a plot path that would not become the PNG named (before any work is done).
-
-    Raises:
-        UserError: ``path`` is empty (the current directory) or does not end in ``.png`` (matplotlib would
-            refuse the format, or add ``.png`` to a name without one).
-    """
-    if not path.strip():
-        raise UserError(f"{option}: empty; give the PNG file to write")
-    if Path(path).suffix.lower() != ".png":
-        raise UserError(f"{option} {path!r}: the plot is a PNG; give a file name ending in .png")
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m tools.reach") -> int:

@@ -26,6 +26,7 @@ from shared import strict_json
 from shared.recording.reader import LogFile, read_log
 from shared.runtime import UserError, cli_errors
 
+from ..png import check_png
 from .compress import compress_log
 from .info import format_info, info_dict
 from .latency import format_latencies, log_latencies
@@ -55,6 +56,8 @@ def _main_info(args: argparse.Namespace) -> int:
 
 
 def _main_render(args: argparse.Namespace, prog: str) -> int:
+    if not args.all:
+        check_png(args.out, "--out")  # matplotlib would write NAME.png where we print NAME
     wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.RobotState"}
     lf = read_log(args.file, keep=lambda ch: ch.schema_name in wanted and ch.message_encoding == "msgpack")
     views = step_views(lf)
@@ -106,9 +109,9 @@ def _main_snapshot(args: argparse.Namespace) -> int:
     from .snapshot import draw_snapshot, scene_at
 
     file = Path(args.file)
-    out = Path(args.out) if args.out else file.with_name(f"{file.stem}-snapshot.png")
-    if out.suffix.lower() != ".png":
-        raise UserError(f"--out {str(out)!r}: a .png file (the snapshot is a PNG)")
+    if args.out is not None:
+        check_png(args.out, "--out")
+    out = Path(args.out) if args.out is not None else file.with_name(f"{file.stem}-snapshot.png")
     state = scene_at(file, args.at)
     draw_snapshot(state, out, title=file.name)
     _note_truncated(read_log(file, keep=lambda ch: False))  # whether the scene reader stopped at a damaged chunk

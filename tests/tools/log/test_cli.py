@@ -56,14 +56,16 @@ def test_render_writes_pngs(run_log, tmp_path, capsys) -> None:
     (["info", "/nonexistent.mcap"], "not found"),
     (["render", "{log}", "--step", "7", "--out", "x.png"], "no plan for step 7"),
     (["render", "{log}", "--out", "x.png"], "--step N or --all"),
+    (["render", "{log}", "--step", "1", "--out", "{tmp}/step1"], "ending in .png"),  # it wrote step1.png, said step1
     (["info", "{bad}"], "not an MCAP file"),
 ])
 def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(b"hello, this is not mcap at all")
-    argv = [a.format(log=run_log, bad=bad) for a in argv]
+    argv = [a.format(log=run_log, bad=bad, tmp=tmp_path) for a in argv]
     with pytest.raises(SystemExit) as exc:
         main(argv)
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
+    assert not list(tmp_path.glob("step1*"))

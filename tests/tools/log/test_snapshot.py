@@ -112,7 +112,8 @@ def test_human_and_posterior_are_drawn(robot, tmp_path) -> None:
     (["snapshot", "{log}", "--at", "-1"], "--at must be a finite time >= 0"),
     (["snapshot", "{log}", "--at", "inf"], "--at must be a finite time >= 0"),
     (["snapshot", "{empty}"], "no scene channels"),
-    (["snapshot", "{log}", "--out", "{tmp}/notapng"], "a .png file"),  # it said 'wrote notapng', wrote notapng.png
+    (["snapshot", "{log}", "--out", "{tmp}/notapng"], "ending in .png"),  # it said 'wrote notapng', wrote notapng.png
+    (["snapshot", "{log}", "--out", ""], "--out: empty"),
 ])
 def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
     bad = tmp_path / "bad.mcap"

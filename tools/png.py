@@ -1,0 +1,27 @@
+"""The one check of a PNG output path, made before any work: ``foresight log snapshot --out``,
+``library generate --plot``, ``python -m tools.reach --out``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from shared.runtime import UserError
+
+__all__ = ["check_png"]
+
+
+def check_png(path: str, option: str) -> None:
+    """Refuse a plot path that would not become the PNG named.
+
+    Args:
+        path: The path given on the command line.
+        option: The option's name, for the message (``--out``).
+
+    Raises:
+        UserError: ``path`` is empty (the current directory) or does not end in ``.png`` (matplotlib would
+            refuse the format, or add ``.png`` to a name without one).
+    """
+    if not path.strip():
+        raise UserError(f"{option}: empty; give the PNG file to write")
+    if Path(path).suffix.lower() != ".png":
+        raise UserError(f"{option} {path!r}: the plot is a PNG; give a file name ending in .png")
