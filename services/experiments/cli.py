@@ -120,6 +120,9 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=int, default=10, help="runs per demonstration and planner (default: 10)")
     p.add_argument("--robot-cup", default="red_cup", help="the robot's one task (default: red_cup)")
     p.add_argument("--human-cup", default="blue_cup", help="the cup the human reaches for (default: blue_cup)")
+    p.add_argument("--basic-every-demo", action="store_true",
+                   help="plan basic STOMP on every demonstration at every seed (default: on every demonstration at "
+                        "seed 0, then, where its paths agree to the bit, once per seed and scored against each)")
     p = sub.add_parser("switch", help=EXPERIMENTS["switch"],
                        description=_doc("switch"),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -299,7 +302,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             raise UserError(f"--demos must be >= 0 (0: all) and --seed >= 0, got {args.demos} and {args.seed}")
         if args.what == "interference":
             res = run_interference(InterferenceConfig(robot_cup=args.robot_cup, human_cup=args.human_cup,
-                                                      demos=args.demos, seeds=args.seeds, **common),
+                                                      demos=args.demos, seeds=args.seeds,
+                                                      basic_once=not args.basic_every_demo, **common),
                                    out, compile=not args.no_compile)
             lines, data = res.lines(), res.to_json()
         else:

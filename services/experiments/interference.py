@@ -38,6 +38,7 @@ from .heldout import (
 from .measures import body_clearance, contact_summary, interference_along_path, interference_over_time, postures_at
 from .planners import VARIANTS, Timing, build_planner
 from .protocol import AUTHORS_TRIALS, authors_trial, move3d_path_weights, protocol, run_pacing
+from .reuse import first_differing_state, same_human, same_robot, with_human
 
 __all__ = ["TABLE1_SCENE", "InterferenceConfig", "RunScore", "InterferenceResult", "score_run",
            "ratio_text", "run_interference"]
@@ -69,6 +70,7 @@ class InterferenceConfig:
     trials: str = "auto"  # authors: the authors' human motions; cup: the class nearest the human's cup; auto: the
     # authors' with the paper protocol on the paper's library, else cup
     path_per_step: float | None = None  # paper protocol: the robot's pace (None: the authors' for the scene)
+    basic_once: bool = True  # basic STOMP planned once per seed, checked on the first (services.experiments.reuse)
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
 
@@ -149,11 +151,17 @@ class InterferenceResult:
     human: CupClass
     demos: list[int]
     runs: list[RunScore] = field(default_factory=list)
+    borrowed: int = 0  # basic STOMP's scores made from another demonstration's run (services.experiments.reuse)
 
     def values(self, planner: str, measure: str) -> np.ndarray:
         """``(demos, seeds)`` values of one measure of one planner."""
         return np.array([[getattr(r, measure) for r in self.runs if r.planner == planner and r.demo == d]
                          for d in self.demos], dtype=np.float64)
+
+    @property
+    def names(self) -> list[str]:
+        """The planners run, in :data:`~services.experiments.planners.VARIANTS` order."""
+        return [n for n in VARIANTS if n in self.config.variants]
 
     def per_demo(self, planner: str, measure: str = "interference") -> tuple[list[float], list[float]]:
         """Mean and standard deviation over seeds, per demonstration."""
@@ -162,6 +170,8 @@ class InterferenceResult:
 
     def ratio(self) -> float:
         """Mean basic interference over mean least-penetration interference (the paper: about 45)."""
+        if not {"basic", "least_penetration"} <= set(self.names):
+            return math.nan
         lp = self.values("least_penetration", "interference").mean()
         basic = self.values("basic", "interference").mean()
         if lp > 0:
@@ -170,35 +180,37 @@ class InterferenceResult:
 
     def contact_violations(self) -> int:
         """Runs (demo, seed) where least penetration spent longer in contact than basic STOMP."""
+        if not {"basic", "least_penetration"} <= set(self.names):
+            return 0
         return int(np.sum(self.values("least_penetration", "time_in_contact")
                           > self.values("basic", "time_in_contact") + 1e-9))
 
     def to_json(self) -> dict[str, Any]:
         """``basic``, ``least_penetration``, ``current``: per-demonstration mean interference; and more."""
-        out: dict[str, Any] = {name: self.per_demo(name)[0] for name in VARIANTS}
-        out.update({f"{name}_std": self.per_demo(name)[1] for name in VARIANTS})
+        out: dict[str, Any] = {name: self.per_demo(name)[0] for name in self.names}
+        out.update({f"{name}_std": self.per_demo(name)[1] for name in self.names})
         for measure in ("min_clearance", "time_in_contact", "time_near"):
-            out[measure] = {name: self.per_demo(name, measure)[0] for name in VARIANTS}
-        out["median_min_clearance"] = {n: float(np.median(self.values(n, "min_clearance"))) for n in VARIANTS}
+            out[measure] = {name: self.per_demo(name, measure)[0] for name in self.names}
+        out["median_min_clearance"] = {n: float(np.median(self.values(n, "min_clearance"))) for n in self.names}
         for part in ("interference_at_goal", "interference_unrecognised"):
-            out[part] = {name: self.per_demo(name, part)[0] for name in VARIANTS}
+            out[part] = {name: self.per_demo(name, part)[0] for name in self.names}
         out["ratio_basic_over_least_penetration"] = self.ratio()
         out["runs_with_more_contact_than_basic"] = self.contact_violations()
         out["authors_comparison"] = self.authors_comparison()
         out["reached"] = {n: int(sum(r.reached_step is not None for r in self.runs if r.planner == n))
-                          for n in VARIANTS}
+                          for n in self.names}
         out.update(protocol=self.config.protocol, library=self.library, scene=self.config.scene,
                    human_class=self.human.name,
                    human_class_distance_m=self.human.distance, demos=self.demos, seeds=self.config.seeds,
                    robot_cup=self.config.robot_cup, human_cup=self.human.cup,
                    timing=dataclasses.asdict(self.config.timing), w_human=self.config.w_human,
-                   volume=self.config.volume,
+                   volume=self.config.volume, basic_runs_borrowed=self.borrowed,
                    runs=[dataclasses.asdict(r) for r in self.runs])
         return out
 
     def lines(self) -> list[str]:
         """The Table I layout: one row per demonstration, mean (std) over seeds; then the real human."""
-        names = list(VARIANTS)
+        names = self.names
         head = f"{'demo':>6}" + "".join(f"{VARIANTS[n].label:>22}" for n in names)
         unit = "probability-voxels x s" if self.config.protocol == "product" else \
             "probability-voxels x configuration-space length"
@@ -229,6 +241,10 @@ class InterferenceResult:
                    f"{self.contact_violations()} of {len(self.demos) * self.config.seeds}")
         reached = self.to_json()["reached"]
         out.append("runs that reached the goal: " + ", ".join(f"{VARIANTS[n].label} {reached[n]}" for n in names))
+        if self.borrowed:
+            out.append(f"basic STOMP ignores the human: its path was the same on every demonstration at seed 0 "
+                       f"(compared to the bit), so at the other seeds it was planned on #{self.demos[0]} and scored "
+                       f"against each demonstration ({self.borrowed} of {len(self.demos) * self.config.seeds} runs)")
         return out + self.authors_lines()
 
     def authors_trials(self) -> bool:
@@ -239,7 +255,7 @@ class InterferenceResult:
 
     def authors_comparison(self) -> list[dict[str, Any]]:
         """Per motion and planner: the authors' 10 runs (mean, min, max) and these runs (mean, min, max)."""
-        if not self.authors_trials():
+        if not self.authors_trials() or not {"basic", "least_penetration"} <= set(self.names):
             return []
         rows = []
         for name in ("basic", "least_penetration"):
@@ -308,23 +324,57 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
         pacing["path_per_step"] = cfg.path_per_step
     result = InterferenceResult(cfg, lib.source, human, [d.index for d in demos])
     total, done = len(demos) * cfg.seeds * len(variants), 0
-    for demo in demos:
-        path = human_file(lib, demo, Path(cfg.work_dir) / "humans")
-        final = None
-        for seed in range(cfg.seeds):
-            for name, variant in variants.items():  # basic first: a prediction run gives the final grid
-                spec = RunSpec(scene, model, path, samples_per_tick(demo, cfg.timing.steps), method=variant.method,
-                               steps=cfg.timing.steps, period_s=cfg.timing.period_s, seed=seed, **pacing)
+    paths = {demo.index: human_file(lib, demo, Path(cfg.work_dir) / "humans") for demo in demos}
+    finals: dict[int, Any] = {}
+    # basic STOMP once per seed (services.experiments.reuse): checked on the first seed, then borrowed
+    once = cfg.basic_once and "basic" in variants and "least_penetration" in variants and len(demos) > 1
+    basic_of_seed: dict[int, RunRecord] = {}
+    for seed in range(cfg.seeds):  # seed by seed: the first seed's check comes before any borrowing
+        for demo in demos:
+            recs: dict[str, RunRecord] = {}
+            scores: dict[str, RunScore] = {}
+            borrow = once and seed > 0 and demo is not demos[0]
+            order = [n for n in variants if n != "basic"] + ["basic"] if borrow else list(variants)
+            for name in order:  # basic first: a prediction run gives the final grid
+                variant = variants[name]
                 planner = planners[variant.human_cost]
-                rec = run_lockstep(spec, planner)
-                if final is None and variant.method == "prediction":
-                    final = rec.final_occupancy
-                if final is None:
+                if borrow and name == "basic":
+                    rec = with_human(basic_of_seed[seed], recs["least_penetration"])
+                else:
+                    spec = RunSpec(scene, model, paths[demo.index], samples_per_tick(demo, cfg.timing.steps),
+                                   method=variant.method, steps=cfg.timing.steps, period_s=cfg.timing.period_s,
+                                   seed=seed, **pacing)
+                    rec = run_lockstep(spec, planner)
+                recs[name] = rec
+                if demo.index not in finals and variant.method == "prediction" and rec.final_occupancy is not None:
+                    finals[demo.index] = rec.final_occupancy
+                if demo.index not in finals:
                     raise RuntimeError("interference: no final prediction was received")
-                score = score_run(rec, planner.robot, scene, final, demo.index, seed, name, human.label, weights)
-                result.runs.append(score)
+                scores[name] = score_run(rec, planner.robot, scene, finals[demo.index], demo.index, seed, name,
+                                         human.label, weights)
                 done += 1
+                borrowed = borrow and name == "basic"
+                result.borrowed += borrowed
+                how = f"  (demo #{demos[0].index}'s path: basic STOMP ignores the human)" if borrowed else ""
                 progress(f"  [{done}/{total}] demo #{demo.index} seed {seed} {variant.label:<18} interference "
-                         f"{score.interference:8.3f}  min clearance {score.min_clearance:+.3f} m  reached step "
-                         f"{score.reached_step}")
+                         f"{scores[name].interference:8.3f}  min clearance {scores[name].min_clearance:+.3f} m  "
+                         f"reached step {scores[name].reached_step}{how}")
+            result.runs.extend(scores[name] for name in variants)
+            if once and "basic" in recs and not borrow:
+                basic_of_seed.setdefault(seed, recs["basic"])
+                once = _basic_is_shared(recs, basic_of_seed[seed], demo.index, progress) if seed == 0 else once
     return result
+
+
+def _basic_is_shared(recs: dict[str, RunRecord], first: RunRecord, demo: int, progress: Callable[[str], None]) -> bool:
+    """The first seed's check that basic STOMP's run can be borrowed (:mod:`services.experiments.reuse`)."""
+    if not same_robot(recs["basic"], first):
+        at = first_differing_state(recs["basic"], first)
+        progress(f"  basic STOMP's path on demo #{demo} differs from the first demonstration's"
+                 f"{'' if at is None else f' from t = {at:.3f} s'}: every run is made")
+        return False
+    if not same_human(recs["basic"], recs["least_penetration"]):
+        progress(f"  basic STOMP's and least penetration's runs of demo #{demo} saw different human streams: "
+                 "every run is made")
+        return False
+    return True

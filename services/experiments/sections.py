@@ -241,7 +241,8 @@ def part_names(protocols: tuple[str, ...]) -> list[str]:
 def part_weight(part: str, plan: ReportPlan) -> float:
     """A part's expected planning work, to run the longest first: goal-steps planned, the paper protocol's x 1.6.
 
-    Runs x goals (the switch: 2, and room for its mirrored run); the paper protocol's step plans 101
+    Runs x goals (the switch: 2, and room for its mirrored run; Table I plans basic STOMP once per seed after
+    the first, :mod:`services.experiments.reuse`); the paper protocol's step plans 101
     waypoints where the product's plans 40 (1.5-1.9x the time, docs/experiments.md "Run time"). The
     recognition plans nothing: 0, last.
     """
@@ -249,7 +250,7 @@ def part_weight(part: str, plan: ReportPlan) -> float:
         return 0.0
     prot, what = part.split(":")
     n_paces = len((plan.paces or DEFAULT_PACES)[prot])
-    runs = {"table1": plan.table1_demos * plan.table1_seeds * 3,
+    runs = {"table1": plan.table1_demos * plan.table1_seeds * 2 + plan.table1_demos + plan.table1_seeds - 1,
             "switch": (plan.switch_demos or 25) * 2 * 2 * 2,
             "pace": n_paces * plan.pace_demos * plan.pace_seeds * 2}[what]
     return runs * (1.6 if prot == "paper" else 1.0)

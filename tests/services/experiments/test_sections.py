@@ -13,14 +13,15 @@ def test_part_names_are_recognition_then_each_protocols_three_parts() -> None:
 
 
 def test_part_weight_counts_planned_goal_steps_longest_first() -> None:
-    # FULL: Table I 5 demonstrations x 10 seeds x 3 planners; the switch 25 x 2 planners x 2 goals, x 2 for its
+    # FULL: Table I 5 demonstrations x 10 seeds x 2 planners + basic STOMP on the 5 at seed 0 and once per later
+    # seed (services.experiments.reuse); the switch 25 x 2 planners x 2 goals, x 2 for its
     # possible mirrored run; the pace sweep 5 paces x 3 x 1 x 2 planners; the paper protocol's steps 1.6x
-    assert part_weight("product:table1", FULL) == 150
+    assert part_weight("product:table1", FULL) == 100 + 5 + 9
     assert part_weight("product:switch", FULL) == 200
     assert part_weight("product:pace", FULL) == 30
-    assert part_weight("paper:table1", FULL) == 150 * 1.6
+    assert part_weight("paper:table1", FULL) == 114 * 1.6
     assert part_weight("recognition", FULL) == 0  # plans nothing: last
     order = sorted(part_names(("product", "paper")), key=lambda part: -part_weight(part, FULL))
-    assert order == ["paper:switch", "paper:table1", "product:switch", "product:table1", "paper:pace",
+    assert order == ["paper:switch", "product:switch", "paper:table1", "product:table1", "paper:pace",
                      "product:pace", "recognition"]
     assert part_weight("product:pace", QUICK) == 1 * 1 * 1 * 2  # --quick: one pace per protocol
