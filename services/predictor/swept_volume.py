@@ -13,7 +13,8 @@ import numpy as np
 from shared.human import HumanModel, place_in_scene
 from shared.scene import Grid, Scene
 
-__all__ = ["posture_voxels", "voxels_per_posture", "swept_volume", "pack_volumes", "unpack_volumes"]
+__all__ = ["SPACING_PER_VOXEL", "surface_spacing", "posture_chunk", "posture_voxels", "voxels_per_posture",
+           "swept_volume", "pack_volumes", "unpack_volumes"]
 
 
 def _flat(points: np.ndarray, grid: Grid) -> np.ndarray:
@@ -57,6 +58,28 @@ def _mark(points: np.ndarray, grid: Grid, out: np.ndarray) -> None:
     out.reshape(-1)[_flat(points, grid)] = True
 
 
+SPACING_PER_VOXEL = 0.4
+"""Coarsest body-surface sampling, as a fraction of the voxel edge: the default's 2 cm over 5 cm voxels."""
+
+_CHUNK_POINTS_SPACING = 0.02
+"""The spacing a ``chunk`` of postures is sized for: a finer one samples fewer postures at a time."""
+
+
+def surface_spacing(spacing: float, resolution: float) -> float:
+    """The surface sample spacing used on voxels of edge ``resolution``.
+
+    ``spacing``, at most :data:`SPACING_PER_VOXEL` of a voxel, so a finer grid is sampled as densely relative to
+    its voxels as the default. A fixed 2 cm left holes in finer grids (one posture's surface against 2 mm
+    sampling: 9 % of its voxels missed at 5 cm, 23 % at 2.5 cm, 79 % at 1 cm).
+    """
+    return min(spacing, SPACING_PER_VOXEL * resolution)
+
+
+def posture_chunk(chunk: int, spacing: float) -> int:
+    """Postures per batch at ``spacing``: ``chunk`` at 2 cm, fewer below (the points grow as 1 / spacing^2)."""
+    return max(1, int(chunk * min(1.0, (spacing / _CHUNK_POINTS_SPACING) ** 2)))
+
+
 def posture_voxels(points: np.ndarray, grid: Grid) -> np.ndarray:
     """Flat C-order indices of the voxels containing any of ``points (..., 3)`` (unique, sorted)."""
     return np.unique(_flat(points, grid))
@@ -75,7 +98,7 @@ def swept_volume(motion: np.ndarray, scene: Scene, grid: Grid, human: HumanModel
         human: Human model (default: a new :class:`HumanModel`).
         spacing: Surface sample spacing (m).
         interior: Also sample the inside of the body (see ``HumanModel.surface_points``).
-        chunk: Postures per batch (bounds memory).
+        chunk: Postures per batch at 2 cm spacing (bounds memory; :func:`posture_chunk`).
 
     Returns:
         ``(nx, ny, nz)`` bool occupancy.
@@ -84,6 +107,7 @@ def swept_volume(motion: np.ndarray, scene: Scene, grid: Grid, human: HumanModel
     motion = np.asarray(motion, dtype=np.float64)
     placed = place_in_scene(motion, motion[0], scene)
     out = np.zeros(grid.dims, dtype=bool)
+    chunk = posture_chunk(chunk, spacing)
     for s in range(0, len(placed), chunk):
         _mark(human.surface_points(placed[s:s + chunk], spacing=spacing, interior=interior), grid, out)
     return out

@@ -20,7 +20,7 @@ import datetime
 import logging
 import sys
 from collections.abc import Callable, MutableMapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +39,7 @@ from .features import VARIANTS, FeatureEncoder
 from .gmm import GMMConfig, MixtureBank, fit_class_gmm
 from .gmr import gmr
 from .model import PredictionModel, TimedVolumes, quantised
-from .swept_volume import swept_volume
+from .swept_volume import surface_spacing, swept_volume
 from .volumes import DEFAULT_VOLUME, VOLUMES, Sweep, demos_volume, digest, spread_volume, sweep, timed_volume
 
 __all__ = ["TrainConfig", "train_model", "regress_motions", "default_library", "demo_sweep_key", "cached", "main"]
@@ -58,7 +58,7 @@ class TrainConfig:
         features: Feature variant (:data:`services.predictor.features.VARIANTS`).
         time_scale: Time units per sample.
         resolution: Voxel edge (m); ``None``: the scene's ``[grid]`` resolution.
-        spacing: Body surface sample spacing (m).
+        spacing: Body surface sample spacing (m); never coarser than :func:`~.swept_volume.surface_spacing`.
         interior: Also sample the inside of the body.
         oversample: Regressed postures per library sample used for the swept volumes.
         temperature: Posterior temperature tau stored in the model (1: the paper's posterior);
@@ -151,9 +151,12 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     demos = list(library.demos) if demos is None else demos
     encoder = FeatureEncoder(cfg.features, cfg.time_scale, feature_names=library.feature_names,
                              source=f"library {library.source}")
-    grid = scene.grid if cfg.resolution is None else scene.grid.with_resolution(cfg.resolution)
     if cfg.resolution is not None and not (0.005 <= cfg.resolution <= 0.5):
         raise UserError(f"--resolution must be between 0.005 and 0.5 m, got {cfg.resolution}")
+    if not (cfg.spacing > 0 and np.isfinite(cfg.spacing)):
+        raise UserError(f"surface sample spacing must be a finite number > 0 m, got {cfg.spacing}")
+    grid = scene.grid if cfg.resolution is None else scene.grid.with_resolution(cfg.resolution)
+    cfg = replace(cfg, spacing=surface_spacing(cfg.spacing, grid.resolution))
     by_class = [[d for d in demos if d.label == m] for m in range(library.n_classes)]
     empty = [library.class_names[m] for m, ds in enumerate(by_class) if not ds]
     if empty:

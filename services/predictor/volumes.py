@@ -29,7 +29,7 @@ import numpy as np
 from shared.human import HumanModel, place_in_scene
 from shared.scene import Grid, Scene
 
-from .swept_volume import swept_volume, voxels_per_posture
+from .swept_volume import posture_chunk, swept_volume, voxels_per_posture
 
 __all__ = ["VOLUMES", "DEFAULT_VOLUME", "Sweep", "sweep", "interpolate", "spread_volume",
            "demos_volume", "timed_volume", "digest"]
@@ -113,12 +113,13 @@ def sweep(motion: np.ndarray, scene: Scene, grid: Grid, human: HumanModel | None
         interior: Also sample the inside of the body (what the body occupies, not only its surface).
         oversample: Interpolated postures per sample interval (the body should move less than a voxel
             between postures).
-        chunk: Postures per batch.
+        chunk: Postures per batch at 2 cm spacing (:func:`~.swept_volume.posture_chunk`).
 
     Returns:
         The voxels hit and the last time each is hit.
     """
     human = human or HumanModel()
+    chunk = posture_chunk(chunk, spacing)
     m = np.asarray(motion, dtype=np.float64)
     dense, times = interpolate(m, oversample)
     placed = place_in_scene(dense, m[0], scene)
