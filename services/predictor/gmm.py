@@ -58,6 +58,11 @@ class GMMConfig:
             raise ValueError(f"reg_covar must be > 0, got {self.reg_covar}")
         if self.max_iter < 1 or self.n_init < 1:
             raise ValueError("max_iter and n_init must be >= 1")
+        if not (self.tol >= 0 and math.isfinite(self.tol)):
+            raise ValueError(f"tol must be a finite number >= 0, got {self.tol}")
+        if self.n_components == 0 and (not self.bic_candidates or min(self.bic_candidates) < 1):
+            raise ValueError(f"bic_candidates must be component counts >= 1 to choose among (components 0: by BIC), "
+                             f"got {tuple(self.bic_candidates)}")
 
 
 def _fit(data: np.ndarray, k: int, cfg: GMMConfig) -> GaussianMixture:
@@ -85,7 +90,10 @@ def fit_class_gmm(data: np.ndarray, cfg: GMMConfig) -> GaussianMixture:
     if data.ndim != 2 or not np.all(np.isfinite(data)):
         raise ValueError(f"GMM data must be a finite (N, D) array, got shape {data.shape}")
     ks = [cfg.n_components] if cfg.n_components > 0 else [k for k in cfg.bic_candidates if k < len(data)]
-    if not ks or ks[0] > len(data):
+    if not ks:
+        raise ValueError(f"cannot choose the number of Gaussians by BIC among {tuple(cfg.bic_candidates)} with "
+                         f"{len(data)} samples: each needs more samples than Gaussians")
+    if ks[0] > len(data):
         raise ValueError(f"cannot fit {cfg.n_components} Gaussians to {len(data)} samples")
     best, best_bic = None, np.inf
     for k in ks:

@@ -240,6 +240,11 @@ class PredictionModel:
         for name, arr in (("weights", w), ("means", mu), ("covariances", cov), ("motions", d["motions"])):
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"{name} contains NaN or infinity")
+        sums = w.sum(axis=1)
+        if np.any(w < 0) or not np.allclose(sums, 1.0, rtol=0, atol=1e-6):  # else the posterior is NaN at run time
+            bad = int(np.flatnonzero(np.any(w < 0, axis=1) | ~np.isclose(sums, 1.0, rtol=0, atol=1e-6))[0])
+            raise ValueError(f"class {names[bad]!r}: mixing weights must be >= 0 and sum to 1, got "
+                             f"{np.array2string(w[bad], precision=4)} (sum {sums[bad]:.6g})")
         grid = Grid(d["grid_min"].astype(np.float64), d["grid_max"].astype(np.float64), float(d["grid_resolution"]))
         dims = grid.dims
         feature_names = (tuple(str(s) for s in d["feature_names"].tolist()) if "feature_names" in d

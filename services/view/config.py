@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.devices import check_device
 from shared.scene import SCENE_HELP
 
-__all__ = ["ViewConfig", "DEFAULT_PORT"]
+__all__ = ["ViewConfig", "DEFAULT_PORT", "STATIC_PERIOD_RANGE"]
 
 DEFAULT_PORT = 8765
 """The Foxglove app's default WebSocket port (its "Open connection" dialog proposes ws://localhost:8765)."""
+
+STATIC_PERIOD_RANGE = (0.05, 3600.0)
+"""``static_period_s``'s range (s): infinity killed the thread that re-sends the table and cups, a tiny period
+would re-send them in a busy loop."""
 
 
 @dataclass
@@ -35,9 +40,11 @@ class ViewConfig:
         """Check ranges; raises ConfigError naming the option."""
         if not 0 <= self.port <= 65535:
             raise ConfigError(f"view.port: must be 0..65535, got {self.port}")
-        for name in ("viz_rate_hz", "static_period_s"):
-            if not getattr(self, name) > 0:
-                raise ConfigError(f"view.{name}: must be > 0, got {getattr(self, name)}")
+        if not (self.viz_rate_hz > 0 and math.isfinite(self.viz_rate_hz)):
+            raise ConfigError(f"view.viz_rate_hz: must be a finite number > 0, got {self.viz_rate_hz}")
+        lo, hi = STATIC_PERIOD_RANGE
+        if not lo <= self.static_period_s <= hi:
+            raise ConfigError(f"view.static_period_s: must be {lo:g}..{hi:g} s, got {self.static_period_s}")
         if not 0 <= self.nice <= 19:
             raise ConfigError(f"view.nice: must be 0..19, got {self.nice}")
         check_device(self.device, "view.device")

@@ -21,9 +21,14 @@ from shared.runtime import UserError
 
 from .stream import SCHEMAS, VizMessage
 
-__all__ = ["LiveServer", "LiveServerError"]
+__all__ = ["LiveServer", "LiveServerError", "url_host"]
 
 log = logging.getLogger(__name__)
+
+
+def url_host(host: str) -> str:
+    """``host`` as a URL writes it: an IPv6 address in brackets."""
+    return f"[{host}]" if ":" in host and not host.startswith("[") else host
 
 
 class LiveServerError(UserError):
@@ -39,7 +44,7 @@ class LiveServer:
         name: The server's name, shown by the app.
         static: Builds the static scene stamped at a time (ns), e.g. ``SceneStream.static``; sent at start and
             every ``static_period_s`` (None: nothing is re-sent).
-        static_period_s: The static scene's period.
+        static_period_s: The static scene's period (s), finite and > 0.
 
     Attributes:
         sent: Messages logged per topic (whether a client was subscribed or not).
@@ -47,6 +52,9 @@ class LiveServer:
 
     def __init__(self, port: int = 8765, host: str = "127.0.0.1", name: str = "foresight",
                  static: Callable[[int], list[VizMessage]] | None = None, static_period_s: float = 1.0) -> None:
+        if not (0 < static_period_s <= threading.TIMEOUT_MAX):  # inf killed the resending thread at its first wait
+            raise LiveServerError(f"live view: the static scene's period must be a finite number > 0 s, "
+                                  f"got {static_period_s}")
         self._context = foxglove.Context()
         self._channels = {
             topic: foxglove.Channel(topic, schema=foxglove.Schema(name=s.name, encoding=s.encoding, data=s.data),
@@ -55,7 +63,7 @@ class LiveServer:
         try:
             self._server = foxglove.start_server(name=name, host=host, port=port, context=self._context)
         except Exception as exc:  # the SDK raises its own error types (a taken port: an OSError-like message)
-            raise LiveServerError(f"live view: cannot serve on ws://{host}:{port}: {exc}") from exc
+            raise LiveServerError(f"live view: cannot serve on ws://{url_host(host)}:{port}: {exc}") from exc
         self.host = host
         self.port: int = self._server.port
         self.sent: dict[str, int] = dict.fromkeys(SCHEMAS, 0)
@@ -82,8 +90,8 @@ class LiveServer:
 
     @property
     def url(self) -> str:
-        """The address to open in the Foxglove app."""
-        return f"ws://{self.host}:{self.port}"
+        """The address to open in the Foxglove app (an IPv6 host in brackets: ``ws://[::1]:8765``)."""
+        return f"ws://{url_host(self.host)}:{self.port}"
 
     def log(self, message: VizMessage) -> None:
         """Send one encoded scene message to every client subscribed to its topic."""

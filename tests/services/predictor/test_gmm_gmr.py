@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from sklearn.mixture import GaussianMixture
@@ -75,3 +77,21 @@ def test_a_row_without_evidence_is_uniform_in_a_batch_too() -> None:
     np.testing.assert_allclose(p[1], [0.5, 0.5])
     np.testing.assert_allclose(p[0], posterior_from_log_likelihood(ll[0]))
     np.testing.assert_allclose(posterior_from_log_likelihood(ll[1]), [0.5, 0.5])
+
+
+def test_too_few_samples_for_every_bic_candidate_names_the_candidates() -> None:
+    """It said 'cannot fit 0 Gaussians to 5 samples'."""
+    with pytest.raises(ValueError, match=r"by BIC among \(5, 10\) with 5 samples"):
+        fit_class_gmm(np.random.default_rng(0).normal(size=(5, 2)), GMMConfig(n_components=0, bic_candidates=(5, 10)))
+
+
+@pytest.mark.parametrize(("cfg", "match"), [
+    (GMMConfig(tol=math.nan), "tol must be a finite number >= 0, got nan"),
+    (GMMConfig(tol=-1.0), "tol must be a finite number >= 0"),
+    (GMMConfig(n_components=0, bic_candidates=()), r"bic_candidates .* got \(\)"),
+    (GMMConfig(n_components=0, bic_candidates=(0, 5)), r"bic_candidates .* got \(0, 5\)"),
+])
+def test_bad_gmm_options_are_named_before_any_fit(cfg, match) -> None:
+    """A NaN tol passed and failed inside scikit-learn, naming its own parameter."""
+    with pytest.raises(ValueError, match=match):
+        cfg.validate()

@@ -250,3 +250,18 @@ def test_a_model_file_with_a_bad_scalar_is_a_model_error(small_model, tmp_path, 
     with pytest.raises(ModelError, match=match):
         PredictionModel.load(tmp_path / "bad.npz")
 
+
+@pytest.mark.parametrize(("change", "match"), [
+    (lambda w: w * np.r_[-1.0, np.ones(w.shape[0] - 1)], "mixing weights must be >= 0 and sum to 1"),
+    (lambda w: w * 0.5, r"mixing weights must be >= 0 and sum to 1, got .* \(sum 0.5\)"),
+])
+def test_a_model_file_with_bad_mixing_weights_is_a_model_error(small_model, tmp_path, change, match) -> None:
+    """A negative weight loaded and the predictor then published a NaN posterior (refused on the wire) forever."""
+    small_model.save(tmp_path / "m.npz")
+    with np.load(tmp_path / "m.npz", allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["weights"] = arrays["weights"].copy()
+    arrays["weights"][0] = change(arrays["weights"][0])
+    np.savez(tmp_path / "bad.npz", **arrays)
+    with pytest.raises(ModelError, match=match):
+        PredictionModel.load(tmp_path / "bad.npz")

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import math
 import threading
+
+import pytest
 
 from services.view.config import ViewConfig
 from services.view.service import ViewService
+from shared.config import ConfigError
 
 
 def test_the_view_says_which_scene_it_draws_and_stops(zenoh_hub, capsys) -> None:
@@ -27,3 +31,14 @@ def test_the_view_says_which_scene_it_draws_and_stops(zenoh_hub, capsys) -> None
         thread.join(30.0)
     assert not thread.is_alive()
     assert "watch live at ws://127.0.0.1:" in out and "drawing scene pr2_two_cups_side" in out, out
+
+
+@pytest.mark.parametrize(("option", "value", "match"), [
+    ("static_period_s", math.inf, r"view.static_period_s: must be 0.05..3600 s, got inf"),
+    ("static_period_s", 1e-9, "view.static_period_s: must be 0.05..3600 s"),
+    ("viz_rate_hz", math.inf, "view.viz_rate_hz: must be a finite number > 0, got inf"),
+    ("viz_rate_hz", 0.0, "view.viz_rate_hz: must be a finite number > 0"),
+])
+def test_out_of_range_rates_and_periods_are_named(option, value, match) -> None:
+    with pytest.raises(ConfigError, match=match):
+        ViewConfig(**{option: value}).validate()

@@ -3,13 +3,14 @@ subscribed to byte for byte, and is disconnected when the server stops; a taken 
 
 from __future__ import annotations
 
+import math
 import socket
 import time
 
 import pytest
 
 from shared.foxglove.client import FoxgloveClient
-from shared.foxglove.live import LiveServer, LiveServerError
+from shared.foxglove.live import LiveServer, LiveServerError, url_host
 from shared.foxglove.stream import SCHEMAS, SceneStream
 
 from .conftest import occupancy, posterior
@@ -80,3 +81,16 @@ def test_a_taken_port_is_named() -> None:
         port = s.getsockname()[1]
         with pytest.raises(LiveServerError, match=f"ws://127.0.0.1:{port}"):
             LiveServer(port=port)
+
+
+def test_an_ipv6_host_is_written_in_brackets() -> None:
+    """``ws://::1:8765`` is no address; the view printed it for ``--host ::1``."""
+    assert url_host("::1") == "[::1]" and url_host("[::1]") == "[::1]"
+    assert url_host("127.0.0.1") == "127.0.0.1" and url_host("localhost") == "localhost"
+
+
+@pytest.mark.parametrize("period", [math.inf, math.nan, 0.0, -1.0])
+def test_a_static_period_that_is_not_a_finite_positive_number_is_refused(period) -> None:
+    """An infinite period killed the thread re-sending the table and cups (time_t overflow) at its first wait."""
+    with pytest.raises(LiveServerError, match="period must be a finite number > 0"):
+        LiveServer(port=0, static=lambda t: [], static_period_s=period)
