@@ -179,6 +179,8 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     p.add_argument("--iterations", type=int, default=None, help="STOMP iterations per step (default: each "
                    "protocol's, 50 / 51); fewer for a quick look")
     p.add_argument("--components", type=int, default=20, help="Gaussians per class (default: 20)")
+    p.add_argument("--volume", choices=VOLUMES, default=None, help="the product protocol's held-out models' volume "
+                   "method (foresight train --volume; default: the trainer's); the paper protocol uses its own")
     p.add_argument("--models-dir", type=Path, default=Path("models/experiments"), help="held-out models cache")
     p.add_argument("--work-dir", type=Path, default=Path("runs/experiments"), help="scratch files of the runs")
     p.add_argument("--plot", type=Path, default=Path("runs/plots/pace.png"), help="the PNG")
@@ -257,7 +259,8 @@ def _pace(args: argparse.Namespace, out) -> int:
     if args.iterations is not None and args.iterations < 1:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
     res = run_pace(PaceConfig(libraries=libraries, protocols=protocols, paces=paces, demos=args.demos,
-                              seeds=args.seeds, components=args.components, models_dir=args.models_dir,
+                              seeds=args.seeds, components=args.components, volume=args.volume,
+                              models_dir=args.models_dir,
                               work_dir=args.work_dir, timing=Timing(iterations=args.iterations)),
                    out, compile=not args.no_compile)
     png = plot_pace(res, args.plot)

@@ -14,6 +14,7 @@ real human: minimum clearance, time in contact and time within 5 cm.
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 from collections.abc import Callable
@@ -123,16 +124,28 @@ def score_run(rec: RunRecord, robot: Any, scene: Scene, final: Any, demo: int, s
                  else interference_along_path(robot, q, final, weights=path_weights))
     at_goal = np.array([s.reached for s in rec.states], dtype=bool)
     at_goal = np.maximum.accumulate(at_goal) if len(at_goal) else at_goal  # from the first state at the goal on
-    # the plan executed during tick n was made with the prediction of tick n - 1 (Fig. 4); after the last tick
-    # (the rest of the path, paper protocol) with the last prediction
-    belief = {t: float(p.posterior[label]) for t, p in rec.posteriors.items()}
-    last = max(belief, default=-1)
-    unknown = np.array([belief.get(min(s.tick - 1, last), 0.0) < 0.5 for s in rec.states], dtype=bool)
+    unknown = np.array([p < 0.5 for p in executed_belief(rec, label)], dtype=bool)
     return RunScore(demo, seed, planner, float(per_state.sum()), float(per_state[at_goal].sum()),
                     float(per_state[unknown].sum()), contact.min_clearance, contact.time_in_contact, contact.time_near,
                     reached,
                     tuple(rec.chosen_goals()),
                     float(np.median([p.planning_ms for p in rec.plans])) if rec.plans else math.nan)
+
+
+def executed_belief(rec: RunRecord, label: int) -> list[float]:
+    """Per state, the probability of class ``label`` in the prediction the plan it executes was made with.
+
+    In lock-step the robot executes plan n - 1 during step n (:mod:`shared.lockstep`), and that plan was made
+    with the grid of its ``occupancy_tick`` (n - 2); after the last step (the rest of the path, paper protocol)
+    the last plan. 0 before the first plan and for a plan made before any prediction.
+    """
+    belief = {t: float(p.posterior[label]) for t, p in rec.posteriors.items()}
+    ticks = [p.tick for p in rec.plans]  # in tick order
+    out = []
+    for s in rec.states:
+        i = bisect.bisect_right(ticks, s.tick - 1) - 1  # the newest plan of tick <= n - 1
+        out.append(belief.get(rec.plans[i].occupancy_tick, 0.0) if i >= 0 else 0.0)
+    return out
 
 
 def ratio_text(ratio: float | None) -> str:
@@ -263,7 +276,8 @@ class InterferenceResult:
             ours = self.values(name, "interference")
             for i, d in enumerate(self.demos):
                 rows.append({"planner": name, "motion": 25 + d, "demo": d, "authors": theirs[d],
-                             "ours": {"mean": float(ours[i].mean()), "std": float(ours[i].std()),
+                             "ours": {"mean": float(ours[i].mean()),
+                                      "std": float(ours[i].std(ddof=1)) if ours.shape[1] > 1 else math.nan,  # as theirs
                                       "min": float(ours[i].min()), "max": float(ours[i].max())}})
         return rows
 

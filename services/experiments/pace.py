@@ -48,6 +48,7 @@ class PaceConfig:
     seeds: int = 2
     timing: Timing = Timing()
     components: int | None = None
+    volume: str | None = None  # the product protocol's occupancy volume (None: the trainer's); the paper's: its own
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
 
@@ -155,6 +156,7 @@ def run_pace(cfg: PaceConfig, progress: Callable[[str], None] = print, compile: 
                 icfg = InterferenceConfig(library=library, scene=protocol(prot).table1_scene, demos=cfg.demos,
                                           seeds=cfg.seeds, timing=timing,
                                           components=cfg.components, variants=PLANNERS, protocol=prot,
+                                          volume=cfg.volume if prot == "product" else None,
                                           path_per_step=pace if prot == "paper" else None,
                                           models_dir=cfg.models_dir, work_dir=cfg.work_dir)
                 progress(f"pace: {prot} protocol, {short_name(library)}, pace {pace:g}")

@@ -87,8 +87,8 @@ def _table1_section(res: InterferenceResult, png: Path) -> list[str]:
                      "before the human's class was recognised (p < 0.5): the robot crosses the human's path while "
                      "the prediction is still spread over the classes (docs/experiments.md).")
     if basic == 0:
-        lines.append("- Basic STOMP never enters the final prediction here: the task does not cross the "
-                     "predicted human volume, so there is nothing for the prediction to remove.")
+        lines.append("- Basic STOMP never enters the final prediction here: its path does not cross the predicted "
+                     "human volume.")
     lines += ["", f"![interference]({png.name})", ""]
     return lines
 
@@ -287,7 +287,7 @@ def library_part(spec: str, part: str, plan: ReportPlan, out: Path, models_dir: 
             pace = run_pace(PaceConfig(libraries=(spec,), protocols=(prot,), paces=plan.paces or dict(DEFAULT_PACES),
                                        demos=plan.pace_demos, seeds=plan.pace_seeds,
                                        timing=Timing(iterations=plan.iterations), components=plan.components,
-                                       models_dir=models_dir, work_dir=out / "work" / prot),
+                                       volume=volume, models_dir=models_dir, work_dir=out / "work" / prot),
                             say, compile=plan.compile)
             md, d = [], {"pace_points": pace.to_json()["points"]}
         else:

@@ -23,11 +23,17 @@ def table1_verdict(res: InterferenceResult) -> str:
     lp = float(np.mean(res.per_demo("least_penetration")[0]))
     paper = np.mean(PAPER_TABLE1["basic"]) / np.mean(PAPER_TABLE1["least_penetration"])
     ratio = res.ratio()
-    if basic == 0:
+    if basic == 0 and lp == 0:
         clear = float(np.median(res.values("basic", "min_clearance")))
-        return (f"**not reproduced (no ratio)**: basic STOMP never enters the final prediction ({basic:.3f}); the "
-                f"human's motions, as placed in this scene, do not cross the robot's path (basic's median minimum "
-                f"clearance to the real human {clear:+.3f} m), so there is nothing for the prediction to remove")
+        where = ("the human's motions, as placed in this scene, do not cross the robot's path" if clear > 0 else
+                 "the robot's path does not cross the predicted volume though it comes within reach of the real "
+                 "human")
+        return (f"**not reproduced (no ratio: 0 / 0)**: neither planner enters the final prediction; {where} "
+                f"(basic's median minimum clearance to the real human {clear:+.3f} m), so there is nothing for the "
+                "prediction to remove")
+    if basic == 0:
+        return (f"**not reproduced**: {ratio_text(ratio)}: basic STOMP never enters the final prediction, least "
+                f"penetration does ({lp:.3f})")
     if ratio >= 20:
         return f"**reproduced**: {ratio:.1f}x against the paper's {paper:.0f}x (target >= 20x)"
     early = float(np.mean(res.per_demo("least_penetration", "interference_unrecognised")[0]))
@@ -43,12 +49,17 @@ def switch_verdict(res: SwitchResult) -> str:
     steps = res.config.timing.steps
     if ac - ap >= 5:
         return f"**reproduced**: the prediction planner leaves the human's cup {ac - ap:g} steps earlier (paper: 9)"
+    away = {m: res.away(m) for m in ("prediction", "current")}
     if ap >= steps and ac >= steps:
-        why = "neither planner leaves the human's cup"
+        never = sum(s is None for m in away for s in away[m])
+        why = (f"in the median run neither planner leaves the human's cup ({never} of "
+               f"{sum(map(len, away.values()))} runs end going for it)")
     elif ap <= 0 and ac <= 0:
-        why = "neither planner ever goes for the human's cup: there is nothing to switch from"
+        never = sum(s == 0 for m in away for s in away[m])
+        why = (f"in the median run neither planner goes for the human's cup: there is nothing to switch from "
+               f"({never} of {sum(map(len, away.values()))} runs never do)")
     else:
-        why = f"prediction leaves at step {ap:g}, current at {ac:g}"
+        why = f"prediction leaves at step {ap:g}, current at {ac:g} (medians)"
     return f"**not reproduced**: {why} ({ac - ap:+g} steps; paper: 4 against 13)"
 
 

@@ -31,3 +31,27 @@ def test_touching_longer_and_never_touching_are_named():
     none = result(point(0.1, 0.0, 0.0))
     assert none.verdict("product", "synthetic").startswith("neither planner touches the human at any pace")
     assert none.to_json()["verdicts"] == {"product, synthetic": none.verdict("product", "synthetic")}
+
+
+def test_the_product_protocol_sweeps_with_the_volume_asked_for_and_the_report_passes_it(monkeypatch, tmp_path):
+    """``eval all --volume V`` ran Table I and the switch with V but the pace sweep with the trainer's default."""
+    import types
+
+    from services.experiments import pace, sections
+    from services.experiments.report import QUICK
+
+    asked = []
+
+    def fake_interference(cfg, progress=None, compile=True):
+        asked.append((cfg.protocol, cfg.volume))
+        return types.SimpleNamespace(ratio=lambda: float("nan"))
+
+    monkeypatch.setattr(pace, "run_interference", fake_interference)
+    monkeypatch.setattr(pace, "_point", lambda res, prot, lib, p: point(p, 0.0, 0.0))
+    pace.run_pace(PaceConfig(protocols=("product", "paper"), paces={"product": (0.25,), "paper": (0.05,)},
+                             volume="spread"), progress=lambda _: None)
+    assert asked == [("product", "spread"), ("paper", None)]  # the paper protocol keeps its own volume
+    seen = []
+    monkeypatch.setattr(sections, "run_pace", lambda cfg, say, compile: seen.append(cfg.volume) or PaceResult(cfg))
+    sections.library_part("synthetic", "product:pace", QUICK, tmp_path, tmp_path / "models", volume="spread")
+    assert seen == ["spread"]

@@ -6,14 +6,24 @@ import math
 
 from services.experiments.heldout import CupClass
 from services.experiments.interference import InterferenceConfig, InterferenceResult, RunScore, ratio_text
-from services.experiments.verdicts import table1_verdict
+from services.experiments.switch import SwitchConfig, SwitchResult, SwitchRun
+from services.experiments.verdicts import switch_verdict, table1_verdict
 
 
-def table1(basic: float, lp: float, early: float = 0.0) -> InterferenceResult:
+def table1(basic: float, lp: float, early: float = 0.0, clearance: float = 0.12) -> InterferenceResult:
     res = InterferenceResult(InterferenceConfig(seeds=1), "synthetic", CupClass("blue_cup", 0, "blue_cup", 0.0), [0])
     for name, value in (("basic", basic), ("least_penetration", lp), ("current", basic)):
-        res.runs.append(RunScore(0, 0, name, value, 0.0, early if name == "least_penetration" else 0.0, 0.12,
+        res.runs.append(RunScore(0, 0, name, value, 0.0, early if name == "least_penetration" else 0.0, clearance,
                                  0.0, 0.0, 5, ("red_cup",), 30.0))
+    return res
+
+
+def switch(away: dict[str, list[int | None]]) -> SwitchResult:
+    res = SwitchResult(SwitchConfig(), "synthetic", CupClass("red_cup", 0, "red_cup", 0.0))
+    for method, steps in away.items():
+        for demo, step in enumerate(steps):
+            res.runs.append(SwitchRun(demo, method, (), (), (), (), None, step, "red_cup" if step is None else "blue",
+                                      None, 0.1, 0.0, 30.0))
     return res
 
 
@@ -22,7 +32,25 @@ def test_table1_verdicts_name_the_ratio_and_the_cause():
     v = table1_verdict(table1(20.0, 10.0, early=9.0))
     assert v.startswith("**not reproduced**: 2.0x") and "90% of least penetration's interference" in v
     none = table1_verdict(table1(0.0, 0.0))
-    assert none.startswith("**not reproduced (no ratio)**") and "+0.120 m" in none
+    assert none.startswith("**not reproduced (no ratio: 0 / 0)**") and "do not cross" in none and "+0.120 m" in none
+
+
+def test_a_table1_verdict_claims_no_crossing_only_where_there_is_none():
+    """Basic at 0 read as 'nothing for the prediction to remove' whatever least penetration and the clearance said."""
+    worse = table1_verdict(table1(0.0, 1.0, clearance=-0.02))
+    assert worse.startswith("**not reproduced**: 0.0x") and "least penetration does (1.000)" in worse
+    assert "nothing for the prediction to remove" not in worse and "do not cross" not in worse
+    touching = table1_verdict(table1(0.0, 0.0, clearance=-0.02))
+    assert "do not cross" not in touching and "within reach of the real human" in touching and "-0.020 m" in touching
+
+
+def test_switch_verdicts_say_median_and_count_the_runs():
+    """Medians were worded as 'never' and 'ever': single runs contradicted them."""
+    v = switch_verdict(switch({"prediction": [0, 0, 6], "current": [0, 0, 9]}))
+    assert "in the median run neither planner goes for the human's cup" in v and "4 of 6 runs never do" in v
+    v = switch_verdict(switch({"prediction": [None, None, 3], "current": [None, None, 2]}))
+    assert "in the median run neither planner leaves the human's cup (4 of 6 runs end going for it)" in v
+    assert switch_verdict(switch({"prediction": [1, 2, 3], "current": [9, 9, 9]})).startswith("**reproduced**")
 
 
 def test_ratio_text():
