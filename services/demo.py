@@ -54,6 +54,7 @@ from shared import strict_json
 from shared.atomic_file import make_parent
 from shared.config import LOG_LEVELS, ConfigError, add_config_arguments, check_prefix, opt, resolve_config
 from shared.config_names import SECTIONS, check_environment, section_class
+from shared.config_tree import ENV_PREFIX
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
 from shared.scene import load_scene
@@ -322,6 +323,23 @@ def _bare_live(argv: list[str]) -> list[str]:
     return out
 
 
+def _share_config_file(path: str | None) -> None:
+    """Give the services the demo's config file, every section of it checked now.
+
+    ``--config FILE`` applied only its ``[demo]`` section (``FORESIGHT_CONFIG=FILE`` reached the services): the
+    services, which read ``FORESIGHT_CONFIG``, get the same file, and each section the file and the environment set
+    is resolved here, so that a misspelt option or a bad value is one error before anything starts.
+
+    Raises:
+        ConfigError: A section of the file or a variable of the environment that its command would refuse.
+    """
+    if path:
+        os.environ[f"{ENV_PREFIX}_CONFIG"] = str(Path(path).resolve())
+    for section in SECTIONS:
+        if section != "demo":
+            resolve_config(section, section_class(section), with_zenoh=False)
+
+
 LIVE_PORT = DEFAULT_PORT
 """``foresight demo --live``'s port without a number: the Foxglove app's default."""
 
@@ -336,6 +354,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
         cfg, _ = resolve_config("demo", DemoConfig, args, with_zenoh=False)
         # the services inherit the environment: a misspelt variable of any of them is an error now, not later
         check_environment(os.environ, {section: section_class(section) for section in SECTIONS})
+        _share_config_file(args.config)
         setup_logging(cfg.log_level)
         stop = threading.Event()
         restore = stop_on_signals(stop, grace_s=STOP_GRACE_S)  # the services' own bounded stops come first

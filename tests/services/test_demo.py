@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -237,3 +238,29 @@ def test_a_picture_that_cannot_be_written_costs_a_warning_not_the_runs_outcome(t
     assert lines == [f"foresight demo: warning: the picture of the run was not drawn: {png}: No space left on device"]
     assert not png.exists()
     assert _picture(lambda p: p, png, lines.append) == png and len(lines) == 1
+
+
+def test_the_demos_config_file_reaches_its_services_and_is_checked_whole(tmp_path: Path, monkeypatch,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """``--config FILE`` applied its [demo] section only (FORESIGHT_CONFIG=FILE reached the services); a typo in
+    another section, or a bad value in the environment, ran without a word."""
+    from services.demo import _share_config_file
+
+    monkeypatch.delenv("FORESIGHT_CONFIG", raising=False)
+    good = tmp_path / "good.toml"
+    good.write_text("[planner.cost]\nw_human = 0\n")
+    _share_config_file(str(good))
+    assert os.environ["FORESIGHT_CONFIG"] == str(good.resolve())  # what every service process inherits
+    for text, named in (("[planner.stmp]\niterations = 10\n", "unknown option(s) stmp; did you mean stomp?"),
+                        ("[replayer]\nrate_hz = -1\n", "replayer.rate_hz")):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        with pytest.raises(SystemExit) as e:
+            main(["--config", str(bad), "--run-dir", str(tmp_path / "run")])
+        assert e.value.code == 2 and named in capsys.readouterr().err
+    monkeypatch.delenv("FORESIGHT_CONFIG")
+    monkeypatch.setenv("FORESIGHT_REPLAYER_RATE_HZ", "fast")
+    with pytest.raises(SystemExit):
+        main(["--run-dir", str(tmp_path / "run")])
+    assert "FORESIGHT_REPLAYER_RATE_HZ: expected float, got 'fast'" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()  # refused before anything ran
