@@ -26,6 +26,7 @@ from services.scenario import (
     belief,
     choose_demonstration,
     model_for,
+    posterior_for,
     step_entry,
     summarise,
     table_header,
@@ -227,7 +228,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     out(f"foresight demo: router on {shown}{' (mutual TLS, access control)' if cfg.security else ''}; "
         f"{_run_length(cfg)}; logs in {run_dir}/")
     recorder = RunRecorder()
-    latest_posterior: list[ClassPosterior | None] = [None]
+    posteriors: dict[int, ClassPosterior] = {}  # the last of each tick (real time: of tick -1, the newest)
     realtime = cfg.mode == "realtime"
     lock = threading.Lock()
     # the run's clock: 0 in lock-step (simulated time); the executor's first state in real time
@@ -251,11 +252,14 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
             if not header_printed[0]:
                 out(table_header(list(msg.goal_names)))
                 header_printed[0] = True
-            out(table_row(step_entry(msg, t0), list(msg.goal_names), belief(latest_posterior[0])))
+            # the belief the plan was made with, as the summary, `foresight log table` and --json give it (whichever
+            # posterior came last made the live column differ from them, and from run to run)
+            out(table_row(step_entry(msg, t0), list(msg.goal_names), belief(posterior_for(msg, posteriors))))
 
     def on_other(msg: Message) -> None:
         if isinstance(msg, ClassPosterior):
-            latest_posterior[0] = msg
+            with lock:
+                posteriors[msg.tick] = msg
         recorder.on_message(msg)
 
     status = 0

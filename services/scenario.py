@@ -28,7 +28,7 @@ from shared.runtime import UserError
 from shared.scene import Scene
 
 __all__ = ["Scenario", "choose_demonstration", "model_for", "RunRecorder", "Summary", "summarise",
-           "DEFAULT_HUMAN_CLASS", "step_entry", "table_header", "table_row", "belief"]
+           "DEFAULT_HUMAN_CLASS", "step_entry", "table_header", "table_row", "belief", "posterior_for"]
 
 log = logging.getLogger("foresight.scenario")
 
@@ -283,7 +283,7 @@ def belief(posterior: ClassPosterior | None) -> str:
     return f"{posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
 
 
-def _posterior_for(plan: Plan, posteriors: dict[int, ClassPosterior]) -> ClassPosterior | None:
+def posterior_for(plan: Plan, posteriors: dict[int, ClassPosterior]) -> ClassPosterior | None:
     """The belief a plan was made with.
 
     Lock-step: the posterior of the tick before the plan's (the occupancy it planned against); real time: the
@@ -324,7 +324,7 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
         t0 = (states[0].stamp if states else ordered[0].stamp) if realtime else 0.0
     steps = [step_entry(p, t0, k) for k, p in zip(keys, ordered, strict=True)]  # ticks, or the plans' order
     for entry, plan in zip(steps, ordered, strict=True):
-        entry["belief"] = belief(_posterior_for(plan, posteriors))
+        entry["belief"] = belief(posterior_for(plan, posteriors))
     chosen = [s["chosen"] for s in steps]
     switch = None
     for i in range(1, len(chosen)):

@@ -10,6 +10,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -18,11 +19,14 @@ from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolv
 from shared.native_threads import limit_blas_threads
 
 __all__ = ["setup_logging", "fail", "stop_on_signals", "interruptible", "cli_errors", "UserError", "service_main",
-           "help_text", "freeze_startup_heap", "watch_parent", "lower_priority", "SHUTDOWN_GRACE_S", "FORCED_EXIT",
-           "PARENT_ENV"]
+           "help_text", "freeze_startup_heap", "watch_parent", "lower_priority", "SHUTDOWN_GRACE_S", "SIGNAL_ECHO_S",
+           "FORCED_EXIT", "PARENT_ENV"]
 
 SHUTDOWN_GRACE_S = 10.0
 """Seconds a process may take to stop after SIGINT/SIGTERM before it exits anyway (:func:`stop_on_signals`)."""
+SIGNAL_ECHO_S = 0.1
+"""A second signal this soon after the first is the same interrupt, delivered twice (coreutils ``timeout`` forwards
+the SIGINT the terminal sent the whole process group), not a second one: :func:`stop_on_signals` ignores it."""
 FORCED_EXIT = 3
 """Exit status of a process that did not stop within :data:`SHUTDOWN_GRACE_S` (or got a second signal)."""
 PARENT_ENV = "FORESIGHT_PARENT_PID"
@@ -109,8 +113,9 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Call
     away, a library that ignores the stop event): ``grace_s`` (default :data:`SHUTDOWN_GRACE_S`) after
     the first signal, unless the restore function has been called by then, it prints one line and the
     stacks of every thread (where it was stuck) to stderr and exits with :data:`FORCED_EXIT`; a second
-    signal does so at once. What the stop had finished by then (the executor's MCAP, closed before its
-    session) is kept.
+    signal exits so at once, with one line (the person who sent it wants out, not a dump). A signal within
+    :data:`SIGNAL_ECHO_S` of the first is the first one delivered again and ignored. What the stop had
+    finished by then (the executor's MCAP, closed before its session) is kept.
     """
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
@@ -118,12 +123,15 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Call
     restored = threading.Event()
     grace = SHUTDOWN_GRACE_S if grace_s is None else grace_s
 
-    def force(why: str) -> None:
+    first_at: list[float] = []
+
+    def force(why: str, stacks: bool = True) -> None:
         if restored.is_set():
             return
-        print(f"{os.path.basename(sys.argv[0]) or 'foresight'}: {why}; exiting with status {FORCED_EXIT} "
-              "(stacks of every thread follow)", file=sys.stderr, flush=True)
-        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+        print(f"{os.path.basename(sys.argv[0]) or 'foresight'}: {why}; exiting with status {FORCED_EXIT}"
+              + (" (stacks of every thread follow)" if stacks else ""), file=sys.stderr, flush=True)
+        if stacks:
+            faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
         os._exit(FORCED_EXIT)
 
     def watchdog(signame: str) -> None:
@@ -133,7 +141,10 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Call
     def handler(signum: int, frame: object) -> None:
         name = signal.Signals(signum).name
         if stop.is_set():
-            force(f"second {name} while stopping")
+            if first_at and time.monotonic() - first_at[0] < SIGNAL_ECHO_S:
+                return  # the first interrupt, delivered again
+            force(f"second {name} while stopping", stacks=False)
+        first_at.append(time.monotonic())
         stop.set()
         threading.Thread(target=watchdog, args=(name,), name="shutdown-watchdog", daemon=True).start()
 

@@ -277,7 +277,7 @@ class Planner:
         tau = self._prev[self._prev_best]
         s_cur, dist = project_onto_path(tau, q_current)
         if float(dist) > self.config.off_path_tol:
-            log.info("robot %.3f from tau_best: reconnecting every goal from its configuration", float(dist))
+            log.debug("robot %.3f from tau_best: reconnecting every goal from its configuration", float(dist))
             return q_current, None
         ahead = self.config.lookahead_s if lookahead_s is None else lookahead_s
         s_t = (s_cur + ahead / self._prev_dt).clamp(max=tau.shape[0] - 1)
@@ -319,6 +319,7 @@ class Planner:
         self.cost.set_occupancy(occ, origin, res)
         c = self.config
         q_t, s_t = self.start_configuration(q, lookahead_s)
+        off_path = self._prev is not None and s_t is None
         if self._prev is None:
             init = init_straight_lines(q_t, self.goal_q, c.stomp.waypoints)
         else:
@@ -350,7 +351,7 @@ class Planner:
             valid=self.goals.valid.cpu().numpy().astype(bool), chosen=self.valid_index[chosen_v],
             dt=self._prev_dt, start=q_t.double().cpu().numpy(), planning_ms=(time.perf_counter() - t0) * 1e3,
             reasons=list(self.goals.reasons) or [""] * k, iterations=result.history.shape[0] - 1,
-            cost_history=result.history.double().cpu().numpy())
+            cost_history=result.history.double().cpu().numpy(), off_path=off_path)
 
 
 def goals_per_call(k: int, limit: int) -> int:

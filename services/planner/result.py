@@ -28,6 +28,8 @@ class PlanResult:
         iterations: STOMP iterations run (``stomp.iterations``, fewer when the anytime option stopped early).
         cost_history: ``(iterations + 1, Kv)`` total cost of each valid goal's current trajectory before each
             iteration and after the last (``StompResult.history``; how fast the step converged).
+        off_path: The robot was farther than ``off_path_tol`` from the previous tau_best: every goal was planned
+            from its configuration, not reconnected (``Planner.start_configuration``).
     """
 
     step: int
@@ -46,3 +48,4 @@ class PlanResult:
     reasons: list[str]
     iterations: int = 0
     cost_history: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    off_path: bool = False

@@ -140,7 +140,8 @@ class PlannerService:
         costs = ", ".join(f"{n}={c:.3g}" for n, c in zip(result.goal_names, result.cost_total, strict=True))
         log.debug("planner: tick %d step %d chose %s (%s) in %.0f ms", tick, result.step,
                   result.goal_names[result.chosen], costs, result.planning_ms)
-        self.summary.add(result.planning_ms, f"chose {result.goal_names[result.chosen]}")
+        self.summary.add(result.planning_ms, f"chose {result.goal_names[result.chosen]}"
+                         + (" from off the path" if result.off_path else ""))  # each one logged at DEBUG by the core
         return result
 
     def run(self, stop: threading.Event | None = None) -> PlannerStats:

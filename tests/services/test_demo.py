@@ -56,6 +56,9 @@ def test_demo_multiprocess_json(tmp_path: Path) -> None:
     assert [r.split()[0] for r in rows] == ["0", "1", "2", "3", "4"]
     assert [r.split()[2] for r in rows] == summary["chosen_goal_per_step"]
     assert [float(r.split()[1]) for r in rows] == pytest.approx([0.0, 0.5, 1.0, 1.5, 2.0])
+    # the live belief is the one each plan was made with, as --json and `foresight log table` give it (the live
+    # column printed whichever posterior had come last: one step early, and not the same from run to run)
+    assert [" ".join(r.split()[-2:]) if "p=" in r else "" for r in rows] == [e["belief"] for e in summary["steps"]]
 
 
 def test_demo_bad_input_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

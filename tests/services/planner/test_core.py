@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
 
 import numpy as np
 import pytest
@@ -73,7 +74,7 @@ def test_first_step_plans_around_the_blob(scene) -> None:
     assert res.cost_human[0] * 10 <= straight
 
 
-def test_next_step_starts_ahead_on_tau_best(scene) -> None:
+def test_next_step_starts_ahead_on_tau_best(scene, caplog) -> None:
     planner = toy_planner(scene, lookahead_s=0.3, iterations=20)
     occ = blob_grid(scene)
     first = planner.step([0.0, -0.2], occ)
@@ -88,9 +89,15 @@ def test_next_step_starts_ahead_on_tau_best(scene) -> None:
     expected = tau[i] + (s_expected - i) * (tau[i + 1] - tau[i])
     assert np.allclose(second.start, expected.numpy(), atol=1e-4)
     assert np.allclose(second.trajectories[:, -1], [[1.0, -0.2], [0.9, 0.2]], atol=1e-6)
-    # off the path: restart from the robot's own configuration
-    third = planner.step([0.0, 0.25], occ)
+    assert not first.off_path and not second.off_path
+    # off the path: restart from the robot's own configuration, said at DEBUG (it was an INFO line per plan) and on
+    # the result, which the service's periodic summary counts
+    with caplog.at_level(logging.DEBUG, logger="foresight"):
+        third = planner.step([0.0, 0.25], occ)
     assert np.allclose(third.start, [0.0, 0.25]) and np.allclose(third.trajectories[:, 0], [0.0, 0.25])
+    assert third.off_path
+    (rec,) = [r for r in caplog.records if "from tau_best" in r.getMessage()]
+    assert rec.levelno == logging.DEBUG
 
 
 def test_departure_lookahead_override_and_anytime_step(scene) -> None:

@@ -85,3 +85,20 @@ def test_a_second_signal_exits_at_once():
             proc.kill()
             proc.wait(timeout=10)
     assert proc.returncode == 3 and "second SIGTERM while stopping" in err, err
+    assert "stacks" not in err and "File " not in err  # one line: whoever sent it wants out, not a dump
+
+
+def test_one_interrupt_delivered_twice_at_once_is_one_interrupt():
+    """``timeout`` forwards the SIGINT a terminal sent the process group: two within milliseconds dumped every
+    thread's stack and exited with status 3 at once."""
+    proc = _blocked_process()
+    try:
+        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    # the process never stops by itself: the grace, not the echo, ends it
+    assert "second" not in err and "did not stop within 1 s of SIGINT" in err, err
