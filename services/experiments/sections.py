@@ -98,12 +98,12 @@ def _switch_section(res: SwitchResult, png: Path) -> list[str]:
     lines.append(f"- verdict ({res.config.protocol} protocol, the step from which the robot leaves the human's cup "
                  f"for good): {switch_verdict(res)}.")
     p, c = res.median_settle("prediction"), res.median_settle("current")
-    lines.append(f"- paper: prediction settles at step 4, current at step 13 (9 steps earlier). Measured medians: "
-                 f"prediction {p:g}, current {c:g} ({c - p:+g} steps; target >= 5 earlier).")
+    lines.append(f"- paper: prediction switches at step 4, current at step 13 (9 steps earlier). Measured median "
+                 f"step from which each run keeps its final goal: prediction {p:g}, current {c:g} ({c - p:+g}).")
     ap, ac = res.median_away("prediction"), res.median_away("current")
     lines.append(f"- step from which the robot never again goes for the human's cup ({res.config.human_cup}; a run "
-                 f"that ends there counts {res.config.timing.steps}): prediction {ap:g}, current {ac:g} "
-                 f"({ac - ap:+g}); runs ending at the human's cup: prediction {res.conflicts('prediction')}, "
+                 f"that ends there counts {res.config.timing.steps}), the verdict's measure: prediction {ap:g}, "
+                 f"current {ac:g} ({ac - ap:+g}; target >= 5 earlier); runs ending at the human's cup: prediction {res.conflicts('prediction')}, "
                  f"current {res.conflicts('current')}.")
     for method in ("prediction", "current"):
         held = _held_costs(res, method)
@@ -271,8 +271,8 @@ def library_part(spec: str, part: str, plan: ReportPlan, out: Path, models_dir: 
     """
     tag, started = library_tag(spec), time.monotonic()
 
-    def say(line: str) -> None:
-        print(f"[{tag}] {line}", flush=True)
+    def say(line: str) -> None:  # the workers' lines interleave: each names its library and part
+        print(f"[{tag} {part}] {line}", flush=True)
 
     if part == "recognition":
         lib = load_experiment_library(spec, load_scene(TABLE1_SCENE))

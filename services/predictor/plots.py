@@ -67,7 +67,8 @@ def plot_swept_volumes(model: PredictionModel, scene: Scene, library: MotionLibr
     """One top-view panel per class (see the module docstring).
 
     Voxels shared by every class's volume (mostly the body) are grey; the class's own voxels are
-    coloured by how many of the M volumes contain them (few: specific to this class).
+    coloured by how many of the M volumes contain them (few: specific to this class). A volume of
+    probabilities (``demos``, ``spread``, ``timed``) is drawn by its support, the voxels with p > 0.
     """
     plt = _plt()
     human = HumanModel()
@@ -75,7 +76,7 @@ def plot_swept_volumes(model: PredictionModel, scene: Scene, library: MotionLibr
     cols = min(4, m)
     rows = (m + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.6 * rows), dpi=100, squeeze=False)
-    volumes = model.require_volumes("the swept-volume plot")
+    volumes = model.require_volumes("the swept-volume plot") > 0  # (M, nx, ny, nz) bool: each class's support
     share = volumes.sum(axis=0)                                         # (nx, ny, nz) classes per voxel
     ext = _extent(model)
     for c in range(m):
