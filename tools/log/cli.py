@@ -113,6 +113,10 @@ def _main_snapshot(args: argparse.Namespace) -> int:
         check_png(args.out, "--out")
     out = Path(args.out) if args.out is not None else file.with_name(f"{file.stem}-snapshot.png")
     state = scene_at(file, args.at)
+    if args.at is not None and args.at > state.t_s + 1e-6:  # it drew the end without a word
+        print(f"foresight log: note: --at {args.at:g} s is past the end of the scene ({state.t_s:.3f} s of "
+              "recording; a lock-step run records its simulated steps faster): drawing its last state",
+              file=sys.stderr)
     draw_snapshot(state, out, title=file.name)
     _note_truncated(read_log(file, keep=lambda ch: False))  # whether the scene reader stopped at a damaged chunk
     print(f"wrote {out} ({state.summary()})")
@@ -165,7 +169,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
     ps = sub.add_parser("snapshot", help=SUBCOMMANDS["snapshot"])
     ps.add_argument("file", help="MCAP file")
     ps.add_argument("--at", type=float, default=None, metavar="SECONDS",
-                    help="seconds from the first scene record (default: the last plan)")
+                    help="seconds of recording (log time, wall clock) from the first scene record; a lock-step run "
+                         "records its simulated steps faster than they are simulated (default: the last plan)")
     ps.add_argument("--out", default=None, metavar="PNG",
                     help="PNG path (default: FILE's stem + '-snapshot.png' next to it)")
     args = parser.parse_args(argv)

@@ -90,7 +90,8 @@ def scene_at(path: str | Path, at_s: float | None) -> SceneState:
     The latest message of each topic wins; a ``SceneUpdate``'s entities replace those of the same id.
 
     Raises:
-        UserError: The file is missing, not an MCAP file or has no scene channels, or ``at_s`` is negative.
+        UserError: The file is missing, not an MCAP file or has no scene channels, or ``at_s`` is negative. A time
+            past the scene's last record draws the last state (``t_s`` says when that is).
         SceneDecodeError: A scene message does not decode under its channel's schema.
     """
     p = Path(path)

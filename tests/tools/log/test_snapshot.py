@@ -72,6 +72,8 @@ def test_cli_writes_a_png(run_log, tmp_path, capsys) -> None:
     assert len(lines) == 1 and lines[0].startswith(f"wrote {out} (t=") and f"{n} voxels" in lines[0]
     assert "chosen red_cup" in lines[0]
     assert out.read_bytes()[:8] == PNG
+    assert main(["snapshot", str(run_log), "--out", str(out), "--at", "1000"]) == 0
+    assert "--at 1000 s is past the end of the scene" in capsys.readouterr().err  # it drew the end without a word
     import matplotlib.image as mpimg
 
     img = mpimg.imread(out)
