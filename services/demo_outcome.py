@@ -157,4 +157,8 @@ def outcome_lines(outcomes: list[Outcome]) -> list[str]:
     text = verdict(outcomes)
     if text:
         out.append(f"verdict: {text}")
+    elif len(outcomes) == 1:  # one row says nothing of what prediction changes: say where the comparison is
+        out.append("one planner, nothing to compare with: `foresight demo --compare` (make demo "
+                   "DEMO_ARGS=--compare) runs the same scenario with the current occupancy and with no human cost, "
+                   "and says whether predicting the human kept the robot further from them")
     return out

@@ -131,8 +131,9 @@ def _log_state(mcap: Path) -> str:
 def _run_length(cfg: DemoConfig) -> str:
     if cfg.mode == "lockstep":
         return f"lockstep mode, {cfg.steps} steps of {cfg.period_s:g} s (simulated time)"
-    return (f"realtime mode, {cfg.steps * cfg.period_s:g} s of wall time ({cfg.steps} periods of {cfg.period_s:g} s; "
-            "a plan per period while the planner keeps up)")
+    return (f"realtime mode, {cfg.steps * cfg.period_s:g} s of wall time ({cfg.steps} periods of {cfg.period_s:g} s); "
+            "the planner replans as soon as it is idle and a new prediction has come, at least once a period: one "
+            "row per plan")
 
 
 

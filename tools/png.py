@@ -1,5 +1,8 @@
-"""The one check of a PNG output path, made before any work: ``foresight log snapshot --out``,
-``library generate --plot``, ``python -m tools.reach --out``."""
+"""The one check of a PNG output path, made before any work.
+
+Used by ``foresight log snapshot --out`` and ``render --out``, ``library generate --plot`` and
+``python -m tools.reach --out``.
+"""
 
 from __future__ import annotations
 

@@ -251,9 +251,10 @@ class ExecutorService:
         r.plans = self.core.plans_adopted
         r.times = np.asarray(self._times)
         r.q = np.asarray(self._qs).reshape(len(self._qs), self.limits.dof)
-        log.info("executor: done after %d steps, goal %s, reached=%s (step %d), %d plans, %d held, %d rejected: %s",
-                 r.steps, r.goal_per_step[-1] if r.goal_per_step else -1, r.reached, r.reached_step, r.plans,
-                 r.held_steps, sum(r.rejects.values()), self.rejects.summary())
+        held = "steps" if self.config.mode == "lockstep" else "state samples"  # what ExecutorResult.held_steps counts
+        log.info("executor: done after %d steps, goal %s, reached=%s (step %d), %d plans, held during %d %s, "
+                 "%d rejected: %s", r.steps, r.goal_per_step[-1] if r.goal_per_step else -1, r.reached,
+                 r.reached_step, r.plans, r.held_steps, held, sum(r.rejects.values()), self.rejects.summary())
         return r
 
     def _live_server(self, builder: SceneBuilder) -> LiveServer | None:

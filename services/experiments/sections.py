@@ -103,8 +103,8 @@ def _switch_section(res: SwitchResult, png: Path) -> list[str]:
     ap, ac = res.median_away("prediction"), res.median_away("current")
     lines.append(f"- step from which the robot never again goes for the human's cup ({res.config.human_cup}; a run "
                  f"that ends there counts {res.config.timing.steps}), the verdict's measure: prediction {ap:g}, "
-                 f"current {ac:g} ({ac - ap:+g}; target >= 5 earlier); runs ending at the human's cup: prediction {res.conflicts('prediction')}, "
-                 f"current {res.conflicts('current')}.")
+                 f"current {ac:g} ({ac - ap:+g}; target >= 5 earlier); runs ending at the human's cup: prediction "
+                 f"{res.conflicts('prediction')}, current {res.conflicts('current')}.")
     for method in ("prediction", "current"):
         held = _held_costs(res, method)
         if held:

@@ -57,6 +57,8 @@ def test_verdict_by_clearance_when_nobody_touched_says_so() -> None:
     lines = outcome_lines(runs)
     assert lines[-1] == f"verdict: {text}"
     assert [ln.split()[0] for ln in lines[3:6]] == ["prediction", "current", "no"]
+    # one row alone said nothing of what prediction changes: it says where the comparison is
+    assert "foresight demo --compare" in outcome_lines(runs[:1])[-1]
 
 
 def test_measure_run_scores_contact_and_interference() -> None:
