@@ -57,7 +57,7 @@ from shared.config_names import SECTIONS, check_environment, section_class
 from shared.config_tree import ENV_PREFIX
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
-from shared.scene import load_scene
+from shared.scene import SCENE_HELP, load_scene
 from shared.security.acl import refuse_ros2_keys
 
 __all__ = ["DemoConfig", "run_demo", "main", "SERVICES_IN_ORDER"]
@@ -85,9 +85,7 @@ class DemoConfig:
                      "scene). red_cup: the robot's one task in the paper's Table I, the situation "
                      "`foresight eval pace` measured; blue_cup,red_cup: the robot also chooses the cup each step "
                      "(the paper's Fig. 9)")
-    scene: str = opt("pr2_two_cups_side", help="scene: an embedded name (pr2_two_cups, pr2_two_cups_facing, "
-                     "pr2_two_cups_side, pr2_two_cups_side_parallel, or the paper's PR2TwoCups, PR2TwoCupsFacing, "
-                     "PR2TwoCupsSide) or a scene TOML file; pr2_two_cups_side: the scene of the paper's Table I")
+    scene: str = opt("pr2_two_cups_side", help=f"{SCENE_HELP}; pr2_two_cups_side: the scene of the paper's Table I")
     method: str = opt("prediction", choices=("prediction", "current"),
                       help="occupancy the planner avoids: the early prediction, or the current posture only")
     human_cost: bool = opt(True, help="plan with the human-penetration cost (off: the paper's 'basic STOMP')")
@@ -136,8 +134,9 @@ class DemoConfig:
         if self.steps < 1:
             raise ConfigError(f"demo.steps: must be >= 1, got {self.steps}")
         check_prefix(self.prefix, "demo.prefix")
-        if not (self.period_s > 0 and self.rate_hz > 0 and self.timeout > 0):
-            raise ConfigError("demo.period_s, demo.rate_hz and demo.timeout must be > 0")
+        for name in ("period_s", "rate_hz", "timeout"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"demo.{name}: must be > 0, got {getattr(self, name)}")
         if not MIN_PERIOD_S <= self.period_s <= MAX_PERIOD_S:  # the clock tick's period on the wire
             raise ConfigError(f"demo.period_s: must be in [{MIN_PERIOD_S:g}, {MAX_PERIOD_S:g}] s (a clock tick's "
                               f"period, docs/protocol.md), got {self.period_s}")

@@ -125,7 +125,9 @@ class PaceResult:
 
     def lines(self) -> list[str]:
         """One row per point, then per protocol and library where prediction stops lowering contact."""
-        out = [f"Table I across the robot's pace ({self.config.demos} demonstrations x {self.config.seeds} seeds); "
+        demos, seeds = self.config.demos, self.config.seeds
+        out = [f"Table I across the robot's pace ({demos} demonstration{'s' * (demos != 1)} x {seeds} "
+               f"seed{'s' * (seeds != 1)}); "
                "contact s (mean) / min clearance m (median) / reached step (median; - : not every run)",
                f"{'protocol':<9}{'library':<16}{'pace':>8}{'ratio':>12}{'basic':>28}{'least penetration':>28}"]
         for p in self.points:

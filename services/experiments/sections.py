@@ -117,7 +117,8 @@ def _switch_section(res: SwitchResult, png: Path) -> list[str]:
     goals = {m: [r.final_goal for r in res.runs if r.method == m] for m in ("prediction", "current")}
     for m, g in goals.items():
         counts = {name: g.count(name) for name in sorted(set(g))}
-        lines.append(f"- final goal with {m}: " + ", ".join(f"{k} in {v} runs" for k, v in counts.items()))
+        lines.append(f"- final goal with {m}: "
+                     + ", ".join(f"{k} in {v} run{'s' * (v != 1)}" for k, v in counts.items()))
     lines += ["", f"![switch]({png.name})", ""]
     return lines
 

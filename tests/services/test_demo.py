@@ -70,6 +70,10 @@ def test_demo_bad_input_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[s
     with pytest.raises(SystemExit):
         main(["--steps", "0"])
     assert "demo.steps: must be >= 1" in capsys.readouterr().err
+    for flag, name in (("--period-s", "period_s"), ("--rate-hz", "rate_hz"), ("--timeout", "timeout")):
+        with pytest.raises(SystemExit):
+            main([flag, "0"])
+        assert f"demo.{name}: must be > 0, got 0.0" in capsys.readouterr().err  # it named all three
     with pytest.raises(SystemExit):
         main(["--goals", "red_cup,green_cup", "--run-dir", str(tmp_path)])
     err = capsys.readouterr().err
@@ -134,6 +138,10 @@ def test_demo_live_takes_a_port_or_foxgloves_default(capsys: pytest.CaptureFixtu
     with pytest.raises(SystemExit):
         main(["--live", "--steps", "0"])  # a bare --live does not swallow the next option
     assert "demo.steps: must be >= 1" in capsys.readouterr().err
+    for flag, name in (("--period-s", "period_s"), ("--rate-hz", "rate_hz"), ("--timeout", "timeout")):
+        with pytest.raises(SystemExit):
+            main([flag, "0"])
+        assert f"demo.{name}: must be > 0, got 0.0" in capsys.readouterr().err  # it named all three
     for value, message in (("70000", "demo.live: must be a port"), ("-1", "demo.live: must be a port"),
                            ("abc", "--live: expected int, got 'abc'")):  # a usage and "unrecognized arguments"
         with pytest.raises(SystemExit):
