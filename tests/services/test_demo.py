@@ -257,7 +257,8 @@ def test_the_demos_config_file_reaches_its_services_and_is_checked_whole(tmp_pat
     another section, or a bad value in the environment, ran without a word."""
     from services.demo import _share_config_file
 
-    monkeypatch.delenv("FORESIGHT_CONFIG", raising=False)
+    monkeypatch.setenv("FORESIGHT_CONFIG", "")  # recorded as unset: whatever the demo sets, the test's end unsets
+    monkeypatch.delenv("FORESIGHT_CONFIG")
     good = tmp_path / "good.toml"
     good.write_text("[planner.cost]\nw_human = 0\n")
     _share_config_file(str(good))
@@ -275,3 +276,5 @@ def test_the_demos_config_file_reaches_its_services_and_is_checked_whole(tmp_pat
         main(["--run-dir", str(tmp_path / "run")])
     assert "FORESIGHT_REPLAYER_RATE_HZ: expected float, got 'fast'" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()  # refused before anything ran
+    monkeypatch.undo()
+    assert "FORESIGHT_CONFIG" not in os.environ  # the demo set it for its services: not for the next test
