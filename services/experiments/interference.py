@@ -92,6 +92,7 @@ class RunScore:
         reached_step: First step at which the robot was at its goal (None: never).
         goals: The goal chosen at each step.
         planning_ms: Median planning time of a step.
+        borrowed: Scored from basic STOMP's run of the first demonstration (:mod:`services.experiments.reuse`).
     """
 
     demo: int
@@ -106,6 +107,7 @@ class RunScore:
     reached_step: int | None
     goals: tuple[str, ...]
     planning_ms: float
+    borrowed: bool = False
 
 
 def score_run(rec: RunRecord, robot: Any, scene: Scene, final: Any, demo: int, seed: int, planner: str,
@@ -164,7 +166,11 @@ class InterferenceResult:
     human: CupClass
     demos: list[int]
     runs: list[RunScore] = field(default_factory=list)
-    borrowed: int = 0  # basic STOMP's scores made from another demonstration's run (services.experiments.reuse)
+
+    @property
+    def borrowed(self) -> int:
+        """Basic STOMP's scores made from another demonstration's run (:mod:`services.experiments.reuse`)."""
+        return sum(r.borrowed for r in self.runs)
 
     def values(self, planner: str, measure: str) -> np.ndarray:
         """``(demos, seeds)`` values of one measure of one planner."""
@@ -365,11 +371,10 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
                     finals[demo.index] = rec.final_occupancy
                 if demo.index not in finals:
                     raise RuntimeError("interference: no final prediction was received")
-                scores[name] = score_run(rec, planner.robot, scene, finals[demo.index], demo.index, seed, name,
-                                         human.label, weights)
-                done += 1
                 borrowed = borrow and name == "basic"
-                result.borrowed += borrowed
+                scores[name] = dataclasses.replace(score_run(rec, planner.robot, scene, finals[demo.index], demo.index,
+                                                             seed, name, human.label, weights), borrowed=borrowed)
+                done += 1
                 how = f"  (demo #{demos[0].index}'s path: basic STOMP ignores the human)" if borrowed else ""
                 progress(f"  [{done}/{total}] demo #{demo.index} seed {seed} {variant.label:<18} interference "
                          f"{scores[name].interference:8.3f}  min clearance {scores[name].min_clearance:+.3f} m  "

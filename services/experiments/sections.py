@@ -170,7 +170,7 @@ def _table1_part(spec: str, prot: str, plan: ReportPlan, out: Path, common: dict
     png = plot_interference(t1, out / f"interference-{library_tag(spec)}{_suffix(prot)}.png")
     md = [f"### Protocol: {prot}", "", PROTOCOL_TEXT[prot], "",
           f"#### Interference (Table I), {prot} protocol", "", *_table1_section(t1, png)]
-    return md, {"interference": t1.to_json(), "planning_ms": [r.planning_ms for r in t1.runs],
+    return md, {"interference": t1.to_json(), "planning_ms": [r.planning_ms for r in t1.runs if not r.borrowed],
                 "verdict": table1_verdict(t1)}
 
 

@@ -98,7 +98,7 @@ def _table1(tmp_path, small, **kw) -> tuple[interference.InterferenceResult, lis
 
 
 def _scores(res) -> dict:
-    return {(r.planner, r.demo, r.seed): dataclasses.replace(r, planning_ms=0.0) for r in res.runs}
+    return {(r.planner, r.demo, r.seed): dataclasses.replace(r, planning_ms=0.0, borrowed=False) for r in res.runs}
 
 
 @pytest.mark.filterwarnings("error::RuntimeWarning")  # the table of two planners had NaN columns for the third
@@ -112,6 +112,7 @@ def test_table1_scores_basic_stomp_the_same_planned_once_per_seed_or_on_every_de
     assert [(r.planner, r.demo, r.seed) for r in once.runs] == [(r.planner, r.demo, r.seed) for r in every.runs]
     assert "basic STOMP ignores the human" in "\n".join(once.lines())
     data = once.to_json()
+    assert [(r.demo, r.seed) for r in once.runs if r.borrowed] == [(once.demos[1], 1)]
     assert data["basic_runs_borrowed"] == 1 and "current" not in data and "current" not in data["reached"]
 
 
