@@ -59,46 +59,37 @@ def _blocked_process() -> subprocess.Popen[str]:
     return proc
 
 
-def test_a_process_stuck_in_a_call_exits_after_the_grace_and_says_where():
+def _signalled(*signals: tuple[signal.Signals, float]) -> tuple[int, str]:
+    """A blocked process sent each signal after its pause (s); its exit status and stderr."""
     proc = _blocked_process()
     try:
-        proc.send_signal(signal.SIGTERM)
+        for sig, pause in signals:
+            time.sleep(pause)
+            proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait(timeout=10)
-    assert proc.returncode == 3, err
+    return proc.returncode, err
+
+
+def test_a_process_stuck_in_a_call_exits_after_the_grace_and_says_where():
+    code, err = _signalled((signal.SIGTERM, 0.0))
+    assert code == 3, err
     assert "did not stop within 1 s of SIGTERM; exiting with status 3" in err
     assert 'File "<string>", line 8' in err  # the stack says where it was stuck
 
 
 def test_a_second_signal_exits_at_once():
-    proc = _blocked_process()
-    try:
-        proc.send_signal(signal.SIGINT)
-        time.sleep(0.2)
-        proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
-    assert proc.returncode == 3 and "second SIGTERM while stopping" in err, err
+    code, err = _signalled((signal.SIGINT, 0.0), (signal.SIGTERM, 0.2))
+    assert code == 3 and "second SIGTERM while stopping" in err, err
     assert "stacks" not in err and "File " not in err  # one line: whoever sent it wants out, not a dump
 
 
 def test_one_interrupt_delivered_twice_at_once_is_one_interrupt():
     """``timeout`` forwards the SIGINT a terminal sent the process group: two within milliseconds dumped every
     thread's stack and exited with status 3 at once."""
-    proc = _blocked_process()
-    try:
-        proc.send_signal(signal.SIGINT)
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
+    code, err = _signalled((signal.SIGINT, 0.0), (signal.SIGINT, 0.0))
     # the process never stops by itself: the grace, not the echo, ends it
-    assert "second" not in err and "did not stop within 1 s of SIGINT" in err, err
+    assert code == 3 and "second" not in err and "did not stop within 1 s of SIGINT" in err, err
