@@ -122,6 +122,8 @@ def run_parts(fn: Callable[..., T], jobs: Sequence[tuple[Any, ...]], workers: in
     with multiprocessing.get_context(context).Pool(workers, initializer=limit_blas_threads) as pool:  # exit: terminate
         for i, result in pool.imap_unordered(_indexed, [(fn, i, job) for i, job in enumerate(jobs)]):
             results[i] = result
+        pool.close()  # done: the workers exit by themselves (terminate is for a failure)
+        pool.join()
     return results
 
 
