@@ -53,7 +53,7 @@ from services.view.config import DEFAULT_PORT
 from shared import strict_json
 from shared.atomic_file import make_parent
 from shared.config import LOG_LEVELS, ConfigError, add_config_arguments, check_prefix, opt, resolve_config
-from shared.config_names import SECTIONS, check_environment, section_class
+from shared.config_names import SECTIONS, section_class
 from shared.config_tree import ENV_PREFIX
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
@@ -351,8 +351,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
     args = parser.parse_args(_bare_live(sys.argv[1:] if argv is None else list(argv)))
     with cli_errors(prog):
         cfg, _ = resolve_config("demo", DemoConfig, args, with_zenoh=False)
-        # the services inherit the environment: a misspelt variable of any of them is an error now, not later
-        check_environment(os.environ, {section: section_class(section) for section in SECTIONS})
+        # the services inherit the environment and the file: a misspelt name or bad value of any of them is an error
+        # now, not later (each section's variables are checked as it is resolved)
         _share_config_file(args.config)
         setup_logging(cfg.log_level)
         stop = threading.Event()
