@@ -388,7 +388,7 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
 
 def _basic_is_shared(recs: dict[str, RunRecord], first: RunRecord, demo: int, progress: Callable[[str], None]) -> bool:
     """The first seed's check that basic STOMP's run can be borrowed (:mod:`services.experiments.reuse`)."""
-    if not same_robot(recs["basic"], first):
+    if recs["basic"] is not first and not same_robot(recs["basic"], first):  # the first demonstration is first
         at = first_differing_state(recs["basic"], first)
         progress(f"  basic STOMP's path on demo #{demo} differs from the first demonstration's"
                  f"{'' if at is None else f' from t = {at:.3f} s'}: every run is made")
