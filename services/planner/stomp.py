@@ -17,10 +17,11 @@ Each goal draws its exploration noise from its own ``torch.Generator`` seeded pe
 K goals gives the same result as K separate runs with the same seeds.
 
 Step 1 and steps 2-4 after the cost call are pure tensor functions (:func:`rollouts`, :func:`update`, and with
-``reuse`` :func:`join_kept`, which joins the kept rollouts and keeps the best); with ``StompConfig.compile`` each
-is one ``torch.compile``-d graph (about 30 small eager ops per iteration become three calls: on a CPU, where an
-eager op costs 5-20 us, that is most of what an iteration spends outside the cost). Compiled and eager give the
-same numbers to float rounding (tested).
+``reuse`` :func:`join_kept`, which joins the kept rollouts and keeps the best). After each cost call STOMP runs
+:func:`advance`: those steps and the next iteration's rollouts, in that order, as one function; with
+``StompConfig.compile`` it is one ``torch.compile``-d graph (about 30 small eager ops per iteration become one
+call: on a CPU, where an eager op costs 5-20 us and a compiled call tens of us before any work, that is most of
+what an iteration spends outside the cost). Compiled and eager give the same numbers to float rounding (tested).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from dataclasses import dataclass, field
 import torch
 
 from .stomp_steps import (
+    advance,
     finite,
     finite_difference_matrix,
     join_kept,
@@ -138,12 +140,11 @@ class StompResult:
 
 
 _COMPILED: dict[str, Callable[..., tuple[torch.Tensor, ...]]] = {}
-_STEPS: dict[str, Callable[..., tuple[torch.Tensor, ...]]] = {"rollouts": rollouts, "update": update,
-                                                              "join_kept": join_kept}
+_STEPS: dict[str, Callable[..., tuple[torch.Tensor, ...]]] = {"rollouts": rollouts, "advance": advance}
 
 
 def _compiled(name: str) -> Callable[..., tuple[torch.Tensor, ...]]:
-    """``torch.compile`` of :func:`rollouts`, :func:`update` or :func:`join_kept`, made once per process.
+    """``torch.compile`` of :func:`rollouts` or :func:`advance`, made once per process.
 
     One code object each, one graph per (K, R, T, D, dtype) seen (a service plans for one K; beyond torch's
     recompile limit, 8, a new shape runs eagerly).
@@ -269,29 +270,21 @@ class Stomp:
         history = []
 
         to_go = self.to_go if c.cost_to_go else None
-        fresh = c.rollouts - c.reuse  # new rollouts per iteration after the first
-        kept: tuple[torch.Tensor, torch.Tensor] | None = None  # reused rollouts (interior, per-waypoint cost)
+        fresh = c.rollouts - c.reuse  # new rollouts per iteration after the first (all of them without reuse)
+        kept: tuple[torch.Tensor | None, torch.Tensor | None] = (None, None)  # reused rollouts and their costs
+        # 1. noisy rollouts, clamped to the joint limits (eps is the noise actually applied); the first iteration's
+        # here, every later one's with the update before it (advance)
+        q, eps = self._first_rollouts(theta, noise[0], start, goal)
         for it in range(c.iterations):
-            # 1. noisy rollouts, clamped to the joint limits (eps is the noise actually applied)
-            if not c.reuse:
-                q, eps = self._step("rollouts", theta, noise[it], start, goal, self.lower, self.upper)
-            else:  # the loop's two shapes: R - reuse new rollouts, and (first iteration only) reuse more
-                q, eps = self._step("rollouts", theta, noise[it, :, :fresh].contiguous(), start, goal, self.lower,
-                                    self.upper)
-                if kept is None:
-                    q2, eps2 = self._step("rollouts", theta, noise[it, :, fresh:].contiguous(), start, goal,
-                                          self.lower, self.upper)
-                    q, eps = torch.cat([q, q2[:, 1:]], 1), torch.cat([eps, eps2], 1)
             # 2. costs of the current trajectory (rollout 0) and of the new noisy rollouts (with reuse: and the
             # previous iteration's best rollouts, with the costs they have; the best of them all are kept)
             cost = self._cost(cost_fn, q, k, q.shape[1])
-            if c.reuse:
-                eps, cost, kept_q, kept_cost = self._step("join_kept", theta, eps, cost, *(kept or (None, None)),
-                                                          c.reuse)
-                kept = (kept_q, kept_cost)
-            # 2-4. keep the best, probabilities per waypoint, smoothed update within the limits
-            theta, total, best_cost, best_theta = self._step("update", theta, eps, cost, best_cost, best_theta,
-                                                             self.lower, self.upper, self.M, to_go, c.sensitivity)
+            # 2-4. keep the best, probabilities per waypoint, smoothed update within the limits; and 1. of the next
+            # iteration (after the last, its noise again: rollouts nobody costs)
+            nxt = noise[min(it + 1, c.iterations - 1), :, :fresh].contiguous()
+            theta, total, best_cost, best_theta, *kept, q, eps = self._step(
+                "advance", theta, eps, cost, *kept, c.reuse, best_cost, best_theta, self.lower, self.upper, self.M,
+                to_go, c.sensitivity, nxt, start, goal)
             history.append(total)
             if interrupt is not None and it + 1 >= min_iterations and it + 1 < c.iterations and interrupt():
                 break
@@ -317,22 +310,37 @@ class Stomp:
         if not self._compile or k < 1:  # no goal to plan for: nothing to compile
             return
         c, n = self.config, self.config.waypoints - 2
+        fresh = c.rollouts - c.reuse
         theta = ((self.lower + self.upper) / 2).expand(k, n, self.dof).contiguous()
-        ends = theta[:, :1].contiguous()
+        start, goal = theta[:, :1].contiguous(), theta[:, :1].clone()
         # distinct tensors as in optimize: dynamo guards aliasing between arguments (an aliased call is another graph)
-        eps = torch.cat([self._step("rollouts", theta, torch.zeros(k, r, n, self.dof, device=self.device,
-                                                                   dtype=self.dtype), ends, ends.clone(), self.lower,
-                                    self.upper)[1]
-                         for r in ([c.rollouts] if not c.reuse else [c.rollouts - c.reuse, c.reuse])], 1)
-        cost = torch.zeros(k, c.rollouts + 1, c.waypoints, device=self.device, dtype=self.dtype)
-        if c.reuse:  # the first iteration (R new rollouts, nothing kept yet), then the others (R - reuse new)
-            fresh = c.rollouts - c.reuse
-            kept = self._step("join_kept", theta, eps, cost, None, None, c.reuse)[2:]
-            self._step("join_kept", theta, eps[:, :fresh].contiguous(), cost[:, :fresh + 1].contiguous(), *kept,
-                       c.reuse)
+        q, eps = self._first_rollouts(theta, torch.zeros(k, c.rollouts, n, self.dof, device=self.device,
+                                                         dtype=self.dtype), start, goal)
+        cost = torch.zeros(q.shape[:3], device=self.device, dtype=self.dtype)
         best = torch.full((k,), math.inf, device=self.device, dtype=self.dtype)
-        self._step("update", theta, eps, cost, best, theta.clone(), self.lower, self.upper, self.M,
-                   self.to_go if c.cost_to_go else None, c.sensitivity)
+        nxt = torch.zeros(k, fresh, n, self.dof, device=self.device, dtype=self.dtype)
+        to_go = self.to_go if c.cost_to_go else None
+        # the first iteration (nothing kept yet), then, with reuse, the others (R - reuse new rollouts)
+        out = self._step("advance", theta, eps, cost, None, None, c.reuse, best, theta.clone(), self.lower,
+                         self.upper, self.M, to_go, c.sensitivity, nxt, start, goal)
+        if c.reuse:
+            self._step("advance", out[0], out[7], cost[:, :fresh + 1].contiguous(), out[4], out[5], c.reuse, out[2],
+                       out[3], self.lower, self.upper, self.M, to_go, c.sensitivity, nxt.clone(), start, goal)
+
+    def _first_rollouts(self, theta: torch.Tensor, noise: torch.Tensor, start: torch.Tensor,
+                        goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Step 1 of the first iteration: ``noise`` ``(K, R, N, D)``; with reuse, as the two shapes of the loop.
+
+        With reuse the later iterations make R - reuse new rollouts, the first all R: as two calls of those
+        two shapes (R - reuse and reuse), so that no third graph is compiled for R.
+        """
+        fresh = self.config.rollouts - self.config.reuse
+        q, eps = self._step("rollouts", theta, noise[:, :fresh].contiguous(), start, goal, self.lower, self.upper)
+        if self.config.reuse:
+            q2, eps2 = self._step("rollouts", theta, noise[:, fresh:].contiguous(), start, goal, self.lower,
+                                  self.upper)
+            q, eps = torch.cat([q, q2[:, 1:]], 1), torch.cat([eps, eps2], 1)
+        return q, eps
 
     def _step(self, name: str, *args: object) -> tuple[torch.Tensor, ...]:
         """One of the steps (:data:`_STEPS`), compiled with ``config.compile`` (eager if compiling fails)."""
