@@ -54,8 +54,6 @@ class _ItemBudget:
             raise _TooMany(f"more than {_MAX_ITEMS} msgpack objects")
         return items
 
-    def map(self, pairs: list[tuple[Any, Any]]) -> dict[Any, Any]:
-        return self.take(dict(pairs))
 
 
 def _unpack(data: bytes) -> Any:
@@ -63,13 +61,30 @@ def _unpack(data: bytes) -> Any:
     budget = _ItemBudget()
     return msgpack.unpackb(data, raw=False, strict_map_key=True, max_str_len=4 * MAX_STRING_CHARS,
                            max_bin_len=MAX_PAYLOAD_BYTES, max_array_len=_MAX_LIST, max_map_len=_MAX_MAP,
-                           max_ext_len=0, list_hook=budget.take, object_pairs_hook=budget.map)
+                           max_ext_len=0, list_hook=budget.take, object_hook=budget.take)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Field:
+    """One field of a message class, with what encoding and decoding it needs resolved once."""
+
+    name: str
+    spec: ArraySpec | None  # an array field's spec, None for a scalar
+    hint: Any  # the scalar's type (float, int, bool, str, list[str])
+    want: np.dtype | None  # the array's dtype, and as it travels (little-endian: what encode writes)
+    wire: np.dtype | None
 
 
 @functools.cache
-def _hints(cls: type) -> dict[str, Any]:
-    """The resolved field types of a message class (resolved once: every decode needs them)."""
-    return typing.get_type_hints(cls)
+def _layout(cls: type) -> tuple[tuple[_Field, ...], frozenset[str]]:
+    """A message class's fields and every key its payload may hold (resolved once: every message needs them)."""
+    hints = typing.get_type_hints(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        spec = f.metadata.get("array")
+        want = np.dtype(spec.dtype) if spec is not None else None
+        out.append(_Field(f.name, spec, hints[f.name], want, want.newbyteorder("<") if want is not None else None))
+    return tuple(out), frozenset({"_type", "_v", *(f.name for f in out)})
 
 
 def encode(msg: Message) -> bytes:
@@ -79,15 +94,14 @@ def encode(msg: Message) -> bytes:
         ProtocolError: If the message does not satisfy its own schema.
     """
     out: dict[str, Any] = {"_type": msg.TYPE, "_v": SCHEMA_VERSION}
-    for f in dataclasses.fields(msg):  # type: ignore[arg-type]
+    for f in _layout(type(msg))[0]:
         value = getattr(msg, f.name)
-        spec = f.metadata.get("array")
-        if spec is not None:
+        if f.wire is not None:
             src = np.asarray(value)
-            arr = np.ascontiguousarray(src, dtype=np.dtype(spec.dtype).newbyteorder("<"))
+            arr = np.ascontiguousarray(src, dtype=f.wire)
             if arr.dtype.kind in "iub" and arr.size == src.size and not np.array_equal(arr.ravel(), src.ravel()):
                 i = int(np.flatnonzero(arr.ravel() != src.ravel())[0])  # wrapped, truncated or not 0/1
-                raise _err(msg.TYPE, f.name, f"{src.ravel()[i].item()!r} does not fit {spec.dtype} (it would be "
+                raise _err(msg.TYPE, f.name, f"{src.ravel()[i].item()!r} does not fit {f.want} (it would be "
                            f"sent as {arr.ravel()[i].item()!r})", "malformed")
             out[f.name] = {"dtype": arr.dtype.str, "shape": list(arr.shape), "data": arr.tobytes()}
         elif isinstance(value, np.generic):
@@ -99,18 +113,17 @@ def encode(msg: Message) -> bytes:
     return data
 
 
-def _decode_array(t: str, name: str, raw: Any, spec: ArraySpec, dims: dict[str, int]) -> np.ndarray:
-    if not isinstance(raw, dict) or set(raw) != {"dtype", "shape", "data"}:
+def _decode_array(t: str, f: _Field, raw: Any, dims: dict[str, int]) -> np.ndarray:
+    name, spec, want, dtype = f.name, f.spec, f.want, f.wire  # dtype: what encode writes; nothing else is parsed
+    assert spec is not None and want is not None and dtype is not None
+    if not isinstance(raw, dict) or raw.keys() != _ARRAY_KEYS:
         raise _err(t, name, "array must be a map with keys dtype, shape, data", "malformed")
-    want = np.dtype(spec.dtype)
-    dtype = want.newbyteorder("<")  # what encode writes; nothing else is parsed (numpy's parser is no validator)
     if not isinstance(raw["dtype"], str):
         raise _err(t, name, f"dtype must be a string, got {type(raw['dtype']).__name__}", "malformed")
-    if raw["dtype"] != dtype.str:
+    if raw["dtype"] != dtype.str:  # (numpy's parser is no validator)
         raise _err(t, name, f"dtype {raw['dtype'][:16]!r} where {dtype.str!r} ({want.name}) is required", "shape")
     shape = raw["shape"]
-    if not isinstance(shape, list) or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0
-                                              for s in shape):
+    if not isinstance(shape, list) or not all(type(s) is int and s >= 0 for s in shape):  # int, not bool
         raise _err(t, name, f"shape {str(shape)[:80]} is not a list of non-negative ints", "malformed")
     if len(shape) != len(spec.shape):
         raise _err(t, name, f"shape {tuple(shape)} has {len(shape)} axes, expected {len(spec.shape)} "
@@ -135,9 +148,12 @@ def _decode_array(t: str, name: str, raw: Any, spec: ArraySpec, dims: dict[str, 
         raise _err(t, name, f"data has {len(data)} bytes, shape {tuple(shape)} of {dtype.name} needs "
                    f"{n * dtype.itemsize}", "shape")
     arr = np.frombuffer(data, dtype=dtype).reshape(shape).astype(want, copy=True)
-    if spec.finite and arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+    if spec.finite and want.kind == "f" and not np.isfinite(arr).all():
         raise _err(t, name, "contains NaN or infinity", "non-finite")
     return arr
+
+
+_ARRAY_KEYS = frozenset({"dtype", "shape", "data"})
 
 
 def _check_scalar(t: str, name: str, tp: Any, value: Any) -> Any:
@@ -207,22 +223,20 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     if type(raw.get("_v")) is not int or raw["_v"] != SCHEMA_VERSION:  # not True, not 1.0
         raise ProtocolError(f"{t}._v: schema version {str(raw.get('_v'))[:40]!r}, this build speaks "
                             f"{SCHEMA_VERSION}", "version")
-    hints = _hints(cls)
-    kwargs: dict[str, Any] = {}
-    dims: dict[str, int] = {}
-    fields = dataclasses.fields(cls)  # type: ignore[arg-type]
-    unknown = set(raw) - {"_type", "_v"} - {f.name for f in fields}
+    fields, known = _layout(cls)
+    unknown = raw.keys() - known
     if unknown:
         raise ProtocolError(f"{t}: unknown field(s) {', '.join(repr(k[:40]) for k in sorted(unknown)[:5])}",
                             "malformed")
+    kwargs: dict[str, Any] = {}
+    dims: dict[str, int] = {}
     for f in fields:
         if f.name not in raw:
             raise _err(t, f.name, "missing", "malformed")
-        spec = f.metadata.get("array")
-        if spec is not None:
-            kwargs[f.name] = _decode_array(t, f.name, raw[f.name], spec, dims)
+        if f.spec is not None:
+            kwargs[f.name] = _decode_array(t, f, raw[f.name], dims)
         else:
-            kwargs[f.name] = _check_scalar(t, f.name, hints[f.name], raw[f.name])
+            kwargs[f.name] = _check_scalar(t, f.name, f.hint, raw[f.name])
     msg = cls(**kwargs)
     msg.check()
     return msg  # type: ignore[return-value]
