@@ -22,6 +22,7 @@ import json
 import sys
 from pathlib import Path
 
+from shared.config import check_prefix
 from shared.protocol import Keys
 from shared.runtime import UserError, cli_errors, help_text
 from shared.security.acl import ROLES, access_control
@@ -59,6 +60,7 @@ def _init(args: argparse.Namespace) -> int:
 
 
 def _acl(args: argparse.Namespace) -> int:
+    check_prefix(args.prefix, "--prefix")  # what every service refuses: a rule under it would grant another space
     print(json.dumps({"access_control": access_control(Keys(args.prefix))}, indent=2))
     return 0
 

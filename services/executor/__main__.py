@@ -9,6 +9,7 @@ from collections.abc import Callable
 from shared.config import ZenohConfig
 from shared.native_threads import limit_torch_threads
 from shared.runtime import service_main
+from shared.security.acl import refuse_ros2_keys
 
 from .core import ExecutorConfig
 from .service import ExecutorService
@@ -34,6 +35,8 @@ this long, so a plan is received (and stamped) within ~1.5 ms of its arrival ins
 
 
 def _make(cfg: ExecutorConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
+    if cfg.robot == "ros2":  # before anything starts: the robot's keys would be dropped by every peer
+        refuse_ros2_keys(zcfg.security_dir, "foresight executor --robot ros2")
     sys.setswitchinterval(SWITCH_INTERVAL_S)  # this process only: `python -m services.executor`
     limit_torch_threads(1)  # its torch work is the scene's forward kinematics: a second thread only spins
     service = ExecutorService(cfg, zcfg, stop)

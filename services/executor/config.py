@@ -6,6 +6,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from services.ros2.core import ros_domain_id
+from services.ros2.wire import topic_problem
 from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.devices import check_device
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
@@ -25,8 +27,9 @@ def check_robot_names(controller: str, joint_states: str, prefix: str) -> None:
     """
     if not controller or any(c in controller for c in "/*$?# "):
         raise ConfigError(f"{prefix}controller: a controller name (no '/'), got {controller!r}")
-    if not joint_states.startswith("/") or any(c in joint_states for c in "*$?# "):
-        raise ConfigError(f"{prefix}joint_states: an absolute topic (/a/b), got {joint_states!r}")
+    problem = topic_problem(joint_states)
+    if problem:
+        raise ConfigError(f"{prefix}joint_states: {problem}")
 
 
 class ExecutorError(ValueError):
@@ -85,7 +88,8 @@ class ExecutorConfig:
     ros2_controller: str = opt("r_arm_controller", help="robot=ros2: the controller; plans go to "
                                "/<controller>/joint_trajectory (trajectory_msgs/JointTrajectory)")
     ros2_joint_states: str = opt("/joint_states", help="robot=ros2: the robot's sensor_msgs/JointState topic")
-    ros2_domain_id: int = opt(0, help="robot=ros2: the ROS 2 domain id (ROS_DOMAIN_ID)")
+    ros2_domain_id: int = opt(default_factory=lambda: ros_domain_id(), help="robot=ros2: the ROS 2 domain id "
+                              "(default: $ROS_DOMAIN_ID, else 0)")
     log_level: str = opt("INFO", help="log level", choices=LOG_LEVELS)
 
     def validate(self) -> None:

@@ -109,7 +109,7 @@ class Ros2Config:
         """Check ranges and names."""
         if not 0 <= self.domain_id <= 232:
             raise ConfigError(f"ros2.domain_id: must be 0..232, got {self.domain_id}")
-        parts = self.namespace.strip("/").split("/") if self.namespace != "/" else []
+        parts = self.namespace.rstrip("/")[1:].split("/") if self.namespace != "/" else []  # '//a': an empty part
         if not self.namespace.startswith("/") or not all(_ROS_NAME.fullmatch(p) for p in parts):
             raise ConfigError(f"ros2.namespace: '/' or /name/... with names of letters, digits and '_' not "
                               f"starting with a digit (ROS 2's rule), got {self.namespace!r}")
@@ -118,6 +118,11 @@ class Ros2Config:
                               f"rule), got {self.node!r}")
         if not 0.0 <= self.min_probability <= 1.0:
             raise ConfigError(f"ros2.min_probability: must be in [0, 1], got {self.min_probability}")
+
+    @property
+    def node_namespace(self) -> str:
+        """The namespace as ROS 2 writes it: ``/`` or ``/a/b``, without a trailing ``/`` (``/a/`` is ``/a``)."""
+        return "/" + "/".join(p for p in self.namespace.split("/") if p)
 
     def topic(self, role: str) -> str:
         """The absolute topic name of ``role``."""

@@ -158,7 +158,7 @@ class Ros2Service:
         stop = stop or threading.Event()
         cfg = self.config
         with open_session(self.zenoh, stop, "ros2") as session:
-            node = Ros2Node(session, cfg.domain_id, cfg.namespace, cfg.node, self.mapping.hashes, self.rejects)
+            node = Ros2Node(session, cfg.domain_id, cfg.node_namespace, cfg.node, self.mapping.hashes, self.rejects)
             zid = node.zid
             for role, topic in TOPICS.items():
                 if role != "joint_states" or cfg.joint_states:
@@ -170,8 +170,8 @@ class Ros2Service:
                 (k.pose, HumanPose, self.on_human))]
             ends = [cfg.stop_with] if cfg.stop_with else []  # one service's name, not its letters
             presence = Presence(session, self.keys, "ros2", stop_with=ends, stop=stop)
-            log.info("ros2: node %s%s on domain %d, topics %s, session %s", cfg.namespace.rstrip("/") + "/", cfg.node,
-                     cfg.domain_id, ", ".join(cfg.topic(r) for r in TOPICS), zid)
+            log.info("ros2: node %s%s on domain %d, topics %s, session %s", cfg.node_namespace.rstrip("/") + "/",
+                     cfg.node, cfg.domain_id, ", ".join(cfg.topic(r) for r in TOPICS), zid)
             try:
                 while not stop.wait(0.5 / cfg.viz_rate_hz):
                     self.flush_viz()

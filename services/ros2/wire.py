@@ -67,9 +67,27 @@ def dds_type(msgtype: str) -> str:
     return f"{pkg}::{kind}::dds_::{name}_"
 
 
+class TopicNameError(ValueError):
+    """A ROS 2 topic name this bridge cannot use (not absolute, a wildcard, an empty part)."""
+
+
+def topic_problem(topic: str) -> str | None:
+    """Why ``topic`` is no absolute ROS 2 topic name this bridge can map to a Zenoh key, or None when it is.
+
+    What the configs check (``executor.ros2_joint_states``, ``tracker.ros2_topic``, ``simrobot.joint_states``),
+    so that a bad name is one line at start-up rather than a traceback when the key is made.
+    """
+    if not topic.startswith("/") or topic == "/" or topic.endswith("/") or "//" in topic:
+        return f"an absolute topic (/a/b) without empty parts, got {topic!r}"
+    if any(c in topic for c in "*$?# "):
+        return f"an absolute topic without wildcards or spaces ('*', '$', '?', '#', ' '), got {topic!r}"
+    return None
+
+
 def _topic(topic: str) -> str:
-    if not topic.startswith("/") or topic.endswith("/") or "//" in topic or any(c in topic for c in "*$?#"):
-        raise ValueError(f"ROS 2 topic {topic!r}: must be absolute (/a/b), without wildcards or empty parts")
+    problem = topic_problem(topic)
+    if problem:
+        raise TopicNameError(f"ROS 2 topic: {problem}")
     return topic[1:]
 
 

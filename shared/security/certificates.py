@@ -222,7 +222,7 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
 
     Args:
         directory: Where (created if missing).
-        roles: Common names, one certificate each (``router`` gets ``hosts`` as alternative names).
+        roles: Common names, one certificate each (every one gets ``hosts`` as alternative names).
         hosts: Host names or addresses the sessions listen on beyond loopback (beside localhost), in every
             certificate: the router's in client mode, each peer's too in peer mode.
         days: Validity of the role certificates (the CA: ten years).

@@ -140,8 +140,32 @@ def test_bad_config_is_named() -> None:
                          ({"node": "1arm"}, "ros2.node"), ({"node": ""}, "ros2.node")):
         with pytest.raises(ConfigError, match=text):  # characters a key expression would refuse later, with a trace
             Ros2Config(**kwargs).validate()
-    for ns in ("/", "/cell", "/cell/arm_2/"):
-        Ros2Config(namespace=ns, node="foresight_1").validate()
+    for ns in ("//robot", "//", "/robot//arm/"):  # the graph tokens said '%%robot' (a node ros2 node list misnames)
+        with pytest.raises(ConfigError, match="ros2.namespace"):
+            Ros2Config(namespace=ns).validate()
+    for ns, written in (("/", "/"), ("/cell", "/cell"), ("/cell/arm_2/", "/cell/arm_2")):
+        cfg = Ros2Config(namespace=ns, node="foresight_1")
+        cfg.validate()
+        assert cfg.node_namespace == written  # the tokens' namespace: '/cell/arm_2/' was mangled '%cell%arm_2%'
+
+
+def test_topic_names_a_zenoh_key_cannot_carry_are_one_config_line() -> None:
+    """A trailing '/', '//' or a wildcard passed the configs and ended in a traceback when the key was made."""
+    from services.executor.config import ExecutorConfig
+    from services.ros2.robot_sim import RobotSimConfig
+    from services.ros2.wire import TopicNameError, data_key, topic_problem
+    from services.tracker.config import TrackerServiceConfig
+
+    for bad in ("/joint_states/", "/robot//joint_states", "joint_states", "/", "/k*", "/a b"):
+        assert topic_problem(bad)
+        for make, name in ((lambda t: ExecutorConfig(ros2_joint_states=t), "executor.ros2_joint_states"),
+                           (lambda t: TrackerServiceConfig(ros2_topic=t), "tracker.ros2_topic"),
+                           (lambda t: RobotSimConfig(joint_states=t), "simrobot.joint_states")):
+            with pytest.raises(ConfigError, match=f"^{name}: "):
+                make(bad).validate()
+        with pytest.raises(TopicNameError, match="ROS 2 topic"):
+            data_key(0, bad, "sensor_msgs/msg/JointState", "RIHS01_0")
+    assert topic_problem("/robot/joint_states") is None
 
 
 def test_the_shells_ros_domain_id_is_the_default_domain(monkeypatch) -> None:
@@ -158,4 +182,7 @@ def test_the_shells_ros_domain_id_is_the_default_domain(monkeypatch) -> None:
             ros_domain_id({"ROS_DOMAIN_ID": bad})
     monkeypatch.setenv("ROS_DOMAIN_ID", "5")
     assert Ros2Config().domain_id == RobotSimConfig().domain_id == TrackerServiceConfig().ros2_domain_id == 5
+    from services.executor.config import ExecutorConfig  # the executor stayed on 0 and never heard the robot
+
+    assert ExecutorConfig().ros2_domain_id == 5
     assert Ros2Config(domain_id=7).domain_id == 7  # a flag, variable or file still decides

@@ -63,6 +63,7 @@ def test_wildcard_subscriptions_only_where_every_matched_key_is_consumed() -> No
     ("services.ros2.__main__", [], "foresight ros2"),
     ("services.tracker.__main__", ["--input", "ros2"], "foresight tracker --input ros2"),
     ("services.ros2.robot_sim", [], "foresight simrobot"),
+    ("services.executor.__main__", ["--robot", "ros2"], "foresight executor --robot ros2"),  # waited, blamed the robot
 ])
 def test_a_command_speaking_ros2_keys_is_refused_under_access_control(tmp_path, capsys, main, argv, what) -> None:
     """It ran and did nothing: the rules drop every key outside the wire contract, without a word."""
@@ -72,3 +73,17 @@ def test_a_command_speaking_ros2_keys_is_refused_under_access_control(tmp_path, 
     assert stopped.value.code == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert f"{what} with --security: ROS 2 keys have no role in the access control yet" in line
+
+
+@pytest.mark.parametrize("prefix", ["lab/*", "foresight/", "", "/cell"])
+def test_acl_for_a_prefix_no_service_takes_is_refused(capsys, prefix) -> None:
+    """It printed rules under 'lab/*' (granting every cell) or '/cell' (no key expression) for a zenohd config."""
+    from tools.security import main
+
+    with pytest.raises(SystemExit) as stopped:
+        main(["acl", "--prefix", prefix])
+    assert stopped.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--prefix" in line and "must be a Zenoh key" in line
+    assert main(["acl", "--prefix", "lab/cell_2"]) == 0
+    assert '"lab/cell_2/planner/plan"' in capsys.readouterr().out
