@@ -21,7 +21,7 @@ from collections.abc import Iterable
 from shared.config_tree import ENV_PREFIX, ConfigError, config_options
 
 __all__ = ["SECTIONS", "OTHER_VARIABLES", "section_class", "check_file_sections", "check_environment",
-           "closest", "every_variable"]
+           "closest", "check_services", "every_variable"]
 
 SECTIONS: dict[str, str] = {
     "zenoh": "shared.config:ZenohConfig",
@@ -66,6 +66,20 @@ def closest(name: str, valid: Iterable[str]) -> str:
     """``"; did you mean X?"`` for the valid name closest to ``name``, or ``""`` when none is close."""
     match = difflib.get_close_matches(name, list(valid), n=1, cutoff=0.6)
     return f"; did you mean {match[0]}?" if match else ""
+
+
+def check_services(names: Iterable[str], option: str, allowed: Iterable[str]) -> None:
+    """Raise ConfigError naming ``option`` for a name in ``names`` that is none of the services ``allowed``.
+
+    A service a command waits for or stops with, misspelt (``--stop-with exector``), is never seen: the command
+    would wait, or run on, without a word.
+    """
+    allowed = list(allowed)
+    for peer in names:
+        if peer not in allowed:
+            close = difflib.get_close_matches(peer, allowed, n=1)
+            raise ConfigError(f"{option}: unknown service {peer!r}"
+                              + (f" (did you mean {close[0]!r}?)" if close else f" (one of {', '.join(allowed)})"))
 
 
 def every_variable() -> list[str]:

@@ -9,7 +9,6 @@ clock tick in lock-step).
 from __future__ import annotations
 
 import dataclasses
-import difflib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from shared.config import LOG_LEVELS, ConfigError, opt
+from shared.config_names import check_services
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
 from shared.protocol import SERVICES, DemoMarker, HumanPose, Message
@@ -64,12 +64,7 @@ class ReplayerConfig:
         if self.seed < 0:
             raise ConfigError(f"replayer.seed: must be >= 0, got {self.seed}")
         for name in ("wait_for", "stop_with"):
-            for peer in getattr(self, name):
-                if peer not in PEERS:
-                    close = difflib.get_close_matches(peer, PEERS, n=1)
-                    raise ConfigError(f"replayer.{name}: unknown service {peer!r}"
-                                      + (f" (did you mean {close[0]!r}?)" if close else
-                                         f" (one of {', '.join(PEERS)})"))
+            check_services(getattr(self, name), f"replayer.{name}", PEERS)
         if self.samples_per_tick < 1:
             raise ConfigError(f"replayer.samples_per_tick: must be >= 1, got {self.samples_per_tick}")
         for name in ("heldout", "max_demos"):
@@ -114,6 +109,8 @@ def select_demos(lib: MotionLibrary, cfg: ReplayerConfig) -> list[Demonstration]
     """
     require_mapping(lib.feature_names, "foresight replayer (HumanPose messages)",
                     f"library {lib.source}", exact=LIVE_MAPPING)
+    if not lib.demos:  # not the selection's fault: say so, not "no demonstration matches the selection"
+        raise ConfigError(f"replayer.library: {lib.source} holds no valid demonstration (see the warnings above)")
     bad = [c for c in cfg.classes if c >= lib.n_classes]
     if bad:
         raise ConfigError(f"replayer.classes: {bad} out of range, the library has {lib.n_classes} classes "

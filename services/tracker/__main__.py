@@ -17,11 +17,11 @@ __all__ = ["main"]
 
 DESCRIPTION = """Take a body tracker's keypoint frames (HumanKeypoints on <prefix>/sensor/keypoints, or a ROS 2
 geometry_msgs/PoseArray with --input ros2), fit the human model to each (the paper's 12 posture features),
-refuse implausible frames (one line each), smooth, bridge short gaps, and publish HumanPose with DemoMarker
-start/end around each reach, as the replayer does for a recording. --from FILE plays a keypoint recording
-(<class>.csv of a keypoint library) in real time instead of a sensor. docs/keypoints.md. Options come from the
-dataclass defaults < --config FILE ([tracker], [zenoh]) < env FORESIGHT_TRACKER_<NAME> / FORESIGHT_ZENOH_<NAME>
-< flags."""
+refuse implausible frames (each counted; at most one line per reason a second), smooth, bridge short gaps,
+and publish HumanPose with DemoMarker start/end around each reach, as the replayer does for a recording.
+--from FILE plays a keypoint recording (<class>.csv of a keypoint library) in real time instead of a sensor.
+docs/keypoints.md. Options come from the dataclass defaults < --config FILE ([tracker], [zenoh]) < env
+FORESIGHT_TRACKER_<NAME> / FORESIGHT_ZENOH_<NAME> < flags."""
 
 
 def _make(cfg: TrackerServiceConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:

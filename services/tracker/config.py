@@ -7,7 +7,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from services.ros2.core import ros_domain_id
+from services.ros2.wire import topic_problem
 from shared.config import LOG_LEVELS, ConfigError, nested, opt
+from shared.config_names import check_services
+from shared.keypoints.layouts import load_layout
+from shared.protocol import SERVICES
 
 from .core import TrackerConfig
 
@@ -74,11 +78,19 @@ class TrackerServiceConfig:
         if self.from_file is not None and not Path(self.from_file).is_file():
             raise ConfigError(f"tracker.from_file: {self.from_file} is not a file (a <class>.csv of a keypoint "
                               "library: foresight library to-keypoints LIB --out DIR)")
-        if not self.ros2_topic.startswith("/"):
-            raise ConfigError(f"tracker.ros2_topic: must be absolute (/a/b), got {self.ros2_topic!r}")
+        problem = topic_problem(self.ros2_topic)
+        if problem:
+            raise ConfigError(f"tracker.ros2_topic: {problem}")
         if not (0 <= self.ros2_domain_id <= 232):
             raise ConfigError(f"tracker.ros2_domain_id: must be 0..232, got {self.ros2_domain_id}")
         if len(set(self.ros2_points)) != len(self.ros2_points):
             raise ConfigError(f"tracker.ros2_points: names repeated: {self.ros2_points}")
+        layout = load_layout(self.tracker.layout)
+        unknown = layout.unknown(self.ros2_points)
+        if unknown:  # every frame would be refused for its names
+            raise ConfigError(f"tracker.ros2_points: {unknown} are not points of the layout {layout.name} (e.g. "
+                              f"{', '.join(layout.source_names[:4])})")
+        for name in ("stop_with", "wait_for"):
+            check_services(getattr(self, name), f"tracker.{name}", [s for s in SERVICES if s != "tracker"])
         if self.wait_timeout < 0:
             raise ConfigError(f"tracker.wait_timeout: must be >= 0, got {self.wait_timeout}")

@@ -44,9 +44,10 @@ from .reach import ReachDetector, ReachRule
 
 __all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S"]
 
-REASONS = ("frame", "names", "missing", "order", "residual", "jump")
+REASONS = ("frame", "names", "missing", "order", "leap", "residual", "jump")
 """Why a frame is refused: another coordinate frame, a point the layout does not have, a required point missing, a
-stamp not after the last accepted frame's, a fit too far from the points, an implausible jump."""
+stamp not after the last accepted frame's, a stamp a long gap after it that the next frame has not confirmed yet, a
+fit too far from the points, an implausible jump."""
 
 MIN_PERIOD_S = 1.0 / 500
 """The shortest frame interval taken for the sensor's period (500 Hz): shorter ones are frames of a burst."""
@@ -81,8 +82,10 @@ class TrackerConfig:
             v = getattr(self, name)
             if not (v > 0 and math.isfinite(v)):
                 raise ConfigError(f"tracker.{name}: must be a finite number > 0, got {v}")
-        if not (self.beta >= 0 and self.pre_s >= 0):
-            raise ConfigError(f"tracker.beta and tracker.pre_s: must be >= 0, got {self.beta}, {self.pre_s}")
+        if not (self.beta >= 0 and math.isfinite(self.beta)):
+            raise ConfigError(f"tracker.beta: must be a finite number >= 0, got {self.beta}")
+        if not (0 <= self.pre_s <= self.max_reach_s):  # inf: the buffer of recent poses never shrank
+            raise ConfigError(f"tracker.pre_s: must be in [0, max_reach_s = {self.max_reach_s:g}] s, got {self.pre_s}")
 
     @property
     def rule(self) -> ReachRule:
@@ -129,6 +132,7 @@ class TrackerCore:
         self._joints: np.ndarray | None = None                  # its joint positions (J, 3), for the jump check
         self._out: tuple[float, np.ndarray] | None = None      # the last smoothed frame
         self._frame_no: int | None = None                       # the last accepted frame's number (if given)
+        self._leap: float | None = None                         # a refused frame's stamp a long gap after the last
         self._ended_at = -math.inf                              # the last reach's end stamp
         self._dts: deque[float] = deque(maxlen=15)              # recent frame intervals: the sensor's period
         self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
@@ -164,6 +168,14 @@ class TrackerCore:
         if self._raw is not None and not stamp > self._raw[0]:
             return self._refuse("order", f"stamp {stamp:.6f} s is not after the last accepted frame's "
                                 f"({self._raw[0]:.6f} s)")
+        if self._raw is not None and stamp - self._raw[0] > self.config.max_gap_s:
+            # a long gap ends the reach under way: only when the next frame confirms it (one frame stamped ahead
+            # of the others ended a reach and made every later frame's stamp "not after" its own)
+            if self._leap is None or not stamp > self._leap:
+                self._leap = stamp
+                return self._refuse("leap", f"stamp {stamp:.6f} s is {stamp - self._raw[0]:.3f} s after the last "
+                                    "accepted frame's: a gap, once the next frame's stamp comes after this one")
+        self._leap = None
         prior = self._raw[1][None] if self._raw is not None and stamp - self._raw[0] <= self.config.max_gap_s else None
         res = self.fit.fit(np.nan_to_num(points)[None], observed[None], prior)
         f, rms = res.features[0], float(res.rms_m[0])
@@ -212,7 +224,7 @@ class TrackerCore:
         self.filter.reset()
         self._recent.clear()
         self._dts.clear()  # the next frames may come from a sensor restarted at another rate
-        self._raw = self._out = self._joints = self._frame_no = None
+        self._raw = self._out = self._joints = self._frame_no = self._leap = None
         return msgs
 
     def _bridge(self, stamp: float, f: np.ndarray, dropped: int | None = None) -> list[Message]:

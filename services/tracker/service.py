@@ -21,6 +21,7 @@ from typing import Any
 from shared.config import ConfigError, ZenohConfig
 from shared.human import HumanModel
 from shared.human_source import HumanPublisher
+from shared.keypoints.fit import REQUIRED
 from shared.keypoints.library import read_keypoint_csv
 from shared.protocol import (
     SENSOR,
@@ -43,9 +44,9 @@ __all__ = ["TrackerService", "TrackerStats", "NODE_NAME"]
 log = logging.getLogger("foresight.tracker")
 
 NODE_NAME = "foresight_tracker"
+"""The tracker's ROS 2 node name (input ros2)."""
 REFUSAL_LOG_PERIOD_S = 1.0
 """At most one log line per refusal reason in this time (every refusal is counted)."""
-"""The tracker's ROS 2 node name (input ros2)."""
 
 
 @dataclass
@@ -95,6 +96,13 @@ class TrackerService:
                 raise ConfigError(f"tracker.from_file: {exc}") from None
             if not zenoh_config.connect:
                 raise ConfigError("tracker.from_file: the player connects to the router in zenoh.connect; none given")
+            layout, names = self.core.layout, self.playback.names
+            unknown = layout.unknown(names)
+            lacking = [p for p in REQUIRED if not set(layout.points.get(p, ())) <= set(names)]
+            if unknown or lacking:  # every frame would be refused, and the run end as if it had played
+                raise ConfigError(f"tracker.from_file: {config.from_file} does not fit the layout {layout.name}: "
+                                  + (f"points {unknown[:4]} are not the layout's" if unknown else
+                                     f"it cannot form the required {lacking}") + " (tracker.layout)")
 
     # -- frames ------------------------------------------------------------------------------------------------
 

@@ -103,6 +103,9 @@ def test_selection_errors(small_lib):
         select_demos(small_lib, ReplayerConfig(indices=[99]))
     with pytest.raises(LibraryError, match="cannot hold out 4"):
         select_demos(small_lib, ReplayerConfig(heldout=4))
+    empty = dataclasses.replace(small_lib, demos=[])  # every block refused on loading: no selection to blame
+    with pytest.raises(ConfigError, match=r"^replayer.library: .* holds no valid demonstration \(see the warnings"):
+        select_demos(empty, ReplayerConfig())
 
 
 @pytest.mark.parametrize(("field", "value", "pattern"), [

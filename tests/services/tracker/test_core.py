@@ -106,6 +106,25 @@ def test_a_short_gap_is_bridged_a_long_one_ends_the_reach(reach) -> None:
     assert ends[0].stamp == pytest.approx(59 / RATE) and core.bridged == 0
 
 
+def test_one_frame_stamped_ahead_ends_no_reach_a_real_gap_does_once_confirmed(reach) -> None:
+    """A frame stamped 1.5 s ahead (frames consecutive) ended the reach and had the next 45 refused as 'order'."""
+    clean = messages(run(TrackerCore(), reach))
+    core = TrackerCore()
+    outs = []
+    for i, p in enumerate(MODEL.joint_positions(reach)):
+        outs.append((i, core.on_frame(i / RATE + (1.5 if i == 80 else 0.0), NAMES, p)))
+    assert outs[80][1].refused.startswith("leap: ") and core.refused["leap"] == 1 and core.refused["order"] == 0
+    markers = [(m.event, m.stamp) for m in messages(outs) if isinstance(m, DemoMarker)]
+    assert markers == [(m.event, m.stamp) for m in clean if isinstance(m, DemoMarker)]  # the reach as without it
+    # a real gap: the frame after it is held, the next confirms it, and the reach under way ends at its last frame
+    core = TrackerCore()
+    outs = [(i, core.on_frame(i / RATE + (1.0 if i >= 80 else 0.0), NAMES, p))
+            for i, p in enumerate(MODEL.joint_positions(reach))]
+    assert outs[80][1].refused.startswith("leap: ") and outs[81][1].refused is None and core.refused["leap"] == 1
+    ends = [m for m in messages(outs) if isinstance(m, DemoMarker) and m.event == "end"]
+    assert ends[0].stamp == pytest.approx(79 / RATE)
+
+
 def test_the_same_frames_give_the_same_messages(reach) -> None:
     a = messages(run(TrackerCore(), reach))
     b = messages(run(TrackerCore(), reach))
@@ -118,6 +137,9 @@ def test_bad_options_are_named() -> None:
         TrackerConfig(max_gap_s=0).validate()
     with pytest.raises(ConfigError, match="tracker.beta"):
         TrackerConfig(beta=-1).validate()
+    for pre_s in (float("inf"), float("nan"), 11.0):  # inf: the buffer of recent poses never shrank
+        with pytest.raises(ConfigError, match=r"^tracker.pre_s: must be in \[0, max_reach_s = 10\] s"):
+            TrackerConfig(pre_s=pre_s).validate()
 
 
 @pytest.mark.parametrize("noise_m", [0.01, 0.02])
@@ -187,12 +209,13 @@ def test_a_backlog_after_a_stall_sets_no_period_of_its_own(reach) -> None:
     stamps += [stamps[-1] + k / RATE for k in range(1, 30)]
     frames = [joints[min(round(s * RATE), len(joints) - 1)] for s in stamps]
     core = TrackerCore()
-    assert all(core.on_frame(s, NAMES, p).refused is None for s, p in zip(stamps, frames, strict=True))
+    refused = [i for i, (s, p) in enumerate(zip(stamps, frames, strict=True)) if core.on_frame(s, NAMES, p).refused]
+    assert refused == [40] and core.refused["leap"] == 1  # the first after the stall: held until the next confirms
     assert core.bridged <= 6  # one interval at most, before the backlog's intervals leave the last three
     numbered = TrackerCore()  # the sensor numbers its frames: none was dropped, so nothing is invented
-    for n, (s, p) in enumerate(zip(stamps, frames, strict=True)):
-        assert numbered.on_frame(s, NAMES, p, frame=n).refused is None
-    assert numbered.bridged == 0
+    refused = [n for n, (s, p) in enumerate(zip(stamps, frames, strict=True))
+               if numbered.on_frame(s, NAMES, p, frame=n).refused]
+    assert refused == [40] and numbered.bridged == 0
 
 
 def test_frame_numbers_bound_a_bridged_gap(reach) -> None:

@@ -20,7 +20,7 @@ from services.tracker.__main__ import main as tracker_main
 from services.tracker.config import PlaybackConfig, TrackerServiceConfig
 from services.tracker.core import TrackerConfig
 from services.tracker.service import TrackerService
-from shared.config import ZenohConfig
+from shared.config import ConfigError, ZenohConfig
 from shared.human import HumanModel
 from shared.keypoints.library import write_keypoint_library
 from shared.library import MotionLibrary
@@ -265,9 +265,28 @@ def test_cli_refuses_a_recording_that_is_not_one(tmp_path: Path, capsys) -> None
     assert "is not a file" in capsys.readouterr().err
 
 
+def test_a_recording_in_another_layout_is_refused_before_it_plays(tmp_path: Path, capsys) -> None:
+    """It played, every frame was refused for its names, and the tracker exited 0 as if it had worked."""
+    lib = generate_library(2, 1, seed=4)
+    write_keypoint_library(MotionLibrary(lib.class_names, lib.demos[:1], [], "test"), tmp_path / "kp")
+    recording = tmp_path / "kp" / f"{lib.demos[0].class_name}.csv"  # Foresight's own point names
+    with pytest.raises(SystemExit) as info:
+        tracker_main(["--from", str(recording), "--layout", "coco17", "--connect", "tcp/127.0.0.1:9"],
+                     prog="foresight tracker")
+    assert info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "tracker.from_file" in line and "does not fit the layout coco17" in line and "'pelvis'" in line
+
+
 def test_config_checks() -> None:
     with pytest.raises(Exception, match="ros2_topic"):
         TrackerServiceConfig(ros2_topic="body").validate()
+    for name in ("stop_with", "wait_for"):  # a typo was never seen: the tracker waited, or never stopped
+        with pytest.raises(ConfigError, match=rf"^tracker.{name}: unknown service 'exector' \(did you mean "
+                           r"'executor'\?\)$"):
+            TrackerServiceConfig(**{name: ["exector"]}).validate()
+    with pytest.raises(ConfigError, match=r"^tracker.ros2_points: \['rwrist'\] are not points of the layout"):
+        TrackerServiceConfig(ros2_points=["pelvis", "rwrist"]).validate()  # every frame would be refused
     with pytest.raises(Exception, match="max_residual_m"):
         TrackerServiceConfig(tracker=dataclasses.replace(TrackerConfig(), max_residual_m=0.0)).validate()
     with pytest.raises(Exception, match="rate_hz"):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from shared.human import HumanModel
-from shared.keypoints import POINT_NAMES, REQUIRED, KeypointFit
+from shared.keypoints import POINT_NAMES, REQUIRED, FitConfig, KeypointFit
 from shared.synthetic import generate_library
 
 MODEL = HumanModel()
@@ -60,3 +60,25 @@ def test_wrong_shapes_are_named() -> None:
         from shared.keypoints import FitConfig
 
         KeypointFit(FitConfig(bounds={"elbow": (0.0, 1.0)}))
+
+
+def test_a_raised_left_arm_moves_no_feature(demos) -> None:
+    """The model's left arm is rigid, a person's is not: fitted, raising it 30 deg tilted the torso by 0.29 rad."""
+    frame = demos[0, 10:11]  # (1, 12)
+    points = MODEL.joint_positions(frame)  # (1, J, 3)
+    names = list(POINT_NAMES)
+    shoulder = points[0, names.index("l_shoulder")]
+    c, s = np.cos(np.radians(60)), np.sin(np.radians(60))
+    raised = points.copy()
+    for name in ("l_elbow", "l_wrist", "l_hand"):  # 60 deg about the shoulder's y axis
+        v = points[0, names.index(name)] - shoulder
+        raised[0, names.index(name)] = shoulder + [c * v[0] + s * v[2], v[1], -s * v[0] + c * v[2]]
+    assert np.linalg.norm(raised - points, axis=-1).max() > 0.2  # the hand moved by decimetres
+    still, moved = KeypointFit().fit(points), KeypointFit().fit(raised)
+    used = KeypointFit(FitConfig(left_out=())).fit(raised)  # the arm fitted: the torso is bent to reach it
+    np.testing.assert_allclose(moved.features, still.features, atol=1e-9)
+    assert np.isnan(moved.residual_m[0, [names.index(n) for n in ("l_elbow", "l_wrist", "l_hand")]]).all()
+    assert moved.rms_m[0] < 0.005 < 0.05 < used.rms_m[0]  # nothing for the tracker's residual check to refuse
+    assert np.abs(used.features - still.features).max() > 0.1
+    with pytest.raises(ValueError, match="fit left_out"):
+        KeypointFit(FitConfig(left_out=("r_wrist",)))  # a required point cannot be left out
