@@ -180,10 +180,13 @@ def plot_pace(res: PaceResult, path: Path) -> Path:
     units = {"product": "robot speed (fraction of the PR2's velocity limits)",
              "paper": "path length per step (configuration space)"}
     for col, prot in enumerate(protocols):
+        loggable = False  # a ratio the log axis can show (a sweep of ratios 0 or inf only crashed the plot)
         for lib in sorted({p.library for p in res.points}):
             pts = sorted((p for p in res.points if p.protocol == prot and p.library == lib), key=lambda p: p.pace)
             x = [p.pace for p in pts]
-            axes[0, col].plot(x, [p.ratio for p in pts], "o-", label=lib)
+            ratios = [p.ratio if 0 < p.ratio < math.inf else np.nan for p in pts]
+            axes[0, col].plot(x, ratios, "o-", label=lib)  # 0 (basic never touched) or inf: off the log axis
+            loggable |= any(r > 0 for r in ratios if not np.isnan(r))
             for name, style in (("basic", "--"), ("least_penetration", "-")):
                 axes[1, col].plot(x, [p.planners[name]["contact_s"] for p in pts], "o" + style,
                                   label=f"{lib}, {name.replace('_', ' ')}")
@@ -198,7 +201,11 @@ def plot_pace(res: PaceResult, path: Path) -> Path:
                        label="the authors' pace" if prot == "paper" else "the product's default")
             ax.set_ylabel(ylabel)
             ax.legend(fontsize=7)
-        axes[0, col].set_yscale("log")
+        if loggable:
+            axes[0, col].set_yscale("log")
+        else:
+            axes[0, col].text(0.5, 0.5, "no ratio between 0 and infinity", ha="center",
+                              transform=axes[0, col].transAxes)
         axes[0, col].set_title(f"{prot} protocol")
         axes[-1, col].set_xlabel(units[prot])
     fig.tight_layout()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from services.experiments.pace import PaceConfig, PacePoint, PaceResult
 
 
@@ -55,3 +57,15 @@ def test_the_product_protocol_sweeps_with_the_volume_asked_for_and_the_report_pa
     monkeypatch.setattr(sections, "run_pace", lambda cfg, say, compile: seen.append(cfg.volume) or PaceResult(cfg))
     sections.library_part("synthetic", "product:pace", QUICK, tmp_path, tmp_path / "models", volume="spread")
     assert seen == ["spread"]
+
+
+def test_a_sweep_without_a_finite_positive_ratio_is_drawn(tmp_path):
+    """A sweep of one pace where both planners scored 0 (ratio 0 / 0) ended in 'Data cannot be log-scaled'."""
+    from services.experiments.pace import plot_pace
+
+    nan = dataclasses.replace(point(0.1, 0.0, 0.0), ratio=float("nan"))
+    zero = dataclasses.replace(point(0.2, 0.0, 0.0), ratio=0.0)
+    for points in ([nan], [nan, zero], [nan, zero, dataclasses.replace(point(0.3, 0.0, 0.0), ratio=float("inf"))],
+                   [nan, point(0.3, 1.0, 0.0)]):
+        png = plot_pace(result(*points), tmp_path / f"pace{len(points)}.png")
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
