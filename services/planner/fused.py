@@ -43,6 +43,7 @@ import torch.nn.functional as F
 from shared.robot import PR2
 from shared.scene import Grid
 
+from .compiling import allow_every_shape
 from .costs import StateCost, acceleration_cost, hinge_sum
 from .sdf import VoxelTables
 
@@ -312,6 +313,8 @@ class FusedCost:
         """Compiled: the pointwise formulation fused by inductor; eager: products and a feature matmul."""
         self.compiled = compiled
         # the lookups' indices are clamped into range (see _trilinear): inductor's per-lane index asserts are moot
+        if compiled:
+            allow_every_shape()  # one code object for every FusedCost of the process (services.planner.compiling)
         self._fn: Callable[..., torch.Tensor] = (
             torch.compile(_kernel, dynamic=False, options={"assert_indirect_indexing": False}) if compiled
             else _kernel)

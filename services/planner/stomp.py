@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from .compiling import allow_every_shape
 from .stomp_steps import (
     advance,
     finite,
@@ -146,10 +147,11 @@ _STEPS: dict[str, Callable[..., tuple[torch.Tensor, ...]]] = {"rollouts": rollou
 def _compiled(name: str) -> Callable[..., tuple[torch.Tensor, ...]]:
     """``torch.compile`` of :func:`rollouts` or :func:`advance`, made once per process.
 
-    One code object each, one graph per (K, R, T, D, dtype) seen (a service plans for one K; beyond torch's
-    recompile limit, 8, a new shape runs eagerly).
+    One code object each, one graph per (K, R, T, D, dtype) seen, up to
+    :data:`~services.planner.compiling.RECOMPILE_LIMIT` of them.
     """
     if name not in _COMPILED:
+        allow_every_shape()  # beyond dynamo's default 8 graphs a new shape ran eagerly (services.planner.compiling)
         _COMPILED[name] = torch.compile(_STEPS[name], dynamic=False)
     return _COMPILED[name]
 
