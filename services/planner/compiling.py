@@ -13,7 +13,7 @@ each is compiled, whatever ran before.
 
 from __future__ import annotations
 
-import torch
+import torch._dynamo.config as dynamo_config  # the documented knob (torch.compile's "recompilation" guide)
 
 __all__ = ["RECOMPILE_LIMIT", "allow_every_shape"]
 
@@ -23,5 +23,4 @@ RECOMPILE_LIMIT = 64
 
 def allow_every_shape() -> None:
     """Raise dynamo's per-function graph limit of this process to :data:`RECOMPILE_LIMIT` (never lowers it)."""
-    config = torch._dynamo.config
-    config.recompile_limit = max(int(config.recompile_limit), RECOMPILE_LIMIT)
+    dynamo_config.recompile_limit = max(int(dynamo_config.recompile_limit), RECOMPILE_LIMIT)
