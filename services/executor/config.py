@@ -9,7 +9,9 @@ from pathlib import Path
 from services.ros2.core import ros_domain_id
 from services.ros2.wire import topic_problem
 from shared.config import LOG_LEVELS, ConfigError, opt
+from shared.config_names import check_services
 from shared.devices import check_device
+from shared.protocol import SERVICES
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.scene import SCENE_HELP
 
@@ -112,9 +114,7 @@ class ExecutorConfig:
         if not all(w > 0 and math.isfinite(w) for w in self.path_weights):
             raise ConfigError(f"executor.path_weights: must be finite and > 0, got {self.path_weights}")
         for name in ("wait_for", "hold_without"):
-            unknown = set(getattr(self, name)) - {"replayer", "tracker", "predictor", "planner"}
-            if unknown:
-                raise ConfigError(f"executor.{name}: unknown service(s) {sorted(unknown)}")
+            check_services(getattr(self, name), f"executor.{name}", [s for s in SERVICES if s != "executor"])
         if not 0 <= self.ros2_domain_id <= 232:
             raise ConfigError(f"executor.ros2_domain_id: must be 0..232, got {self.ros2_domain_id}")
         check_robot_names(self.ros2_controller, self.ros2_joint_states, "executor.ros2_")
