@@ -43,7 +43,7 @@ import torch.nn.functional as F
 from shared.robot import PR2
 from shared.scene import Grid
 
-from .compiling import allow_every_shape
+from .compiling import compile_every_shape
 from .costs import StateCost, acceleration_cost, hinge_sum
 from .sdf import VoxelTables
 
@@ -313,10 +313,9 @@ class FusedCost:
         """Compiled: the pointwise formulation fused by inductor; eager: products and a feature matmul."""
         self.compiled = compiled
         # the lookups' indices are clamped into range (see _trilinear): inductor's per-lane index asserts are moot
-        if compiled:
-            allow_every_shape()  # one code object for every FusedCost of the process (services.planner.compiling)
+        # one code object for every FusedCost of the process, so room for all their shapes (planner.compiling)
         self._fn: Callable[..., torch.Tensor] = (
-            torch.compile(_kernel, dynamic=False, options={"assert_indirect_indexing": False}) if compiled
+            compile_every_shape(_kernel, dynamic=False, options={"assert_indirect_indexing": False}) if compiled
             else _kernel)
         self._static.update(pointwise=compiled if self.pointwise is None else self.pointwise)
         self._flat = compiled  # compiled: 8 gathers from the volume itself (8x smaller than the packed cells)

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .compiling import allow_every_shape
+from .compiling import compile_every_shape
 from .stomp_steps import (
     advance,
     finite,
@@ -151,8 +151,7 @@ def _compiled(name: str) -> Callable[..., tuple[torch.Tensor, ...]]:
     :data:`~services.planner.compiling.RECOMPILE_LIMIT` of them.
     """
     if name not in _COMPILED:
-        allow_every_shape()  # beyond dynamo's default 8 graphs a new shape ran eagerly (services.planner.compiling)
-        _COMPILED[name] = torch.compile(_STEPS[name], dynamic=False)
+        _COMPILED[name] = compile_every_shape(_STEPS[name], dynamic=False)  # past 8 graphs: eager (compiling)
     return _COMPILED[name]
 
 
