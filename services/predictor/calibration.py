@@ -8,6 +8,13 @@ fold every class's mixture is refitted without that fold's demonstrations and th
 demonstrations are scored at executed fractions 10%, 20%, ..., 100%; the tau of a grid with the
 least mean log-loss of the true class (``-ln p(true class | prefix)``, averaged over the
 demonstrations and the fractions) is chosen.
+
+A held-out demonstration's summed log-likelihood under one class's mixture depends on that mixture and that
+demonstration only, and the report trains one model per held-out demonstration: each refits one class, so all
+but one of every fold's mixtures are the ones the previous model scored with. The scores are therefore kept per
+process by the mixture's parameters and the demonstration's data (:class:`_PrefixScorer`): a held-out model
+scores only its refitted class, the same numbers to the bit (each class's column is computed as the stacked
+bank computes it, with the same padding; tested).
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ import numpy as np
 from sklearn.mixture import GaussianMixture
 
 from .gmm import DEFAULT_TEMPERATURE, MixtureBank, posterior_from_log_likelihood
+from .volumes import digest
 
 __all__ = ["TEMPERATURE_GRID", "CV_FRACTIONS", "TemperatureChoice", "choose_temperature", "log_loss"]
 
@@ -52,6 +60,39 @@ class TemperatureChoice:
                 f"tau = 1: {self.mean_log_loss.get(1.0, float('nan')):.3f})")
 
 
+_SCORES: dict[str, np.ndarray] = {}
+"""Summed log-likelihoods at the scored prefixes, by mixture and demonstration (:class:`_PrefixScorer`)."""
+_SCORES_MAX = 500_000  # entries of 10 floats: about 60 MB at most, then the memo starts again
+
+
+class _PrefixScorer:
+    """One class mixture's summed log-likelihood of a demonstration's prefixes, memoised per process.
+
+    Args:
+        mixture: The fitted class mixture.
+        components: The Gaussians of the stacked bank it is scored beside (its padding: the same float sums).
+    """
+
+    def __init__(self, mixture: GaussianMixture, components: int) -> None:
+        self.mixture = mixture
+        self.components = components
+        self.key = digest(mixture.weights_, mixture.means_, mixture.covariances_, components)
+        self._bank: MixtureBank | None = None
+
+    def scores(self, x: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """``(F,)`` ``sum_{t <= e} ln p(x_t | mixture)`` for each ``e`` of ``ends (F,)``; ``x`` is ``(T, D)``."""
+        key = self.key + digest(x, ends)
+        out = _SCORES.get(key)
+        if out is None:
+            if self._bank is None:
+                self._bank = MixtureBank.from_sklearn([self.mixture], components=self.components)
+            out = np.cumsum(self._bank.log_likelihood(x)[:, 0])[ends]
+            if len(_SCORES) >= _SCORES_MAX:
+                _SCORES.clear()
+            _SCORES[key] = out
+        return out
+
+
 def log_loss(cum: np.ndarray, labels: np.ndarray, temperature: float) -> float:
     """Mean ``-ln p(true class | prefix)`` over ``cum (N, F, M)`` summed log-likelihoods (floored at 1e-12)."""
     p = posterior_from_log_likelihood(cum, temperature=temperature)
@@ -83,13 +124,12 @@ def choose_temperature(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray]
         if not any(held):
             continue
         mixtures = [fit(np.vstack([f[j] for j in range(len(f)) if j % folds != k])) for f in feats]
-        bank = MixtureBank.from_sklearn(mixtures)
+        scorers = [_PrefixScorer(g, max(g.n_components for g in mixtures)) for g in mixtures]
         for m, js in enumerate(held):
             for j in js:
-                ll = np.cumsum(bank.log_likelihood(feats[m][j]), axis=0)           # (T, M)
-                n = len(ll)
+                n = len(feats[m][j])
                 ends = np.clip(np.rint(np.asarray(fractions) * n).astype(int), 1, n) - 1
-                cums.append(ll[ends])
+                cums.append(np.stack([s.scores(feats[m][j], ends) for s in scorers], axis=-1))  # (F, M)
                 labels.append(m)
     cum, lab = np.array(cums), np.array(labels)
     losses = {float(t): log_loss(cum, lab, t) for t in grid}

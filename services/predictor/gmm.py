@@ -133,9 +133,13 @@ class MixtureBank:
         self._flat_means = self.means_.reshape(m * k, d)
 
     @classmethod
-    def from_sklearn(cls, mixtures: list[GaussianMixture]) -> MixtureBank:
-        """Stack fitted scikit-learn mixtures (one per class), padding to the largest K."""
+    def from_sklearn(cls, mixtures: list[GaussianMixture], components: int | None = None) -> MixtureBank:
+        """Stack fitted scikit-learn mixtures (one per class), padding to the largest K (or to ``components``)."""
         k = max(g.n_components for g in mixtures)
+        if components is not None:
+            if components < k:
+                raise ValueError(f"cannot pad mixtures of {k} Gaussians to {components}")
+            k = components
         d = mixtures[0].means_.shape[1]
         m = len(mixtures)
         w = np.zeros((m, k))
