@@ -20,6 +20,7 @@ from services.predictor.volumes import DEFAULT_VOLUME
 from shared.library import MotionLibrary
 from shared.scene import load_scene
 
+from .fit_store import fit_store
 from .heldout import library_tag, load_experiment_library
 from .interference import (
     PAPER_TABLE1,
@@ -49,13 +50,15 @@ def _subset(lib: MotionLibrary, per_class: int) -> MotionLibrary:
     return MotionLibrary(list(lib.class_names), demos, [], f"{lib.source} (first {per_class} per class)")
 
 
-def _recognition(lib: MotionLibrary, plan: ReportPlan, out: Path, tag: str, n_jobs: int
+def _recognition(lib: MotionLibrary, plan: ReportPlan, out: Path, tag: str, n_jobs: int, models_dir: Path
                  ) -> tuple[list[str], dict[str, Any]]:
     from services.predictor.gmm import GMMConfig
     from services.predictor.recognition import PAPER_FIG6, leave_one_out, plot_recognition
 
     sub = _subset(lib, plan.recognition_demos)
-    res = leave_one_out(sub, GMMConfig(n_components=plan.components), n_jobs=n_jobs, progress=False)
+    # in one process, the refits are the held-out models' class fits: one entry of the models' store for both
+    fits = fit_store(Path(models_dir) / "fits") if n_jobs == 1 else None
+    res = leave_one_out(sub, GMMConfig(n_components=plan.components), n_jobs=n_jobs, progress=False, fit_cache=fits)
     png = plot_recognition([res], out / f"recognition-{tag}.png", f"leave-one-out recognition: {sub.source}")
     rates = dict(zip(res.fractions, res.rates, strict=True))
     lines = ["| executed | " + " | ".join(f"{f:.0%}" for f in res.fractions) + " |",
@@ -278,7 +281,7 @@ def library_part(spec: str, part: str, plan: ReportPlan, out: Path, models_dir: 
     if part == "recognition":
         lib = load_experiment_library(spec, load_scene(TABLE1_SCENE))
         say(f"recognition, leave-one-out on {lib.source}")
-        lines, rec = _recognition(lib, plan, out, tag, n_jobs)
+        lines, rec = _recognition(lib, plan, out, tag, n_jobs, models_dir)
         md, d = ([f"## Library: {lib.source}", "", "### Recognition (Fig. 6)", "", *lines],
                  {"recognition": rec, "prediction_ms": _prediction_ms(lib, models_dir, plan.components, volume)})
     else:

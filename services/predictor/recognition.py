@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable, MutableMapping
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from joblib import Parallel, delayed
+from sklearn.mixture import GaussianMixture
 from tqdm import tqdm
 
 from shared import strict_json
@@ -24,7 +28,8 @@ from shared.library import MotionLibrary, load_library
 from shared.runtime import UserError, cli_errors
 
 from .features import VARIANTS, FeatureEncoder
-from .gmm import DEFAULT_TEMPERATURE, GMMConfig, MixtureBank, fit_class_gmm, posterior_from_log_likelihood
+from .fit_cache import class_fit
+from .gmm import DEFAULT_TEMPERATURE, GMMConfig, MixtureBank, posterior_from_log_likelihood
 from .train import DEFAULT_FEATURES, default_library
 
 __all__ = ["FRACTIONS", "RecognitionResult", "leave_one_out", "plot_recognition", "plot_calibration", "main"]
@@ -84,11 +89,11 @@ def _prefix_lengths(n: int, fractions: tuple[float, ...]) -> np.ndarray:
     return np.clip(np.rint(np.asarray(fractions) * n).astype(int), 1, n)
 
 
-def _score_demo(i: int, feats: list[np.ndarray], labels: np.ndarray, full: MixtureBank, cfg: GMMConfig,
-                fractions: tuple[float, ...]) -> np.ndarray:
+def _score_demo(i: int, feats: list[np.ndarray], labels: np.ndarray, full: MixtureBank,
+                fit: Callable[[np.ndarray], GaussianMixture], fractions: tuple[float, ...]) -> np.ndarray:
     m = int(labels[i])
     rest = np.vstack([feats[j] for j in np.flatnonzero(labels == m) if j != i])
-    own = MixtureBank.from_sklearn([fit_class_gmm(rest, cfg)])
+    own = MixtureBank.from_sklearn([fit(rest)])
     ll = full.log_likelihood(feats[i])                  # (T, M)
     ll[:, m] = own.log_likelihood(feats[i])[:, 0]
     cum = np.cumsum(ll, axis=0)
@@ -97,7 +102,7 @@ def _score_demo(i: int, feats: list[np.ndarray], labels: np.ndarray, full: Mixtu
 
 def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAULT_FEATURES,
                   fractions: tuple[float, ...] = FRACTIONS, n_jobs: int = 2, progress: bool = True,
-                  name: str | None = None) -> RecognitionResult:
+                  name: str | None = None, fit_cache: MutableMapping[str, Any] | None = None) -> RecognitionResult:
     """Run the leave-one-out protocol.
 
     Args:
@@ -108,6 +113,9 @@ def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAUL
         n_jobs: Parallel refits (joblib processes).
         progress: Show a tqdm bar.
         name: Label of the result (default: ``features`` and components).
+        fit_cache: The trainer's fit cache (:func:`~services.predictor.train.class_fit`): the refits are the
+            class fits of the models trained without each demonstration, so the report's recognition and its
+            held-out models fit each once between them. Read in this process: ``n_jobs`` must be 1.
 
     Returns:
         The recognition rates.
@@ -117,12 +125,15 @@ def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAUL
     counts = library.counts()
     if min(counts) < 2:
         raise UserError(f"library {library.source}: leave-one-out needs >= 2 demonstrations per class, got {counts}")
+    if fit_cache is not None and n_jobs != 1:
+        raise ValueError(f"leave_one_out: a fit cache is read in this process, so n_jobs must be 1, got {n_jobs}")
+    fit = partial(class_fit, gmm=cfg, cache=fit_cache)
     feats = [enc.batch(d.features) for d in demos]
     labels = np.array([d.label for d in demos])
-    full = Parallel(n_jobs=n_jobs)(delayed(fit_class_gmm)(np.vstack([feats[j] for j in np.flatnonzero(labels == m)]),
-                                                          cfg) for m in range(library.n_classes))
+    full = Parallel(n_jobs=n_jobs)(delayed(fit)(np.vstack([feats[j] for j in np.flatnonzero(labels == m)]))
+                                   for m in range(library.n_classes))
     bank = MixtureBank.from_sklearn(full)
-    jobs = (delayed(_score_demo)(i, feats, labels, bank, cfg, fractions) for i in range(len(demos)))
+    jobs = (delayed(_score_demo)(i, feats, labels, bank, fit, fractions) for i in range(len(demos)))
     it = Parallel(n_jobs=n_jobs, return_as="generator")(jobs)
     cum = np.array(list(tqdm(it, total=len(demos), desc=f"leave-one-out ({features})", unit="demo",
                              disable=not progress)))                   # (N, F, M)

@@ -19,7 +19,7 @@ import argparse
 import datetime
 import logging
 import sys
-from collections.abc import Callable, MutableMapping
+from collections.abc import MutableMapping
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -36,7 +36,8 @@ from shared.scene import SCENE_HELP, Scene, load_scene
 
 from .calibration import DEFAULT_FOLDS, TemperatureChoice, choose_temperature
 from .features import VARIANTS, FeatureEncoder
-from .gmm import GMMConfig, MixtureBank, fit_class_gmm
+from .fit_cache import cached, class_fit
+from .gmm import GMMConfig, MixtureBank
 from .gmr import gmr
 from .model import PredictionModel, TimedVolumes, quantised
 from .swept_volume import surface_spacing, swept_volume
@@ -164,8 +165,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     cache: MutableMapping[str, Any] = {} if fit_cache is None else fit_cache
 
     def fit(data: np.ndarray) -> Any:
-        key = "gmm:" + digest(data, repr(cfg.gmm))
-        return cached(cache, key, lambda: fit_class_gmm(data, cfg.gmm))
+        return class_fit(data, cfg.gmm, cache)
 
     feats = [[encoder.batch(d.features) for d in ds] for ds in by_class]
     mixtures = [fit(np.vstack(f)) for f in tqdm(feats, desc="GMM per class", unit="class", disable=not progress)]
@@ -209,21 +209,6 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
                            spacing=cfg.spacing, interior=cfg.interior, meta=meta, temperature=choice.temperature,
                            feature_names=tuple(library.feature_names), volume_method=cfg.volume,
                            timed=timed)
-
-
-def cached(cache: MutableMapping[str, Any], key: str, make: Callable[[], Any]) -> Any:
-    """``cache[key]``, made with ``make()`` if it is missing.
-
-    A cache with a ``compute(key, make)`` method (the report's
-    :class:`~services.experiments.fit_store.FitStore`, shared by its worker processes) makes each entry once
-    across processes; a dict, once per process.
-    """
-    compute = getattr(cache, "compute", None)
-    if compute is not None:
-        return compute(key, make)
-    if key not in cache:
-        cache[key] = make()
-    return cache[key]
 
 
 def _volume_key_parts(scene: Scene, grid, cfg: TrainConfig) -> tuple:
