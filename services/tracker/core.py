@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from shared.config import ConfigError, opt
+from shared.feature_sets import HERAKLES_NAMES
 from shared.human import HumanModel
 from shared.keypoints.fit import POINT_NAMES, REQUIRED, KeypointFit
 from shared.keypoints.layouts import LAYOUTS, load_layout
@@ -44,10 +45,11 @@ from .reach import ReachDetector, ReachRule
 
 __all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S"]
 
-REASONS = ("frame", "names", "missing", "order", "leap", "residual", "jump")
+REASONS = ("frame", "names", "missing", "order", "leap", "range", "residual", "jump")
 """Why a frame is refused: another coordinate frame, a point the layout does not have, a required point missing, a
 stamp not after the last accepted frame's, a stamp a long gap after it that the next frame has not confirmed yet, a
-fit too far from the points, an implausible jump."""
+pelvis outside the range the fit covers (so the fit cannot reach the points), a fit too far from the points, an
+implausible jump."""
 
 MIN_PERIOD_S = 1.0 / 500
 """The shortest frame interval taken for the sensor's period (500 Hz): shorter ones are frames of a burst."""
@@ -180,6 +182,11 @@ class TrackerCore:
         res = self.fit.fit(np.nan_to_num(points)[None], observed[None], prior)
         f, rms = res.features[0], float(res.rms_m[0])
         if rms > self.config.max_residual_m:
+            outside = self._outside(points[self._required["pelvis"]])
+            if outside:  # the fit stopped at its bound: its residual is the distance, not a bad fit
+                return self._refuse("range", f"pelvis {outside}, outside the range the fit covers (the motion "
+                                    "library's room: shared.feature_sets.HERAKLES_RANGES); the keypoints must be in "
+                                    "the library's frame")
             limit = self.config.max_residual_m * 100
             return self._refuse("residual", f"fit residual {rms * 100:.1f} cm rms > {limit:g}")
         out = TrackerOutput()
@@ -212,6 +219,14 @@ class TrackerCore:
         return TrackerOutput(self._lost(self._raw[0]) if self._raw is not None else [])
 
     # -- internals ---------------------------------------------------------------------------------
+
+    def _outside(self, pelvis: np.ndarray) -> str:
+        """Where the observed pelvis ``(3,)`` lies beyond the fit's pelvis bounds, in words ('' if within)."""
+        at = [HERAKLES_NAMES.index(f"pelvis_{axis}") for axis in "xyz"]
+        words = [f"{axis} {v:.2f} m not in [{lo:g}, {hi:g}]"
+                 for axis, v, lo, hi in zip("xyz", pelvis, self.fit.low[at], self.fit.high[at], strict=True)
+                 if not lo <= v <= hi]
+        return ", ".join(words)
 
     def _refuse(self, reason: str, why: str) -> TrackerOutput:
         self.refused[reason] += 1

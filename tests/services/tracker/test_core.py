@@ -94,6 +94,19 @@ def test_refused_frames_are_named_and_counted(reach) -> None:
     assert core.refused["missing"] == 1 and core.refused["jump"] >= 1 and sum(core.refused.values()) >= 3
 
 
+
+def test_a_person_beyond_the_fits_range_is_refused_as_out_of_range_not_as_a_bad_fit(reach) -> None:
+    """15 m from the library's origin (the wire takes keypoints up to 20 m) the fit stops at its pelvis bound of
+    10 m and was refused as 'fit residual 665 cm', as if the points were noise."""
+    core = TrackerCore()
+    outs = [core.on_frame(i / RATE, NAMES, p + [15.0, 0.0, 0.0]) for i, p in enumerate(MODEL.joint_positions(reach))]
+    assert all(o.refused.startswith("range: pelvis x ") and "not in [-10, 10]" in o.refused for o in outs)
+    assert core.refused["range"] == len(outs) and core.refused["residual"] == 0 and core.accepted == 0
+    core = TrackerCore()
+    wild = MODEL.joint_positions(reach)[0].copy()
+    wild[NAMES.index("r_wrist")] += [0.0, 0.0, 1.0]  # within range, one point wild: still a bad fit
+    assert core.on_frame(0.0, NAMES, wild).refused.startswith("residual: ")
+
 def test_a_short_gap_is_bridged_a_long_one_ends_the_reach(reach) -> None:
     core = TrackerCore()
     poses = [m for m in messages(run(core, reach, skip={60, 61, 62})) if isinstance(m, HumanPose)]
