@@ -1,4 +1,4 @@
-"""``foresight bench {predictor,planner,faults,keypoints,soak,viz}``: dispatch to each component's benchmark script.
+"""``foresight bench NAME``: dispatch to each component's benchmark script (:data:`BENCHES`).
 
 Each benchmark lives beside the code it measures and exposes ``main(argv, prog) -> int``; it is
 imported only when asked for.
@@ -23,6 +23,8 @@ BENCHES: dict[str, tuple[str, str]] = {
     "live": ("services.view.bench", "foresight demo in real time without a live view, with --live, with foresight "
              "view (a Foxglove client on each): pose -> plan p99"),
     "soak": ("tools.soak", "poses at 300 Hz for 60 s: predictor latency and drops, replanning period, RSS"),
+    "codec": ("shared.protocol.bench", "encode and decode of each wire message against bare msgpack: what the "
+              "checks cost"),
     "viz": ("shared.foxglove.bench",
             "one occupancy update of the Foxglove scene: SDK protobuf vs the JSON path it replaced"),
 }
