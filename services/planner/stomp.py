@@ -322,11 +322,12 @@ class Stomp:
         nxt = torch.zeros(k, fresh, n, self.dof, device=self.device, dtype=self.dtype)
         to_go = self.to_go if c.cost_to_go else None
         # the first iteration (nothing kept yet), then, with reuse, the others (R - reuse new rollouts)
-        out = self._step("advance", theta, eps, cost, None, None, c.reuse, best, theta.clone(), self.lower,
-                         self.upper, self.M, to_go, c.sensitivity, nxt, start, goal)
+        theta, _, best, best_theta, kept_q, kept_cost, _, eps = self._step(
+            "advance", theta, eps, cost, None, None, c.reuse, best, theta.clone(), self.lower, self.upper, self.M,
+            to_go, c.sensitivity, nxt, start, goal)
         if c.reuse:
-            self._step("advance", out[0], out[7], cost[:, :fresh + 1].contiguous(), out[4], out[5], c.reuse, out[2],
-                       out[3], self.lower, self.upper, self.M, to_go, c.sensitivity, nxt.clone(), start, goal)
+            self._step("advance", theta, eps, cost[:, :fresh + 1].contiguous(), kept_q, kept_cost, c.reuse, best,
+                       best_theta, self.lower, self.upper, self.M, to_go, c.sensitivity, nxt.clone(), start, goal)
 
     def _first_rollouts(self, theta: torch.Tensor, noise: torch.Tensor, start: torch.Tensor,
                         goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
