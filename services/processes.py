@@ -20,6 +20,16 @@ __all__ = ["ServiceProcess", "free_port"]
 log = logging.getLogger("foresight.processes")
 
 
+def describe_exit(code: int | None) -> str:
+    """``-9`` -> ``"was killed (SIGKILL)"``, ``1`` -> ``"exited with status 1"``."""
+    if code is not None and code < 0:
+        try:
+            return f"was killed ({signal.Signals(-code).name})"
+        except ValueError:
+            return f"was killed (signal {-code})"
+    return f"exited with status {code}"
+
+
 class ServiceProcess:
     """One Foresight service run as ``python -m MODULE ARGS`` in its own process.
 
@@ -48,6 +58,7 @@ class ServiceProcess:
         self.log_path = Path(log_path)
         self.env = dict(env or {})
         self.proc: subprocess.Popen[bytes] | None = None
+        self._log_from = 0
 
     @property
     def command(self) -> list[str]:
@@ -63,6 +74,7 @@ class ServiceProcess:
                 out.write(f"\n--- {self.name} started again (the run above exited with status "
                           f"{self.proc.returncode}) ---\n".encode())
                 out.flush()
+            self._log_from = out.tell()  # this run's output starts here (tail reads no earlier run's, nor the banner)
             self.proc = subprocess.Popen(self.command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                          process_group=0,
                                          env={**os.environ, "PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid()),
@@ -81,9 +93,11 @@ class ServiceProcess:
         return None if self.proc is None else self.proc.poll()
 
     def tail(self, lines: int = 3) -> str:
-        """The last lines of the process's output."""
+        """The last lines of the process's output since its latest start ('' when it printed nothing)."""
         try:
-            text = self.log_path.read_text(errors="replace")
+            with self.log_path.open("rb") as f:
+                f.seek(self._log_from)
+                text = f.read().decode(errors="replace")
         except OSError:
             return ""
         return "\n".join(text.strip().splitlines()[-lines:])
@@ -108,7 +122,9 @@ class ServiceProcess:
             if stop is not None and stop.is_set():
                 return False
             if not self.running:
-                raise UserError(f"{self.name} exited with status {self.returncode}: {self.tail(1)}")
+                code = self.returncode  # a signal's death is no line of the log's doing
+                why = self.tail(1) if code is not None and code > 0 else ""
+                raise UserError(f"{self.name} {describe_exit(code)}" + (f": {why}" if why else ""))
             if time.monotonic() > deadline:
                 raise UserError(f"{self.name} did not come up within {timeout:g} s (see {self.log_path})")
             time.sleep(0.02)

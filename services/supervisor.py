@@ -11,25 +11,14 @@ would crawl on at one timeout a tick; its death ends the run, its log complete.
 from __future__ import annotations
 
 import logging
-import signal
 from collections.abc import Callable, Mapping
 
-from services.processes import ServiceProcess
+from services.processes import ServiceProcess, describe_exit
 from shared.protocol import HUMAN_SOURCES
 
 __all__ = ["Supervisor", "describe_exit"]
 
 log = logging.getLogger("foresight.supervisor")
-
-
-def describe_exit(code: int | None) -> str:
-    """``-9`` -> ``"was killed (SIGKILL)"``, ``1`` -> ``"exited with status 1"``."""
-    if code is not None and code < 0:
-        try:
-            return f"was killed ({signal.Signals(-code).name})"
-        except ValueError:
-            return f"was killed (signal {-code})"
-    return f"exited with status {code}"
 
 
 class Supervisor:

@@ -70,6 +70,8 @@ def cli_errors(prog: str) -> Iterator[None]:
         yield
     except (ConfigError, UserError, FileNotFoundError) as exc:
         raise SystemExit(fail(prog, str(exc))) from None
+    except BrokenPipeError:  # output piped into `head`, which exited early: not an error (tools.foresight says 0)
+        raise
     except OSError as exc:  # a path that is a directory, under a file, not writable; a full disk
         where = f"{exc.filename}: " if exc.filename else ""
         raise SystemExit(fail(prog, f"{where}{exc.strerror or exc}")) from None
@@ -106,7 +108,8 @@ def interruptible(stop: threading.Event) -> Iterator[None]:
             signal.signal(s, h)
 
 
-def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Callable[[], None]:
+def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: str | None = None
+                    ) -> Callable[[], None]:
     """Set ``stop`` on SIGINT/SIGTERM (main thread only); returns a function restoring the old handlers.
 
     A process must obey the signal even when a call it is in blocks (a Zenoh call whose router went
@@ -115,7 +118,10 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Call
     stacks of every thread (where it was stuck) to stderr and exits with :data:`FORCED_EXIT`; a second
     signal exits so at once, with one line (the person who sent it wants out, not a dump). A signal within
     :data:`SIGNAL_ECHO_S` of the first is the first one delivered again and ignored. What the stop had
-    finished by then (the executor's MCAP, closed before its session) is kept.
+    finished by then (the executor's MCAP, closed before its session) is kept. The first signal is the first
+    one received, whether or not ``stop`` was already set (by ``--stop-with``, a parent gone, the service itself):
+    a process that is stopping on its own still gets its grace. ``prog`` names the process in those lines
+    (default: the script's name).
     """
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
@@ -128,7 +134,7 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Call
     def force(why: str, stacks: bool = True) -> None:
         if restored.is_set():
             return
-        print(f"{os.path.basename(sys.argv[0]) or 'foresight'}: {why}; exiting with status {FORCED_EXIT}"
+        print(f"{prog or os.path.basename(sys.argv[0]) or 'foresight'}: {why}; exiting with status {FORCED_EXIT}"
               + (" (stacks of every thread follow)" if stacks else ""), file=sys.stderr, flush=True)
         if stacks:
             faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
@@ -140,8 +146,8 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None) -> Call
 
     def handler(signum: int, frame: object) -> None:
         name = signal.Signals(signum).name
-        if stop.is_set():
-            if first_at and time.monotonic() - first_at[0] < SIGNAL_ECHO_S:
+        if first_at:
+            if time.monotonic() - first_at[0] < SIGNAL_ECHO_S:
                 return  # the first interrupt, delivered again
             force(f"second {name} while stopping", stacks=False)
         first_at.append(time.monotonic())
@@ -240,7 +246,7 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
         limit_blas_threads()  # python -m services.X does not pass through tools.foresight
         cfg, zcfg = resolve_config(section, config_cls, args)
         setup_logging(cfg.log_level)
-        restore = stop_on_signals(stop)
+        restore = stop_on_signals(stop, prog=prog)
         watch_parent(stop)
         try:
             run = make(cfg, zcfg, stop)

@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
 
 from shared import strict_json
 from shared.recording.reader import read_log
-from shared.runtime import cli_errors, setup_logging
+from shared.runtime import cli_errors, interruptible, setup_logging
 
 from .system import PROCESSES, ProcessSystem, SystemSpec, Watcher, positive_number
 
@@ -162,8 +163,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench faults") ->
         spec = SystemSpec(run_dir=args.run_dir, model=demo_model(args.models_dir))
         system = ProcessSystem(spec)
         results: dict[str, Any] = {"kills": []}
-        try:
-            with Watcher(system.endpoint) as watcher:
+        try:  # SIGTERM as Ctrl-C: the processes are closed below, none left behind
+            with interruptible(threading.Event()), Watcher(system.endpoint) as watcher:
                 system.start_all()
                 for victim in victims:
                     r = measure_kill(system, watcher, victim, args.down_s, args.timeout)

@@ -84,13 +84,13 @@ def main(argv: list[str] | None = None) -> int:
 
 def _dispatch(argv: list[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = _parser()
+    # the help lists every sub-command, importing each table (and what those modules import): only when shown
     if not argv or argv[0] in ("-h", "--help"):
-        parser.print_help(sys.stdout if argv else sys.stderr)  # no command is an error: its help goes to stderr
+        _parser().print_help(sys.stdout if argv else sys.stderr)  # no command is an error: its help goes to stderr
         return 0 if argv else 2
     command, rest = argv[0], argv[1:]
     if command not in COMMANDS:
-        parser.print_usage(sys.stderr)
+        _parser().print_usage(sys.stderr)
         print(f"foresight: error: unknown command {command!r} (choose from {', '.join(COMMANDS)})",
               file=sys.stderr)
         return 2

@@ -9,7 +9,7 @@ import re
 import threading
 
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
-from shared.runtime import cli_errors, setup_logging, stop_on_signals
+from shared.runtime import cli_errors, setup_logging, stop_on_signals, watch_parent
 from shared.transport import describe, open_session
 
 __all__ = ["RouterConfig", "main", "check_listen", "ROUTER_ENDPOINT"]
@@ -36,7 +36,8 @@ def check_listen(listen: list[str]) -> None:
     if not listen:
         raise ConfigError(f"zenoh.listen: empty; a router must listen on an endpoint, e.g. {ROUTER_ENDPOINT}")
     for ep in listen:
-        if re.search(r":0(?:[/#?]|$)", ep.split("/", 1)[1]):
+        port = re.split(r"[/#?]", ep.split("/", 1)[1].rsplit(":", 1)[-1])[0]  # tcp/HOST:PORT[#...]
+        if port.isdigit() and int(port) == 0:
             raise ConfigError(f"zenoh.listen: {ep!r} asks for a free port, which the services could not be told; "
                               f"give the port they connect to, e.g. {ROUTER_ENDPOINT}")
 
@@ -52,7 +53,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight router") -> int:
         check_listen(zcfg.listen)
     setup_logging(cfg.log_level)
     stop = threading.Event()
-    restore = stop_on_signals(stop)
+    restore = stop_on_signals(stop, prog=prog)
+    watch_parent(stop)  # started by foresight demo or a bench: stop when it has gone, as its services do
     try:
         with cli_errors(prog), open_session(zcfg) as session:
             log.info("router listening on %s (%s)", ",".join(zcfg.listen), describe(session)["zid"])

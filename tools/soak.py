@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -28,7 +29,7 @@ import numpy as np
 from services.executor.core import reason_kind
 from services.replayer.core import MAX_RATE_HZ, MIN_RATE_HZ
 from shared import strict_json
-from shared.runtime import cli_errors, setup_logging
+from shared.runtime import cli_errors, interruptible, setup_logging
 
 from .faults import demo_model
 from .system import ProcessSystem, SystemSpec, Watcher, positive_number
@@ -126,8 +127,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> i
     with cli_errors(prog):
         spec = SystemSpec(run_dir=args.run_dir, model=demo_model(args.models_dir), rate_hz=args.rate_hz)
         system = ProcessSystem(spec)
-        try:
-            with Watcher(system.endpoint, poses=True) as watcher:
+        try:  # SIGTERM as Ctrl-C: the processes are closed below, none left behind
+            with interruptible(threading.Event()), Watcher(system.endpoint, poses=True) as watcher:
                 system.start_all()
                 r = soak(system, watcher, args.duration_s, args.timeout)
         finally:

@@ -51,3 +51,29 @@ def test_a_restart_keeps_the_log_of_the_run_that_ended(tmp_path):
     assert "RuntimeError: the cause" in text and "second start: fine" in text
     assert text.index("the cause") < text.index("planner started again (the run above exited with status 1)") \
         < text.index("second start: fine")
+
+
+def test_a_killed_service_is_said_killed_not_with_its_last_log_line(tmp_path):
+    """A service killed while starting was reported as 'exited with status -9: serving' (its last line)."""
+    (tmp_path / "killed.py").write_text("import os, signal\nprint('serving', flush=True)\n"
+                                        "os.kill(os.getpid(), signal.SIGKILL)\n")
+    proc = ServiceProcess("planner", "killed", [], tmp_path / "planner.log", env={"PYTHONPATH": str(tmp_path)})
+    proc.start()
+    proc.proc.wait(30)
+    with pytest.raises(UserError) as exc:
+        proc.wait_alive(lambda name: False, timeout=30.0)
+    assert str(exc.value) == "planner was killed (SIGKILL)"
+
+
+def test_the_tail_of_a_restarted_service_is_its_own_output(tmp_path):
+    """A restarted service that died silently was reported with the restart banner as its last output."""
+    (tmp_path / "quiet.py").write_text("import sys\nif len(sys.argv) > 1:\n    print('first run', flush=True)\n"
+                                       "sys.exit(1)\n")
+    proc = ServiceProcess("planner", "quiet", ["loud"], tmp_path / "planner.log", env={"PYTHONPATH": str(tmp_path)})
+    proc.start()
+    proc.proc.wait(30)
+    assert proc.tail(1) == "first run"
+    proc.args = []  # the second run prints nothing
+    proc.start()
+    proc.proc.wait(30)
+    assert proc.tail(1) == "" and "started again" in (tmp_path / "planner.log").read_text()

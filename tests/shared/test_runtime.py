@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import gc
+import io
+import sys
+import types
 import weakref
 
 import pytest
 
-from shared.runtime import freeze_startup_heap, setup_logging
+from shared.runtime import cli_errors, freeze_startup_heap, setup_logging
+from tools import foresight
 
 
 class _Node:
@@ -65,3 +69,22 @@ def test_watch_parent_stops_at_once_when_the_parent_died_during_start_up(monkeyp
 def test_a_log_level_that_is_no_level_is_refused_rather_than_read_as_info() -> None:
     with pytest.raises(ValueError, match="log level 'DEBGU': not one of DEBUG, INFO, WARNING, ERROR"):
         setup_logging("DEBGU")
+
+
+
+def test_a_broken_pipe_passes_through_to_the_dispatcher(monkeypatch):
+    """Output piped into `head` ended a command as 'error: Broken pipe', status 2: cli_errors took it for a disk
+    error; the dispatcher, which returns 0 for it, never saw it."""
+    with pytest.raises(BrokenPipeError), cli_errors("foresight x"):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    def closed_pipe(argv: list[str], prog: str) -> int:
+        with cli_errors(prog):
+            raise BrokenPipeError(32, "Broken pipe")
+
+    command = types.ModuleType("fake_command")
+    command.main = closed_pipe
+    monkeypatch.setitem(sys.modules, "fake_command", command)
+    monkeypatch.setitem(foresight.COMMANDS, "fake", ("fake_command", "a command whose reader went away"))
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # the dispatcher closes it (nothing more can be said)
+    assert foresight.main(["fake"]) == 0

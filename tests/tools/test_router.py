@@ -1,11 +1,18 @@
-"""``foresight router``: its help shows its own Zenoh defaults; it refuses to listen nowhere or on port 0."""
+"""``foresight router``: its help shows its own Zenoh defaults; it refuses to listen nowhere or on port 0; it stops
+when the process that started it has gone."""
 
 from __future__ import annotations
 
+import os
 import re
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 
+from services.processes import free_port
 from shared.config import ConfigError
 from tools.router import ROUTER_ENDPOINT, check_listen, main
 
@@ -22,6 +29,8 @@ def test_help_shows_the_routers_own_zenoh_defaults(capsys):
 @pytest.mark.parametrize("listen, message", [
     ([], "empty; a router must listen"),
     (["tcp/127.0.0.1:0"], "asks for a free port"),
+    (["tcp/127.0.0.1:00"], "asks for a free port"),  # port 0 however written: the regex took only ':0'
+    (["tcp/127.0.0.1:000#iface=lo"], "asks for a free port"),
     (["tcp/127.0.0.1:7447", "udp/[::1]:0"], "'udp/[::1]:0' asks for a free port"),
 ])
 def test_a_router_nobody_could_reach_is_refused(listen, message):
@@ -40,3 +49,39 @@ def test_the_command_fails_in_one_line_before_opening_a_session(argv, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("foresight router: error: zenoh.listen:")
+
+
+def test_a_router_started_by_a_process_that_dies_stops_by_itself(tmp_path):
+    """A bench killed by SIGTERM left its router running, re-parented to init, holding its port; the services it
+    had started stopped (they watch their parent), the router did not."""
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "import subprocess, sys\n"
+        f"r = subprocess.Popen([sys.executable, '-m', 'tools', 'router', '--listen', 'tcp/127.0.0.1:{free_port()}'],"
+        f" stderr=open({str(tmp_path / 'router.log')!r}, 'w'), env={{**__import__('os').environ, "
+        "'FORESIGHT_PARENT_PID': str(__import__('os').getpid())})\n"
+        "print(r.pid, flush=True)\n"
+        "import time; time.sleep(3)\n")  # then exits without stopping it
+    parent = subprocess.Popen([sys.executable, str(script)], cwd=Path(__file__).resolve().parents[2],
+                              stdout=subprocess.PIPE, text=True)
+    router = int(parent.stdout.readline())
+    try:
+        parent.wait(timeout=30)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and not _gone(router):
+            time.sleep(0.1)
+        assert _gone(router), "the router outlived the process that started it"
+    finally:
+        try:
+            os.kill(router, 9)
+        except ProcessLookupError:
+            pass
+    assert "has exited; stopping" in (tmp_path / "router.log").read_text()
+
+
+def _gone(pid: int) -> bool:
+    """Whether ``pid`` has exited (a zombie nobody reaped counts: an init that does not reap keeps them)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] in ("Z", "X")
+    except (FileNotFoundError, ProcessLookupError):
+        return True

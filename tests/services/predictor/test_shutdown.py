@@ -45,23 +45,25 @@ BLOCKED = """
 import sys, threading, time
 from shared import runtime
 stop = threading.Event()
-runtime.stop_on_signals(stop, grace_s=1.0)
+runtime.stop_on_signals(stop, grace_s=1.0, prog="blocked")
+if sys.argv[1:] == ["stopping"]:
+    stop.set()  # stopping on its own already (--stop-with, its parent gone) when the signal comes
 print("ready", flush=True)
 while True:
     time.sleep(600)  # a call that does not look at the stop event
 """
 
 
-def _blocked_process() -> subprocess.Popen[str]:
-    proc = subprocess.Popen([sys.executable, "-c", BLOCKED], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+def _blocked_process(*args: str) -> subprocess.Popen[str]:
+    proc = subprocess.Popen([sys.executable, "-c", BLOCKED, *args], cwd=REPO, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
     return proc
 
 
-def _signalled(*signals: tuple[signal.Signals, float]) -> tuple[int, str]:
+def _signalled(*signals: tuple[signal.Signals, float], args: tuple[str, ...] = ()) -> tuple[int, str]:
     """A blocked process sent each signal after its pause (s); its exit status and stderr."""
-    proc = _blocked_process()
+    proc = _blocked_process(*args)
     try:
         for sig, pause in signals:
             time.sleep(pause)
@@ -77,8 +79,8 @@ def _signalled(*signals: tuple[signal.Signals, float]) -> tuple[int, str]:
 def test_a_process_stuck_in_a_call_exits_after_the_grace_and_says_where():
     code, err = _signalled((signal.SIGTERM, 0.0))
     assert code == 3, err
-    assert "did not stop within 1 s of SIGTERM; exiting with status 3" in err
-    assert 'File "<string>", line 8' in err  # the stack says where it was stuck
+    assert "blocked: did not stop within 1 s of SIGTERM; exiting with status 3" in err  # named by its prog
+    assert 'File "<string>", line 10' in err  # the stack says where it was stuck
 
 
 def test_a_second_signal_exits_at_once():
@@ -93,3 +95,10 @@ def test_one_interrupt_delivered_twice_at_once_is_one_interrupt():
     code, err = _signalled((signal.SIGINT, 0.0), (signal.SIGINT, 0.0))
     # the process never stops by itself: the grace, not the echo, ends it
     assert code == 3 and "second" not in err and "did not stop within 1 s of SIGINT" in err, err
+
+
+def test_the_first_signal_to_a_process_already_stopping_on_its_own_gets_the_grace():
+    """With stop already set (--stop-with, a parent gone) the first and only SIGTERM (docker compose down, the
+    demo's stop) was taken for a second one: exit 3 at once, 'second SIGTERM', its shutdown cut off."""
+    code, err = _signalled((signal.SIGTERM, 0.0), args=("stopping",))
+    assert code == 3 and "second" not in err and "did not stop within 1 s of SIGTERM" in err, err
