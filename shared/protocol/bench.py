@@ -4,16 +4,16 @@ What the codec adds to msgpack is its checks: every field named and typed, every
 finiteness, the bounds of ``shared/protocol/limits.py``, the message's own invariants (docs/protocol.md). This
 bench shows what they cost. Each message is one the services send in a run (a pose, a posterior, the robot's
 state, an occupancy grid of about ``--voxels`` voxels, a plan of K = 2 goals at 40 and at 101 waypoints, a
-keypoint frame), built from a seeded generator. For each, interleaved repeat by repeat so that machine load
-falls on all four alike:
+keypoint frame), built from a seeded generator. Four calls per message:
 
 * ``encode``: :func:`~shared.protocol.encode` of the message;
 * ``pack`` (the baseline): ``msgpack.packb`` of the plain structure the encoded bytes hold;
 * ``decode``: :func:`~shared.protocol.decode` of the bytes, checks included;
 * ``unpack`` (the baseline): ``msgpack.unpackb`` of the bytes, no check, no array built.
 
-Each figure is the best of ``--repeats`` means over ``--loops`` calls (us per call); the ratios are the codec's
-time over msgpack's. Every message is checked to decode to bytes that encode back identically.
+Each figure is the best of ``--repeats`` means over ``--loops`` calls (us per call), every repeat timing every call
+of every message once (a slow moment of the machine falls on one repeat of all of them); the ratios are the
+codec's time over msgpack's. Every message is checked to decode to bytes that encode back identically.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from shared.runtime import cli_errors
 from .codec import decode, encode
 from .messages import ClassPosterior, HumanKeypoints, HumanPose, Message, OccupancyGrid, Plan, RobotState
 
-__all__ = ["bench_messages", "time_message", "run_bench", "main"]
+__all__ = ["bench_messages", "run_bench", "main"]
 
 JOINTS = [f"joint_{i}" for i in range(8)]
 
@@ -73,40 +73,45 @@ def bench_messages(voxels: int = 1500, seed: int = 0) -> list[tuple[str, Message
     ]
 
 
-def _best_mean_us(fn: Callable[[], Any], loops: int) -> float:
+def _mean_us(fn: Callable[[], Any], loops: int) -> float:
     start = time.perf_counter()
     for _ in range(loops):
         fn()
     return (time.perf_counter() - start) / loops * 1e6
 
 
-def time_message(msg: Message, loops: int, repeats: int) -> dict[str, float]:
-    """Per-call times (us, best of ``repeats`` means of ``loops`` calls) of one message; bytes in ``bytes``.
-
-    Raises:
-        AssertionError: If the message does not decode to bytes that encode back identically.
-    """
+def _calls(msg: Message) -> dict[str, Callable[[], Any]]:
+    """The four timed calls of one message, after checking its round trip."""
     data = encode(msg)
     if encode(decode(data, type(msg))) != data:
         raise AssertionError(f"{msg.TYPE}: decoding and encoding again changed its bytes")
     plain = msgpack.unpackb(data)
-    calls = {"encode": lambda: encode(msg), "pack": lambda: msgpack.packb(plain),
-             "decode": lambda: decode(data, type(msg)), "unpack": lambda: msgpack.unpackb(data)}
-    best = dict.fromkeys(calls, float("inf"))
-    for _ in range(repeats):  # interleaved: each repeat times all four
-        for name, fn in calls.items():
-            best[name] = min(best[name], _best_mean_us(fn, loops))
-    return {"bytes": float(len(data)), **best}
+    return {"encode": lambda: encode(msg), "pack": lambda: msgpack.packb(plain),
+            "decode": lambda: decode(data, type(msg)), "unpack": lambda: msgpack.unpackb(data)}
 
 
 def run_bench(loops: int = 2000, repeats: int = 5, voxels: int = 1500, seed: int = 0,
               progress: Callable[[str], None] = lambda _s: None) -> list[dict[str, Any]]:
-    """One row per message: name, bytes, the four times (us) and the codec-over-msgpack ratios."""
+    """One row per message: name, bytes, the four times (us) and the codec-over-msgpack ratios.
+
+    Each repeat times every call of every message once, so that a slow moment of the machine falls on one repeat
+    of all of them, and the best of the repeats is kept.
+
+    Raises:
+        AssertionError: If a message does not decode to bytes that encode back identically.
+    """
+    msgs = bench_messages(voxels, seed)
+    calls = {name: _calls(msg) for name, msg in msgs}
+    best = {name: dict.fromkeys(c, float("inf")) for name, c in calls.items()}
+    for r in range(repeats):
+        progress(f"repeat {r + 1} of {repeats} ...")
+        for name, c in calls.items():
+            for call, fn in c.items():
+                best[name][call] = min(best[name][call], _mean_us(fn, loops))
     rows = []
-    for name, msg in bench_messages(voxels, seed):
-        progress(f"{name} ...")
-        t = time_message(msg, loops, repeats)
-        rows.append({"message": name, **t, "encode_ratio": t["encode"] / t["pack"],
+    for name, msg in msgs:
+        t = best[name]
+        rows.append({"message": name, "bytes": len(encode(msg)), **t, "encode_ratio": t["encode"] / t["pack"],
                      "decode_ratio": t["decode"] / t["unpack"]})
     return rows
 
