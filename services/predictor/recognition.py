@@ -113,7 +113,7 @@ def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAUL
         n_jobs: Parallel refits (joblib processes).
         progress: Show a tqdm bar.
         name: Label of the result (default: ``features`` and components).
-        fit_cache: The trainer's fit cache (:func:`~services.predictor.train.class_fit`): the refits are the
+        fit_cache: The trainer's fit cache (:func:`~services.predictor.fit_cache.class_fit`): the refits are the
             class fits of the models trained without each demonstration, so the report's recognition and its
             held-out models fit each once between them. Read in this process: ``n_jobs`` must be 1.
 
