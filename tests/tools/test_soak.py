@@ -1,7 +1,12 @@
-"""``foresight bench soak``'s summary: the reaction latency when the predictor grids only the newest pose."""
+"""``foresight bench soak``'s summary: the reaction latency when the predictor grids only the newest pose; soak and
+faults close what they started when stopped by SIGTERM."""
 
 from __future__ import annotations
 
+import signal
+import subprocess
+import sys
+from pathlib import Path
 from types import SimpleNamespace as NS
 
 import pytest
@@ -18,3 +23,49 @@ def test_reaction_latency_is_the_first_grid_for_the_pose_or_a_later_one():
     lat = _cover_latency(poses, grids)
     assert lat == pytest.approx([0.25, 0.15, 0.05])  # demo 2's pose and index 3 are never covered
     assert _cover_latency(poses, []) == []
+
+
+SIGTERMED = """
+import sys, time
+import tools.{bench} as bench
+
+class Processes:  # stands in for the router and the four services: what matters is that close() runs
+    def __init__(self, spec):
+        self.endpoint = "tcp/127.0.0.1:1"
+    def start_all(self):
+        print("started", flush=True)
+        time.sleep(60)
+    def close(self):
+        print("closed", flush=True)
+        return {{}}
+
+class Watcher:
+    def __init__(self, *args, **kwargs):
+        pass
+    def __enter__(self):
+        return self
+    def __exit__(self, *exc):
+        return False
+
+bench.ProcessSystem, bench.Watcher, bench.demo_model = Processes, Watcher, lambda models_dir: "model.npz"
+from tools.foresight import main
+sys.exit(main(["bench", "{bench}"]))
+"""
+
+
+@pytest.mark.parametrize("bench", ["soak", "faults"])
+def test_a_bench_stopped_by_sigterm_closes_the_processes_it_started(bench):
+    """SIGTERM ended the bench without its ``finally``: the processes it had started were left to notice by
+    themselves, and the router never did (tests/tools/test_router.py)."""
+    proc = subprocess.Popen([sys.executable, "-c", SIGTERMED.format(bench=bench)], cwd=Path(__file__).parents[2],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "started"
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert out.strip() == "closed" and proc.returncode == 130, err
+    assert "foresight: interrupted" in err
