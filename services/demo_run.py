@@ -304,9 +304,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 out("foresight demo: interrupted; stopping the services (the executor first: it closes the log)")
                 status = 130
             elif executor.returncode not in (0, None):
-                code = executor.returncode  # a killed process's last line is not why it died: only an error's is
-                said = f": {executor.tail(1)}" if code > 0 and executor.tail(1) else ""
-                out(f"foresight demo: executor {describe_exit(code)}{said}")
+                said = executor.last_words()  # a killed process's last line is not why it died: only an error's is
+                out(f"foresight demo: executor {describe_exit(executor.returncode)}" + (f": {said}" if said else ""))
                 status = 1
             if supervisor.faults:
                 out("foresight demo: faults during the run: " + ", ".join(

@@ -102,6 +102,14 @@ class ServiceProcess:
             return ""
         return "\n".join(text.strip().splitlines()[-lines:])
 
+    def last_words(self) -> str:
+        """The last output line of a process that exited by itself with an error status.
+
+        '' otherwise: while it runs, after status 0, or when a signal ended it (its log's last line is then no reason).
+        """
+        code = self.returncode
+        return self.tail(1) if code is not None and code > 0 else ""
+
     def wait_alive(self, is_alive: Callable[[str], bool], timeout: float,
                    stop: threading.Event | None = None) -> bool:
         """Wait until the service's liveliness token is seen.
@@ -122,9 +130,8 @@ class ServiceProcess:
             if stop is not None and stop.is_set():
                 return False
             if not self.running:
-                code = self.returncode  # a signal's death is no line of the log's doing
-                why = self.tail(1) if code is not None and code > 0 else ""
-                raise UserError(f"{self.name} {describe_exit(code)}" + (f": {why}" if why else ""))
+                why = self.last_words()
+                raise UserError(f"{self.name} {describe_exit(self.returncode)}" + (f": {why}" if why else ""))
             if time.monotonic() > deadline:
                 raise UserError(f"{self.name} did not come up within {timeout:g} s (see {self.log_path})")
             time.sleep(0.02)

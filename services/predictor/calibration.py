@@ -79,9 +79,12 @@ class _PrefixScorer:
         self.key = digest(mixture.weights_, mixture.means_, mixture.covariances_, components)
         self._bank: MixtureBank | None = None
 
-    def scores(self, x: np.ndarray, ends: np.ndarray) -> np.ndarray:
-        """``(F,)`` ``sum_{t <= e} ln p(x_t | mixture)`` for each ``e`` of ``ends (F,)``; ``x`` is ``(T, D)``."""
-        key = self.key + digest(x, ends)
+    def scores(self, x: np.ndarray, ends: np.ndarray, x_key: str) -> np.ndarray:
+        """``(F,)`` ``sum_{t <= e} ln p(x_t | mixture)`` for each ``e`` of ``ends (F,)``; ``x`` is ``(T, D)``.
+
+        ``x_key`` is ``digest(x, ends)``, computed once by the caller for every class's scorer.
+        """
+        key = self.key + x_key
         out = _SCORES.get(key)
         if out is None:
             if self._bank is None:
@@ -129,7 +132,8 @@ def choose_temperature(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray]
             for j in js:
                 n = len(feats[m][j])
                 ends = np.clip(np.rint(np.asarray(fractions) * n).astype(int), 1, n) - 1
-                cums.append(np.stack([s.scores(feats[m][j], ends) for s in scorers], axis=-1))  # (F, M)
+                x_key = digest(feats[m][j], ends)  # once per demonstration, for every class's scorer
+                cums.append(np.stack([s.scores(feats[m][j], ends, x_key) for s in scorers], axis=-1))  # (F, M)
                 labels.append(m)
     cum, lab = np.array(cums), np.array(labels)
     losses = {float(t): log_loss(cum, lab, t) for t in grid}
