@@ -32,6 +32,8 @@ import numpy as np
 
 from services.predictor.volumes import DEFAULT_VOLUME, VOLUMES
 from shared import strict_json
+from shared.library import load_library, report_drops
+from shared.library.report import said_once, say_once
 from shared.native_threads import limit_blas_threads
 from shared.runtime import UserError
 
@@ -111,20 +113,28 @@ def report_workers(asked: int = 0) -> int:
     return asked or (os.cpu_count() or 1) + 1
 
 
-def run_parts(fn: Callable[..., T], jobs: Sequence[tuple[Any, ...]], workers: int, context: str = "spawn") -> list[T]:
+def run_parts(fn: Callable[..., T], jobs: Sequence[tuple[Any, ...]], workers: int, context: str = "spawn",
+              said: Sequence[str] = ()) -> list[T]:
     """``fn(*job)`` for every job in ``workers`` processes, handed out in the order given; results in that order.
 
     The first job to raise ends them all: its exception is raised here at once, and the worker processes, with the
     jobs they are running, are terminated (a full report's parts run for minutes; waiting for them would only
-    delay the error). ``context``: the multiprocessing start method.
+    delay the error). ``context``: the multiprocessing start method. ``said``: the libraries' drop lines the
+    caller logged already; the workers do not repeat them (:func:`shared.library.report.say_once`).
     """
     results: list[Any] = [None] * len(jobs)
-    with multiprocessing.get_context(context).Pool(workers, initializer=limit_blas_threads) as pool:  # exit: terminate
+    with multiprocessing.get_context(context).Pool(workers, initializer=_worker_init,
+                                                   initargs=(tuple(said),)) as pool:  # exit: terminate
         for i, result in pool.imap_unordered(_indexed, [(fn, i, job) for i, job in enumerate(jobs)]):
             results[i] = result
         pool.close()  # done: the workers exit by themselves (terminate is for a failure)
         pool.join()
     return results
+
+
+def _worker_init(said: tuple[str, ...]) -> None:
+    limit_blas_threads()
+    say_once(said)
 
 
 def _indexed(task: tuple[Callable[..., Any], int, tuple[Any, ...]]) -> tuple[int, Any]:
@@ -165,14 +175,18 @@ def run_report(args: argparse.Namespace) -> int:
     jobs = [(spec, part) for spec in libs for part in part_names(protocols)]
     workers = min(len(jobs), report_workers(args.workers))
     done: dict[str, dict[str, tuple[list[str], dict[str, Any]]]] = {spec: {} for spec in libs}
-    if workers > 1:
-        order = sorted(jobs, key=lambda job: -part_weight(job[1], plan))  # the longest first: the cores end together
-        results = run_parts(library_part, [(spec, part, plan, out, Path(args.models_dir), 1, args.volume)
-                                           for spec, part in order], workers)
-        for (spec, part), result in zip(order, results, strict=True):
-            done[spec][part] = result
-    sections = [library_section(spec, plan, out, Path(args.models_dir), volume=args.volume, protocols=protocols,
-                                parts=done[spec]) for spec in libs]
+    # every part reads its library again: read each here first (a bad one fails before any work), say what it
+    # dropped, and let no part say it again
+    said = [line for spec in libs if spec != SYNTHETIC for line in report_drops(load_library(spec, report=False))]
+    with said_once(said):
+        if workers > 1:
+            order = sorted(jobs, key=lambda job: -part_weight(job[1], plan))  # the longest first: cores end together
+            results = run_parts(library_part, [(spec, part, plan, out, Path(args.models_dir), 1, args.volume)
+                                               for spec, part in order], workers, said=said)
+            for (spec, part), result in zip(order, results, strict=True):
+                done[spec][part] = result
+        sections = [library_section(spec, plan, out, Path(args.models_dir), volume=args.volume,
+                                    protocols=protocols, parts=done[spec]) for spec in libs]
     pace = PaceResult(PaceConfig(libraries=tuple(libs), protocols=protocols, demos=plan.pace_demos,
                                  seeds=plan.pace_seeds))
     for _, d in sections:

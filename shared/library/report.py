@@ -2,18 +2,22 @@
 
 :func:`shared.library.load_library` logs these lines (logger ``foresight.library``, WARNING) on every
 path that reads a library: the replayer, the demo, training and the experiments. ``foresight library
-info`` and ``validate`` print the issues themselves, one per demonstration.
+info`` and ``validate`` print the issues themselves, one per demonstration. A command that reads one library
+many times (``foresight eval all``: every part reads it, in worker processes) says each line once with
+:func:`said_once`.
 """
 
 from __future__ import annotations
 
 import logging
 from collections import Counter
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from .motions import MotionLibrary
 
-__all__ = ["MAX_LISTED", "drop_lines", "report_drops"]
+__all__ = ["MAX_LISTED", "drop_lines", "report_drops", "said_once", "say_once"]
 
 log = logging.getLogger("foresight.library")
 
@@ -61,3 +65,38 @@ def report_drops(lib: MotionLibrary, logger: logging.Logger | None = None) -> li
     for line in lines:
         (logger or log).warning("%s", line)
     return lines
+
+
+class _Once(logging.Filter):
+    """Lets a drop line through the first time only; ``said`` holds the lines said already (elsewhere too)."""
+
+    def __init__(self, said: Iterable[str] = ()) -> None:
+        super().__init__()
+        self.said = set(said)
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        line = record.getMessage()
+        if line in self.said:
+            return False
+        self.said.add(line)
+        return True
+
+
+def say_once(said: Iterable[str] = ()) -> None:
+    """From now on in this process, log each drop line once, and none of ``said`` (lines another process logged).
+
+    For worker processes (a ``multiprocessing`` initializer): their parent read the library first and said
+    what it dropped.
+    """
+    log.addFilter(_Once(said))
+
+
+@contextmanager
+def said_once(said: Iterable[str] = ()) -> Iterator[None]:
+    """Within the block, :func:`say_once`; the filter is removed on leaving it."""
+    once = _Once(said)
+    log.addFilter(once)
+    try:
+        yield
+    finally:
+        log.removeFilter(once)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 import time
 from pathlib import Path
@@ -12,7 +13,9 @@ import pytest
 from services.experiments.cli import main
 from services.experiments.report import report_workers, run_parts
 from services.experiments.sections import part_names
+from shared.library import load_library, report_drops
 from shared.runtime import UserError
+from tests.shared.library.test_report import broken_library
 
 
 def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path):
@@ -79,3 +82,26 @@ def test_two_libraries_with_one_name_are_refused_before_anything_runs(tmp_path, 
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "is given twice" in err[0] and "different folder name" in err[0]
     assert not out.exists()
+
+
+def _read_and_listen(path: str) -> list[str]:
+    """Read a library in a worker; returns the drop lines that reached the library logger's handlers."""
+    heard: list[str] = []
+    handler = logging.Handler()
+    handler.emit = lambda record: heard.append(record.getMessage())  # type: ignore[method-assign]
+    logging.getLogger("foresight.library").addHandler(handler)
+    try:
+        load_library(path)
+    finally:
+        logging.getLogger("foresight.library").removeHandler(handler)
+    return heard
+
+
+def test_the_workers_do_not_repeat_the_drops_the_report_said(tmp_path):
+    lib = str(broken_library(tmp_path / "lib"))
+    said = report_drops(load_library(lib, report=False))
+    assert len(said) == 1
+    jobs = [(lib,)] * 4
+    heard = run_parts(_read_and_listen, jobs, workers=2, context="fork")
+    assert all(h in ([], said) for h in heard) and 1 <= heard.count(said) <= 2  # once in each worker at most
+    assert run_parts(_read_and_listen, jobs, workers=2, context="fork", said=said) == [[]] * 4
