@@ -84,6 +84,11 @@ class DirectFile:
                 log.warning("mcap log %s: the OS takes writes again; nothing held is lost", self._path)
 
     @property
+    def failed(self) -> OSError | None:
+        """The OS's refusal that ended the file (None while it takes bytes): every later write fails."""
+        return self._failed
+
+    @property
     def held(self) -> int:
         """Bytes taken but not yet written (the OS refused them)."""
         return len(self._held)

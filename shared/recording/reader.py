@@ -59,13 +59,16 @@ def open_records(path: str | Path) -> Iterator[StreamReader]:
     """The records of an MCAP file, read in file order with CRCs checked, for every reader of the logs.
 
     Raises:
-        UserError: The path is missing, a directory, empty, or does not start with the MCAP magic.
+        UserError: The path is missing, a directory, not a regular file (a pipe), empty, or does not start with
+            the MCAP magic.
     """
     p = Path(path)
     if p.is_dir():
         raise UserError(f"log file {str(p)!r} is a directory")
-    if not p.is_file():
+    if not p.exists():
         raise UserError(f"log file {str(p)!r} not found")
+    if not p.is_file():  # a pipe (process substitution) cannot be read twice or sought: the readers need both
+        raise UserError(f"log file {str(p)!r} is not a regular file (a pipe?): copy it to a file first")
     size = p.stat().st_size
     with p.open("rb") as f:
         head = f.read(len(MAGIC))

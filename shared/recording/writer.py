@@ -20,8 +20,11 @@ Layout (see docs/executor.md; the channels' schemas are in :mod:`shared.recordin
 
 Chunks are compressed with zstd by default (``compression``; lz4 or none on request). The file is
 written in chunks straight to the operating system (no user-space buffer) and the open
-chunk is flushed every ``flush_period_s``; if the process is killed, everything up to the last
-complete chunk stays readable (with a non-seeking reader, see :func:`shared.recording.reader.read_log`).
+chunk is flushed every ``flush_period_s``, by a thread of its own when no message comes to do it (a run
+waiting for its peers); if the process is killed, everything up to the last complete chunk stays readable
+(with a non-seeking reader, see :func:`shared.recording.reader.read_log`). Once the file has ended (the OS
+refused bytes past what :mod:`shared.recording.direct_file` holds), every later message raises at once
+instead of growing the writer's index of a chunk that will never be written.
 """
 
 from __future__ import annotations
@@ -65,7 +68,7 @@ class McapLog:
         viz_period_s: Smallest time (message stamps) between two scene updates of the robot, the
             human or the occupancy (plans and posteriors are drawn every time).
         chunk_size: Chunk size in bytes.
-        flush_period_s: Longest time an incomplete chunk stays in memory.
+        flush_period_s: Longest time an incomplete chunk stays in memory (finite; 0: each message is flushed).
         scene_text: The scene file's text, attached as ``scene.toml``.
         run_metadata: String map written as metadata ``foresight.run``.
         clock: Log-time source in nanoseconds (default ``time.time_ns``).
@@ -87,6 +90,8 @@ class McapLog:
                  compression: str = "zstd", on_viz: Callable[[VizMessage], None] | None = None) -> None:
         if compression not in COMPRESSION:
             raise ValueError(f"MCAP compression must be one of {', '.join(COMPRESSION)}, got {compression!r}")
+        if not 0 <= flush_period_s <= threading.TIMEOUT_MAX:
+            raise ValueError(f"MCAP flush period must be a finite number of seconds >= 0, got {flush_period_s}")
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.keys = keys
@@ -120,6 +125,12 @@ class McapLog:
         self._writer.flush()
         self._viz = (BackgroundWorker(self._visualise_item, "mcap-foxglove", viz_pending)
                      if builder is not None and viz_thread else None)
+        self._flush_errors = 0
+        self._stop_flushing = threading.Event()
+        self._flusher = None  # with a period of 0 every message flushes: no quiet spell holds one back
+        if flush_period_s > 0:
+            self._flusher = threading.Thread(target=self._flush_periodically, name="mcap-flush", daemon=True)
+            self._flusher.start()
 
     # -- channels ------------------------------------------------------------------------------
 
@@ -137,6 +148,9 @@ class McapLog:
         return self._channels[topic]
 
     def _add(self, channel: int, topic: str, data: bytes, log_time: int, publish_time: int) -> None:
+        if (failed := self._file.failed) is not None:  # the file has ended: the writer would only grow its index
+            raise OSError(failed.errno, f"{self.path}: the log has ended ({failed.strerror}); message on {topic} "
+                          "not written")
         self._writer.add_message(channel_id=channel, log_time=log_time, data=data, publish_time=publish_time,
                                  sequence=self.counts.get(topic, 0))
         self.counts[topic] = self.counts.get(topic, 0) + 1
@@ -262,6 +276,17 @@ class McapLog:
 
     # -- lifecycle -----------------------------------------------------------------------------
 
+    def _flush_periodically(self) -> None:
+        """The flushes no message triggers: a chunk waits at most ``flush_period_s`` even in a quiet spell."""
+        while not self._stop_flushing.wait(max(0.0, self._last_flush + self.flush_period_s - time.monotonic())):
+            try:
+                self.flush_if_due()
+            except Exception as exc:  # a full disk: the next message's write fails and is counted by its caller
+                self._flush_errors += 1
+                if self._flush_errors == 1 or self._flush_errors % 100 == 0:
+                    log.error("mcap log %s: flushing failed (%d so far): %s", self.path, self._flush_errors, exc)
+                self._stop_flushing.wait(self.flush_period_s)
+
     def flush_if_due(self) -> None:
         """Write the open chunk if it is older than ``flush_period_s`` (call it periodically)."""
         if time.monotonic() - self._last_flush >= self.flush_period_s:
@@ -277,7 +302,12 @@ class McapLog:
     def close(self) -> None:
         """Finish the queued scene updates, write the reject counts, the summary and the footer; idempotent."""
         if self._viz is not None:
-            self._viz.close()  # outside the lock: the updates still queued take it to write
+            # outside the lock: the updates still queued take it to write. Both waits are bounded well within a
+            # stopping process's grace (shared.runtime.SHUTDOWN_GRACE_S), so the footer is written before it ends
+            self._viz.close(timeout_s=5.0)
+        self._stop_flushing.set()
+        if self._flusher is not None and self._flusher is not threading.current_thread():
+            self._flusher.join(2.0)  # a flush holds the lock at most as long as a write
         with self._lock:
             if self._closed:
                 return

@@ -49,7 +49,8 @@ class CompressResult:
         state = "" if self.input_complete else (f" (the input is truncated ({self.input_error or 'no footer'}): copied "
                                                 "up to its last complete chunk, and the copy says so)")
         same = "identical" if self.identical else "NOT IDENTICAL"
-        return (f"{src} ({self.size_in / 1e6:.2f} MB) -> {dst} ({self.size_out / 1e6:.2f} MB, {ratio:.1f}x smaller); "
+        size = f"{ratio:.1f}x smaller" if ratio >= 1 else f"{1 / ratio:.1f}x larger"
+        return (f"{src} ({self.size_in / 1e6:.2f} MB) -> {dst} ({self.size_out / 1e6:.2f} MB, {size}); "
                 f"{self.messages} messages read back {same}{state}")
 
 

@@ -54,7 +54,9 @@ def format_info(lf: LogFile) -> str:
     state = (f"complete; copied from a TRUNCATED log ({source.get('source_error', 'no footer')}): what the run wrote "
              "after its last whole chunk is not here" if lf.complete and source.get("source_complete") == "false"
              else "complete") if lf.complete else (
-        f"{lf.state}: recovered {lf.message_count} messages, {d['duration_s']:.2f} s, "
+        f"{lf.state}: recovered {d['messages']} messages"
+        + (f" and {d['rejected_records']} refused payloads" if d["rejected_records"] else "")
+        + f", {d['duration_s']:.2f} s, "
         "up to the last whole chunk")
     lines = [f"file:      {lf.path} ({lf.size / 1e6:.2f} MB, {state})",
              f"profile:   {lf.profile or '-'}   library: {lf.library or '-'}",

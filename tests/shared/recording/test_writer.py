@@ -237,3 +237,21 @@ def test_compressed_chunks_hold_the_same_messages(tmp_path, pr2) -> None:
     assert sizes["zstd"] < sizes["none"] / 3 and sizes["lz4"] < sizes["none"]
     with pytest.raises(ValueError, match="compression must be one of zstd, lz4, none"):
         McapLog(tmp_path / "x.mcap", KEYS, None, compression="gzip")
+
+
+def test_a_quiet_spell_holds_no_message_back_longer_than_the_flush_period(tmp_path, pr2) -> None:
+    """Messages just before a quiet spell (an executor waiting for its peers) stayed in memory until the next
+    message came, and a kill then lost them: the open chunk was flushed only when a message was logged."""
+    path = tmp_path / "quiet.mcap"
+    log = McapLog(path, KEYS, None, flush_period_s=0.2)
+    try:
+        sent = [log.on_sample(KEYS.clock, encode(ClockTick(stamp=0.1 * i, tick=i, period=0.1))) for i in range(3)]
+        assert all(m is not None for m in sent)
+        time.sleep(1.0)  # no message: the log's own timer flushes
+        lf = read_log(path, keep=lambda ch: True)  # read as a killed run's file is
+        assert not lf.complete and len(lf.topic_messages(KEYS.clock)) == 3
+    finally:
+        log.close()
+    assert read_log(path).complete
+    with pytest.raises(ValueError, match="flush period must be a finite number of seconds >= 0"):
+        McapLog(tmp_path / "x.mcap", KEYS, None, flush_period_s=float("inf"))

@@ -19,6 +19,7 @@ def test_round_trip_is_identical_and_sizes_follow_the_compression(run_log: Path,
     assert plain.identical and packed.identical and plain.input_complete
     assert plain.messages == packed.messages == read_log(run_log).message_count
     assert packed.size_out < plain.size_out
+    assert "x smaller" in packed.line(Path("a"), Path("b")) and "x larger" in plain.line(Path("a"), Path("b"))
     assert same_messages(run_log, tmp_path / "packed.mcap")
     assert read_log(tmp_path / "packed.mcap").complete
 

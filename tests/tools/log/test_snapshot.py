@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import os
 import shutil
 from pathlib import Path
 
@@ -110,6 +111,8 @@ def test_human_and_posterior_are_drawn(robot, tmp_path) -> None:
 
 @pytest.mark.parametrize("argv, message", [
     (["snapshot", "/nonexistent.mcap"], "not found"),
+    (["snapshot", "{tmp}"], "is a directory"),  # it said 'not found'
+    (["snapshot", "{pipe}"], "is not a regular file (a pipe?)"),
     (["snapshot", "{bad}"], "not an MCAP file"),
     (["snapshot", "{log}", "--at", "-1"], "--at must be a finite time >= 0"),
     (["snapshot", "{log}", "--at", "inf"], "--at must be a finite time >= 0"),
@@ -122,7 +125,8 @@ def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
     bad.write_bytes(b"hello, this is not mcap at all")
     empty = tmp_path / "empty.mcap"
     McapLog(empty, KEYS).close()
-    argv = [a.format(log=run_log, bad=bad, empty=empty, tmp=tmp_path) for a in argv]
+    os.mkfifo(pipe := tmp_path / "pipe")
+    argv = [a.format(log=run_log, bad=bad, empty=empty, tmp=tmp_path, pipe=pipe) for a in argv]
     with pytest.raises(SystemExit) as exc:
         main(argv)
     assert exc.value.code not in (0, None)
