@@ -38,7 +38,7 @@ def _write_layout(cfg: ViewConfig) -> None:
     from shared.scene import load_scene
 
     path = Path(cfg.write_layout)
-    path.write_text(layout_text(foresight_layout(load_scene(cfg.scene or None))))
+    path.write_text(layout_text(foresight_layout(load_scene(cfg.scene or None), voxel_size=cfg.voxel_size or None)))
     print(f"foresight view: wrote the Foxglove layout {path} (Foxglove: Layouts -> Import from file)")
 
 

@@ -34,6 +34,9 @@ class ViewConfig:
                     "take CPU from the planning loop on a shared machine")
     write_layout: str = opt("", help="write the Foxglove layout for this scene (3D panel, posterior and cost plots) "
                             "to this file and exit")
+    voxel_size: float = opt(0.0, help="the layout's cube per occupancy voxel (m; --write-layout): 0, the scene "
+                            "grid's resolution; give the model's when it was trained with another (foresight train "
+                            "--resolution), or its voxels are drawn overlapping or apart")
     log_level: str = opt("INFO", help="log level", choices=LOG_LEVELS)
 
     def validate(self) -> None:
@@ -45,6 +48,9 @@ class ViewConfig:
         lo, hi = STATIC_PERIOD_RANGE
         if not lo <= self.static_period_s <= hi:
             raise ConfigError(f"view.static_period_s: must be {lo:g}..{hi:g} s, got {self.static_period_s}")
+        if not (0 <= self.voxel_size <= 1 and math.isfinite(self.voxel_size)):
+            raise ConfigError(f"view.voxel_size: must be 0 (the scene's resolution) or a size up to 1 m, got "
+                              f"{self.voxel_size}")
         if not 0 <= self.nice <= 19:
             raise ConfigError(f"view.nice: must be 0..19, got {self.nice}")
         check_device(self.device, "view.device")

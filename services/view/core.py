@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable
 
 from shared.foxglove.scene import SceneBuilder
-from shared.foxglove.stream import SceneStream, VizMessage
+from shared.foxglove.stream import DRAWS, SceneStream, VizMessage
 from shared.protocol import Message
 
 __all__ = ["ViewCore"]
@@ -45,12 +45,19 @@ class ViewCore:
         with self._lock:
             return self.stream.static(self._clock())
 
-    def on_message(self, msg: Message) -> list[VizMessage]:
-        """The scene messages of ``msg`` received now ([] when it is not drawn: no picture, or too soon)."""
-        log_time = self._clock()
+    def on_message(self, msg: Message, watched: Callable[[str], bool] | None = None) -> list[VizMessage]:
+        """The scene messages of ``msg`` received now ([] when it is not drawn: no picture, or too soon).
+
+        Args:
+            msg: The message.
+            watched: Whether a client subscribes to a topic (None: draw as if one did). A message none of whose
+                topics (:data:`~shared.foxglove.stream.DRAWS`) is watched is not drawn, and does not count as
+                drawn: the next one of its kind is drawn for a client that subscribes meanwhile.
+        """
         with self._lock:
+            log_time = self._clock()  # in the lock: the messages of one topic leave in the order of their times
             topic = self.stream.due(msg)
-            if topic is None:
+            if topic is None or (watched is not None and not any(map(watched, DRAWS[topic]))):
                 return []
             self.stream.mark(topic, msg)
             try:

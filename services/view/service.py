@@ -64,7 +64,7 @@ class ViewService:
         if server is None:
             return
         try:
-            for m in self.core.on_message(msg):
+            for m in self.core.on_message(msg, server.watched):  # nobody watching: no drawing (FK, encoding)
                 server.log(m)
         except Exception:  # a drawing bug costs a picture, never the view
             self.failures += 1

@@ -79,7 +79,9 @@ def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[Sce
     """The scene messages of a log (channels ``/viz/...`` and ``/tf``, or ``topics``) in log-time order.
 
     The file is read record by record, as :func:`shared.recording.reader.read_log` does: a log whose writer
-    was killed yields what its complete chunks hold.
+    was killed yields what its complete chunks hold. The scene is written off the receive path, so the file is
+    not in log-time order: the wanted records are all held (encoded) and sorted before the first is yielded,
+    memory about the size of the log's scene messages.
 
     Raises:
         SceneDecodeError: A message does not decode under its channel's schema.

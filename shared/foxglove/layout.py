@@ -36,13 +36,15 @@ def _plot(title: str, paths: list[tuple[str, str, str]], y_label: str, y_max: fl
 
 
 def foresight_layout(scene: Scene, class_names: Sequence[str] | None = None,
-                     goal_names: Sequence[str] | None = None) -> fl.Layout:
+                     goal_names: Sequence[str] | None = None, voxel_size: float | None = None) -> fl.Layout:
     """The layout for a run in ``scene``.
 
     Args:
         scene: The scene (its cups are the goals; its grid's resolution is the voxels' size).
         class_names: The motion classes of the posterior plot (default: the cups' names, as the libraries name them).
         goal_names: The goals of the cost plot (default: the cups' names).
+        voxel_size: The cube drawn per occupancy voxel (m; default: the scene grid's resolution). A model trained
+            at another resolution (``foresight train --resolution``) sends its own voxels.
 
     Returns:
         The layout; ``layout.to_json()`` is the file the Foxglove app imports.
@@ -54,7 +56,8 @@ def foresight_layout(scene: Scene, class_names: Sequence[str] | None = None,
         topic: fl.BaseRendererSceneUpdateTopicSettings(visible=True)  # type: ignore[dict-item]
         for topic, s in SCHEMAS.items() if s.name == "foxglove.SceneUpdate"}
     topics["/viz/occupancy"] = fl.BaseRendererPointCloudTopicSettings(
-        visible=True, point_shape="cube", cube_size=float(scene.grid.resolution), color_mode="rgba-fields")
+        visible=True, point_shape="cube", cube_size=float(voxel_size or scene.grid.resolution),
+        color_mode="rgba-fields")
     centre = (np.asarray(scene.workspace.min, dtype=float) + np.asarray(scene.workspace.max, dtype=float)) / 2
     three_d = fl.ThreeDeePanel(title="scene", config=fl.ThreeDeeConfig(
         follow_tf="world", topics=topics,

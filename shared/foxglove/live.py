@@ -2,10 +2,15 @@
 
 Every channel of :data:`shared.foxglove.stream.SCHEMAS` is advertised from the start, so a client (the
 Foxglove app, or any client of Foxglove's WebSocket protocol) can subscribe before the first message; a
-message on a channel no client subscribes to costs nothing but the call. The static scene (table, cups,
+message on a channel no client subscribes to costs nothing but the call (:meth:`LiveServer.watched` lets a caller
+skip drawing it). The static scene (table, cups,
 robot base) is sent again every ``static_period_s`` for apps that connect later (Foxglove keeps a scene
 entity until it is replaced). The server has its own ``foxglove.Context``: nothing else logged through the
-SDK in this process reaches it.
+SDK in this process reaches it. A channel's log times never go backwards, whichever thread logs.
+
+The WebSocket has no authentication, under ``--security`` too (that secures Zenoh): a host other than
+loopback is served with a warning saying so (``compose.yaml`` binds 0.0.0.0 inside its container and
+publishes the port on the host's loopback).
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from collections.abc import Callable
 
 import foxglove
 
+from shared.loopback import is_loopback
 from shared.runtime import UserError
 
 from .stream import SCHEMAS, VizMessage
@@ -66,7 +72,12 @@ class LiveServer:
             raise LiveServerError(f"live view: cannot serve on ws://{url_host(host)}:{port}: {exc}") from exc
         self.host = host
         self.port: int = self._server.port
+        if not is_loopback(host):
+            log.warning("live view: serving ws://%s:%d beyond loopback, without authentication (--security covers "
+                        "Zenoh, not this WebSocket): anyone who reaches the port sees the run", url_host(host),
+                        self.port)
         self.sent: dict[str, int] = dict.fromkeys(SCHEMAS, 0)
+        self._last_time: dict[str, int] = {}
         self._stopped = False
         self._count_lock = threading.Lock()
         self._stop = threading.Event()
@@ -90,16 +101,31 @@ class LiveServer:
 
     @property
     def url(self) -> str:
-        """The address to open in the Foxglove app (an IPv6 host in brackets: ``ws://[::1]:8765``)."""
-        return f"ws://{url_host(self.host)}:{self.port}"
+        """The address to open in the Foxglove app on this machine.
+
+        An IPv6 host in brackets (``ws://[::1]:8765``); a server on every address (0.0.0.0 or ::) at loopback.
+        """
+        host = {"0.0.0.0": "127.0.0.1", "::": "::1", "[::]": "::1"}.get(self.host, self.host)
+        return f"ws://{url_host(host)}:{self.port}"
+
+    def watched(self, topic: str) -> bool:
+        """Whether a client subscribes to ``topic`` now."""
+        return not self._stopped and self._channels[topic].has_sinks()
 
     def log(self, message: VizMessage) -> None:
-        """Send one encoded scene message to every client subscribed to its topic."""
+        """Send one encoded scene message to every client subscribed to its topic.
+
+        Its log time is raised to its channel's last one if it is older (a thread that drew it earlier than
+        another but logged it later): a channel's times never go backwards.
+        """
         if self._stopped:
             return
-        self._channels[message.topic].log(message.data, log_time=message.log_time)
+        topic = message.topic
         with self._count_lock:  # several threads log (Zenoh's per subscriber, the log's, the static resend)
-            self.sent[message.topic] += 1
+            log_time = max(message.log_time, self._last_time.get(topic, 0))
+            self._last_time[topic] = log_time
+            self._channels[topic].log(message.data, log_time=log_time)
+            self.sent[topic] += 1
 
     def close(self) -> None:
         """Stop serving (clients are disconnected); idempotent."""

@@ -186,6 +186,7 @@ class SceneBuilder:
         self.min_probability = min_probability
         self.max_voxels = max_voxels
         self._first_pose: dict[int, np.ndarray] = {}  # the placement reference of the last few demonstrations
+        self._unmatched_names: set[tuple[str, ...]] = set()  # joint name lists already warned about
 
     def note_pose(self, pose: HumanPose) -> None:
         """Every pose, drawn or not: a demonstration's first (index 0) is where the human is placed from.
@@ -194,9 +195,13 @@ class SceneBuilder:
         predictor places the human from it, and so must the picture.
         """
         if pose.index == 0:
-            self._first_pose[pose.demo_id] = pose.features.copy()
-            while len(self._first_pose) > _KEEP_FIRST_POSES:  # a long session: keep the last few
-                del self._first_pose[next(iter(self._first_pose))]
+            self._remember_first(pose)
+
+    def _remember_first(self, pose: HumanPose) -> np.ndarray:
+        self._first_pose[pose.demo_id] = first = pose.features.copy()
+        while len(self._first_pose) > _KEEP_FIRST_POSES:  # a long session: keep the last few
+            del self._first_pose[next(iter(self._first_pose))]
+        return first
 
     # -- static scene ----------------------------------------------------------------------------
 
@@ -228,7 +233,10 @@ class SceneBuilder:
         if list(names) == model:
             return q
         if sorted(names) != sorted(model):
-            log.warning("viz: joint names %s do not match the robot model's %s", names, model)
+            if tuple(names) not in self._unmatched_names:  # once per list: every robot state would say it again
+                self._unmatched_names.add(tuple(names))
+                log.warning("viz: joint names %s do not match the robot model's %s; such states are not drawn",
+                            names, model)
             return None
         idx = [list(names).index(n) for n in model]
         return q[..., idx]
@@ -328,7 +336,7 @@ class SceneBuilder:
         self.note_pose(pose)
         first = self._first_pose.get(pose.demo_id)
         if first is None:  # joined after the demonstration's first pose: placed from the first one seen
-            self._first_pose[pose.demo_id] = first = pose.features.copy()
+            first = self._remember_first(pose)
         feats = self.place(pose.features, first, self.scene)
         ends, radii = self.human.capsules(feats)  # (S, 2, 3), (S,)
         ends = np.asarray(ends, dtype=np.float64).reshape(-1, 2, 3)

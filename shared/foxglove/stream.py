@@ -21,7 +21,7 @@ from shared.protocol import ClassPosterior, HumanPose, Message, OccupancyGrid, P
 from .charts import COSTS_SCHEMA, POSTERIOR_SCHEMA, costs_chart, posterior_chart
 from .scene import SceneBuilder
 
-__all__ = ["TOPICS", "VizSchema", "VizMessage", "SceneStream", "SCHEMAS"]
+__all__ = ["TOPICS", "DRAWS", "VizSchema", "VizMessage", "SceneStream", "SCHEMAS"]
 
 
 @dataclass(frozen=True)
@@ -74,6 +74,12 @@ TOPICS: dict[str, str] = {topic: s.name for topic, s in SCHEMAS.items()}
 
 _EVERY = frozenset({"/viz/plan", "/viz/posterior"})
 """Drawn for every message; the others at most once per ``viz_period_s`` of message time."""
+
+
+DRAWS: dict[str, tuple[str, ...]] = {"/viz/plan": ("/viz/plan", "/viz/costs"), "/viz/robot": ("/viz/robot", "/tf"),
+                                      "/viz/occupancy": ("/viz/occupancy",), "/viz/human": ("/viz/human",),
+                                      "/viz/posterior": ("/viz/posterior",)}
+"""The topics :meth:`SceneStream.draw` writes for each message kind (the topic :meth:`SceneStream.due` names)."""
 
 
 def _kind(msg: Message) -> str | None:

@@ -6,6 +6,7 @@ import ipaddress
 import os
 from typing import TYPE_CHECKING, Any
 
+from shared.loopback import is_loopback
 from shared.protocol import Keys
 
 from .acl import OBSERVER, access_control
@@ -68,12 +69,7 @@ def insecure_listen_warning(listen: list[str]) -> str:
     """One warning line when a session without security listens beyond loopback ("" when it does not)."""
     exposed = []
     for ep in listen:
-        host = _host(ep)
-        try:
-            loopback = ipaddress.ip_address(host).is_loopback
-        except ValueError:
-            loopback = host == "localhost"
-        if not loopback:
+        if not is_loopback(_host(ep)):
             exposed.append(ep)
     if not exposed:
         return ""

@@ -42,6 +42,16 @@ def test_the_live_scene_is_what_the_log_records(builder) -> None:
     assert [m.topic for m in core.static()] == ["/viz/scene", "/tf"]
 
 
+def test_a_message_nobody_watches_is_not_drawn_and_not_counted_as_drawn(builder) -> None:
+    """The view drew every message (the robot's FK, the encoding) though no client subscribed."""
+    core = ViewCore(builder, viz_period_s=0.5, clock=itertools.count(1_000, 1_000).__next__)
+    watching: set[str] = set()
+    assert core.on_message(grid(0.0), watching.__contains__) == [] and core.drawn == {}
+    watching.add("/viz/occupancy")
+    assert len(core.on_message(grid(0.1), watching.__contains__)) == 1  # not held back by the one not drawn
+    assert core.drawn == {"/viz/occupancy": 1}
+
+
 def test_bad_options_are_named() -> None:
     for kwargs, name in (({"port": 70000}, "view.port"), ({"viz_rate_hz": 0}, "view.viz_rate_hz"),
                          ({"nice": 25}, "view.nice"), ({"device": ""}, "view.device"),

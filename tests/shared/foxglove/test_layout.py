@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from shared.foxglove.layout import foresight_layout, layout_text
 from shared.foxglove.stream import SCHEMAS, SceneStream
 
@@ -45,3 +47,18 @@ def test_the_layout_shows_every_scene_topic_and_plots_paths_that_resolve(builder
             for part in path.split("."):
                 value = value[part]
             assert value is None or isinstance(value, float), series["value"]
+
+
+def test_a_model_s_own_voxel_size_is_the_layout_s_cube(tmp_path, capsys) -> None:
+    """The cubes were the scene grid's 5 cm whatever the model's resolution (foresight train --resolution 0.03)."""
+    from services.view.__main__ import main
+
+    cloud = json.loads(foresight_layout(SCENE, voxel_size=0.03).to_json())
+    assert next(p for p in panels(cloud["content"]) if p["panelType"] == "ThreeDee")["config"]["topics"][
+        "/viz/occupancy"]["cubeSize"] == 0.03
+    out = tmp_path / "layout.json"
+    assert main(["--write-layout", str(out), "--voxel-size", "0.03"]) == 0
+    assert out.read_text() == layout_text(foresight_layout(SCENE, voxel_size=0.03))
+    with pytest.raises(SystemExit) as exc:
+        main(["--write-layout", str(out), "--voxel-size", "-1"])
+    assert exc.value.code == 2 and "view.voxel_size" in capsys.readouterr().err

@@ -94,3 +94,50 @@ def test_a_static_period_that_is_not_a_finite_positive_number_is_refused(period)
     """An infinite period killed the thread re-sending the table and cups (time_t overflow) at its first wait."""
     with pytest.raises(LiveServerError, match="period must be a finite number > 0"):
         LiveServer(port=0, static=lambda t: [], static_period_s=period)
+
+
+def test_a_channel_s_log_times_never_go_backwards_and_watched_says_who_subscribes(builder) -> None:
+    """A thread that drew a message earlier than another but logged it later sent an older log time after a newer
+    one on the same channel; the view also drew for channels nobody watched."""
+    stream = SceneStream(builder)
+    with LiveServer(port=0) as server, FoxgloveClient(server.url) as client:
+        assert not server.watched("/viz/posterior")
+        client.subscribe(["/viz/posterior"])
+        deadline = time.monotonic() + 20
+        while not server.watched("/viz/posterior") and time.monotonic() < deadline:
+            client.receive(0.1)
+        assert server.watched("/viz/posterior") and not server.watched("/viz/occupancy")
+        late, early = stream.draw(posterior(), T + 5)[0], stream.draw(posterior(), T + 1)[0]
+        server.log(late)
+        server.log(early)  # drawn before `late`, logged after it
+        got: list = []
+        while len(got) < 2 and time.monotonic() < deadline:
+            got += [r.log_time for r in client.receive(0.2)]
+        assert got == [T + 5, T + 5]
+    assert not server.watched("/viz/posterior")  # stopped: nobody
+
+
+def test_a_host_beyond_loopback_is_served_with_a_warning_and_opened_at_loopback(monkeypatch, caplog) -> None:
+    """The WebSocket has no authentication, --security or not; 0.0.0.0 was served silently and printed as the
+    address to open. (The server is not really started on 0.0.0.0 here: tests stay on loopback.)"""
+    import foxglove
+
+    started = []
+
+    class Fake:
+        port = 8765
+
+        def stop(self) -> None:
+            pass
+
+    monkeypatch.setattr(foxglove, "start_server", lambda **kw: started.append(kw["host"]) or Fake())
+    with caplog.at_level("WARNING", logger="shared.foxglove.live"):
+        for host, url in (("0.0.0.0", "ws://127.0.0.1:8765"), ("::", "ws://[::1]:8765"),
+                          ("192.0.2.7", "ws://192.0.2.7:8765"), ("127.0.0.1", "ws://127.0.0.1:8765")):
+            caplog.clear()
+            with LiveServer(port=8765, host=host) as server:
+                assert server.url == url
+            warned = [r.getMessage() for r in caplog.records]
+            assert (host == "127.0.0.1") == (not warned), (host, warned)
+            assert all("without authentication" in w and "--security" in w for w in warned)
+    assert started == ["0.0.0.0", "::", "192.0.2.7", "127.0.0.1"]

@@ -162,3 +162,21 @@ def test_the_human_is_placed_from_its_first_pose_even_when_that_pose_is_not_draw
     for demo in range(3, 10):  # a long session keeps a few references, not one per demonstration
         viewed.note_pose(at(demo, 0, float(demo), 0.0))
     assert len(viewed._first_pose) <= 4
+    for demo in range(10, 60):  # joined each demonstration after its first pose: one reference per demonstration
+        viewed.human_body(at(demo, 5, float(demo), 0.0))  # was kept for ever
+    assert len(viewed._first_pose) <= 4
+
+
+def test_a_joint_name_mismatch_is_said_once_per_name_list(builder, caplog) -> None:
+    """Every robot state (twice: spheres and end effector) and every plan logged the same warning again."""
+    from dataclasses import replace
+
+    good = state(builder.robot)
+    names = list(good.joint_names)
+    wrong, other = replace(good, joint_names=["x", *names[1:]]), replace(good, joint_names=[*names[:-1], "y"])
+    with caplog.at_level("WARNING", logger="shared.foxglove.scene"):
+        for _ in range(30):
+            assert builder.robot_spheres(wrong) is None and builder.end_effector_transform(wrong) is None
+        builder.robot_spheres(other)
+    warned = [r.getMessage() for r in caplog.records if "do not match" in r.getMessage()]
+    assert len(warned) == 2 and "'x'" in warned[0] and "'y'" in warned[1]
