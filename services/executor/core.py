@@ -52,12 +52,15 @@ class ArmLimits:
         lower: ``(D,)`` lower joint limits.
         upper: ``(D,)`` upper joint limits.
         velocity: ``(D,)`` positive joint velocity limits (per second).
+        continuous: The joints without position limits (``lower``/``upper`` are then the planner's [-pi, pi]); a
+            robot may report them unwrapped (2 pi + 0.1), which :meth:`wrap` brings into that range.
     """
 
     joint_names: tuple[str, ...]
     lower: np.ndarray
     upper: np.ndarray
     velocity: np.ndarray
+    continuous: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         d = len(self.joint_names)
@@ -71,6 +74,8 @@ class ArmLimits:
             raise ExecutorError(f"ArmLimits: upper limit below lower limit for {bad}")
         if np.any(self.velocity <= 0):
             raise ExecutorError("ArmLimits.velocity: limits must be > 0")
+        if unknown := [n for n in self.continuous if n not in self.joint_names]:
+            raise ExecutorError(f"ArmLimits.continuous: {unknown} are not joints of {list(self.joint_names)}")
 
     @property
     def dof(self) -> int:
@@ -80,6 +85,30 @@ class ArmLimits:
     def clamp(self, q: np.ndarray) -> np.ndarray:
         """Clamp configurations ``(..., D)`` into the joint limits."""
         return np.clip(q, self.lower, self.upper)
+
+    @property
+    def continuous_mask(self) -> np.ndarray:
+        """``(D,)`` bool: which joints are continuous."""
+        return np.array([n in self.continuous for n in self.joint_names], dtype=bool)
+
+    def wrap(self, q: np.ndarray) -> np.ndarray:
+        """Configurations ``(..., D)`` with each continuous joint's angle brought into [-pi, pi)."""
+        out = np.array(q, dtype=np.float64)
+        c = self.continuous_mask
+        out[..., c] = (out[..., c] + np.pi) % (2 * np.pi) - np.pi
+        return out
+
+    def unwrap_from(self, start: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Waypoints ``(N, D)`` whose continuous joints turn the short way from ``start`` ``(D,)``.
+
+        ``start`` is a robot's own (possibly unwrapped) reading; each continuous joint then goes on the short way
+        from waypoint to waypoint, never back round through the wrap.
+        """
+        c = self.continuous_mask
+        out = np.array(q, dtype=np.float64)
+        if c.any():
+            out[:, c] = np.unwrap(np.vstack([np.asarray(start, dtype=np.float64)[None, c], out[:, c]]), axis=0)[1:]
+        return out
 
     @classmethod
     def from_robot(cls, robot: object) -> ArmLimits:
@@ -93,7 +122,7 @@ class ArmLimits:
             return np.asarray(x, dtype=np.float64)
 
         return cls(tuple(robot.joint_names), arr(robot.lower), arr(robot.upper),  # type: ignore[attr-defined]
-                   arr(robot.velocity_limits))  # type: ignore[attr-defined]
+                   arr(robot.velocity_limits), tuple(getattr(robot, "continuous", ())))  # type: ignore[attr-defined]
 
 
 @dataclass

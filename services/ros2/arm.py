@@ -8,10 +8,14 @@ hold rules, reference and its pace -- whose configuration is measured rather tha
   from where the executor's pace has got to, timed at that pace and within ``velocity_scale`` of the
   joint velocity limits (:func:`command_points`); again after a hold ends;
 * sends a hold when the robot must hold (:meth:`ExecutorCore.stale_reason`, plus the robot's own joint
-  states going stale): a trajectory without points, which a joint_trajectory_controller takes as "hold
-  the present position" (where the arm is when it arrives, not where it was last measured);
+  states going stale): one point where the arm is now (:func:`hold_point`). Not a trajectory without points:
+  ros2_controllers' JointTrajectoryController refuses that ("Empty trajectory received.") and goes on with
+  the trajectory it has;
 * reads the robot's configuration and velocity back after each step (lock-step: the state the robot
-  reports at the step's simulated time, which it follows on ``/clock``; real time: the newest one).
+  reports at the step's simulated time, which it follows on ``/clock``; real time: the newest one). A
+  continuous joint (the PR2's forearm and wrist roll) reported unwrapped (2 pi + 0.1) is wrapped into the
+  planner's [-pi, pi) (it was clamped to pi, up to pi off); commands turn it the short way from the robot's
+  own reading (:meth:`ArmLimits.unwrap_from`).
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from services.executor.config import ExecutorConfig
 from services.executor.core import ArmLimits, ExecutorCore
 from services.executor.reference import Reference
 
-__all__ = ["Measured", "RobotLink", "Ros2Arm", "command_points", "MIN_SEGMENT_S"]
+__all__ = ["Measured", "RobotLink", "Ros2Arm", "command_points", "hold_point", "MIN_SEGMENT_S"]
 
 MIN_SEGMENT_S = 1e-3
 """Shortest time between two points of a command (a controller needs strictly increasing times)."""
@@ -81,6 +85,25 @@ def command_points(reference: Reference, progress: float, q: np.ndarray, config:
     return positions.copy(), np.cumsum(segments)
 
 
+def hold_point(measured: Measured, limits: ArmLimits, velocity_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The hold command: one point where the arm is now, in the robot's own joint values.
+
+    Args:
+        measured: The robot's last report; the arm has moved on by ``qd`` over its ``age_s`` since (0 in lock-step).
+        limits: The joints' limits (the bounded joints' point is kept within them) and velocities.
+        velocity_scale: The share of the velocity limits the arm may use to get there.
+
+    Returns:
+        ``positions`` ``(1, D)``; ``times`` ``(1,)``: the time the slowest joint needs at ``velocity_scale`` from
+        the reported configuration, at least :data:`MIN_SEGMENT_S`.
+    """
+    bounded = ~limits.continuous_mask
+    target = measured.q + measured.qd * measured.age_s
+    target[bounded] = np.clip(target[bounded], limits.lower[bounded], limits.upper[bounded])
+    slowest = float(np.max(np.abs(target - measured.q) / (limits.velocity * velocity_scale)))
+    return target[None], np.array([max(slowest, MIN_SEGMENT_S)])
+
+
 class Ros2Arm(ExecutorCore):
     """:class:`ExecutorCore`'s rules driving a ROS 2 robot through ``link``; ``q``/``qd`` are the robot's.
 
@@ -98,6 +121,8 @@ class Ros2Arm(ExecutorCore):
         self.sent_holds = 0
         self._commanded: object = None  # the plan last sent, or None while holding (or before any plan)
         self._state_age = 0.0
+        self._measured = Measured(np.asarray(q0, dtype=np.float64).copy(), np.zeros(limits.dof))  # the robot's own
+        self.q = limits.clamp(limits.wrap(q0))
 
     def stale_reason(self, t: float | None = None) -> str:
         """The executor's reasons, and the robot's joint states older than ``stale_limit_s`` (real time)."""
@@ -111,16 +136,16 @@ class Ros2Arm(ExecutorCore):
         reason = self.stale_reason() if hold_reason is None else hold_reason
         if not reason and self.reference is not None:
             if self._commanded is not self.plan:
-                self.link.send(*command_points(self.reference, self.tau, self.q, self.config,
-                                               self.limits.velocity))
+                positions, times = command_points(self.reference, self.tau, self.q, self.config, self.limits.velocity)
+                self.link.send(self.limits.unwrap_from(self._measured.q, positions), times)
                 self._commanded = self.plan
                 self.sent_plans += 1
         elif self._commanded is not None:  # hold where it is, once per hold (nothing was sent before a plan)
-            self.link.send(np.zeros((0, self.limits.dof)), np.zeros(0))
+            self.link.send(*hold_point(self._measured, self.limits, self.config.velocity_scale))
             self._commanded = None
             self.sent_holds += 1
         super().step(h, reason)  # the pace (tau), the clock, holding and its reason; its simulated q is replaced:
-        measured = self.link.measure(self.t)
-        self.q, self.qd = self.limits.clamp(measured.q), measured.qd
+        measured = self._measured = self.link.measure(self.t)
+        self.q, self.qd = self.limits.clamp(self.limits.wrap(measured.q)), measured.qd
         self._state_age = measured.age_s
         self._update_reached()

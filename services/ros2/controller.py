@@ -3,8 +3,10 @@
 What ros2_controllers' JointTrajectoryController does with a ``JointTrajectory`` on its topic, reduced to a
 kinematic arm that follows perfectly: a new trajectory replaces the one in progress at once; the arm goes
 from where it is to the first point in that point's ``time_from_start`` and on between the points linearly
-in time; after the last point it holds it; a trajectory without points holds where the arm is; joints the
-message does not name keep their position. Used by ``foresight simrobot`` (:mod:`services.ros2.robot_sim`)
+in time; after the last point it holds it; joints the message does not name keep their position; a trajectory
+without points is refused and the one in progress goes on, as the real controller's "Empty trajectory
+received." (:meth:`services.ros2.core.Ros2Mapping.trajectory_in` refuses it before it gets here).
+Used by ``foresight simrobot`` (:mod:`services.ros2.robot_sim`)
 to try ``--robot ros2`` without a robot, and by the tests.
 """
 
@@ -43,6 +45,8 @@ class SimulatedController:
             positions: ``(N, len(columns))`` its points.
             times: ``(N,)`` their time from ``t``.
         """
+        if not len(positions):  # refused: the trajectory in progress goes on
+            return
         here = self.position(t)
         knots = np.repeat(here[None], len(positions) + 1, axis=0)
         knots[1:, columns] = positions

@@ -118,6 +118,9 @@ class Ros2Config:
                               f"rule), got {self.node!r}")
         if not 0.0 <= self.min_probability <= 1.0:
             raise ConfigError(f"ros2.min_probability: must be in [0, 1], got {self.min_probability}")
+        if not self.frame_id.strip():
+            raise ConfigError("ros2.frame_id: empty (RViz refuses markers without a frame); the scene's frame is "
+                              "'world'")
 
     @property
     def node_namespace(self) -> str:
@@ -295,11 +298,15 @@ class Ros2Mapping:
         except Exception as exc:  # rosbags raises several types for truncated or garbled bytes
             raise Ros2InputError(f"{msgtype}: cannot be decoded ({type(exc).__name__}: {exc})") from None
 
-    def joint_state_in(self, payload: bytes, joint_names: list[str]) -> tuple[float, np.ndarray, np.ndarray]:
+    def joint_state_in(self, payload: bytes, joint_names: list[str]) -> tuple[float, np.ndarray, np.ndarray] | None:
         """A robot's ``JointState`` as ``(stamp s, q, qd)`` in ``joint_names``' order (qd zero when not sent).
 
+        None for a state of none of ``joint_names``: another driver's joints on the same topic (a gripper's), as
+        common on real robots; not an error.
+
         Raises:
-            Ros2InputError: Not a JointState, a joint of ``joint_names`` missing, lengths that disagree, NaN.
+            Ros2InputError: Not a JointState, some but not all joints of ``joint_names``, lengths that disagree,
+                NaN.
         """
         msg = self.decode(payload, "sensor_msgs/msg/JointState")
         names = list(msg.name)
@@ -307,6 +314,8 @@ class Ros2Mapping:
         if len(pos) != len(names) or len(vel) not in (0, len(names)):
             raise Ros2InputError(f"JointState: {len(names)} names but {len(pos)} positions, {len(vel)} velocities")
         missing = [n for n in joint_names if n not in names]
+        if len(missing) == len(joint_names):
+            return None
         if missing:
             raise Ros2InputError(f"JointState: joints {missing} missing (has {names})")
         order = [names.index(n) for n in joint_names]
@@ -321,17 +330,20 @@ class Ros2Mapping:
 
         Returns:
             ``columns``: for each of the message's joints its index in ``joint_names``; ``positions``
-            ``(N, len(columns))``; ``times`` ``(N,)`` seconds from the start, increasing (no points: hold).
+            ``(N, len(columns))``, N >= 1; ``times`` ``(N,)`` seconds from the start, increasing.
 
         Raises:
-            Ros2InputError: No joint names, a joint the controller does not have, a point of the wrong length,
-                NaN, times not increasing.
+            Ros2InputError: No joint names, no points (ros2_controllers' JointTrajectoryController refuses an
+                empty trajectory, "Empty trajectory received.", and goes on with the one it has), a joint the
+                controller does not have, a point of the wrong length, NaN, times not increasing.
         """
         msg = self.decode(payload, ROBOT_TYPES["command"])
         names = list(msg.joint_names)
         if not names:  # as ros2_controllers' trajectory controller: a command names the joints it moves
-            raise Ros2InputError("JointTrajectory: no joint_names (a command names the joints it moves; no points: "
-                                 "hold)")
+            raise Ros2InputError("JointTrajectory: no joint_names (a command names the joints it moves)")
+        if not msg.points:
+            raise Ros2InputError("JointTrajectory: no points (a trajectory controller refuses an empty trajectory and "
+                                 "goes on with the one it has; to hold, send one point where the arm is)")
         unknown = [n for n in names if n not in joint_names]
         if unknown or len(set(names)) != len(names):
             raise Ros2InputError(f"JointTrajectory: joints {unknown or names} unknown or repeated (controller has "

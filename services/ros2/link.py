@@ -76,8 +76,11 @@ class Ros2RobotLink:
         self.node.subscription(config.ros2_joint_states, ROBOT_TYPES["state"], self._on_state)
 
     def _on_state(self, payload: bytes) -> None:
-        stamp, q, qd = self.mapping.joint_state_in(payload, self.joint_names)  # Ros2InputError: refused, counted
+        state = self.mapping.joint_state_in(payload, self.joint_names)  # Ros2InputError: refused, counted
         self.record(self.config.ros2_joint_states, ROBOT_TYPES["state"], payload)
+        if state is None:  # another driver's joints (a gripper's) on the same topic
+            return
+        stamp, q, qd = state
         with self._cond:
             if self._latest is not None and stamp < self._latest[0]:
                 raise Ros2InputError(f"JointState: stamped {stamp:.3f} s, older than the last one "

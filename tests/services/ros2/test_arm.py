@@ -9,7 +9,7 @@ import pytest
 from services.executor.config import ExecutorConfig
 from services.executor.core import ArmLimits
 from services.executor.reference import Reference
-from services.ros2.arm import MIN_SEGMENT_S, Measured, Ros2Arm, command_points
+from services.ros2.arm import MIN_SEGMENT_S, Measured, Ros2Arm, command_points, hold_point
 from services.ros2.controller import SimulatedController
 from shared.lockstep import FIRST_PLAN
 from tests.services.executor.test_core import make_plan
@@ -65,9 +65,11 @@ def test_a_hold_is_sent_once_at_the_present_configuration_and_the_plan_again_on_
     for _ in range(8):  # nothing new: plan and occupancy stale after 0.5 s
         arm.step(0.1)
     assert arm.holding and "s old (limit 0.50 s)" in arm.reason
-    holds = [p for p, t in robot.sent if len(p) == 0]  # no points: hold the present position
-    assert len(holds) == 1 and arm.sent_holds == 1
+    assert len(robot.sent) == 2 and arm.sent_holds == 1
+    hold, hold_time = robot.sent[1]  # one point where the arm is (a controller refuses a trajectory without points)
+    assert hold.shape == (1, 2) and hold_time.tolist() == [MIN_SEGMENT_S]
     held = arm.q.copy()
+    np.testing.assert_allclose(hold[0], held)
     assert np.all(held > q_then)  # it stopped where it was when told to hold, not back where it was measured
     arm.step(0.1)
     np.testing.assert_allclose(arm.q, held)  # stopped
@@ -101,3 +103,31 @@ def test_command_points_keep_the_pace_within_the_velocity_limits() -> None:
     # past the end: the goal, at least MIN_SEGMENT_S away
     positions, times = command_points(ref, 5.0, np.array([1.2, 0.0]), ExecutorConfig(), LIMITS.velocity)
     assert positions.tolist() == [[1.2, 0.0]] and times.tolist() == [MIN_SEGMENT_S]
+
+
+def test_a_hold_is_where_the_arm_is_now_within_the_limits_and_the_velocity_scale() -> None:
+    """Reported 0.1 s ago moving at 1 rad/s: the arm is about 0.1 further by now; holding at the report would pull
+    it back."""
+    positions, times = hold_point(Measured(np.array([0.0, 2.95]), np.array([1.0, 1.0]), 0.1), LIMITS, 0.5)
+    np.testing.assert_allclose(positions, [[0.1, 3.0]])  # j1 kept within its limit
+    assert times.tolist() == [pytest.approx(0.1 / (1.0 * 0.5))]  # the slowest joint at half its limit
+    assert hold_point(Measured(np.zeros(2), np.zeros(2)), LIMITS, 0.5)[1].tolist() == [MIN_SEGMENT_S]
+
+
+def test_a_continuous_joint_reported_unwrapped_is_wrapped_and_commanded_the_short_way() -> None:
+    """A wrist at 0.1 rad reported as 2 pi + 0.1 (as ros2_control reports a continuous joint) was clamped to pi."""
+    limits = ArmLimits(NAMES, np.array([-3.0, -np.pi]), np.array([3.0, np.pi]), np.array([1.0, 2.0]),
+                       continuous=("j1",))
+    q0 = np.array([0.0, 2 * np.pi + 0.1])
+    robot = FakeRobot(q0)
+    arm = Ros2Arm(limits, q0, ExecutorConfig(stale_limit_s=5.0), robot)
+    np.testing.assert_allclose(arm.q, [0.0, 0.1])  # the planner's value of the same angle
+    arm.adopt(make_plan(arm.q, [np.array([0.2, 0.5])], t=11, dt=0.1, names=NAMES))
+    arm.note_occupancy()
+    arm.step(0.1)
+    positions, _ = robot.sent[0]
+    np.testing.assert_allclose(positions[-1], [0.2, 2 * np.pi + 0.5])  # on from the robot's own reading
+    assert np.all(np.abs(np.diff(positions[:, 1])) < 1.0)  # never round through the wrap
+    np.testing.assert_allclose(arm.q[1], 0.1 + (0.5 - 0.1) * 0.1, atol=1e-6)  # measured, wrapped back
+    with pytest.raises(Exception, match="continuous"):
+        ArmLimits(NAMES, limits.lower, limits.upper, limits.velocity, continuous=("j7",))

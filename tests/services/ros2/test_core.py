@@ -93,6 +93,8 @@ def test_incoming_joint_states_are_checked(mapping: Ros2Mapping) -> None:
     assert q.tolist() == [0.1, 0.2, 0.3] and qd.tolist() == [1.0, 2.0, 3.0]
     with pytest.raises(Ros2InputError, match=r"joints \['r_shoulder_lift_joint'\] missing"):
         mapping.joint_state_in(raw(JOINTS[:2], [0.1, 0.2]), JOINTS)
+    # another driver's joints on the same topic (a gripper's): not ours, not an error (was refused and counted)
+    assert mapping.joint_state_in(raw(["r_gripper_joint"], [0.04]), JOINTS) is None
     with pytest.raises(Ros2InputError, match="non-finite position or velocity of \\['r_shoulder_pan_joint'\\]"):
         mapping.joint_state_in(raw(JOINTS, [0.1, float("nan"), 0.3]), JOINTS)
     with pytest.raises(Ros2InputError, match="not CDR"):
@@ -125,7 +127,8 @@ def test_commands_and_clock_round_trip_and_bad_commands_are_named(mapping: Ros2M
         mapping.trajectory_in(mapping.command(JOINTS, pos, np.array([1.0, 1.0])), JOINTS)
     with pytest.raises(Ros2InputError, match="non-finite positions"):
         mapping.trajectory_in(mapping.command(JOINTS, pos * np.nan, np.array([1.0, 2.0])), JOINTS)
-    assert mapping.trajectory_in(mapping.command(JOINTS, np.zeros((0, 3)), np.zeros(0)), JOINTS)[1].shape == (0, 3)
+    with pytest.raises(Ros2InputError, match="no points"):  # the real controller refuses it: no hold
+        mapping.trajectory_in(mapping.command(JOINTS, np.zeros((0, 3)), np.zeros(0)), JOINTS)
     with pytest.raises(Ros2InputError, match="no joint_names"):  # numpy's reshape error before
         mapping.trajectory_in(mapping.command([], np.zeros((0, 0)), np.zeros(0)), JOINTS)
     key = mapping.robot_key("/r_arm_controller/joint_trajectory", "command")
@@ -137,7 +140,8 @@ def test_bad_config_is_named() -> None:
     for kwargs, text in (({"domain_id": 300}, "ros2.domain_id"), ({"namespace": "cell"}, "ros2.namespace"),
                          ({"node": "a/b"}, "ros2.node"), ({"namespace": "/robot#1"}, "ros2.namespace"),
                          ({"namespace": "/cell//arm"}, "ros2.namespace"), ({"node": "arm*1"}, "ros2.node"),
-                         ({"node": "1arm"}, "ros2.node"), ({"node": ""}, "ros2.node")):
+                         ({"node": "1arm"}, "ros2.node"), ({"node": ""}, "ros2.node"),
+                         ({"frame_id": ""}, "ros2.frame_id: empty"), ({"frame_id": " "}, "ros2.frame_id: empty")):
         with pytest.raises(ConfigError, match=text):  # characters a key expression would refuse later, with a trace
             Ros2Config(**kwargs).validate()
     for ns in ("//robot", "//", "/robot//arm/"):  # the graph tokens said '%%robot' (a node ros2 node list misnames)
