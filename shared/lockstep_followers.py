@@ -11,11 +11,16 @@ from __future__ import annotations
 
 import queue
 import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from shared.protocol import ClockTick, DemoMarker, OccupancyGrid, RobotState
 
-__all__ = ["TickQueue", "TickOrder", "PlanningInputs", "TickInbox"]
+__all__ = ["TickQueue", "TickOrder", "PlanningInputs", "TickInbox", "STOP_SLICE_S"]
+
+STOP_SLICE_S = 0.1
+"""Longest a stopped follower goes on waiting for its inputs (a stopped planner once waited its whole timeout)."""
 
 
 class TickQueue:
@@ -71,6 +76,11 @@ class PlanningInputs:
     state: RobotState | None
     occupancy: OccupancyGrid | None
     expected_tick: int
+
+    @property
+    def state_late(self) -> bool:
+        """Whether the state is older than the end of tick n (the newest one of that tick after the timeout)."""
+        return self.state is not None and self.state.stamp < self.tick.stamp + self.tick.period - 1e-9
 
     @property
     def prediction_missing(self) -> bool:
@@ -137,14 +147,25 @@ class TickInbox:
             self.end_tick = msg.tick if msg.event == "end" else None
             self.cond.notify_all()
 
-    def wait_state(self, tick: int, stamp: float, timeout: float) -> RobotState | None:
-        """The state of ``tick`` stamped at least ``stamp`` (else the newest of that tick after the timeout)."""
+    def _wait_for(self, ready: Callable[[], bool], timeout: float, stop: threading.Event | None) -> bool:
+        """``cond.wait_for`` (the lock held) in slices of :data:`STOP_SLICE_S`, ending early once ``stop`` is set."""
+        end = time.monotonic() + timeout
+        while not (done := ready()):
+            left = end - time.monotonic()
+            if left <= 0 or (stop is not None and stop.is_set()):
+                break
+            self.cond.wait(min(left, STOP_SLICE_S))
+        return done
+
+    def wait_state(self, tick: int, stamp: float, timeout: float,
+                   stop: threading.Event | None = None) -> RobotState | None:
+        """The state of ``tick`` stamped at least ``stamp`` (else the newest of that tick after the timeout or stop)."""
         with self.cond:
-            self.cond.wait_for(lambda: tick in self.states and self.states[tick].stamp >= stamp - 1e-9, timeout)
+            self._wait_for(lambda: tick in self.states and self.states[tick].stamp >= stamp - 1e-9, timeout, stop)
             return self.states.get(tick)
 
-    def wait_occupancy(self, tick: int, timeout: float) -> OccupancyGrid | None:
-        """The final grid of ``tick``, else the newest final grid of an earlier tick after the timeout.
+    def wait_occupancy(self, tick: int, timeout: float, stop: threading.Event | None = None) -> OccupancyGrid | None:
+        """The final grid of ``tick``, else the newest final grid of an earlier tick after the timeout (or stop).
 
         Once the observed demonstration has ended (its end marker carries the tick of its last pose),
         no grid comes after that tick: the grid of the last pose's tick is the prediction to use.
@@ -154,21 +175,21 @@ class TickInbox:
             return tick if self.end_tick is None else min(tick, self.end_tick)
 
         with self.cond:
-            if self.cond.wait_for(lambda: target() in self.occupancy, timeout):
+            if self._wait_for(lambda: target() in self.occupancy, timeout, stop):
                 return self.occupancy[target()]
             earlier = [t for t in self.occupancy if t < tick]
             return self.occupancy[max(earlier)] if earlier else None
 
-    def inputs(self, tick: ClockTick, timeout: float) -> PlanningInputs:
-        """Wait (at most ``timeout`` s each) for the state and the prediction tick n is planned from.
+    def inputs(self, tick: ClockTick, timeout: float, stop: threading.Event | None = None) -> PlanningInputs:
+        """Wait (at most ``timeout`` s each, less once ``stop`` is set) for the state and the prediction of tick n.
 
         The state is the last one of tick n (stamp ``t_n + P``); without it there is nothing to plan
         from and the prediction is not awaited.
         """
-        state = self.wait_state(tick.tick, tick.stamp + tick.period, timeout)
+        state = self.wait_state(tick.tick, tick.stamp + tick.period, timeout, stop)
         if state is None:
             return PlanningInputs(tick, None, None, tick.tick - 1)
-        occ = self.wait_occupancy(tick.tick - 1, timeout) if tick.tick > 0 else None
+        occ = self.wait_occupancy(tick.tick - 1, timeout, stop) if tick.tick > 0 else None
         end = self.end_tick
         expected = tick.tick - 1 if end is None else min(tick.tick - 1, end)
         return PlanningInputs(tick, state, occ, expected)

@@ -18,6 +18,8 @@ class ExecutorResult:
         reached: Whether the goal was reached; ``reached_step`` the first step it was (-1: never).
         goal_per_step: Goal index executed during each step (-1: none yet).
         held_steps: Steps (lock-step) or state samples (real time) during which the robot held.
+        lockstep_timeouts: Lock-step waits for a tick's plan or prediction that ran out (the step went on without
+            it: a run whose numbers depend on timing; the experiments refuse such a run).
         finish_steps: Steps after the last one that executed the rest of the last plan (``finish_path``).
         plans: Plans adopted; ``plans_rejected``: plans with the wrong joints.
         rejects: Payloads refused (decoding, values, order), per key; ``reject_reasons`` per
@@ -31,6 +33,7 @@ class ExecutorResult:
     reached_step: int = -1
     goal_per_step: list[int] = field(default_factory=list)
     held_steps: int = 0
+    lockstep_timeouts: int = 0
     finish_steps: int = 0
     plans: int = 0
     plans_rejected: int = 0

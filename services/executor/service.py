@@ -326,9 +326,11 @@ class ExecutorService:
                 return  # at the goal: nothing left to finish
             flush = self.mcap.flush_if_due if self.mcap is not None else None
             if not self.inbox.wait_plan(n, cfg.lockstep_timeout_s, self.stop, idle=flush) and not self.stop.is_set():
+                r.lockstep_timeouts += 1
                 log.warning("executor: no plan for tick %d within %.1f s; going on", n, cfg.lockstep_timeout_s)
             elif cfg.require_occupancy and not self.inbox.wait_occupancy(n, cfg.lockstep_timeout_s, self.stop,
                                                                          idle=flush) and not self.stop.is_set():
+                r.lockstep_timeouts += 1
                 log.warning("executor: no prediction for tick %d within %.1f s; going on", n, cfg.lockstep_timeout_s)
             n += 1
         if cfg.finish_path and not self.stop.is_set():

@@ -73,13 +73,13 @@ def _user_errors() -> Iterator[None]:
     from shared.library import LibraryError
     from shared.scene import SceneError
 
-    from .harness import PlanningFailed
+    from .harness import RunFailed
 
     try:
         yield
     except (SceneError, LibraryError, ModelError) as exc:
         raise UserError(str(exc)) from None
-    except PlanningFailed as exc:
+    except RunFailed as exc:
         raise UserError(f"a run failed: {exc}") from None
 
 

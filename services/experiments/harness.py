@@ -14,7 +14,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +34,8 @@ from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyG
 from shared.scene import Scene
 from shared.transport import open_session, subscribe
 
-__all__ = ["RunSpec", "RunRecord", "ServiceThread", "run_lockstep", "PlanningFailed", "JOIN_S"]
+__all__ = ["RunSpec", "RunRecord", "ServiceThread", "run_lockstep", "RunFailed", "PlanningFailed", "LateInputs",
+           "ServiceFailed", "JOIN_S"]
 
 log = logging.getLogger("foresight.experiments")
 
@@ -225,25 +226,58 @@ class ServiceThread:
         return self.result
 
 
-class PlanningFailed(RuntimeError):
+class RunFailed(RuntimeError):
+    """A lock-step run that is no measurement (its numbers would be those of a broken run, or depend on timing)."""
+
+
+class PlanningFailed(RunFailed):
     """A lock-step run's planner failed a step: the run measures a robot without plans, so it is no measurement."""
 
 
-def _join_unless_planning_fails(executor: ServiceThread, planner: PlannerService, timeout_s: float) -> Any:
-    """The executor's result once it ends; at once :class:`PlanningFailed` if a planner step failed before.
+class LateInputs(RunFailed):
+    """A lock-step wait ran out and the run went on without a plan, prediction or state.
 
-    Without it a failed step left the executor waiting ``lockstep_timeout_s`` for that tick's plan and the
-    run was measured as if the robot had stood still on purpose.
+    Its numbers depend on timing (one late grid gave another path), so the run is refused rather than scored.
     """
+
+
+class ServiceFailed(RunFailed):
+    """A service of the run ended with an error while the executor still ran (its exception is the cause)."""
+
+
+def _join_unless_run_fails(threads: list[ServiceThread], planner: PlannerService, timeout_s: float) -> Any:
+    """The executor's (the last thread's) result once it ends; at once a :class:`RunFailed` if the run fails.
+
+    Without it a failed planner step, or a service that died (a torch error in the planner), left the executor
+    waiting ``lockstep_timeout_s`` for each tick's plan: the run was measured as if the robot had stood still on
+    purpose, or ended minutes later in a TimeoutError that named none of the causes.
+
+    Raises:
+        PlanningFailed: A planner step failed. ServiceFailed: A service ended with an error (chained).
+        LateInputs: A lock-step wait ran out (the executor's or the planner's). TimeoutError: The run overran.
+    """
+    *others, executor = threads
     deadline = time.monotonic() + timeout_s
-    while not planner.stats.failures and executor.thread.is_alive() and time.monotonic() < deadline:
+    while executor.thread.is_alive() and time.monotonic() < deadline:
+        if planner.stats.failures:
+            raise PlanningFailed(f"the planner failed {planner.stats.failures} step(s) of the run "
+                                 f"({planner.stats.plans} planned); last: {planner.stats.last_error}")
+        if dead := next((t for t in others if t.error is not None), None):
+            raise ServiceFailed(f"the {dead.name} failed during the run: {type(dead.error).__name__}: "
+                                f"{dead.error}") from dead.error
         executor.thread.join(0.05)
+    if executor.thread.is_alive():
+        raise TimeoutError(f"{executor.name} did not stop within {timeout_s:g} s")
+    result = executor.join(0)
     if planner.stats.failures:
         raise PlanningFailed(f"the planner failed {planner.stats.failures} step(s) of the run "
                              f"({planner.stats.plans} planned); last: {planner.stats.last_error}")
-    if executor.thread.is_alive():
-        raise TimeoutError(f"{executor.name} did not stop within {timeout_s:g} s")
-    return executor.join(0)
+    if result.lockstep_timeouts or planner.stats.late_inputs:
+        last = f"; {planner.stats.last_late}" if planner.stats.last_late else ""
+        raise LateInputs(f"lock-step waits ran out: the executor went on without a plan or prediction "
+                         f"{result.lockstep_timeouts} time(s), the planner planned {planner.stats.late_inputs} "
+                         f"tick(s) without its inputs{last} (a run whose numbers depend on timing is no measurement)")
+    return result
 
 
 _EXECUTOR_MODELS: dict[int, tuple[Scene, Any, Any]] = {}
@@ -290,12 +324,13 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
                                               samples_per_tick=spec.samples_per_tick), peer)
     ex_stop = threading.Event()
     robot, human = _executor_models(spec.scene)
-    executor = ExecutorService(ExecutorConfig(mode="lockstep", steps=spec.steps, step_period_s=spec.period_s,
-                                              mcap=str(mcap) if mcap else "none", scene=scene_ref,
-                                              lockstep_timeout_s=min(60.0, spec.timeout_s),
-                                              path_per_step=spec.path_per_step, path_weights=list(spec.path_weights),
-                                              finish_path=spec.finish_path),
-                               peer, stop=ex_stop, robot=robot, human=human, scene=spec.scene)
+    ex_cfg = ExecutorConfig(mode="lockstep", steps=spec.steps, step_period_s=spec.period_s,
+                            mcap=str(mcap) if mcap else "none", scene=scene_ref,
+                            lockstep_timeout_s=min(60.0, spec.timeout_s), path_per_step=spec.path_per_step,
+                            path_weights=list(spec.path_weights), finish_path=spec.finish_path)
+    if spec.period_s > ex_cfg.stale_limit_s:  # a plan starts a period after its tick: every step held (--period-s 0.6)
+        ex_cfg = replace(ex_cfg, stale_limit_s=1.5 * spec.period_s)  # stale once a plan is missing, as at 0.5 s
+    executor = ExecutorService(ex_cfg, peer, stop=ex_stop, robot=robot, human=human, scene=spec.scene)
     threads = [ServiceThread("predictor", predictor.run), ServiceThread("planner", planner_svc.run),
                ServiceThread("replayer", replayer.run),
                ServiceThread("executor", lambda _stop: executor.run(), stop_event=ex_stop)]
@@ -307,8 +342,13 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
         try:
             for t in threads:
                 t.start()
-            result = _join_unless_planning_fails(threads[-1], planner_svc, spec.timeout_s)
+            result = _join_unless_run_fails(threads, planner_svc, spec.timeout_s)
             collect.settle(result)  # the executor, with no log of its own to fill, does not linger
+        except BaseException as exc:
+            failed: BaseException | None = exc
+            raise
+        else:
+            failed = None
         finally:
             for t in threads:
                 t.stop_event.set()
@@ -318,6 +358,8 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
                     t.join(JOIN_S)
                 except Exception as exc:  # report the first after stopping all
                     errors.append(exc)
+                    if failed is not None and exc not in (failed, failed.__cause__):  # lost with the run's error
+                        log.error("stopping the failed run's %s: %s: %s", t.name, type(exc).__name__, exc)
             for s in subs:
                 s.undeclare()
         if errors:

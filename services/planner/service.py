@@ -73,6 +73,8 @@ class PlannerStats:
     plans: int = 0
     failures: int = 0
     last_error: str = ""
+    late_inputs: int = 0  # lock-step: ticks planned from an older state or prediction after the wait ran out
+    last_late: str = ""
     planning_ms: list[float] = field(default_factory=list)
 
 
@@ -177,15 +179,25 @@ class PlannerService:
                 if tick.tick == 0:
                     self.planner.reset()
                 wait = self.config.input_timeout_s
-                got = inbox.inputs(tick, wait)
+                got = inbox.inputs(tick, wait, stop)
+                if stop.is_set():  # stopped while waiting: plan nothing more (the planner may serve the next run)
+                    break
                 if got.state is None:
                     log.error("planner: no robot state for tick %d within %.1f s; skipping it", tick.tick, wait)
                     self.stats.failures += 1
                     continue
                 occ = got.occupancy
+                late = []
+                if got.state_late:
+                    late.append(f"the robot state of tick {tick.tick} stamped {got.state.stamp:.3f} s, before the "
+                                f"tick's end")
                 if got.prediction_missing:
-                    log.warning("planner: prediction of tick %d missing; planning tick %d with %s", tick.tick - 1,
-                                tick.tick, "an empty grid" if occ is None else f"the one of tick {occ.tick}")
+                    late.append(f"the prediction of tick {tick.tick - 1} (planned with "
+                                f"{'an empty grid' if occ is None else f'the one of tick {occ.tick}'})")
+                if late:
+                    self.stats.late_inputs += 1
+                    self.stats.last_late = f"tick {tick.tick}: {'; '.join(late)} after {wait:.1f} s"
+                    log.warning("planner: planning tick %d without %s", tick.tick, " or ".join(late))
                 self._plan(got.state.q, occ, tick.tick, tick.stamp, pub)
         finally:
             presence.close()

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import threading
+import time
+
 import numpy as np
 
-from shared.lockstep_followers import TickInbox, TickOrder
+from shared.lockstep_followers import STOP_SLICE_S, TickInbox, TickOrder
 from shared.protocol import ClockTick, DemoMarker, OccupancyGrid, RobotState
 
 NAMES = ("j0", "j1")
@@ -99,3 +102,20 @@ def test_a_new_run_does_not_get_the_last_runs_states_and_grids() -> None:
     for t in range(1, 12):  # run B goes on: its own ticks are kept
         inbox.add_state(state(t, (t + 1) * 0.2))
     assert sorted(inbox.states) == list(range(4, 12))
+
+
+def test_a_stopped_follower_stops_waiting_and_a_late_state_is_named() -> None:
+    """A stopped planner went on waiting its whole input timeout (60 s in the experiments), then planned a step on
+    the Planner the next run had already reset."""
+    inbox, stop = TickInbox(), threading.Event()
+    tick = ClockTick(stamp=1.0, tick=5, period=0.2)
+    threading.Timer(0.2, stop.set).start()
+    started = time.monotonic()
+    assert inbox.inputs(tick, timeout=30.0, stop=stop).state is None
+    assert time.monotonic() - started < 0.2 + 5 * STOP_SLICE_S + 2.0  # a slice after the stop, not 30 s
+    inbox.add_state(state(5, 1.1))  # tick 5 ends at 1.2: the newest of the tick, but not its last
+    inbox.add_occupancy(grid(4))
+    got = inbox.inputs(tick, timeout=0.0)
+    assert got.state_late and not got.prediction_missing
+    inbox.add_state(state(5, 1.2))
+    assert not inbox.inputs(tick, timeout=0.0).state_late

@@ -11,8 +11,9 @@ import types
 import numpy as np
 import pytest
 
+import services.experiments.harness as harness
 from services.experiments.cli import main
-from services.experiments.harness import PlanningFailed, RunSpec, _Collector, run_lockstep
+from services.experiments.harness import LateInputs, PlanningFailed, RunSpec, ServiceFailed, _Collector, run_lockstep
 from services.experiments.heldout import HeldOutModels, human_file, samples_per_tick
 from services.experiments.planners import Timing, build_planner
 from services.planner.core import PlannerError
@@ -171,3 +172,52 @@ def test_a_run_whose_last_messages_never_come_is_measured_with_a_warning_naming_
         collect.settle(result, quiet_s=0.02, limit_s=0.2)
     assert time.monotonic() - started < 5
     assert "not all in after 0.2 s (0 of 3 robot states)" in caplog.text
+
+
+def test_a_service_that_dies_fails_the_run_at_once_with_its_error(small_run, monkeypatch):
+    """A torch error in the planner thread was seen by nobody: the executor waited 60 s per tick and the run ended
+    in 'executor did not stop within 300 s', its cause neither chained nor logged."""
+    spec, planner = small_run
+    step = planner.step
+
+    def dies(*args, **kwargs):
+        if planner.step_index == 1:
+            raise RuntimeError("CUDA error: an illegal memory access (injected)")
+        return step(*args, **kwargs)
+
+    monkeypatch.setattr(planner, "step", dies)
+    started = time.monotonic()
+    with pytest.raises(ServiceFailed, match="the planner failed during the run: RuntimeError: CUDA error") as exc:
+        run_lockstep(spec, planner)
+    assert isinstance(exc.value.__cause__, RuntimeError) and time.monotonic() - started < 30
+
+
+def test_a_late_prediction_refuses_the_run_instead_of_scoring_another_path(small_run, monkeypatch):
+    """A grid late past the lock-step waits gave another path (the planner used the grid before), scored as if it
+    were the reproducible run."""
+    from services.predictor.service import PredictorService
+
+    spec, planner = small_run
+    for name in ("ExecutorConfig", "PlannerServiceConfig"):  # the waits at 1 s instead of 60 s
+        cls = getattr(harness, name)
+        monkeypatch.setattr(harness, name, lambda *a, _cls=cls, **k: _cls(*a, **{
+            f: (1.0 if f in ("lockstep_timeout_s", "input_timeout_s") else v) for f, v in k.items()}))
+    process = PredictorService._process
+
+    def late(self, msg, grid, now):
+        if getattr(msg, "tick", -1) == 1 and getattr(msg, "tick_last", False):
+            time.sleep(1.5)
+        return process(self, msg, grid, now)
+
+    monkeypatch.setattr(PredictorService, "_process", late)
+    with pytest.raises(LateInputs, match=r"planned 1 tick\(s\) without its inputs; tick 2: the prediction of tick 1"):
+        run_lockstep(spec, planner)
+
+
+def test_a_period_longer_than_the_stale_limit_still_moves_the_robot(small_run):
+    """At --period-s 0.6 every plan was 0.6 s old when it started, over the executor's 0.5 s: every step held and
+    the commands scored a robot that never moved as 0 interference."""
+    spec, planner = small_run
+    rec = run_lockstep(dataclasses.replace(spec, period_s=0.6), planner)
+    assert rec.result.held_steps == 1  # the first step only: no plan yet
+    assert np.abs(np.diff(rec.q(), axis=0)).sum() > 0.1
