@@ -28,7 +28,8 @@ its cup each step too (the paper's Fig. 9).
    the chosen goal per step).
 
 Ctrl-C (or SIGTERM) at any moment stops the services in order, the executor first, which finishes
-its MCAP; the demo then says how many plans were made and that the log is complete.
+its MCAP; the demo then says after how many of its steps it stopped (plans, in real time) and that the log
+is complete. With ``--compare`` a run cut short is marked in the table and no verdict is given.
 """
 
 from __future__ import annotations
@@ -78,9 +79,9 @@ class DemoConfig:
                     help="lockstep: deterministic, one replanning step per clock tick; realtime: wall clock")
     steps: int = opt(20, help="replanning steps (the paper: 20)")
     seed: int = opt(0, help="seed of the demonstration choice and of STOMP")
-    human_class: str = opt("blue_cup", help="class (name or index) the human performs; empty: red_cup, else the "
-                           "last class. blue_cup: the reach of the paper's Table I, across the robot's way to the "
-                           "red cup")
+    human_class: str = opt("blue_cup", help="class (name or index) the human performs. blue_cup: the reach of the "
+                           "paper's Table I, across the robot's way to the red cup. Empty: the class named red_cup, "
+                           "or the library's last class if none is")
     goals: str = opt("red_cup", help="cups the robot plans for, comma-separated, in order (empty: every cup of the "
                      "scene). red_cup: the robot's one task in the paper's Table I, the situation "
                      "`foresight eval pace` measured; blue_cup,red_cup: the robot also chooses the cup each step "

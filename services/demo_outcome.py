@@ -39,6 +39,7 @@ class Outcome:
         ee_path: ``(N, 3)`` end-effector positions of the executed states (scene frame).
         clearance: ``(N,)`` robot-human clearance at each executed state (m).
         mcap_path: The run's log.
+        cut_short: How the run was cut short (``interrupted after 9 of 20 steps``), "" when it ran to its end.
     """
 
     planner: str
@@ -53,6 +54,7 @@ class Outcome:
     ee_path: np.ndarray = field(repr=False)
     clearance: np.ndarray = field(repr=False)
     mcap_path: str | None = None
+    cut_short: str = ""
 
     def to_json(self) -> dict[str, Any]:
         """The scalar fields (the arrays stay out of ``--json``)."""
@@ -60,7 +62,8 @@ class Outcome:
                 "near_s": self.near_s,
                 "min_clearance_m": self.min_clearance_m if math.isfinite(self.min_clearance_m) else None,
                 "switch_step": self.switch_step, "reached_step": self.reached_step,
-                "chosen_goal_per_step": self.chosen_goal_per_step, "mcap_path": self.mcap_path}
+                "chosen_goal_per_step": self.chosen_goal_per_step, "mcap_path": self.mcap_path,
+                "cut_short": self.cut_short}
 
 
 def measure_run(planner: str, states: list[RobotState], poses: list[HumanPose], reference: OccupancyGrid | None,
@@ -91,7 +94,7 @@ def measure_run(planner: str, states: list[RobotState], poses: list[HumanPose], 
           if len(q) else np.zeros((0, 3)))
     return Outcome(planner, float(cost), contact.time_in_contact, contact.time_near, contact.min_clearance,
                    summary.switch_step, summary.reached_step, list(summary.chosen_goal_per_step), t, ee, clearance,
-                   summary.mcap_path)
+                   summary.mcap_path, str(summary.extra.get("cut_short", "")))
 
 
 def _kept_further(main: Outcome, other: Outcome) -> bool:
@@ -116,6 +119,9 @@ def verdict(outcomes: list[Outcome]) -> str:
     main, others = outcomes[0], outcomes[1:]
     if not others:
         return ""
+    if cut := [o for o in outcomes if o.cut_short]:  # a part of a run against a whole one says nothing
+        return (f"none: the {' and '.join(f'{o.planner} run was {o.cut_short}' for o in cut)}, so its numbers are "
+                "of a part of the run; let --compare run to its end for a verdict")
     names = " and ".join(o.planner for o in others)
     less_interference = all(main.interference < o.interference for o in others)
     further = all(_kept_further(main, o) for o in others)
@@ -152,8 +158,10 @@ def outcome_lines(outcomes: list[Outcome]) -> list[str]:
         sw = "-" if o.switch_step is None else str(o.switch_step)
         re = "-" if o.reached_step is None else str(o.reached_step)
         clear = f"{o.min_clearance_m:+.3f}" if math.isfinite(o.min_clearance_m) else "-"
-        out.append(f"  {o.planner:<20}{o.interference:>13.3f}{o.contact_s:>11.2f}{o.near_s:>15.2f}{clear:>17}{sw:>13}"
+        name = f"{o.planner} *" if o.cut_short else o.planner
+        out.append(f"  {name:<20}{o.interference:>13.3f}{o.contact_s:>11.2f}{o.near_s:>15.2f}{clear:>17}{sw:>13}"
                    f"{re:>14}")
+    out += [f"  * {o.planner}: {o.cut_short}" for o in outcomes if o.cut_short]
     text = verdict(outcomes)
     if text:
         out.append(f"verdict: {text}")

@@ -168,7 +168,10 @@ def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable
     out(f"foresight demo: library {lib.source}: {lib.n_classes} classes, {len(lib.demos)} demonstrations; "
         f"the human performs {demo.class_name} #{demo.index} ({demo.n_samples} samples, "
         f"{scenario.samples_per_tick} per step)")
-    model = model_for(lib, scene, demo, cfg.models_dir, None if cfg.components < 0 else cfg.components)
+    model = model_for(lib, scene, demo, cfg.models_dir, None if cfg.components < 0 else cfg.components,
+                      on_train=lambda path: out(f"foresight demo: training the prediction model without the human's "
+                                                f"demonstration, once: about a minute on 2 cores (its progress below); "
+                                                f"later runs load it from {path.parent}"))
     out(f"foresight demo: prediction model {model}")
     directory.mkdir(parents=True, exist_ok=True)
     human = directory / "human.npz"
@@ -334,6 +337,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     summary.extra["mode"] = cfg.mode
     summary.extra["method"] = cfg.method
     summary.extra["human_cost"] = cfg.human_cost
+    if status:  # its numbers are of a part of the run: no comparison may take them for a whole one
+        summary.extra["cut_short"] = f"{'interrupted' if status == 130 else 'stopped'} after {done}"
     return status, RunRecord(planner, summary, states, final, recorder.human_poses(), run_dir)
 
 

@@ -14,7 +14,7 @@ import logging
 import math
 import os
 import threading
-from collections.abc import MutableMapping, Sequence
+from collections.abc import Callable, MutableMapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -92,7 +92,8 @@ def _library_digest(library: MotionLibrary) -> str:
 
 def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Sequence[Demonstration],
               models_dir: Path, components: int | None = None, progress: bool = True,
-              fit_cache: MutableMapping[str, Any] | None = None, volume: str | None = None) -> Path:
+              fit_cache: MutableMapping[str, Any] | None = None, volume: str | None = None,
+              on_train: Callable[[Path], None] | None = None) -> Path:
     """The prediction model for a run: trained on ``library`` without ``held_out``, cached in ``models_dir``.
 
     The cache key covers the library's data, the held-out demonstrations, the scene and the training
@@ -108,6 +109,8 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
         fit_cache: Shared fitted class mixtures (``train_model``'s ``fit_cache``): with one model per
             held-out demonstration, only the held-out demonstration's class is refitted.
         volume: Volume method (``foresight train --volume``; None: the trainer's default).
+        on_train: Called with the model's path before it is trained (not when it is cached): a caller says why
+            the next minute passes.
 
     Returns:
         Path of the model file (trained now if it was not cached).
@@ -130,6 +133,8 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
     if path.is_file():
         log.info("using cached model %s", path)
         return path
+    if on_train is not None:
+        on_train(path)
     skip = set(left)
     demos = [d for d in library.demos if (d.label, d.index) not in skip]
     model = train_model(library, scene, cfg, demos=demos, progress=progress, fit_cache=fit_cache)

@@ -316,7 +316,12 @@ def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None =
     env = os.environ if env is None else env
     cli = dict(vars(args)) if args is not None else {}
     path = config_file or cli.get("config") or env.get(f"{ENV_PREFIX}_CONFIG")
-    data = load_toml(path) if path else {}
+    try:
+        data = load_toml(path) if path else {}
+    except ConfigError as exc:
+        if config_file or cli.get("config"):
+            raise
+        raise ConfigError(f"{exc} (the file ${ENV_PREFIX}_CONFIG names)") from None  # a forgotten export, say
     source = f"config file {str(path)!r}: " if path else ""  # starts each message about what the file holds
     for key, value in data.items():
         if not isinstance(value, dict):

@@ -62,10 +62,16 @@ def section_class(section: str) -> type:
     return typing.cast(type, getattr(importlib.import_module(module), name))
 
 
-def closest(name: str, valid: Iterable[str]) -> str:
-    """``"; did you mean X?"`` for the valid name closest to ``name``, or ``""`` when none is close."""
-    match = difflib.get_close_matches(name, list(valid), n=1, cutoff=0.6)
-    return f"; did you mean {match[0]}?" if match else ""
+def closest(name: str, valid: Iterable[str], prefix: str = "") -> str:
+    """``"; did you mean X?"`` for the valid name closest to ``name``, or ``""`` when none is close.
+
+    ``prefix``, shared by ``name`` and the names compared, is left out of the comparison: ``FORESIGHT_FOO`` is not
+    close to ``FORESIGHT_UID`` for their common ``FORESIGHT_``.
+    """
+    rest = name[len(prefix):] if name.startswith(prefix) else name
+    names = {v[len(prefix):]: v for v in valid if v.startswith(prefix)}
+    match = difflib.get_close_matches(rest, list(names), n=1, cutoff=0.6)
+    return f"; did you mean {names[match[0]]}?" if match else ""
 
 
 def check_services(names: Iterable[str], option: str, allowed: Iterable[str]) -> None:
@@ -130,7 +136,8 @@ def check_environment(env: typing.Mapping[str, str], checked: typing.Mapping[str
         if section is None:
             every = [*OTHER_VARIABLES, *every_variable(), *(o.env for s, c in checked.items()
                                                             for o in config_options(s, c))]
-            raise ConfigError(f"environment: {variable} is no Foresight option{closest(variable, every)} (options "
+            raise ConfigError(f"environment: {variable} is no Foresight option"
+                              f"{closest(variable, every, f'{ENV_PREFIX}_')} (options "
                               f"are FORESIGHT_<SECTION>_<OPTION>, sections: {', '.join(sorted(every_section))})")
         if section not in checked:
             continue
@@ -139,4 +146,4 @@ def check_environment(env: typing.Mapping[str, str], checked: typing.Mapping[str
         if variable not in known[section]:
             where = "" if section == "zenoh" else f" (see foresight {section} --help)"
             raise ConfigError(f"environment: {variable} is no option of [{section}]"
-                              f"{closest(variable, known[section])}{where}")
+                              f"{closest(variable, known[section], f'{ENV_PREFIX}_{section.upper()}_')}{where}")

@@ -7,6 +7,7 @@ import faulthandler
 import gc
 import logging
 import os
+import re
 import signal
 import sys
 import threading
@@ -38,8 +39,12 @@ class UserError(Exception):
 
 
 def help_text(doc: str) -> str:
-    """A docstring as ``--help`` text: reST inline literals (double backticks) become single backticks."""
-    return doc.replace("``", "`")
+    """A docstring as ``--help`` text.
+
+    reST inline literals (double backticks) become single backticks, and a cross-reference (a ``:mod:`` or
+    ``:func:`` role, say) the name it refers to, in single backticks.
+    """
+    return re.sub(r":(?:mod|func|class|meth|data|attr|exc):`~?([^`]+)`", r"`\1`", doc).replace("``", "`")
 
 
 def setup_logging(level: str = "INFO") -> None:

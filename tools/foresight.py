@@ -69,8 +69,20 @@ def _parser() -> argparse.ArgumentParser:
         description="Foresight: plan robot motion around the early-predicted workspace occupancy of a human.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="commands:\n" + "\n".join(lines) + "\n\nRun 'foresight COMMAND --help' for the options of a command.",
-        usage="foresight [-h] COMMAND [ARGS...]",
+        usage="foresight [-h] [--version] COMMAND [ARGS...]",
     )
+
+
+def version() -> str:
+    """``foresight X.Y.Z`` (the installed package's version), with the Python it runs on."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as installed
+
+    try:
+        number = installed("foresight")
+    except PackageNotFoundError:  # run from a checkout that was never installed (python -m tools)
+        number = "(not installed: run from a checkout)"
+    return f"foresight {number} (Python {sys.version.split()[0]})"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -89,6 +101,9 @@ def _dispatch(argv: list[str] | None) -> int:
         _parser().print_help(sys.stdout if argv else sys.stderr)  # no command is an error: its help goes to stderr
         return 0 if argv else 2
     command, rest = argv[0], argv[1:]
+    if command in ("-V", "--version"):
+        print(version())
+        return 0
     if command not in COMMANDS:
         _parser().print_usage(sys.stderr)
         print(f"foresight: error: unknown command {command!r} (choose from {', '.join(COMMANDS)})",

@@ -101,7 +101,7 @@ def _doc(module: str) -> str:
     """A module's docstring as ``--help`` prose (reST literals shown plain)."""
     import importlib
 
-    return (importlib.import_module(f"services.experiments.{module}").__doc__ or "").replace("``", "")
+    return help_text(importlib.import_module(f"services.experiments.{module}").__doc__ or "").replace("`", "")
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:

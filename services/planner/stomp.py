@@ -65,7 +65,7 @@ class StompConfig:
     Attributes:
         rollouts: Noisy rollouts R per goal and iteration.
         waypoints: Waypoints T per trajectory (start and goal included).
-        iterations: Iterations per call of :meth:`Stomp.optimize` (one replanning step).
+        iterations: Iterations per call of :meth:`Stomp.optimize` (one replanning step), at least 1.
         noise_std: Exploration noise standard deviation (rad) at the middle of the trajectory (the
             scaled R^-1 has unit maximum variance).
         joint_noise_scale: Optional per-joint factors (length D) on ``noise_std``; empty = all 1.
@@ -105,8 +105,8 @@ class StompConfig:
             raise StompError(f"stomp.reuse must be in [0, rollouts - 1 = {self.rollouts - 1}], got {self.reuse}")
         if self.waypoints < 3:
             raise StompError(f"stomp.waypoints must be >= 3, got {self.waypoints}")
-        if self.iterations < 0:
-            raise StompError(f"stomp.iterations must be >= 0, got {self.iterations}")
+        if self.iterations < 1:  # 0 was let through and failed in the first plan (an IndexError)
+            raise StompError(f"stomp.iterations must be >= 1, got {self.iterations}")
         if not (self.noise_std >= 0 and math.isfinite(self.noise_std)):
             raise StompError(f"stomp.noise_std must be finite and >= 0, got {self.noise_std}")
         if any(not (s >= 0 and math.isfinite(s)) for s in self.joint_noise_scale):

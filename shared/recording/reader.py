@@ -64,7 +64,10 @@ def open_records(path: str | Path) -> Iterator[StreamReader]:
     """
     p = Path(path)
     if p.is_dir():
-        raise UserError(f"log file {str(p)!r} is a directory")
+        logs = sorted(p.rglob("*.mcap"))
+        listed = ", ".join(str(f) for f in logs[:6]) + (f" and {len(logs) - 6} more" if len(logs) > 6 else "")
+        raise UserError(f"log file {str(p)!r} is a directory" + (f"; the logs under it: {listed}" if logs else
+                                                                   ", with no .mcap file under it"))
     if not p.exists():
         raise UserError(f"log file {str(p)!r} not found")
     if not p.is_file():  # a pipe (process substitution) cannot be read twice or sought: the readers need both

@@ -34,6 +34,20 @@ def test_verdict_by_contact_when_anyone_touched() -> None:
     assert verdict(higher).startswith("not shown in this run (its interference was not the lowest)")
 
 
+def test_a_run_cut_short_gets_no_verdict_and_is_marked_in_the_table() -> None:
+    """Ctrl-C in the second planner's run of --compare: a 9-step run was judged against a 20-step one, 'shown'."""
+    import dataclasses
+
+    runs = [_outcome("prediction", 0.55, 0.0, 0.0, 0.128), _outcome("current occupancy", 19.0, 0.0, 1.9, 0.019)]
+    runs[1] = dataclasses.replace(runs[1], cut_short="interrupted after 9 of 20 steps")
+    text = verdict(runs)
+    assert text.startswith("none: the current occupancy run was interrupted after 9 of 20 steps")
+    lines = outcome_lines(runs)
+    assert any(ln.startswith("  current occupancy *") for ln in lines)
+    assert "  * current occupancy: interrupted after 9 of 20 steps" in lines
+    assert f"verdict: {text}" in lines and not any("shown" in ln for ln in lines)
+
+
 def test_verdict_on_a_contact_tie_with_one_baseline_goes_by_nearness() -> None:
     # the demo's Table I situation: the current-occupancy planner does not touch the human either, but comes closer
     runs = [_outcome("prediction", 0.55, 0.0, 0.0, 0.128), _outcome("current occupancy", 20.0, 0.0, 2.1, 0.019),
@@ -67,7 +81,7 @@ def test_measure_run_scores_contact_and_interference() -> None:
     q0 = robot.q_start.numpy().astype(np.float64)
     states = [RobotState(stamp=0.5 * i, tick=i, joint_names=robot.joint_names, goal=0, reached=False, holding=False,
                          reason="", q=q0, qd=np.zeros(len(q0))) for i in (2, 0, 1)]  # any order
-    summary = types.SimpleNamespace(switch_step=None, reached_step=None, chosen_goal_per_step=["red_cup"] * 3,
+    summary = types.SimpleNamespace(extra={}, switch_step=None, reached_step=None, chosen_goal_per_step=["red_cup"] * 3,
                                     mcap_path=None)
     # no human, empty prediction: nothing measured against
     empty = OccupancyGrid.from_dense(np.zeros(scene.grid.dims), scene.grid.origin, scene.grid.resolution, stamp=0.0,

@@ -116,3 +116,21 @@ def test_a_restarted_planner_does_not_renumber_the_lockstep_steps():
     realtime = [_plan(-1, 0, [1.0, 2.0], stamp=0.1 * i, step=i % 3) for i in range(5)]  # restarts twice
     assert [e["step"] for e in summarise(realtime, [], None, {}, PointRobot(), "red_cup", None).steps] == \
         list(range(5))
+
+
+def test_model_for_says_when_it_trains_and_not_when_the_model_is_cached(tmp_path, monkeypatch):
+    """The first `make demo` trained for a minute behind bare progress bars; now the demo says what is happening."""
+    import services.predictor.train as train
+    from services.scenario import model_for
+    from shared.scene import load_scene
+
+    class Trained:
+        def save(self, path):
+            path.write_bytes(b"model")
+
+    monkeypatch.setattr(train, "train_model", lambda *a, **k: Trained())
+    lib = generate_library(2, 3, seed=1)
+    said: list = []
+    first = model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, on_train=said.append)
+    again = model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, on_train=said.append)
+    assert first == again and first.read_bytes() == b"model" and said == [first]

@@ -73,6 +73,8 @@ def test_config_file_from_env(tmp_path):
     assert cfg.loop is True
     cfg, _ = resolve_config("demo", DemoCfg, parse(["--no-loop"]), env={"FORESIGHT_CONFIG": str(f)})
     assert cfg.loop is False
+    with pytest.raises(ConfigError, match=r"not found \(the file \$FORESIGHT_CONFIG names\)"):  # a forgotten export
+        resolve_config("demo", DemoCfg, parse([]), env={"FORESIGHT_CONFIG": str(f) + ".missing"})
 
 
 def test_section_field_shadowing_a_zenoh_flag():

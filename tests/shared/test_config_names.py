@@ -46,6 +46,10 @@ def test_misspelt_variable_names_the_closest_option() -> None:
     with pytest.raises(ConfigError, match=r"FORESIGHT_REPLAYR_RATE_HZ is no Foresight option; did you mean "
                                           r"FORESIGHT_REPLAYER_RATE_HZ\?"):
         check_environment({"FORESIGHT_REPLAYR_RATE_HZ": "3"}, checked)
+    # only the names after FORESIGHT_ compare: FOO was 'close' to the Docker build's UID for their common prefix
+    with pytest.raises(ConfigError) as exc:
+        check_environment({"FORESIGHT_FOO": "1"}, checked)
+    assert "did you mean" not in str(exc.value) and "is no Foresight option" in str(exc.value)
     # lower case: the environment's names are case-sensitive, so it was ignored without a word
     with pytest.raises(ConfigError, match=r"foresight_replayer_rate_hz is read as nothing: .* upper case "
                                           r"\(FORESIGHT_REPLAYER_RATE_HZ\)"):

@@ -88,3 +88,10 @@ def test_a_broken_pipe_passes_through_to_the_dispatcher(monkeypatch):
     monkeypatch.setitem(foresight.COMMANDS, "fake", ("fake_command", "a command whose reader went away"))
     monkeypatch.setattr(sys, "stderr", io.StringIO())  # the dispatcher closes it (nothing more can be said)
     assert foresight.main(["fake"]) == 0
+
+
+def test_help_text_shows_cross_references_as_the_names_they_refer_to() -> None:
+    """`foresight eval all --help` printed ':mod:`services.experiments.protocol`'."""
+    from shared.runtime import help_text
+
+    assert help_text("see :mod:`services.x` and :func:`~a.b.c`, ``--flag``") == "see `services.x` and `a.b.c`, `--flag`"

@@ -31,13 +31,20 @@ def test_top_level_help_lists_every_subcommand_that_exists(command: str, capsys)
 
 
 @pytest.mark.parametrize("argv", [["demo", "--help"], ["bench", "planner", "--help"], ["library", "--help"],
-                                  ["train", "--help"], ["eval", "recognition", "--help"]])
+                                  ["train", "--help"], ["eval", "recognition", "--help"], ["eval", "all", "--help"],
+                                  ["eval", "interference", "--help"], ["eval", "pace", "--help"]])
 def test_help_has_no_rest_markup(argv, capsys) -> None:
     with pytest.raises(SystemExit) as exc:
         cli_main(argv)
     assert exc.value.code == 0
     out = capsys.readouterr().out
     assert out.startswith("usage: foresight") and "``" not in out
+    assert not re.search(r":(mod|func|class|meth|data|attr):", out)  # eval all printed ':mod:`services...`'
+
+
+def test_version(capsys) -> None:
+    assert cli_main(["--version"]) == 0
+    assert re.fullmatch(r"foresight \S+.* \(Python 3\.\d+\.\d+\)\n", capsys.readouterr().out)
 
 
 def test_no_command_is_an_error_with_the_help_on_stderr(capsys) -> None:

@@ -243,6 +243,8 @@ def test_config_resolves_and_names_bad_values() -> None:
     assert p.stomp_config().rollouts == 24 and cfg.planner_config().lookahead_s == 0.0 and p.lookahead_s == 0.5
     with pytest.raises(ConfigError, match=r"planner\.stomp\.rollouts must be >= 2"):
         PlannerConfig(stomp=StompConfig(rollouts=1)).validate()
+    with pytest.raises(ConfigError, match=r"planner\.stomp\.iterations must be >= 1"):  # 0 failed in the first plan
+        PlannerConfig(stomp=StompConfig(iterations=0)).validate()
     with pytest.raises(ConfigError, match=r"planner\.cost\.w_human"):
         PlannerConfig(cost=CostConfig(w_human=-1)).validate()
     with pytest.raises(ConfigError, match="planner.velocity_scale"):
