@@ -297,6 +297,11 @@ def _closing_lines(cfg: DemoConfig, summary: Summary) -> list[str]:
     """What the demo prints at the end: the run's summary (or the comparison), the picture, where everything is."""
     extra = summary.extra
     lines = [] if cfg.compare else summary.lines(table=False)[:-1]  # the table was printed live; the log comes last
+    if cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra:
+        lines.append(f"note: a real-time run ends after its {cfg.steps} steps of {cfg.period_s:g} s "
+                     f"({cfg.steps * cfg.period_s:g} s), and the robot, at {cfg.robot_speed:g} of its velocity limits, "
+                     f"had not arrived: --steps {2 * cfg.steps} gives it twice as long (a lock-step run executes the "
+                     "rest of its last plan after its last step)")
     lines += extra.get("outcome_lines", [])
     if cfg.compare:
         lines.append("MCAP logs: " + ", ".join(str(r["mcap_path"]) for r in extra.get("comparison", [])))

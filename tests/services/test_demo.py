@@ -278,3 +278,22 @@ def test_the_demos_config_file_reaches_its_services_and_is_checked_whole(tmp_pat
     assert not (tmp_path / "run").exists()  # refused before anything ran
     monkeypatch.undo()
     assert "FORESIGHT_CONFIG" not in os.environ  # the demo set it for its services: not for the next test
+
+
+def test_a_real_time_run_that_ends_before_the_goal_says_why_and_what_to_do() -> None:
+    """`make demo DEMO_ARGS=--mode realtime` ended with 'goal reached: no' and nothing explaining it."""
+    import dataclasses
+
+    from services.demo import DemoConfig, _closing_lines
+    from services.scenario import Summary
+
+    summary = Summary(steps=[], chosen_goal_per_step=[], switch_step=None, interference_cost=0.0, mcap_path="x.mcap",
+                      reached=False, reached_step=None, human_class="blue_cup", recognised_class="blue_cup",
+                      extra={"run_dir": "runs/demo/x"})
+    cfg = dataclasses.replace(DemoConfig(), mode="realtime", steps=20, period_s=0.5, robot_speed=0.1)
+    note = [ln for ln in _closing_lines(cfg, summary) if ln.startswith("note: a real-time run ends")]
+    assert len(note) == 1 and "(10 s)" in note[0] and "--steps 40" in note[0]
+    for quiet in (dataclasses.replace(cfg, mode="lockstep"), cfg):  # lock-step finishes its plan; reached: nothing
+        if quiet is cfg:
+            summary = dataclasses.replace(summary, reached=True)
+        assert not [ln for ln in _closing_lines(quiet, summary) if ln.startswith("note: a real-time run")]

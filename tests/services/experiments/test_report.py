@@ -18,10 +18,16 @@ from shared.runtime import UserError
 from tests.shared.library.test_report import broken_library
 
 
-def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path):
+def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path, capsys):
     out = tmp_path / "report"
     assert main(["all", "--quick", "--out", str(out), "--models-dir", str(tmp_path / "models")]) == 0
     text = (out / "report.md").read_text()
+    # the terminal ends with the verdicts, not only with where the report is
+    printed = capsys.readouterr().out
+    assert "eval all: the paper's results, reproduced or not" in printed
+    section = text.split("## The paper's results", 1)[1].split("\n## ", 1)[0]
+    verdicts = [ln for ln in section.splitlines() if ln.startswith("- ")]
+    assert verdicts and all(f"  {ln[2:].replace('**', '')}" in printed for ln in verdicts)
     headings = ("### Recognition (Fig. 6)", "### Interference (Table I)", "### Goal switch (Fig. 8-9)", "## Timing")
     for heading in headings:
         assert heading in text
