@@ -277,18 +277,28 @@ def _resolve_section(section: str, cls: type[T], file_values: dict[str, Any],
         raise ConfigError(f"{source}[{section}] must be a table")
     _check_tables(section, cls, file_values, source)
     changes: dict[tuple[str, ...], Any] = {}
+    given: dict[str, str] = {}  # option name -> where its value came from (for the checks' messages)
     for o in config_options(section, cls):
         flag = (cli_names or {}).get(o.field, o.flag)
         if o.dest in cli:
-            changes[o.attrs] = parse_value(flag, o.tp, cli[o.dest], o.choices)
+            changes[o.attrs], given[o.name] = parse_value(flag, o.tp, cli[o.dest], o.choices), flag
         elif o.env in env:
-            changes[o.attrs] = parse_value(o.env, o.tp, env[o.env], o.choices)
+            changes[o.attrs], given[o.name] = parse_value(o.env, o.tp, env[o.env], o.choices), o.env
         else:
             raw = _file_value(file_values, o)
             if raw is not dataclasses.MISSING:
                 changes[o.attrs] = parse_value(f"{source}{o.name}", o.tp, raw, o.choices, typed=True)
+                given[o.name] = source.rstrip(": ") or "the config file"
     obj = _apply(base if base is not None else cls(), changes)
-    _validate(obj, section)
+    try:
+        _validate(obj, section)
+    except ConfigError as exc:  # name where the refused value was set: a file, a variable or a flag
+        text = str(exc)
+        named = max((n for n in given if text.startswith(n) and text[len(n):len(n) + 1] in (":", " ")), key=len,
+                    default=None)
+        if named is None:
+            raise
+        raise ConfigError(f"{text} (set by {given[named]})") from None
     return obj
 
 

@@ -77,6 +77,17 @@ def test_config_file_from_env(tmp_path):
         resolve_config("demo", DemoCfg, parse([]), env={"FORESIGHT_CONFIG": str(f) + ".missing"})
 
 
+def test_a_refused_value_names_where_it_was_set(tmp_path):
+    """`rate_hz = -5` in a file was refused without naming the file (a wrong type named it)."""
+    f = write(tmp_path, "[demo]\nrate_hz = -5\n")
+    with pytest.raises(ConfigError, match=rf"^demo.rate_hz: must be > 0, got -5.0 \(set by config file '{f}'\)$"):
+        resolve_config("demo", DemoCfg, parse(["--config", str(f)]), env={})
+    with pytest.raises(ConfigError, match=r"got -2.0 \(set by FORESIGHT_DEMO_RATE_HZ\)$"):
+        resolve_config("demo", DemoCfg, parse([]), env={"FORESIGHT_DEMO_RATE_HZ": "-2"})
+    with pytest.raises(ConfigError, match=r"got -1.0 \(set by --rate-hz\)$"):
+        resolve_config("demo", DemoCfg, parse(["--config", str(f), "--rate-hz", "-1"]), env={})
+
+
 def test_section_field_shadowing_a_zenoh_flag():
     @dataclasses.dataclass
     class WithMode:
