@@ -26,7 +26,15 @@ from shared.config import check_prefix
 from shared.protocol import Keys
 from shared.runtime import UserError, cli_errors, help_text
 from shared.security.acl import ROLES, access_control
-from shared.security.certificates import CA_DAYS, certificate_hosts, init_security_dir, issued_hosts, verify_role
+from shared.security.certificates import (
+    CA_DAYS,
+    certificate_hosts,
+    fingerprint,
+    init_security_dir,
+    issued_hosts,
+    load_authority,
+    verify_role,
+)
 
 __all__ = ["main", "SUBCOMMANDS"]
 
@@ -43,7 +51,7 @@ def _init(args: argparse.Namespace) -> int:
         raise UserError(f"--days must be >= 1, got {args.days}")
     try:
         if args.hosts is None:  # rotation keeps the cell's hosts; a first init has none beyond loopback
-            hosts = issued_hosts(args.dir, ROLES) if args.dir.is_dir() and not args.new_ca else []
+            hosts = issued_hosts(args.dir, ROLES) if args.dir.is_dir() else []  # --new-ca too: the cell's hosts
             if hosts:
                 print(f"hosts kept from the certificates replaced: {', '.join(hosts)} (--hosts gives others)")
         else:
@@ -76,6 +84,11 @@ def _check(args: argparse.Namespace) -> int:
     if not roles:
         raise UserError(f"security directory {args.dir}: no role's certificate ({', '.join(ROLES)})")
     bad = 0
+    try:  # the same on every machine of the cell: compare it there
+        print(f"authority: {args.dir / 'ca.crt'}, SHA-256 {fingerprint(load_authority(args.dir / 'ca.crt'))}")
+    except (OSError, ValueError) as exc:
+        print(f"authority: {exc}")
+        bad += 1
     for role in roles:
         try:
             cert = verify_role(args.dir, role, now=now)

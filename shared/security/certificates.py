@@ -30,7 +30,8 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 from ..atomic_file import atomic_write
 
 __all__ = ["Issued", "CertificateError", "make_authority", "issue", "init_security_dir", "read_role", "verify_role",
-           "check_host", "check_directory", "issued_hosts", "certificate_hosts", "LOOPBACK_HOSTS", "CA_DAYS"]
+           "check_host", "check_directory", "issued_hosts", "certificate_hosts", "load_authority", "fingerprint",
+           "LOOPBACK_HOSTS", "CA_DAYS"]
 
 LOOPBACK_HOSTS = ("localhost", "127.0.0.1")
 """Names every certificate carries, so that a run on one machine verifies."""
@@ -172,22 +173,67 @@ def _load_cert(path: Path) -> x509.Certificate:
         raise CertificateError(f"{path}: not a PEM certificate ({str(exc).splitlines()[0][:80]})") from None
 
 
-def check_directory(directory: str | os.PathLike[str]) -> None:
-    """Refuse a security directory that someone else may write: they could put their own authority in ca.crt.
+def check_directory(directory: str | os.PathLike[str], files: Sequence[str] = ("ca.crt",)) -> None:
+    """Refuse a security directory, or a file of it, that someone else may write.
+
+    Whoever may write them could put an authority of their own in ca.crt (Zenoh trusts every certificate that file
+    holds), or replace a role's certificate and key.
+
+    Args:
+        directory: The security directory.
+        files: Its files to check as well, where they exist (followed where they are links: what is read counts).
 
     Raises:
-        CertificateError: The directory is writable by its group or others, or belongs to another user (root
-            excepted).
+        CertificateError: The directory or one of ``files`` is writable by its group or others, or belongs to
+            another user (root excepted).
     """
     d = Path(directory)
-    st = d.stat()
-    if st.st_mode & 0o022:
-        raise CertificateError(f"security directory {d}: writable by {'others' if st.st_mode & 0o002 else 'its group'}"
-                               f" (mode {st.st_mode & 0o777:o}); whoever can write it can replace ca.crt with an "
-                               f"authority of their own: chmod go-w {d}")
-    if st.st_uid not in (os.getuid(), 0):
-        raise CertificateError(f"security directory {d}: belongs to user id {st.st_uid}, not to this user "
-                               f"({os.getuid()}) or root; its owner could replace ca.crt")
+    for path, what in ((d, "security directory"), *((d / f, "security file") for f in files if (d / f).exists())):
+        st = path.stat()
+        if st.st_mode & 0o022:
+            raise CertificateError(f"{what} {path}: writable by {'others' if st.st_mode & 0o002 else 'its group'} "
+                                   f"(mode {st.st_mode & 0o777:o}); whoever can write it can put an authority of "
+                                   f"their own in ca.crt: chmod go-w {path}")
+        if st.st_uid not in (os.getuid(), 0):
+            raise CertificateError(f"{what} {path}: belongs to user id {st.st_uid}, not to this user "
+                                   f"({os.getuid()}) or root; its owner could put an authority of their own in ca.crt")
+
+
+def load_authority(path: Path) -> x509.Certificate:
+    """The cell's one authority from ``ca.crt``.
+
+    Raises:
+        CertificateError: The file holds no certificate, more than one (Zenoh trusts each: a second is a second
+            authority whose certificates every session would accept), or one that is no certificate authority.
+    """
+    pems = re.findall(rb"-----BEGIN CERTIFICATE-----", path.read_bytes())
+    if len(pems) > 1:
+        raise CertificateError(f"{path}: holds {len(pems)} certificates; a cell's ca.crt holds its one authority "
+                               "(every certificate in it would be trusted: someone added one?)")
+    ca = _load_cert(path)
+    try:
+        is_ca = ca.extensions.get_extension_for_class(x509.BasicConstraints).value.ca
+    except x509.ExtensionNotFound:
+        is_ca = False
+    if not is_ca:
+        raise CertificateError(f"{path}: not a certificate authority (a role's certificate copied over ca.crt?)")
+    return ca
+
+
+def fingerprint(cert: x509.Certificate) -> str:
+    """SHA-256 fingerprint, ``AB:CD:...``: compare the authority's on every machine of a cell."""
+    return cert.fingerprint(hashes.SHA256()).hex(":").upper()
+
+
+def _validity(cert: x509.Certificate, name: str, now: dt.datetime) -> None:
+    """Refuse ``cert`` outside its validity, saying which end and this machine's clock (a clock off, say)."""
+    clock = f"this machine's clock: {now:%Y-%m-%d %H:%M} UTC"
+    if now < cert.not_valid_before_utc:
+        raise CertificateError(f"{name}: not valid before {cert.not_valid_before_utc:%Y-%m-%d %H:%M} UTC ({clock}; "
+                               "is it behind?)")
+    if now > cert.not_valid_after_utc:
+        raise CertificateError(f"{name}: expired at {cert.not_valid_after_utc:%Y-%m-%d %H:%M} UTC ({clock}); "
+                               "issue new certificates: foresight security init DIR (docs/security.md, rotation)")
 
 
 def issued_hosts(directory: str | os.PathLike[str], roles: Sequence[str]) -> list[str]:
@@ -238,7 +284,7 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
     """
     hosts = [check_host(h) for h in hosts]
     d = Path(directory)
-    d.mkdir(parents=True, exist_ok=True)
+    d.mkdir(mode=0o700, parents=True, exist_ok=True)  # 0700 whatever the umask (002 made it 775, then refused)
     check_directory(d)
     ca_crt, ca_key = d / "ca.crt", d / "ca.key"
     if not force and ca_crt.is_file() != ca_key.is_file():
@@ -304,8 +350,8 @@ def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime |
             directory others may write).
     """
     ca_path, cert_path, key_path = read_role(directory, role)
-    check_directory(directory)
-    ca, cert = _load_cert(ca_path), _load_cert(cert_path)
+    check_directory(directory, ("ca.crt", f"{role}.crt", f"{role}.key"))
+    ca, cert = load_authority(ca_path), _load_cert(cert_path)
     if (mode := key_path.stat().st_mode & 0o777) & 0o077:  # a key others can read is no longer this role's alone
         raise CertificateError(f"{key_path}: others than its owner may read it (mode {mode:o}): chmod 600 {key_path}")
     try:
@@ -315,10 +361,7 @@ def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime |
     names = [a.value for a in cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)]
     if names != [role]:
         raise CertificateError(f"{cert_path.name}: common name {names} is not [{role!r}]")
-    now = now or dt.datetime.now(dt.UTC)
-    if not cert.not_valid_before_utc <= now <= cert.not_valid_after_utc:
-        raise CertificateError(f"{cert_path.name}: not valid now (valid {cert.not_valid_before_utc:%Y-%m-%d} .. "
-                               f"{cert.not_valid_after_utc:%Y-%m-%d})")
+    _validity(cert, cert_path.name, now or dt.datetime.now(dt.UTC))
     try:
         key = serialization.load_pem_private_key(key_path.read_bytes(), password=None)
     except (ValueError, TypeError) as exc:  # TypeError: the key is encrypted (a session cannot ask for a password)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 import os
+import re
 import stat
 from pathlib import Path
 
@@ -61,7 +62,13 @@ def test_check_names_what_is_wrong(tmp_path: Path) -> None:
     (other / "ca.crt").write_bytes(authority.cert_pem)
     (other / "planner.crt").write_bytes(expired.cert_pem)
     (other / "planner.key").write_bytes(expired.key_pem)
-    with pytest.raises(ValueError, match="not valid now"):
+    with pytest.raises(ValueError, match=r"planner.crt: expired at .* UTC \(this machine's clock: .* UTC\)"):
+        verify_role(other, "planner")
+    early = issue(authority, "planner", now=dt.datetime.now(dt.UTC) + dt.timedelta(minutes=20))  # starts in 15
+    (other / "planner.crt").write_bytes(early.cert_pem)
+    (other / "planner.key").write_bytes(early.key_pem)
+    with pytest.raises(ValueError, match=r"planner.crt: not valid before .* UTC \(this machine's clock: .*is it "
+                                         r"behind\?\)"):  # a robot whose clock is behind read 'not valid now'
         verify_role(other, "planner")
     with pytest.raises(FileNotFoundError, match="observer.crt is missing .*foresight security init"):
         read_role(d, "observer")
@@ -139,6 +146,13 @@ def test_rotation_without_hosts_keeps_the_hosts_of_the_certificates_it_replaces(
     assert issued_hosts(tmp_path, ROLES) == ["robot.local", "192.168.1.10"]
     assert main(["init", str(tmp_path), "--hosts", "cell.local"]) == 0  # given: they replace the old ones
     assert issued_hosts(tmp_path, ROLES) == ["cell.local"]
+    old_ca = (tmp_path / "ca.crt").read_bytes()
+    capsys.readouterr()
+    assert main(["init", str(tmp_path), "--new-ca"]) == 0  # a leaked ca.key's answer dropped every host
+    assert (tmp_path / "ca.crt").read_bytes() != old_ca and issued_hosts(tmp_path, ROLES) == ["cell.local"]
+    assert "hosts kept from the certificates replaced: cell.local" in capsys.readouterr().out
+    assert main(["check", str(tmp_path)]) == 0
+    assert re.search(r"^authority: .*ca.crt, SHA-256 ([0-9A-F]{2}:){31}[0-9A-F]{2}$", capsys.readouterr().out, re.M)
 
 
 def test_a_directory_others_may_write_is_refused_and_no_planted_link_is_followed(tmp_path: Path) -> None:
@@ -202,3 +216,37 @@ def test_check_on_a_cell_machine_checks_the_roles_it_holds_and_names_their_hosts
     assert "executor: ok" in out and "planner" not in out.split("not on this machine:")[0]
     assert main(["check", str(robot), "--role", "planner"]) == 1  # asked for: missing is an error
     assert "planner.crt is missing" in capsys.readouterr().out
+
+
+def test_a_ca_file_others_may_write_or_holding_a_second_authority_is_refused(tmp_path: Path) -> None:
+    """A 0666 ca.crt in a 0700 directory passed, and so did a ca.crt with another CA appended: Zenoh trusts every
+    certificate in it, and that CA's 'planner' was let in."""
+    d = tmp_path / "cell"
+    init_security_dir(d, ["planner"])
+    verify_role(d, "planner")
+    (d / "ca.crt").chmod(0o666)
+    with pytest.raises(ValueError, match=r"security file .*ca.crt: writable by others \(mode 666\)"):
+        verify_role(d, "planner")
+    (d / "ca.crt").chmod(0o644)
+    (d / "planner.crt").chmod(0o664)
+    with pytest.raises(ValueError, match=r"planner.crt: writable by its group"):
+        verify_role(d, "planner")
+    (d / "planner.crt").chmod(0o644)
+    (d / "ca.crt").write_bytes((d / "ca.crt").read_bytes() + make_authority().cert_pem)
+    with pytest.raises(ValueError, match="ca.crt: holds 2 certificates"):
+        verify_role(d, "planner")
+    (d / "ca.crt").write_bytes((d / "planner.crt").read_bytes())  # a role's certificate copied over it
+    with pytest.raises(ValueError, match="ca.crt: not a certificate authority"):
+        verify_role(d, "planner")
+
+
+def test_init_makes_its_directory_0700_whatever_the_umask(tmp_path: Path) -> None:
+    """Under umask 002 (Ubuntu's for users with their own group) init refused the directory it had just made."""
+    import os
+
+    old = os.umask(0o002)
+    try:
+        init_security_dir(tmp_path / "cell", ["planner"])
+    finally:
+        os.umask(old)
+    assert (tmp_path / "cell").stat().st_mode & 0o777 == 0o700
