@@ -43,7 +43,7 @@ from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Message
 from .filters import OneEuroFilter
 from .reach import ReachDetector, ReachRule
 
-__all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S"]
+__all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S", "JUMP_CONFIRM"]
 
 REASONS = ("frame", "names", "missing", "order", "leap", "range", "residual", "jump")
 """Why a frame is refused: another coordinate frame, a point the layout does not have, a required point missing, a
@@ -53,6 +53,11 @@ implausible jump."""
 
 MIN_PERIOD_S = 1.0 / 500
 """The shortest frame interval taken for the sensor's period (500 Hz): shorter ones are frames of a burst."""
+
+JUMP_CONFIRM = 3
+"""Frames in a row of the body a jump was refused to (each following the one before) that make it a new track:
+the reach under way ends and the new body is tracked afresh. Before, the speed over the growing time since the last
+accepted frame fell under the limit after 0.2-0.3 s and the new body was glided to as the same person."""
 
 
 @dataclass
@@ -136,6 +141,8 @@ class TrackerCore:
         self._frame_no: int | None = None                       # the last accepted frame's number (if given)
         self._leap: float | None = None                         # a refused frame's stamp a long gap after the last
         self._ended_at = -math.inf                              # the last reach's end stamp
+        self._jump: tuple[float, np.ndarray, int] | None = None  # refused as a jump: (stamp, joints, frames in a row)
+        self._yaw = HERAKLES_NAMES.index("pelvis_yaw")
         self._dts: deque[float] = deque(maxlen=15)              # recent frame intervals: the sensor's period
         self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
         self.demo_id = -1
@@ -197,12 +204,23 @@ class TrackerCore:
             dt = stamp - self._raw[0]
             moved = np.linalg.norm(joints - self._joints, axis=-1)
             j = int(np.argmax(moved))
-            if moved[j] / dt > self.config.max_speed_mps:
+            if self._jump is not None and self._follows(self._jump, joints, stamp):
+                # the body of the refused frames goes on (another person, a re-identified skeleton): never glide
+                # over to it once the time since the last accepted frame has grown; JUMP_CONFIRM frames of it in a
+                # row, and it is taken as a new track (the reach under way ends)
+                n = self._jump[2] + 1
+                self._jump = (stamp, joints, n)
+                if n < JUMP_CONFIRM:
+                    return self._refuse("jump", f"the body of the frame refused before goes on ({n} of "
+                                        f"{JUMP_CONFIRM} frames): another person?")
+                out.messages += self._lost(self._raw[0])
+            elif moved[j] / dt > self.config.max_speed_mps:
+                self._jump = (stamp, joints, 1)
                 return self._refuse("jump", f"{POINT_NAMES[j]} at {moved[j] / dt:.1f} m/s since the last frame")
-            if dt >= MIN_PERIOD_S and (len(self._dts) < 3 or dt >= 0.5 * float(np.median(self._dts))):
+            elif dt >= MIN_PERIOD_S and (len(self._dts) < 3 or dt >= 0.5 * float(np.median(self._dts))):
                 self._dts.append(dt)  # the sensor's period; a burst's intervals are left out
         dropped = None if frame is None or self._frame_no is None or self._raw is None else frame - self._frame_no - 1
-        self._raw, self._joints, self._frame_no = (stamp, f), joints, frame
+        self._raw, self._joints, self._frame_no, self._jump = (stamp, f), joints, frame, None
         self.accepted += 1
         smooth = self.filter(f, stamp)
         out.messages += self._bridge(stamp, smooth, dropped) + self._frame(stamp, smooth)
@@ -219,6 +237,12 @@ class TrackerCore:
         return TrackerOutput(self._lost(self._raw[0]) if self._raw is not None else [])
 
     # -- internals ---------------------------------------------------------------------------------
+
+    def _follows(self, refused: tuple[float, np.ndarray, int], joints: np.ndarray, stamp: float) -> bool:
+        """Whether ``joints`` ``(J, 3)`` at ``stamp`` continue the body of the frame last refused as a jump."""
+        last_t, last_joints, _ = refused
+        dt = max(stamp - last_t, MIN_PERIOD_S)
+        return float(np.max(np.linalg.norm(joints - last_joints, axis=-1))) / dt <= self.config.max_speed_mps
 
     def _outside(self, pelvis: np.ndarray) -> str:
         """Where the observed pelvis ``(3,)`` lies beyond the fit's pelvis bounds, in words ('' if within)."""
@@ -239,7 +263,8 @@ class TrackerCore:
         self.filter.reset()
         self._recent.clear()
         self._dts.clear()  # the next frames may come from a sensor restarted at another rate
-        self._raw = self._out = self._joints = self._frame_no = self._leap = None
+        self._raw = self._out = self._joints = self._frame_no = self._leap = self._jump = None
+        self._ended_at = -math.inf  # a sensor restarted, or a clock stepped back: its frames may precede the last end
         return msgs
 
     def _bridge(self, stamp: float, f: np.ndarray, dropped: int | None = None) -> list[Message]:
@@ -276,7 +301,7 @@ class TrackerCore:
             self.demo_id += 1
             self.reaches += 1
             self._index = 0
-            first = [(s, g) for s, g in self._recent if s >= event.stamp - 1e-9 and s > self._ended_at]
+            first = [(s, g) for s, g in self._recent if s >= event.stamp - 1e-9 and s > self._ended_at] or [(t, f)]
             msgs: list[Message] = [DemoMarker(stamp=first[0][0], tick=-1, demo_id=self.demo_id, event="start",
                                               true_class=-1, class_name="live", n_samples=0)]
             return msgs + [self._pose(s, g) for s, g in first]
@@ -289,8 +314,12 @@ class TrackerCore:
         return msgs
 
     def _pose(self, t: float, f: np.ndarray) -> HumanPose:
+        features = np.asarray(f, dtype=np.float64).copy()
+        # the fit follows the yaw continuously from its first guess: a track begun on the other side of +-pi, or a
+        # person who turned round, published it 2 pi off the libraries' convention (recognised 10 of 40 reaches)
+        features[self._yaw] = (features[self._yaw] + math.pi) % (2 * math.pi) - math.pi
         pose = HumanPose(stamp=t, tick=-1, tick_last=True, demo_id=self.demo_id, index=self._index,
-                         features=np.asarray(f, dtype=np.float64).copy())
+                         features=features)
         self._index += 1
         return pose
 

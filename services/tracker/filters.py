@@ -2,8 +2,9 @@
 
 A first-order low-pass filter per value whose cutoff rises with the value's speed: ``fc = min_cutoff +
 beta |dx/dt|`` (the speed itself low-passed at ``d_cutoff``). A sensor's centimetre jitter on a still person
-is smoothed at ``min_cutoff``; a reach, fast, passes with a high cutoff, so the prediction is not delayed by
-the smoothing. Frames may come at any interval (the smoothing factor follows each frame's own ``dt``).
+is smoothed at ``min_cutoff``; a reach, fast, passes with a higher cutoff, so it lags less than a slow motion
+would (about 2 frames at 30 Hz with the tracker's defaults: docs/keypoints.md). Frames may come at any interval
+(the smoothing factor follows each frame's own ``dt``).
 """
 
 from __future__ import annotations
