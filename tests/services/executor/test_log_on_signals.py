@@ -57,4 +57,4 @@ def test_executor_bad_option_is_one_line(tmp_path) -> None:
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
-        "python -m services.executor: error: executor.stale_limit_s: must be > 0, got -1.0"]
+        "python -m services.executor: error: executor.stale_limit_s: must be > 0, got -1.0 (set by --stale-limit-s)"]
