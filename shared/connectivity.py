@@ -54,6 +54,22 @@ def tls_hint(cfg: ZenohConfig) -> str:
             "name not in it - looks like this; `foresight security check DIR`)" if cfg.security_dir else "")
 
 
+def connect_names(cfg: ZenohConfig) -> str:
+    """The session's ``connect`` endpoints as it uses them, comma-separated.
+
+    Under security that is ``tls/``: the config's ``tcp/`` is what the user wrote, and the warnings named it though
+    every link was TLS.
+    """
+    if not cfg.security_dir:
+        return ",".join(cfg.connect)
+    from shared.security.tls import secure_endpoints
+
+    try:
+        return ",".join(secure_endpoints(cfg.connect))
+    except ValueError:  # an endpoint security refuses: opening the session says so
+        return ",".join(cfg.connect)
+
+
 class ConnectionWatch:
     """A thread that reports a session without router or peer (see the module docstring).
 
@@ -74,7 +90,7 @@ class ConnectionWatch:
         self.clock = clock
         self.failed: str | None = None
         self.warnings = 0
-        self._where = ",".join(cfg.connect)
+        self._where = connect_names(cfg)
         self._done = threading.Event()
         self._thread: threading.Thread | None = None
         self._since = clock()  # start of the current spell without a connection

@@ -21,7 +21,7 @@ from typing import Any, Generic, TypeVar
 import zenoh
 
 from shared.config import ZenohConfig
-from shared.connectivity import retry_config, tls_hint, watched
+from shared.connectivity import connect_names, retry_config, tls_hint, watched
 from shared.protocol import Keys, Message, ProtocolError, Receipt, decode, encode
 from shared.protocol.limits import MAX_PAYLOAD_BYTES
 from shared.rejects import RejectCounter
@@ -74,7 +74,7 @@ def _open(cfg: ZenohConfig) -> zenoh.Session:
     except zenoh.ZError as exc:
         reason = str(exc).split(" at /")[0].strip()  # drop the Rust source location
         raise TransportError(f"zenoh: cannot open a {cfg.mode} session (listen {','.join(cfg.listen) or '-'}, "
-                             f"connect {','.join(cfg.connect) or '-'}): {reason}") from None
+                             f"connect {connect_names(cfg) or '-'}): {reason}") from None
 
 
 def open_with_retry(cfg: ZenohConfig, sleep: Callable[[float], None] | None = None,
@@ -109,16 +109,16 @@ def open_with_retry(cfg: ZenohConfig, sleep: Callable[[float], None] | None = No
                 raise
             pause = min(delay, left)
             log.warning("zenoh: router %s not reachable yet (attempt %d); retrying in %.2g s, at most %g s in all%s",
-                        ",".join(cfg.connect), attempt, pause, cfg.connect_timeout_s, tls_hint(cfg))
+                        connect_names(cfg), attempt, pause, cfg.connect_timeout_s, tls_hint(cfg))
             sleep(pause)
             delay, attempt = min(2 * delay, RETRY_MAX_S), attempt + 1
     if attempt > 1:
-        log.info("zenoh: connected to %s after %d attempts", ",".join(cfg.connect), attempt)
+        log.info("zenoh: connected to %s after %d attempts", connect_names(cfg), attempt)
     if cfg.mode == "peer" and cfg.connect:
         info = session.info
         if not list(info.routers_zid()) and not list(info.peers_zid()):
             log.warning("zenoh: %s not reachable yet; Zenoh keeps trying in the background (peer mode)",
-                        ",".join(cfg.connect))
+                        connect_names(cfg))
     return session
 
 

@@ -101,7 +101,7 @@ class PredictorService:
                 return []
             self.pacer.sent(now)
             self.stats.coalesced -= 1  # it gets its own grid after all
-            return [self._grid(msg, time.time())]
+            return [self._grid(msg, msg.stamp)]
 
     def _grid(self, msg: HumanPose, stamp: float) -> OccupancyGrid:
         return self.core.predict().to_message(stamp=stamp, tick=msg.tick, tick_last=msg.tick_last,
@@ -128,7 +128,9 @@ class PredictorService:
             self.stats.rejected += 1
             return []
         self.stats.poses += 1
-        stamp = time.time() if msg.tick < 0 else msg.stamp
+        # stamped with the pose it was predicted from, as a Plan is with its input: a pose that waited in the backlog
+        # gives a prediction as old as it (stamped 'now', a 5 s old pose's grid looked fresh to every reader)
+        stamp = msg.stamp
         out: list[ClassPosterior | OccupancyGrid] = [
             ClassPosterior(stamp=stamp, tick=msg.tick, demo_id=msg.demo_id, index=msg.index,
                            class_names=list(self.model.class_names), posterior=posterior,

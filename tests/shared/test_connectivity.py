@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 
@@ -110,3 +111,13 @@ def test_client_retries_end_when_the_service_is_stopped():
             open_with_retry(client, stop=stop)
     finally:
         timer.cancel()
+
+
+def test_the_endpoints_are_named_as_the_session_uses_them() -> None:
+    """Under security the warnings said 'router tcp/...' though every link was TLS (docs/security.md: tls/...)."""
+    from shared.connectivity import connect_names
+
+    plain = ZenohConfig(mode="client", connect=["tcp/127.0.0.1:7447", "tcp/[::1]:7447"], multicast_scouting=False)
+    assert connect_names(plain) == "tcp/127.0.0.1:7447,tcp/[::1]:7447"
+    secured = dataclasses.replace(plain, security_dir="cell")
+    assert connect_names(secured) == "tls/127.0.0.1:7447,tls/[::1]:7447"

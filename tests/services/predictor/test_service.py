@@ -172,3 +172,15 @@ def test_a_worker_still_busy_at_stop_is_said_and_what_it_computes_later_is_not_p
     release.set()
     time.sleep(0.3)
     assert grids.items == [] and posts.items == [] and service.stats.published == 0
+
+
+def test_a_prediction_is_stamped_with_the_pose_it_was_made_from(zenoh_hub, small_model, small_library) -> None:
+    """A real-time pose that waited 4.7 s in the backlog got a posterior and a grid stamped 'now': every reader
+    took a prediction of a 5 s old motion for a fresh one (a Plan is stamped with its input already)."""
+    service = PredictorService(PredictorConfig(), zenoh_hub(), model=small_model)
+    demo = small_library.by_class(1)[0]
+    old = time.time() - 4.7
+    outs = service.handle_batch([HumanPose(stamp=old, tick=-1, tick_last=True, demo_id=3, index=0,
+                                           features=demo.features[0])], time.monotonic())
+    kinds = {type(o).__name__: o.stamp for o in outs}
+    assert kinds == {"ClassPosterior": old, "OccupancyGrid": old}
