@@ -43,7 +43,8 @@ from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Message
 from .filters import OneEuroFilter
 from .reach import ReachDetector, ReachRule
 
-__all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S", "JUMP_CONFIRM"]
+__all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S", "JUMP_CONFIRM",
+           "LIBRARY_RATE_HZ"]
 
 REASONS = ("frame", "names", "missing", "order", "leap", "range", "residual", "jump")
 """Why a frame is refused: another coordinate frame, a point the layout does not have, a required point missing, a
@@ -53,6 +54,11 @@ implausible jump."""
 
 MIN_PERIOD_S = 1.0 / 500
 """The shortest frame interval taken for the sensor's period (500 Hz): shorter ones are frames of a burst."""
+
+LIBRARY_RATE_HZ = 30.0
+"""The rate of the motion libraries (the paper's recordings and the replayer's default): a pose is published per
+frame and the predictor's time feature is its index, so a sensor far from this rate reads every motion as faster or
+slower (docs/keypoints.md)."""
 
 JUMP_CONFIRM = 3
 """Frames in a row of the body a jump was refused to (each following the one before) that make it a new track:
@@ -106,6 +112,7 @@ class TrackerOutput:
 
     messages: list[Message] = field(default_factory=list)
     refused: str | None = None
+    note: str | None = None  # once per track: something the user should know (a sensor rate not the library's)
 
 
 class TrackerCore:
@@ -142,6 +149,7 @@ class TrackerCore:
         self._leap: float | None = None                         # a refused frame's stamp a long gap after the last
         self._ended_at = -math.inf                              # the last reach's end stamp
         self._jump: tuple[float, np.ndarray, int] | None = None  # refused as a jump: (stamp, joints, frames in a row)
+        self._rate_said = False                                  # the sensor's rate checked for this track
         self._yaw = HERAKLES_NAMES.index("pelvis_yaw")
         self._dts: deque[float] = deque(maxlen=15)              # recent frame intervals: the sensor's period
         self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
@@ -224,6 +232,14 @@ class TrackerCore:
         self.accepted += 1
         smooth = self.filter(f, stamp)
         out.messages += self._bridge(stamp, smooth, dropped) + self._frame(stamp, smooth)
+        if len(self._dts) == self._dts.maxlen and not self._rate_said:  # the period known: said once per track
+            self._rate_said = True
+            rate = 1.0 / float(np.median(self._dts))
+            if abs(rate / LIBRARY_RATE_HZ - 1.0) > 0.25:
+                out.note = (f"the sensor sends {rate:.0f} frames a second, the motion library's poses came at "
+                            f"{LIBRARY_RATE_HZ:g}: a pose's index is its time for the predictor, so its motions look "
+                            f"{rate / LIBRARY_RATE_HZ:.1f}x slower; send {LIBRARY_RATE_HZ:g} frames a second "
+                            "(docs/keypoints.md)")
         self._out = (stamp, smooth)
         return out
 
@@ -265,6 +281,7 @@ class TrackerCore:
         self._dts.clear()  # the next frames may come from a sensor restarted at another rate
         self._raw = self._out = self._joints = self._frame_no = self._leap = self._jump = None
         self._ended_at = -math.inf  # a sensor restarted, or a clock stepped back: its frames may precede the last end
+        self._rate_said = False
         return msgs
 
     def _bridge(self, stamp: float, f: np.ndarray, dropped: int | None = None) -> list[Message]:

@@ -123,6 +123,8 @@ class TrackerService:
                                 ", ".join(f"{k} {v}" for k, v in self.core.refused.items() if v))
                 return
             self._accepted_at = time.monotonic()
+            if out.note:
+                log.warning("tracker: %s", out.note)
             self._publish(out.messages)
 
     def check_silence(self) -> bool:

@@ -310,3 +310,14 @@ def test_another_body_in_view_ends_the_track_instead_of_being_glided_to(reach) -
     after = messages(later)
     assert [m.event for m in after if isinstance(m, DemoMarker)] == ["end"]  # the reach ended, nothing glided on
     assert not [m for m in after if isinstance(m, HumanPose)]
+
+
+def test_a_sensor_at_another_rate_than_the_librarys_is_named_once(reach) -> None:
+    """At 120 Hz the same reach was published with 4x the indices, the predictor's time feature, and recognised in
+    11 of 50 reaches at 40 % against 48 of 50 at 30 Hz, without a word."""
+    joints = MODEL.joint_positions(reach)
+    for rate, said in ((30.0, []), (120.0, ["120 frames a second"])):
+        core = TrackerCore()
+        notes = [core.on_frame(i / rate, NAMES, p).note for i, p in enumerate(joints)]
+        notes = [n for n in notes if n]
+        assert len(notes) == len(said) and all(s in n and "4.0x slower" in n for s, n in zip(said, notes, strict=True))
