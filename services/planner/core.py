@@ -331,26 +331,39 @@ class Planner:
         reached = (init[:, -1] - init[:, 0]).norm(dim=-1) <= c.goal_tol  # (Kv,)
         trajs = torch.where(reached[:, None, None], init[:, -1:].expand_as(init), result.trajectories)  # (Kv, T, D)
         terms = self.cost_terms(trajs)
-        valid = torch.ones(len(self.valid_index), dtype=torch.bool, device=self.device)
+        # a goal whose cost is not finite this step is invalid for it: chosen (goal_choice human took goal 0 for a
+        # NaN) or published (the Plan is refused after the planner had adopted it), it would derail the next steps
+        valid = torch.stack([torch.isfinite(terms[n]) for n in ("smoothness", "obstacle", "human", "total")]).all(0)
+        if not bool(valid.any()):
+            raise PlannerError(f"no goal has a finite cost this step (total {terms['total'].tolist()}); the last plan "
+                               "stands")
         chosen_v = best(choice_key(terms, c.goal_choice), valid)
         dts = self._dt(trajs)
         self._prev, self._prev_best, self._prev_dt = trajs, chosen_v, float(dts[chosen_v])
 
         k = len(self.goals.names)
+        ok = [i for i, v in zip(self.valid_index, valid.tolist(), strict=True) if v]  # the goals valid this step
         out_traj = q_t.expand(k, c.stomp.waypoints, -1).clone()
-        out_traj[self.valid_index] = trajs
+        out_traj[ok] = trajs[valid]
         costs = {name: np.full(k, np.inf) for name in ("smoothness", "obstacle", "human", "total")}
         for name in costs:
-            costs[name][self.valid_index] = terms[name].double().cpu().numpy()
+            costs[name][ok] = terms[name][valid].double().cpu().numpy()
+        out_valid = np.zeros(k, dtype=bool)
+        out_valid[ok] = True
+        reasons = list(self.goals.reasons) or [""] * k
+        for i in sorted(set(self.valid_index) - set(ok)):
+            reasons[i] = "its cost is not finite this step"
+            log.warning("planner: goal %s: cost not finite at step %d; invalid for it", self.goals.names[i],
+                        self.step_index)
         result_step = self.step_index
         self.step_index += 1
         return PlanResult(
             step=result_step, goal_names=list(self.goals.names), joint_names=list(self.robot.joint_names),
             trajectories=out_traj.float().cpu().numpy(), cost_smoothness=costs["smoothness"],
             cost_obstacle=costs["obstacle"], cost_human=costs["human"], cost_total=costs["total"],
-            valid=self.goals.valid.cpu().numpy().astype(bool), chosen=self.valid_index[chosen_v],
+            valid=out_valid, chosen=self.valid_index[chosen_v],
             dt=self._prev_dt, start=q_t.double().cpu().numpy(), planning_ms=(time.perf_counter() - t0) * 1e3,
-            reasons=list(self.goals.reasons) or [""] * k, iterations=result.history.shape[0] - 1,
+            reasons=reasons, iterations=result.history.shape[0] - 1,
             cost_history=result.history.double().cpu().numpy(), off_path=off_path)
 
 

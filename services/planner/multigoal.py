@@ -181,6 +181,6 @@ def choice_key(terms: dict[str, torch.Tensor], goal_choice: str) -> torch.Tensor
     """
     if goal_choice == "total":
         return terms["total"]
-    h = terms["human"]
+    h = torch.nan_to_num(terms["human"], nan=math.inf)  # one NaN made the minimum NaN, no goal tied: goal 0 won
     tied = h <= h.min() + 1e-6 * h.min().abs().clamp_min(1.0)  # float32: equal to rounding
     return torch.where(tied, terms["total"], h.new_tensor(math.inf))

@@ -250,7 +250,9 @@ class PlannerService:
                     continue
                 trigger.start(now, ident, reason)
                 lookahead = None  # period mode: the configured lookahead (the demo sets it to the period)
-                if trigger.mode == "event" and recent:  # the plan is executed about one planning time from now
+                if robot.holding:  # held, it stays where it is: a plan starting ahead of it was left at once
+                    lookahead = 0.0  # ('departure'), every other step
+                elif trigger.mode == "event" and recent:  # the plan is executed about one planning time from now
                     lookahead = min(self.planner.config.lookahead_s, float(np.median(recent)))
                 result = self._plan(robot.q, occ, -1, robot.stamp, pub, interrupt=newer_waiting,
                                     lookahead_s=lookahead)

@@ -418,3 +418,41 @@ def test_goal_choice_picks_the_lower_term_it_names(scene, choice: str, expected:
     res = planner.step([0.0, -0.2], blob_grid(scene))
     assert res.chosen == expected
     assert res.trajectories[res.chosen, -1].tolist() == pytest.approx([[1.0, -0.2], [0.9, 0.2]][expected])
+
+
+def test_a_goal_whose_cost_is_not_finite_is_invalid_for_the_step_and_none_leaves_the_state(pr2_planner,
+                                                                                            monkeypatch) -> None:
+    """A NaN cost on a valid goal made the Plan unpublishable after the planner had adopted it (the next steps
+    reconnected from a plan the executor never got), and with goal_choice human it was goal 0 that was chosen."""
+    planner = pr2_planner
+    planner.reset()
+    q0 = planner.robot.q_start.numpy()
+    occ = np.zeros(planner.scene.grid.dims, np.float32)
+    first = planner.step(q0, occ)
+    terms = planner.cost_terms
+
+    def nan_on(goals):
+        def patched(q):
+            out = {k: v.clone() for k, v in terms(q).items()}
+            for g in goals:
+                if g < out["human"].shape[0]:
+                    out["human"][g] = float("nan")
+            out["total"] = out["smoothness"] + out["obstacle"] + out["human"]
+            return out
+        return patched
+
+    monkeypatch.setattr(planner, "cost_terms", nan_on([1]))
+    res = planner.step(first.start, occ)
+    assert res.valid.tolist() == [True, False] and res.reasons[1] == "its cost is not finite this step"
+    assert res.chosen == 0 and np.isinf(res.cost_total[1]) and np.all(np.isfinite(res.cost_total[:1]))
+    from shared.protocol import Plan  # what the service publishes is within the wire contract
+    Plan(stamp=1.0, tick=-1, step=res.step, goal_names=res.goal_names, joint_names=res.joint_names, dt=res.dt,
+         chosen=res.chosen, planning_ms=res.planning_ms, occupancy_tick=-1, occupancy_index=-1,
+         trajectories=res.trajectories.astype(np.float32), cost_smoothness=res.cost_smoothness,
+         cost_obstacle=res.cost_obstacle, cost_human=res.cost_human, cost_total=res.cost_total,
+         valid=res.valid).check()
+    step = planner.step_index
+    monkeypatch.setattr(planner, "cost_terms", nan_on([0, 1]))
+    with pytest.raises(PlannerError, match="no goal has a finite cost this step"):
+        planner.step(res.start, occ)
+    assert planner.step_index == step  # the last plan stands

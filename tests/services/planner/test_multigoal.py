@@ -114,3 +114,5 @@ def test_choice_by_human_cost_breaks_ties_by_total() -> None:
     assert best(choice_key(terms, "total"), valid) == 2
     terms["human"] = torch.tensor([0.2, 0.1, 0.3])
     assert best(choice_key(terms, "human"), valid) == 1
+    terms["human"] = torch.tensor([0.2, 0.1, float("nan")])  # one NaN made every key inf: goal 0 was chosen
+    assert best(choice_key(terms, "human"), valid) == 1
