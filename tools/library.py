@@ -28,7 +28,14 @@ import numpy as np
 
 from shared.feature_sets import describe_features, require_mapping
 from shared.human import HumanModel, place_in_scene, reach_points
-from shared.library import LibraryError, MotionLibrary, load_library, save_library, write_csv_dir
+from shared.library import (
+    LibraryError,
+    MotionLibrary,
+    check_wire_limits,
+    load_library,
+    save_library,
+    write_csv_dir,
+)
 from shared.runtime import cli_errors
 from shared.scene import load_scene
 from shared.synthetic import FEATURE_SETS, SyntheticConfig, generate_library, load_layout, pelvis_frame
@@ -146,15 +153,18 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     else:
         lib = generate_library(args.classes, args.demos, args.seed, lay, scene, cfg)
     took = time.perf_counter() - start
+    check_wire_limits(lib, out)  # what every read refuses is not written
     if out.suffix == ".npz":
         save_library(lib, out)
-        what = f"{out}"
+        what, names = f"{out}", ", ".join(lib.class_names)
     else:
         before = set(out.glob("compound_*.csv")) if out.is_dir() else set()
         files = write_csv_dir(lib, out)
         what = f"{out}/ ({len(files)} CSV files{_replaced(before - set(files))})"
+        names = (f"{', '.join(f.stem for f in files)}, as a CSV directory names its classes: "
+                 f"{', '.join(lib.class_names)} in that order; an .npz keeps the names")
     print(f"wrote {what}: {len(lib.demos)} demonstrations in {lib.n_classes} classes "
-          f"({', '.join(lib.class_names)}), {cfg.n_samples} samples of {lib.n_features} features each, "
+          f"({names}), {cfg.n_samples} samples of {lib.n_features} features each, "
           f"seed {args.seed}, generated in {took:.2f} s")
     if args.plot:
         scene = scene or load_scene(None)

@@ -347,6 +347,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
     args = parser.parse_args(argv)
     setup_logging()
     with cli_errors(prog):
+        if args.seed < 0:  # numpy's and sklearn's errors said neither which option nor which command
+            raise UserError(f"--seed must be >= 0, got {args.seed}")
         scene = load_scene(args.scene)
         lib = load_library(args.library) if args.library else default_library(scene)
         demos = heldout_split(lib, args.heldout, args.seed)[0] if args.heldout else list(lib.demos)

@@ -75,6 +75,7 @@ __all__ = [
     "heldout_split",
     "drop_lines",
     "report_drops",
+    "check_wire_limits",
 ]
 
 
@@ -98,14 +99,21 @@ def load_library(path: str | Path, report: bool = True) -> MotionLibrary:
     if not str(path).strip():
         raise LibraryError("library path: empty (give a directory of compound_*.csv or a .npz)")
     lib = _read(Path(path).expanduser())
-    _check_wire_limits(lib, path)
+    check_wire_limits(lib, path)
     if report:
         report_drops(lib)
     return lib
 
 
-def _check_wire_limits(lib: MotionLibrary, path: str | Path) -> None:
-    """Refuse a library whose classes the predictor could not publish (docs/protocol.md's limits)."""
+def check_wire_limits(lib: MotionLibrary, path: str | Path) -> None:
+    """Refuse a library whose classes the predictor could not publish (docs/protocol.md's limits).
+
+    Every read checks it; a command that writes a library checks it first, so that it never writes one that no
+    command can read (``foresight library generate`` with a goal named "" did).
+
+    Raises:
+        LibraryError: Too many classes, or a class name of 0 or too many characters.
+    """
     if lib.n_classes > MAX_CLASSES:
         raise LibraryError(f"library {str(path)!r}: {lib.n_classes} classes, over the wire's limit of {MAX_CLASSES} "
                            "(a ClassPosterior carries one probability per class)")

@@ -136,10 +136,13 @@ def heldout_split(lib: MotionLibrary, n_per_class: int, seed: int
         ``(train, heldout)``, both ordered by (label, index).
 
     Raises:
-        LibraryError: If ``n_per_class`` is negative or leaves a class without training data.
+        LibraryError: If ``n_per_class`` is negative or leaves a class without training data, or ``seed`` is not an
+            integer >= 0.
     """
     if n_per_class < 0:
         raise LibraryError(f"heldout: n_per_class must be >= 0, got {n_per_class}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise LibraryError(f"heldout: the seed must be an integer >= 0, got {seed!r}")  # numpy's error named no option
     rng = np.random.default_rng(seed)
     train: list[Demonstration] = []
     held: list[Demonstration] = []

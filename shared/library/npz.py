@@ -8,6 +8,7 @@ class names, the feature names and the issues found when the library was read
 from __future__ import annotations
 
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -88,7 +89,7 @@ def load_npz(path: Path) -> MotionLibrary:
             data = {k: z[k] for k in _NPZ_KEYS}
     except LibraryError:
         raise
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:  # zlib: damaged data
         raise LibraryError(f"library file {str(path)!r}: unreadable npz ({type(exc).__name__}: {exc})") from None
     where = f"library file {str(path)!r}"
     try:

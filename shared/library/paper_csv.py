@@ -99,7 +99,13 @@ def _read_lines(p: Path) -> list[tuple[int, str]]:
         text = p.read_text(encoding="utf-8-sig", errors="replace")  # a byte-order mark is not part of line 1
     except OSError as exc:
         raise LibraryError(f"cannot read library file {str(p)!r}: {exc.strerror or exc}") from None
-    return [(n, line) for n, line in enumerate(text.splitlines(), start=1) if line.strip()]
+    # a row of empty fields (",,,,", a spreadsheet's export) is as blank as an empty line: it was taken for a row of
+    # the demonstration before it, and cost that demonstration
+    lines = [(n, line) for n, line in enumerate(text.splitlines(), start=1) if line.replace(",", "").strip()]
+    trailing = sum(line.rstrip().endswith(",") for _, line in lines)
+    if lines and trailing >= 0.9 * len(lines):  # a trailing comma on (nearly) every line: no empty 14th column
+        lines = [(n, line.rstrip()[:-1] if line.rstrip().endswith(",") else line) for n, line in lines]
+    return lines
 
 
 def _column_counts(lines: list[tuple[int, str]]) -> Counter[int]:
@@ -118,6 +124,16 @@ def _count_summary(counts: Counter[int]) -> str:
         return f"{ranked[0][1]} lines of {ranked[0][0]} columns"
     parts = [f"{n} of {c} columns" if i == 0 else f"{n} of {c}" for i, (c, n) in enumerate(ranked)]
     return f"{sum(counts.values())} lines ({', '.join(parts)})"
+
+
+def _numbered_header(lines: list[tuple[int, str]]) -> bool:
+    """Whether the first line is columns numbered 0, 1, 2, ... (pandas' default header) before a block's first row."""
+    fields = lines[0][1].split(",")
+    if len(lines) < 2 or not all(_is_float(f) for f in fields) or len(fields) < 3:
+        return False
+    second = lines[1][1].split(",", 1)[0]
+    return [float(f) for f in fields] == [float(i) for i in range(len(fields))] and _is_float(second) \
+        and float(second) == 0.0
 
 
 def _feature_names_for(n_cols: int) -> tuple[str, ...]:
@@ -155,8 +171,9 @@ def _parse_class(p: Path, lines: list[tuple[int, str]], label: int, name: str, n
                  ) -> tuple[list[Demonstration], list[LibraryIssue]]:
     feature_names = _feature_names_for(n_cols)
     blocks: list[_Block] = []
-    if lines and not any(_is_float(f) for f in lines[0][1].split(",")):
-        lines = lines[1:]  # a header line (column names): not a demonstration
+    if lines and (not any(_is_float(f) for f in lines[0][1].split(",")) or _numbered_header(lines)):
+        header = lines[0][1].strip()  # column names: not a demonstration, and neither is the same line again
+        lines = [(n, line) for n, line in lines[1:] if line.strip() != header]  # (two files joined with cat)
     for lineno, line in lines:
         values, problem = _parse_row(line)
         # a row that does not parse still starts a demonstration when its sample index is 0: else the row and
@@ -294,7 +311,7 @@ def write_csv_dir(lib: MotionLibrary, directory: str | Path) -> list[Path]:
         rows = [np.column_stack([np.arange(d.n_samples), d.features]) for d in lib.by_class(m)]
         path = out / f"compound_{m}.csv"
         np.savetxt(path, np.concatenate(rows) if rows else np.zeros((0, 1 + lib.n_features)), delimiter=",",
-                   fmt=["%d"] + ["%.9g"] * lib.n_features)
+                   fmt=["%d"] + ["%.17g"] * lib.n_features)  # every float64 back as written (%.9g: 5e-9 off)
         files.append(path)
     for stale in set(out.glob("compound_*.csv")) - set(files):
         stale.unlink()

@@ -84,9 +84,25 @@ def test_cli_generate_npz_and_csv(tmp_path, capsys) -> None:
         np.testing.assert_allclose(x.features, y.features, rtol=1e-8, atol=1e-9)
     direct = generate_library(3, 4, seed=2)
     np.testing.assert_array_equal(a.demos[5].features, direct.demos[5].features)
-    assert "wrote" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    # a CSV directory names its classes by file: say so (it printed the goal names, as if they were kept)
+    assert "(compound_0, compound_1, compound_2, as a CSV directory names its classes: blue_cup, red_cup, " \
+           "near_left in that order; an .npz keeps the names)" in out
+    assert b.class_names == ["compound_0", "compound_1", "compound_2"]
     with pytest.raises(SystemExit):
         library_main(["generate", "--classes", "12", "--out", str(tmp_path / "x.npz")])
+
+
+def test_generate_writes_no_library_that_no_command_could_read(tmp_path, capsys) -> None:
+    """A layout's goal named "" was generated and written; every later read refused it."""
+    layout = tmp_path / "layout.toml"
+    layout.write_text('name = "bad"\nscene = "pr2_two_cups"\n[[goals]]\nname = ""\nposition = [0.4, -0.3, 0.0]\n'
+                      '[[goals]]\nname = "b"\nposition = [0.4, -0.1, 0.0]\n')
+    with pytest.raises(SystemExit) as e:
+        library_main(["generate", "--classes", "2", "--demos", "3", "--layout", str(layout), "--out",
+                      str(tmp_path / "bad.npz")])
+    assert e.value.code == 2 and "class name '' has 0 characters" in capsys.readouterr().err
+    assert not (tmp_path / "bad.npz").exists()
 
 
 def test_generate_cli_wide(tmp_path, capsys) -> None:

@@ -245,6 +245,8 @@ def test_heldout_split(tmp_path):
     assert heldout_split(lib, 0, seed=0) == (lib.demos, [])
     with pytest.raises(LibraryError, match="cannot hold out 6"):
         heldout_split(lib, 6, seed=0)
+    with pytest.raises(LibraryError, match="the seed must be an integer >= 0, got -1"):  # numpy's error, a traceback
+        heldout_split(lib, 1, seed=-1)
 
 
 def test_issue_str():
@@ -340,3 +342,59 @@ def test_save_library_replaces_a_library_only_with_a_whole_one(tmp_path, monkeyp
     monkeypatch.undo()
     save_library(generate_library(3, 1, seed=1), tmp_path / "noext")
     assert load_library(tmp_path / "noext.npz").n_classes == 3
+
+
+@pytest.mark.parametrize("edit", ["empty fields at the end", "empty fields between blocks", "header again",
+                                  "trailing commas", "numbered header"])
+def test_a_spreadsheets_export_quirks_cost_no_demonstration(tmp_path, edit):
+    """Rows of empty fields and a repeated header were taken for rows of the demonstration before them, which was
+    dropped; a comma at the end of every line made 13 features and dropped every block; pandas' numbered header
+    was a one-row demonstration."""
+    make_lib(tmp_path)
+    path = tmp_path / "compound_1.csv"
+    lines = path.read_text().splitlines()
+    width = lines[0].count(",")
+    if edit == "empty fields at the end":
+        lines += ["," * width] * 2
+    elif edit == "empty fields between blocks":
+        lines.insert(40, "," * width)
+    elif edit == "header again":
+        lines = ["index," + ",".join(FEATURE_NAMES)] + lines[:40] + ["index," + ",".join(FEATURE_NAMES)] + lines[40:]
+    elif edit == "trailing commas":
+        lines = [line + "," for line in lines]
+    else:
+        lines.insert(0, ",".join(str(i) for i in range(width + 1)))
+    path.write_text("\n".join(lines) + "\n")
+    lib = load_library(tmp_path)
+    assert lib.issues == [] and lib.counts() == [4, 4, 4] and lib.n_features == 12
+
+
+def test_a_damaged_npz_is_a_library_error_not_a_traceback(tmp_path):
+    """Damage inside a compressed member raised zlib.error from numpy's lazy read: every command's traceback."""
+    import zipfile
+
+    from shared.synthetic import generate_library
+
+    save_library(generate_library(3, 4, seed=0), tmp_path / "lib.npz")
+    raw = bytearray((tmp_path / "lib.npz").read_bytes())
+    with zipfile.ZipFile(tmp_path / "lib.npz") as z:
+        info = z.getinfo("features.npy")
+    for offset in (100, 200, 400):  # some damage fails the member's CRC, some the deflate stream (zlib.error)
+        bad = bytearray(raw)
+        at = info.header_offset + 30 + len(info.filename) + len(info.extra) + offset
+        bad[at:at + 40] = bytes([0xFF]) * 40
+        (tmp_path / "bad.npz").write_bytes(bytes(bad))
+        with pytest.raises(LibraryError, match="unreadable npz"):
+            load_library(tmp_path / "bad.npz")
+
+
+def test_a_csv_copy_keeps_every_float64(tmp_path):
+    """%.9g rounded the features: a CSV and an npz of the same library differed by up to 5e-9."""
+    from shared.library import write_csv_dir
+    from shared.synthetic import generate_library
+
+    lib = generate_library(2, 3, seed=5)
+    write_csv_dir(lib, tmp_path)
+    back = load_library(tmp_path)
+    for a, b in zip(lib.demos, back.demos, strict=True):
+        np.testing.assert_array_equal(a.features, b.features)
