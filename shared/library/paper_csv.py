@@ -42,6 +42,7 @@ _PAPER_COLS = 1 + len(FEATURE_NAMES)
 class _Block:
     first_line: int
     rows: list[list[float]] = field(default_factory=list)
+    lines: list[int] = field(default_factory=list)  # the file line of each row
     problems: list[str] = field(default_factory=list)
     columns: dict[int, list[int]] = field(default_factory=dict)  # wrong column count -> its line numbers
     text: list[tuple[int, str]] = field(default_factory=list)  # (line, problem) of non-numeric rows
@@ -211,6 +212,7 @@ def _parse_class(p: Path, lines: list[tuple[int, str]], label: int, name: str, n
         else:
             blk.last_index = expected
         blk.rows.append(values[1:])
+        blk.lines.append(lineno)
     demos: list[Demonstration] = []
     issues: list[LibraryIssue] = []
     typical = float(np.median([len(b.rows) for b in blocks])) if blocks else 0.0
@@ -221,7 +223,8 @@ def _parse_class(p: Path, lines: list[tuple[int, str]], label: int, name: str, n
             reasons.append(f"truncated: {len(blk.rows)} samples where the file's blocks typically have "
                            f"{typical:g}")
         if not reasons:
-            reasons = validate_block(np.asarray(blk.rows, dtype=np.float64).reshape(-1, n_cols - 1), feature_names)
+            reasons = validate_block(np.asarray(blk.rows, dtype=np.float64).reshape(-1, n_cols - 1), feature_names,
+                                     blk.lines)
         if reasons:
             issues.append(LibraryIssue(name, b, f"{where}: " + "; ".join(reasons)))
             continue

@@ -9,7 +9,7 @@ these to every stored demonstration.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -47,12 +47,14 @@ def _ranges(mask: np.ndarray) -> str:
     return line_ranges(np.flatnonzero(mask).tolist())
 
 
-def validate_block(features: np.ndarray, feature_names: tuple[str, ...] = FEATURE_NAMES) -> list[str]:
+def validate_block(features: np.ndarray, feature_names: tuple[str, ...] = FEATURE_NAMES,
+                   lines: Sequence[int] | None = None) -> list[str]:
     """Check one demonstration's features against the library rules.
 
     Args:
         features: ``(T, F)`` feature rows of one block.
         feature_names: The F feature names; the plausible ranges are checked where they have a mapping.
+        lines: ``(T,)`` the file line of each row (a CSV): the messages name the line of a value they quote.
 
     Returns:
         Reasons the block is malformed (empty when it is valid). Sample positions are 0-based.
@@ -75,10 +77,14 @@ def validate_block(features: np.ndarray, feature_names: tuple[str, ...] = FEATUR
     if dead.any():
         reasons.append(f"dead channel(s): {', '.join(names[j] for j in np.flatnonzero(dead))} zero or subnormal "
                        f"in all {f.shape[0]} samples")
+    def at(row: int) -> str:
+        return f" at line {lines[row]}" if lines is not None else ""
+
     live_sub = subnormal & ~dead[None, :]
     if live_sub.any():
         cols = [names[j] for j in np.flatnonzero(live_sub.any(axis=0))]
-        reasons.append(f"subnormal (garbage) values in {', '.join(cols)}")
+        reasons.append(f"subnormal (garbage) values in {', '.join(cols)} (first{at(int(np.argmax(live_sub.any(1))))})"
+                       if lines is not None else f"subnormal (garbage) values in {', '.join(cols)}")
     mapping = mapping_for(names)
     if mapping is None:  # no plausible ranges known for an unmapped feature set
         return reasons
@@ -88,8 +94,9 @@ def validate_block(features: np.ndarray, feature_names: tuple[str, ...] = FEATUR
     for j in np.flatnonzero(out.any(axis=0)):
         name = names[j]
         lo, hi = mapping.plausible_ranges[name]
-        col = f[out[:, j], j]
-        worst = col[np.argmax(np.maximum(lo - col, col - hi))]
+        rows = np.flatnonzero(out[:, j])
+        col = f[rows, j]
+        k = int(np.argmax(np.maximum(lo - col, col - hi)))
         reasons.append(f"{name} outside its plausible range [{lo:g}, {hi:g}] {mapping.units[j]} in "
-                       f"{int(out[:, j].sum())} samples (e.g. {worst:g})")
+                       f"{len(rows)} samples (e.g. {col[k]:g}{at(int(rows[k]))})")
     return reasons

@@ -108,8 +108,10 @@ def test_out_of_range_block(tmp_path):
     make_lib(tmp_path)
     b = blocks()
     b[1][10:20, 10] = 0.9  # a 90 cm arm extension
+    b[1][14, 10] = 1.2  # the worst of them: on line 55 (block 1 starts at line 41)
     write_class(tmp_path / "compound_0.csv", b)
-    check_one_issue(tmp_path, "compound_0", 1, r"r_arm_trans outside its plausible range \[-0.5, 0.5\] m in 10 samples")
+    check_one_issue(tmp_path, "compound_0", 1, r"r_arm_trans outside its plausible range \[-0.5, 0.5\] m in 10 samples "
+                                               r"\(e.g. 1.2 at line 55\)")  # it named no line: 40 to search
 
 
 def test_wrong_column_count(tmp_path):
