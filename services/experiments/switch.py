@@ -150,7 +150,9 @@ class SwitchResult:
         out.update({f"ends_at_human_cup_{m}": self.conflicts(m) for m in METHODS})
         out.update({f"final_goal_{m}": [r.final_goal for r in self.runs if r.method == m] for m in METHODS})
         out.update({f"reached_step_{m}": [r.reached_step for r in self.runs if r.method == m] for m in METHODS})
-        out["earlier_by"] = self.median_settle("current") - self.median_settle("prediction")
+        # as the verdict reads it: from the step each leaves the human's cup for good (the settle steps' difference
+        # said -14 where the verdict said +0)
+        out["earlier_by"] = self.median_away("current") - self.median_away("prediction")
         out.update(protocol=self.config.protocol, library=self.library, scene=self.config.scene,
                    human_class=self.human.name,
                    human_class_distance_m=self.human.distance, timing=dataclasses.asdict(self.config.timing),

@@ -34,6 +34,10 @@ def table1_verdict(res: InterferenceResult) -> str:
     if basic == 0:
         return (f"**not reproduced**: {ratio_text(ratio)}: basic STOMP never enters the final prediction, least "
                 f"penetration does ({lp:.3f})")
+    if lp == 0:  # the ratio is unbounded whatever basic scored (0.0001 passed as 'inf >= 20x'): no measurement
+        return (f"**not judged (no finite ratio)**: least penetration scores 0 in every run, basic STOMP {basic:.3g}; "
+                f"the paper's least penetration is not 0 ({np.mean(PAPER_TABLE1['least_penetration']):.2f} against "
+                f"{np.mean(PAPER_TABLE1['basic']):.2f}), so 0 is no reproduction of a ratio, and no refutation")
     if ratio >= 20:
         return f"**reproduced**: {ratio:.1f}x against the paper's {paper:.0f}x (target >= 20x)"
     early = float(np.mean(res.per_demo("least_penetration", "interference_unrecognised")[0]))
@@ -47,8 +51,12 @@ def switch_verdict(res: SwitchResult) -> str:
     """One line: whether the prediction planner leaves the human's cup >= 5 steps before the current one (4 vs 13)."""
     ap, ac = res.median_away("prediction"), res.median_away("current")
     steps = res.config.timing.steps
-    if ac - ap >= 5:
+    if ac - ap >= 5 and ap > 0:
         return f"**reproduced**: the prediction planner leaves the human's cup {ac - ap:g} steps earlier (paper: 9)"
+    if ac - ap >= 5:  # it never went there: 'leaves 6 steps earlier' was said of a planner that never did
+        return (f"**not judged (no switch to time)**: in the median run the prediction planner never goes for the "
+                f"human's cup, the current one leaves it at step {ac:g}; in the paper both went there first and "
+                "prediction left earlier (4 against 13)")
     away = {m: res.away(m) for m in ("prediction", "current")}
     if ap >= steps and ac >= steps:
         never = sum(s is None for m in away for s in away[m])
@@ -59,7 +67,9 @@ def switch_verdict(res: SwitchResult) -> str:
         why = (f"in the median run neither planner goes for the human's cup: there is nothing to switch from "
                f"({never} of {sum(map(len, away.values()))} runs never do)")
     else:
-        why = f"prediction leaves at step {ap:g}, current at {ac:g} (medians)"
+        said = {m: ("never goes there" if a <= 0 else f"leaves at step {a:g}") for m, a in (("prediction", ap),
+                                                                                              ("current", ac))}
+        why = f"prediction {said['prediction']}, current {said['current']} (medians)"
     return f"**not reproduced**: {why} ({ac - ap:+g} steps; paper: 4 against 13)"
 
 

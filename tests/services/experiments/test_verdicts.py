@@ -56,3 +56,17 @@ def test_switch_verdicts_say_median_and_count_the_runs():
 def test_ratio_text():
     assert ratio_text(2.345) == "2.3x" and ratio_text(math.inf) == "inf"
     assert ratio_text(math.nan) == ratio_text(None) == "n/a (0 / 0)"
+
+
+def test_no_verdict_rests_on_a_ratio_or_a_switch_that_is_not_there():
+    """Least penetration at 0 and basic at 0.0001 read 'reproduced: infx'; a prediction planner that never went for
+    the human's cup 'left it 6 steps earlier'; 'leaves at step 0' stood for 'never goes there'; earlier_by in the
+    JSON said -14 where the verdict said +0 (it took the settle steps)."""
+    v = table1_verdict(table1(0.0001, 0.0))
+    assert v.startswith("**not judged (no finite ratio)**") and "least penetration scores 0" in v and "inf" not in v
+    never = switch({"prediction": [0, 0, 0], "current": [6, 6, 6]})
+    assert switch_verdict(never).startswith("**not judged (no switch to time)**")
+    assert "leaves the human's cup 6 steps earlier" not in switch_verdict(never)
+    once = switch({"prediction": [4, 4, 4], "current": [0, 0, 0]})
+    assert "prediction leaves at step 4, current never goes there" in switch_verdict(once)
+    assert switch({"prediction": [1, 2, 3], "current": [9, 9, 9]}).to_json()["earlier_by"] == 7
