@@ -248,9 +248,10 @@ def interference_along_path(robot: Any, q: np.ndarray, occupancy: OccupancyGrid,
                             spacing: float | None = None, weights: np.ndarray | None = None) -> np.ndarray:
     """Each executed state's share of the path-length integral of the penetration (the paper authors' measure).
 
-    The executed path is sampled every ``ds`` of configuration-space length (:func:`path_samples`; the
-    authors' code: every 0.005 of Move3D's path parameter, docs/experiments.md) and each sample's penetration
-    (:func:`penetration`) counts ``cost x ds``: a path outside every occupied voxel scores 0, and the score grows
+    The executed path is sampled at its start and every ``ds`` of configuration-space length (:func:`path_samples`;
+    the authors' code: every 0.005 of Move3D's path parameter, docs/experiments.md), and each step between two
+    samples counts ``(c_prev + c) / 2 x ds`` of their penetrations (:func:`penetration`): the trapezoid of the
+    authors' ``cs_integral`` (``deltaStepCost``). A path outside every occupied voxel scores 0, and the score grows
     with the length inside. Time plays no part: a robot standing still accrues nothing.
 
     Args:
@@ -262,13 +263,14 @@ def interference_along_path(robot: Any, q: np.ndarray, occupancy: OccupancyGrid,
         weights: ``(D,)`` per-joint weights of the length (:func:`path_samples`).
 
     Returns:
-        ``(N,)`` probability-voxels x configuration-space length, per state (the samples of the segment
-        ending at it; 0 for the first).
+        ``(N,)`` probability-voxels x configuration-space length, per state (the steps ending in its segment;
+        0 for the first).
     """
     samples, seg = path_samples(q, ds, weights)
     out = np.zeros(len(np.asarray(q)))
     if len(samples):
-        np.add.at(out, seg, penetration(robot, samples, occupancy, spacing) * ds)
+        c = penetration(robot, np.concatenate([np.asarray(q, dtype=np.float64)[:1], samples]), occupancy, spacing)
+        np.add.at(out, seg, 0.5 * (c[:-1] + c[1:]) * ds)  # (was a right sum: the start none, the end a whole step)
     return out
 
 

@@ -86,6 +86,12 @@ def test_path_integral_is_zero_outside_grows_with_length_inside_and_ignores_time
     inside = [interference_along_path(tiny, np.linspace([0.405, 0.42, 0.42], [0.405 + length, 0.42, 0.42], 9), occ,
                                       ds=0.005).sum() for length in (0.01, 0.02, 0.03, 0.04)]
     np.testing.assert_allclose(inside, [0.01, 0.02, 0.03, 0.04], atol=1e-12)  # = the length inside, by hand
+    # a step counts the mean of its two ends' costs, the authors' cs_integral (a right sum counted the end's whole):
+    # from outside the block to 1 mm inside it, only the last sample is in: half a step of cost 1
+    entering = np.linspace([0.381, 0.42, 0.42], [0.401, 0.42, 0.42], 5)  # 0.02 long, 4 steps of 0.005
+    assert interference_along_path(tiny, entering, occ, ds=0.005).sum() == pytest.approx(0.5 * 0.005)
+    leaving = entering[::-1]  # the start inside: half a step too (a right sum counted none)
+    assert interference_along_path(tiny, leaving, occ, ds=0.005).sum() == pytest.approx(0.5 * 0.005)
     # standing still accrues nothing (unlike the time integral): a path of length 0
     still = np.tile([0.5, 0.5, 0.5], (20, 1))
     assert interference_along_path(robot, still, occ).sum() == 0.0
