@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 from services.executor.config import ExecutorConfig
+from services.executor.core import ArmLimits
+from services.ros2.arm import hold_point
 from services.ros2.core import Ros2Config, Ros2Mapping
 from services.ros2.link import Ros2RobotLink
 from services.ros2.robot_sim import RobotSim, RobotSimConfig
@@ -70,6 +72,23 @@ def test_the_robot_is_found_driven_and_bad_samples_are_refused(
                 assert robot.rejects.counts == {"/r_arm_controller/joint_trajectory": 1}
                 link.send(q0[None], np.array([0.2]))
                 assert wait_until(lambda: np.allclose(link.measure(0.0).q, q0, atol=1e-9), 10.0)
+                # the hold: a trajectory without points is refused, as ros2_controllers refuses it ("Empty trajectory
+                # received.") and the motion goes on; the executor's one point where the arm is stops it
+                far = q0 + 0.3
+                link.send(far[None], np.array([3.0]))
+                time.sleep(0.5)
+                link.send(np.zeros((0, len(names))), np.zeros(0))
+                assert wait_until(lambda: robot.rejects.total == 2, 10.0)
+                moving = link.measure(0.0).q
+                time.sleep(0.3)
+                assert not np.allclose(link.measure(0.0).q, moving, atol=1e-4)  # still under way: no hold
+                limits = ArmLimits(tuple(names), np.full(len(names), -10.0), np.full(len(names), 10.0),
+                                   np.ones(len(names)))
+                link.send(*hold_point(link.measure(0.0), limits, 0.5))
+                time.sleep(0.5)
+                held = link.measure(0.0).q
+                time.sleep(0.3)
+                assert np.allclose(link.measure(0.0).q, held, atol=1e-6) and not np.allclose(held, far, atol=0.05)
             finally:
                 link.close()
     finally:
@@ -77,7 +96,7 @@ def test_the_robot_is_found_driven_and_bad_samples_are_refused(
         thread.join(10.0)
     assert not thread.is_alive()
     assert "/r_arm_controller/joint_trajectory" in recorded and "/joint_states" in recorded
-    assert robot.arm.received == 2
+    assert robot.arm.received == 4  # the refused commands never reached the arm
 
 
 def test_no_robot_is_one_clear_error(zenoh_hub: Callable[[], ZenohConfig]) -> None:

@@ -156,6 +156,22 @@ def test_a_client_that_never_reaches_its_router_under_tls_is_told_what_that_may_
     hint = "mutual TLS as planner: a refused certificate"
     assert hint in str(err.value) and "foresight security check DIR" in str(err.value)
     assert any(hint in r.getMessage() for r in caplog.records if "not reachable yet" in r.getMessage())
+    assert "connect tls/127.0.0.1:" in str(err.value)  # the link as it is made (it said tcp/)
+
+
+def test_a_session_whose_ca_file_holds_a_second_authority_fails_at_once(dirs: dict[str, Path], tmp_path) -> None:
+    """Zenoh trusts every certificate in ca.crt: an authority appended to it had its own 'planner' let in (a
+    review's script: the executor took its plans). A session now refuses such a file before it connects."""
+    import shutil
+
+    cell = tmp_path / "cell"
+    shutil.copytree(dirs["good"], cell)
+    cell.chmod(0o700)
+    (cell / "ca.crt").write_bytes((cell / "ca.crt").read_bytes() + (dirs["other"] / "ca.crt").read_bytes())
+    cfg = ZenohConfig(mode="client", listen=[], connect=["tcp/127.0.0.1:9"], security_dir=str(cell), role="replayer")
+    with pytest.raises(CertificateError, match="ca.crt: holds 2 certificates"):
+        with open_session(cfg):
+            pass
 
 
 def test_a_session_listening_on_a_host_its_certificate_does_not_name_is_warned(dirs) -> None:
