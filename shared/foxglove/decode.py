@@ -105,6 +105,8 @@ def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[Sce
             summary = None
         if summary is not None and summary.chunk_indexes:
             chosen = [c.topic for c in summary.channels.values() if wanted(c.topic)]
+            if not chosen:  # no scene channel: nothing to read
+                return
             for schema, channel, message in indexed.iter_messages(topics=chosen, log_time_order=True):
                 if schema is None:
                     continue

@@ -278,3 +278,13 @@ def test_a_complete_log_s_scene_is_read_in_time_order_through_its_index(tmp_path
     cut.write_bytes(data[:data.rindex(b"\x0f")])  # into the summary: the footer and its offsets gone
     assert not read_log(cut).complete
     assert [(r.topic, r.log_time) for r in read_scene(cut)] == whole
+
+
+def test_a_complete_log_without_scene_channels_has_no_scene_records(tmp_path, pr2) -> None:
+    """Read through its index, a log of raw messages only (an executor without the scene) gives no scene record."""
+    path = tmp_path / "raw.mcap"
+    log = McapLog(path, KEYS, None)
+    for key, data in sample_messages(pr2):
+        log.on_sample(key, data)
+    log.close()
+    assert read_log(path).complete and list(read_scene(path)) == []
