@@ -37,6 +37,7 @@ from sklearn.mixture import GaussianMixture
 from services.predictor.model import MODEL_VERSION
 from services.predictor.volumes import Sweep
 from shared.atomic_file import atomic_write
+from shared.npz_reading import NPZ_LOCK
 
 __all__ = ["FitStore", "fit_store", "store_tag"]
 
@@ -112,7 +113,7 @@ class FitStore(MutableMapping[str, Any]):
         if not path.is_file():
             return False
         try:
-            with np.load(path, allow_pickle=False) as arrays:
+            with NPZ_LOCK, np.load(path, allow_pickle=False) as arrays:
                 self._memory[key] = _decode(arrays)
         except _UNREADABLE:  # cut short, damaged or foreign (np.load raises each of these): computed again
             return False

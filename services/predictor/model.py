@@ -48,6 +48,7 @@ import numpy as np
 
 from shared.atomic_file import atomic_write
 from shared.feature_sets import HERAKLES_NAMES, MAPPINGS, count_features, mapping_for
+from shared.npz_reading import NPZ_LOCK
 from shared.scene import Grid, Scene
 
 from .features import FeatureEncoder
@@ -210,7 +211,7 @@ class PredictionModel:
         if not p.is_file():
             raise ModelError(f"model file {str(p)!r} not found; run `foresight train --out {p}` first")
         try:
-            with np.load(p, allow_pickle=False) as z:
+            with NPZ_LOCK, np.load(p, allow_pickle=False) as z:
                 data = {k: z[k] for k in z.files}
         except (zipfile.BadZipFile, zlib.error, OSError, ValueError, EOFError) as exc:
             raise ModelError(f"model file {str(p)!r} is corrupt or not a model file ({type(exc).__name__}: "

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from shared.atomic_file import atomic_write
+from shared.npz_reading import NPZ_LOCK
 
 from .motions import Demonstration, LibraryError, LibraryIssue, MotionLibrary
 from .validation import validate_block
@@ -78,15 +79,16 @@ def load_npz(path: Path) -> MotionLibrary:
             head = f.read(4)
         if head not in (b"PK\x03\x04", b"PK\x05\x06") and not head.startswith(b"\x93NUM"):
             raise LibraryError(f"library file {str(path)!r}: not an npz archive (a zip file){_starts(head)}")
-        loaded = np.load(path, allow_pickle=False)
-        if not isinstance(loaded, np.lib.npyio.NpzFile):  # one .npy array under an .npz name
-            raise LibraryError(f"library file {str(path)!r}: one array, not a Foresight library npz")
-        with loaded as z:
-            missing = [k for k in _NPZ_KEYS if k not in z.files]
-            if missing:
-                raise LibraryError(f"library file {str(path)!r}: not a Foresight library npz "
-                                   f"(missing {', '.join(missing)})")
-            data = {k: z[k] for k in _NPZ_KEYS}
+        with NPZ_LOCK:
+            loaded = np.load(path, allow_pickle=False)
+            if not isinstance(loaded, np.lib.npyio.NpzFile):  # one .npy array under an .npz name
+                raise LibraryError(f"library file {str(path)!r}: one array, not a Foresight library npz")
+            with loaded as z:
+                missing = [k for k in _NPZ_KEYS if k not in z.files]
+                if missing:
+                    raise LibraryError(f"library file {str(path)!r}: not a Foresight library npz "
+                                       f"(missing {', '.join(missing)})")
+                data = {k: z[k] for k in _NPZ_KEYS}
     except LibraryError:
         raise
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:  # zlib: damaged data

@@ -98,6 +98,8 @@ class FakeSystem:
         self.plans: list[Plan] = []
         self.predictor_on = threading.Event()
         self.predictor_on.set()
+        self.first_plan = threading.Event()  # cleared: the plan of tick 0 waits for it (the tests' puts go first)
+        self.first_plan.set()
         self._stop = threading.Event()
         self._goals: list[np.ndarray] | None = None
 
@@ -128,6 +130,8 @@ class FakeSystem:
                     occ_pub.put(blob(tick.tick, tick.tick, tick.stamp))
                 state = latest.get("state")
                 if state is not None and tick.tick not in self.skip_plans:
+                    if tick.tick == 0:
+                        self.first_plan.wait(20.0)
                     plan = self._plan(state, tick.tick, tick.tick)
                     self.plans.append(plan)
                     plan_pub.put(plan)

@@ -138,7 +138,12 @@ def test_lockstep_holds_without_plans_then_resumes(zenoh_hub, pr2, tmp_path) -> 
 
 def run_sending(service: ExecutorService, fake: FakeSystem, payloads: list[tuple[str, bytes]],
                 timeout: float = 30) -> None:
-    """Run ``service`` against ``fake`` and, once its first tick is out, put ``payloads`` ((key, bytes) pairs)."""
+    """Run ``service`` against ``fake`` and, once its first tick is out, put ``payloads`` ((key, bytes) pairs).
+
+    The plan of tick 0 waits until they are put (from the session that puts it): on a loaded machine a 4-step run
+    could end before they arrived, and nothing was counted.
+    """
+    fake.first_plan.clear()
     with fake.running():
         t = threading.Thread(target=service.run)
         t.start()
@@ -147,6 +152,7 @@ def run_sending(service: ExecutorService, fake: FakeSystem, payloads: list[tuple
             time.sleep(0.01)
         for key, payload in payloads:  # while it runs
             fake.session.put(key, payload)
+        fake.first_plan.set()
         t.join(timeout=timeout)
     assert not t.is_alive()
 
