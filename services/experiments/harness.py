@@ -258,20 +258,22 @@ def _join_unless_run_fails(threads: list[ServiceThread], planner: PlannerService
     """
     *others, executor = threads
     deadline = time.monotonic() + timeout_s
-    while executor.thread.is_alive() and time.monotonic() < deadline:
-        if planner.stats.failures:
-            raise PlanningFailed(f"the planner failed {planner.stats.failures} step(s) of the run "
-                                 f"({planner.stats.plans} planned); last: {planner.stats.last_error}")
-        if dead := next((t for t in others if t.error is not None), None):
-            raise ServiceFailed(f"the {dead.name} failed during the run: {type(dead.error).__name__}: "
-                                f"{dead.error}") from dead.error
+
+    def dead() -> ServiceThread | None:
+        return next((t for t in others if t.error is not None), None)
+
+    while (executor.thread.is_alive() and not planner.stats.failures and dead() is None
+           and time.monotonic() < deadline):
         executor.thread.join(0.05)
-    if executor.thread.is_alive():
-        raise TimeoutError(f"{executor.name} did not stop within {timeout_s:g} s")
-    result = executor.join(0)
     if planner.stats.failures:
         raise PlanningFailed(f"the planner failed {planner.stats.failures} step(s) of the run "
                              f"({planner.stats.plans} planned); last: {planner.stats.last_error}")
+    if executor.thread.is_alive() and (failed := dead()) is not None:
+        raise ServiceFailed(f"the {failed.name} failed during the run: {type(failed.error).__name__}: "
+                            f"{failed.error}") from failed.error
+    if executor.thread.is_alive():
+        raise TimeoutError(f"{executor.name} did not stop within {timeout_s:g} s")
+    result = executor.join(0)
     if result.lockstep_timeouts or planner.stats.late_inputs:
         last = f"; {planner.stats.last_late}" if planner.stats.last_late else ""
         raise LateInputs(f"lock-step waits ran out: the executor went on without a plan or prediction "

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from shared.foxglove.decode import SceneDecodeError, SceneRecord, read_scene
-from shared.recording.reader import DAMAGED, open_records
+from shared.recording.reader import DAMAGED
 from shared.runtime import UserError
 
 __all__ = ["SceneState", "scene_at", "draw_snapshot"]
@@ -95,9 +95,6 @@ def scene_at(path: str | Path, at_s: float | None) -> SceneState:
         SceneDecodeError: A scene message does not decode under its channel's schema.
     """
     p = Path(path)
-    if not p.is_file():
-        with open_records(p):  # names what the path is instead (missing, a directory, not a regular file)
-            pass
     if at_s is not None and not (at_s >= 0.0 and math.isfinite(at_s)):
         raise UserError(f"--at must be a finite time >= 0 s, got {at_s}")
     end = math.inf
