@@ -145,16 +145,22 @@ def run_sending(service: ExecutorService, fake: FakeSystem, payloads: list[tuple
     """
     fake.first_plan.clear()
     with fake.running():
-        t = threading.Thread(target=service.run)
+        t = threading.Thread(target=service.run, daemon=True)
         t.start()
-        deadline = time.monotonic() + 20
-        while not fake.ticks and time.monotonic() < deadline:
-            time.sleep(0.01)
-        for key, payload in payloads:  # while it runs
-            fake.session.put(key, payload)
-        fake.first_plan.set()
-        t.join(timeout=timeout)
-    assert not t.is_alive()
+        try:
+            deadline = time.monotonic() + 20
+            while not fake.ticks and time.monotonic() < deadline:
+                time.sleep(0.01)
+            for key, payload in payloads:  # while it runs
+                fake.session.put(key, payload)
+            fake.first_plan.set()
+            t.join(timeout=timeout)
+            ended = not t.is_alive()
+        finally:  # a run that did not end (or a failure above) is stopped, never left behind the test
+            if t.is_alive():
+                service.stop.set()
+                t.join(10)
+    assert ended, f"the executor's run did not end within {timeout} s"
 
 
 def test_mcap_has_every_channel_decodable_with_schemas(zenoh_hub, pr2, tmp_path) -> None:

@@ -62,7 +62,14 @@ def test_interference_command_prints_the_table_i_json(tmp_path, capsys, models_d
     assert main(args) == 0
     data = json.loads(capsys.readouterr().out)
     for key in ("basic", "least_penetration", "current"):
-        assert len(data[key]) == 1 and data[key][0] >= 0
+        # one demonstration, one seed: its mean is that run's score, and the table's measures are the run's
+        (run,) = [r for r in data["runs"] if r["planner"] == key]
+        assert data[key] == [pytest.approx(run["interference"])] and run["interference"] >= 0
+        assert data["min_clearance"][key] == [pytest.approx(run["min_clearance"])]
+        assert data["time_in_contact"][key] == [pytest.approx(run["time_in_contact"])]
+    basic, least = data["basic"][0], data["least_penetration"][0]
+    ratio = data["ratio_basic_over_least_penetration"]
+    assert ratio == pytest.approx(basic / least) if least > 0 else not math.isfinite(ratio)
     assert data["scene"] == "pr2_two_cups_side" and data["human_class"] == "blue_cup"
     assert set(data["min_clearance"]) == {"basic", "least_penetration", "current"}
 
@@ -74,7 +81,13 @@ def test_switch_command_prints_the_settle_steps_and_draws_fig9(tmp_path, capsys,
     assert main(args) == 0
     data = json.loads(capsys.readouterr().out)
     assert len(data["switch_steps_prediction"]) == len(data["switch_steps_current"]) == 1
-    assert isinstance(data["switch_step_prediction"], float)
+    for method in ("prediction", "current"):
+        # the settle step is read off the run's chosen goals (the first step from which it keeps its last goal)
+        (run,) = [r for r in data["runs"] if r["method"] == method]
+        goals = run["goals"]
+        assert len(goals) == 3 and run["final_goal"] == goals[-1]
+        settle = next(i for i in range(len(goals)) if all(g == goals[-1] for g in goals[i:]))
+        assert data[f"switch_steps_{method}"] == [settle] and data[f"switch_step_{method}"] == float(settle)
     assert png.is_file() and png.stat().st_size > 10_000
 
 
@@ -145,7 +158,11 @@ def test_pace_command_prints_a_point_per_protocol_library_and_pace(tmp_path, cap
                                                                      ("paper", 0.05), ("paper", 0.1)]
     for p in data["points"]:
         assert p["library"] == "synthetic"
-        assert p["ratio"] >= 0 or math.isnan(p["ratio"])  # inf where least penetration scores 0
+        basic, least = p["basic"]["interference"], p["least_penetration"]["interference"]
+        if least > 0:  # Table I's ratio of the point's own means; inf where least penetration scores 0, else nan
+            assert p["ratio"] == pytest.approx(basic / least)
+        else:
+            assert math.isinf(p["ratio"]) if basic > 0 else math.isnan(p["ratio"])
         for name in ("basic", "least_penetration"):
             assert set(p[name]) >= {"contact_s", "min_clearance_m", "reached_step"}
     assert data["operating_point"]["paper"] == pytest.approx(0.05)

@@ -36,7 +36,7 @@ def test_matrices_follow_the_paper() -> None:
     n = T - 2
     a = finite_difference_matrix(n)
     assert a.shape == (n + 2, n)
-    theta = torch.randn(n, dtype=torch.float64)
+    theta = torch.randn(n, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
     padded = torch.cat([torch.zeros(2, dtype=torch.float64), theta, torch.zeros(2, dtype=torch.float64)])
     acc = padded[2:] - 2 * padded[1:-1] + padded[:-2]
     assert torch.allclose(a @ theta, acc[: n + 2])
