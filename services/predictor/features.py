@@ -9,7 +9,8 @@ posture. Variants:
 - ``relative``: the pelvis x, y, z and yaw are taken relative to the demonstration's first pelvis
   pose (rotated into its heading), so where the recorder stood does not matter.
 - ``relative_velocity``: ``relative`` plus the per-sample change of the 5 arm features
-  (backward differences, 0 at the first sample), times ``velocity_scale``.
+  (backward differences, 0 at the first sample; online, over the samples since the last observed one),
+  times ``velocity_scale``.
 - ``hand``: ``paper`` plus the right hand's position (m) in the frame of the demonstration's first
   pelvis pose (``shared.human.HumanModel.hand_position``), a Euclidean feature of where the reach goes.
 
@@ -18,6 +19,13 @@ the human model): they need the paper's 12 features (``shared.feature_sets.HERAK
 
 The same encoder serves training (:meth:`FeatureEncoder.batch`) and the online query
 (:meth:`FeatureEncoder.step`); both give identical vectors.
+
+A model's encoder holds the last sample index its mixtures were fitted on (``last_index``) and encodes a later
+index as that one: the mixtures know nothing of later times, and scoring a posture held past the end of the
+training motions at its true index ranked the classes by how wide their last Gaussians are in time, not by the
+posture (the paper's library, postures held after sample 99: 92 % of held-out demonstrations recognised at
+index 99, 8 % at index 200). A live reach that pauses at its goal, or a sensor slower than the library, runs
+past the end; a slower reach is still compared at the library's pace before it.
 """
 
 from __future__ import annotations
@@ -57,6 +65,8 @@ class FeatureEncoder:
         velocity_scale: Multiplier of the velocity features (``relative_velocity``).
         feature_names: The F posture features (default: the paper's 12).
         source: The library or model the features come from (for the error message).
+        last_index: The last sample index the mixtures were fitted on; later indices are encoded as it
+            (None: no limit, as in training).
 
     Raises:
         ValueError: If ``variant`` is unknown.
@@ -65,7 +75,8 @@ class FeatureEncoder:
     """
 
     def __init__(self, variant: str = "paper", time_scale: float = 1.0, velocity_scale: float = 10.0,
-                 feature_names: tuple[str, ...] = HERAKLES_NAMES, source: str = "") -> None:
+                 feature_names: tuple[str, ...] = HERAKLES_NAMES, source: str = "",
+                 last_index: int | None = None) -> None:
         if variant not in VARIANTS:
             raise ValueError(f"feature variant {variant!r} is not one of {', '.join(VARIANTS)}")
         self.feature_names = tuple(feature_names)
@@ -75,8 +86,12 @@ class FeatureEncoder:
         self.variant = variant
         self.time_scale = float(time_scale)
         self.velocity_scale = float(velocity_scale)
+        if last_index is not None and last_index < 0:
+            raise ValueError(f"last_index must be >= 0, got {last_index}")
+        self.last_index = None if last_index is None else int(last_index)
         self._first: np.ndarray | None = None
         self._prev: np.ndarray | None = None
+        self._prev_index: int | None = None
         self._human = None
 
     @property
@@ -96,7 +111,7 @@ class FeatureEncoder:
         f = np.asarray(features, dtype=np.float64)
         if f.ndim != 2 or f.shape[1] != self.n_posture:
             raise ValueError(f"features: expected shape (T, {self.n_posture}), got {f.shape}")
-        t = np.arange(len(f), dtype=np.float64)[:, None] * self.time_scale
+        t = self._time(np.arange(len(f)))[:, None]
         post = f if self.variant in ("paper", "hand") else _relative(f, f[0])
         cols = [t, post]
         if self.variant == "hand":
@@ -111,6 +126,7 @@ class FeatureEncoder:
         """Start a new demonstration (forget the first and previous posture)."""
         self._first = None
         self._prev = None
+        self._prev_index = None
 
     def step(self, features: np.ndarray, index: int) -> np.ndarray:
         """Encode one posture of the demonstration being observed.
@@ -126,14 +142,22 @@ class FeatureEncoder:
         if self._first is None:
             self._first = f.copy()
         post = f if self.variant in ("paper", "hand") else _relative(f, self._first)
-        parts = [np.array([index * self.time_scale]), post]
+        parts = [self._time(np.array([index])), post]
         if self.variant == "hand":
             parts.append(self._hand(f, self._first))
         if self.variant == "relative_velocity":
-            v = np.zeros(5) if self._prev is None else f[_ARM] - self._prev[_ARM]
+            # the change per sample: a pose missing between two (refused, dropped) is not one sample's change
+            gap = 1 if self._prev_index is None else max(1, index - self._prev_index)
+            v = np.zeros(5) if self._prev is None else (f[_ARM] - self._prev[_ARM]) / gap
             parts.append(v * self.velocity_scale)
         self._prev = f.copy()
+        self._prev_index = int(index)
         return np.concatenate(parts)
+
+    def _time(self, index: np.ndarray) -> np.ndarray:
+        """The time feature of sample indices (at most ``last_index``)."""
+        i = index if self.last_index is None else np.minimum(index, self.last_index)
+        return i.astype(np.float64) * self.time_scale
 
     def _hand(self, f: np.ndarray, first: np.ndarray) -> np.ndarray:
         if self._human is None:

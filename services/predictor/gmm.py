@@ -187,11 +187,15 @@ def posterior_from_log_likelihood(log_likelihood: np.ndarray, log_prior: np.ndar
         ``(..., M)`` posteriors summing to 1 over the last axis; uniform in a row without a finite value.
 
     Raises:
-        ValueError: If ``temperature`` is not a finite number > 0.
+        ValueError: If ``temperature`` is not a finite number > 0, or a log-likelihood is NaN or +inf (no
+            probability follows from it: the rows came out NaN).
     """
     if not (temperature > 0 and math.isfinite(temperature)):
         raise ValueError(f"temperature must be a finite number > 0, got {temperature}")
     ll = np.asarray(log_likelihood, dtype=np.float64)
+    bad = np.isnan(ll) | (ll == np.inf)
+    if bad.any():
+        raise ValueError(f"log-likelihoods must be finite or -inf, got {int(bad.sum())} NaN or +inf of {ll.size}")
     if temperature != 1.0:
         ll = ll / temperature
     if log_prior is not None:

@@ -28,7 +28,7 @@ Contents (M classes, K Gaussians at most per class, F posture features, D featur
 | ``human_pelvis`` | f8 (4,) | that scene's human placement (x, y, z, yaw) |
 | ``spacing`` | float | surface sample spacing (m) used for the volumes |
 | ``interior`` | bool | whether the body's inside was sampled too |
-| ``meta`` | str | JSON: library source, demonstrations per class, options, timestamp |
+| ``meta`` | str | JSON: library source, demonstrations per class, options, timestamp, ``last_index`` |
 | ``temperature`` | float | posterior temperature tau (optional: files without it use 1, the paper's) |
 
 Version 2 added ``volume_method``, ``volume_probabilities`` and the ``timed_*`` arrays; version 1 files
@@ -144,7 +144,16 @@ class PredictionModel:
 
     def encoder(self) -> FeatureEncoder:
         """A fresh feature encoder matching the training features."""
-        return FeatureEncoder(self.feature_variant, self.time_scale, self.velocity_scale, self.feature_names)
+        return FeatureEncoder(self.feature_variant, self.time_scale, self.velocity_scale, self.feature_names,
+                              last_index=self.last_index)
+
+    @property
+    def last_index(self) -> int:
+        """The last sample index the mixtures were fitted on (``meta["last_index"]``).
+
+        A model trained before it was recorded: the last sample of its longest class motion.
+        """
+        return int(self.meta.get("last_index", int(np.max(self.motion_lengths)) - 1))
 
     def require_volumes(self, what: str) -> np.ndarray:
         """The ``(M, nx, ny, nz)`` swept volumes, or a one-line :class:`ModelError` saying why there are none.

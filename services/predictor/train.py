@@ -198,7 +198,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
             "components": [int(g.n_components) for g in mixtures], "gmm": asdict(cfg.gmm),
             "oversample": cfg.oversample, "temperature": choice.temperature, "temperature_choice": choice.method,
             "temperature_log_loss": {f"{t:g}": v for t, v in choice.mean_log_loss.items()},
-            "volume": cfg.volume,
+            "volume": cfg.volume, "last_index": max(d.n_samples for d in demos) - 1,
             "trained_at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")}
     return PredictionModel(class_names=list(library.class_names), feature_variant=cfg.features,
                            time_scale=cfg.time_scale, velocity_scale=encoder.velocity_scale,

@@ -70,6 +70,14 @@ def test_tempered_posterior() -> None:
             posterior_from_log_likelihood(ll, temperature=bad)
 
 
+@pytest.mark.parametrize("bad", [[math.nan, 0.0, -1.0], [math.inf, 0.0, -1.0]])
+def test_a_nan_or_infinite_log_likelihood_is_refused(bad) -> None:
+    """They gave NaN rows ([nan, 0, -1] -> all NaN; [inf, 0, -1] -> [nan, 0, 0]) where a probability was promised."""
+    with pytest.raises(ValueError, match="log-likelihoods must be finite or -inf, got 1 NaN or \\+inf of 3"):
+        posterior_from_log_likelihood(np.array(bad))
+    assert posterior_from_log_likelihood(np.array([-math.inf, 0.0, 0.0])).tolist() == [0.0, 0.5, 0.5]
+
+
 def test_a_row_without_evidence_is_uniform_in_a_batch_too() -> None:
     """The fallback used to be global: a batch with one such row gave NaN there (and a NaN log loss)."""
     ll = np.array([[0.0, -2.0], [-np.inf, -np.inf]])

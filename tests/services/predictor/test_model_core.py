@@ -233,6 +233,54 @@ def test_mean_evidence_is_the_softmax_of_the_per_frame_mean(small_model: Predict
     assert b.posterior.max() < a.posterior.max()  # the authors' mean is less confident than the paper's product
 
 
+def test_mean_evidence_with_the_models_temperature_is_refused(small_model: PredictionModel, scene) -> None:
+    """The model's tau is chosen on summed evidence: with 'mean' it divided the frames' evidence twice over, and the
+    posterior stayed within 0.01 of uniform on the paper's library."""
+    with pytest.raises(PredictorError, match="evidence 'mean' needs predictor.temperature set"):
+        PredictorCore(small_model, scene, PredictorConfig(evidence="mean"))
+    with pytest.raises(ValueError, match="evidence 'mean' needs predictor.temperature set"):
+        PredictorConfig(evidence="mean").validate()
+    PredictorConfig(evidence="mean", temperature=1.0).validate()
+
+
+def test_a_posture_held_past_the_training_motions_is_scored_at_their_last_index(small_model: PredictionModel,
+                                                                                small_library, scene) -> None:
+    """Postures after the last index the mixtures were fitted on were scored at their own index: the class with the
+    widest last Gaussians in time won, whatever the posture (8 % recognised at index 200 on the paper's library)."""
+    last = small_model.last_index
+    assert last == max(d.n_samples for d in small_library.demos) - 1 == small_model.meta["last_index"]
+    enc = small_model.encoder()
+    assert enc.step(small_library.demos[0].features[0], last + 50)[0] == last * small_model.time_scale
+    demo = small_library.by_class(1)[0].features
+    held = np.vstack([demo, np.repeat(demo[-1:], 60, axis=0)])        # the human holds the final posture
+    core = PredictorCore(small_model, scene)
+    core.reset(0)
+    steps = [core.log_likelihood()]
+    for i, f in enumerate(held):
+        core.observe(f, i)
+        steps.append(core.log_likelihood())
+    gain = np.diff(np.array(steps), axis=0)                          # (T, M) each posture's evidence
+    assert len(demo) - 1 == last
+    assert np.allclose(gain[-1], gain[last], rtol=1e-9, atol=1e-6)   # the same posture, scored at the same time
+    assert np.argmax(core.log_likelihood()) == 1
+    # a model file from before the index was recorded: its longest class motion's last sample
+    old = dataclasses.replace(small_model, meta={k: v for k, v in small_model.meta.items() if k != "last_index"})
+    assert old.last_index == int(np.max(small_model.motion_lengths)) - 1
+    batch = FeatureEncoder(last_index=3).batch(demo[:6])
+    assert batch[:, 0].tolist() == [0.0, 1.0, 2.0, 3.0, 3.0, 3.0]
+
+
+def test_the_velocity_over_a_missing_pose_is_the_change_per_sample(small_library) -> None:
+    """A refused or dropped pose between two made the live velocity the change of two samples (training's: one)."""
+    demo = small_library.demos[0].features[:5]
+    full = FeatureEncoder("relative_velocity").batch(demo)
+    enc = FeatureEncoder("relative_velocity")
+    got = {i: enc.step(demo[i], i) for i in (0, 1, 3, 4)}           # pose 2 never arrives
+    for i in (0, 1, 4):
+        assert np.array_equal(got[i], full[i])
+    assert np.allclose(got[3][-5:], (full[2][-5:] + full[3][-5:]) / 2)  # the mean change over samples 2 and 3
+
+
 @pytest.mark.parametrize(("key", "value", "match"), [
     ("time_scale", np.array(np.nan), "time_scale must be a finite number > 0"),
     ("velocity_scale", np.array(np.inf), "velocity_scale must be a finite number > 0"),
