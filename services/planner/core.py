@@ -25,12 +25,11 @@ from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from shared.scene import Grid, Scene
 
 from .config import PlannerConfig
-from .costs import acceleration_cost
+from .costs import acceleration_cost, path_dt, waypoint_times
 from .fused import FusedCost, supports
 from .inputs import PlannerError, PlannerInputError, check_configuration, check_occupancy
 from .multigoal import best, choice_key, init_straight_lines, interpolate_path, project_onto_path, reconnect_previous
@@ -121,6 +120,7 @@ class Planner:
                 log.warning("goal %s dropped: %s", name, reason)
         self.lower, self.upper = robot.lower.to(self.device, self.dtype), robot.upper.to(self.device, self.dtype)
         self._vmax = robot.velocity_limits.to(self.device, self.dtype) * c.velocity_scale  # (D,)
+        self._inv_vmax = 1.0 / self._vmax
         vel = robot.velocity_limits.double().cpu()
         self.stomp = Stomp(c.stomp_config((vel / vel.max()).tolist()), (self.lower, self.upper))
         self.valid_index = torch.nonzero(goals.valid.cpu()).flatten().tolist()
@@ -128,7 +128,7 @@ class Planner:
         self.fused: FusedCost | None = None
         if c.fused_cost and supports(robot, cost):
             self.fused = FusedCost(robot, cost, self.w_smooth, self._vmax, c.integrate_costs, compile=c.compile,
-                                   grid=scene.grid, dwell=c.goal_dwell_s)
+                                   grid=scene.grid, dwell=c.goal_dwell_s, min_dt=c.min_dt)
             per_call = goals_per_call(len(self.valid_index), c.cost_chunk_goals if self.device.type == "cpu" else 0)
             # with reuse, every iteration after the first costs its new rollouts and theta only (the first: two calls)
             self.fused.warm_up(per_call * (c.stomp.rollouts - c.stomp.reuse + 1), c.stomp.waypoints)
@@ -143,19 +143,19 @@ class Planner:
     # costs
 
     def waypoint_time(self, q: torch.Tensor) -> torch.Tensor:
-        """Time attributed to each waypoint when the path is run at the (scaled) velocity limits.
+        """Time each waypoint stands for when the path is executed (:func:`~.costs.waypoint_times`).
 
         Args:
             q: ``(..., T, D)`` trajectories.
 
         Returns:
-            ``(..., T)`` seconds: half of each adjacent segment's duration, a segment taking
-            ``max_j |dq_j| / (velocity_scale * v_j)``. With ``integrate_costs`` the state costs are
-            weighted by it, so they integrate over the path (a detour or a loop costs more),
-            instead of counting waypoints (:meth:`waypoint_cost` adds the goal's dwell).
+            ``(..., T)`` seconds: the path's one ``dt`` (its slowest segment at the scaled velocity limits, at
+            least ``min_dt``: what the plan carries and the executor runs), half of it at both ends. With
+            ``integrate_costs`` the state costs are weighted by it, so they integrate over the time the robot
+            spends along the path (a detour or a loop costs more), instead of counting waypoints
+            (:meth:`waypoint_cost` adds the goal's dwell).
         """
-        seg = ((q[..., 1:, :] - q[..., :-1, :]).abs() / self._vmax).amax(-1)  # (..., T-1)
-        return 0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0)))
+        return waypoint_times(q, self._inv_vmax, self.config.min_dt)
 
     def _state_terms(self, q: torch.Tensor) -> torch.Tensor:
         """``(K, R, T, D)`` -> ``(K, R, T, 2)`` obstacle and human terms, time-weighted if configured.
@@ -257,8 +257,7 @@ class Planner:
 
     def _dt(self, traj: torch.Tensor) -> torch.Tensor:
         """``(K, T, D)`` -> ``(K,)`` seconds per waypoint so no joint exceeds its scaled velocity limit."""
-        step = ((traj[:, 1:] - traj[:, :-1]).abs() / self._vmax).amax(dim=(1, 2))
-        return step.clamp_min(self.config.min_dt)
+        return path_dt(traj, self._inv_vmax, self.config.min_dt)
 
     def start_configuration(self, q_current: torch.Tensor, lookahead_s: float | None = None
                             ) -> tuple[torch.Tensor, torch.Tensor | None]:

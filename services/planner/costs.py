@@ -37,8 +37,8 @@ from shared.scene import Scene
 
 from .sdf import GridLookupError, SignedDistanceField, VoxelTables
 
-__all__ = ["CostConfig", "StateCost", "CostInputError", "LiftTables", "OccupancyTables", "hinge_sum",
-           "acceleration_cost"]
+__all__ = ["CostConfig", "StateCost", "CostInputError", "LiftTables", "OccupancyTables", "hinge_sum", "path_dt",
+           "waypoint_times", "acceleration_cost"]
 
 
 class CostInputError(ValueError):
@@ -117,6 +117,43 @@ def acceleration_cost(q: torch.Tensor) -> torch.Tensor:
         raise CostInputError(f"acceleration_cost needs at least 3 waypoints, got shape {tuple(q.shape)}")
     acc = q[..., 2:, :] - 2 * q[..., 1:-1, :] + q[..., :-2, :]
     return F.pad((acc * acc).sum(-1), (1, 1))
+
+
+def path_dt(q: torch.Tensor, inv_vmax: torch.Tensor, min_dt: float) -> torch.Tensor:
+    """Seconds per waypoint of a trajectory as the executor runs it: one ``dt`` for the whole path.
+
+    The slowest segment at the scaled velocity limits sets it (``max_t,j |q[t+1, j] - q[t, j]| / vmax_j``, at
+    least ``min_dt``); the plan carries it and the executor spends it on every segment.
+
+    Args:
+        q: ``(..., T, D)`` trajectories, T >= 2.
+        inv_vmax: ``(D,)`` 1 / scaled velocity limits.
+        min_dt: Smallest time between waypoints (s).
+
+    Returns:
+        ``(...,)`` seconds.
+    """
+    return ((q[..., 1:, :] - q[..., :-1, :]).abs() * inv_vmax).amax((-2, -1)).clamp_min(min_dt)
+
+
+def waypoint_times(q: torch.Tensor, inv_vmax: torch.Tensor, min_dt: float) -> torch.Tensor:
+    """Time each waypoint stands for when the trajectory is executed (:func:`path_dt` per segment).
+
+    Half of each adjacent segment's time: ``dt`` inside, ``dt / 2`` at both ends. The state costs weighted by it
+    integrate over the time the robot really spends along the path, bunched waypoints included (weighting each
+    waypoint by its own segments at the velocity limits charged 0.21 s in a band the executed robot crossed in
+    1.06 s, docs/planner.md).
+
+    Args:
+        q: ``(..., T, D)`` trajectories, T >= 2.
+        inv_vmax: ``(D,)`` 1 / scaled velocity limits.
+        min_dt: Smallest time between waypoints (s).
+
+    Returns:
+        ``(..., T)`` seconds.
+    """
+    seg = path_dt(q, inv_vmax, min_dt)[..., None].expand(*q.shape[:-2], q.shape[-2] - 1)  # (..., T-1)
+    return 0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0)))
 
 
 @dataclass(frozen=True)

@@ -21,13 +21,14 @@ as FLOPs), and can be ``torch.compile``-d:
 * **Self-collision**: the body spheres are rigid in the base frame up to the torso lift ``l``, so
   ``|x - c_b - l v_b|^2`` is one ``(B_body, 7) x (7, A x B)`` matmul of features
   ``[x, l (x . v), 1, l, l^2]`` plus ``|x|^2`` (exact, every arm/body pair, as the reference).
-* time weights and accelerations on ``(N, T, D)``; the hinge and the accelerations are
+* time weights (``costs.waypoint_times``) and accelerations on ``(N, T, D)``; the hinge and the accelerations are
   ``costs.hinge_sum`` and ``costs.acceleration_cost``, as in the reference.
 
 Everything is read from public tables: ``PR2.kinematics`` / ``PR2.spheres``, ``SignedDistanceField.tables``
 and ``StateCost.occupancy``.
 
-Tested equal to the reference to 1e-5 relative (``tests/services/planner/test_fused.py``).
+Tested equal to the reference to 1e-4 relative in float32 and about 1e-9 in float64
+(``tests/services/planner/test_fused.py``).
 """
 
 from __future__ import annotations
@@ -38,13 +39,12 @@ from collections.abc import Callable
 from typing import Any
 
 import torch
-import torch.nn.functional as F
 
 from shared.robot import PR2
 from shared.scene import Grid
 
 from .compiling import compile_every_shape
-from .costs import StateCost, acceleration_cost, hinge_sum
+from .costs import StateCost, acceleration_cost, hinge_sum, waypoint_times
 from .sdf import VoxelTables
 
 __all__ = ["FusedCost", "supports"]
@@ -211,8 +211,7 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
         obstacle = obstacle + hinge_sum(s["self_eps"] - (dist - r_arm), s["self_eps"], 0)
     state = torch.stack([s["w_obstacle"] * obstacle, s["w_human"] * human]).view(2, n, t)
     if s["integrate"]:
-        seg = ((q[:, 1:] - q[:, :-1]).abs() * inv_vmax).amax(-1)  # (N, T - 1)
-        dt = (0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0))))[None].repeat(2, 1, 1)  # (2, N, T)
+        dt = waypoint_times(q, inv_vmax, s["min_dt"])[None].repeat(2, 1, 1)  # (2, N, T)
         dt[1, :, -1] += s["dwell"]  # the human term at the goal: the time the robot stays there
         state = state * dt
     smooth = s["w_smooth"] * acceleration_cost(q)
@@ -237,11 +236,13 @@ class FusedCost:
             :meth:`terms` runs eagerly next to a compiled kernel, always take the products.
         dwell: With ``integrate``, seconds added to the last waypoint's time in the human term
             (``PlannerConfig.goal_dwell_s``).
+        min_dt: With ``integrate``, the smallest time between waypoints (``PlannerConfig.min_dt``;
+            :func:`~services.planner.costs.waypoint_times`).
     """
 
     def __init__(self, robot: PR2, cost: StateCost, w_smooth: float, vmax: torch.Tensor, integrate: bool,
                  compile: bool = False, grid: Grid | None = None, pointwise: bool | None = None,
-                 dwell: float = 0.0) -> None:
+                 dwell: float = 0.0, min_dt: float = 0.0) -> None:
         if not supports(robot, cost):
             raise ValueError("FusedCost needs a PR2 StateCost with lift tables, 1 point per sphere, trilinear")
         self.robot, self.cost = robot, cost
@@ -296,7 +297,7 @@ class FusedCost:
                             a0=robot.arm_slice.start - arm.start, a1=robot.arm_slice.stop - arm.start,
                             self_eps=max(float(cfg.self_clearance), 1e-6), w_obstacle=float(cfg.w_obstacle),
                             w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate),
-                            dwell=float(dwell))
+                            dwell=float(dwell), min_dt=float(min_dt))
         if grid is None:
             zeros, first, inv_res = torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0
         else:  # the zero-padded shape and geometry of a real occupancy on `grid` (see VoxelTables.from_grid)

@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 import torch
 
-from services.planner.costs import CostConfig, CostInputError, StateCost, acceleration_cost, hinge_sum
+from services.planner.costs import (
+    CostConfig,
+    CostInputError,
+    StateCost,
+    acceleration_cost,
+    hinge_sum,
+    path_dt,
+    waypoint_times,
+)
 
 
 @pytest.fixture(scope="module")
@@ -151,3 +159,23 @@ def test_torso_tables_match_direct_evaluation(scene, robot) -> None:
     assert torch.allclose(a[:, 1], b[:, 1], rtol=2e-3, atol=2e-3)  # random occupancy: piecewise linear
     centers = robot.sphere_centers(q)
     assert torch.allclose(direct.obstacle(centers) * direct.config.w_obstacle, a[:, 0], atol=1e-5)
+
+
+def test_waypoint_times_are_the_executed_time_of_the_path() -> None:
+    """The executor spends the plan's one dt on every segment: bunched waypoints are slow, and the cost says so.
+
+    Weighting each waypoint by its own segments at the velocity limits charged 0.21 s in a band the executed robot
+    spent 1.06 s in (a review script: the same path, waypoints bunched inside the band)."""
+    inv_vmax = torch.tensor([1.0, 2.0], dtype=torch.float64)  # joint 1 is twice as slow
+    # 5 waypoints: three bunched (0.01 apart) then two long segments (0.4 on joint 0, 0.3 on joint 1 = 0.6 s)
+    q = torch.tensor([[0.0, 0.0], [0.01, 0.0], [0.02, 0.0], [0.42, 0.0], [0.42, 0.3]], dtype=torch.float64)
+    dt = path_dt(q, inv_vmax, min_dt=0.01)
+    assert float(dt) == pytest.approx(0.6)                   # the slowest segment: 0.3 rad at 0.5 rad/s
+    w = waypoint_times(q, inv_vmax, min_dt=0.01)
+    assert torch.allclose(w, torch.tensor([0.3, 0.6, 0.6, 0.6, 0.3], dtype=torch.float64))
+    assert float(w.sum()) == pytest.approx(4 * float(dt))     # (T - 1) dt: the whole executed duration
+    held = torch.zeros(7, 2, dtype=torch.float64)              # a held path still runs min_dt per segment
+    assert torch.allclose(waypoint_times(held, inv_vmax, 0.01).sum(), torch.tensor(0.06, dtype=torch.float64))
+    batch = torch.stack([q, q * 0.5, q.flip(0)])[None]         # (1, 3, T, D): batched equals looped
+    looped = torch.stack([waypoint_times(b, inv_vmax, 0.01) for b in batch[0]])
+    assert torch.equal(waypoint_times(batch, inv_vmax, 0.01)[0], looped)

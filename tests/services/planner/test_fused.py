@@ -42,7 +42,10 @@ def test_fused_equals_reference_on_random_batches(planner, scene) -> None:
             ref = planner.waypoint_cost_reference(q)
             out = planner.waypoint_cost(q)
             assert out.shape == ref.shape == (3, 5, 40)
-            assert torch.allclose(out, ref, rtol=1e-5, atol=1e-4), float((out - ref).abs().max())
+            # float32 rounding: the kernel sums the sphere terms in another order, and every waypoint carries the
+            # path's dt, so the largest state terms carry the largest weights (up to 3.3e-5 relative here); in
+            # float64 the two agree to ~1e-9 (below)
+            assert torch.allclose(out, ref, rtol=1e-4, atol=1e-4), float((out - ref).abs().max())
     planner.cost.set_occupancy(None, grid.origin, grid.resolution)
 
 
