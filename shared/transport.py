@@ -14,7 +14,7 @@ import json
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from typing import Any, Generic, TypeVar
 
@@ -22,6 +22,7 @@ import zenoh
 
 from shared.config import ZenohConfig
 from shared.connectivity import connect_names, retry_config, tls_hint, watched
+from shared.presence import Presence
 from shared.protocol import Keys, Message, ProtocolError, Receipt, decode, encode
 from shared.protocol.limits import MAX_PAYLOAD_BYTES
 from shared.rejects import RejectCounter
@@ -307,90 +308,6 @@ class LatestSubscriber(Generic[M]):
     def undeclare(self) -> None:
         """Release the subscription."""
         self._sub.undeclare()
-
-
-class Presence:
-    """Declares this service's liveliness token and logs when peer services appear or disappear.
-
-    Args:
-        session: Open Zenoh session.
-        keys: The run's key expressions.
-        service: This service's name (its token is ``<prefix>/alive/<service>``).
-        on_change: Called with ``(peer, appeared)`` on every change.
-        stop_with: Peers whose departure ends this service: once one of them has been seen and its
-            token disappears (it finished, or its process ended), ``stop`` is set.
-        stop: The service's stop event (needed with ``stop_with``).
-    """
-
-    def __init__(self, session: zenoh.Session, keys: Keys, service: str,
-                 on_change: Callable[[str, bool], None] | None = None, stop_with: Sequence[str] = (),
-                 stop: threading.Event | None = None) -> None:
-        if stop_with and stop is None:
-            raise ValueError("Presence: stop_with needs the stop event")
-        self.service = service
-        self.alive: set[str] = set()
-        self._seen: set[str] = set()
-        self._stop_with = frozenset(stop_with)
-        self._stop = stop
-        self._lock = threading.Lock()
-        self._on_change = on_change
-        self._token = session.liveliness().declare_token(keys.alive(service))
-        self._sub = session.liveliness().declare_subscriber(keys.alive_all, self._handle, history=True)
-        if self._stop_with:
-            log.info("%s: will stop when %s has come and gone", service, ", ".join(sorted(self._stop_with)))
-
-    def _handle(self, sample: zenoh.Sample) -> None:
-        peer = str(sample.key_expr).rsplit("/", 1)[-1]
-        up = sample.kind == zenoh.SampleKind.PUT
-        with self._lock:
-            (self.alive.add if up else self.alive.discard)(peer)
-            ended = not up and peer in self._seen
-            if up and peer in self._stop_with:
-                self._seen.add(peer)
-        if peer != self.service:
-            log.info("%s: peer %s %s", self.service, peer, "appeared" if up else "disappeared")
-        if self._on_change is not None:
-            self._on_change(peer, up)
-        if ended and self._stop is not None:
-            log.info("%s: %s has gone: stopping", self.service, peer)
-            self._stop.set()
-
-    def is_alive(self, service: str) -> bool:
-        """Whether ``service``'s token is currently seen."""
-        with self._lock:
-            return service in self.alive
-
-    def wait_for(self, services: Sequence[str], timeout: float, stop: threading.Event | None = None) -> list[str]:
-        """Wait until every one of ``services`` is alive, at most ``timeout`` seconds (or until ``stop``).
-
-        How a run waits for its peers before it starts (the executor before its first tick, a real-time
-        replayer before streaming); both outcomes are logged.
-
-        Returns:
-            The services still missing (empty when all are present).
-        """
-        wanted = list(services)
-        if not wanted:
-            return []
-        stop = stop or threading.Event()
-        deadline = time.monotonic() + timeout
-        while True:
-            missing = [s for s in wanted if not self.is_alive(s)]
-            if not missing:
-                log.info("%s: %s present, starting", self.service, ", ".join(wanted))
-                return []
-            if stop.is_set():
-                return missing
-            if time.monotonic() >= deadline:
-                log.warning("%s: starting without %s (not seen within %.1f s)", self.service, ", ".join(missing),
-                            timeout)
-                return missing
-            stop.wait(0.02)
-
-    def close(self) -> None:
-        """Undeclare the token and the subscriber."""
-        self._sub.undeclare()
-        self._token.undeclare()
 
 
 def describe(session: zenoh.Session) -> dict[str, Any]:

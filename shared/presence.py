@@ -1,0 +1,156 @@
+"""Which services are up: each service's liveliness token, its peers' tokens, and a peer's departure.
+
+A service declares ``<prefix>/alive/<service>`` and watches every token of the run. A peer named in
+``stop_with`` (the executor, for a compose stack's planner, predictor and tracker) ends the service once it has
+come and gone. A token also disappears when *this* session loses its connection: Zenoh reports every remote
+token deleted when the router goes, and the router's restart (compose restarts it) used to stop every such
+service for good while the executor reconnected and held the robot (a review script: the router down for 6 s;
+planner, predictor and tracker stopped, the executor held for the rest of the run). So a departure is counted
+only once the token has stayed away :data:`DEPARTURE_GRACE_S` with this session connected; while it has no
+connection the departure waits, at most :data:`CUT_WAIT_S` (a cell whose only link was the departed peer
+itself ends then).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+
+import zenoh
+
+from shared.protocol import Keys
+
+__all__ = ["Presence", "DEPARTURE_GRACE_S", "CUT_WAIT_S"]
+
+log = logging.getLogger("shared.transport")
+
+DEPARTURE_GRACE_S = 1.0
+"""A ``stop_with`` peer's token gone this long, this session connected throughout the check, is a departure."""
+
+CUT_WAIT_S = 60.0
+"""Without any connection, how long a vanished ``stop_with`` peer is waited for before its departure counts."""
+
+
+def connected(session: zenoh.Session) -> bool:
+    """Whether ``session`` is linked to any router or peer."""
+    info = session.info
+    return any(True for _ in info.routers_zid()) or any(True for _ in info.peers_zid())
+
+
+class Presence:
+    """Declares this service's liveliness token and logs when peer services appear or disappear.
+
+    Args:
+        session: Open Zenoh session.
+        keys: The run's key expressions.
+        service: This service's name (its token is ``<prefix>/alive/<service>``).
+        on_change: Called with ``(peer, appeared)`` on every change.
+        stop_with: Peers whose departure ends this service: once one of them has been seen and its
+            token stays away (it finished, or its process ended), ``stop`` is set; a token lost with this
+            session's own connection is not a departure (module docstring).
+        stop: The service's stop event (needed with ``stop_with``).
+        is_connected: Whether the session has a link (default :func:`connected`; tests replace it).
+    """
+
+    def __init__(self, session: zenoh.Session, keys: Keys, service: str,
+                 on_change: Callable[[str, bool], None] | None = None, stop_with: Sequence[str] = (),
+                 stop: threading.Event | None = None,
+                 is_connected: Callable[[], bool] | None = None) -> None:
+        if stop_with and stop is None:
+            raise ValueError("Presence: stop_with needs the stop event")
+        self.service = service
+        self.alive: set[str] = set()
+        self._seen: set[str] = set()
+        self._stop_with = frozenset(stop_with)
+        self._stop = stop
+        self._lock = threading.Lock()
+        self._on_change = on_change
+        self._is_connected = is_connected or (lambda: connected(session))
+        self._closed = threading.Event()
+        self._token = session.liveliness().declare_token(keys.alive(service))
+        self._sub = session.liveliness().declare_subscriber(keys.alive_all, self._handle, history=True)
+        if self._stop_with:
+            log.info("%s: will stop when %s has come and gone", service, ", ".join(sorted(self._stop_with)))
+
+    def _handle(self, sample: zenoh.Sample) -> None:
+        peer = str(sample.key_expr).rsplit("/", 1)[-1]
+        up = sample.kind == zenoh.SampleKind.PUT
+        with self._lock:
+            (self.alive.add if up else self.alive.discard)(peer)
+            ended = not up and peer in self._seen
+            if up and peer in self._stop_with:
+                self._seen.add(peer)
+        if peer != self.service:
+            log.info("%s: peer %s %s", self.service, peer, "appeared" if up else "disappeared")
+        if self._on_change is not None:
+            self._on_change(peer, up)
+        if ended and self._stop is not None:
+            self._check_later(peer, time.monotonic(), cut=False)
+
+    def _check_later(self, peer: str, since: float, cut: bool) -> None:
+        timer = threading.Timer(DEPARTURE_GRACE_S, self._confirm, args=(peer, since, cut))
+        timer.daemon = True
+        timer.start()
+
+    def _confirm(self, peer: str, since: float, cut: bool) -> None:
+        """Count ``peer``'s departure (set ``stop``) unless it is back or this session lost its own link."""
+        if self._closed.is_set() or self._stop is None or self._stop.is_set() or self.is_alive(peer):
+            return
+        if not self._is_connected():
+            if time.monotonic() - since < CUT_WAIT_S:
+                if not cut:
+                    log.warning("%s: no connection: %s's token went with it; waiting for the link (at most "
+                                "%.0f s) before taking it as gone", self.service, peer, CUT_WAIT_S)
+                self._check_later(peer, since, cut=True)
+                return
+            log.warning("%s: no connection for %.0f s and %s not back: taking it as gone", self.service,
+                        CUT_WAIT_S, peer)
+        elif cut:  # linked again: its token comes back through the subscriber's history, give it the grace
+            log.info("%s: connected again; checking that %s is back", self.service, peer)
+            self._check_later(peer, since, cut=False)
+            return
+        log.info("%s: %s has gone: stopping", self.service, peer)
+        self._stop.set()
+
+    def is_alive(self, service: str) -> bool:
+        """Whether ``service``'s token is currently seen."""
+        with self._lock:
+            return service in self.alive
+
+    def wait_for(self, services: Sequence[str], timeout: float, stop: threading.Event | None = None) -> list[str]:
+        """Wait until every one of ``services`` is alive, at most ``timeout`` seconds (or until ``stop``).
+
+        How a run waits for its peers before it starts (the executor before its first tick, a real-time
+        replayer before streaming); what it waits for is logged when the wait starts, and both outcomes.
+
+        Returns:
+            The services still missing (empty when all are present).
+        """
+        wanted = list(services)
+        if not wanted:
+            return []
+        stop = stop or threading.Event()
+        deadline = time.monotonic() + timeout
+        missing = [s for s in wanted if not self.is_alive(s)]
+        if missing:
+            log.info("%s: waiting for %s (at most %.0f s)", self.service, ", ".join(missing), timeout)
+        while True:
+            missing = [s for s in wanted if not self.is_alive(s)]
+            if not missing:
+                log.info("%s: %s present, starting", self.service, ", ".join(wanted))
+                return []
+            if stop.is_set():
+                return missing
+            if time.monotonic() >= deadline:
+                log.warning("%s: starting without %s (not seen within %.1f s)", self.service, ", ".join(missing),
+                            timeout)
+                return missing
+            stop.wait(0.02)
+
+    def close(self) -> None:
+        """Undeclare the token and the subscriber."""
+        self._closed.set()
+        self._sub.undeclare()
+        self._token.undeclare()
