@@ -36,6 +36,7 @@ from shared.transport import Presence, open_session, subscribe
 
 from .core import TOPICS, Ros2Config, Ros2Mapping
 from .node import Ros2Node, Ros2Publisher
+from .wire import parse_endpoint_token
 
 __all__ = ["Ros2ServiceConfig", "Ros2Service", "Ros2Stats"]
 
@@ -91,6 +92,8 @@ class Ros2Service:
         self._first_pose: tuple[int, np.ndarray] | None = None  # (demo id, its first pose): the human's placement
         self._last_viz: dict[str, float] = {}
         self._pending: dict[str, Callable[[], bytes]] = {}  # role -> the newest marker held back by the rate limit
+        self.robot_publishes: str | None = None  # another node publishing the joint states topic: the robot's
+        self._zid = ""
 
     def _put(self, role: str, payload: bytes) -> None:
         pub = self._pubs.get(role)
@@ -130,9 +133,28 @@ class Ros2Service:
         self._put("goal", self.mapping.goal(plan))
 
     def on_state(self, state: RobotState) -> None:
-        """The simulated robot's joints."""
-        if self.config.joint_states:
+        """The simulated robot's joints (not when another node publishes the joint states: :meth:`on_graph`)."""
+        if self.config.joint_states and self.robot_publishes is None:
             self._put("joint_states", self.mapping.joint_state(state))
+
+    def on_graph(self, key: str) -> None:
+        """A graph token: another node publishing the joint states topic is the robot's driver.
+
+        The executor driving a ROS 2 robot (``robot = "ros2"``) publishes the robot's measured joints as its
+        RobotState; echoed onto the robot's own topic they came back as a second publisher's states (116 refused
+        by the executor in a review run, the rest taken for fresh measurements). From the first such publisher on,
+        the gateway publishes no joint states and says so once.
+        """
+        ep = parse_endpoint_token(key)
+        topic = self.config.topic("joint_states")
+        if ep is None or ep.kind != "MP" or ep.topic != topic or ep.zid == self._zid or not self.config.joint_states:
+            return
+        with self._lock:
+            first, self.robot_publishes = self.robot_publishes is None, self.robot_publishes or \
+                f"{ep.namespace.rstrip('/')}/{ep.node}"
+        if first:
+            log.warning("ros2: node %s publishes %s (a robot's driver): the executor's RobotState is not echoed there "
+                        "(run the gateway with --no-joint-states beside a ROS 2 robot)", self.robot_publishes, topic)
 
     def on_occupancy(self, grid: OccupancyGrid) -> None:
         """The predicted occupancy (rate-limited)."""
@@ -159,7 +181,10 @@ class Ros2Service:
         cfg = self.config
         with open_session(self.zenoh, stop, "ros2") as session:
             node = Ros2Node(session, cfg.domain_id, cfg.node_namespace, cfg.node, self.mapping.hashes, self.rejects)
-            zid = node.zid
+            zid = self._zid = node.zid
+            graph = session.liveliness().declare_subscriber(f"@ros2_lv/{cfg.domain_id}/**",
+                                                            lambda sample: self.on_graph(str(sample.key_expr)),
+                                                            history=True)
             for role, topic in TOPICS.items():
                 if role != "joint_states" or cfg.joint_states:
                     self._pubs[role] = node.publisher(cfg.topic(role), topic.msgtype)
@@ -178,6 +203,7 @@ class Ros2Service:
             finally:
                 self.flush_viz(force=True)  # the last occupancy and body stay on show
                 presence.close()
+                graph.undeclare()
                 for s in subs:
                     s.undeclare()
                 node.close()

@@ -19,7 +19,7 @@ import struct
 from dataclasses import dataclass
 
 __all__ = ["Attachment", "ATTACHMENT_SIZE", "GID_SIZE", "dds_type", "data_key", "mangle", "node_token",
-           "endpoint_token", "qos_chunk", "AttachmentError"]
+           "endpoint_token", "Endpoint", "parse_endpoint_token", "qos_chunk", "AttachmentError"]
 
 GID_SIZE = 16
 ATTACHMENT_SIZE = 8 + 8 + 1 + GID_SIZE
@@ -124,3 +124,23 @@ def endpoint_token(domain: int, zid: str, node_id: int, entity_id: int, kind: st
     _topic(topic)
     return (f"@ros2_lv/{domain}/{zid}/{node_id}/{entity_id}/{kind}/{mangle(enclave)}/{mangle(namespace)}/{node}/"
             f"{mangle(topic)}/{dds_type(msgtype)}/{type_hash}/{qos}")
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """A publisher or subscription seen in the graph: its session ``zid``, ``kind`` (``MP``/``MS``), node, topic."""
+
+    zid: str
+    kind: str
+    namespace: str
+    node: str
+    topic: str
+
+
+def parse_endpoint_token(key: str) -> Endpoint | None:
+    """The publisher or subscription a graph token declares (:func:`endpoint_token`); None for any other key."""
+    parts = key.split("/")
+    if len(parts) != 13 or parts[0] != "@ros2_lv" or parts[5] not in ("MP", "MS"):
+        return None
+    namespace = "/" if parts[7] == "%" else parts[7].replace("%", "/")
+    return Endpoint(parts[2], parts[5], namespace, parts[8], parts[9].replace("%", "/"))

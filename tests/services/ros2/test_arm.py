@@ -114,6 +114,36 @@ def test_a_hold_is_where_the_arm_is_now_within_the_limits_and_the_velocity_scale
     assert hold_point(Measured(np.zeros(2), np.zeros(2)), LIMITS, 0.5)[1].tolist() == [MIN_SEGMENT_S]
 
 
+class LaggingRobot(FakeRobot):
+    """Its reports are ``age`` seconds old, as a real robot's over a network: the arm has moved on since."""
+
+    def measure(self, t: float) -> Measured:
+        self.arm.advance(t)
+        return Measured(self.arm.position(t - self.age), self.arm.qd.copy(), self.age)
+
+
+def test_a_new_plan_is_timed_from_where_the_arm_is_not_from_its_last_report() -> None:
+    """The first segment was timed from the report: the arm, 0.1 rad further on, covered 0.15 rad in 0.1 s (1.5 rad/s
+    against a limit of 1; on the simulated PR2 4-7 rad/s against 2.3-3.6)."""
+    robot = LaggingRobot(np.zeros(2))
+    arm = Ros2Arm(LIMITS, np.zeros(2), ExecutorConfig(stale_limit_s=5.0), robot)
+    robot.age = 0.1
+    arm.adopt(make_plan(np.zeros(2), [np.array([1.0, 0.0])], t=11, dt=0.1, names=NAMES))  # j0 at its 1 rad/s
+    for _ in range(5):
+        arm.note_occupancy()
+        arm.step(0.1)
+    here = robot.arm.position(robot.arm.t)
+    assert here[0] == pytest.approx(0.5) and arm.q[0] == pytest.approx(0.4)  # the report is 0.1 rad behind
+    back = make_plan(arm.q, [np.zeros(2)], t=9, dt=0.1, names=NAMES, tick=1)  # turn back, 0.05 rad per 0.1 s
+    arm.adopt(back)
+    arm.note_occupancy()
+    arm.step(0.1)
+    positions, times = robot.sent[-1]
+    speed = np.abs(np.diff(np.vstack([here, positions]), axis=0)) / np.diff(np.concatenate([[0.0], times]))[:, None]
+    assert speed.max() <= LIMITS.velocity.max() * ExecutorConfig().velocity_scale + 1e-9
+    assert np.all(speed <= LIMITS.velocity + 1e-9)
+
+
 def test_a_continuous_joint_reported_unwrapped_is_wrapped_and_commanded_the_short_way() -> None:
     """A wrist at 0.1 rad reported as 2 pi + 0.1 (as ros2_control reports a continuous joint) was clamped to pi."""
     limits = ArmLimits(NAMES, np.array([-3.0, -np.pi]), np.array([3.0, np.pi]), np.array([1.0, 2.0]),

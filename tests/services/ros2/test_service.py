@@ -16,10 +16,12 @@ import zenoh
 from rosbags.typesys import Stores, get_typestore
 
 from services.ros2.core import TOPICS
+from services.ros2.node import Ros2Node
 from services.ros2.service import Ros2Service, Ros2ServiceConfig
 from services.ros2.wire import Attachment
 from shared.config import ZenohConfig
 from shared.protocol import ClassPosterior, HumanPose, Keys, OccupancyGrid, Plan, RobotState
+from shared.rejects import RejectCounter
 from shared.transport import TypedPublisher, open_session
 
 TS = get_typestore(Stores.ROS2_JAZZY)
@@ -148,3 +150,36 @@ def test_the_newest_marker_held_back_by_the_rate_limit_is_sent_when_its_window_p
     assert pub.payloads == [svc.mapping.occupancy(grids[0]), svc.mapping.occupancy(grids[2])]
     svc.flush_viz(force=True)
     assert pub.sent == 2  # sent once
+
+
+def test_beside_a_robot_publishing_its_joint_states_the_gateway_echoes_none(
+        zenoh_hub: Callable[[], ZenohConfig], wait_until: Callable[..., bool], caplog) -> None:
+    """--robot ros2: the executor's RobotState is the robot's own reading; echoed onto /joint_states it came back to
+    the executor as a second publisher's (116 refused in a review run, the others taken for measurements)."""
+    hub = zenoh_hub()
+    keys = Keys(hub.prefix)
+    echoed: list[str] = []
+    stop = threading.Event()
+    service = Ros2Service(Ros2ServiceConfig(), zenoh_hub())
+    with open_session(hub) as ros, open_session(zenoh_hub()) as foresight:
+        driver = Ros2Node(ros, 0, "/", "robot_driver", service.mapping.hashes, RejectCounter("test"))
+        driver.publisher("/joint_states", TOPICS["joint_states"].msgtype)  # the robot's driver, as simrobot
+        sub = ros.declare_subscriber(service.mapping.key("joint_states"), lambda s: echoed.append(str(s.key_expr)))
+        thread = threading.Thread(target=service.run, args=(stop,), daemon=True)
+        with caplog.at_level("WARNING", logger="foresight.ros2"):
+            thread.start()
+            try:
+                assert wait_until(lambda: service.robot_publishes is not None, 30.0)
+                state_pub = TypedPublisher(foresight, keys.robot_state)
+                for i in range(3):
+                    state_pub.put(RobotState(stamp=1.0 + i, tick=i, joint_names=JOINTS, goal=0, reached=False,
+                                             holding=False, reason="", q=np.full(2, 0.1 * i), qd=np.zeros(2)))
+                time.sleep(1.0)
+            finally:
+                stop.set()
+                thread.join(10.0)
+                sub.undeclare()
+                driver.close()
+    assert service.robot_publishes == "/robot_driver" and echoed == []
+    assert service.stats.sent["joint_states"] == 0
+    assert "node /robot_driver publishes /joint_states (a robot's driver)" in caplog.text
