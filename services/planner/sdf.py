@@ -144,14 +144,16 @@ class VoxelTables:
     def lookup(self, points: torch.Tensor, mode: str = "trilinear") -> torch.Tensor:
         """Values at ``points`` ``(..., 3)`` -> ``(...)``.
 
-        ``mode``: ``"trilinear"``, or ``"nearest"`` (the voxel whose centre is nearest). Beyond the outer
-        voxel centres the query is clamped to them.
+        ``mode``: ``"trilinear"``, or ``"nearest"`` (the voxel containing the point; on a face, the one above it).
+        Beyond the outer voxel centres the query is clamped to them.
         """
         lead = points.shape[:-1]
         u = ((points.reshape(-1, 3) - self.first) * self.inv_res).clamp(min=0)
         u = torch.minimum(u, self.u_max)
         if mode == "nearest":
-            idx = (torch.round(u) * self.voxel_strides).sum(-1).long()
+            # floor(u + 1/2), not round: round-half-even put points on a face in the upper voxel at some faces and
+            # the lower at others; a face's point belongs to the voxel above it, as Grid.index's [i, i + 1) has it
+            idx = (torch.floor(u + 0.5) * self.voxel_strides).sum(-1).long()
             return self.volume.view(-1).index_select(0, idx).reshape(lead)
         i0 = torch.minimum(u.floor(), self.cell_max)
         f = u - i0

@@ -88,6 +88,11 @@ def test_grid_lookup_nearest_reads_the_containing_voxel() -> None:
     got = grid_lookup(vol, origin, res, p, mode="nearest")
     idx = np.floor(p.numpy() / res).astype(int)
     assert got.tolist() == [float(vol[tuple(i)]) for i in idx]
+    # on the faces between voxels (exact in binary): the voxel above each face, as Grid.index; round-half-even gave
+    # voxels 1, 1, 3 for the faces of 1, 2, 3
+    faces = torch.tensor([[0.25 * i, 0.1, 0.1] for i in (1, 2, 3)])
+    got = grid_lookup(vol, origin, 0.25, faces, mode="nearest")
+    assert got.tolist() == [float(vol[i, 0, 0]) for i in (1, 2, 3)]
 
 
 @pytest.mark.parametrize("vol,origin,res,match", [
