@@ -49,9 +49,19 @@ def retry_config() -> dict[str, object]:
 
 
 def tls_hint(cfg: ZenohConfig) -> str:
-    """What a link that never comes up means under mutual TLS (appended to the warnings), or ``""`` without it."""
-    return (f" (mutual TLS as {cfg.role or 'observer'}: a refused certificate - another CA, expired, or the peer's "
-            "name not in it - looks like this; `foresight security check DIR`)" if cfg.security_dir else "")
+    """Why a link does not come up under mutual TLS (appended to the warnings), or ``""`` without it.
+
+    One handshake with the first ``connect`` endpoint (:func:`shared.security.probe.diagnose`) says which: nothing
+    listening, the router's certificate from another authority or for other names, this machine's refused.
+    """
+    if not cfg.security_dir:
+        return ""
+    from shared.security.probe import diagnose
+
+    role = cfg.role or "observer"
+    endpoints = connect_names(cfg).split(",")
+    what = diagnose(endpoints[0], cfg.security_dir, role) if endpoints[0] else "no endpoint to connect to"
+    return f" (mutual TLS as {role}: {what}; `foresight security check DIR`)"
 
 
 def connect_names(cfg: ZenohConfig) -> str:

@@ -153,7 +153,7 @@ def test_a_client_that_never_reaches_its_router_under_tls_is_told_what_that_may_
                       security_dir=str(dirs["good"]), role="planner", connect_timeout_s=0.3)
     with caplog.at_level("WARNING", logger="shared.transport"), pytest.raises(TransportError) as err:
         open_with_retry(cfg, sleep=lambda _s: None)
-    hint = "mutual TLS as planner: a refused certificate"
+    hint = "mutual TLS as planner: nothing listens at 127.0.0.1:"
     assert hint in str(err.value) and "foresight security check DIR" in str(err.value)
     assert any(hint in r.getMessage() for r in caplog.records if "not reachable yet" in r.getMessage())
     assert "connect tls/127.0.0.1:" in str(err.value)  # the link as it is made (it said tcp/)
@@ -186,3 +186,32 @@ def test_a_session_listening_on_a_host_its_certificate_does_not_name_is_warned(d
                               "127.0.0.1, localhost)") and "--hosts" in warning
     plain = ZenohConfig(mode="peer", listen=["tcp/192.168.1.10:7447"], connect=[], multicast_scouting=False)
     assert "without security" in listen_warning(plain)
+
+
+def test_a_refused_link_is_named_by_one_handshake(dirs: dict[str, Path], tmp_path: Path) -> None:
+    """Router down, its certificate from another authority, for another name, or this machine's refused: the client's
+    warnings said the same generic line for all of them (a four-machine review)."""
+    from shared.security.probe import diagnose
+
+    mixed = tmp_path / "mixed"  # this cell's ca.crt, another authority's replayer certificate
+    mixed.mkdir(mode=0o700)
+    shutil.copy(dirs["good"] / "ca.crt", mixed / "ca.crt")
+    for name in ("replayer.crt", "replayer.key"):
+        shutil.copy(dirs["other"] / name, mixed / name)
+    port = free_port()
+    assert diagnose(f"tls/127.0.0.1:{port}", dirs["good"], "planner") == \
+        f"nothing listens at 127.0.0.1:{port} (connection refused)"
+    with cell(dirs) as (endpoint, _):
+        ep = endpoint.replace("tcp/", "tls/")
+        assert "succeeds (the router accepts this certificate)" in diagnose(ep, dirs["good"], "planner")
+        assert "presents is not issued by this cell's authority (ca.crt) (unable to get local issuer certificate)" \
+            in diagnose(ep, dirs["other"], "replayer")
+        assert "refused this machine's replayer certificate" in diagnose(ep, mixed, "replayer")
+        cfg = ZenohConfig(mode="client", listen=[], connect=[endpoint], multicast_scouting=False,
+                          security_dir=str(dirs["other"]), role="replayer", connect_timeout_s=0.3)
+        with pytest.raises(TransportError, match="not issued by this cell's authority"):
+            open_with_retry(cfg, sleep=lambda _s: None)
+    port = free_port()  # a router listening on a loopback address its certificate does not name
+    with open_session(ZenohConfig(mode="router", listen=[f"tcp/127.0.0.2:{port}"], connect=[],
+                                  security_dir=str(dirs["good"]), role="router")):
+        assert "issued for other names" in diagnose(f"tls/127.0.0.2:{port}", dirs["good"], "planner")
