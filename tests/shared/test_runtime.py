@@ -95,3 +95,31 @@ def test_help_text_shows_cross_references_as_the_names_they_refer_to() -> None:
     from shared.runtime import help_text
 
     assert help_text("see :mod:`services.x` and :func:`~a.b.c`, ``--flag``") == "see `services.x` and `a.b.c`, `--flag`"
+
+
+def test_a_service_with_a_refused_certificate_ends_before_it_is_built(tmp_path, capsys) -> None:
+    """The planner loaded torch and compiled its cost (3-4 s) before its expired certificate ended it."""
+    import dataclasses
+    import datetime as dt
+
+    from shared.runtime import service_main
+    from shared.security.certificates import Issued, init_security_dir, issue
+
+    cell = tmp_path / "cell"
+    init_security_dir(cell, ["planner"])
+    old = issue(Issued((cell / "ca.crt").read_bytes(), (cell / "ca.key").read_bytes()), "planner",
+                not_after=dt.datetime.now(dt.UTC) - dt.timedelta(hours=1))
+    (cell / "planner.crt").write_bytes(old.cert_pem)
+    (cell / "planner.key").write_bytes(old.key_pem)
+
+    @dataclasses.dataclass
+    class Config:
+        log_level: str = "INFO"
+
+    built = []
+    with pytest.raises(SystemExit) as exit_:
+        service_main(["--zenoh-mode", "client", "--connect", "tls/127.0.0.1:9", "--listen", "", "--security",
+                      str(cell)], "foresight planner", section="planner", config_cls=Config, description="",
+                     make=lambda *a: built.append(a))
+    assert exit_.value.code == 2 and built == []
+    assert "planner.crt: expired at" in capsys.readouterr().err
