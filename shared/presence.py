@@ -6,8 +6,9 @@ come and gone. A token also disappears when *this* session loses its connection:
 token deleted when the router goes, and the router's restart (compose restarts it) used to stop every such
 service for good while the executor reconnected and held the robot (a review script: the router down for 6 s;
 planner, predictor and tracker stopped, the executor held for the rest of the run). So a departure is counted
-only once the token has stayed away :data:`DEPARTURE_GRACE_S` with this session connected; while it has no
-connection the departure waits, at most :data:`CUT_WAIT_S` (a cell whose only link was the departed peer
+only once the token has stayed away :data:`DEPARTURE_GRACE_S` with this session linked all the while; a link lost
+in the meantime gives the peer :data:`REJOIN_S` from the link's return to come back as well, and a link that
+stays lost ends the wait after :data:`CUT_WAIT_S` without one (a cell whose only link was the departed peer
 itself ends then).
 """
 
@@ -22,15 +23,22 @@ import zenoh
 
 from shared.protocol import Keys
 
-__all__ = ["Presence", "DEPARTURE_GRACE_S", "CUT_WAIT_S"]
+__all__ = ["Presence", "DEPARTURE_GRACE_S", "REJOIN_S", "CUT_WAIT_S", "connected"]
 
 log = logging.getLogger("shared.transport")
 
 DEPARTURE_GRACE_S = 1.0
-"""A ``stop_with`` peer's token gone this long, this session connected throughout the check, is a departure."""
+"""A ``stop_with`` peer's token gone this long, this session linked all the while, is a departure."""
+
+REJOIN_S = 10.0
+"""After this session's link comes back, how long a vanished ``stop_with`` peer has to come back too: it reconnects on
+its own, Zenoh retrying every 1-4 s (a peer reconnecting 1-4 s after this session was taken for gone)."""
 
 CUT_WAIT_S = 60.0
-"""Without any connection, how long a vanished ``stop_with`` peer is waited for before its departure counts."""
+"""Without any link, how long a vanished ``stop_with`` peer is waited for before its departure counts."""
+
+POLL_S = 0.1
+"""How often a vanished peer's token and this session's link are looked at."""
 
 
 def connected(session: zenoh.Session) -> bool:
@@ -69,6 +77,7 @@ class Presence:
         self._on_change = on_change
         self._is_connected = is_connected or (lambda: connected(session))
         self._closed = threading.Event()
+        self._generation: dict[str, int] = {}  # per peer: deletions seen (the newest deletion's watch counts)
         self._token = session.liveliness().declare_token(keys.alive(service))
         self._sub = session.liveliness().declare_subscriber(keys.alive_all, self._handle, history=True)
         if self._stop_with:
@@ -87,32 +96,40 @@ class Presence:
         if self._on_change is not None:
             self._on_change(peer, up)
         if ended and self._stop is not None:
-            self._check_later(peer, time.monotonic(), cut=False)
+            with self._lock:  # this deletion's watch; an earlier one of the same peer ends at its next look
+                generation = self._generation[peer] = self._generation.get(peer, 0) + 1
+            threading.Thread(target=self._watch, args=(peer, generation), name=f"presence-{peer}",
+                             daemon=True).start()
 
-    def _check_later(self, peer: str, since: float, cut: bool) -> None:
-        timer = threading.Timer(DEPARTURE_GRACE_S, self._confirm, args=(peer, since, cut))
-        timer.daemon = True
-        timer.start()
-
-    def _confirm(self, peer: str, since: float, cut: bool) -> None:
-        """Count ``peer``'s departure (set ``stop``) unless it is back or this session lost its own link."""
-        if self._closed.is_set() or self._stop is None or self._stop.is_set() or self.is_alive(peer):
-            return
-        if not self._is_connected():
-            if time.monotonic() - since < CUT_WAIT_S:
-                if not cut:
-                    log.warning("%s: no connection: %s's token went with it; waiting for the link (at most "
-                                "%.0f s) before taking it as gone", self.service, peer, CUT_WAIT_S)
-                self._check_later(peer, since, cut=True)
-                return
-            log.warning("%s: no connection for %.0f s and %s not back: taking it as gone", self.service,
-                        CUT_WAIT_S, peer)
-        elif cut:  # linked again: its token comes back through the subscriber's history, give it the grace
-            log.info("%s: connected again; checking that %s is back", self.service, peer)
-            self._check_later(peer, since, cut=False)
-            return
-        log.info("%s: %s has gone: stopping", self.service, peer)
-        self._stop.set()
+    def _watch(self, peer: str, generation: int) -> None:
+        """Set ``stop`` once ``peer`` stays away (module docstring), unless it comes back or the service ends."""
+        now = time.monotonic()
+        due = now + DEPARTURE_GRACE_S
+        cut = None if self._is_connected() else now  # when this session's link went (None: linked)
+        while not self._closed.is_set() and self._stop is not None and not self._stop.is_set():
+            with self._lock:
+                if self._generation.get(peer) != generation or peer in self.alive:
+                    return
+            now = time.monotonic()
+            if not self._is_connected():
+                if cut is None:
+                    cut = now
+                    log.warning("%s: no connection: %s's token went with it; waiting for the link (at most %.0f "
+                                "s) before taking it as gone", self.service, peer, CUT_WAIT_S)
+                if now - cut >= CUT_WAIT_S:
+                    log.warning("%s: no connection for %.0f s and %s not back: taking it as gone", self.service,
+                                CUT_WAIT_S, peer)
+                    self._stop.set()
+                    return
+            else:
+                if cut is not None:  # linked again: the peer reconnects on its own, give it the time to
+                    log.info("%s: connected again; waiting up to %.0f s for %s", self.service, REJOIN_S, peer)
+                    cut, due = None, now + REJOIN_S
+                if now >= due:
+                    log.info("%s: %s has gone: stopping", self.service, peer)
+                    self._stop.set()
+                    return
+            self._closed.wait(POLL_S)
 
     def is_alive(self, service: str) -> bool:
         """Whether ``service``'s token is currently seen."""

@@ -251,9 +251,11 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
         limit_blas_threads()  # python -m services.X does not pass through tools.foresight
         cfg, zcfg = resolve_config(section, config_cls, args)
         if zcfg.security_dir:  # a refused certificate ends the service before its models load (3-4 s: the planner)
+            from shared.security import ROLES
             from shared.security.tls import security_settings
 
-            security_settings(zcfg)
+            if section in ROLES:  # the others (ros2, simrobot) refuse security themselves, naming why
+                security_settings(zcfg)
         setup_logging(cfg.log_level)
         restore = stop_on_signals(stop, prog=prog)
         watch_parent(stop)

@@ -86,15 +86,16 @@ def command_points(reference: Reference, progress: float, q: np.ndarray, config:
     return positions.copy(), np.cumsum(segments)
 
 
-def present(measured: Measured, limits: ArmLimits) -> np.ndarray:
-    """``(D,)`` where the arm is now, in the robot's own joint values: its report moved on by ``qd`` over ``age_s``.
+def present(measured: Measured, limits: ArmLimits, since_s: float = 0.0) -> np.ndarray:
+    """``(D,)`` where the arm is now, in the robot's own joint values: its report moved on by ``qd`` over its age.
 
-    The bounded joints are kept within their limits. A command timed from the report itself was short by the
+    ``since_s``: seconds since the report was read (its age then was ``age_s``). The bounded joints are kept within
+    their limits. A command timed from the report itself was short by the
     distance the arm had moved since: 4-7 rad/s in the first 15-25 ms of each new plan on the simulated robot,
     against limits of 2.3-3.6 (a review run, real time, reports 10-20 ms old).
     """
     bounded = ~limits.continuous_mask
-    now = measured.q + measured.qd * measured.age_s
+    now = measured.q + measured.qd * (measured.age_s + since_s)
     now[bounded] = np.clip(now[bounded], limits.lower[bounded], limits.upper[bounded])
     return now
 
@@ -148,7 +149,10 @@ class Ros2Arm(ExecutorCore):
         reason = self.stale_reason() if hold_reason is None else hold_reason
         if not reason and self.reference is not None:
             if self._commanded is not self.plan:
-                now = self.limits.clamp(self.limits.wrap(present(self._measured, self.limits)))  # not its report
+                # where the arm is, not its report: read at the end of the last step, h ago in real time (in lock-step
+                # the arm moves only with the next /clock)
+                since = h if self.config.mode == "realtime" else 0.0
+                now = self.limits.clamp(self.limits.wrap(present(self._measured, self.limits, since)))
                 positions, times = command_points(self.reference, self.tau, now, self.config, self.limits.velocity)
                 self.link.send(self.limits.unwrap_from(self._measured.q, positions), times)
                 self._commanded = self.plan

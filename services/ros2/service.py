@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import zenoh
 
 from shared.config import ConfigError, ZenohConfig, opt
 from shared.protocol import (
@@ -93,6 +94,7 @@ class Ros2Service:
         self._last_viz: dict[str, float] = {}
         self._pending: dict[str, Callable[[], bytes]] = {}  # role -> the newest marker held back by the rate limit
         self.robot_publishes: str | None = None  # another node publishing the joint states topic: the robot's
+        self._drivers: set[str] = set()  # their graph tokens
         self._zid = ""
 
     def _put(self, role: str, payload: bytes) -> None:
@@ -137,24 +139,29 @@ class Ros2Service:
         if self.config.joint_states and self.robot_publishes is None:
             self._put("joint_states", self.mapping.joint_state(state))
 
-    def on_graph(self, key: str) -> None:
-        """A graph token: another node publishing the joint states topic is the robot's driver.
+    def on_graph(self, key: str, alive: bool = True) -> None:
+        """A graph token (``alive`` False: withdrawn): another node publishing the joint states is a robot's driver.
 
         The executor driving a ROS 2 robot (``robot = "ros2"``) publishes the robot's measured joints as its
         RobotState; echoed onto the robot's own topic they came back as a second publisher's states (116 refused
-        by the executor in a review run, the rest taken for fresh measurements). From the first such publisher on,
-        the gateway publishes no joint states and says so once.
+        by the executor in a review run, the rest taken for fresh measurements). While another node publishes
+        there the gateway publishes no joint states, and says so when that starts and ends.
         """
         ep = parse_endpoint_token(key)
         topic = self.config.topic("joint_states")
         if ep is None or ep.kind != "MP" or ep.topic != topic or ep.zid == self._zid or not self.config.joint_states:
             return
+        node = f"{ep.namespace.rstrip('/')}/{ep.node}"
         with self._lock:
-            first, self.robot_publishes = self.robot_publishes is None, self.robot_publishes or \
-                f"{ep.namespace.rstrip('/')}/{ep.node}"
-        if first:
+            before = set(self._drivers)
+            (self._drivers.add if alive else self._drivers.discard)(key)
+            self.robot_publishes = node if alive else (self.robot_publishes if self._drivers else None)
+            started, ended = not before and self._drivers, before and not self._drivers
+        if started:
             log.warning("ros2: node %s publishes %s (a robot's driver): the executor's RobotState is not echoed there "
-                        "(run the gateway with --no-joint-states beside a ROS 2 robot)", self.robot_publishes, topic)
+                        "(run the gateway with --no-joint-states beside a ROS 2 robot)", node, topic)
+        elif ended:
+            log.info("ros2: no other node publishes %s now; the executor's RobotState goes there again", topic)
 
     def on_occupancy(self, grid: OccupancyGrid) -> None:
         """The predicted occupancy (rate-limited)."""
@@ -182,9 +189,10 @@ class Ros2Service:
         with open_session(self.zenoh, stop, "ros2") as session:
             node = Ros2Node(session, cfg.domain_id, cfg.node_namespace, cfg.node, self.mapping.hashes, self.rejects)
             zid = self._zid = node.zid
-            graph = session.liveliness().declare_subscriber(f"@ros2_lv/{cfg.domain_id}/**",
-                                                            lambda sample: self.on_graph(str(sample.key_expr)),
-                                                            history=True)
+            def on_token(sample: zenoh.Sample) -> None:
+                self.on_graph(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+
+            graph = session.liveliness().declare_subscriber(f"@ros2_lv/{cfg.domain_id}/**", on_token, history=True)
             for role, topic in TOPICS.items():
                 if role != "joint_states" or cfg.joint_states:
                     self._pubs[role] = node.publisher(cfg.topic(role), topic.msgtype)

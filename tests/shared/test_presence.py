@@ -49,6 +49,7 @@ def test_a_token_lost_with_the_link_is_not_a_departure(zenoh_hub, monkeypatch) -
 
 def test_a_peer_gone_while_the_link_is_down_counts_once_the_link_is_back(zenoh_hub, monkeypatch) -> None:
     monkeypatch.setattr(presence, "DEPARTURE_GRACE_S", 0.1)
+    monkeypatch.setattr(presence, "REJOIN_S", 0.3)
     link = threading.Event()
     keys, stop = Keys("p2"), threading.Event()
     with open_session(zenoh_hub()) as sa, open_session(zenoh_hub()) as sb:
@@ -116,3 +117,28 @@ def test_a_router_restart_does_not_stop_the_services_that_stop_with_the_executor
             watcher.close()
             router_stop.set()
             second.join(10)
+
+
+def test_a_peer_that_reconnects_after_this_session_is_not_taken_for_gone(zenoh_hub, monkeypatch) -> None:
+    """Two clients of a restarted router reconnect at different times: the link back at 0.5 s and the executor's token
+    at 1.4 s stopped the planner (the grace ran from the token's deletion; the link was looked at once, at its end)."""
+    monkeypatch.setattr(presence, "DEPARTURE_GRACE_S", 1.0)
+    link = threading.Event()
+    link.set()
+    keys, stop = Keys("p5"), threading.Event()
+    with open_session(zenoh_hub()) as sa, open_session(zenoh_hub()) as sb:
+        watcher = Presence(sa, keys, "planner", stop_with=["executor"], stop=stop, is_connected=link.is_set)
+        try:
+            executor = Presence(sb, keys, "executor")
+            assert wait_until(lambda: watcher.is_alive("executor"))
+            link.clear()
+            executor.close()                    # the router goes: the link and the executor's token together
+            time.sleep(0.5)
+            link.set()                          # this session is linked again first ...
+            assert not stop.wait(0.9)           # ... past the 1 s grace from the deletion
+            executor = Presence(sb, keys, "executor")  # the executor's comes back later
+            assert wait_until(lambda: watcher.is_alive("executor"))
+            assert not stop.wait(1.5)
+            executor.close()
+        finally:
+            watcher.close()

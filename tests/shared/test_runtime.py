@@ -123,3 +123,17 @@ def test_a_service_with_a_refused_certificate_ends_before_it_is_built(tmp_path, 
                      make=lambda *a: built.append(a))
     assert exit_.value.code == 2 and built == []
     assert "planner.crt: expired at" in capsys.readouterr().err
+
+
+def test_a_command_that_is_no_role_refuses_security_itself(tmp_path, capsys) -> None:
+    """foresight ros2 / simrobot under --security: the early certificate check asked for an observer certificate
+    instead of letting them say that ROS 2 keys have no role in the access control."""
+    from services.ros2.__main__ import main
+    from shared.security.certificates import init_security_dir
+
+    cell = tmp_path / "cell"
+    init_security_dir(cell, ["router", "planner"])
+    with pytest.raises(SystemExit) as exit_:
+        main(["--zenoh-mode", "client", "--connect", "tls/127.0.0.1:9", "--listen", "", "--security", str(cell)])
+    assert exit_.value.code == 2
+    assert "ROS 2 keys have no role in the access control" in capsys.readouterr().err

@@ -9,7 +9,7 @@ import pytest
 from services.executor.config import ExecutorConfig
 from services.executor.core import ArmLimits
 from services.executor.reference import Reference
-from services.ros2.arm import MIN_SEGMENT_S, Measured, Ros2Arm, command_points, hold_point
+from services.ros2.arm import MIN_SEGMENT_S, Measured, Ros2Arm, command_points, hold_point, present
 from services.ros2.controller import SimulatedController
 from shared.lockstep import FIRST_PLAN
 from tests.services.executor.test_core import make_plan
@@ -142,6 +142,14 @@ def test_a_new_plan_is_timed_from_where_the_arm_is_not_from_its_last_report() ->
     speed = np.abs(np.diff(np.vstack([here, positions]), axis=0)) / np.diff(np.concatenate([[0.0], times]))[:, None]
     assert speed.max() <= LIMITS.velocity.max() * ExecutorConfig().velocity_scale + 1e-9
     assert np.all(speed <= LIMITS.velocity + 1e-9)
+
+
+def test_the_present_configuration_counts_the_time_since_the_report_was_read() -> None:
+    """Real time: the report was read at the end of the last step, h before the command (its age then: age_s)."""
+    report = Measured(np.array([0.0, 2.9]), np.array([1.0, 1.0]), 0.05)
+    np.testing.assert_allclose(present(report, LIMITS), [0.05, 2.95])
+    np.testing.assert_allclose(present(report, LIMITS, since_s=0.02), [0.07, 2.97])
+    np.testing.assert_allclose(present(report, LIMITS, since_s=0.5), [0.55, 3.0])  # j1 within its limit
 
 
 def test_a_continuous_joint_reported_unwrapped_is_wrapped_and_commanded_the_short_way() -> None:

@@ -183,3 +183,18 @@ def test_beside_a_robot_publishing_its_joint_states_the_gateway_echoes_none(
     assert service.robot_publishes == "/robot_driver" and echoed == []
     assert service.stats.sent["joint_states"] == 0
     assert "node /robot_driver publishes /joint_states (a robot's driver)" in caplog.text
+
+
+def test_once_the_other_publisher_is_gone_the_gateway_publishes_the_joint_states_again() -> None:
+    """A short-lived publisher (ros2 topic pub, a bag) silenced the gateway for the rest of its run."""
+    from services.ros2.wire import endpoint_token
+
+    service = Ros2Service(Ros2ServiceConfig(), ZenohConfig())
+    token = endpoint_token(0, "other", 1, 2, "MP", "/", "topic_pub", "/joint_states", "sensor_msgs/msg/JointState",
+                           "RIHS01_x", "q")
+    service.on_graph(token)
+    service.on_graph(endpoint_token(0, "other", 1, 3, "MS", "/", "topic_pub", "/joint_states",
+                                    "sensor_msgs/msg/JointState", "RIHS01_x", "q"))  # a subscription: no matter
+    assert service.robot_publishes == "/topic_pub"
+    service.on_graph(token, alive=False)
+    assert service.robot_publishes is None
