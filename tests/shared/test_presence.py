@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import pytest
 
 import shared.presence as presence
 from services.processes import free_port
@@ -13,132 +18,132 @@ from shared.protocol import Keys
 from shared.transport import open_session
 
 
-def wait_until(cond, timeout: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.01)
-    return cond()
+@dataclass
+class Cell:
+    """A planner that stops with the executor, the executor's session, and this session's link (a switch)."""
+
+    watcher: Presence
+    other: object
+    keys: Keys
+    stop: threading.Event
+    link: threading.Event
+
+    def executor(self) -> Presence:
+        """The executor's token, (re)declared on the other session."""
+        return Presence(self.other, self.keys, "executor")
 
 
-def test_a_token_lost_with_the_link_is_not_a_departure(zenoh_hub, monkeypatch) -> None:
+@pytest.fixture
+def cell(zenoh_hub, wait_until) -> Iterator[Cell]:
+    """Two loopback sessions; the planner's link is what ``link`` says (set: linked)."""
+    link, stop = threading.Event(), threading.Event()
+    link.set()
+    with open_session(zenoh_hub()) as sa, open_session(zenoh_hub()) as sb:
+        watcher = Presence(sa, Keys("p"), "planner", stop_with=["executor"], stop=stop, is_connected=link.is_set)
+        try:
+            yield Cell(watcher, sb, Keys("p"), stop, link)
+        finally:
+            watcher.close()
+
+
+def test_a_token_lost_with_the_link_is_not_a_departure(cell: Cell, wait_until, monkeypatch) -> None:
     """The router's restart deleted every remote token: each --stop-with service stopped for good."""
     monkeypatch.setattr(presence, "DEPARTURE_GRACE_S", 0.1)
-    link = threading.Event()
-    link.set()
-    keys, stop = Keys("p1"), threading.Event()
-    with open_session(zenoh_hub()) as sa, open_session(zenoh_hub()) as sb:
-        watcher = Presence(sa, keys, "planner", stop_with=["executor"], stop=stop, is_connected=link.is_set)
-        try:
-            executor = Presence(sb, keys, "executor")
-            assert wait_until(lambda: watcher.is_alive("executor"))
-            link.clear()                        # this session lost its link; the peer's token went with it
-            executor.close()
-            assert wait_until(lambda: not watcher.is_alive("executor"))
-            assert not stop.wait(1.0)           # ten grace periods later: still running, waiting for the link
-            executor = Presence(sb, keys, "executor")
-            link.set()                          # linked again, and the peer is back
-            assert wait_until(lambda: watcher.is_alive("executor"))
-            assert not stop.wait(0.5)
-            executor.close()                    # now it really leaves, the link up: a departure
-            assert stop.wait(5.0)
-        finally:
-            watcher.close()
+    executor = cell.executor()
+    assert wait_until(lambda: cell.watcher.is_alive("executor"), 10.0)
+    cell.link.clear()                           # this session lost its link; the peer's token went with it
+    executor.close()
+    assert wait_until(lambda: not cell.watcher.is_alive("executor"), 10.0)
+    assert not cell.stop.wait(1.0)              # ten grace periods later: still running, waiting for the link
+    executor = cell.executor()
+    cell.link.set()                             # linked again, and the peer is back
+    assert wait_until(lambda: cell.watcher.is_alive("executor"), 10.0)
+    assert not cell.stop.wait(0.5)
+    executor.close()                            # now it really leaves, the link up: a departure
+    assert cell.stop.wait(5.0)
 
 
-def test_a_peer_gone_while_the_link_is_down_counts_once_the_link_is_back(zenoh_hub, monkeypatch) -> None:
+def test_a_peer_gone_while_the_link_is_down_counts_once_the_link_is_back(cell: Cell, wait_until,
+                                                                        monkeypatch) -> None:
     monkeypatch.setattr(presence, "DEPARTURE_GRACE_S", 0.1)
     monkeypatch.setattr(presence, "REJOIN_S", 0.3)
-    link = threading.Event()
-    keys, stop = Keys("p2"), threading.Event()
-    with open_session(zenoh_hub()) as sa, open_session(zenoh_hub()) as sb:
-        watcher = Presence(sa, keys, "planner", stop_with=["executor"], stop=stop, is_connected=link.is_set)
-        try:
-            link.set()
-            executor = Presence(sb, keys, "executor")
-            assert wait_until(lambda: watcher.is_alive("executor"))
-            link.clear()
-            executor.close()
-            assert not stop.wait(0.5)
-            link.set()                          # back, and the executor did not come back with it
-            assert stop.wait(5.0)
-        finally:
-            watcher.close()
+    executor = cell.executor()
+    assert wait_until(lambda: cell.watcher.is_alive("executor"), 10.0)
+    cell.link.clear()
+    executor.close()
+    assert not cell.stop.wait(0.5)
+    cell.link.set()                             # back, and the executor did not come back with it
+    assert cell.stop.wait(5.0)
 
 
-def test_without_any_link_a_departure_counts_after_a_bounded_wait(zenoh_hub, monkeypatch) -> None:
+def test_without_any_link_a_departure_counts_after_a_bounded_wait(cell: Cell, wait_until, monkeypatch) -> None:
     """A cell whose only link was the departed peer itself: it ends, after CUT_WAIT_S."""
     monkeypatch.setattr(presence, "DEPARTURE_GRACE_S", 0.1)
     monkeypatch.setattr(presence, "CUT_WAIT_S", 0.3)
-    keys, stop = Keys("p3"), threading.Event()
-    with open_session(zenoh_hub()) as sa, open_session(zenoh_hub()) as sb:
-        watcher = Presence(sa, keys, "planner", stop_with=["executor"], stop=stop, is_connected=lambda: False)
-        try:
-            executor = Presence(sb, keys, "executor")
-            assert wait_until(lambda: watcher.is_alive("executor"))
-            executor.close()
-            assert stop.wait(5.0)
-        finally:
-            watcher.close()
+    executor = cell.executor()
+    assert wait_until(lambda: cell.watcher.is_alive("executor"), 10.0)
+    cell.link.clear()                           # and it never comes back
+    executor.close()
+    assert cell.stop.wait(5.0)
 
 
-def test_a_router_restart_does_not_stop_the_services_that_stop_with_the_executor() -> None:
+def test_a_peer_that_reconnects_after_this_session_is_not_taken_for_gone(cell: Cell, wait_until,
+                                                                          monkeypatch) -> None:
+    """Two clients of a restarted router reconnect at different times: the link back at 0.5 s and the executor's token
+    at 1.4 s stopped the planner (the grace ran from the token's deletion; the link was looked at once, at its end)."""
+    monkeypatch.setattr(presence, "DEPARTURE_GRACE_S", 1.0)
+    executor = cell.executor()
+    assert wait_until(lambda: cell.watcher.is_alive("executor"), 10.0)
+    cell.link.clear()
+    executor.close()                            # the router goes: the link and the executor's token together
+    time.sleep(0.5)
+    cell.link.set()                             # this session is linked again first ...
+    assert not cell.stop.wait(0.9)              # ... past the 1 s grace from the deletion
+    executor = cell.executor()                  # the executor's comes back later
+    assert wait_until(lambda: cell.watcher.is_alive("executor"), 10.0)
+    assert not cell.stop.wait(1.5)
+    executor.close()
+
+
+def test_a_router_restart_does_not_stop_the_services_that_stop_with_the_executor(wait_until) -> None:
     """Client sessions through a real router, which goes and comes back on its endpoint."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router_cfg = ZenohConfig(mode="router", listen=[endpoint], connect=[], multicast_scouting=False)
     client = ZenohConfig(mode="client", listen=[], connect=[endpoint], multicast_scouting=False)
     keys, stop = Keys("p4"), threading.Event()
-    router_stop = threading.Event()
 
-    def router() -> None:
-        with open_session(router_cfg) as _:
-            router_stop.wait(30)
+    @contextlib.contextmanager
+    def router() -> Iterator[None]:
+        up, down = threading.Event(), threading.Event()
 
-    first = threading.Thread(target=router, daemon=True)
-    first.start()
-    with open_session(client) as sa, open_session(client) as sb:
-        watcher = Presence(sa, keys, "planner", stop_with=["executor"], stop=stop)
-        executor = Presence(sb, keys, "executor")
+        def serve() -> None:
+            with open_session(router_cfg):
+                up.set()
+                down.wait(30)
+
+        thread = threading.Thread(target=serve, daemon=True)
+        thread.start()
         try:
-            assert wait_until(lambda: watcher.is_alive("executor"))
-            router_stop.set()                   # the router goes: every remote token is reported deleted
-            first.join(10)
-            assert wait_until(lambda: not watcher.is_alive("executor"))
-            assert wait_until(lambda: not presence.connected(sa))
-            router_stop.clear()
-            second = threading.Thread(target=router, daemon=True)
-            second.start()                      # ... and comes back on the same endpoint
-            assert wait_until(lambda: watcher.is_alive("executor"), timeout=30.0)
-            assert not stop.is_set()
-            executor.close()                    # a real departure still ends the watcher
-            assert stop.wait(10.0)
+            assert up.wait(30)
+            yield
         finally:
-            watcher.close()
-            router_stop.set()
-            second.join(10)
+            down.set()
+            thread.join(10)
 
-
-def test_a_peer_that_reconnects_after_this_session_is_not_taken_for_gone(zenoh_hub, monkeypatch) -> None:
-    """Two clients of a restarted router reconnect at different times: the link back at 0.5 s and the executor's token
-    at 1.4 s stopped the planner (the grace ran from the token's deletion; the link was looked at once, at its end)."""
-    monkeypatch.setattr(presence, "DEPARTURE_GRACE_S", 1.0)
-    link = threading.Event()
-    link.set()
-    keys, stop = Keys("p5"), threading.Event()
-    with open_session(zenoh_hub()) as sa, open_session(zenoh_hub()) as sb:
-        watcher = Presence(sa, keys, "planner", stop_with=["executor"], stop=stop, is_connected=link.is_set)
-        try:
+    with contextlib.ExitStack() as first:
+        first.enter_context(router())
+        with open_session(client) as sa, open_session(client) as sb:
+            watcher = Presence(sa, keys, "planner", stop_with=["executor"], stop=stop)
             executor = Presence(sb, keys, "executor")
-            assert wait_until(lambda: watcher.is_alive("executor"))
-            link.clear()
-            executor.close()                    # the router goes: the link and the executor's token together
-            time.sleep(0.5)
-            link.set()                          # this session is linked again first ...
-            assert not stop.wait(0.9)           # ... past the 1 s grace from the deletion
-            executor = Presence(sb, keys, "executor")  # the executor's comes back later
-            assert wait_until(lambda: watcher.is_alive("executor"))
-            assert not stop.wait(1.5)
-            executor.close()
-        finally:
-            watcher.close()
+            try:
+                assert wait_until(lambda: watcher.is_alive("executor"), 10.0)
+                first.close()                   # the router goes: every remote token is reported deleted
+                assert wait_until(lambda: not watcher.is_alive("executor"), 10.0)
+                assert wait_until(lambda: not presence.connected(sa), 10.0)
+                with router():                  # ... and comes back on the same endpoint
+                    assert wait_until(lambda: watcher.is_alive("executor"), 30.0)
+                    assert not stop.is_set()
+                    executor.close()            # a real departure still ends the watcher
+                    assert stop.wait(10.0)
+            finally:
+                watcher.close()
