@@ -5,11 +5,13 @@ A service declares ``<prefix>/alive/<service>`` and watches every token of the r
 come and gone. A token also disappears when *this* session loses its connection: Zenoh reports every remote
 token deleted when the router goes, and the router's restart (compose restarts it) used to stop every such
 service for good while the executor reconnected and held the robot (a review script: the router down for 6 s;
-planner, predictor and tracker stopped, the executor held for the rest of the run). So a departure is counted
-only once the token has stayed away :data:`DEPARTURE_GRACE_S` with this session linked all the while; a link lost
-in the meantime gives the peer :data:`REJOIN_S` from the link's return to come back as well, and a link that
-stays lost ends the wait after :data:`CUT_WAIT_S` without one (a cell whose only link was the departed peer
-itself ends then).
+planner, predictor and tracker stopped, the executor held for the rest of the run). A deletion that comes with the
+link down, or with the link found gone within :data:`LINK_WINDOW_S` of it (the router's deletions and the link's
+end come together: the link was already down at 3 of 3 deletions measured, still up at 1 of 3 in a test), is the
+link's: the peer has :data:`REJOIN_S` from the link's return to come back, and a link that stays lost ends the wait
+after :data:`CUT_WAIT_S`. A deletion with the link up is the peer's own (it withdrew its token as it ended): it
+counts after :data:`DEPARTURE_GRACE_S` unless the token comes back, even if the link goes later (in peer mode the
+departed peer may have been the link, as in the README's one-service block).
 """
 
 from __future__ import annotations
@@ -34,11 +36,16 @@ REJOIN_S = 10.0
 """After this session's link comes back, how long a vanished ``stop_with`` peer has to come back too: it reconnects on
 its own, Zenoh retrying every 1-4 s (a peer reconnecting 1-4 s after this session was taken for gone)."""
 
-CUT_WAIT_S = 60.0
-"""Without any link, how long a vanished ``stop_with`` peer is waited for before its departure counts."""
+CUT_WAIT_S = 30.0
+"""Without any link, how long a peer lost with it is waited for before its departure counts (a router restart, as
+compose does it, takes seconds)."""
 
 POLL_S = 0.1
 """How often a vanished peer's token and this session's link are looked at."""
+
+LINK_WINDOW_S = 0.5
+"""A link found gone this soon after a peer's token is taken to have gone first (the router's loss: the deletions
+and the link's end come together, in either order); later, the peer left and its link went with it (peer mode)."""
 
 
 def connected(session: zenoh.Session) -> bool:
@@ -96,22 +103,28 @@ class Presence:
         if self._on_change is not None:
             self._on_change(peer, up)
         if ended and self._stop is not None:
+            # lost with the link (the router went: the link is already down when the deletions come), or withdrawn
+            # (the peer ended; a link lost after that, the peer's own in peer mode, changes nothing)
+            with_link = not self._is_connected()
             with self._lock:  # this deletion's watch; an earlier one of the same peer ends at its next look
                 generation = self._generation[peer] = self._generation.get(peer, 0) + 1
-            threading.Thread(target=self._watch, args=(peer, generation), name=f"presence-{peer}",
+            threading.Thread(target=self._watch, args=(peer, generation, with_link), name=f"presence-{peer}",
                              daemon=True).start()
 
-    def _watch(self, peer: str, generation: int) -> None:
+    def _watch(self, peer: str, generation: int, with_link: bool) -> None:
         """Set ``stop`` once ``peer`` stays away (module docstring), unless it comes back or the service ends."""
-        now = time.monotonic()
-        due = now + DEPARTURE_GRACE_S
-        cut = None if self._is_connected() else now  # when this session's link went (None: linked)
+        deleted = time.monotonic()
+        due = deleted + (REJOIN_S if with_link else DEPARTURE_GRACE_S)
+        cut = None  # when this session's link was seen gone (None: linked)
         while not self._closed.is_set() and self._stop is not None and not self._stop.is_set():
             with self._lock:
                 if self._generation.get(peer) != generation or peer in self.alive:
                     return
             now = time.monotonic()
-            if not self._is_connected():
+            linked = self._is_connected()
+            if not linked and not with_link and now - deleted <= LINK_WINDOW_S:
+                with_link, due = True, deleted + REJOIN_S  # the link went with the token: the router's doing
+            if with_link and not linked:
                 if cut is None:
                     cut = now
                     log.warning("%s: no connection: %s's token went with it; waiting for the link (at most %.0f "

@@ -128,7 +128,7 @@ class Planner:
         self.fused: FusedCost | None = None
         if c.fused_cost and supports(robot, cost):
             self.fused = FusedCost(robot, cost, self.w_smooth, self._vmax, c.integrate_costs, compile=c.compile,
-                                   grid=scene.grid, dwell=c.goal_dwell_s, min_dt=c.min_dt)
+                                   grid=scene.grid, dwell=c.goal_dwell_s)
             per_call = goals_per_call(len(self.valid_index), c.cost_chunk_goals if self.device.type == "cpu" else 0)
             # with reuse, every iteration after the first costs its new rollouts and theta only (the first: two calls)
             self.fused.warm_up(per_call * (c.stomp.rollouts - c.stomp.reuse + 1), c.stomp.waypoints)
@@ -149,13 +149,13 @@ class Planner:
             q: ``(..., T, D)`` trajectories.
 
         Returns:
-            ``(..., T)`` seconds: the path's one ``dt`` (its slowest segment at the scaled velocity limits, at
-            least ``min_dt``: what the plan carries and the executor runs), half of it at both ends. With
+            ``(..., T)`` seconds: the path's one ``dt`` (its slowest segment at the scaled velocity limits: what
+            the plan carries, at least ``min_dt``, and the executor runs), half of it at both ends. With
             ``integrate_costs`` the state costs are weighted by it, so they integrate over the time the robot
             spends along the path (a detour or a loop costs more), instead of counting waypoints
             (:meth:`waypoint_cost` adds the goal's dwell).
         """
-        return waypoint_times(q, self._inv_vmax, self.config.min_dt)
+        return waypoint_times(q, self._inv_vmax)
 
     def _state_terms(self, q: torch.Tensor) -> torch.Tensor:
         """``(K, R, T, D)`` -> ``(K, R, T, 2)`` obstacle and human terms, time-weighted if configured.

@@ -119,16 +119,16 @@ def acceleration_cost(q: torch.Tensor) -> torch.Tensor:
     return F.pad((acc * acc).sum(-1), (1, 1))
 
 
-def path_dt(q: torch.Tensor, inv_vmax: torch.Tensor, min_dt: float) -> torch.Tensor:
+def path_dt(q: torch.Tensor, inv_vmax: torch.Tensor, min_dt: float = 0.0) -> torch.Tensor:
     """Seconds per waypoint of a trajectory as the executor runs it: one ``dt`` for the whole path.
 
-    The slowest segment at the scaled velocity limits sets it (``max_t,j |q[t+1, j] - q[t, j]| / vmax_j``, at
-    least ``min_dt``); the plan carries it and the executor spends it on every segment.
+    The slowest segment at the scaled velocity limits sets it (``max_t,j |q[t+1, j] - q[t, j]| / vmax_j``); the
+    plan carries it, at least ``min_dt``, and the executor spends it on every segment.
 
     Args:
         q: ``(..., T, D)`` trajectories, T >= 2.
         inv_vmax: ``(D,)`` 1 / scaled velocity limits.
-        min_dt: Smallest time between waypoints (s).
+        min_dt: Smallest time between waypoints (s; the plan's floor, 0: none).
 
     Returns:
         ``(...,)`` seconds.
@@ -136,23 +136,24 @@ def path_dt(q: torch.Tensor, inv_vmax: torch.Tensor, min_dt: float) -> torch.Ten
     return ((q[..., 1:, :] - q[..., :-1, :]).abs() * inv_vmax).amax((-2, -1)).clamp_min(min_dt)
 
 
-def waypoint_times(q: torch.Tensor, inv_vmax: torch.Tensor, min_dt: float) -> torch.Tensor:
-    """Time each waypoint stands for when the trajectory is executed (:func:`path_dt` per segment).
+def waypoint_times(q: torch.Tensor, inv_vmax: torch.Tensor) -> torch.Tensor:
+    """Time each waypoint stands for when the trajectory is executed: the path's one dt (:func:`path_dt`) per segment.
 
     Half of each adjacent segment's time: ``dt`` inside, ``dt / 2`` at both ends. The state costs weighted by it
-    integrate over the time the robot really spends along the path, bunched waypoints included (weighting each
-    waypoint by its own segments at the velocity limits charged 0.21 s in a band the executed robot crossed in
-    1.06 s, docs/planner.md).
+    integrate over the time the robot spends along the path, bunched waypoints included (weighting each waypoint
+    by its own segments at the velocity limits charged 0.21 s in a band the executed robot crossed in 1.06 s,
+    docs/planner.md). Without the plan's ``min_dt`` floor: under it every path would cost the same time whatever
+    its length, and a robot near its goal looped there (an integration run never reached it in 30 steps); the
+    executor still runs such a path at ``min_dt`` per segment, its last few tenths of a second.
 
     Args:
         q: ``(..., T, D)`` trajectories, T >= 2.
         inv_vmax: ``(D,)`` 1 / scaled velocity limits.
-        min_dt: Smallest time between waypoints (s).
 
     Returns:
         ``(..., T)`` seconds.
     """
-    seg = path_dt(q, inv_vmax, min_dt)[..., None].expand(*q.shape[:-2], q.shape[-2] - 1)  # (..., T-1)
+    seg = path_dt(q, inv_vmax)[..., None].expand(*q.shape[:-2], q.shape[-2] - 1)  # (..., T-1)
     return 0.5 * (F.pad(seg, (0, 1)) + F.pad(seg, (1, 0)))
 
 

@@ -211,7 +211,7 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
         obstacle = obstacle + hinge_sum(s["self_eps"] - (dist - r_arm), s["self_eps"], 0)
     state = torch.stack([s["w_obstacle"] * obstacle, s["w_human"] * human]).view(2, n, t)
     if s["integrate"]:
-        dt = waypoint_times(q, inv_vmax, s["min_dt"])[None].repeat(2, 1, 1)  # (2, N, T)
+        dt = waypoint_times(q, inv_vmax)[None].repeat(2, 1, 1)  # (2, N, T)
         dt[1, :, -1] += s["dwell"]  # the human term at the goal: the time the robot stays there
         state = state * dt
     smooth = s["w_smooth"] * acceleration_cost(q)
@@ -236,13 +236,11 @@ class FusedCost:
             :meth:`terms` runs eagerly next to a compiled kernel, always take the products.
         dwell: With ``integrate``, seconds added to the last waypoint's time in the human term
             (``PlannerConfig.goal_dwell_s``).
-        min_dt: With ``integrate``, the smallest time between waypoints (``PlannerConfig.min_dt``;
-            :func:`~services.planner.costs.waypoint_times`).
     """
 
     def __init__(self, robot: PR2, cost: StateCost, w_smooth: float, vmax: torch.Tensor, integrate: bool,
                  compile: bool = False, grid: Grid | None = None, pointwise: bool | None = None,
-                 dwell: float = 0.0, min_dt: float = 0.0) -> None:
+                 dwell: float = 0.0) -> None:
         if not supports(robot, cost):
             raise ValueError("FusedCost needs a PR2 StateCost with lift tables, 1 point per sphere, trilinear")
         self.robot, self.cost = robot, cost
@@ -297,7 +295,7 @@ class FusedCost:
                             a0=robot.arm_slice.start - arm.start, a1=robot.arm_slice.stop - arm.start,
                             self_eps=max(float(cfg.self_clearance), 1e-6), w_obstacle=float(cfg.w_obstacle),
                             w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate),
-                            dwell=float(dwell), min_dt=float(min_dt))
+                            dwell=float(dwell))
         if grid is None:
             zeros, first, inv_res = torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0
         else:  # the zero-padded shape and geometry of a real occupancy on `grid` (see VoxelTables.from_grid)

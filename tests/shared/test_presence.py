@@ -105,6 +105,18 @@ def test_a_peer_that_reconnects_after_this_session_is_not_taken_for_gone(cell: C
     executor.close()
 
 
+def test_a_peer_that_was_the_link_and_withdrew_its_token_has_gone(cell: Cell, wait_until, monkeypatch) -> None:
+    """Peer mode, the executor listening and the others connected to it (the README's one-service block): it withdraws
+    its token as it ends, and its link goes a moment later. That is a departure (the planner waited for its link)."""
+    monkeypatch.setattr(presence, "DEPARTURE_GRACE_S", 1.0)
+    executor = cell.executor()
+    assert wait_until(lambda: cell.watcher.is_alive("executor"), 10.0)
+    executor.close()                            # withdrawn, the link still up
+    time.sleep(0.7)
+    cell.link.clear()                           # ... then the link goes: the executor's process has ended
+    assert cell.stop.wait(3.0)
+
+
 def test_a_router_restart_does_not_stop_the_services_that_stop_with_the_executor(wait_until) -> None:
     """Client sessions through a real router, which goes and comes back on its endpoint."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"

@@ -171,11 +171,14 @@ def test_waypoint_times_are_the_executed_time_of_the_path() -> None:
     q = torch.tensor([[0.0, 0.0], [0.01, 0.0], [0.02, 0.0], [0.42, 0.0], [0.42, 0.3]], dtype=torch.float64)
     dt = path_dt(q, inv_vmax, min_dt=0.01)
     assert float(dt) == pytest.approx(0.6)                   # the slowest segment: 0.3 rad at 0.5 rad/s
-    w = waypoint_times(q, inv_vmax, min_dt=0.01)
+    w = waypoint_times(q, inv_vmax)
     assert torch.allclose(w, torch.tensor([0.3, 0.6, 0.6, 0.6, 0.3], dtype=torch.float64))
     assert float(w.sum()) == pytest.approx(4 * float(dt))     # (T - 1) dt: the whole executed duration
-    held = torch.zeros(7, 2, dtype=torch.float64)              # a held path still runs min_dt per segment
-    assert torch.allclose(waypoint_times(held, inv_vmax, 0.01).sum(), torch.tensor(0.06, dtype=torch.float64))
+    # without the plan's min_dt floor: a held path costs no time (its dwell is the planner's), a short one its own
+    held = torch.zeros(7, 2, dtype=torch.float64)
+    assert float(path_dt(held, inv_vmax, 0.01)) == 0.01 and float(waypoint_times(held, inv_vmax).sum()) == 0.0
+    short = q * 0.001
+    assert float(waypoint_times(short, inv_vmax).sum()) == pytest.approx(4 * 0.0006)
     batch = torch.stack([q, q * 0.5, q.flip(0)])[None]         # (1, 3, T, D): batched equals looped
-    looped = torch.stack([waypoint_times(b, inv_vmax, 0.01) for b in batch[0]])
-    assert torch.equal(waypoint_times(batch, inv_vmax, 0.01)[0], looped)
+    looped = torch.stack([waypoint_times(b, inv_vmax) for b in batch[0]])
+    assert torch.equal(waypoint_times(batch, inv_vmax)[0], looped)
