@@ -90,9 +90,9 @@ def present(measured: Measured, limits: ArmLimits, since_s: float = 0.0) -> np.n
     """``(D,)`` where the arm is now, in the robot's own joint values: its report moved on by ``qd`` over its age.
 
     ``since_s``: seconds since the report was read (its age then was ``age_s``). The bounded joints are kept within
-    their limits. A command timed from the report itself was short by the
-    distance the arm had moved since: 4-7 rad/s in the first 15-25 ms of each new plan on the simulated robot,
-    against limits of 2.3-3.6 (a review run, real time, reports 10-20 ms old).
+    their limits. A command timed from the report itself was short by the distance the arm had moved since (a
+    lagging test robot: 1.5 rad/s against a 1 rad/s limit; the simulated PR2 went 4-7 rad/s in the first 15-25 ms
+    of new plans, limits 2.3-3.6, of which this removes part: docs/ros2.md).
     """
     bounded = ~limits.continuous_mask
     now = measured.q + measured.qd * (measured.age_s + since_s)
