@@ -25,7 +25,7 @@ import zenoh
 
 from shared.protocol import Keys
 
-__all__ = ["Presence", "DEPARTURE_GRACE_S", "REJOIN_S", "CUT_WAIT_S", "connected"]
+__all__ = ["Presence", "DEPARTURE_GRACE_S", "REJOIN_S", "CUT_WAIT_S", "UNSEEN_WARN_S", "connected"]
 
 log = logging.getLogger("shared.transport")
 
@@ -42,6 +42,9 @@ compose does it, takes seconds)."""
 
 POLL_S = 0.1
 """How often a vanished peer's token and this session's link are looked at."""
+
+UNSEEN_WARN_S = 60.0
+"""A ``stop_with`` peer not seen this long after the start is said, once."""
 
 LINK_WINDOW_S = 0.5
 """A link found gone this soon after a peer's token is taken to have gone first (the router's loss: the deletions
@@ -89,6 +92,21 @@ class Presence:
         self._sub = session.liveliness().declare_subscriber(keys.alive_all, self._handle, history=True)
         if self._stop_with:
             log.info("%s: will stop when %s has come and gone", service, ", ".join(sorted(self._stop_with)))
+            threading.Thread(target=self._say_if_unseen, name="presence-unseen", daemon=True).start()
+
+    def _say_if_unseen(self) -> None:
+        """Say once when no ``stop_with`` peer has come within :data:`UNSEEN_WARN_S`: it does not end by itself.
+
+        A service started after the executor had ended (the tracker is in no default wait list) waited for it in
+        silence, for ever (a review script: killed by its 45 s timeout, one log line).
+        """
+        if self._closed.wait(UNSEEN_WARN_S) or self._stop is None or self._stop.is_set():
+            return
+        with self._lock:
+            seen = bool(self._seen)
+        if not seen:
+            log.warning("%s: %s not seen in %.0f s: this service ends when one of them has come and gone, or when "
+                        "stopped", self.service, ", ".join(sorted(self._stop_with)), UNSEEN_WARN_S)
 
     def _handle(self, sample: zenoh.Sample) -> None:
         peer = str(sample.key_expr).rsplit("/", 1)[-1]

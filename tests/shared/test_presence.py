@@ -117,6 +117,20 @@ def test_a_peer_that_was_the_link_and_withdrew_its_token_has_gone(cell: Cell, wa
     assert cell.stop.wait(3.0)
 
 
+def test_a_stop_with_peer_never_seen_is_said(zenoh_hub, monkeypatch, caplog) -> None:
+    """A tracker started after the executor had ended waited for it for ever, in silence."""
+    monkeypatch.setattr(presence, "UNSEEN_WARN_S", 0.2)
+    with caplog.at_level("WARNING", logger="shared.transport"), open_session(zenoh_hub()) as session:
+        watcher = Presence(session, Keys("p6"), "tracker", stop_with=["executor"], stop=threading.Event())
+        try:
+            time.sleep(0.6)
+        finally:
+            watcher.close()
+    said = [r.getMessage() for r in caplog.records if "not seen in" in r.getMessage()]
+    assert said == ["tracker: executor not seen in 0 s: this service ends when one of them has come and gone, or when "
+                    "stopped"]
+
+
 def test_a_router_restart_does_not_stop_the_services_that_stop_with_the_executor(wait_until) -> None:
     """Client sessions through a real router, which goes and comes back on its endpoint."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
