@@ -252,10 +252,10 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
         cfg, zcfg = resolve_config(section, config_cls, args)
         if zcfg.security_dir:  # a refused certificate ends the service before its models load (3-4 s: the planner)
             from shared.security import ROLES
-            from shared.security.tls import security_settings
+            from shared.security.certificates import verify_role
 
             if section in ROLES:  # the others (ros2, simrobot) refuse security themselves, naming why
-                security_settings(zcfg)
+                verify_role(zcfg.security_dir, zcfg.role)  # what opening the session checks first
         setup_logging(cfg.log_level)
         restore = stop_on_signals(stop, prog=prog)
         watch_parent(stop)

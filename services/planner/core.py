@@ -149,8 +149,8 @@ class Planner:
             q: ``(..., T, D)`` trajectories.
 
         Returns:
-            ``(..., T)`` seconds: the path's one ``dt`` (its slowest segment at the scaled velocity limits: what
-            the plan carries, at least ``min_dt``, and the executor runs), half of it at both ends. With
+            ``(..., T)`` seconds: the path's one ``dt`` (its slowest segment at the scaled velocity limits, what
+            the plan carries and the executor runs; without the plan's ``min_dt`` floor), half of it at both ends. With
             ``integrate_costs`` the state costs are weighted by it, so they integrate over the time the robot
             spends along the path (a detour or a loop costs more), instead of counting waypoints
             (:meth:`waypoint_cost` adds the goal's dwell).

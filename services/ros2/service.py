@@ -93,8 +93,7 @@ class Ros2Service:
         self._first_pose: tuple[int, np.ndarray] | None = None  # (demo id, its first pose): the human's placement
         self._last_viz: dict[str, float] = {}
         self._pending: dict[str, Callable[[], bytes]] = {}  # role -> the newest marker held back by the rate limit
-        self.robot_publishes: str | None = None  # another node publishing the joint states topic: the robot's
-        self._drivers: set[str] = set()  # their graph tokens
+        self._drivers: dict[str, str] = {}  # graph token -> node, of other nodes publishing the joint states topic
         self._zid = ""
 
     def _put(self, role: str, payload: bytes) -> None:
@@ -134,6 +133,12 @@ class Ros2Service:
         self._put("trajectory", self.mapping.trajectory(plan))
         self._put("goal", self.mapping.goal(plan))
 
+    @property
+    def robot_publishes(self) -> str | None:
+        """A node other than the gateway publishing the joint states topic (a robot's driver), or None."""
+        with self._lock:
+            return next(iter(self._drivers.values()), None)
+
     def on_state(self, state: RobotState) -> None:
         """The simulated robot's joints (not when another node publishes the joint states: :meth:`on_graph`)."""
         if self.config.joint_states and self.robot_publishes is None:
@@ -153,10 +158,12 @@ class Ros2Service:
             return
         node = f"{ep.namespace.rstrip('/')}/{ep.node}"
         with self._lock:
-            before = set(self._drivers)
-            (self._drivers.add if alive else self._drivers.discard)(key)
-            self.robot_publishes = node if alive else (self.robot_publishes if self._drivers else None)
-            started, ended = not before and self._drivers, before and not self._drivers
+            before = bool(self._drivers)
+            if alive:
+                self._drivers[key] = node
+            else:
+                self._drivers.pop(key, None)
+            started, ended = not before and bool(self._drivers), before and not self._drivers
         if started:
             log.warning("ros2: node %s publishes %s (a robot's driver): the executor's RobotState is not echoed there "
                         "(run the gateway with --no-joint-states beside a ROS 2 robot)", node, topic)
@@ -189,6 +196,7 @@ class Ros2Service:
         with open_session(self.zenoh, stop, "ros2") as session:
             node = Ros2Node(session, cfg.domain_id, cfg.node_namespace, cfg.node, self.mapping.hashes, self.rejects)
             zid = self._zid = node.zid
+
             def on_token(sample: zenoh.Sample) -> None:
                 self.on_graph(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
 
