@@ -240,6 +240,9 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
         make: ``(config, zenoh_config, stop) -> run``: builds the service (bad input raises a
             one-line error) and returns a callable that serves until ``stop`` is set.
 
+    ``make`` may not open anything that must be closed (a session, a log): a SIGINT/SIGTERM while it builds ends
+    the process at once (:func:`interruptible`), status 0; while the service runs, the signal sets ``stop``.
+
     Returns:
         The exit status: 0 when the service stopped, 2 on bad input.
     """
@@ -260,7 +263,16 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
         restore = stop_on_signals(stop, prog=prog)
         watch_parent(stop)
         try:
-            run = make(cfg, zcfg, stop)
+            try:
+                # building checks no stop event (the planner compiles its kernels for up to a minute) and opens
+                # nothing to close: a signal now ends it at once, not after the grace with a dump of every stack
+                with interruptible(stop):
+                    run = None if stop.is_set() else make(cfg, zcfg, stop)
+            except KeyboardInterrupt:
+                run = None
+            if run is None:
+                logging.getLogger("foresight").info("%s: stopped while starting", prog)
+                return 0
             logging.getLogger("foresight").debug("%d start-up objects frozen out of the garbage collector",
                                                  freeze_startup_heap())
             run()

@@ -301,3 +301,31 @@ def test_the_secure_router_command_parses() -> None:
     with pytest.raises(SystemExit) as exc:
         router_main([*cmd[2:], "--help"])
     assert exc.value.code == 0
+
+
+def _strip_ms(table: str, tmp_path: Path) -> str:
+    """The check's ``strip_ms`` (tools/compose_check.sh) applied to ``table``."""
+    path = tmp_path / "table.txt"
+    path.write_text(table)
+    line = next(x for x in (REPO / "tools/compose_check.sh").read_text().splitlines() if x.startswith("strip_ms()"))
+    return subprocess.run(["bash", "-c", f'{line}\nstrip_ms "$1"', "strip", str(path)], capture_output=True, text=True,
+                          check=True, timeout=30).stdout
+
+
+def test_the_checks_table_comparison_drops_the_plan_times_and_keeps_the_beliefs(tmp_path) -> None:
+    """It dropped each row's last field, which became the belief (p=0.13) when that column was filled: the plan
+    times stayed in and the check failed on every machine."""
+    from services.scenario import table_header, table_row
+
+    goals = ["red_cup", "blue_cup"]
+
+    def table(ms: float, belief: str) -> str:
+        rows = [table_row({"step": s, "t_s": 0.5 * s, "chosen": "red_cup", "planning_ms": ms * (s + 1),
+                           "cost_total": {"red_cup": 1.5 / (s + 1), "blue_cup": 2.0}}, goals, belief if s else "")
+                for s in range(3)]
+        return "\n".join([table_header(goals), *rows, "switch step: none"]) + "\n"
+
+    first = _strip_ms(table(7125.0, "far_left p=0.13"), tmp_path)
+    assert first == _strip_ms(table(74.0, "far_left p=0.13"), tmp_path)  # only the plan times differ
+    assert first != _strip_ms(table(74.0, "far_left p=0.99"), tmp_path)  # a belief differs
+    assert "7125" not in first and "p=0.13" in first and "1.500" in first and "switch step: none" in first

@@ -4,14 +4,19 @@ from __future__ import annotations
 
 import gc
 import io
+import signal
+import subprocess
 import sys
 import types
 import weakref
+from pathlib import Path
 
 import pytest
 
 from shared.runtime import cli_errors, freeze_startup_heap, setup_logging
 from tools import foresight
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 class _Node:
@@ -137,3 +142,39 @@ def test_a_command_that_is_no_role_refuses_security_itself(tmp_path, capsys) -> 
         main(["--zenoh-mode", "client", "--connect", "tls/127.0.0.1:9", "--listen", "", "--security", str(cell)])
     assert exit_.value.code == 2
     assert "ROS 2 keys have no role in the access control" in capsys.readouterr().err
+
+
+BUILDING = """
+import dataclasses, sys, time
+from shared.runtime import service_main
+
+@dataclasses.dataclass
+class Config:
+    log_level: str = "INFO"
+
+def make(cfg, zcfg, stop):
+    print("building", flush=True)
+    time.sleep(600)  # a build that checks no stop event (the planner compiling its kernels)
+    return lambda: print("served", flush=True)
+
+sys.exit(service_main(["--listen", "tcp/127.0.0.1:0"], "foresight planner", section="planner", config_cls=Config,
+                      description="", make=make))
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_while_the_service_is_built_ends_it_at_once_with_status_0(sig) -> None:
+    """A planner stopped while it compiled its kernels (docker compose down, Ctrl-C at start-up) ran on for the grace,
+    then exited with status 3 and ~80 lines of every thread's stack."""
+    proc = subprocess.Popen([sys.executable, "-c", BUILDING], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "building"
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+        proc.wait(timeout=10)
+    assert proc.returncode == 0, err
+    assert "foresight planner: stopped while starting" in err and "Traceback" not in err and "stacks" not in err
+    assert "served" not in out
