@@ -18,6 +18,8 @@ No Zenoh here. Per keypoint frame (``HumanKeypoints``: names, positions (K, 3) i
    starts afresh. The period is the median of the recent intervals, leaving out those under half of it or
    under :data:`MIN_PERIOD_S` (frames that came in a burst, e.g. after a network stall), so a burst never
    makes the bridge invent frames between the next regular ones;
+5b. a sensor whose rate is more than 10 % off the motion library's (``pose_rate_hz``, 30) has its frames resampled
+   to that rate (:mod:`.resample`): the predictor reads a pose's index as its time;
 6. the reach rule (:mod:`.reach`) says when a reach starts and ends: ``DemoMarker`` start and end, the poses
    in between as ``HumanPose`` (index 0, 1, ... from the start; ``demo_id`` one per reach). Between reaches
    nothing is published: the predictor recognises reaches, as it does the recorder's demonstrations.
@@ -42,6 +44,7 @@ from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Message
 
 from .filters import OneEuroFilter
 from .reach import ReachDetector, ReachRule
+from .resample import PoseClock
 
 __all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S", "JUMP_CONFIRM",
            "LIBRARY_RATE_HZ"]
@@ -56,9 +59,9 @@ MIN_PERIOD_S = 1.0 / 500
 """The shortest frame interval taken for the sensor's period (500 Hz): shorter ones are frames of a burst."""
 
 LIBRARY_RATE_HZ = 30.0
-"""The rate of the motion libraries (the paper's recordings and the replayer's default): a pose is published per
-frame and the predictor's time feature is its index, so a sensor far from this rate reads every motion as faster or
-slower (docs/keypoints.md)."""
+"""The rate of the motion libraries (the paper's recordings and the replayer's default): the predictor's time feature
+is a pose's index, so the poses of a sensor far from this rate are resampled to it (:mod:`.resample`,
+docs/keypoints.md)."""
 
 JUMP_CONFIRM = 3
 """Frames in a row of the body a jump was refused to (each following the one before) that make it a new track:
@@ -87,11 +90,13 @@ class TrackerConfig:
     rest_s: float = opt(1.0, help="the hand's rest position is learnt over this long after a (re)start; no reach "
                         "starts before (s)")
     max_reach_s: float = opt(10.0, help="a reach ends after this long in any case (s)")
+    pose_rate_hz: float = opt(LIBRARY_RATE_HZ, help="the motion library's pose rate: a sensor more than 10 % off it "
+                              "has its poses resampled to it (a pose's index is its time for the predictor)")
 
     def validate(self) -> None:
         """Check ranges; raises ConfigError naming the option."""
         for name in ("max_residual_m", "max_speed_mps", "max_gap_s", "min_cutoff_hz", "start_m",
-                     "end_m", "end_s", "rest_s", "max_reach_s"):
+                     "end_m", "end_s", "rest_s", "max_reach_s", "pose_rate_hz"):
             v = getattr(self, name)
             if not (v > 0 and math.isfinite(v)):
                 raise ConfigError(f"tracker.{name}: must be a finite number > 0, got {v}")
@@ -112,7 +117,7 @@ class TrackerOutput:
 
     messages: list[Message] = field(default_factory=list)
     refused: str | None = None
-    note: str | None = None  # once per track: something the user should know (a sensor rate not the library's)
+    note: str | None = None  # once per track: something the user should know (the sensor's frames resampled)
 
 
 class TrackerCore:
@@ -149,7 +154,8 @@ class TrackerCore:
         self._leap: float | None = None                         # a refused frame's stamp a long gap after the last
         self._ended_at = -math.inf                              # the last reach's end stamp
         self._jump: tuple[float, np.ndarray, int] | None = None  # refused as a jump: (stamp, joints, frames in a row)
-        self._rate_said = False                                  # the sensor's rate checked for this track
+        self._rate_said = False                                  # the sensor's rate named for this track
+        self.clock = PoseClock(self.config.pose_rate_hz)         # a pose per frame, or resampled to the library's
         self._yaw = HERAKLES_NAMES.index("pelvis_yaw")
         self._dts: deque[float] = deque(maxlen=15)              # recent frame intervals: the sensor's period
         self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
@@ -231,15 +237,17 @@ class TrackerCore:
         self._raw, self._joints, self._frame_no, self._jump = (stamp, f), joints, frame, None
         self.accepted += 1
         smooth = self.filter(f, stamp)
-        out.messages += self._bridge(stamp, smooth, dropped) + self._frame(stamp, smooth)
-        if len(self._dts) == self._dts.maxlen and not self._rate_said:  # the period known: said once per track
+        sensor_hz = 1.0 / float(np.median(self._dts)) if len(self._dts) == self._dts.maxlen else None
+        if self.clock.follow(sensor_hz) and not self._rate_said:  # said once per track
             self._rate_said = True
-            rate = 1.0 / float(np.median(self._dts))
-            if abs(rate / LIBRARY_RATE_HZ - 1.0) > 0.25:
-                out.note = (f"the sensor sends {rate:.0f} frames a second, the motion library's poses came at "
-                            f"{LIBRARY_RATE_HZ:g}: a pose's index is its time for the predictor, so its motions look "
-                            f"{rate / LIBRARY_RATE_HZ:.1f}x slower; send {LIBRARY_RATE_HZ:g} frames a second "
-                            "(docs/keypoints.md)")
+            out.note = (f"the sensor sends {sensor_hz:.0f} frames a second, the motion library's poses came at "
+                        f"{self.clock.rate_hz:g}: its poses are resampled to {self.clock.rate_hz:g} a second (a "
+                        "pose's index is its time for the predictor; docs/keypoints.md)")
+        if self.clock.resampling:
+            for t, g in self.clock.poses(self._out, stamp, smooth):
+                out.messages += self._frame(t, g)
+        else:
+            out.messages += self._bridge(stamp, smooth, dropped) + self._frame(stamp, smooth)
         self._out = (stamp, smooth)
         return out
 
@@ -282,6 +290,7 @@ class TrackerCore:
         self._raw = self._out = self._joints = self._frame_no = self._leap = self._jump = None
         self._ended_at = -math.inf  # a sensor restarted, or a clock stepped back: its frames may precede the last end
         self._rate_said = False
+        self.clock.reset()
         return msgs
 
     def _bridge(self, stamp: float, f: np.ndarray, dropped: int | None = None) -> list[Message]:

@@ -124,7 +124,7 @@ class TrackerService:
                 return
             self._accepted_at = time.monotonic()
             if out.note:
-                log.warning("tracker: %s", out.note)
+                log.info("tracker: %s", out.note)
             self._publish(out.messages)
 
     def check_silence(self) -> bool:
