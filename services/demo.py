@@ -128,7 +128,8 @@ class DemoConfig:
     restart: bool = opt(False, help="start a service that dies during the run again (at most 3 times); without "
                         "it the run carries on without the service (the executor holds the robot)")
     json: bool = opt(False, help="print one JSON object with the summary (progress goes to stderr)")
-    log_level: str = opt("WARNING", choices=LOG_LEVELS, help="log level of the demo")
+    log_level: str = opt("WARNING", choices=LOG_LEVELS, help="log level of the demo (DEBUG: the services' logs too, "
+                         "e.g. the planner's line per plan; FORESIGHT_<SERVICE>_LOG_LEVEL sets one service's)")
 
     def validate(self) -> None:
         """Check value ranges."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import shutil
 import threading
 import time
@@ -25,6 +26,7 @@ from services.scenario import (
     Summary,
     belief,
     choose_demonstration,
+    keep_posterior,
     model_for,
     posterior_for,
     step_entry,
@@ -87,9 +89,20 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
                  mcap: Path) -> dict[str, list[str]]:
     """Command-line arguments of each service for this demo."""
     common = ["--connect", endpoint, "--listen", "tcp/127.0.0.1:0", "--prefix", cfg.prefix, "--zenoh-mode", "peer",
-              "--log-level", "INFO", *(["--security", str(cfg.security)] if cfg.security else [])]
+              *(["--security", str(cfg.security)] if cfg.security else [])]
     own = service_options(cfg, model, replay_library, samples_per_tick, mcap)
-    return {name: [*flags, *common] for name, flags in own.items()}
+    return {name: [*flags, *common, *_log_level(name, cfg.log_level)] for name, flags in own.items()}
+
+
+def _log_level(service: str, demo_level: str) -> list[str]:
+    """A service's ``--log-level``: INFO into its log, DEBUG with the demo's; none where the user set its variable.
+
+    ``FORESIGHT_PLANNER_LOG_LEVEL=DEBUG foresight demo`` gave the planner's per-plan lines nowhere: a flag beats the
+    variable, and the demo passed INFO to every service.
+    """
+    if os.environ.get(f"FORESIGHT_{service.upper()}_LOG_LEVEL"):
+        return []
+    return ["--log-level", "DEBUG" if demo_level.upper() == "DEBUG" else "INFO"]
 
 
 def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_per_tick: int,
@@ -232,7 +245,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     out(f"foresight demo: router on {shown}{' (mutual TLS, access control)' if cfg.security else ''}; "
         f"{_run_length(cfg)}; logs in {run_dir}/")
     recorder = RunRecorder()
-    posteriors: dict[int, ClassPosterior] = {}  # the last of each tick (real time: of tick -1, the newest)
+    posteriors: dict[int, ClassPosterior] = {}  # the last of each tick (real time: every one, scenario.keep_posterior)
     realtime = cfg.mode == "realtime"
     lock = threading.Lock()
     # the run's clock: 0 in lock-step (simulated time); the executor's first state in real time
@@ -263,7 +276,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     def on_other(msg: Message) -> None:
         if isinstance(msg, ClassPosterior):
             with lock:
-                posteriors[msg.tick] = msg
+                keep_posterior(posteriors, msg)
         recorder.on_message(msg)
 
     status = 0

@@ -28,7 +28,8 @@ from shared.runtime import UserError
 from shared.scene import Scene
 
 __all__ = ["Scenario", "choose_demonstration", "model_for", "RunRecorder", "Summary", "summarise",
-           "DEFAULT_HUMAN_CLASS", "step_entry", "table_header", "table_row", "belief", "posterior_for"]
+           "DEFAULT_HUMAN_CLASS", "step_entry", "table_header", "table_row", "belief", "posterior_for",
+           "keep_posterior"]
 
 log = logging.getLogger("foresight.scenario")
 
@@ -168,7 +169,7 @@ class RunRecorder:
                                                                             self.final_occupancy.index):
                     self.final_occupancy = msg
             elif isinstance(msg, ClassPosterior):
-                self.posteriors[msg.tick] = msg
+                keep_posterior(self.posteriors, msg)
             elif isinstance(msg, HumanPose):
                 self.poses.append(msg)
 
@@ -286,6 +287,16 @@ def belief(posterior: ClassPosterior | None) -> str:
         return ""
     k = int(np.argmax(posterior.posterior))
     return f"{posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
+
+
+def keep_posterior(posteriors: dict[int, ClassPosterior], msg: ClassPosterior) -> None:
+    """Keep a received posterior for :func:`posterior_for`: lock-step, the last of its tick; real time, every one.
+
+    Real time stamps every message tick -1: keyed by their tick, each posterior replaced the one before, and the
+    belief of every plan but the last (made before the newest posterior) came out empty in the demo's live table
+    and summary. They are keyed by arrival there (no tick >= 0 in a real-time run), as ``foresight log table`` does.
+    """
+    posteriors[msg.tick if msg.tick >= 0 else len(posteriors)] = msg
 
 
 def posterior_for(plan: Plan, posteriors: dict[int, ClassPosterior]) -> ClassPosterior | None:

@@ -21,7 +21,7 @@ from shared.native_threads import limit_blas_threads
 
 __all__ = ["setup_logging", "fail", "stop_on_signals", "interruptible", "cli_errors", "UserError", "service_main",
            "help_text", "freeze_startup_heap", "watch_parent", "lower_priority", "SHUTDOWN_GRACE_S", "SIGNAL_ECHO_S",
-           "FORCED_EXIT", "PARENT_ENV"]
+           "FORCED_EXIT", "PARENT_ENV", "OWN_LOGGERS"]
 
 SHUTDOWN_GRACE_S = 10.0
 """Seconds a process may take to stop after SIGINT/SIGTERM before it exits anyway (:func:`stop_on_signals`)."""
@@ -30,6 +30,8 @@ SIGNAL_ECHO_S = 0.1
 the SIGINT the terminal sent the whole process group), not a second one: :func:`stop_on_signals` ignores it."""
 FORCED_EXIT = 3
 """Exit status of a process that did not stop within :data:`SHUTDOWN_GRACE_S` (or got a second signal)."""
+OWN_LOGGERS = ("foresight", "shared", "services", "tools")
+"""The loggers of Foresight's code (its ``foresight.*`` names and its modules'), which ``--log-level`` sets."""
 PARENT_ENV = "FORESIGHT_PARENT_PID"
 """Environment variable with the pid of the process that started this one (``foresight demo``, tests)."""
 
@@ -58,8 +60,13 @@ def setup_logging(level: str = "INFO") -> None:
         raise ValueError(f"log level {level!r}: not one of DEBUG, INFO, WARNING, ERROR")
     root = logging.getLogger()
     if not root.handlers:
-        logging.basicConfig(level=getattr(logging, level.upper()),
+        asked = getattr(logging, level.upper())
+        # DEBUG is Foresight's own: other libraries' (matplotlib's font search, filelock's every lock, ...) stay at
+        # INFO, or a planner's per-plan lines came buried in hundreds of theirs
+        logging.basicConfig(level=max(asked, logging.INFO),
                             format="%(asctime)s %(name)s %(levelname)s %(message)s", stream=sys.stderr)
+        for name in OWN_LOGGERS:
+            logging.getLogger(name).setLevel(asked)
 
 
 def fail(prog: str, message: str, code: int = 2) -> int:

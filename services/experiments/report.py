@@ -142,6 +142,15 @@ def _indexed(task: tuple[Callable[..., Any], int, tuple[Any, ...]]) -> tuple[int
     return i, fn(*job)
 
 
+def _left_out(args: argparse.Namespace, libs: list[str]) -> list[str]:
+    """A line saying why the paper's library is not in the report, where the user did not choose the libraries."""
+    if args.library or args.libraries or str(PAPER_LIBRARY) in libs:
+        return []
+    why = ("a --quick run leaves it out (`--library PATH` adds it)" if PAPER_LIBRARY.is_dir() else
+           f"it is not at {PAPER_LIBRARY} (the README's 'The paper's motion library' says where to get it)")
+    return [f"The paper's library is not in this report: {why}.", ""]
+
+
 def run_report(args: argparse.Namespace) -> int:
     """Run every experiment and write ``report.md`` and its PNGs to ``args.out``; returns 0.
 
@@ -202,7 +211,8 @@ def run_report(args: argparse.Namespace) -> int:
           f"{timing.steps} steps of {timing.period_s} s, "
           f"{iterations}, {plan.components} Gaussians per class; the product protocol's occupancy "
           f"volume `{args.volume}` (`foresight train --volume`; the paper protocol's is `paper`). Why the numbers "
-          "differ from the paper's: docs/experiments.md.", "", *(verdicts := summary(libs, sections, protocols)),
+          "differ from the paper's: docs/experiments.md.", "", *_left_out(args, libs),
+          *(verdicts := summary(libs, sections, protocols)),
           "## Across the robot's pace", "", "```", *pace.lines(), "```", "", f"![pace]({pace_png.name})", ""]
     data: dict[str, Any] = {"plan": plan.__dict__, "volume": args.volume, "protocols": protocols, "libraries": {},
                             "pace": pace.to_json()}

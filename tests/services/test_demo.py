@@ -297,3 +297,23 @@ def test_a_real_time_run_that_ends_before_the_goal_says_why_and_what_to_do() -> 
         if quiet is cfg:
             summary = dataclasses.replace(summary, reached=True)
         assert not [ln for ln in _closing_lines(quiet, summary) if ln.startswith("note: a real-time run")]
+
+
+def test_the_services_log_at_debug_with_the_demos_debug_or_their_own_variable(monkeypatch) -> None:
+    """The demo passed --log-level INFO to every service: neither `--log-level DEBUG` nor
+    FORESIGHT_PLANNER_LOG_LEVEL=DEBUG reached the planner's per-plan lines (a flag beats the variable)."""
+    from pathlib import Path
+
+    from services.demo import DemoConfig
+    from services.demo_run import service_args
+
+    def levels(**kw: str) -> dict[str, str | None]:
+        args = service_args(DemoConfig(**kw), "tcp/127.0.0.1:7447", Path("m.npz"), Path("h.npz"), 5, Path("r.mcap"))
+        return {name: a[a.index("--log-level") + 1] if "--log-level" in a else None for name, a in args.items()}
+
+    monkeypatch.delenv("FORESIGHT_PLANNER_LOG_LEVEL", raising=False)
+    assert set(levels().values()) == {"INFO"}
+    assert set(levels(log_level="DEBUG").values()) == {"DEBUG"}
+    monkeypatch.setenv("FORESIGHT_PLANNER_LOG_LEVEL", "DEBUG")
+    got = levels()
+    assert got.pop("planner") is None and set(got.values()) == {"INFO"}  # the variable decides the planner's

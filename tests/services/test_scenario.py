@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from services.scenario import Summary, choose_demonstration, summarise, table_header
+from services.scenario import RunRecorder, Summary, choose_demonstration, summarise, table_header
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.synthetic import generate_library
@@ -103,6 +103,23 @@ def test_each_row_shows_the_belief_its_plan_was_made_with():
     realtime = summarise([_plan(-1, 0, [1.0, 2.0], stamp=t) for t in (0.05, 0.2, 0.5)], [], None,
                          {0: _posterior(-1, 0.1, [0.7, 0.3]), 1: _posterior(-1, 0.3, [0.2, 0.8])}, None, "x", None)
     assert [e["belief"] for e in realtime.steps] == ["", "far_left p=0.70", "blue_cup p=0.80"]  # the newest before
+
+
+def test_the_recorder_keeps_every_real_time_posterior_for_the_beliefs():
+    """Real time stamps every posterior tick -1: the recorder (and the demo's live table) kept only the newest, so every
+    plan but the last showed an empty belief while the person moved (a review's realtime demo: rows 1-18 empty)."""
+    rec = RunRecorder()
+    for msg in (_plan(-1, 0, [1.0, 2.0], stamp=0.05), _posterior(-1, 0.1, [0.7, 0.3]),
+                _plan(-1, 0, [1.0, 2.0], stamp=0.2), _posterior(-1, 0.3, [0.2, 0.8]), _posterior(-1, 0.4, [0.1, 0.9]),
+                _plan(-1, 0, [1.0, 2.0], stamp=0.35)):
+        rec.on_message(msg)
+    plans, states, grid, posts = rec.snapshot()
+    s = summarise(plans, states, grid, posts, None, "x", None)
+    assert [e["belief"] for e in s.steps] == ["", "far_left p=0.70", "blue_cup p=0.80"]
+    lock = RunRecorder()  # lock-step: the last of each tick
+    for tick, p in ((0, 0.6), (0, 0.7), (1, 0.8)):
+        lock.on_message(_posterior(tick, 0.1 * tick, [p, 1 - p]))
+    assert {t: float(m.posterior[0]) for t, m in lock.snapshot()[3].items()} == {0: 0.7, 1: 0.8}
 
 
 def test_a_restarted_planner_does_not_renumber_the_lockstep_steps():

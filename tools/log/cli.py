@@ -47,11 +47,15 @@ SUBCOMMANDS: dict[str, str] = {
 
 
 def _main_info(args: argparse.Namespace) -> int:
-    lf = read_log(args.file)
+    """One log's summary; a directory's: every log under it (``--json``: a list), as after ``demo --compare``."""
+    path = Path(args.file)
+    logs = sorted(path.rglob("*.mcap")) if path.is_dir() else []
+    files = logs or [path]  # a directory with none: read_log names the problem
+    infos = [read_log(f) for f in files]
     if args.json:
-        print(strict_json.dumps(info_dict(lf), indent=2))
+        print(strict_json.dumps([info_dict(lf) for lf in infos] if logs else info_dict(infos[0]), indent=2))
     else:
-        print(format_info(lf))
+        print("\n\n".join(format_info(lf) for lf in infos))
     return 0
 
 
@@ -148,7 +152,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
                                      "scene (Foxglove's channels) at a moment of the run.")
     sub = parser.add_subparsers(dest="cmd", required=True, metavar="{" + ",".join(SUBCOMMANDS) + "}")
     pi = sub.add_parser("info", help=SUBCOMMANDS["info"])
-    pi.add_argument("file", help="MCAP file")
+    pi.add_argument("file", help="MCAP file, or a directory: every log under it (a demo --compare run's)")
     pi.add_argument("--json", action="store_true", help="print one JSON object")
     pr = sub.add_parser("render", help=SUBCOMMANDS["render"])
     pr.add_argument("file", help="MCAP file")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from services.scenario import Summary, summarise
+from services.scenario import Summary, keep_posterior, summarise
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.recording.reader import LogFile
 
@@ -32,8 +32,8 @@ def run_summary(lf: LogFile) -> Summary:
     states = [s for _, s in decode_all(lf, "foresight.RobotState", RobotState)]
     grids = [g for _, g in decode_all(lf, "foresight.OccupancyGrid", OccupancyGrid)]
     posteriors: dict[int, Any] = {}
-    for i, (_, post) in enumerate(decode_all(lf, "foresight.ClassPosterior", ClassPosterior)):
-        posteriors[post.tick if post.tick >= 0 else i] = post
+    for _, post in decode_all(lf, "foresight.ClassPosterior", ClassPosterior):
+        keep_posterior(posteriors, post)
     robot = PR2.from_scene(scene_of(lf), device="cpu", dtype=torch.float32)
     return summarise(plans, states, grids[-1] if grids else None, posteriors, robot, "", lf.path)
 

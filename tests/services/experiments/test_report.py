@@ -39,9 +39,24 @@ def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path, capsys):
     assert set(lib) >= {"recognition", "interference", "switch", "prediction_ms"}
     assert len(lib["interference"]["basic"]) == 1
     assert "paper:" in text  # every section compares with the paper's numbers
+    assert "The paper's library is not in this report: " in text  # a --quick run said nothing of leaving it out
     # each part's run time, in the data and in the timing block
     assert set(lib["part_seconds"]) == set(part_names(tuple(data["protocols"])))
     assert all(v > 0 for v in lib["part_seconds"].values()) and "Each part's run time" in text
+
+
+def test_the_report_says_why_the_papers_library_is_left_out(monkeypatch, tmp_path):
+    import argparse
+
+    from services.experiments import report
+
+    args = argparse.Namespace(library="", libraries="")
+    monkeypatch.setattr(report, "PAPER_LIBRARY", tmp_path)  # here
+    assert "a --quick run leaves it out" in report._left_out(args, ["synthetic"])[0]
+    assert report._left_out(args, ["synthetic", str(tmp_path)]) == []  # in the report
+    assert report._left_out(argparse.Namespace(library="", libraries="synthetic"), ["synthetic"]) == []  # chosen
+    monkeypatch.setattr(report, "PAPER_LIBRARY", tmp_path / "none")
+    assert "it is not at" in report._left_out(args, ["synthetic"])[0]
 
 
 def _refuse(word: str) -> None:

@@ -52,6 +52,25 @@ def test_render_writes_pngs(run_log, tmp_path, capsys) -> None:
     assert sorted(p.name for p in (tmp_path / "all").iterdir()) == ["step_000.png", "step_001.png"]
 
 
+def test_info_of_a_directory_describes_every_log_under_it(run_log, tmp_path, capsys) -> None:
+    """After `demo --compare` the README's `log info runs/demo/latest/*.mcap` found nothing (each planner's run has its
+    own directory) and `log info runs/demo/latest` only listed the logs."""
+    import shutil
+
+    for name in ("prediction", "current-occupancy"):
+        (tmp_path / name).mkdir()
+        shutil.copy(run_log, tmp_path / name / f"{name}.mcap")
+    assert main(["info", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert out.count("complete") == 2 and "prediction.mcap" in out and "current-occupancy.mcap" in out
+    assert main(["info", str(tmp_path), "--json"]) == 0
+    assert [d["complete"] for d in json.loads(capsys.readouterr().out)] == [True, True]
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(SystemExit):
+        main(["info", str(tmp_path / "empty")])
+    assert "no .mcap file under it" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("argv, message", [
     (["info", "/nonexistent.mcap"], "not found"),
     (["render", "{log}", "--step", "7", "--out", "x.png"], "no plan for step 7"),
