@@ -293,7 +293,28 @@ def load_csv_dir(directory: Path) -> MotionLibrary:
         d, i = _parse_class(f, ls, label, f.stem, n_cols)
         demos.extend(d)
         issues.extend(i)
-    return MotionLibrary(names, demos, issues, str(directory), _feature_names_for(n_cols))
+    return MotionLibrary(names, demos, issues + _unread(directory, files), str(directory), _feature_names_for(n_cols))
+
+
+def _unread(directory: Path, files: list[Path]) -> list[LibraryIssue]:
+    """What a directory of ``compound_<m>.csv`` does not read, said: its other .csv files, and numbers missing.
+
+    Both passed without a word: ``reach_a.csv`` beside ``compound_1.csv`` was not read, and without
+    ``compound_1.csv`` the classes are numbered in their files' order, so class 1 is ``compound_2``.
+    """
+    numbered = {int(m.group(1)): f for f in files if (m := re.fullmatch(r"compound_(\d+)", f.stem))}
+    if not numbered:
+        return []
+    out = [LibraryIssue(f.stem, -1, f"{f.name} not read: beside compound_<m>.csv files only those are the "
+                                    "library's classes")
+           for f in sorted(set(directory.glob("*.csv")) - set(files))]
+    missing = sorted(set(range(max(numbered) + 1)) - set(numbered))
+    if missing:
+        shown = ", ".join(f"compound_{m}.csv" for m in missing[:4]) + (" ..." if len(missing) > 4 else "")
+        first_after = next(i for i, m in enumerate(sorted(numbered)) if m > missing[0])
+        out.append(LibraryIssue(f"compound_{missing[0]}", -1, f"{shown} missing: the classes are numbered in their "
+                                f"files' order (class {first_after} is compound_{sorted(numbered)[first_after]})"))
+    return out
 
 
 def write_csv_dir(lib: MotionLibrary, directory: str | Path) -> list[Path]:

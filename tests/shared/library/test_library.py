@@ -400,3 +400,19 @@ def test_a_csv_copy_keeps_every_float64(tmp_path):
     back = load_library(tmp_path)
     for a, b in zip(lib.demos, back.demos, strict=True):
         np.testing.assert_array_equal(a.features, b.features)
+
+
+def test_files_a_class_directory_does_not_read_and_missing_numbers_are_said(tmp_path):
+    """A .csv beside compound_<m>.csv files was left out, and a missing compound_1.csv renumbered the classes (class 1
+    became compound_2), both without a word (a review's first hour)."""
+    from shared.library.report import drop_lines
+
+    make_lib(tmp_path, n_classes=3, n_demos=4)
+    (tmp_path / "compound_1.csv").rename(tmp_path / "reach_a.csv")
+    lib = load_library(tmp_path)
+    assert lib.class_names == ["compound_0", "compound_2"]
+    lines = drop_lines(lib)
+    assert any("reach_a.csv: reach_a.csv not read" in ln for ln in lines), lines
+    assert any("compound_1.csv missing: the classes are numbered in their files' order (class 1 is compound_2)" in ln
+               for ln in lines), lines
+    assert len(lib.demos) == 2 * 4  # the two classes still read
