@@ -121,6 +121,10 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
             marks = _step_points(o, len(o.chosen_goal_per_step), period_s)
             top.scatter(marks[:, 0], marks[:, 1], c=[_goal_color(g) for g in o.chosen_goal_per_step], s=22,
                         edgecolors=col, linewidths=0.8, zorder=7)
+            # where the hand starts and ends (a review could not tell the path's direction)
+            top.scatter(*o.ee_path[0, :2], marker="o", s=70, facecolors="white", edgecolors=col, linewidths=1.8,
+                        zorder=8)
+            top.scatter(*o.ee_path[-1, :2], marker="X", s=80, color=col, zorder=8)
             clear.plot(_seconds(o), o.clearance, color=col, lw=1.8, label=o.planner)
         goals.scatter(np.arange(len(o.chosen_goal_per_step)), np.full(len(o.chosen_goal_per_step), k),
                       c=[_goal_color(g) for g in o.chosen_goal_per_step], s=70, marker="s")
@@ -128,6 +132,9 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
     top.set_xlabel("x (m)")
     top.set_ylabel("y (m)")
     top.set_title("top view: robot hand paths (dots: replanning steps, in the chosen cup's colour)", fontsize=10)
+    if any(len(o.ee_path) for o in outcomes):  # the start and end marks, in each planner's colour
+        top.scatter([], [], marker="o", s=70, facecolors="white", edgecolors="k", linewidths=1.8, label="hand's start")
+        top.scatter([], [], marker="X", s=80, color="k", label="hand's end")
     top.legend(loc="best", fontsize=8)
     clear.axhline(0.0, color="k", lw=0.8)
     clear.set_ylabel("robot-human clearance (m)")

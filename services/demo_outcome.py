@@ -137,8 +137,10 @@ def verdict(outcomes: list[Outcome]) -> str:
             f"{against([f'{o.min_clearance_m * 100:.0f} cm' for o in outcomes])}")
     ties = [o.planner for o in others if math.isclose(main.contact_s, o.contact_s, abs_tol=1e-9)]
     if touched and ties:
-        body += (f" ({' and '.join(ties)} touched the human as long as the prediction planner: "
-                 "there the time within 5 cm and the closest approach tell them apart)")
+        tie = ("did not touch the human either" if main.contact_s == 0 else
+               "touched the human as long as the prediction planner")
+        body += (f" ({' and '.join(ties)} {tie}: there the time within 5 cm and the closest approach tell them "
+                 "apart)")
     if less_interference and further:
         return f"shown, against {names}: {body}"
     missed = [what for what, ok in (("its interference was not the lowest", less_interference),

@@ -131,14 +131,23 @@ def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_
     }
 
 
-def _log_state(mcap: Path) -> str:
-    """One phrase on the run's MCAP: complete (the executor finished it) or not, with its message count."""
+def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> str:
+    """One phrase on the run's MCAP: complete (the executor finished it) or not, with its message count.
+
+    With ``plan_topic``: its plans too, and how many of the ``received`` ones came after the executor closed it (an
+    interrupt: the planner's last plan may come after; the live table printed it, the log has not).
+    """
     if not mcap.is_file():
         return "no log was written (the executor had not started)"
     from shared.recording.reader import read_log
 
     lf = read_log(mcap)
-    return f"log {mcap}: {lf.state}, {lf.message_count} messages"
+    text = f"log {mcap}: {lf.state}, {lf.message_count} messages"
+    if plan_topic is not None:
+        logged = sum(c.count for c in lf.channels.values() if c.topic == plan_topic)
+        late = received - logged
+        text += f", {logged} plans" + (f" (the last {late} came after the executor closed it)" if late > 0 else "")
+    return text
 
 
 def _run_length(cfg: DemoConfig) -> str:
@@ -338,7 +347,10 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     plans, states, final, posteriors = recorder.snapshot()
     if status:  # interrupted, a dead service, the executor's own failure, a timeout: what the log holds
         done = f"{len(plans)} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{len(plans)} plans"
-        out(f"foresight demo: {'interrupted' if status == 130 else 'stopped'} after {done}; {_log_state(mcap)}")
+        out(f"foresight demo: {'interrupted' if status == 130 else 'stopped'} after {done}; "
+            f"{_log_state(mcap, keys.plan, len(plans))}")
+    elif stop.is_set():  # a signal while the services stopped, after the run's end: it ended whole
+        out("foresight demo: interrupted while stopping the services, after the run had ended: nothing was lost")
     if not plans:
         if status != 130:
             out("foresight demo: no plan was received; see the service logs in " + str(run_dir))

@@ -55,7 +55,9 @@ def test_verdict_on_a_contact_tie_with_one_baseline_goes_by_nearness() -> None:
     text = verdict(runs)
     assert text.startswith("shown, against current occupancy and no human cost")
     assert "touched the real human 0.0 s against 0.0 s, 2.2 s" in text
-    assert "current occupancy touched the human as long as the prediction planner" in text
+    assert "(current occupancy did not touch the human either: there the time within 5 cm" in text  # was "as long as"
+    both = [_outcome("prediction", 0.55, 0.5, 0.6, -0.01), _outcome("current occupancy", 20.0, 0.5, 2.1, -0.02)]
+    assert "current occupancy touched the human as long as the prediction planner" in verdict(both)
     assert "closest 13 cm against 2 cm, -5 cm" in text
     nearer = [_outcome("prediction", 0.55, 0.0, 2.5, 0.01), *runs[1:]]  # a tie, and nearer than that baseline
     assert verdict(nearer).startswith("not shown in this run (it did not stay further from the human)")

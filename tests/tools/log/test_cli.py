@@ -88,3 +88,13 @@ def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
     assert not list(tmp_path.glob("step1*"))
+
+
+def test_the_demos_interrupt_line_says_which_plans_the_log_has(run_log) -> None:
+    """Ctrl-C mid-run: the live table printed a 64th plan made after the executor had closed its log, and the demo
+    said "interrupted after 64 plans; log ...: complete" while the log held 63."""
+    from services.demo_run import _log_state
+
+    assert _log_state(run_log, KEYS.plan, 2).endswith("complete, " + _log_state(run_log).split("complete, ")[1]
+                                                     + ", 2 plans")
+    assert _log_state(run_log, KEYS.plan, 3).endswith(", 2 plans (the last 1 came after the executor closed it)")
