@@ -45,11 +45,8 @@ import threading
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from services.demo_figure import draw_outcomes
-from services.demo_outcome import measure_run, outcome_lines, verdict
-from services.demo_run import SERVICES_IN_ORDER, RunRecord, run_once
-from services.scenario import Summary
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
 from shared.atomic_file import make_parent
@@ -61,7 +58,11 @@ from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
 from shared.scene import SCENE_HELP, load_scene
 from shared.security.acl import refuse_ros2_keys
 
-__all__ = ["DemoConfig", "run_demo", "main", "SERVICES_IN_ORDER"]
+if TYPE_CHECKING:  # the run's modules load torch and matplotlib (9 s): imported when a run starts, not for --help
+    from services.demo_run import RunRecord
+    from services.scenario import Summary
+
+__all__ = ["DemoConfig", "run_demo", "main"]
 
 log = logging.getLogger("foresight.demo")
 
@@ -232,6 +233,9 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     The summary's ``extra`` holds ``comparison`` (one row per planner: interference, contact, ...), ``verdict``
     (with ``--compare``), ``figure`` (the PNG) and ``run_dir``.
     """
+    from services import demo_run
+    from services.demo_figure import draw_outcomes
+    from services.demo_outcome import measure_run, outcome_lines, verdict
     from shared.robot import PR2
 
     _check_models_dir(cfg)
@@ -247,7 +251,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
                 out(f"foresight demo: --- {name} ---")
             sub = dataclasses.replace(cfg, compare=False, **changes,
                                       run_dir=root / name.replace(" ", "-") if cfg.compare else root)
-            status, record = run_once(sub, name, stop, out, started=lambda: _point_latest(root))
+            status, record = demo_run.run_once(sub, name, stop, out, started=lambda: _point_latest(root))
             if record is None:
                 if records:  # interrupted before this planner's first plan: what the earlier ones did still counts
                     break

@@ -317,3 +317,13 @@ def test_the_services_log_at_debug_with_the_demos_debug_or_their_own_variable(mo
     monkeypatch.setenv("FORESIGHT_PLANNER_LOG_LEVEL", "DEBUG")
     got = levels()
     assert got.pop("planner") is None and set(got.values()) == {"INFO"}  # the variable decides the planner's
+
+
+def test_the_demos_help_loads_neither_torch_nor_matplotlib() -> None:
+    """`foresight demo --help` took 10 s: the demo module imported the run's modules (torch, the planner's compiler,
+    matplotlib) to show its options. They are imported when a run starts."""
+    code = ("import sys; from services.demo import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in ('torch', 'matplotlib', 'sklearn') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         cwd=Path(__file__).resolve().parents[2]).stdout
+    assert "usage: foresight demo" in out and out.strip().splitlines()[-1] == "[]", out[-500:]

@@ -118,6 +118,7 @@ def test_compare_interrupted_before_a_later_planners_first_plan_keeps_the_finish
     import threading
 
     import services.demo as demo
+    import services.demo_run as demo_run
     from services.demo_run import RunRecord
     from services.scenario import Summary
 
@@ -132,7 +133,7 @@ def test_compare_interrupted_before_a_later_planners_first_plan_keeps_the_finish
             return 0, RunRecord(name, s, [], None, [], tmp_path)
         return 130, None  # interrupted before its first plan
 
-    monkeypatch.setattr(demo, "run_once", run_once)
+    monkeypatch.setattr(demo_run, "run_once", run_once)
     status, summary = demo.run_demo(demo.DemoConfig(compare=True, run_dir=tmp_path / "runs"), threading.Event(),
                                     out=lambda line: None)
     assert calls == ["prediction", "current occupancy"] and status == 130
