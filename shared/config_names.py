@@ -106,6 +106,22 @@ def check_file_sections(data: dict[str, typing.Any], path: str = "config file") 
                               f"(sections: {', '.join(SECTIONS)})")
 
 
+def _likely_section(variable: str, sections: Iterable[str]) -> str | None:
+    """The section closest to the start of a ``FORESIGHT_...`` variable that names none (``REPLAYR_RATE_HZ``: replayer).
+
+    Each run of its first words is compared with the section names; the closest match wins, None when none is close.
+    """
+    words = variable[len(ENV_PREFIX) + 1:].lower().split("_")
+    best, score = None, 0.0
+    for k in range(1, len(words)):
+        head = "_".join(words[:k])
+        for name in sections:
+            ratio = difflib.SequenceMatcher(None, head, name).ratio()
+            if ratio >= 0.6 and ratio > score:
+                best, score = name, ratio
+    return best
+
+
 def _section_of(variable: str, sections: Iterable[str]) -> str | None:
     """The section a ``FORESIGHT_<SECTION>_...`` variable addresses (the longest that fits), or None."""
     fits = [s for s in sections if variable.startswith(f"{ENV_PREFIX}_{s.upper()}_")]
@@ -134,8 +150,11 @@ def check_environment(env: typing.Mapping[str, str], checked: typing.Mapping[str
             continue
         section = _section_of(variable, every_section)
         if section is None:
-            every = [*OTHER_VARIABLES, *every_variable(), *(o.env for s, c in checked.items()
-                                                            for o in config_options(s, c))]
+            # the options of the section it most likely meant (every section's: every config module imported, torch
+            # with the planner's, 8 s for one line), those of the checked ones, and the other variables
+            meant = _likely_section(variable, SECTIONS)
+            every = [*OTHER_VARIABLES, *([o.env for o in config_options(meant, section_class(meant))] if meant else []),
+                     *(o.env for s, c in checked.items() for o in config_options(s, c))]
             raise ConfigError(f"environment: {variable} is no Foresight option"
                               f"{closest(variable, every, f'{ENV_PREFIX}_')} (options "
                               f"are FORESIGHT_<SECTION>_<OPTION>, sections: {', '.join(sorted(every_section))})")

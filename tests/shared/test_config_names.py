@@ -81,3 +81,26 @@ def test_resolve_config_checks_file_and_environment(tmp_path: Path) -> None:
         resolve_config("replayer", Svc, p.parse_args([]), env={"FORESIGHT_REPLAYER_RATEHZ": "3"})
     cfg, _ = resolve_config("replayer", Svc, p.parse_args([]), env={"FORESIGHT_REPLAYER_RATE_HZ": "3"})
     assert cfg.rate_hz == 3.0
+
+
+@pytest.mark.parametrize("variable, meant", [("FORESIGHT_CONFG", "FORESIGHT_CONFIG"),
+                                             ("FORESIGHT_BLAS_THREAD", "FORESIGHT_BLAS_THREADS"),
+                                             ("FORESIGHT_ZENHO_CONNECT", "FORESIGHT_ZENOH_CONNECT"),
+                                             ("FORESIGHT_PLANER_GOALS", "FORESIGHT_PLANNER_GOALS")])
+def test_a_misspelt_section_or_variable_is_named_from_the_section_it_most_likely_meant(variable, meant) -> None:
+    with pytest.raises(ConfigError, match=rf"{variable} is no Foresight option; did you mean {meant}\?"):
+        check_environment({variable: "1"}, {"replayer": section_class("replayer")})
+
+
+def test_naming_a_misspelt_section_imports_only_the_section_it_meant() -> None:
+    """FORESIGHT_REPLAYR_RATE_HZ took 7.8 s to be named (every section's config imported, torch with the planner's)."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom shared.config import ConfigError\nfrom shared.config_names import check_environment, "
+            "section_class\ntry:\n    check_environment({'FORESIGHT_REPLAYR_RATE_HZ': '3'}, "
+            "{'replayer': section_class('replayer')})\nexcept ConfigError as exc:\n    print(exc)\n"
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         cwd=Path(__file__).resolve().parents[2]).stdout.splitlines()
+    assert "did you mean FORESIGHT_REPLAYER_RATE_HZ?" in out[0] and out[-1] == "False", out
