@@ -9,7 +9,7 @@ from collections.abc import Callable
 from shared.config import ZenohConfig
 from shared.runtime import service_main
 
-from .service import PlannerService, PlannerServiceConfig
+from .config import PlannerServiceConfig  # the service (torch, its compiler) is imported to run, not for --help
 
 __all__ = ["main"]
 
@@ -22,6 +22,8 @@ FORESIGHT_PLANNER_COST_<NAME>, FORESIGHT_ZENOH_<NAME> < flags (--<name>, --stomp
 
 
 def _make(cfg: PlannerServiceConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
+    from .service import PlannerService
+
     service = PlannerService(cfg, zcfg)
     return lambda: service.run(stop)
 

@@ -16,18 +16,127 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from shared.config import LOG_LEVELS, ConfigError, nested, opt
 from shared.devices import check_device
 from shared.protocol.limits import JOINT_LIMIT_TOL, MAX_DT_S, MAX_WAYPOINTS, MIN_DT_S
 from shared.scene import SCENE_HELP
 
-from .costs import CostConfig
 from .replan import TRIGGERS
-from .stomp import StompConfig
 
-__all__ = ["PlannerConfig", "PlannerServiceConfig"]
+if TYPE_CHECKING:
+    import torch
+
+__all__ = ["PlannerConfig", "PlannerServiceConfig", "StompConfig", "StompError", "CostConfig"]
+
+
+class StompError(ValueError):
+    """Bad input to STOMP (shape, non-finite values, start/goal outside the bounds); names the problem."""
+
+
+@dataclass
+class StompConfig:
+    """Parameters of :class:`Stomp`.
+
+    Attributes:
+        rollouts: Noisy rollouts R per goal and iteration.
+        waypoints: Waypoints T per trajectory (start and goal included).
+        iterations: Iterations per call of :meth:`Stomp.optimize` (one replanning step), at least 1.
+        noise_std: Exploration noise standard deviation (rad) at the middle of the trajectory (the
+            scaled R^-1 has unit maximum variance).
+        joint_noise_scale: Optional per-joint factors (length D) on ``noise_std``; empty = all 1.
+        noise_decay: Noise multiplied by this factor after every iteration (1 = constant).
+        sensitivity: h, the exponent scale of the per-timestep probabilities (paper: 10).
+        cost_to_go: Rank rollouts per waypoint by their cost-to-go (sum of costs from that waypoint
+            to the goal, as in PI^2) rather than the waypoint's own cost.
+        reuse: Rollouts of the previous iteration kept in the next one, least total cost first, with the
+            costs they already have (ros-industrial STOMP and the paper authors' code: 5 of 10): each
+            iteration after the first then costs ``rollouts - reuse`` new rollouts and the current trajectory
+            (10 and 5 since they were measured against 16 and 0: docs/planner.md, "Reused rollouts").
+        seed: Base seed; goal k uses ``seed + k`` unless seeds are given to :meth:`Stomp.optimize`.
+        device: Torch device, e.g. ``"cpu"`` or ``"cuda"``.
+        dtype: ``"float32"`` or ``"float64"``.
+        compile: ``torch.compile`` the rollout and update steps (eager when compilation fails).
+    """
+
+    rollouts: int = 10
+    waypoints: int = 40
+    iterations: int = 50
+    noise_std: float = 0.1
+    joint_noise_scale: list[float] = field(default_factory=list)
+    noise_decay: float = 1.0
+    sensitivity: float = 10.0
+    cost_to_go: bool = True
+    reuse: int = 5
+    seed: int = 0
+    device: str = "cpu"
+    dtype: str = "float32"
+    compile: bool = False
+
+    def validate(self) -> None:
+        """Raise :class:`StompError` naming the first bad field."""
+        if self.rollouts < 2:
+            raise StompError(f"stomp.rollouts must be >= 2, got {self.rollouts}")
+        if not 0 <= self.reuse < self.rollouts:
+            raise StompError(f"stomp.reuse must be in [0, rollouts - 1 = {self.rollouts - 1}], got {self.reuse}")
+        if self.waypoints < 3:
+            raise StompError(f"stomp.waypoints must be >= 3, got {self.waypoints}")
+        if self.iterations < 1:  # 0 was let through and failed in the first plan (an IndexError)
+            raise StompError(f"stomp.iterations must be >= 1, got {self.iterations}")
+        if not (self.noise_std >= 0 and math.isfinite(self.noise_std)):
+            raise StompError(f"stomp.noise_std must be finite and >= 0, got {self.noise_std}")
+        if any(not (s >= 0 and math.isfinite(s)) for s in self.joint_noise_scale):
+            raise StompError(f"stomp.joint_noise_scale must be finite and >= 0, got {self.joint_noise_scale}")
+        if not (0 < self.noise_decay <= 1):
+            raise StompError(f"stomp.noise_decay must be in (0, 1], got {self.noise_decay}")
+        if not (self.sensitivity > 0 and math.isfinite(self.sensitivity)):
+            raise StompError(f"stomp.sensitivity must be > 0, got {self.sensitivity}")
+        if self.dtype not in ("float32", "float64"):
+            raise StompError(f"stomp.dtype must be float32 or float64, got {self.dtype!r}")
+
+    @property
+    def torch_dtype(self) -> torch.dtype:
+        """The torch dtype named by :attr:`dtype`."""
+        import torch  # here, not at the top: the config tree loads without torch (--help)
+
+        return torch.float32 if self.dtype == "float32" else torch.float64
+
+
+@dataclass
+class CostConfig:
+    """Weights and shape of the planning costs (held by :class:`StateCost` as ``config``)."""
+
+    w_smooth: float = 10.0  # weight of the squared accelerations (rad^2 per waypoint step); the planner's default
+    w_obstacle: float = 10.0  # weight of the obstacle penetration (m, summed over spheres)
+    w_human: float = 1.0  # weight of the summed occupancy probability
+    clearance: float = 0.05  # obstacle margin eps (m): spheres closer than this to a surface pay
+    self_clearance: float = 0.01  # margin of the arm-vs-body self-collision term (m); < 0 disables it
+    sdf_resolution: float = 0.02  # voxel edge of the static signed distance field (m)
+    human_points: int = 1  # points per sphere for the human cost: 1 (centre) or 7 (centre + 6)
+    human_point_radius: float = 0.7  # offset of the extra points, as a fraction of the sphere radius
+    human_interp: str = "trilinear"  # "trilinear" or "nearest" (the voxel containing the point)
+    torso_table_step: float = 0.002  # lift step (m) of the tabulated costs of torso-carried spheres; 0: off
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming the first bad value."""
+        def finite(x: float) -> bool:  # an infinite weight or margin makes every cost inf * 0 or inf - inf: NaN
+            return math.isfinite(x)
+
+        checks = [("w_smooth", finite(self.w_smooth) and self.w_smooth >= 0),
+                  ("w_obstacle", finite(self.w_obstacle) and self.w_obstacle >= 0),
+                  ("w_human", finite(self.w_human) and self.w_human >= 0),
+                  ("clearance", finite(self.clearance) and self.clearance > 0),
+                  ("self_clearance", finite(self.self_clearance)),
+                  ("sdf_resolution", finite(self.sdf_resolution) and self.sdf_resolution > 0),
+                  ("human_points", self.human_points in (1, 7)),
+                  ("human_point_radius", 0 <= self.human_point_radius <= 1),
+                  ("human_interp", self.human_interp in ("trilinear", "nearest")),
+                  ("torso_table_step", finite(self.torso_table_step) and self.torso_table_step >= 0)]
+        for name, ok in checks:
+            if not ok:
+                raise ValueError(f"costs.{name}: bad value {getattr(self, name)!r}")
 
 
 @dataclass

@@ -24,7 +24,6 @@ read only public tables: the robot's ``ChainTables``/``SphereTables``, the field
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,6 +34,7 @@ import torch.nn.functional as F
 from shared.robot import PR2
 from shared.scene import Scene
 
+from .config import CostConfig
 from .sdf import GridLookupError, SignedDistanceField, VoxelTables
 
 __all__ = ["CostConfig", "StateCost", "CostInputError", "LiftTables", "OccupancyTables", "hinge_sum", "path_dt",
@@ -43,41 +43,6 @@ __all__ = ["CostConfig", "StateCost", "CostInputError", "LiftTables", "Occupancy
 
 class CostInputError(ValueError):
     """A cost input (occupancy grid, configuration batch) is malformed; the message names it."""
-
-
-@dataclass
-class CostConfig:
-    """Weights and shape of the planning costs (held by :class:`StateCost` as ``config``)."""
-
-    w_smooth: float = 10.0  # weight of the squared accelerations (rad^2 per waypoint step); the planner's default
-    w_obstacle: float = 10.0  # weight of the obstacle penetration (m, summed over spheres)
-    w_human: float = 1.0  # weight of the summed occupancy probability
-    clearance: float = 0.05  # obstacle margin eps (m): spheres closer than this to a surface pay
-    self_clearance: float = 0.01  # margin of the arm-vs-body self-collision term (m); < 0 disables it
-    sdf_resolution: float = 0.02  # voxel edge of the static signed distance field (m)
-    human_points: int = 1  # points per sphere for the human cost: 1 (centre) or 7 (centre + 6)
-    human_point_radius: float = 0.7  # offset of the extra points, as a fraction of the sphere radius
-    human_interp: str = "trilinear"  # "trilinear" or "nearest" (the voxel containing the point)
-    torso_table_step: float = 0.002  # lift step (m) of the tabulated costs of torso-carried spheres; 0: off
-
-    def validate(self) -> None:
-        """Raise ``ValueError`` naming the first bad value."""
-        def finite(x: float) -> bool:  # an infinite weight or margin makes every cost inf * 0 or inf - inf: NaN
-            return math.isfinite(x)
-
-        checks = [("w_smooth", finite(self.w_smooth) and self.w_smooth >= 0),
-                  ("w_obstacle", finite(self.w_obstacle) and self.w_obstacle >= 0),
-                  ("w_human", finite(self.w_human) and self.w_human >= 0),
-                  ("clearance", finite(self.clearance) and self.clearance > 0),
-                  ("self_clearance", finite(self.self_clearance)),
-                  ("sdf_resolution", finite(self.sdf_resolution) and self.sdf_resolution > 0),
-                  ("human_points", self.human_points in (1, 7)),
-                  ("human_point_radius", 0 <= self.human_point_radius <= 1),
-                  ("human_interp", self.human_interp in ("trilinear", "nearest")),
-                  ("torso_table_step", finite(self.torso_table_step) and self.torso_table_step >= 0)]
-        for name, ok in checks:
-            if not ok:
-                raise ValueError(f"costs.{name}: bad value {getattr(self, name)!r}")
 
 
 def hinge_sum(e: torch.Tensor, eps: float, dim: int = -1) -> torch.Tensor:

@@ -29,11 +29,12 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import torch
 
 from .compiling import compile_every_shape
+from .config import StompConfig, StompError
 from .stomp_steps import (
     advance,
     finite,
@@ -52,76 +53,6 @@ log = logging.getLogger("foresight.planner")
 
 CostFn = Callable[[torch.Tensor], torch.Tensor]
 """Per-waypoint cost: ``q (K, R, T, D) -> (K, R, T)``."""
-
-
-class StompError(ValueError):
-    """Bad input to STOMP (shape, non-finite values, start/goal outside the bounds); names the problem."""
-
-
-@dataclass
-class StompConfig:
-    """Parameters of :class:`Stomp`.
-
-    Attributes:
-        rollouts: Noisy rollouts R per goal and iteration.
-        waypoints: Waypoints T per trajectory (start and goal included).
-        iterations: Iterations per call of :meth:`Stomp.optimize` (one replanning step), at least 1.
-        noise_std: Exploration noise standard deviation (rad) at the middle of the trajectory (the
-            scaled R^-1 has unit maximum variance).
-        joint_noise_scale: Optional per-joint factors (length D) on ``noise_std``; empty = all 1.
-        noise_decay: Noise multiplied by this factor after every iteration (1 = constant).
-        sensitivity: h, the exponent scale of the per-timestep probabilities (paper: 10).
-        cost_to_go: Rank rollouts per waypoint by their cost-to-go (sum of costs from that waypoint
-            to the goal, as in PI^2) rather than the waypoint's own cost.
-        reuse: Rollouts of the previous iteration kept in the next one, least total cost first, with the
-            costs they already have (ros-industrial STOMP and the paper authors' code: 5 of 10): each
-            iteration after the first then costs ``rollouts - reuse`` new rollouts and the current trajectory
-            (10 and 5 since they were measured against 16 and 0: docs/planner.md, "Reused rollouts").
-        seed: Base seed; goal k uses ``seed + k`` unless seeds are given to :meth:`Stomp.optimize`.
-        device: Torch device, e.g. ``"cpu"`` or ``"cuda"``.
-        dtype: ``"float32"`` or ``"float64"``.
-        compile: ``torch.compile`` the rollout and update steps (eager when compilation fails).
-    """
-
-    rollouts: int = 10
-    waypoints: int = 40
-    iterations: int = 50
-    noise_std: float = 0.1
-    joint_noise_scale: list[float] = field(default_factory=list)
-    noise_decay: float = 1.0
-    sensitivity: float = 10.0
-    cost_to_go: bool = True
-    reuse: int = 5
-    seed: int = 0
-    device: str = "cpu"
-    dtype: str = "float32"
-    compile: bool = False
-
-    def validate(self) -> None:
-        """Raise :class:`StompError` naming the first bad field."""
-        if self.rollouts < 2:
-            raise StompError(f"stomp.rollouts must be >= 2, got {self.rollouts}")
-        if not 0 <= self.reuse < self.rollouts:
-            raise StompError(f"stomp.reuse must be in [0, rollouts - 1 = {self.rollouts - 1}], got {self.reuse}")
-        if self.waypoints < 3:
-            raise StompError(f"stomp.waypoints must be >= 3, got {self.waypoints}")
-        if self.iterations < 1:  # 0 was let through and failed in the first plan (an IndexError)
-            raise StompError(f"stomp.iterations must be >= 1, got {self.iterations}")
-        if not (self.noise_std >= 0 and math.isfinite(self.noise_std)):
-            raise StompError(f"stomp.noise_std must be finite and >= 0, got {self.noise_std}")
-        if any(not (s >= 0 and math.isfinite(s)) for s in self.joint_noise_scale):
-            raise StompError(f"stomp.joint_noise_scale must be finite and >= 0, got {self.joint_noise_scale}")
-        if not (0 < self.noise_decay <= 1):
-            raise StompError(f"stomp.noise_decay must be in (0, 1], got {self.noise_decay}")
-        if not (self.sensitivity > 0 and math.isfinite(self.sensitivity)):
-            raise StompError(f"stomp.sensitivity must be > 0, got {self.sensitivity}")
-        if self.dtype not in ("float32", "float64"):
-            raise StompError(f"stomp.dtype must be float32 or float64, got {self.dtype!r}")
-
-    @property
-    def torch_dtype(self) -> torch.dtype:
-        """The torch dtype named by :attr:`dtype`."""
-        return torch.float32 if self.dtype == "float32" else torch.float64
 
 
 @dataclass
