@@ -259,6 +259,11 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
             records.append(record)
             if status != 0:
                 break
+            if stop.is_set():  # Ctrl-C while this planner's services stopped: its run is whole, the next not begun
+                if cfg.compare and len(records) < len(variants):
+                    out(f"foresight demo: interrupted: the comparison stops after {name}")
+                    status = 130
+                break
     finally:
         if not records:  # a bad option found late, Ctrl-C while training: no run directory without a run in it
             _discard_unstarted(root)

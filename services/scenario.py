@@ -289,14 +289,19 @@ def belief(posterior: ClassPosterior | None) -> str:
     return f"{posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
 
 
+ARRIVAL_KEY0 = 1 << 40
+"""The first key of real-time (tick -1) posteriors in a posteriors-by-tick dict: above every tick."""
+
+
 def keep_posterior(posteriors: dict[int, ClassPosterior], msg: ClassPosterior) -> None:
     """Keep a received posterior for :func:`posterior_for`: lock-step, the last of its tick; real time, every one.
 
     Real time stamps every message tick -1: keyed by their tick, each posterior replaced the one before, and the
     belief of every plan but the last (made before the newest posterior) came out empty in the demo's live table
-    and summary. They are keyed by arrival there (no tick >= 0 in a real-time run), as ``foresight log table`` does.
+    and summary. They are keyed by arrival there, from :data:`ARRIVAL_KEY0` (no tick reaches it: a run that mixed
+    both kinds kept them apart; the newest arrival is still the largest key).
     """
-    posteriors[msg.tick if msg.tick >= 0 else len(posteriors)] = msg
+    posteriors[msg.tick if msg.tick >= 0 else ARRIVAL_KEY0 + len(posteriors)] = msg
 
 
 def posterior_for(plan: Plan, posteriors: dict[int, ClassPosterior]) -> ClassPosterior | None:

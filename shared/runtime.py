@@ -277,6 +277,7 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
                     run = None if stop.is_set() else make(cfg, zcfg, stop)
             except KeyboardInterrupt:
                 run = None
+                _exit_within(SHUTDOWN_GRACE_S, prog)  # a worker the build started must not hold the exit unbounded
             if run is None:
                 logging.getLogger("foresight").info("%s: stopped while starting", prog)
                 return 0
@@ -286,6 +287,23 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
         finally:
             restore()
     return 0
+
+
+def _exit_within(grace_s: float, prog: str) -> None:
+    """Exit with :data:`FORCED_EXIT` unless the process has ended within ``grace_s`` (a daemon timer).
+
+    After a signal cut a service's build short: a thread the build had started (a compile pool) would otherwise
+    keep the interpreter from exiting for as long as it runs, with :func:`stop_on_signals`' watchdog, replaced by
+    :func:`interruptible`'s handler, never started.
+    """
+    def force() -> None:
+        time.sleep(grace_s)
+        print(f"{prog}: did not exit within {grace_s:g} s of stopping while starting; exiting with status "
+              f"{FORCED_EXIT} (stacks of every thread follow)", file=sys.stderr, flush=True)
+        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+        os._exit(FORCED_EXIT)
+
+    threading.Thread(target=force, name="start-watchdog", daemon=True).start()
 
 
 def lower_priority(nice: int) -> None:

@@ -325,6 +325,12 @@ def test_the_checks_table_comparison_drops_the_plan_times_and_keeps_the_beliefs(
                 for s in range(3)]
         return "\n".join([table_header(goals), *rows, "switch step: none"]) + "\n"
 
+    long = ["the_very_long_cup_name", "red_cup"]  # wider than the table's columns: cut by position, it lost letters
+    rows = [table_header(long), table_row({"step": 1, "t_s": 0.5, "chosen": "the_very_long_cup_name",
+                                           "planning_ms": 12345.0, "cost_total": {n: 1.25 for n in long}}, long,
+                                          "far_left p=0.13")]
+    assert _strip_ms("\n".join(rows) + "\n", tmp_path).splitlines()[1].split() == [
+        "1", "0.50", "the_very_long_cup_name", "1.250", "1.250", "far_left", "p=0.13"]
     first = _strip_ms(table(7125.0, "far_left p=0.13"), tmp_path)
     assert first == _strip_ms(table(74.0, "far_left p=0.13"), tmp_path)  # only the plan times differ
     assert first != _strip_ms(table(74.0, "far_left p=0.99"), tmp_path)  # a belief differs

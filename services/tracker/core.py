@@ -158,6 +158,7 @@ class TrackerCore:
         self.clock = PoseClock(self.config.pose_rate_hz)         # a pose per frame, or resampled to the library's
         self._yaw = HERAKLES_NAMES.index("pelvis_yaw")
         self._dts: deque[float] = deque(maxlen=15)              # recent frame intervals: the sensor's period
+        self._short: deque[float] = deque(maxlen=15)            # intervals in a row under half of it (_faster)
         self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
         self.demo_id = -1
         self._index = 0
@@ -233,6 +234,9 @@ class TrackerCore:
                 return self._refuse("jump", f"{POINT_NAMES[j]} at {moved[j] / dt:.1f} m/s since the last frame")
             elif dt >= MIN_PERIOD_S and (len(self._dts) < 3 or dt >= 0.5 * float(np.median(self._dts))):
                 self._dts.append(dt)  # the sensor's period; a burst's intervals are left out
+                self._short.clear()
+            elif dt >= MIN_PERIOD_S:
+                self._faster(dt)
         dropped = None if frame is None or self._frame_no is None or self._raw is None else frame - self._frame_no - 1
         self._raw, self._joints, self._frame_no, self._jump = (stamp, f), joints, frame, None
         self.accepted += 1
@@ -262,6 +266,20 @@ class TrackerCore:
 
     # -- internals ---------------------------------------------------------------------------------
 
+    def _faster(self, dt: float) -> None:
+        """An interval under half the period: a burst's, or a sensor that went faster (30 -> 120 Hz mid-track).
+
+        A burst ends when its backlog is flushed; a faster sensor goes on. Once as many such intervals as the period
+        holds came in a row, within 25 % of their median, they are the sensor's period (else a sensor that sped up
+        was measured at its old rate for good, and its poses never resampled).
+        """
+        self._short.append(dt)
+        if len(self._short) == self._short.maxlen:
+            med = float(np.median(self._short))
+            if all(abs(x - med) <= 0.25 * med for x in self._short):
+                self._dts = deque(self._short, maxlen=self._dts.maxlen)
+                self._short.clear()
+
     def _follows(self, refused: tuple[float, np.ndarray, int], joints: np.ndarray, stamp: float) -> bool:
         """Whether ``joints`` ``(J, 3)`` at ``stamp`` continue the body of the frame last refused as a jump."""
         last_t, last_joints, _ = refused
@@ -287,6 +305,7 @@ class TrackerCore:
         self.filter.reset()
         self._recent.clear()
         self._dts.clear()  # the next frames may come from a sensor restarted at another rate
+        self._short.clear()
         self._raw = self._out = self._joints = self._frame_no = self._leap = self._jump = None
         self._ended_at = -math.inf  # a sensor restarted, or a clock stepped back: its frames may precede the last end
         self._rate_said = False

@@ -302,18 +302,25 @@ def _unread(directory: Path, files: list[Path]) -> list[LibraryIssue]:
     Both passed without a word: ``reach_a.csv`` beside ``compound_1.csv`` was not read, and without
     ``compound_1.csv`` the classes are numbered in their files' order, so class 1 is ``compound_2``.
     """
-    numbered = {int(m.group(1)): f for f in files if (m := re.fullmatch(r"compound_(\d+)", f.stem))}
-    if not numbered:
+    numbers = {f: int(m.group(1)) for f in files if (m := re.fullmatch(r"compound_(\d+)", f.stem))}
+    if not numbers:
         return []
     out = [LibraryIssue(f.stem, -1, f"{f.name} not read: beside compound_<m>.csv files only those are the "
                                     "library's classes")
            for f in sorted(set(directory.glob("*.csv")) - set(files))]
-    missing = sorted(set(range(max(numbered) + 1)) - set(numbered))
+    by_number: dict[int, list[Path]] = {}
+    for f, n in numbers.items():
+        by_number.setdefault(n, []).append(f)
+    for n, same in sorted(by_number.items()):
+        if len(same) > 1:  # compound_0.csv and compound_00.csv: both read, as two classes
+            out.append(LibraryIssue(same[1].stem, -1, f"{' and '.join(f.name for f in same)} have the same number "
+                                    f"{n}: both read, as classes {', '.join(str(files.index(f)) for f in same)}"))
+    missing = sorted(set(range(max(by_number) + 1)) - set(by_number))
     if missing:
         shown = ", ".join(f"compound_{m}.csv" for m in missing[:4]) + (" ..." if len(missing) > 4 else "")
-        first_after = next(i for i, m in enumerate(sorted(numbered)) if m > missing[0])
+        after = next(f for f in files if numbers.get(f, -1) > missing[0])
         out.append(LibraryIssue(f"compound_{missing[0]}", -1, f"{shown} missing: the classes are numbered in their "
-                                f"files' order (class {first_after} is compound_{sorted(numbered)[first_after]})"))
+                                f"files' order (class {files.index(after)} is {after.stem})"))
     return out
 
 

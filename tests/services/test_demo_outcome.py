@@ -139,3 +139,30 @@ def test_compare_interrupted_before_a_later_planners_first_plan_keeps_the_finish
     assert calls == ["prediction", "current occupancy"] and status == 130
     assert summary is not None and [row["planner"] for row in summary.extra["comparison"]] == ["prediction"]
     assert "verdict" not in summary.extra and Path(summary.extra["figure"]).is_file()
+
+
+def test_compare_stops_after_a_planner_whose_teardown_was_interrupted(tmp_path, monkeypatch) -> None:
+    """Ctrl-C while the first planner's services stopped (its run whole, status 0): the demo said "nothing was lost"
+    and went on to start the next planner with the stop already set (a review's script)."""
+    import threading
+
+    import services.demo as demo
+    import services.demo_run as demo_run
+    from services.demo_run import RunRecord
+    from services.scenario import Summary
+
+    stop, calls, said = threading.Event(), [], []
+
+    def run_once(cfg, name, stop_, out, started=None):
+        calls.append(name)
+        stop.set()  # the signal came while this run's services stopped
+        s = Summary(steps=[], chosen_goal_per_step=["red_cup"], switch_step=None, interference_cost=0.0,
+                    mcap_path=str(tmp_path / "x.mcap"), reached=True, reached_step=3, human_class="blue_cup",
+                    recognised_class="blue_cup", goal_names=["red_cup"])
+        return 0, RunRecord(name, s, [], None, [], tmp_path)
+
+    monkeypatch.setattr(demo_run, "run_once", run_once)
+    status, summary = demo.run_demo(demo.DemoConfig(compare=True, run_dir=tmp_path / "runs"), stop, out=said.append)
+    assert calls == ["prediction"] and status == 130
+    assert "foresight demo: interrupted: the comparison stops after prediction" in said
+    assert summary is not None and "verdict" not in summary.extra

@@ -120,6 +120,11 @@ def test_the_recorder_keeps_every_real_time_posterior_for_the_beliefs():
     for tick, p in ((0, 0.6), (0, 0.7), (1, 0.8)):
         lock.on_message(_posterior(tick, 0.1 * tick, [p, 1 - p]))
     assert {t: float(m.posterior[0]) for t, m in lock.snapshot()[3].items()} == {0: 0.7, 1: 0.8}
+    for p in (0.1, 0.2, 0.3):  # real-time ones beside them: kept apart (the arrival key was len(): 2 overwrote...)
+        lock.on_message(_posterior(-1, 1.0 + p, [p, 1 - p]))
+    kept = lock.snapshot()[3]
+    assert sorted(float(m.posterior[0]) for m in kept.values()) == [0.1, 0.2, 0.3, 0.7, 0.8]
+    assert float(kept[max(kept)].posterior[0]) == 0.3  # the newest arrival is the largest key
 
 
 def test_a_restarted_planner_does_not_renumber_the_lockstep_steps():

@@ -188,3 +188,27 @@ def test_debug_is_foresights_own_and_other_libraries_stay_at_info() -> None:
             "logging.getLogger('matplotlib.font_manager').debug('theirs'); logging.getLogger('filelock').info('info')")
     err = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=60).stderr
     assert "ours" in err and "module" in err and "info" in err and "theirs" not in err, err
+
+
+BUILDING_WITH_A_WORKER = BUILDING.replace(
+    '    time.sleep(600)  # a build that checks no stop event (the planner compiling its kernels)',
+    '    import threading\n    threading.Thread(target=time.sleep, args=(600,)).start()  # a worker, not a daemon\n'
+    '    time.sleep(600)')
+
+
+def test_a_worker_left_by_a_stopped_build_does_not_hold_the_exit_past_the_grace() -> None:
+    """A build stopped by a signal returned 0, but a non-daemon thread it had started kept the interpreter waiting as
+    long as it ran (a review's script: 25 s), where the shutdown watchdog used to force the exit after the grace."""
+    code = BUILDING_WITH_A_WORKER.replace("from shared.runtime import service_main",
+                                          "from shared import runtime\nruntime.SHUTDOWN_GRACE_S = 1.0\n"
+                                          "from shared.runtime import service_main")
+    proc = subprocess.Popen([sys.executable, "-c", code], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "building"
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        proc.wait(timeout=10)
+    assert proc.returncode == 3 and "did not exit within 1 s of stopping while starting" in err, err[-2000:]

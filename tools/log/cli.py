@@ -49,14 +49,22 @@ SUBCOMMANDS: dict[str, str] = {
 def _main_info(args: argparse.Namespace) -> int:
     """One log's summary; a directory's: every log under it (``--json``: a list), as after ``demo --compare``."""
     path = Path(args.file)
-    logs = sorted(path.rglob("*.mcap")) if path.is_dir() else []
-    files = logs or [path]  # a directory with none: read_log names the problem
-    infos = [read_log(f) for f in files]
-    if args.json:
-        print(strict_json.dumps([info_dict(lf) for lf in infos] if logs else info_dict(infos[0]), indent=2))
-    else:
-        print("\n\n".join(format_info(lf) for lf in infos))
-    return 0
+    logs = sorted(f for f in path.rglob("*.mcap") if f.is_file()) if path.is_dir() else []
+    if not logs:  # a file, or a directory with none: read_log reads it or names the problem
+        lf = read_log(path)
+        print(strict_json.dumps(info_dict(lf), indent=2) if args.json else format_info(lf))
+        return 0
+    shown: list[object] = []
+    failed = 0
+    for f in logs:  # one unreadable log (empty, not MCAP) is named in its place; the others are still described
+        try:
+            lf = read_log(f)
+            shown.append(info_dict(lf) if args.json else format_info(lf))
+        except UserError as exc:
+            failed += 1
+            shown.append({"file": str(f), "unreadable": str(exc)} if args.json else f"file: {f}: {exc}")
+    print(strict_json.dumps(shown, indent=2) if args.json else "\n\n".join(str(x) for x in shown))
+    return 2 if failed == len(logs) else 0
 
 
 def _main_render(args: argparse.Namespace, prog: str) -> int:

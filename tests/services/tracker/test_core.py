@@ -357,3 +357,19 @@ def test_a_sensor_at_the_librarys_rate_keeps_a_pose_per_frame(reach) -> None:
     stamps = {float(m.stamp) for o in outs for m in o.messages if isinstance(m, HumanPose)}
     assert stamps and stamps <= {float(s) for s in t} and not [o.note for o in outs if o.note]
     assert core.clock.made == 0
+
+
+def test_a_sensor_that_speeds_up_mid_track_is_resampled(reach) -> None:
+    """30 Hz for 1.5 s, then 120 Hz: every 8 ms interval was left out as a burst's, the period stayed 33 ms, and the
+    poses came at 120 a second (a review's script). A run of them in a row is the sensor's new period."""
+    t30, j30 = _at_rate(reach, RATE)
+    t120, j120 = _at_rate(reach, 120.0)
+    cut = 1.5
+    stamps = [*t30[t30 < cut], *t120[t120 >= cut]]
+    joints = [*j30[t30 < cut], *j120[t120 >= cut]]
+    core = TrackerCore()
+    poses = [m for s, p in zip(stamps, joints, strict=True) for m in core.on_frame(float(s), NAMES, p).messages
+             if isinstance(m, HumanPose)]
+    assert core.clock.resampling
+    late = np.array([p.stamp for p in poses if p.stamp > cut + 0.5])
+    assert len(late) > 10 and np.allclose(np.diff(late), 1.0 / RATE, atol=1e-6)

@@ -416,3 +416,19 @@ def test_files_a_class_directory_does_not_read_and_missing_numbers_are_said(tmp_
     assert any("compound_1.csv missing: the classes are numbered in their files' order (class 1 is compound_2)" in ln
                for ln in lines), lines
     assert len(lib.demos) == 2 * 4  # the two classes still read
+
+
+def test_odd_class_numbers_are_said_with_the_classes_they_became(tmp_path):
+    """compound_0.csv beside compound_00.csv and compound_2.csv: the line said class 1 was compound_2 (it is class 2;
+    compound_00 is class 1), from the files' positions among the numbers instead of among the classes."""
+    from shared.library.report import drop_lines
+
+    make_lib(tmp_path, n_classes=3, n_demos=2)
+    (tmp_path / "compound_1.csv").rename(tmp_path / "compound_00.csv")
+    lib = load_library(tmp_path)
+    assert lib.class_names == ["compound_0", "compound_00", "compound_2"]
+    lines = drop_lines(lib)
+    assert any("compound_0.csv and compound_00.csv have the same number 0: both read, as classes 0, 1" in ln
+               for ln in lines), lines
+    assert any("compound_1.csv missing: the classes are numbered in their files' order (class 2 is compound_2)" in ln
+               for ln in lines), lines

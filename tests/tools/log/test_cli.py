@@ -69,6 +69,13 @@ def test_info_of_a_directory_describes_every_log_under_it(run_log, tmp_path, cap
     with pytest.raises(SystemExit):
         main(["info", str(tmp_path / "empty")])
     assert "no .mcap file under it" in capsys.readouterr().err
+    (tmp_path / "empty" / "broken.mcap").write_bytes(b"")  # one unreadable log: named, the others still described
+    assert main(["info", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert out.count("complete") == 2 and "broken.mcap: " in out and "not an MCAP file (empty)" in out
+    assert main(["info", str(tmp_path), "--json"]) == 0
+    assert [("unreadable" in d) for d in json.loads(capsys.readouterr().out)] == [False, True, False]
+    assert main(["info", str(tmp_path / "empty")]) == 2  # none readable
 
 
 @pytest.mark.parametrize("argv, message", [
