@@ -1,8 +1,9 @@
 """Poses at the motion library's rate, whatever the sensor's: the tracker's output clock.
 
 The predictor reads a pose's index as its time (the libraries' poses came at 30 a second), so a sensor at 120 Hz,
-published a pose per frame, showed every reach 4x slower, and one at 15 Hz 2x faster: recognised in 11 of 50 reaches
-at 40 % of the motion at 120 Hz, against 48 of 50 at 30 Hz (docs/keypoints.md). :class:`PoseClock` puts the
+published a pose per frame, had every reach's indices run 4x too fast (a quarter of the way in, its time feature
+stood at the model's last index), and one at 15 Hz 2x too slow (docs/keypoints.md measures what it does to
+recognition, and why a pose per frame at 60 Hz happened to recognise more early on). :class:`PoseClock` puts the
 tracker's smoothed frames on the library's clock: while the sensor's rate is within ``enter`` of it, each frame is
 a pose (no resampling, no added delay); once it is further off, poses are made at ``rate_hz`` from the first such
 frame on, each interpolated linearly between the smoothed frames on either side of its time, so a pose is never
