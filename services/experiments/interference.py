@@ -38,14 +38,12 @@ from .heldout import (
 )
 from .measures import body_clearance, contact_summary, interference_along_path, interference_over_time, postures_at
 from .planners import VARIANTS, Timing, build_planner
-from .protocol import AUTHORS_TRIALS, authors_trial, move3d_path_weights, protocol, run_pacing
+from .protocol import AUTHORS_TRIALS, TABLE1_SCENE, authors_trial, move3d_path_weights, protocol, run_pacing
 from .reuse import first_differing_state, same_human, same_robot, with_human
 
 __all__ = ["TABLE1_SCENE", "InterferenceConfig", "RunScore", "InterferenceResult", "score_run",
            "ratio_text", "run_interference"]
 
-TABLE1_SCENE = "pr2_two_cups_side"
-"""The scene of the paper's Table I and Fig. 7 (docs/scenes.md says why)."""
 
 PAPER_TABLE1 = {"basic": [24.41, 21.47, 27.52, 24.44, 25.13], "least_penetration": [0.41, 0.49, 0.60, 0.41, 0.74]}
 """The paper's Table I (mean over 10 runs per demonstration)."""

@@ -23,13 +23,10 @@ import numpy as np
 from .heldout import short_name
 from .interference import InterferenceConfig, InterferenceResult, ratio_text, run_interference
 from .planners import Timing
-from .protocol import PAPER, protocol
+from .protocol import DEFAULT_PACES, PAPER, protocol
 
 __all__ = ["PaceConfig", "PacePoint", "PaceResult", "run_pace", "plot_pace", "DEFAULT_PACES", "OPERATING_POINT"]
 
-DEFAULT_PACES = {"product": (0.05, 0.1, 0.25, 0.5, 1.0),
-                 "paper": (0.0125, 0.025, 0.05, 0.1, 0.2)}
-"""Paces per protocol: fractions of the velocity limits (product), path length per step (paper)."""
 
 OPERATING_POINT = {"product": Timing.robot_speed, "paper": PAPER.pace(PAPER.table1_scene)}
 """Each protocol's own pace: the product's default speed and the authors' side-scene pace."""

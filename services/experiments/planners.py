@@ -14,13 +14,15 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from services.planner.core import Planner, PlannerConfig
-from services.planner.costs import CostConfig
-from services.planner.stomp import StompConfig
+from services.planner.config import CostConfig, PlannerConfig, StompConfig
 from shared.scene import Scene
 
 from .protocol import PRODUCT, Protocol
+
+if TYPE_CHECKING:  # the planner (torch, its compiler) is imported to build one, not for foresight eval --help
+    from services.planner.core import Planner
 
 __all__ = ["Variant", "VARIANTS", "Timing", "build_planner"]
 
@@ -105,4 +107,6 @@ def build_planner(scene: Scene, goals: list[str], human_cost: bool, timing: Timi
     cfg = PlannerConfig(goals=list(goals), stomp=stomp, velocity_scale=timing.robot_speed, lookahead_s=0.0, cost=cost,
                         compile=compile, device=device, integrate_costs=p.integrate_costs, goal_choice=p.goal_choice,
                         **extra)
+    from services.planner.core import Planner
+
     return Planner(scene, cfg, robot=robot)

@@ -36,7 +36,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import torch
 
 from shared.runtime import UserError
 
@@ -44,6 +43,15 @@ __all__ = ["PROTOCOLS", "Protocol", "PAPER", "PRODUCT", "protocol", "move3d_path
            "authors_trial", "run_pacing"]
 
 PROTOCOLS = ("product", "paper")
+
+TABLE1_SCENE = "pr2_two_cups_side"
+"""The product protocol's Table I scene."""
+SWITCH_SCENE = "pr2_two_cups_facing"
+"""The goal switch's scene (Fig. 8-9)."""
+DEFAULT_PACES = {"product": (0.05, 0.1, 0.25, 0.5, 1.0),
+                 "paper": (0.0125, 0.025, 0.05, 0.1, 0.2)}
+"""Paces of ``foresight eval pace`` per protocol: fractions of the velocity limits (product), path length per step
+(paper)."""
 
 AUTHORS_TRIALS = {"pr2_two_cups_side_parallel": ("compound_1", (0, 1, 2, 3, 4)),
                   "pr2_two_cups_side": ("compound_1", (0, 1, 2, 3, 4)), "pr2_two_cups_facing": ("compound_3", (2,))}
@@ -176,6 +184,8 @@ def move3d_path_weights(robot: object) -> np.ndarray:
     Returns:
         ``(D,)`` weights (m per rad; 1 for the torso lift).
     """
+    import torch  # here: the protocols load without torch (foresight eval --help)
+
     q = robot.q_start if getattr(robot, "q_start", None) is not None else (robot.lower + robot.upper) / 2
     q = torch.as_tensor(q, dtype=robot.dtype, device=robot.device)
     frames = robot.fk_links(q).double().cpu().numpy()  # (L, 4, 4): root, each joint's child, tool

@@ -37,12 +37,8 @@ from shared.library.report import said_once, say_once
 from shared.native_threads import limit_blas_threads
 from shared.runtime import UserError
 
-from .heldout import SYNTHETIC, library_tag
-from .pace import PaceConfig, PacePoint, PaceResult, plot_pace
 from .planners import Timing
 from .protocol import PROTOCOLS
-from .sections import library_part, library_section, part_names, part_weight
-from .verdicts import summary
 
 __all__ = ["ReportPlan", "QUICK", "FULL", "add_report_arguments", "run_report", "run_parts", "PAPER_LIBRARY"]
 
@@ -156,6 +152,12 @@ def run_report(args: argparse.Namespace) -> int:
 
     Each library's recognition and each protocol run as separate parts in worker processes (:func:`report_workers`).
     """
+    # the experiments load the services and torch: imported to run, not for foresight eval --help
+    from .heldout import SYNTHETIC, library_tag
+    from .pace import PaceConfig, PacePoint, PaceResult, plot_pace
+    from .sections import library_part, library_section, part_names, part_weight
+    from .verdicts import summary
+
     plan = QUICK if args.quick else FULL
     protocols = tuple(p.strip() for p in args.protocols.split(",") if p.strip())
     bad = [p for p in protocols if p not in PROTOCOLS]

@@ -37,13 +37,11 @@ from .heldout import (
 )
 from .measures import body_clearance, contact_summary, postures_at
 from .planners import Timing, build_planner
-from .protocol import authors_trial, move3d_path_weights, protocol, run_pacing
+from .protocol import SWITCH_SCENE, authors_trial, move3d_path_weights, protocol, run_pacing
 
 __all__ = ["SWITCH_SCENE", "SwitchConfig", "SwitchRun", "SwitchResult", "settle_step", "away_step", "run_switch",
            "plot_switch"]
 
-SWITCH_SCENE = "pr2_two_cups_facing"
-"""The scene of the paper's Fig. 8-9."""
 
 METHODS = ("prediction", "current")
 

@@ -21,3 +21,19 @@ def test_counts_and_seeds_out_of_range_are_one_line(tmp_path, capsys, argv, mess
     err = capsys.readouterr().err.strip().splitlines()
     assert stop.value.code == 2 and len(err) == 1 and message in err[0], err
     assert not (tmp_path / "models").exists()  # refused before training
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["interference", "--help"], ["all", "--help"], ["pace", "--help"]])
+def test_the_experiments_help_loads_no_torch(argv) -> None:
+    """`foresight eval --help` took 12 s: the parser imported every experiment (the services, torch) for its defaults
+    and the modules' docstrings. The defaults live in protocol.py and planners.py, the docstrings are read from the
+    source, the experiments are imported to run."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = (f"import sys\nfrom services.experiments.cli import main\ntry:\n    main({argv!r})\nexcept SystemExit:\n"
+            "    pass\nprint('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         cwd=Path(__file__).resolve().parents[3]).stdout
+    assert "usage: foresight eval" in out and out.strip().splitlines()[-1] == "False", out[-500:]
