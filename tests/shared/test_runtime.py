@@ -191,9 +191,9 @@ def test_debug_is_foresights_own_and_other_libraries_stay_at_info() -> None:
 
 
 BUILDING_WITH_A_WORKER = BUILDING.replace(
-    '    time.sleep(600)  # a build that checks no stop event (the planner compiling its kernels)',
+    '    print("building", flush=True)',
     '    import threading\n    threading.Thread(target=time.sleep, args=(600,)).start()  # a worker, not a daemon\n'
-    '    time.sleep(600)')
+    '    print("building", flush=True)  # after the worker started: the signal comes once it runs')
 
 
 def test_a_worker_left_by_a_stopped_build_does_not_hold_the_exit_past_the_grace() -> None:
