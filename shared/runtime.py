@@ -144,13 +144,8 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
     first_at: list[float] = []
 
     def force(why: str, stacks: bool = True) -> None:
-        if restored.is_set():
-            return
-        print(f"{prog or os.path.basename(sys.argv[0]) or 'foresight'}: {why}; exiting with status {FORCED_EXIT}"
-              + (" (stacks of every thread follow)" if stacks else ""), file=sys.stderr, flush=True)
-        if stacks:
-            faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
-        os._exit(FORCED_EXIT)
+        if not restored.is_set():
+            _forced_exit(prog, why, stacks)
 
     def watchdog(signame: str) -> None:
         if not restored.wait(grace):
@@ -298,12 +293,18 @@ def _exit_within(grace_s: float, prog: str) -> None:
     """
     def force() -> None:
         time.sleep(grace_s)
-        print(f"{prog}: did not exit within {grace_s:g} s of stopping while starting; exiting with status "
-              f"{FORCED_EXIT} (stacks of every thread follow)", file=sys.stderr, flush=True)
-        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
-        os._exit(FORCED_EXIT)
+        _forced_exit(prog, f"did not exit within {grace_s:g} s of stopping while starting")
 
     threading.Thread(target=force, name="start-watchdog", daemon=True).start()
+
+
+def _forced_exit(prog: str | None, why: str, stacks: bool = True) -> None:
+    """Say why in one line (with every thread's stack: where it was stuck) and exit with :data:`FORCED_EXIT` now."""
+    print(f"{prog or os.path.basename(sys.argv[0]) or 'foresight'}: {why}; exiting with status {FORCED_EXIT}"
+          + (" (stacks of every thread follow)" if stacks else ""), file=sys.stderr, flush=True)
+    if stacks:
+        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+    os._exit(FORCED_EXIT)
 
 
 def lower_priority(nice: int) -> None:

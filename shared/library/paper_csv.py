@@ -236,12 +236,18 @@ def _parse_class(p: Path, lines: list[tuple[int, str]], label: int, name: str, n
     return demos, issues
 
 
+def _class_number(p: Path) -> int | None:
+    """The number of a ``compound_<m>.csv`` class file (None: not numbered so)."""
+    m = re.fullmatch(r"compound_(\d+)", p.stem)
+    return int(m.group(1)) if m else None
+
+
 def _class_files(directory: Path) -> list[Path]:
     files = list(directory.glob("compound_*.csv"))
     if files:
         def key(p: Path) -> tuple[int, str]:
-            m = re.fullmatch(r"compound_(\d+)", p.stem)
-            return (int(m.group(1)) if m else 1 << 30, p.name)
+            n = _class_number(p)
+            return (1 << 30 if n is None else n, p.name)
         return sorted(files, key=key)
     return sorted(directory.glob("*.csv"))
 
@@ -302,7 +308,7 @@ def _unread(directory: Path, files: list[Path]) -> list[LibraryIssue]:
     Both passed without a word: ``reach_a.csv`` beside ``compound_1.csv`` was not read, and without
     ``compound_1.csv`` the classes are numbered in their files' order, so class 1 is ``compound_2``.
     """
-    numbers = {f: int(m.group(1)) for f in files if (m := re.fullmatch(r"compound_(\d+)", f.stem))}
+    numbers = {f: n for f in files if (n := _class_number(f)) is not None}
     if not numbers:
         return []
     out = [LibraryIssue(f.stem, -1, f"{f.name} not read: beside compound_<m>.csv files only those are the "
