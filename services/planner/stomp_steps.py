@@ -79,7 +79,8 @@ def update(theta: torch.Tensor, eps: torch.Tensor, cost: torch.Tensor, best_cost
     Args:
         theta: ``(K, N, D)`` current free waypoints.
         eps: ``(K, R, N, D)`` the noise applied to the rollouts.
-        cost: ``(K, R + 1, N + 2)`` per-waypoint cost (row 0: ``theta``); NaN/inf count as very costly.
+        cost: ``(K, R + 1, N + 2)`` per-waypoint cost (row 0: ``theta``); NaN/inf count as very costly, and a
+            rollout with one takes no part in the update.
         best_cost: ``(K,)`` the least total cost so far.
         best_theta: ``(K, N, D)`` its waypoints.
         lower: ``(D,)`` lower joint limits.
@@ -91,6 +92,7 @@ def update(theta: torch.Tensor, eps: torch.Tensor, cost: torch.Tensor, best_cost
     Returns:
         ``(theta', total (K,) cost of theta, best_cost', best_theta')``.
     """
+    ok = torch.isfinite(cost[:, 1:, 1:]).all(-1, keepdim=True)  # (K, R, 1): the rollouts costed finite
     cost = finite(cost)
     total = cost[:, 0].sum(-1)  # (K,)
     better = total < best_cost
@@ -98,9 +100,12 @@ def update(theta: torch.Tensor, eps: torch.Tensor, cost: torch.Tensor, best_cost
     best_theta = torch.where(better[:, None, None], theta, best_theta)
     # S(r, i) = sum_{j >= i} q(r, j) (goal included), or the free waypoints' own costs
     s = cost[:, 1:, 1:] @ to_go if to_go is not None else cost[:, 1:, 1:-1]  # (K, R, N)
-    # 3. probabilities per waypoint over the rollouts
-    s_min, s_max = s.amin(1, keepdim=True), s.amax(1, keepdim=True)
-    p = torch.softmax(-sensitivity * (s - s_min) / (s_max - s_min).clamp_min(1e-12), dim=1)
+    # 3. probabilities per waypoint over the rollouts costed finite (none: no update); a NaN/inf rollout scaled
+    # among them would stretch the range (s_max - s_min) so far that every other rollout weighed the same
+    s_min = torch.where(ok, s, torch.inf).amin(1, keepdim=True)
+    s_max = torch.where(ok, s, -torch.inf).amax(1, keepdim=True)
+    scaled = -sensitivity * (s - s_min) / (s_max - s_min).clamp_min(1e-12)
+    p = torch.softmax(torch.where(ok, scaled, -torch.inf), dim=1).nan_to_num(0.0)
     # 4. update: probability-weighted noise, smoothed by M, kept within the limits
     delta = torch.matmul(m, (p[..., None] * eps).sum(1))  # (K, N, D)
     return torch.clamp(theta + delta, lower, upper), total, best_cost, best_theta

@@ -77,3 +77,47 @@ def test_advance_is_the_three_steps_in_order_eager_and_compiled(keep: int, kept:
         for i, (x, y) in enumerate(zip(got, want, strict=True)):
             assert (x is None and y is None) or torch.equal(x, y), f"result {i} differs"
     assert (want[4] is None) == (keep == 0)  # the kept rollouts: only with reuse
+
+
+def _update_args(cost: torch.Tensor, eps: torch.Tensor, to_go: bool) -> dict:
+    """``update``'s arguments for K = 1, N = 6 free waypoints, D = 2 around ``cost (1, R + 1, 8)``."""
+    f = torch.float64
+    return {"theta": torch.full((1, 6, 2), 0.5, dtype=f), "eps": eps, "cost": cost,
+            "best_cost": torch.tensor([math.inf], dtype=f), "best_theta": torch.zeros(1, 6, 2, dtype=f),
+            "lower": torch.zeros(2, dtype=f), "upper": torch.ones(2, dtype=f), "m": torch.eye(6, dtype=f) / 2,
+            "to_go": torch.tril(torch.ones(7, 6, dtype=f)) if to_go else None, "sensitivity": 10.0}
+
+
+@pytest.mark.parametrize("to_go", [True, False])
+def test_a_non_finite_rollout_takes_no_part_and_the_others_weigh_as_without_it(to_go: bool) -> None:
+    g = torch.Generator().manual_seed(2)
+    f = torch.float64
+    cost, eps = torch.rand(1, 5, 8, generator=g, dtype=f), 0.1 * torch.randn(1, 4, 6, 2, generator=g, dtype=f)
+    without = update(**_update_args(cost[:, [0, 1, 2, 4]], eps[:, [0, 1, 3]], to_go))[0]
+    for bad in (float("nan"), math.inf):
+        spoilt = cost.clone()
+        spoilt[0, 3, :] = bad  # rollout 2 (row 3): non-finite at every waypoint
+        got = update(**_update_args(spoilt, eps, to_go))[0]
+        torch.testing.assert_close(got, without)  # before: the others all weighed 1/4, whatever their costs
+
+
+def test_a_rollout_non_finite_at_one_waypoint_takes_no_part_anywhere() -> None:
+    g = torch.Generator().manual_seed(3)
+    f = torch.float64
+    cost, eps = torch.rand(1, 5, 8, generator=g, dtype=f), 0.1 * torch.randn(1, 4, 6, 2, generator=g, dtype=f)
+    spoilt = cost.clone()
+    spoilt[0, 3, 4] = math.nan  # rollout 2 at free waypoint 3 (index 4 of 8: the start is index 0)
+    for to_go in (True, False):
+        got = update(**_update_args(spoilt, eps, to_go))[0]
+        torch.testing.assert_close(got, update(**_update_args(cost[:, [0, 1, 2, 4]], eps[:, [0, 1, 3]], to_go))[0])
+
+
+def test_no_finite_rollout_leaves_the_trajectory_where_it_was() -> None:
+    g = torch.Generator().manual_seed(4)
+    f = torch.float64
+    cost, eps = torch.rand(1, 5, 8, generator=g, dtype=f), 0.1 * torch.randn(1, 4, 6, 2, generator=g, dtype=f)
+    cost[0, 1:] = math.nan
+    for to_go in (True, False):
+        args = _update_args(cost, eps, to_go)
+        got, total = update(**args)[:2]
+        assert torch.equal(got, args["theta"]) and torch.isfinite(total).all()
