@@ -4,7 +4,7 @@
   certificate per role (``shared.security.acl.ROLES``) in DIR; run again, it re-issues the role certificates
   under the same authority and for the same hosts unless ``--hosts`` is given (rotation; ``--new-ca``
   replaces the authority).
-* ``foresight security acl [--prefix P]``: the generated ``access_control`` section (JSON), e.g. for
+* ``foresight security acl [--prefix P] [--zenoh-mode M]``: the generated ``access_control`` section (JSON), e.g. for
   a zenohd router's config file.
 * ``foresight security check DIR [--role R]``: each certificate found (a machine holds its own roles'),
   its validity, its hosts and whether it verifies against the directory's CA.
@@ -25,7 +25,7 @@ from pathlib import Path
 from shared.config import check_prefix
 from shared.protocol import Keys
 from shared.runtime import UserError, cli_errors, help_text
-from shared.security.acl import ROLES, access_control
+from shared.security.acl import ROLES, access_control, remote_roles
 from shared.security.certificates import (
     CA_DAYS,
     certificate_hosts,
@@ -69,7 +69,7 @@ def _init(args: argparse.Namespace) -> int:
 
 def _acl(args: argparse.Namespace) -> int:
     check_prefix(args.prefix, "--prefix")  # what every service refuses: a rule under it would grant another space
-    print(json.dumps({"access_control": access_control(Keys(args.prefix))}, indent=2))
+    print(json.dumps({"access_control": access_control(Keys(args.prefix), remote_roles(args.zenoh_mode))}, indent=2))
     return 0
 
 
@@ -118,6 +118,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight security") -> int
     p.add_argument("--new-ca", action="store_true", help="make a new authority even if DIR has one")
     p = sub.add_parser("acl", help=SUBCOMMANDS["acl"])
     p.add_argument("--prefix", default="foresight", help="key-expression prefix (default: foresight)")
+    p.add_argument("--zenoh-mode", default="router", choices=("router", "peer", "client"),
+                   help="the session's mode: a client's rules name its router only (default: router, every role)")
     p = sub.add_parser("check", help=SUBCOMMANDS["check"])
     p.add_argument("dir", type=Path, help="security directory")
     p.add_argument("--role", default=None, help="check this role only (default: every role with files in DIR)")

@@ -19,17 +19,19 @@ forwards all); every role may watch the tokens (``declare_liveliness_subscriber`
 ``liveliness_query``, its ``reply``). The sensor and the observer declare no token; the observer puts nothing.
 
 What a router certificate can do follows from forwarding: it may send any key. A stolen role key
-acts as that role (docs/security.md).
+acts as that role (docs/security.md). A client session's rules name the router only (:func:`remote_roles`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from shared.config_tree import ConfigError
 from shared.protocol import SENSOR, SERVICES, Keys
 
-__all__ = ["ROLES", "ROUTER", "OBSERVER", "access_control", "owned_keys", "consumed_keys", "subscription_exprs"]
+__all__ = ["ROLES", "ROUTER", "OBSERVER", "access_control", "remote_roles", "owned_keys", "consumed_keys",
+           "subscription_exprs"]
 
 ROUTER = "router"
 OBSERVER = "observer"
@@ -85,8 +87,15 @@ def _rule(rule_id: str, messages: list[str], flows: list[str], key_exprs: list[s
     return {"id": rule_id, "permission": "allow", "messages": messages, "flows": flows, "key_exprs": key_exprs}
 
 
-def access_control(keys: Keys) -> dict[str, Any]:
+def access_control(keys: Keys, remotes: Sequence[str] = ROLES) -> dict[str, Any]:
     """The ``access_control`` section of a Zenoh config for the keys under ``keys.prefix``.
+
+    Args:
+        keys: The wire contract's keys.
+        remotes: The roles this session may exchange anything with; a remote presenting another role's
+            certificate gets nothing and is heard in nothing (``default_permission``). A client session talks to
+            its router only (:func:`remote_roles`): a machine answering at the router's address with another
+            role's certificate (every certificate names the same hosts) reads none of its puts.
 
     Returns:
         A JSON-ready dict: ``enabled``, ``default_permission`` (deny), ``rules``, ``subjects`` (one
@@ -117,10 +126,20 @@ def access_control(keys: Keys) -> dict[str, Any]:
             grant(role, _rule(f"{role}: presence in", ["liveliness_token"], ["ingress"], [keys.alive(role)]))
         elif role == ROUTER:
             grant(role, _rule("router: presence in", ["liveliness_token"], ["ingress"], [keys.alive_all]))
+    unknown = [r for r in remotes if r not in ROLES]
+    if unknown or not remotes:
+        raise ValueError(f"access_control: remotes {list(remotes)} must be roles of {', '.join(ROLES)}")
+    used = {rule_id for role in remotes for rule_id in policies[role]}
     return {
         "enabled": True,
         "default_permission": "deny",
-        "rules": rules,
-        "subjects": [{"id": role, "cert_common_names": [role]} for role in ROLES],
-        "policies": [{"id": role, "rules": ids, "subjects": [role]} for role, ids in policies.items()],
+        "rules": [rule for rule in rules if rule["id"] in used],
+        "subjects": [{"id": role, "cert_common_names": [role]} for role in ROLES if role in remotes],
+        "policies": [{"id": role, "rules": ids, "subjects": [role]} for role, ids in policies.items()
+                     if role in remotes],
     }
+
+
+def remote_roles(mode: str) -> tuple[str, ...]:
+    """The roles a session in Zenoh ``mode`` exchanges anything with: a client its router only, else every role."""
+    return (ROUTER,) if mode == "client" else ROLES

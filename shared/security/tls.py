@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from shared.loopback import is_loopback
 from shared.protocol import Keys
 
-from .acl import OBSERVER, access_control
+from .acl import OBSERVER, access_control, remote_roles
 from .certificates import certificate_hosts, read_role, verify_role
 
 if TYPE_CHECKING:
@@ -109,7 +109,8 @@ def security_settings(cfg: ZenohConfig) -> tuple[list[str], list[str], dict[str,
     """A session's endpoints and the Zenoh config entries its security asks for.
 
     With ``cfg.security_dir``: endpoints on TLS, ``transport/link/tls`` (mutual TLS with the role's
-    certificate) and ``access_control`` (generated from the wire contract). Without: the endpoints as
+    certificate) and ``access_control`` (generated from the wire contract; in client mode for the router only, the
+    one remote a client has). Without: the endpoints as
     given and no entries (:func:`insecure_listen_warning` says, once per session, when they listen beyond
     loopback).
 
@@ -121,5 +122,5 @@ def security_settings(cfg: ZenohConfig) -> tuple[list[str], list[str], dict[str,
         return listen, connect, {}
     return secure_endpoints(listen), secure_endpoints(connect), {
         "transport/link/tls": tls_settings(cfg.security_dir, cfg.role or OBSERVER),
-        "access_control": access_control(Keys(cfg.prefix)),
+        "access_control": access_control(Keys(cfg.prefix), remote_roles(cfg.mode)),
     }

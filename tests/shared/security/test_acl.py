@@ -7,7 +7,16 @@ import importlib
 import pytest
 
 from shared.protocol import HUMAN_SOURCES, ROUTES, SENSOR, SERVICES, Keys
-from shared.security.acl import OBSERVER, ROLES, ROUTER, access_control, consumed_keys, owned_keys, subscription_exprs
+from shared.security.acl import (
+    OBSERVER,
+    ROLES,
+    ROUTER,
+    access_control,
+    consumed_keys,
+    owned_keys,
+    remote_roles,
+    subscription_exprs,
+)
 from shared.security.certificates import init_security_dir
 
 KEYS = Keys("cell")
@@ -50,6 +59,19 @@ def test_each_role_puts_only_what_it_owns_and_receives_what_it_consumes() -> Non
     assert _rules_of(acl, OBSERVER, "liveliness_token", "ingress") == set()
     assert _rules_of(acl, OBSERVER, "put", "egress") == set(KEYS.data_keys())
     assert _rules_of(acl, ROUTER, "put", "ingress") == set(KEYS.data_keys())  # it forwards
+
+
+def test_a_client_session_names_its_router_only() -> None:
+    every, client = access_control(KEYS, remote_roles("peer")), access_control(KEYS, remote_roles("client"))
+    assert remote_roles("router") == remote_roles("peer") == ROLES and remote_roles("client") == (ROUTER,)
+    assert [s["id"] for s in client["subjects"]] == [ROUTER] and [p["id"] for p in client["policies"]] == [ROUTER]
+    assert client["default_permission"] == "deny"  # any other certificate: nothing either way
+    for message, flow in (("put", "ingress"), ("put", "egress"), ("declare_subscriber", "ingress"),
+                          ("liveliness_token", "ingress")):
+        assert _rules_of(client, ROUTER, message, flow) == _rules_of(every, ROUTER, message, flow)
+    assert {r["id"] for r in client["rules"]} == set(client["policies"][0]["rules"])  # no rule left unused
+    with pytest.raises(ValueError, match="remotes"):
+        access_control(KEYS, ("robot",))
 
 
 def test_wildcard_subscriptions_only_where_every_matched_key_is_consumed() -> None:
