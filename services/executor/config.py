@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from services.ros2.core import ros_domain_id
+from services.ros2.core import UNREADABLE_DOMAIN, check_domain_id, ros_domain_id
 from services.ros2.wire import topic_problem
 from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.config_names import check_services
@@ -115,8 +115,8 @@ class ExecutorConfig:
             raise ConfigError(f"executor.path_weights: must be finite and > 0, got {self.path_weights}")
         for name in ("wait_for", "hold_without"):
             check_services(getattr(self, name), f"executor.{name}", [s for s in SERVICES if s != "executor"])
-        if not 0 <= self.ros2_domain_id <= 232:
-            raise ConfigError(f"executor.ros2_domain_id: must be 0..232, got {self.ros2_domain_id}")
+        if self.robot == "ros2" or self.ros2_domain_id != UNREADABLE_DOMAIN:  # the shell's ROS_DOMAIN_ID: if used
+            check_domain_id(self.ros2_domain_id, "executor.ros2_domain_id", "--ros2-domain-id")
         check_robot_names(self.ros2_controller, self.ros2_joint_states, "executor.ros2_")
         if not 0 <= self.live_port <= 65535:
             raise ConfigError(f"executor.live_port: must be a port 1..65535 (0: off), got {self.live_port}")

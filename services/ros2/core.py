@@ -33,8 +33,8 @@ from shared.protocol import ClassPosterior, HumanPose, OccupancyGrid, Plan, Robo
 
 from .wire import data_key
 
-__all__ = ["Ros2Config", "ros_domain_id", "Ros2Mapping", "Topic", "TOPICS", "ROBOT_TYPES", "KEYPOINTS_TYPE",
-           "Ros2InputError"]
+__all__ = ["Ros2Config", "ros_domain_id", "check_domain_id", "UNREADABLE_DOMAIN", "Ros2Mapping", "Topic", "TOPICS",
+           "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError"]
 
 STORE = "ros2_jazzy"
 """The rosbags type store the message definitions and hashes come from (ROS 2 Jazzy)."""
@@ -74,21 +74,44 @@ _ROS_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 """A ROS 2 node name or one namespace token (https://design.ros2.org/articles/topic_and_service_names.html)."""
 
 
+UNREADABLE_DOMAIN = -1
+"""The default domain id when ``ROS_DOMAIN_ID`` holds no domain id: :func:`check_domain_id` names the variable."""
+
+
 def ros_domain_id(env: Mapping[str, str] | None = None) -> int:
     """The ROS 2 domain of this shell: ``ROS_DOMAIN_ID`` as ROS 2's own tools read it (0 when unset or empty).
 
     A shell set up for ROS 2 runs Foresight's nodes on the domain its ``ros2`` commands use; a
-    ``FORESIGHT_*_DOMAIN_ID`` variable, the config file or ``--domain-id`` still take precedence.
-
-    Raises:
-        ConfigError: ``ROS_DOMAIN_ID`` is set to something that is not a domain id (0..232).
+    ``FORESIGHT_*_DOMAIN_ID`` variable, the config file or ``--domain-id`` still take precedence. A value that is not
+    a domain id (0..232) gives :data:`UNREADABLE_DOMAIN`, refused by :func:`check_domain_id` where a command speaks
+    ROS 2 and no option overrides it; an option table's default must not fail (``--help`` would).
     """
     raw = (os.environ if env is None else env).get("ROS_DOMAIN_ID", "").strip()
     if not raw:
         return 0
     if not raw.isdigit() or not raw.isascii() or int(raw) > 232:
-        raise ConfigError(f"ROS_DOMAIN_ID={raw!r}: not a ROS 2 domain id (0..232)")
+        return UNREADABLE_DOMAIN
     return int(raw)
+
+
+def check_domain_id(value: int, option: str, flag: str) -> None:
+    """Refuse a domain id outside 0..232, naming ``ROS_DOMAIN_ID`` when the value is its unreadable default.
+
+    Args:
+        value: The domain id configured.
+        option: Its config name (``ros2.domain_id``).
+        flag: The flag that overrides it (``--domain-id``).
+
+    Raises:
+        ConfigError: The value is no domain id.
+    """
+    if 0 <= value <= 232:
+        return
+    raw = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if value == UNREADABLE_DOMAIN and raw and ros_domain_id() == UNREADABLE_DOMAIN:
+        raise ConfigError(f"ROS_DOMAIN_ID={raw!r}: not a ROS 2 domain id (0..232), and {option} takes it; set it "
+                          f"right, unset it, or give {flag} N")
+    raise ConfigError(f"{option}: must be 0..232, got {value}")
 
 
 @dataclass
@@ -107,8 +130,7 @@ class Ros2Config:
 
     def validate(self) -> None:
         """Check ranges and names."""
-        if not 0 <= self.domain_id <= 232:
-            raise ConfigError(f"ros2.domain_id: must be 0..232, got {self.domain_id}")
+        check_domain_id(self.domain_id, "ros2.domain_id", "--domain-id")
         parts = self.namespace.rstrip("/")[1:].split("/") if self.namespace != "/" else []  # '//a': an empty part
         if not self.namespace.startswith("/") or not all(_ROS_NAME.fullmatch(p) for p in parts):
             raise ConfigError(f"ros2.namespace: '/' or /name/... with names of letters, digits and '_' not "

@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from services.ros2.core import ros_domain_id
+from services.ros2.core import UNREADABLE_DOMAIN, check_domain_id, ros_domain_id
 from services.ros2.wire import topic_problem
 from shared.config import LOG_LEVELS, ConfigError, nested, opt
 from shared.config_names import check_services
@@ -81,8 +81,8 @@ class TrackerServiceConfig:
         problem = topic_problem(self.ros2_topic)
         if problem:
             raise ConfigError(f"tracker.ros2_topic: {problem}")
-        if not (0 <= self.ros2_domain_id <= 232):
-            raise ConfigError(f"tracker.ros2_domain_id: must be 0..232, got {self.ros2_domain_id}")
+        if self.input == "ros2" or self.ros2_domain_id != UNREADABLE_DOMAIN:  # the shell's ROS_DOMAIN_ID: if used
+            check_domain_id(self.ros2_domain_id, "tracker.ros2_domain_id", "--ros2-domain-id")
         if len(set(self.ros2_points)) != len(self.ros2_points):
             raise ConfigError(f"tracker.ros2_points: names repeated: {self.ros2_points}")
         layout = load_layout(self.tracker.layout)
