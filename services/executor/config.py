@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from services.ros2.core import UNREADABLE_DOMAIN, check_domain_id, ros_domain_id
+from services.ros2.domain import UNREADABLE_DOMAIN, check_domain_id, ros_domain_id
 from services.ros2.wire import topic_problem
 from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.config_names import check_services

@@ -20,9 +20,7 @@ Frames: everything in the scene's frame, ``frame_id`` (default ``world``, as in 
 
 from __future__ import annotations
 
-import os
 import re
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,10 +29,11 @@ import numpy as np
 from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.protocol import ClassPosterior, HumanPose, OccupancyGrid, Plan, RobotState
 
+from .domain import check_domain_id, ros_domain_id
 from .wire import data_key
 
-__all__ = ["Ros2Config", "ros_domain_id", "check_domain_id", "UNREADABLE_DOMAIN", "Ros2Mapping", "Topic", "TOPICS",
-           "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError"]
+__all__ = ["Ros2Config", "Ros2Mapping", "Topic", "TOPICS",
+           "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError", "seconds_in", "time_msg"]
 
 STORE = "ros2_jazzy"
 """The rosbags type store the message definitions and hashes come from (ROS 2 Jazzy)."""
@@ -72,46 +71,6 @@ KEYPOINTS_TYPE = "geometry_msgs/msg/PoseArray"
 
 _ROS_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 """A ROS 2 node name or one namespace token (https://design.ros2.org/articles/topic_and_service_names.html)."""
-
-
-UNREADABLE_DOMAIN = -1
-"""The default domain id when ``ROS_DOMAIN_ID`` holds no domain id: :func:`check_domain_id` names the variable."""
-
-
-def ros_domain_id(env: Mapping[str, str] | None = None) -> int:
-    """The ROS 2 domain of this shell: ``ROS_DOMAIN_ID`` as ROS 2's own tools read it (0 when unset or empty).
-
-    A shell set up for ROS 2 runs Foresight's nodes on the domain its ``ros2`` commands use; a
-    ``FORESIGHT_*_DOMAIN_ID`` variable, the config file or ``--domain-id`` still take precedence. A value that is not
-    a domain id (0..232) gives :data:`UNREADABLE_DOMAIN`, refused by :func:`check_domain_id` where a command speaks
-    ROS 2 and no option overrides it; an option table's default must not fail (``--help`` would).
-    """
-    raw = (os.environ if env is None else env).get("ROS_DOMAIN_ID", "").strip()
-    if not raw:
-        return 0
-    if not raw.isdigit() or not raw.isascii() or int(raw) > 232:
-        return UNREADABLE_DOMAIN
-    return int(raw)
-
-
-def check_domain_id(value: int, option: str, flag: str) -> None:
-    """Refuse a domain id outside 0..232, naming ``ROS_DOMAIN_ID`` when the value is its unreadable default.
-
-    Args:
-        value: The domain id configured.
-        option: Its config name (``ros2.domain_id``).
-        flag: The flag that overrides it (``--domain-id``).
-
-    Raises:
-        ConfigError: The value is no domain id.
-    """
-    if 0 <= value <= 232:
-        return
-    raw = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    if value == UNREADABLE_DOMAIN and raw and ros_domain_id() == UNREADABLE_DOMAIN:
-        raise ConfigError(f"ROS_DOMAIN_ID={raw!r}: not a ROS 2 domain id (0..232), and {option} takes it; set it "
-                          f"right, unset it, or give {flag} N")
-    raise ConfigError(f"{option}: must be 0..232, got {value}")
 
 
 @dataclass
@@ -162,7 +121,8 @@ def _sec_nanosec(seconds: float) -> tuple[int, int]:
     return divmod(int(round(seconds * 1e9)), 10**9)
 
 
-def _stamp(ts: Any, seconds: float) -> Any:
+def time_msg(ts: Any, seconds: float) -> Any:
+    """A ``builtin_interfaces/msg/Time`` of ``seconds``, rounded to the nanosecond (``ts``: the type store)."""
     sec, nanosec = _sec_nanosec(seconds)
     return ts.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
@@ -170,6 +130,18 @@ def _stamp(ts: Any, seconds: float) -> Any:
 def _duration(ts: Any, seconds: float) -> Any:
     sec, nanosec = _sec_nanosec(seconds)
     return ts.types["builtin_interfaces/msg/Duration"](sec=sec, nanosec=nanosec)
+
+
+def seconds_in(time: Any, what: str) -> float:
+    """Seconds of a received ``builtin_interfaces`` ``Time`` or ``Duration``; ``what`` names the field.
+
+    Raises:
+        Ros2InputError: ``nanosec`` outside [0, 1e9), which the message definition excludes (1.5e9 would be
+            read as 1.5 s more than the sender's clock library means).
+    """
+    if not 0 <= time.nanosec < 10**9:
+        raise Ros2InputError(f"{what}: nanosec {time.nanosec} outside 0..999999999 (sec {time.sec})")
+    return time.sec + time.nanosec * 1e-9
 
 
 class Ros2Mapping:
@@ -195,7 +167,7 @@ class Ros2Mapping:
         return data_key(self.config.domain_id, self.config.topic(role), t.msgtype, self.hashes[t.msgtype])
 
     def _header(self, stamp: float) -> Any:
-        return self.ts.types["std_msgs/msg/Header"](stamp=_stamp(self.ts, stamp), frame_id=self.config.frame_id)
+        return self.ts.types["std_msgs/msg/Header"](stamp=time_msg(self.ts, stamp), frame_id=self.config.frame_id)
 
     def _cdr(self, msg: Any, msgtype: str) -> bytes:
         return bytes(self.ts.serialize_cdr(msg, msgtype))
@@ -243,7 +215,7 @@ class Ros2Mapping:
 
     def clock(self, t: float) -> bytes:
         """Simulated time as ``rosgraph_msgs/Clock`` (what ROS 2 nodes with ``use_sim_time`` follow)."""
-        return self._cdr(self.ts.types["rosgraph_msgs/msg/Clock"](clock=_stamp(self.ts, t)), ROBOT_TYPES["clock"])
+        return self._cdr(self.ts.types["rosgraph_msgs/msg/Clock"](clock=time_msg(self.ts, t)), ROBOT_TYPES["clock"])
 
     def joint_state_of(self, joint_names: list[str], q: np.ndarray, qd: np.ndarray, stamp: float) -> bytes:
         """A robot's ``JointState`` (positions, velocities) at ``stamp``."""
@@ -327,8 +299,8 @@ class Ros2Mapping:
         common on real robots; not an error.
 
         Raises:
-            Ros2InputError: Not a JointState, some but not all joints of ``joint_names``, lengths that disagree,
-                NaN.
+            Ros2InputError: Not a JointState, some but not all joints of ``joint_names``, one of them repeated,
+                lengths that disagree, NaN, a stamp's nanosec outside [0, 1e9).
         """
         msg = self.decode(payload, "sensor_msgs/msg/JointState")
         names = list(msg.name)
@@ -340,12 +312,15 @@ class Ros2Mapping:
             return None
         if missing:
             raise Ros2InputError(f"JointState: joints {missing} missing (has {names})")
+        repeated = sorted({n for n in joint_names if names.count(n) > 1})
+        if repeated:
+            raise Ros2InputError(f"JointState: joints {repeated} repeated (which value holds?)")
         order = [names.index(n) for n in joint_names]
         q, qd = pos[order], (vel[order] if len(vel) else np.zeros(len(order)))
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
             bad = [n for n, v, w in zip(joint_names, q, qd, strict=True) if not (np.isfinite(v) and np.isfinite(w))]
             raise Ros2InputError(f"JointState: non-finite position or velocity of {bad}")
-        return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, q, qd
+        return seconds_in(msg.header.stamp, "JointState: header.stamp"), q, qd
 
     def trajectory_in(self, payload: bytes, joint_names: list[str]) -> tuple[list[int], np.ndarray, np.ndarray]:
         """A ``JointTrajectory`` command for a controller of ``joint_names``: ``(columns, positions, times)``.
@@ -373,7 +348,8 @@ class Ros2Mapping:
         if any(len(p.positions) != len(names) for p in msg.points):
             raise Ros2InputError(f"JointTrajectory: a point without {len(names)} positions")
         positions = np.array([p.positions for p in msg.points], dtype=np.float64).reshape(-1, len(names))
-        times = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points])
+        times = np.array([seconds_in(p.time_from_start, f"JointTrajectory: point {i} time_from_start")
+                          for i, p in enumerate(msg.points)])
         if not np.all(np.isfinite(positions)):
             raise Ros2InputError("JointTrajectory: non-finite positions")
         if np.any(np.diff(times) <= 0) or (len(times) and times[0] < 0):
@@ -382,8 +358,7 @@ class Ros2Mapping:
 
     def clock_in(self, payload: bytes) -> float:
         """Seconds of a ``rosgraph_msgs/Clock``."""
-        stamp = self.decode(payload, ROBOT_TYPES["clock"]).clock
-        return stamp.sec + stamp.nanosec * 1e-9
+        return seconds_in(self.decode(payload, ROBOT_TYPES["clock"]).clock, "Clock: clock")
 
     def robot_key(self, topic: str, role: str, type_hash: str | None = None) -> str:
         """The data key of a robot topic (``role`` in :data:`ROBOT_TYPES`); ``type_hash="*"`` matches any hash."""

@@ -13,12 +13,11 @@ The convention the tracker takes (docs/keypoints.md):
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
-from .core import KEYPOINTS_TYPE, Ros2InputError, Ros2Mapping
+from .core import KEYPOINTS_TYPE, Ros2InputError, Ros2Mapping, seconds_in, time_msg
 
 __all__ = ["keypoints_in", "keypoints_out"]
 
@@ -34,15 +33,13 @@ def keypoints_in(mapping: Ros2Mapping, payload: bytes, n_points: int) -> tuple[f
         raise Ros2InputError(f"PoseArray: {len(msg.poses)} poses, the tracker's point order has {n_points} "
                              "([tracker] ros2_points)")
     positions = np.array([[p.position.x, p.position.y, p.position.z] for p in msg.poses], dtype=np.float64)
-    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, str(msg.header.frame_id), positions.reshape(-1, 3)
+    return seconds_in(msg.header.stamp, "PoseArray: header.stamp"), str(msg.header.frame_id), positions.reshape(-1, 3)
 
 
 def keypoints_out(mapping: Ros2Mapping, positions: np.ndarray, stamp: float, frame_id: str) -> bytes:
     """``positions (J, 3)`` (NaN where lost) as a ``PoseArray`` at ``stamp`` (s) in ``frame_id`` (no rotations)."""
     t = mapping.ts.types
-    sec = math.floor(stamp)
-    header = t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=int((stamp - sec) * 1e9)),
-                                      frame_id=frame_id)
+    header = t["std_msgs/msg/Header"](stamp=time_msg(mapping.ts, stamp), frame_id=frame_id)
 
     def pose(p: np.ndarray) -> Any:
         return t["geometry_msgs/msg/Pose"](position=t["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]),

@@ -28,7 +28,8 @@ from shared.scene import SCENE_HELP, load_scene
 from shared.transport import Presence, open_session
 
 from .controller import SimulatedController
-from .core import ROBOT_TYPES, Ros2Config, Ros2Mapping, ros_domain_id
+from .core import ROBOT_TYPES, Ros2Config, Ros2Mapping
+from .domain import ros_domain_id
 from .node import Ros2Node
 
 __all__ = ["RobotSimConfig", "RobotSim"]

@@ -27,3 +27,14 @@ def test_pose_array_of_another_size_or_type_is_refused() -> None:
         keypoints_in(mapping, payload, 3)
     with pytest.raises(Ros2InputError, match="PoseArray"):
         keypoints_in(mapping, mapping.clock(1.0), 3)
+
+
+def test_a_stamp_is_rounded_to_the_nanosecond_and_an_invalid_one_is_refused() -> None:
+    """Out: rounded as every other ROS 2 time (it was truncated: 2.9999999999999996 went out as 2.999999999 s)."""
+    mapping = Ros2Mapping(Ros2Config())
+    msg = mapping.ts.deserialize_cdr(keypoints_out(mapping, np.zeros((1, 3)), 2.9999999999999996, "recorder"),
+                                     KEYPOINTS_TYPE)
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (3, 0)
+    msg.header.stamp.nanosec = 1_200_000_000
+    with pytest.raises(Ros2InputError, match="PoseArray: header.stamp: nanosec 1200000000"):
+        keypoints_in(mapping, bytes(mapping.ts.serialize_cdr(msg, KEYPOINTS_TYPE)), 1)
