@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from services.ros2.domain import UNREADABLE_DOMAIN, check_domain_id, ros_domain_id
-from services.ros2.wire import topic_problem
+from services.ros2.wire import ROS_NAME, topic_problem
 from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.config_names import check_services
 from shared.devices import check_device
@@ -27,8 +27,9 @@ def check_robot_names(controller: str, joint_states: str, prefix: str) -> None:
     Raises:
         ConfigError: Named ``<prefix>controller`` or ``<prefix>joint_states`` (e.g. ``executor.ros2_controller``).
     """
-    if not controller or any(c in controller for c in "/*$?# "):
-        raise ConfigError(f"{prefix}controller: a controller name (no '/'), got {controller!r}")
+    if not ROS_NAME.fullmatch(controller):
+        raise ConfigError(f"{prefix}controller: a controller name of letters, digits and '_', not starting with a "
+                          f"digit (ROS 2's rule for a name; no '/'), got {controller!r}")
     problem = topic_problem(joint_states)
     if problem:
         raise ConfigError(f"{prefix}joint_states: {problem}")

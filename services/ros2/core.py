@@ -20,7 +20,6 @@ Frames: everything in the scene's frame, ``frame_id`` (default ``world``, as in 
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,7 +29,7 @@ from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.protocol import ClassPosterior, HumanPose, OccupancyGrid, Plan, RobotState
 
 from .domain import check_domain_id, ros_domain_id
-from .wire import data_key
+from .wire import ROS_NAME, data_key
 
 __all__ = ["Ros2Config", "Ros2Mapping", "Topic", "TOPICS",
            "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError", "seconds_in", "time_msg"]
@@ -69,8 +68,6 @@ KEYPOINTS_TYPE = "geometry_msgs/msg/PoseArray"
 """A body tracker's keypoints, as the tracker takes them from ROS 2 (:mod:`services.ros2.keypoints`)."""
 
 
-_ROS_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-"""A ROS 2 node name or one namespace token (https://design.ros2.org/articles/topic_and_service_names.html)."""
 
 
 @dataclass
@@ -91,10 +88,10 @@ class Ros2Config:
         """Check ranges and names."""
         check_domain_id(self.domain_id, "ros2.domain_id", "--domain-id")
         parts = self.namespace.rstrip("/")[1:].split("/") if self.namespace != "/" else []  # '//a': an empty part
-        if not self.namespace.startswith("/") or not all(_ROS_NAME.fullmatch(p) for p in parts):
+        if not self.namespace.startswith("/") or not all(ROS_NAME.fullmatch(p) for p in parts):
             raise ConfigError(f"ros2.namespace: '/' or /name/... with names of letters, digits and '_' not "
                               f"starting with a digit (ROS 2's rule), got {self.namespace!r}")
-        if not _ROS_NAME.fullmatch(self.node):
+        if not ROS_NAME.fullmatch(self.node):
             raise ConfigError(f"ros2.node: a name of letters, digits and '_' not starting with a digit (ROS 2's "
                               f"rule), got {self.node!r}")
         if not 0.0 <= self.min_probability <= 1.0:

@@ -15,11 +15,13 @@ Zenoh, no ROS; the ``rosbags`` type store gives the message definitions, CDR and
 
 from __future__ import annotations
 
+import re
 import struct
 from dataclasses import dataclass
 
 __all__ = ["Attachment", "ATTACHMENT_SIZE", "GID_SIZE", "dds_type", "data_key", "mangle", "node_token",
-           "endpoint_token", "Endpoint", "parse_endpoint_token", "qos_chunk", "AttachmentError"]
+           "endpoint_token", "Endpoint", "parse_endpoint_token", "qos_chunk", "AttachmentError", "ROS_NAME",
+           "topic_problem", "MAX_TOPIC_LENGTH"]
 
 GID_SIZE = 16
 ATTACHMENT_SIZE = 8 + 8 + 1 + GID_SIZE
@@ -71,16 +73,30 @@ class TopicNameError(ValueError):
     """A ROS 2 topic name this bridge cannot use (not absolute, a wildcard, an empty part)."""
 
 
+ROS_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+"""One token of a ROS 2 name (a node, a namespace part, a topic part): letters, digits and ``_``, not starting with a
+digit (https://design.ros2.org/articles/topic_and_service_names.html; rmw's ``rmw_validate_full_topic_name``)."""
+
+MAX_TOPIC_LENGTH = 255 - 8
+"""rmw's ``RMW_TOPIC_MAX_NAME_LENGTH``: the longest topic name ROS 2 takes."""
+
+
 def topic_problem(topic: str) -> str | None:
     """Why ``topic`` is no absolute ROS 2 topic name this bridge can map to a Zenoh key, or None when it is.
 
-    What the configs check (``executor.ros2_joint_states``, ``tracker.ros2_topic``, ``simrobot.joint_states``),
-    so that a bad name is one line at start-up rather than a traceback when the key is made.
+    ROS 2's rule for a fully qualified name (``rmw_validate_full_topic_name``): absolute, no empty part, each part a
+    :data:`ROS_NAME` token, at most :data:`MAX_TOPIC_LENGTH` characters. What the configs check
+    (``executor.ros2_joint_states``, ``tracker.ros2_topic``, ``simrobot.joint_states``), so that a bad name is one
+    line at start-up, not a run waiting for a topic no ROS 2 node can have.
     """
     if not topic.startswith("/") or topic == "/" or topic.endswith("/") or "//" in topic:
         return f"an absolute topic (/a/b) without empty parts, got {topic!r}"
-    if any(c in topic for c in "*$?# "):
-        return f"an absolute topic without wildcards or spaces ('*', '$', '?', '#', ' '), got {topic!r}"
+    bad = [part for part in topic[1:].split("/") if not ROS_NAME.fullmatch(part)]
+    if bad:
+        return (f"each part of a topic letters, digits and '_', not starting with a digit (ROS 2's rule): "
+                f"{bad[0]!r} of {topic!r} is not")
+    if len(topic) > MAX_TOPIC_LENGTH:
+        return f"a topic of at most {MAX_TOPIC_LENGTH} characters (ROS 2's limit), got {len(topic)}"
     return None
 
 
