@@ -1,8 +1,9 @@
 """Counting rejected messages per key and reason, with rate-limited logging (one reusable object per service).
 
 A service's thin loop calls :meth:`RejectCounter.reject` for every payload it refuses; the counter
-keeps ``(key, reason)`` counts, logs at most one line per key per ``log_period_s`` (each line says
-how many were refused on that key so far, by reason, so a flood never floods the log), and gives a
+keeps ``(key, reason)`` counts, logs at most one line per key per ``log_period_s`` and the first of each reason
+on a key at once (each line says how many were refused on that key so far, by reason, so a flood never floods
+the log, and a second kind of fault is never hidden behind the first), and gives a
 one-line :meth:`RejectCounter.summary` for the service's status and shutdown lines.
 """
 
@@ -46,9 +47,10 @@ class RejectCounter:
         """
         why = reason or getattr(error, "reason", None) or "malformed"
         with self._lock:
+            new_reason = (key, why) not in self._by_reason
             self._by_reason[(key, why)] = self._by_reason.get((key, why), 0) + 1
             now = self._clock()
-            if now - self._last_log.get(key, -float("inf")) < self.log_period_s:
+            if not new_reason and now - self._last_log.get(key, -float("inf")) < self.log_period_s:
                 return
             self._last_log[key] = now
             counts = {r: n for (k, r), n in self._by_reason.items() if k == key}

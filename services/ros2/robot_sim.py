@@ -135,8 +135,8 @@ class RobotSim:
             finally:
                 presence.close()
                 node.close()
-        log.info("simrobot: stopped; %d trajectories received, %d joint states sent, %d samples refused",
-                 self.arm.received, self.published, self.rejects.total)
+        log.info("simrobot: stopped; %d trajectories received, %d joint states sent, %d samples refused (%s)",
+                 self.arm.received, self.published, self.rejects.total, self.rejects.summary())
         return self.published
 
 

@@ -42,6 +42,9 @@ from .wire import parse_endpoint_token
 __all__ = ["Ros2ServiceConfig", "Ros2Service", "Ros2Stats"]
 
 log = logging.getLogger("foresight.ros2")
+_MIN_FLUSH_WAIT_S = 0.005
+"""The held-back markers' flush loop sleeps at least this long: a very high ``viz_rate_hz`` (1e12 for "no limit")
+spun a core with no message flowing."""
 
 
 @dataclass
@@ -214,7 +217,7 @@ class Ros2Service:
             log.info("ros2: node %s%s on domain %d, topics %s, session %s", cfg.node_namespace.rstrip("/") + "/",
                      cfg.node, cfg.domain_id, ", ".join(cfg.topic(r) for r in TOPICS), zid)
             try:
-                while not stop.wait(0.5 / cfg.viz_rate_hz):
+                while not stop.wait(max(0.5 / cfg.viz_rate_hz, _MIN_FLUSH_WAIT_S)):
                     self.flush_viz()
             finally:
                 self.flush_viz(force=True)  # the last occupancy and body stay on show
@@ -223,5 +226,6 @@ class Ros2Service:
                 for s in subs:
                     s.undeclare()
                 node.close()
-        log.info("ros2: stopped; sent %s", ", ".join(f"{cfg.topic(r)} {n}" for r, n in self.stats.sent.items()))
+        sent = ", ".join(f"{cfg.topic(r)} {n}" for r, n in self.stats.sent.items())
+        log.info("ros2: stopped; sent %s; refused %s", sent, self.rejects.summary())
         return self.stats

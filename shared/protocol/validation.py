@@ -97,7 +97,8 @@ class Expectations:
 
     Attributes:
         clock: ``"realtime"`` (wall-clock stamps, ``tick == -1``), ``"lockstep"`` (simulated stamps)
-            or ``"auto"`` (by the message: ``tick == -1`` real time, else lock-step).
+            or ``"auto"`` (by the message: ``tick == -1`` real time, else lock-step; tick -1 at stamp 0 is the
+            lock-step state before step 0).
         period_s: The lock-step period P, when the receiver knows it (the executor).
         max_tick: Returns the highest tick that may arrive now (the executor: its clock + 1).
         robot: The receiver's robot, or None.
@@ -123,7 +124,10 @@ def _stamp(msg: Any, exp: Expectations) -> None:
     t, tick, stamp = msg.TYPE, msg.tick, msg.stamp
     if not -1 <= tick <= L.MAX_TICK:
         raise _err(t, "tick", f"{tick} not in [-1, {L.MAX_TICK}]", "out-of-range")
-    realtime = exp.clock == "realtime" or (exp.clock == "auto" and tick == -1)
+    # auto: tick -1 is real time, except the lock-step state before step 0 (tick -1, stamp 0), which a receiver
+    # that knows no clock refused as 56 years old
+    before_step_0 = tick == -1 and 0.0 <= stamp <= L.LOGICAL_STAMP_TOL_S
+    realtime = exp.clock == "realtime" or (exp.clock == "auto" and tick == -1 and not before_step_0)
     if realtime:
         if tick != -1:
             raise _err(t, "tick", f"{tick} in a real-time run (must be -1)", "mismatch")

@@ -95,9 +95,10 @@ def test_demo_drives_the_simulated_ros2_robot(tmp_path: Path) -> None:
         channels = {c.topic: c.message_encoding for c in make_reader(f).get_summary().channels.values()}
     assert channels["/joint_states"] == channels["/r_arm_controller/joint_trajectory"] == channels["/clock"] == "cdr"
     robot_log = (Path(summary["run_dir"]) / "simrobot.log").read_text()
-    assert "0 samples refused" in robot_log and " 0 trajectories received" not in robot_log
+    assert "0 samples refused (none)" in robot_log and " 0 trajectories received" not in robot_log
     ros2_log = (Path(summary["run_dir"]) / "ros2.log").read_text()
     assert "/joint_states 0," in ros2_log, "the gateway leaves /joint_states to the robot"
+    assert "; refused none" in ros2_log
 
 
 def test_demo_refuses_a_ros2_robot_with_security(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -31,3 +31,17 @@ def test_a_peers_text_cannot_start_a_log_line_of_its_own(caplog) -> None:
         rejects.reject("fs/pose", ProtocolError(f"HumanPose: unknown field(s) {forged}"))
     (line,) = [r.getMessage() for r in caplog.records]
     assert "\n" not in line and "\r" not in line and "x\\n2030-01-01" in line and "cleanly\\r" in line
+
+
+def test_the_first_of_each_reason_on_a_key_is_logged_at_once_the_rest_rate_limited(caplog) -> None:
+    """Before, four faults of four kinds within a second logged the first only: a robot on another ROS 2
+    distribution (a type hash of its own) was never named while garbled samples came first."""
+    rejects = RejectCounter("simrobot", log_period_s=1.0, clock=lambda: 0.0)
+    with caplog.at_level(logging.WARNING, logger="foresight.rejects"):
+        for why in ("attachment", "type", "malformed", "attachment", "type", "malformed"):
+            rejects.reject("/arm/joint_trajectory", f"{why} fault", reason=why)
+    lines = [r.getMessage() for r in caplog.records]
+    assert [line.split("(")[1].split(")")[0] for line in lines] == ["attachment", "type", "malformed"]
+    assert lines[-1].endswith("[3 so far: attachment 1, malformed 1, type 1]")
+    assert rejects.summary() == "/arm/joint_trajectory: attachment 2, malformed 2, type 2"
+

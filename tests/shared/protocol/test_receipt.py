@@ -140,7 +140,8 @@ def test_reject_counter_counts_per_key_and_reason_and_rate_limits(caplog):
                                  ("k/b", "stamp-past"): 1}
     assert counter.counts == {"k/a": 502, "k/b": 1} and counter.total == 503
     lines = [r.getMessage() for r in caplog.records]
-    assert len(lines) == 3, lines  # one per key per second, not one per message
+    assert len(lines) == 4, lines  # one per key per second and the first of each reason, not one per message
+    assert "(malformed): no reason attribute [501 so far: joint-limits 500, malformed 1]" in lines[1]
     assert "502 so far: joint-limits 500, malformed 1, velocity 1" in lines[-1]
     assert counter.summary() == "k/a: joint-limits 500, malformed 1, velocity 1; k/b: stamp-past 1"
     assert RejectCounter("x").summary() == "none"

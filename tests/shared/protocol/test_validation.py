@@ -101,6 +101,10 @@ def test_auto_clock_goes_by_the_messages_tick():
     check_values(pose(tick=-1, stamp=NOW), exp)
     check_values(pose(tick=5, stamp=1.0), exp)
     refused(pose(tick=-1, stamp=1.0), exp, "stamp-past")
+    # the lock-step state before step 0: refused as 56 years old by the ROS 2 gateway and the live view, every run
+    check_values(state(tick=-1, stamp=0.0), exp)
+    refused(state(tick=-1, stamp=0.5), exp, "stamp-past")  # nothing else at tick -1 is simulated time
+    refused(state(tick=-1, stamp=0.0), realtime(), "stamp-past")  # a real-time receiver still refuses it
 
 
 def test_ticks_beyond_the_lockstep_clock_are_from_the_future():
