@@ -42,6 +42,7 @@ from shared.keypoints.fit import POINT_NAMES, REQUIRED, KeypointFit
 from shared.keypoints.layouts import LAYOUTS, load_layout
 from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Message
 
+from .checks import MAX_TILT_DEG, fit_without_outliers, furthest_point, missing_points, torso_tilt_deg
 from .filters import OneEuroFilter
 from .reach import ReachDetector, ReachRule
 from .resample import PoseClock
@@ -49,11 +50,12 @@ from .resample import PoseClock
 __all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S", "JUMP_CONFIRM",
            "LIBRARY_RATE_HZ"]
 
-REASONS = ("frame", "names", "missing", "order", "leap", "range", "residual", "jump")
+REASONS = ("frame", "names", "missing", "upright", "order", "leap", "range", "residual", "jump")
 """Why a frame is refused: another coordinate frame, a point the layout does not have, a required point missing, a
-stamp not after the last accepted frame's, a stamp a long gap after it that the next frame has not confirmed yet, a
-pelvis outside the range the fit covers (so the fit cannot reach the points), a fit too far from the points, an
-implausible jump."""
+torso leaning too far from the vertical (keypoints whose up is not z: :mod:`services.tracker.checks`), a stamp not
+after the last accepted frame's, a stamp a long gap after it that the next frame has not confirmed yet, a pelvis
+outside the range the fit covers (so the fit cannot reach the points), a fit too far from the points, an implausible
+jump."""
 
 MIN_PERIOD_S = 1.0 / 500
 """The shortest frame interval taken for the sensor's period (500 Hz): shorter ones are frames of a burst."""
@@ -132,6 +134,8 @@ class TrackerCore:
         accepted: Frames accepted.
         bridged: Poses interpolated across gaps.
         reaches: Reaches started.
+        points_left_out: Optional points left out of accepted frames' fits, far off them
+            (:func:`~services.tracker.checks.fit_without_outliers`).
     """
 
     def __init__(self, config: TrackerConfig | None = None, model: HumanModel | None = None) -> None:
@@ -143,7 +147,7 @@ class TrackerCore:
         self.filter = OneEuroFilter(self.config.min_cutoff_hz, self.config.beta)
         self.reach = ReachDetector(self.config.rule)
         self.refused = dict.fromkeys(REASONS, 0)
-        self.accepted = self.bridged = self.reaches = 0
+        self.accepted = self.bridged = self.reaches = self.points_left_out = 0
         self._wrist, self._pelvis = list(POINT_NAMES).index("r_wrist"), list(POINT_NAMES).index("pelvis")
         self._shoulders = list(POINT_NAMES).index("r_shoulder"), list(POINT_NAMES).index("l_shoulder")
         self._required = {p: list(POINT_NAMES).index(p) for p in REQUIRED}
@@ -188,7 +192,13 @@ class TrackerCore:
         observed = np.all(np.isfinite(points), axis=-1)
         missing = [p for p, j in self._required.items() if not observed[j]]
         if missing:
-            return self._refuse("missing", f"required point(s) missing: {', '.join(missing)}")
+            return self._refuse("missing", f"required point(s) missing: "
+                                f"{missing_points(self.layout, names, positions, missing)}")
+        tilt = torso_tilt_deg(points)
+        if tilt > MAX_TILT_DEG:  # a camera's frame (z forward) or a y-up one: the fit would lay the person down
+            return self._refuse("upright", f"the torso (pelvis to the shoulders' midpoint) leans {tilt:.0f} deg from "
+                                f"the vertical (z), more than {MAX_TILT_DEG:g}: is z the keypoints' up? The "
+                                "sensor's extrinsic transform must bring them into the library's frame")
         if self._raw is not None and not stamp > self._raw[0]:
             return self._refuse("order", f"stamp {stamp:.6f} s is not after the last accepted frame's "
                                 f"({self._raw[0]:.6f} s)")
@@ -202,6 +212,7 @@ class TrackerCore:
         self._leap = None
         prior = self._raw[1][None] if self._raw is not None and stamp - self._raw[0] <= self.config.max_gap_s else None
         res = self.fit.fit(np.nan_to_num(points)[None], observed[None], prior)
+        res, dropped = fit_without_outliers(self.fit, points, observed, prior, res, self.config.max_residual_m)
         f, rms = res.features[0], float(res.rms_m[0])
         if rms > self.config.max_residual_m:
             outside = self._outside(points[self._required["pelvis"]])
@@ -210,7 +221,9 @@ class TrackerCore:
                                     "library's room: shared.feature_sets.HERAKLES_RANGES); the keypoints must be in "
                                     "the library's frame")
             limit = self.config.max_residual_m * 100
-            return self._refuse("residual", f"fit residual {rms * 100:.1f} cm rms > {limit:g}")
+            return self._refuse("residual", f"fit residual {rms * 100:.1f} cm rms > {limit:g}; furthest: "
+                                f"{furthest_point(self.layout, res)}")
+        self.points_left_out += len(dropped)
         out = TrackerOutput()
         joints = self.model.joint_positions(f)
         if self._raw is not None and stamp - self._raw[0] > self.config.max_gap_s:

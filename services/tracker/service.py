@@ -198,8 +198,9 @@ class TrackerService:
                 presence.close()
         self.stats.refused = dict(self.core.refused)
         log.info("tracker: stopped after %d frames (%d played), %d reaches, %d poses, %d markers; refused: %s; "
-                 "rejected on receipt: %s", self.stats.frames, self.stats.played, self.stats.reaches, self.stats.poses,
-                 self.stats.markers, ", ".join(f"{k} {v}" for k, v in self.stats.refused.items()) or "none",
+                 "optional points left out, far off the fit: %d; rejected on receipt: %s", self.stats.frames,
+                 self.stats.played, self.stats.reaches, self.stats.poses, self.stats.markers,
+                 ", ".join(f"{k} {v}" for k, v in self.stats.refused.items()) or "none", self.core.points_left_out,
                  self.rejects.summary())
         return self.stats
 

@@ -1,0 +1,107 @@
+"""A keypoint frame's plausibility, in words a sensor's user can act on (pure: no Zenoh).
+
+* :func:`missing_points`: a required point the frame lacks, named with the sensor's own points it is made of;
+* :func:`torso_tilt_deg`: how far the torso leans from the vertical (z) - keypoints left in a camera's frame (z
+  forward) or a y-up frame lie on their side, which the fit would take for a person lying down;
+* :func:`fit_without_outliers`: a fit refitted without the optional points far off it (a sensor that reports a
+  point it did not detect at (0, 0, 0), as many do) while its residual is above the limit;
+* :func:`furthest_point`: the observed point furthest from the fit, for the refusal's line.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shared.keypoints.fit import POINT_NAMES, REQUIRED, FitResult, KeypointFit
+from shared.keypoints.layouts import Layout
+
+__all__ = ["MAX_TILT_DEG", "MIN_TORSO_M", "OUTLIER_FACTOR", "missing_points", "torso_tilt_deg", "fit_without_outliers",
+           "furthest_point"]
+
+MAX_TILT_DEG = 60.0
+"""The most the torso (pelvis to the shoulders' midpoint) may lean from the vertical: twice the most of any motion
+of the paper's library or the synthetic one (30.4 and 30.8 deg)."""
+
+MIN_TORSO_M = 0.2
+"""The shortest torso whose lean is judged: half the model's (0.43 m, pelvis to the shoulders' midpoint)."""
+
+OUTLIER_FACTOR = 3.0
+"""An optional point further than this many times ``max_residual_m`` from the fit is left out and the frame refitted
+(a point where the sensor detected nothing; the default limit, 8 cm, makes it 24 cm)."""
+
+_PELVIS, _R_SHOULDER, _L_SHOULDER = (POINT_NAMES.index(p) for p in ("pelvis", "r_shoulder", "l_shoulder"))
+
+
+def _made_of(layout: Layout, point: str) -> tuple[str, ...]:
+    return layout.points.get(point, ())
+
+
+def missing_points(layout: Layout, names: list[str], positions: np.ndarray, points: list[str]) -> str:
+    """``points`` (Foresight's) in words: each with the sensor's points it is the mean of, and those not seen.
+
+    E.g. ``pelvis (left_hip, right_hip: left_hip not seen)`` for COCO; ``r_wrist`` for Foresight's own names.
+    """
+    seen = {n for n, p in zip(names, np.asarray(positions), strict=True) if np.all(np.isfinite(p))}
+    words = []
+    for point in points:
+        sources = _made_of(layout, point)
+        if sources == (point,) or not sources:
+            words.append(point)
+            continue
+        unseen = [s for s in sources if s not in seen]
+        words.append(f"{point} ({', '.join(sources)}: {', '.join(unseen)} not seen)")
+    return ", ".join(words)
+
+
+def torso_tilt_deg(points: np.ndarray) -> float:
+    """Degrees between the vertical (+z) and the torso, pelvis to the shoulders' midpoint, of ``points (J, 3)``.
+
+    NaN for a torso shorter than :data:`MIN_TORSO_M`: a wild point (a pelvis half a metre off), not a frame lying on
+    its side; the fit's residual refuses it.
+    """
+    v = (points[_R_SHOULDER] + points[_L_SHOULDER]) / 2 - points[_PELVIS]
+    norm = float(np.linalg.norm(v))
+    return float("nan") if norm < MIN_TORSO_M else float(np.degrees(np.arccos(np.clip(v[2] / norm, -1.0, 1.0))))
+
+
+def fit_without_outliers(fit: KeypointFit, points: np.ndarray, observed: np.ndarray, prior: np.ndarray | None,
+                         result: FitResult, max_residual_m: float) -> tuple[FitResult, list[str]]:
+    """Refit without the optional points far off the fit (:data:`OUTLIER_FACTOR`) while its rms is above the limit.
+
+    Each round leaves out the optional point furthest from the fit, if it is more than :data:`OUTLIER_FACTOR` x
+    ``max_residual_m`` off; a required point, or none so far off, ends it.
+
+    Args:
+        fit: The fit that made ``result``.
+        points: ``(J, 3)`` the frame's points (NaN where not observed).
+        observed: ``(J,)`` which of them the fit used.
+        prior: ``(1, 12)`` the previous frame's features, or None.
+        result: The fit of the frame with every observed point (a batch of one).
+        max_residual_m: The tracker's limit.
+
+    Returns:
+        The last fit and the points left out (none: ``result`` itself).
+    """
+    used, dropped = observed.copy(), []
+    while float(result.rms_m[0]) > max_residual_m:
+        r = np.where(used, result.residual_m[0], np.nan)
+        if not np.isfinite(r).any():
+            break
+        j = int(np.nanargmax(r))
+        if POINT_NAMES[j] in REQUIRED or not r[j] > OUTLIER_FACTOR * max_residual_m:
+            break
+        used[j] = False
+        dropped.append(POINT_NAMES[j])
+        result = fit.fit(np.nan_to_num(points)[None], used[None], prior)
+    return result, dropped
+
+
+def furthest_point(layout: Layout, result: FitResult) -> str:
+    """The observed point furthest from the fit and its distance, e.g. ``r_wrist (right_wrist) 31 cm off``."""
+    r = result.residual_m[0]
+    if not np.isfinite(r).any():
+        return "no point"
+    j = int(np.nanargmax(r))
+    sources = _made_of(layout, POINT_NAMES[j])
+    made_of = f" ({', '.join(sources)})" if sources and sources != (POINT_NAMES[j],) else ""
+    return f"{POINT_NAMES[j]}{made_of} {r[j] * 100:.0f} cm off"
