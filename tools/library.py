@@ -235,7 +235,10 @@ def _cmd_from_keypoints(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise LibraryError(str(exc)) from None
     save_library(lib, out)
-    print(f"wrote {out}: {len(lib.demos)} demonstrations in {lib.n_classes} classes; {report.line()}")
+    for issue in lib.issues:
+        print(f"left out: {issue}", file=sys.stderr)
+    print(f"wrote {out}: {len(lib.demos)} demonstrations in {lib.n_classes} classes"
+          f"{f', {len(lib.issues)} left out (above)' if lib.issues else ''}; {report.line()}")
     return 0
 
 

@@ -1,8 +1,9 @@
 """A keypoint frame's plausibility, in words a sensor's user can act on (pure: no Zenoh).
 
 * :func:`missing_points`: a required point the frame lacks, named with the sensor's own points it is made of;
-* :func:`torso_tilt_deg`: how far the torso leans from the vertical (z) - keypoints left in a camera's frame (z
-  forward) or a y-up frame lie on their side, which the fit would take for a person lying down;
+* :func:`~shared.keypoints.plausibility.torso_tilt_deg`: how far the torso leans from the vertical (z) - keypoints
+  left in a camera's frame (z forward) or a y-up frame lie on their side, which the fit would take for a person lying
+  down;
 * :func:`fit_without_outliers`: a fit refitted without the optional points far off it (a sensor that reports a
   point it did not detect at (0, 0, 0), as many do) while its residual is above the limit;
 * :func:`furthest_point`: the observed point furthest from the fit, for the refusal's line.
@@ -14,22 +15,14 @@ import numpy as np
 
 from shared.keypoints.fit import POINT_NAMES, REQUIRED, FitResult, KeypointFit
 from shared.keypoints.layouts import Layout
+from shared.keypoints.plausibility import MAX_TILT_DEG, torso_tilt_deg
 
-__all__ = ["MAX_TILT_DEG", "MIN_TORSO_M", "OUTLIER_FACTOR", "missing_points", "torso_tilt_deg", "fit_without_outliers",
+__all__ = ["MAX_TILT_DEG", "OUTLIER_FACTOR", "missing_points", "torso_tilt_deg", "fit_without_outliers",
            "furthest_point"]
-
-MAX_TILT_DEG = 60.0
-"""The most the torso (pelvis to the shoulders' midpoint) may lean from the vertical: twice the most of any motion
-of the paper's library or the synthetic one (30.4 and 30.8 deg)."""
-
-MIN_TORSO_M = 0.2
-"""The shortest torso whose lean is judged: half the model's (0.43 m, pelvis to the shoulders' midpoint)."""
 
 OUTLIER_FACTOR = 3.0
 """An optional point further than this many times ``max_residual_m`` from the fit is left out and the frame refitted
 (a point where the sensor detected nothing; the default limit, 8 cm, makes it 24 cm)."""
-
-_PELVIS, _R_SHOULDER, _L_SHOULDER = (POINT_NAMES.index(p) for p in ("pelvis", "r_shoulder", "l_shoulder"))
 
 
 def _made_of(layout: Layout, point: str) -> tuple[str, ...]:
@@ -51,17 +44,6 @@ def missing_points(layout: Layout, names: list[str], positions: np.ndarray, poin
         unseen = [s for s in sources if s not in seen]
         words.append(f"{point} ({', '.join(sources)}: {', '.join(unseen)} not seen)")
     return ", ".join(words)
-
-
-def torso_tilt_deg(points: np.ndarray) -> float:
-    """Degrees between the vertical (+z) and the torso, pelvis to the shoulders' midpoint, of ``points (J, 3)``.
-
-    NaN for a torso shorter than :data:`MIN_TORSO_M`: a wild point (a pelvis half a metre off), not a frame lying on
-    its side; the fit's residual refuses it.
-    """
-    v = (points[_R_SHOULDER] + points[_L_SHOULDER]) / 2 - points[_PELVIS]
-    norm = float(np.linalg.norm(v))
-    return float("nan") if norm < MIN_TORSO_M else float(np.degrees(np.arccos(np.clip(v[2] / norm, -1.0, 1.0))))
 
 
 def fit_without_outliers(fit: KeypointFit, points: np.ndarray, observed: np.ndarray, prior: np.ndarray | None,

@@ -23,6 +23,7 @@ from shared.human import HumanModel
 from shared.human_source import HumanPublisher
 from shared.keypoints.fit import REQUIRED
 from shared.keypoints.library import read_keypoint_csv
+from shared.keypoints.plausibility import units_problem
 from shared.protocol import (
     SENSOR,
     DemoMarker,
@@ -91,9 +92,13 @@ class TrackerService:
         self.playback: Playback | None = None
         if config.from_file is not None:
             try:
-                self.playback = Playback(read_keypoint_csv(config.from_file), config.playback)
+                recorded = read_keypoint_csv(config.from_file)
+                self.playback = Playback(recorded, config.playback)
             except ValueError as exc:
                 raise ConfigError(f"tracker.from_file: {exc}") from None
+            for demo in recorded:  # else every frame is refused on receipt, and the run ends as if it had played
+                if problem := units_problem(demo.names, demo.positions):
+                    raise ConfigError(f"tracker.from_file: {config.from_file} demo {demo.demo}: {problem}")
             if not zenoh_config.connect:
                 raise ConfigError("tracker.from_file: the player connects to the router in zenoh.connect; none given")
             layout, names = self.core.layout, self.playback.names

@@ -19,7 +19,7 @@ from .fit import POINT_NAMES, REQUIRED
 
 __all__ = ["Layout", "load_layout", "LAYOUTS"]
 
-LAYOUTS = ("foresight", "coco17", "plugin_gait")
+LAYOUTS = ("foresight", "coco17", "mediapipe33", "body25", "plugin_gait")
 """The layouts that ship with Foresight."""
 
 

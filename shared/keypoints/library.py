@@ -22,10 +22,11 @@ import numpy as np
 from shared.atomic_file import atomic_write, make_parent
 from shared.feature_sets import require_mapping
 from shared.human import HumanModel
-from shared.library import Demonstration, MotionLibrary
+from shared.library import Demonstration, LibraryIssue, MotionLibrary
 
 from .fit import POINT_NAMES, REQUIRED, FitConfig, KeypointFit
 from .layouts import load_layout
+from .plausibility import MAX_TILT_DEG, torso_tilt_deg, units_problem
 
 __all__ = ["write_keypoint_library", "read_keypoint_csv", "fit_keypoint_library", "KeypointDemo", "FitReport",
            "CLASS_ORDER_FILE"]
@@ -178,15 +179,18 @@ def _class_files(directory: Path) -> list[Path]:
     return [directory / f"{n}.csv" for n in names]
 
 
-def fit_keypoint_library(directory: Path, layout: str = "foresight", config: FitConfig | None = None
-                         ) -> tuple[MotionLibrary, FitReport]:
+def fit_keypoint_library(directory: Path, layout: str = "foresight", config: FitConfig | None = None,
+                         max_residual_m: float = 0.08) -> tuple[MotionLibrary, FitReport]:
     """Fit the 12 features to every demonstration of a keypoint library; returns the motion library and a report.
 
     Frames are fitted in order, each warm-started from the one before (all demonstrations at once); frames that
-    are absent or lack a required point get the features interpolated between their neighbours.
+    are absent or lack a required point get the features interpolated between their neighbours. A demonstration
+    whose median fit residual exceeds ``max_residual_m`` (the live tracker's default limit per frame) is left out,
+    as a :class:`~shared.library.LibraryIssue` of the library: its points do not fit the model.
 
     Raises:
-        ValueError: No CSV in ``directory``, or a malformed one.
+        ValueError: No CSV in ``directory``, a malformed one, a demonstration that is not in metres or whose up is
+            not z (:mod:`shared.keypoints.plausibility`), or none left.
     """
     files = _class_files(Path(directory))
     lay = load_layout(layout)
@@ -195,7 +199,15 @@ def fit_keypoint_library(directory: Path, layout: str = "foresight", config: Fit
         for kd in read_keypoint_csv(path):
             if unknown := lay.unknown(kd.names):  # a typo would be a point never observed, without a word
                 raise ValueError(f"{path}: point(s) {', '.join(unknown)} are not layout {lay.name}'s")
-            demos.append((label, path.stem, kd, lay.to_model(kd.names, kd.positions)))
+            if problem := units_problem(kd.names, kd.positions):
+                raise ValueError(f"{path} demo {kd.demo}: {problem}")
+            model = lay.to_model(kd.names, kd.positions)
+            tilt = torso_tilt_deg(model)
+            if np.isfinite(tilt).any() and np.nanmedian(tilt) > MAX_TILT_DEG:  # the tracker's rule, per demonstration
+                raise ValueError(f"{path} demo {kd.demo}: the torso (pelvis to the shoulders' midpoint) leans "
+                                 f"{np.nanmedian(tilt):.0f} deg from the vertical (z) in the median frame, more than "
+                                 f"{MAX_TILT_DEG:g}: is z the keypoints' up? They must be in the library's frame")
+            demos.append((label, path.stem, kd, model))
     if not demos:
         raise ValueError(f"keypoint library {directory}: no demonstration in any of its {len(files)} CSV files")
     required = [POINT_NAMES.index(p) for p in REQUIRED]
@@ -214,6 +226,7 @@ def fit_keypoint_library(directory: Path, layout: str = "foresight", config: Fit
         batch[i, len(kept):] = kept[-1]  # padding: the last frame again (its fits are not used)
     result = KeypointFit(config).fit_sequences(batch)
     out, residuals, bridged, fitted = [], [], 0, 0
+    issues: list[LibraryIssue] = []
     counts: dict[int, int] = {}
     for i, ((label, name, kd, _), ok) in enumerate(zip(demos, usable, strict=True)):
         n = int(ok.sum())
@@ -223,8 +236,17 @@ def fit_keypoint_library(directory: Path, layout: str = "foresight", config: Fit
         bridged += len(span) - n
         fitted += n
         r = result.residual_m[i, :n]
-        residuals.append(r[np.isfinite(r)])
+        r = r[np.isfinite(r)]
+        if r.size and float(np.median(r)) > max_residual_m:
+            issues.append(LibraryIssue(name, kd.demo, f"demo {kd.demo}: fit residual median {np.median(r) * 100:.1f} "
+                                       f"cm > {max_residual_m * 100:g} cm: its points do not fit the model (another "
+                                       "layout? --layout)"))
+            continue
+        residuals.append(r)
         index = counts[label] = counts.get(label, -1) + 1
         out.append(Demonstration(label, name, index, feats, f"{name}.csv#demo {kd.demo}"))
-    lib = MotionLibrary([p.stem for p in files], out, [], f"keypoints:{directory} (layout {lay.name})")
+    if not out:
+        raise ValueError(f"keypoint library {directory}: no demonstration fits the model "
+                         f"({'; '.join(map(str, issues[:3]))})")
+    lib = MotionLibrary([p.stem for p in files], out, issues, f"keypoints:{directory} (layout {lay.name})")
     return lib, FitReport(np.concatenate(residuals), fitted, bridged)

@@ -376,3 +376,18 @@ def test_playback_stamps_each_frame_when_due_even_when_it_is_sent_late(zenoh_hub
     gaps = np.diff([m.stamp for m in sorted(sent, key=lambda m: m.frame)])
     assert np.allclose(gaps, 1 / 30, atol=1e-6), gaps
     assert sum(stats.refused.values()) == 0, stats.refused
+
+
+def test_a_recording_in_millimetres_is_refused_before_it_plays(tmp_path: Path, capsys) -> None:
+    """It played, every frame was refused on receipt as beyond 20 m of the sensor, and the tracker exited 0."""
+    lib = generate_library(2, 1, seed=4)
+    write_keypoint_library(MotionLibrary(lib.class_names, lib.demos[:1], [], "test"), tmp_path / "kp")
+    recording = tmp_path / "kp" / f"{lib.demos[0].class_name}.csv"
+    rows = [r.split(",") for r in recording.read_text().splitlines()]
+    mm = [rows[0]] + [r[:2] + [f"{float(c) * 1000:.3f}" if c else c for c in r[2:]] for r in rows[1:]]
+    recording.write_text("\n".join(",".join(r) for r in mm) + "\n")
+    with pytest.raises(SystemExit) as info:
+        tracker_main(["--from", str(recording), "--connect", "tcp/127.0.0.1:9"], prog="foresight tracker")
+    assert info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "tracker.from_file" in line and "demo 0: a coordinate" in line and "millimetres? divide by 1000" in line

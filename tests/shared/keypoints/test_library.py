@@ -110,3 +110,85 @@ def test_a_layout_knows_every_point_its_sensor_sends() -> None:
     gait = load_layout("plugin_gait")
     assert set(gait.ignored).isdisjoint(gait.source_names) and gait.unknown(["C7", "RFIN", "LKNE"]) == []
     assert load_layout("foresight").unknown(["pelvis", "left_hip"]) == ["left_hip"]
+
+
+def test_mediapipe_and_body25_have_layouts_of_their_own_giving_what_coco_gives() -> None:
+    """The docs said both shared COCO's names; every frame of either was refused for its names."""
+    mediapipe = ["nose", "left_eye_inner", "left_eye", "left_eye_outer", "right_eye_inner", "right_eye",
+                 "right_eye_outer", "left_ear", "right_ear", "mouth_left", "mouth_right", "left_shoulder",
+                 "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_pinky",
+                 "right_pinky", "left_index", "right_index", "left_thumb", "right_thumb", "left_hip", "right_hip",
+                 "left_knee", "right_knee", "left_ankle", "right_ankle", "left_heel", "right_heel", "left_foot_index",
+                 "right_foot_index"]
+    body25 = ["Nose", "Neck", "RShoulder", "RElbow", "RWrist", "LShoulder", "LElbow", "LWrist", "MidHip", "RHip",
+              "RKnee", "RAnkle", "LHip", "LKnee", "LAnkle", "REye", "LEye", "REar", "LEar", "LBigToe", "LSmallToe",
+              "LHeel", "RBigToe", "RSmallToe", "RHeel"]
+    assert len(mediapipe) == 33 and len(body25) == 25
+    coco = load_layout("coco17")
+    rng = np.random.default_rng(0)
+    for name, every in (("mediapipe33", mediapipe), ("body25", body25)):
+        layout = load_layout(name)
+        assert layout.unknown(every) == [] and set(layout.ignored).isdisjoint(layout.source_names)
+        assert set(layout.source_names) <= set(every) and set(layout.points) == set(coco.points)
+        # the same body in both layouts' names maps to the same points
+        rename = {"left_hip": "LHip", "right_hip": "RHip", "left_ear": "LEar", "right_ear": "REar",
+                  "left_shoulder": "LShoulder", "right_shoulder": "RShoulder", "left_elbow": "LElbow",
+                  "right_elbow": "RElbow", "left_wrist": "LWrist", "right_wrist": "RWrist"}
+        pos = rng.normal(size=(len(coco.source_names), 3))
+        names = coco.source_names if name == "mediapipe33" else [rename[n] for n in coco.source_names]
+        np.testing.assert_array_equal(layout.to_model(names, pos), coco.to_model(coco.source_names, pos))
+
+
+def _rewrite(directory: Path, transform) -> None:  # noqa: ANN001
+    """Apply ``transform (3,) -> (3,)`` to every point of every CSV in ``directory``, in place."""
+    import csv
+
+    for path in directory.glob("*.csv"):
+        rows = list(csv.reader(path.read_text().splitlines()))
+        header, out = rows[0], [rows[0]]
+        xs = [i for i, h in enumerate(header) if h.endswith("_x")]
+        for row in rows[1:]:
+            for i in xs:
+                if row[i]:
+                    row[i:i + 3] = [f"{v:.6f}" for v in transform(np.array([float(c) for c in row[i:i + 3]]))]
+            out.append(row)
+        path.write_text("\n".join(",".join(r) for r in out) + "\n")
+
+
+def test_keypoints_in_millimetres_or_lying_on_their_side_are_refused(small, tmp_path: Path) -> None:
+    """Before, both were fitted (features clamped to their bounds), written and counted 'issues 0', exit 0."""
+    write_keypoint_library(small, tmp_path / "mm")
+    _rewrite(tmp_path / "mm", lambda p: p * 1000.0)
+    with pytest.raises(ValueError, match=r"demo 0: a coordinate \d+\.\d m from the origin \('[a-z_]+'\), beyond 20 m: "
+                                         r"keypoints are in metres \(millimetres\? divide by 1000\)"):
+        fit_keypoint_library(tmp_path / "mm")
+    write_keypoint_library(small, tmp_path / "camera")
+    _rewrite(tmp_path / "camera", lambda p: np.array([p[0], -p[2], p[1]]))  # z forward, y down
+    with pytest.raises(ValueError, match=r"demo 0: the torso .* leans \d+ deg from the vertical \(z\) in the median "
+                                         r"frame, more than 60: is z the keypoints' up\?"):
+        fit_keypoint_library(tmp_path / "camera")
+
+
+def test_a_demonstration_that_does_not_fit_the_model_is_left_out_as_an_issue(small, tmp_path: Path) -> None:
+    write_keypoint_library(small, tmp_path / "lib")
+    path = sorted((tmp_path / "lib").glob("*.csv"))[0]
+    rows = path.read_text().splitlines()
+    header = rows[0].split(",")
+    xs = [i for i, h in enumerate(header) if h.endswith("_x")]
+    pelvis = header.index("pelvis_x")
+    spoilt = [rows[0]]
+    for row in rows[1:]:
+        cells = row.split(",")
+        if cells[0] == "1":  # the class's second demonstration: a body twice the model's size about its pelvis
+            centre = np.array([float(c) for c in cells[pelvis:pelvis + 3]])
+            for i in xs:
+                if cells[i]:
+                    p = centre + 2 * (np.array([float(c) for c in cells[i:i + 3]]) - centre)
+                    cells[i:i + 3] = [f"{v:.6f}" for v in p]
+        spoilt.append(",".join(cells))
+    path.write_text("\n".join(spoilt) + "\n")
+    lib, _ = fit_keypoint_library(tmp_path / "lib")
+    assert len(lib.demos) == len(small.demos) - 1
+    (issue,) = lib.issues
+    assert issue.class_name == path.stem and issue.block == 1
+    assert "demo 1: fit residual median " in issue.reason and "cm > 8 cm: its points do not fit the" in issue.reason
