@@ -1,6 +1,6 @@
 """The ``view`` loop: subscribe to a running system's messages, serve its scene live on ws://HOST:PORT.
 
-It subscribes to the plan, robot state, occupancy, posterior and human pose keys (as the read-only
+It subscribes to the plan, robot state, occupancy, posterior, human pose and demonstration-marker keys (as the read-only
 ``observer`` when security is on: it puts nothing and declares no token) and logs each message's scene to
 a :class:`~shared.foxglove.live.LiveServer`, which sends the static scene again every ``static_period_s``
 for clients that connect later.
@@ -17,6 +17,7 @@ from shared.foxglove.live import LiveServer
 from shared.foxglove.scene import default_builder
 from shared.protocol import (
     ClassPosterior,
+    DemoMarker,
     Expectations,
     HumanPose,
     Keys,
@@ -82,7 +83,7 @@ class ViewService:
             k = self.keys
             subs = [subscribe(session, key, cls, self._on, self.rejects, self.receipt)
                     for key, cls in ((k.plan, Plan), (k.robot_state, RobotState), (k.occupancy, OccupancyGrid),
-                                     (k.posterior, ClassPosterior), (k.pose, HumanPose))]
+                                     (k.posterior, ClassPosterior), (k.pose, HumanPose), (k.demo, DemoMarker))]
             log.info("view: serving %s to the Foxglove app (Open connection -> Foxglove WebSocket; layout: "
                      "docs/foresight.foxglove.json); prefix %r", server.url, self.zenoh.prefix)
             print(f"foresight view: watch live at {server.url}; drawing scene {self.scene.name} (--scene: the "

@@ -36,7 +36,7 @@ from foxglove.messages import (
 )
 from scipy.spatial.transform import Rotation
 
-from shared.protocol import HumanPose, OccupancyGrid, Plan, RobotState
+from shared.protocol import DemoMarker, HumanPose, OccupancyGrid, Plan, RobotState
 from shared.scene import Scene
 
 if TYPE_CHECKING:
@@ -153,6 +153,10 @@ def _line(points: np.ndarray, rgba: tuple[float, float, float, float], thickness
 _NAMED = {"blue": (0.15, 0.35, 0.95), "red": (0.9, 0.15, 0.15), "green": (0.1, 0.7, 0.2),
           "yellow": (0.9, 0.8, 0.1)}
 CHOSEN_RGBA = (0.1, 0.85, 0.2, 1.0)
+HUMAN_RGBA = (0.25, 0.5, 0.95, 0.6)
+"""The human's body while its demonstration (a reach) goes on."""
+ENDED_HUMAN_RGBA = (0.55, 0.55, 0.55, 0.35)
+"""The body of a demonstration that has ended: its last pose, no longer updated."""
 
 
 def goal_rgb(name: str, k: int) -> tuple[float, float, float]:
@@ -187,6 +191,7 @@ class SceneBuilder:
         self.max_voxels = max_voxels
         self._first_pose: dict[int, np.ndarray] = {}  # the placement reference of the last few demonstrations
         self._unmatched_names: set[tuple[str, ...]] = set()  # joint name lists already warned about
+        self._body: tuple[int, np.ndarray, np.ndarray] | None = None  # the last body drawn: demo, segments, radii
 
     def note_pose(self, pose: HumanPose) -> None:
         """Every pose, drawn or not: a demonstration's first (index 0) is where the human is placed from.
@@ -341,8 +346,24 @@ class SceneBuilder:
         ends, radii = self.human.capsules(feats)  # (S, 2, 3), (S,)
         ends = np.asarray(ends, dtype=np.float64).reshape(-1, 2, 3)
         radii = np.asarray(radii, dtype=np.float64).reshape(-1)
-        lines = [_line(seg, (0.25, 0.5, 0.95, 0.6), 2.0 * r) for seg, r in zip(ends, radii, strict=True)]
-        return SceneUpdate(entities=[_entity("human/body", pose.stamp if stamp is None else stamp, lines=lines)])
+        self._body = (pose.demo_id, ends, radii)
+        return self._body_update(ends, radii, HUMAN_RGBA, pose.stamp if stamp is None else stamp)
+
+    def human_ended(self, marker: DemoMarker, stamp: float | None = None) -> SceneUpdate | None:
+        """At a demonstration's end marker, its last drawn body again in grey: no pose updates it any more.
+
+        A live tracker publishes poses during reaches only, so its last reach's body stayed on show, as if live,
+        while the person moved on or left. None for a start marker, or when no body of that demonstration is drawn.
+        """
+        if marker.event != "end" or self._body is None or self._body[0] != marker.demo_id:
+            return None
+        _, ends, radii = self._body
+        return self._body_update(ends, radii, ENDED_HUMAN_RGBA, marker.stamp if stamp is None else stamp)
+
+    def _body_update(self, ends: np.ndarray, radii: np.ndarray, rgba: tuple[float, float, float, float],
+                     stamp: float) -> SceneUpdate:
+        lines = [_line(seg, rgba, 2.0 * r) for seg, r in zip(ends, radii, strict=True)]
+        return SceneUpdate(entities=[_entity("human/body", stamp, lines=lines)])
 
 
 def default_builder(scene: Scene, device: str = "cpu") -> SceneBuilder:

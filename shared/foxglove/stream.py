@@ -16,7 +16,7 @@ from typing import Any
 
 from foxglove.messages import FrameTransforms, PointCloud, SceneUpdate
 
-from shared.protocol import ClassPosterior, HumanPose, Message, OccupancyGrid, Plan, RobotState
+from shared.protocol import ClassPosterior, DemoMarker, HumanPose, Message, OccupancyGrid, Plan, RobotState
 
 from .charts import COSTS_SCHEMA, POSTERIOR_SCHEMA, costs_chart, posterior_chart
 from .scene import SceneBuilder
@@ -121,6 +121,8 @@ class SceneStream:
         """
         if isinstance(msg, HumanPose):
             self.builder.note_pose(msg)
+        if isinstance(msg, DemoMarker):  # a demonstration's end: its body greyed, never held back by the throttle
+            return "/viz/human" if msg.event == "end" else None
         topic = _kind(msg)
         if topic is None or topic in _EVERY:
             return topic
@@ -129,7 +131,8 @@ class SceneStream:
 
     def mark(self, topic: str, msg: Message) -> None:
         """Record that ``msg`` is drawn on ``topic`` (the next one of its kind waits ``viz_period_s``)."""
-        self._last[topic] = float(getattr(msg, "stamp", 0.0))
+        if not isinstance(msg, DemoMarker):  # the end marker holds back no pose
+            self._last[topic] = float(getattr(msg, "stamp", 0.0))
 
     def draw(self, msg: Message, log_time: int) -> list[VizMessage]:
         """The encoded scene messages of ``msg``, stamped with its receive time ``log_time`` (ns).
@@ -147,6 +150,8 @@ class SceneStream:
             out.append(("/viz/occupancy", b.occupancy_cloud(msg, stamp=t)))
         elif isinstance(msg, HumanPose):
             out.append(("/viz/human", b.human_body(msg, stamp=t)))
+        elif isinstance(msg, DemoMarker):
+            out.append(("/viz/human", b.human_ended(msg, stamp=t)))
         elif isinstance(msg, ClassPosterior):
             out.append(("/viz/posterior", posterior_chart(msg, t)))
         return [VizMessage(topic, _encode(obj), log_time) for topic, obj in out if obj is not None]

@@ -10,7 +10,7 @@ import pytest
 
 from shared.foxglove.decode import SceneDecodeError, SchemaDecoder
 from shared.foxglove.stream import SCHEMAS, SceneStream, VizMessage
-from shared.protocol import HumanPose
+from shared.protocol import DemoMarker, HumanPose
 
 from .conftest import SCENE, occupancy, plan, pose, posterior, state
 
@@ -97,6 +97,38 @@ def test_human_body_and_posterior(builder) -> None:
     post = got["/viz/posterior"]
     assert post["probability"] == {"blue_cup": 0.25, "red_cup": 0.75}
     assert post["recognised"] == "red_cup" and post["index"] == 40
+
+
+def test_a_demonstrations_end_draws_its_last_body_again_in_grey(builder) -> None:
+    """A live tracker publishes poses during reaches only: its last reach's body stayed on show as if live."""
+    from shared.foxglove.scene import ENDED_HUMAN_RGBA, HUMAN_RGBA, SceneBuilder
+
+    def marker(event: str, demo_id: int = 1, stamp: float = 1.01) -> DemoMarker:
+        return DemoMarker(stamp=stamp, tick=5, demo_id=demo_id, event=event, true_class=-1, class_name="",
+                          n_samples=1)
+
+    def rgba(color) -> tuple:  # noqa: ANN001
+        return tuple(round(v, 3) for v in (color.r, color.g, color.b, color.a))
+
+    stream = SceneStream(builder, viz_period_s=0.5)
+    assert stream.due(marker("end", demo_id=7)) == "/viz/human"
+    assert stream.draw(marker("end", demo_id=7), T) == []  # no body of demonstration 7 drawn: nothing
+    live = decoded(stream.draw(pose(), T))["/viz/human"].entities[0]
+    stream.mark("/viz/human", pose())
+    assert stream.due(marker("start")) is None and stream.draw(marker("start"), T) == []
+    end = marker("end")
+    assert stream.due(end) == "/viz/human"  # within the throttle's period of the pose: drawn all the same
+    stream.mark("/viz/human", end)
+    ended = decoded(stream.draw(end, T))["/viz/human"].entities[0]
+    assert ended.id == live.id == "human/body" and len(ended.lines) == len(live.lines)
+    assert [[(p.x, p.y, p.z) for p in ln.points] for ln in ended.lines] == \
+        [[(p.x, p.y, p.z) for p in ln.points] for ln in live.lines]
+    assert {rgba(ln.color) for ln in live.lines} == {tuple(round(v, 3) for v in HUMAN_RGBA)}
+    assert {rgba(ln.color) for ln in ended.lines} == {tuple(round(v, 3) for v in ENDED_HUMAN_RGBA)}
+    later = pose()
+    later.stamp = 1.505  # the marker held back no pose: the next one is due a period after the last pose (1.0)
+    assert stream.due(later) == "/viz/human"
+    assert SceneBuilder(SCENE).human_ended(end) is None  # no human model
 
 
 def test_the_robot_human_and_occupancy_are_throttled_plans_and_posteriors_are_not(builder) -> None:
