@@ -22,7 +22,8 @@ from services.executor.config import ExecutorConfig, check_robot_names
 from services.executor.core import ArmLimits
 from services.executor.models import load_models, start_configuration
 from shared.config import LOG_LEVELS, ConfigError, ZenohConfig, opt
-from shared.protocol import Keys
+from shared.config_names import check_services
+from shared.protocol import SERVICES, Keys
 from shared.rejects import RejectCounter
 from shared.scene import SCENE_HELP, load_scene
 from shared.transport import Presence, open_session
@@ -58,6 +59,8 @@ class RobotSimConfig:
         Ros2Config(domain_id=self.domain_id, node=self.node).validate()
         if not self.rate_hz > 0:
             raise ConfigError(f"simrobot.rate_hz: must be > 0, got {self.rate_hz}")
+        if self.stop_with:  # misspelt, it is never seen go, and the robot runs on without a word
+            check_services([self.stop_with], "simrobot.stop_with", SERVICES)
         check_robot_names(self.controller, self.joint_states, "simrobot.")
 
 

@@ -20,7 +20,9 @@ import numpy as np
 import zenoh
 
 from shared.config import ConfigError, ZenohConfig, opt
+from shared.config_names import check_services
 from shared.protocol import (
+    SERVICES,
     ClassPosterior,
     DemoMarker,
     Expectations,
@@ -64,6 +66,8 @@ class Ros2ServiceConfig(Ros2Config):
             raise ConfigError(f"ros2.nice: must be 0..19, got {self.nice}")
         if not self.viz_rate_hz > 0:
             raise ConfigError(f"ros2.viz_rate_hz: must be > 0, got {self.viz_rate_hz}")
+        if self.stop_with:  # misspelt, it is never seen go, and the gateway runs on without a word
+            check_services([self.stop_with], "ros2.stop_with", SERVICES)
 
 
 @dataclass

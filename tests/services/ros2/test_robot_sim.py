@@ -21,3 +21,15 @@ def test_bad_robot_names_are_named_after_the_option_given() -> None:
     with pytest.raises(ConfigError, match=r"^executor.ros2_joint_states: each part .* 'joint_\*' of '/joint_\*'"):
         ExecutorConfig(ros2_joint_states="/joint_*").validate()
     RobotSimConfig(controller="r_arm_controller_2").validate()
+
+
+def test_a_misspelt_stop_with_service_is_named_with_the_closest() -> None:
+    """Misspelt, the service was never seen going, and the robot or the gateway ran on without a word."""
+    from services.ros2.service import Ros2ServiceConfig
+
+    for make, option in ((lambda s: RobotSimConfig(stop_with=s), "simrobot.stop_with"),
+                         (lambda s: Ros2ServiceConfig(stop_with=s), "ros2.stop_with")):
+        with pytest.raises(ConfigError, match=rf"^{option}: unknown service 'exectuor' \(did you mean 'executor'\?\)"):
+            make("exectuor").validate()
+        make("executor").validate()
+        make("").validate()
