@@ -17,12 +17,50 @@ from shared.keypoints.fit import POINT_NAMES, REQUIRED, FitResult, KeypointFit
 from shared.keypoints.layouts import Layout
 from shared.keypoints.plausibility import MAX_TILT_DEG, torso_tilt_deg
 
-__all__ = ["MAX_TILT_DEG", "OUTLIER_FACTOR", "missing_points", "torso_tilt_deg", "fit_without_outliers",
-           "furthest_point"]
+__all__ = ["MAX_TILT_DEG", "OUTLIER_FACTOR", "UPRIGHT_CONFIRM", "Upright", "missing_points", "torso_tilt_deg",
+           "fit_without_outliers", "furthest_point"]
 
 OUTLIER_FACTOR = 3.0
 """An optional point further than this many times ``max_residual_m`` from the fit is left out and the frame refitted
 (a point where the sensor detected nothing; the default limit, 8 cm, makes it 24 cm)."""
+
+
+UPRIGHT_CONFIRM = 15
+"""Frames a track must stand upright (half a second at 30 Hz) before a lean beyond :data:`MAX_TILT_DEG` is taken
+for a person bending over rather than keypoints whose up is not z."""
+
+
+class Upright:
+    """Whether a track's keypoints have z up: frames leaning too far are refused until it has stood upright.
+
+    Frames leaning beyond :data:`MAX_TILT_DEG` are refused until the track has stood upright for
+    :data:`UPRIGHT_CONFIRM` frames. Keypoints in a camera's frame (z forward) or a y-up one lean about 90 deg in
+    every frame, from the first; a person bending over to pick something up leans as far, for a while, once tracked
+    upright (judged frame by frame, such a bend ended the reach under way).
+
+    Attributes:
+        frames: Upright frames accepted in the current track.
+    """
+
+    def __init__(self) -> None:
+        self.frames = 0
+
+    def problem(self, tilt: float, new_track: bool) -> str:
+        """Why a frame leaning ``tilt`` deg is refused ('' if it is not); ``new_track``: it would start a track."""
+        upright = 0 if new_track else self.frames
+        if not tilt > MAX_TILT_DEG or upright >= UPRIGHT_CONFIRM:
+            return ""
+        return (f"the torso (pelvis to the shoulders' midpoint) leans {tilt:.0f} deg from the vertical (z), more than "
+                f"{MAX_TILT_DEG:g}, and the track has not stood upright for {UPRIGHT_CONFIRM} frames ({upright} so "
+                "far): is z the keypoints' up? The sensor's extrinsic transform must bring them into the library's "
+                "frame")
+
+    def accepted(self, tilt: float, new_track: bool) -> None:
+        """A frame leaning ``tilt`` deg was accepted (``new_track``: it started a track)."""
+        if new_track:
+            self.frames = 0
+        if not tilt > MAX_TILT_DEG:
+            self.frames += 1
 
 
 def _made_of(layout: Layout, point: str) -> tuple[str, ...]:

@@ -42,7 +42,7 @@ from shared.keypoints.fit import POINT_NAMES, REQUIRED, KeypointFit
 from shared.keypoints.layouts import LAYOUTS, load_layout
 from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Message
 
-from .checks import MAX_TILT_DEG, fit_without_outliers, furthest_point, missing_points, torso_tilt_deg
+from .checks import Upright, fit_without_outliers, furthest_point, missing_points, torso_tilt_deg
 from .filters import OneEuroFilter
 from .reach import ReachDetector, ReachRule
 from .resample import PoseClock
@@ -148,6 +148,7 @@ class TrackerCore:
         self.reach = ReachDetector(self.config.rule)
         self.refused = dict.fromkeys(REASONS, 0)
         self.accepted = self.bridged = self.reaches = self.points_left_out = 0
+        self.upright = Upright()                                 # whether this track's keypoints have z up
         self._wrist, self._pelvis = list(POINT_NAMES).index("r_wrist"), list(POINT_NAMES).index("pelvis")
         self._shoulders = list(POINT_NAMES).index("r_shoulder"), list(POINT_NAMES).index("l_shoulder")
         self._required = {p: list(POINT_NAMES).index(p) for p in REQUIRED}
@@ -194,11 +195,9 @@ class TrackerCore:
         if missing:
             return self._refuse("missing", f"required point(s) missing: "
                                 f"{missing_points(self.layout, names, positions, missing)}")
-        tilt = torso_tilt_deg(points)
-        if tilt > MAX_TILT_DEG:  # a camera's frame (z forward) or a y-up one: the fit would lay the person down
-            return self._refuse("upright", f"the torso (pelvis to the shoulders' midpoint) leans {tilt:.0f} deg from "
-                                f"the vertical (z), more than {MAX_TILT_DEG:g}: is z the keypoints' up? The "
-                                "sensor's extrinsic transform must bring them into the library's frame")
+        tilt, new_track = torso_tilt_deg(points), self._raw is None or stamp - self._raw[0] > self.config.max_gap_s
+        if why := self.upright.problem(tilt, new_track):  # a camera's frame, a y-up one: the fit lays them down
+            return self._refuse("upright", why)
         if self._raw is not None and not stamp > self._raw[0]:
             return self._refuse("order", f"stamp {stamp:.6f} s is not after the last accepted frame's "
                                 f"({self._raw[0]:.6f} s)")
@@ -253,6 +252,7 @@ class TrackerCore:
         dropped = None if frame is None or self._frame_no is None or self._raw is None else frame - self._frame_no - 1
         self._raw, self._joints, self._frame_no, self._jump = (stamp, f), joints, frame, None
         self.accepted += 1
+        self.upright.accepted(tilt, new_track)
         smooth = self.filter(f, stamp)
         sensor_hz = 1.0 / float(np.median(self._dts)) if len(self._dts) == self._dts.maxlen else None
         if self.clock.follow(sensor_hz) and not self._rate_said:  # said once per track
@@ -321,7 +321,7 @@ class TrackerCore:
         self._short.clear()
         self._raw = self._out = self._joints = self._frame_no = self._leap = self._jump = None
         self._ended_at = -math.inf  # a sensor restarted, or a clock stepped back: its frames may precede the last end
-        self._rate_said = False
+        self._rate_said, self.upright.frames = False, 0
         self.clock.reset()
         return msgs
 

@@ -245,8 +245,11 @@ def fit_keypoint_library(directory: Path, layout: str = "foresight", config: Fit
         residuals.append(r)
         index = counts[label] = counts.get(label, -1) + 1
         out.append(Demonstration(label, name, index, feats, f"{name}.csv#demo {kd.demo}"))
-    if not out:
-        raise ValueError(f"keypoint library {directory}: no demonstration fits the model "
-                         f"({'; '.join(map(str, issues[:3]))})")
+    given = {label for label, *_ in demos}
+    empty = [f"{p.stem} ({'none fits the model' if label in given else 'none given'})"
+             for label, p in enumerate(files) if label not in counts]
+    if empty:  # training would refuse the library, far from here
+        raise ValueError(f"keypoint library {directory}: no demonstration of {', '.join(empty)}"
+                         + (f"; {'; '.join(map(str, issues[:3]))}" if issues else ""))
     lib = MotionLibrary([p.stem for p in files], out, issues, f"keypoints:{directory} (layout {lay.name})")
     return lib, FitReport(np.concatenate(residuals), fitted, bridged)

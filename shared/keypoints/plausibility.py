@@ -45,15 +45,17 @@ def torso_tilt_deg(points: np.ndarray) -> np.ndarray | float:
 
 
 def units_problem(names: list[str], positions: np.ndarray) -> str:
-    """Why ``positions (..., K, 3)`` of the points ``names`` are not in metres ('' when they may be).
+    """Why a recording's ``positions (T, K, 3)`` of the points ``names`` are not in metres ('' when they may be).
 
-    A coordinate beyond :data:`MAX_KEYPOINT_M` of the origin (what the wire refuses of a live sensor): a recording
-    in millimetres reads as kilometres.
+    Most of its frames (more than half) hold a coordinate beyond :data:`MAX_KEYPOINT_M` of the origin (what the wire
+    refuses of a live sensor): a recording in millimetres reads as kilometres in every frame. A few such frames are
+    a sensor's glitches, refused one by one on receipt or by the fit, not a wrong unit.
     """
-    p = np.asarray(positions, dtype=np.float64)
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, len(names), 3)
     far = np.where(np.isfinite(p), np.abs(p), 0.0)
-    if not far.size or float(far.max()) <= MAX_KEYPOINT_M:
+    beyond = far.max(axis=(1, 2)) > MAX_KEYPOINT_M  # (T,)
+    if not beyond.sum() * 2 > len(p):
         return ""
-    k = int(np.unravel_index(int(np.argmax(far)), far.shape)[-2])
-    return (f"a coordinate {float(far.max()):.1f} m from the origin ('{names[k]}'), beyond {MAX_KEYPOINT_M:g} m: "
-            "keypoints are in metres (millimetres? divide by 1000)")
+    k = int(np.unravel_index(int(np.argmax(far)), far.shape)[1])
+    return (f"coordinates beyond {MAX_KEYPOINT_M:g} m of the origin in {int(beyond.sum())} of its {len(p)} frames "
+            f"(up to {float(far.max()):.1f} m, '{names[k]}'): keypoints are in metres (millimetres? divide by 1000)")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.tracker.checks import MAX_TILT_DEG
+from services.tracker.checks import MAX_TILT_DEG, UPRIGHT_CONFIRM, torso_tilt_deg
 from services.tracker.core import TrackerConfig, TrackerCore
 from shared.human import HumanModel
 from shared.keypoints.fit import POINT_NAMES
@@ -36,8 +36,33 @@ def test_keypoints_whose_up_is_not_z_are_refused_as_not_upright(joints, frame: s
     outs = [core.on_frame(i / RATE, NAMES, p @ rotate + [0, 0, 1.0]) for i, p in enumerate(joints)]
     assert core.accepted == 0 and core.refused["upright"] == len(joints)
     assert outs[0].refused.startswith("upright: the torso (pelvis to the shoulders' midpoint) leans ")
-    assert f"from the vertical (z), more than {MAX_TILT_DEG:g}: is z the keypoints' up?" in outs[0].refused
+    assert f"from the vertical (z), more than {MAX_TILT_DEG:g}, and the track has not stood upright" in outs[0].refused
+    assert "is z the keypoints' up?" in outs[0].refused
     assert not any(o.messages for o in outs)
+
+
+def test_a_person_bending_over_once_tracked_upright_is_taken() -> None:
+    """Judged frame by frame, a bend beyond 60 deg was refused as keypoints whose up is not z (46 of 120 frames here),
+    and the gap ended the reach under way."""
+    from shared.feature_sets import HERAKLES_NAMES
+
+    f = np.zeros(12)
+    f[HERAKLES_NAMES.index("pelvis_z")] = 1.0
+    lean = np.radians(110) * np.sin(np.linspace(0, np.pi, 120)) ** 2  # upright, bent (torso_y 110 deg), upright
+    frames = []
+    for a in np.concatenate([np.zeros(UPRIGHT_CONFIRM), lean]):
+        g = f.copy()
+        g[HERAKLES_NAMES.index("torso_y")] = a
+        frames.append(MODEL.joint_positions(g))
+    core = TrackerCore()
+    outs = [core.on_frame(i / RATE, NAMES, p) for i, p in enumerate(frames)]
+    assert max(torso_tilt_deg(p) for p in frames) > MAX_TILT_DEG + 10  # 75 deg at the bend's deepest
+    assert sum(core.refused.values()) == 0 and core.accepted == len(frames), [o.refused for o in outs if o.refused]
+    core = TrackerCore()  # bent from its first frame: refused until it has stood upright long enough
+    outs = [core.on_frame(i / RATE, NAMES, p) for i, p in enumerate(frames[UPRIGHT_CONFIRM + 55:])]
+    assert outs[0].refused.startswith("upright: ")
+    assert "has not stood upright for 15 frames (0 so far)" in outs[0].refused
+    assert core.accepted > 0 and core.refused["upright"] > 0
 
 
 def test_an_optional_point_reported_at_the_origin_is_left_out_and_the_reach_goes_on(joints) -> None:

@@ -390,4 +390,4 @@ def test_a_recording_in_millimetres_is_refused_before_it_plays(tmp_path: Path, c
         tracker_main(["--from", str(recording), "--connect", "tcp/127.0.0.1:9"], prog="foresight tracker")
     assert info.value.code == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
-    assert "tracker.from_file" in line and "demo 0: a coordinate" in line and "millimetres? divide by 1000" in line
+    assert "tracker.from_file" in line and "demo 0: coordinates beyond 20 m" in line and "millimetres?" in line

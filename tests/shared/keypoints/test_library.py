@@ -159,7 +159,7 @@ def test_keypoints_in_millimetres_or_lying_on_their_side_are_refused(small, tmp_
     """Before, both were fitted (features clamped to their bounds), written and counted 'issues 0', exit 0."""
     write_keypoint_library(small, tmp_path / "mm")
     _rewrite(tmp_path / "mm", lambda p: p * 1000.0)
-    with pytest.raises(ValueError, match=r"demo 0: a coordinate \d+\.\d m from the origin \('[a-z_]+'\), beyond 20 m: "
+    with pytest.raises(ValueError, match=r"demo 0: coordinates beyond 20 m of the origin in 100 of its 100 frames .*"
                                          r"keypoints are in metres \(millimetres\? divide by 1000\)"):
         fit_keypoint_library(tmp_path / "mm")
     write_keypoint_library(small, tmp_path / "camera")
@@ -192,3 +192,27 @@ def test_a_demonstration_that_does_not_fit_the_model_is_left_out_as_an_issue(sma
     (issue,) = lib.issues
     assert issue.class_name == path.stem and issue.block == 1
     assert "demo 1: fit residual median " in issue.reason and "cm > 8 cm: its points do not fit the" in issue.reason
+
+
+def test_a_class_none_of_whose_demonstrations_fits_is_refused_by_name(small, tmp_path: Path) -> None:
+    """It was written as an empty class, exit 0, and training refused the library later."""
+    write_keypoint_library(small, tmp_path / "lib")
+    path = sorted((tmp_path / "lib").glob("*.csv"))[1]
+    rows = path.read_text().splitlines()
+    header = rows[0].split(",")
+    xs = [i for i, h in enumerate(header) if h.endswith("_x")]
+    pelvis = header.index("pelvis_x")
+    spoilt = [rows[0]]
+    for row in rows[1:]:  # every demonstration of the class: a body twice the model's size about its pelvis
+        cells = row.split(",")
+        centre = np.array([float(c) for c in cells[pelvis:pelvis + 3]])
+        for i in xs:
+            if cells[i]:
+                cells[i:i + 3] = [f"{v:.6f}" for v in centre + 2 * (np.array([float(c) for c in cells[i:i + 3]])
+                                                                      - centre)]
+        spoilt.append(",".join(cells))
+    path.write_text("\n".join(spoilt) + "\n")
+    with pytest.raises(ValueError, match=rf"no demonstration of {path.stem} \(none fits the model\); {path.stem} "
+                                         r"block 0: demo 0: fit residual median"):
+        fit_keypoint_library(tmp_path / "lib")
+
