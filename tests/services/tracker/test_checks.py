@@ -12,7 +12,6 @@ from shared.human import HumanModel
 from shared.keypoints.fit import POINT_NAMES
 from shared.keypoints.layouts import load_layout
 from shared.protocol import DemoMarker, HumanPose
-from shared.synthetic import generate_library
 
 MODEL = HumanModel()
 NAMES = list(POINT_NAMES)
@@ -20,11 +19,9 @@ RATE = 30.0
 
 
 @pytest.fixture(scope="module")
-def joints() -> np.ndarray:
-    """``(T, J, 3)``: the model's points along a synthetic reach with a second of rest before and after it."""
-    d = generate_library(seed=0).demos[0]
-    feats = np.concatenate([np.repeat(d.features[:1], 30, 0), d.features, np.repeat(d.features[-1:], 40, 0)])
-    return MODEL.joint_positions(feats)
+def joints(reach) -> np.ndarray:
+    """``(T, J, 3)``: the model's points along the reach (conftest)."""
+    return MODEL.joint_positions(reach)
 
 
 @pytest.mark.parametrize("frame", ["camera (z forward)", "y up"])

@@ -12,18 +12,10 @@ from shared.feature_sets import HERAKLES_NAMES
 from shared.human import HumanModel
 from shared.keypoints.fit import POINT_NAMES
 from shared.protocol import DemoMarker, HumanPose
-from shared.synthetic import generate_library
 
 MODEL = HumanModel()
 NAMES = list(POINT_NAMES)
 RATE = 30.0
-
-
-@pytest.fixture(scope="module")
-def reach() -> np.ndarray:
-    """``(T, 12)``: a synthetic demonstration with a second of rest before and after it."""
-    d = generate_library(seed=0).demos[0]
-    return np.concatenate([np.repeat(d.features[:1], 30, 0), d.features, np.repeat(d.features[-1:], 40, 0)])
 
 
 def run(core: TrackerCore, feats: np.ndarray, skip: set[int] = frozenset(), edit=None) -> list:  # noqa: ANN001

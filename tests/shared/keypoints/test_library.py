@@ -169,24 +169,27 @@ def test_keypoints_in_millimetres_or_lying_on_their_side_are_refused(small, tmp_
         fit_keypoint_library(tmp_path / "camera")
 
 
-def test_a_demonstration_that_does_not_fit_the_model_is_left_out_as_an_issue(small, tmp_path: Path) -> None:
-    write_keypoint_library(small, tmp_path / "lib")
-    path = sorted((tmp_path / "lib").glob("*.csv"))[0]
+def _enlarge(path: Path, demo: str | None = None) -> None:
+    """Make every body of ``path`` (or of its demonstration ``demo``) twice the model's size about its pelvis."""
     rows = path.read_text().splitlines()
     header = rows[0].split(",")
     xs = [i for i, h in enumerate(header) if h.endswith("_x")]
     pelvis = header.index("pelvis_x")
-    spoilt = [rows[0]]
+    out = [rows[0]]
     for row in rows[1:]:
         cells = row.split(",")
-        if cells[0] == "1":  # the class's second demonstration: a body twice the model's size about its pelvis
+        if demo is None or cells[0] == demo:
             centre = np.array([float(c) for c in cells[pelvis:pelvis + 3]])
-            for i in xs:
-                if cells[i]:
-                    p = centre + 2 * (np.array([float(c) for c in cells[i:i + 3]]) - centre)
-                    cells[i:i + 3] = [f"{v:.6f}" for v in p]
-        spoilt.append(",".join(cells))
-    path.write_text("\n".join(spoilt) + "\n")
+            for i in (i for i in xs if cells[i]):
+                cells[i:i + 3] = [f"{v:.6f}" for v in 2 * np.array([float(c) for c in cells[i:i + 3]]) - centre]
+        out.append(",".join(cells))
+    path.write_text("\n".join(out) + "\n")
+
+
+def test_a_demonstration_that_does_not_fit_the_model_is_left_out_as_an_issue(small, tmp_path: Path) -> None:
+    write_keypoint_library(small, tmp_path / "lib")
+    path = sorted((tmp_path / "lib").glob("*.csv"))[0]
+    _enlarge(path, demo="1")  # the class's second demonstration
     lib, _ = fit_keypoint_library(tmp_path / "lib")
     assert len(lib.demos) == len(small.demos) - 1
     (issue,) = lib.issues
@@ -198,20 +201,7 @@ def test_a_class_none_of_whose_demonstrations_fits_is_refused_by_name(small, tmp
     """It was written as an empty class, exit 0, and training refused the library later."""
     write_keypoint_library(small, tmp_path / "lib")
     path = sorted((tmp_path / "lib").glob("*.csv"))[1]
-    rows = path.read_text().splitlines()
-    header = rows[0].split(",")
-    xs = [i for i, h in enumerate(header) if h.endswith("_x")]
-    pelvis = header.index("pelvis_x")
-    spoilt = [rows[0]]
-    for row in rows[1:]:  # every demonstration of the class: a body twice the model's size about its pelvis
-        cells = row.split(",")
-        centre = np.array([float(c) for c in cells[pelvis:pelvis + 3]])
-        for i in xs:
-            if cells[i]:
-                cells[i:i + 3] = [f"{v:.6f}" for v in centre + 2 * (np.array([float(c) for c in cells[i:i + 3]])
-                                                                      - centre)]
-        spoilt.append(",".join(cells))
-    path.write_text("\n".join(spoilt) + "\n")
+    _enlarge(path)
     with pytest.raises(ValueError, match=rf"no demonstration of {path.stem} \(none fits the model\); {path.stem} "
                                          r"block 0: demo 0: fit residual median"):
         fit_keypoint_library(tmp_path / "lib")
