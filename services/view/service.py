@@ -1,7 +1,7 @@
 """The ``view`` loop: subscribe to a running system's messages, serve its scene live on ws://HOST:PORT.
 
-It subscribes to the plan, robot state, occupancy, posterior, human pose and demonstration-marker keys (as the read-only
-``observer`` when security is on: it puts nothing and declares no token) and logs each message's scene to
+It subscribes to the plan, robot state, occupancy, posterior, human pose, demonstration-marker and keypoint keys (as
+the read-only ``observer`` when security is on: it puts nothing and declares no token) and logs each message's scene to
 a :class:`~shared.foxglove.live.LiveServer`, which sends the static scene again every ``static_period_s``
 for clients that connect later.
 """
@@ -19,6 +19,7 @@ from shared.protocol import (
     ClassPosterior,
     DemoMarker,
     Expectations,
+    HumanKeypoints,
     HumanPose,
     Keys,
     Message,
@@ -83,7 +84,8 @@ class ViewService:
             k = self.keys
             subs = [subscribe(session, key, cls, self._on, self.rejects, self.receipt)
                     for key, cls in ((k.plan, Plan), (k.robot_state, RobotState), (k.occupancy, OccupancyGrid),
-                                     (k.posterior, ClassPosterior), (k.pose, HumanPose), (k.demo, DemoMarker))]
+                                     (k.posterior, ClassPosterior), (k.pose, HumanPose), (k.demo, DemoMarker),
+                                     (k.keypoints, HumanKeypoints))]
             log.info("view: serving %s to the Foxglove app (Open connection -> Foxglove WebSocket; layout: "
                      "docs/foresight.foxglove.json); prefix %r", server.url, self.zenoh.prefix)
             print(f"foresight view: watch live at {server.url}; drawing scene {self.scene.name} (--scene: the "

@@ -202,6 +202,10 @@ class SceneBuilder:
         if pose.index == 0:
             self._remember_first(pose)
 
+    def placement_reference(self) -> np.ndarray | None:
+        """The newest demonstration's first pose ``(12,)``, from which the human is placed (None before any)."""
+        return next(reversed(self._first_pose.values()), None)
+
     def _remember_first(self, pose: HumanPose) -> np.ndarray:
         self._first_pose[pose.demo_id] = first = pose.features.copy()
         while len(self._first_pose) > _KEEP_FIRST_POSES:  # a long session: keep the last few

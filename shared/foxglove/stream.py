@@ -16,9 +16,19 @@ from typing import Any
 
 from foxglove.messages import FrameTransforms, PointCloud, SceneUpdate
 
-from shared.protocol import ClassPosterior, DemoMarker, HumanPose, Message, OccupancyGrid, Plan, RobotState
+from shared.protocol import (
+    ClassPosterior,
+    DemoMarker,
+    HumanKeypoints,
+    HumanPose,
+    Message,
+    OccupancyGrid,
+    Plan,
+    RobotState,
+)
 
 from .charts import COSTS_SCHEMA, POSTERIOR_SCHEMA, costs_chart, posterior_chart
+from .keypoints import keypoints_update
 from .scene import SceneBuilder
 
 __all__ = ["TOPICS", "DRAWS", "VizSchema", "VizMessage", "SceneStream", "SCHEMAS"]
@@ -64,6 +74,7 @@ SCHEMAS: dict[str, VizSchema] = {
     "/viz/occupancy": _proto(PointCloud),   # predicted occupancy: voxel centres, probability, colour
     "/viz/plan": _proto(SceneUpdate),       # candidate end-effector paths
     "/viz/human": _proto(SceneUpdate),      # human body segments
+    "/viz/keypoints": _proto(SceneUpdate),  # a body tracker's points
     "/viz/posterior": _json(POSTERIOR_SCHEMA),
     "/viz/costs": _json(COSTS_SCHEMA),
 }
@@ -78,14 +89,15 @@ _EVERY = frozenset({"/viz/plan", "/viz/posterior"})
 
 DRAWS: dict[str, tuple[str, ...]] = {"/viz/plan": ("/viz/plan", "/viz/costs"), "/viz/robot": ("/viz/robot", "/tf"),
                                       "/viz/occupancy": ("/viz/occupancy",), "/viz/human": ("/viz/human",),
-                                      "/viz/posterior": ("/viz/posterior",)}
+                                      "/viz/posterior": ("/viz/posterior",), "/viz/keypoints": ("/viz/keypoints",)}
 """The topics :meth:`SceneStream.draw` writes for each message kind (the topic :meth:`SceneStream.due` names)."""
 
 
 def _kind(msg: Message) -> str | None:
     """The throttled topic that draws ``msg`` (None: nothing does)."""
     for cls, topic in ((Plan, "/viz/plan"), (RobotState, "/viz/robot"), (OccupancyGrid, "/viz/occupancy"),
-                       (HumanPose, "/viz/human"), (ClassPosterior, "/viz/posterior")):
+                       (HumanPose, "/viz/human"), (ClassPosterior, "/viz/posterior"),
+                       (HumanKeypoints, "/viz/keypoints")):
         if isinstance(msg, cls):
             return topic
     return None
@@ -152,6 +164,8 @@ class SceneStream:
             out.append(("/viz/human", b.human_body(msg, stamp=t)))
         elif isinstance(msg, DemoMarker):
             out.append(("/viz/human", b.human_ended(msg, stamp=t)))
+        elif isinstance(msg, HumanKeypoints):
+            out.append(("/viz/keypoints", keypoints_update(msg, b.placement_reference(), b.scene, t)))
         elif isinstance(msg, ClassPosterior):
             out.append(("/viz/posterior", posterior_chart(msg, t)))
         return [VizMessage(topic, _encode(obj), log_time) for topic, obj in out if obj is not None]

@@ -14,7 +14,7 @@ import numpy as np
 
 from .model import HumanError, HumanModel, check_features
 
-__all__ = ["place_in_scene", "voxelize", "reach_points"]
+__all__ = ["place_in_scene", "place_points", "voxelize", "reach_points"]
 
 
 def place_in_scene(features: np.ndarray, first_pose: np.ndarray, scene) -> np.ndarray:
@@ -38,14 +38,26 @@ def place_in_scene(features: np.ndarray, first_pose: np.ndarray, scene) -> np.nd
     ref = check_features(first_pose, "first_pose")
     if ref.ndim != 1:
         raise HumanError(f"first_pose: expected shape (12,), got {ref.shape}")
-    dyaw = float(scene.human.pelvis_yaw) - ref[3]
-    c, s = math.cos(dyaw), math.sin(dyaw)
-    d = f[..., 0:3] - ref[0:3]
     out = f.copy()
+    out[..., 0:3] = place_points(f[..., 0:3], ref, scene)
+    out[..., 3] = f[..., 3] + float(scene.human.pelvis_yaw) - ref[3]
+    return out
+
+
+def place_points(points: np.ndarray, first_pose: np.ndarray, scene) -> np.ndarray:
+    """Move recorder-frame points ``(..., 3)`` as :func:`place_in_scene` moves a demonstration's pelvis.
+
+    The rigid motion (rotation about z by ``scene yaw - first yaw``, then translation) that takes ``first_pose``'s
+    pelvis (x, y, z, yaw: its first 4 entries) to ``scene.human``: a body tracker's keypoints, moved with it, meet
+    the body of the poses fitted to them.
+    """
+    dyaw = float(scene.human.pelvis_yaw) - float(first_pose[3])
+    c, s = math.cos(dyaw), math.sin(dyaw)
+    d = np.asarray(points, dtype=np.float64) - np.asarray(first_pose[0:3], dtype=np.float64)
+    out = np.empty_like(d)
     out[..., 0] = c * d[..., 0] - s * d[..., 1] + scene.human.pelvis_xyz[0]
     out[..., 1] = s * d[..., 0] + c * d[..., 1] + scene.human.pelvis_xyz[1]
     out[..., 2] = d[..., 2] + scene.human.pelvis_xyz[2]
-    out[..., 3] = f[..., 3] + dyaw
     return out
 
 

@@ -1,0 +1,63 @@
+"""A body tracker's keypoints in the 3D scene, between reaches too (``/viz/keypoints``).
+
+The tracker publishes the human's poses during reaches only, so the body on ``/viz/human`` shows a reach and
+stays grey between reaches. The sensor's own points show the person all the time: each frame's points as small
+spheres, placed in the scene as the poses are (:func:`shared.human.placement.place_points`: the rigid motion that
+takes the newest demonstration's first pelvis pose to the scene's human), so that they meet the body where a reach
+is drawn. Before the first reach no placement is known and nothing is drawn. Each frame's spheres live
+:data:`LIFETIME_S`: when the sensor stops or the person leaves, they go.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from foxglove.messages import (
+    Color,
+    Duration,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneUpdate,
+    SpherePrimitive,
+    Vector3,
+)
+
+from shared.human.placement import place_points
+from shared.protocol import HumanKeypoints
+from shared.scene import Scene
+
+from .scene import WORLD_FRAME, timestamp
+
+__all__ = ["LIFETIME_S", "KEYPOINT_RGBA", "RADIUS_M", "keypoints_update"]
+
+LIFETIME_S = 0.5
+"""How long a frame's spheres stay without a newer frame (the view draws at most ``viz_rate_hz``, 5 a second)."""
+KEYPOINT_RGBA = (0.95, 0.95, 0.35, 0.9)
+RADIUS_M = 0.03
+
+
+def keypoints_update(msg: HumanKeypoints, reference: np.ndarray | None, scene: Scene, stamp: float
+                     ) -> SceneUpdate | None:
+    """The frame's seen points as spheres in the scene, or None (no placement yet, or no point seen).
+
+    Args:
+        msg: The sensor's frame (recorder's frame, metres; NaN where lost).
+        reference: ``(12,)`` the newest demonstration's first pose (:meth:`SceneBuilder.placement_reference`).
+        scene: The scene the human is placed in.
+        stamp: The entity's time (s).
+    """
+    if reference is None:
+        return None
+    pos = np.asarray(msg.positions, dtype=np.float64).reshape(-1, 3)
+    seen = pos[np.all(np.isfinite(pos), axis=1)]
+    if not len(seen):
+        return None
+    r, g, b, a = KEYPOINT_RGBA
+    spheres = [SpherePrimitive(pose=Pose(position=Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                                         orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+                               size=Vector3(x=2 * RADIUS_M, y=2 * RADIUS_M, z=2 * RADIUS_M),
+                               color=Color(r=r, g=g, b=b, a=a))
+               for p in place_points(seen, reference, scene)]
+    life = Duration(sec=int(LIFETIME_S), nsec=int(round(LIFETIME_S % 1 * 1e9)))
+    return SceneUpdate(entities=[SceneEntity(timestamp=timestamp(stamp), frame_id=WORLD_FRAME, id="human/keypoints",
+                                             lifetime=life, spheres=spheres)])
