@@ -354,7 +354,8 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     q = np.array([s.q for s in states]) if states else np.zeros((0, 0))
     stamps = np.array([s.stamp for s in states])
     cost = interference(robot, q, stamps, final_occupancy) if final_occupancy is not None and len(q) else 0.0
-    reached_states = [s for s in states if s.reached]
+    # the goal it ended going for (a robot that reached one cup and then turned to the other has not reached it)
+    reached_states = [s for s in states if s.reached and s.goal == states[-1].goal]
     reached_step = reached_t = None
     if reached_states:
         first = reached_states[0]

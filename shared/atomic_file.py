@@ -15,7 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["atomic_write", "make_parent"]
+__all__ = ["atomic_write", "make_parent", "ready_to_write"]
 
 
 def make_parent(path: str | os.PathLike[str]) -> Path:
@@ -31,6 +31,27 @@ def make_parent(path: str | os.PathLike[str]) -> Path:
         blocker = next((a for a in reversed(p.parents) if a.exists() and not a.is_dir()), p.parent)
         raise NotADirectoryError(errno.ENOTDIR, "a file is in the way (a directory is needed there)",
                                  str(blocker)) from None
+    return p
+
+
+def ready_to_write(path: str | os.PathLike[str], directory: bool = False) -> Path:
+    """Check, before the work that makes it, that ``path`` can be written: its parents made, nothing in the way.
+
+    Args:
+        path: A file to write (or, with ``directory``, a directory to write into).
+        directory: ``path`` is a directory (created).
+
+    Raises:
+        NotADirectoryError: A file is where a directory is needed (named).
+        IsADirectoryError: ``path`` is a directory where a file is to be written.
+        PermissionError: The directory it goes in is not writable.
+    """
+    p = Path(path)
+    target = make_parent(p / "x").parent if directory else make_parent(p).parent  # directory: p itself is made
+    if not directory and p.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "a directory is in the way (a file is to be written there)", str(p))
+    if not os.access(target, os.W_OK | os.X_OK):
+        raise PermissionError(errno.EACCES, "not writable by this user", str(target))
     return p
 
 

@@ -15,7 +15,8 @@ class ExecutorResult:
 
     Attributes:
         steps: Replanning steps completed (lock-step) or periods elapsed (real time).
-        reached: Whether the goal was reached; ``reached_step`` the first step it was (-1: never).
+        reached: Whether a goal was reached; ``reached_step`` the first step one was (-1: never);
+            ``reached_steps`` the first step each goal (index) was, where the robot switched goals.
         goal_per_step: Goal index executed during each step (-1: none yet).
         held_steps: Steps (lock-step) or state samples (real time) during which the robot held.
         lockstep_timeouts: Lock-step waits for a tick's plan or prediction that ran out (the step went on without
@@ -31,6 +32,7 @@ class ExecutorResult:
     steps: int = 0
     reached: bool = False
     reached_step: int = -1
+    reached_steps: dict[int, int] = field(default_factory=dict)
     goal_per_step: list[int] = field(default_factory=list)
     held_steps: int = 0
     lockstep_timeouts: int = 0
@@ -43,3 +45,11 @@ class ExecutorResult:
     mcap_path: str | None = None
     times: np.ndarray = field(default_factory=lambda: np.zeros(0))
     q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    def note_reached(self, goal: int, step: int) -> bool:
+        """Goal ``goal`` is reached during ``step``; True the first time any goal is (the run's ``reached_step``)."""
+        self.reached_steps.setdefault(goal, step)
+        if self.reached_step >= 0:
+            return False
+        self.reached, self.reached_step = True, step
+        return True

@@ -317,8 +317,7 @@ class ExecutorService:
                 self._publish_state(state_pub, state)
             r.goal_per_step.append(step.goal)
             r.steps = n + 1
-            if step.reached and r.reached_step < 0:
-                r.reached, r.reached_step = True, n
+            if step.reached and r.note_reached(step.goal, n):
                 log.info("executor: goal %d reached during step %d", step.goal, n)
             clock_pub.put(step.clock)
             if cfg.stop_on_goal and step.reached:
@@ -351,8 +350,7 @@ class ExecutorService:
                 bound = n + 1 + math.ceil(core.remaining / per_step) + 20
             for state in step.states:
                 self._publish_state(state_pub, state)
-            if step.reached and r.reached_step < 0:
-                r.reached, r.reached_step = True, n
+            if step.reached and r.note_reached(step.goal, n):
                 log.info("executor: goal %d reached during step %d (the rest of the path)", step.goal, n)
             n += 1
 
@@ -393,8 +391,7 @@ class ExecutorService:
             while len(self.result.goal_per_step) < step:
                 self.result.goal_per_step.append(core.goal)
             self.result.steps = step
-            if core.reached and self.result.reached_step < 0:
-                self.result.reached, self.result.reached_step = True, step
+            if core.reached and self.result.note_reached(core.goal, step):
                 log.info("executor: goal %d reached at t=%.2f s", core.goal, core.t)
                 if cfg.stop_on_goal:
                     break

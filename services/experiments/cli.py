@@ -15,6 +15,7 @@ from pathlib import Path
 
 from services.predictor.volumes import VOLUMES
 from shared import strict_json
+from shared.atomic_file import ready_to_write
 from shared.runtime import UserError, cli_errors, help_text, setup_logging
 from shared.scene import SCENE_HELP
 
@@ -203,6 +204,7 @@ def _occupancy(args: argparse.Namespace, out) -> int:
 
     if args.per_class < 0 or args.components < 1 or args.n_jobs < 1:
         raise UserError("--per-class must be >= 0, --components and --n-jobs >= 1")
+    ready_to_write(args.out, directory=True)  # before the work: a file in the way lost it all
     scene = load_scene(args.scene or None)
     lib = load_experiment_library(args.library, scene)
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
@@ -259,6 +261,7 @@ def _pace(args: argparse.Namespace, out) -> int:
         libraries = (*dict.fromkeys((*libraries, args.library)),)
     if args.iterations is not None and args.iterations < 1:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
+    ready_to_write(args.plot)
     res = run_pace(PaceConfig(libraries=libraries, protocols=protocols, paces=paces, demos=args.demos,
                               seeds=args.seeds, components=args.components, volume=args.volume,
                               models_dir=args.models_dir,
@@ -304,6 +307,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             raise UserError(f"--demos and --seeds must be >= 1, got {args.demos} and {args.seeds}")
         if args.what == "switch" and (args.demos < 0 or args.seed < 0):
             raise UserError(f"--demos must be >= 0 (0: all) and --seed >= 0, got {args.demos} and {args.seed}")
+        if args.what == "switch":
+            ready_to_write(args.plot)
         if args.what == "interference":
             from .interference import InterferenceConfig, run_interference
 

@@ -32,8 +32,12 @@ from shared.scene import Scene
 
 from .fit_store import fit_store
 
-__all__ = ["SYNTHETIC", "load_experiment_library", "library_tag", "short_name", "CupClass", "cup_class",
-           "HeldOutModels", "human_file", "samples_per_tick", "class_at_cup", "human_class"]
+__all__ = ["SYNTHETIC", "FAR_FROM_CUP_M", "load_experiment_library", "library_tag", "short_name", "CupClass",
+           "cup_class", "HeldOutModels", "human_file", "samples_per_tick", "class_at_cup", "human_class"]
+
+FAR_FROM_CUP_M = 0.3
+"""A class whose mean reach ends further than this from its cup (horizontally) does not reach for it: the synthetic
+classes end 1-2 cm from theirs, the paper's library's nearest 0.13-0.46 m (docs/experiments.md)."""
 
 SYNTHETIC = "synthetic"
 """Library name of the embedded synthetic library (generated for the experiment's scene)."""
@@ -72,6 +76,25 @@ class CupClass:
     label: int
     name: str
     distance: float
+
+    def warning(self) -> str:
+        """A line when the class does not reach for its cup (its mean reach ends beyond :data:`FAR_FROM_CUP_M`)."""
+        if not self.distance > FAR_FROM_CUP_M:
+            return ""
+        return (f"warning: class {self.name}'s mean reach ends {self.distance:.2f} m from {self.cup}, more than "
+                f"{FAR_FROM_CUP_M:g}: this human does not reach for that cup, and the runs measure a person who is "
+                "not where the cup is (--human-cup, or a library whose class reaches it)")
+
+    def held_out(self, pool: int, demos: int) -> int:
+        """``demos`` held-out demonstrations of the class's ``pool``, or a UserError when none would be left to train.
+
+        Before, ``--demos`` above the pool held every demonstration out, and the model's training said only
+        "no demonstrations for class(es)".
+        """
+        if demos >= pool:
+            raise UserError(f"--demos {demos}: class {self.name} has {pool} demonstrations, and the held-out ones are "
+                            f"left out of its model: at most {pool - 1}")
+        return demos
 
 
 def cup_class(library: MotionLibrary, scene: Scene, cup: str, exclude: tuple[int, ...] = ()) -> CupClass:

@@ -326,12 +326,14 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
         how = "the authors' motions"
     else:
         rng = np.random.default_rng(cfg.selection_seed)
-        picked = sorted(rng.choice(len(pool), size=min(cfg.demos, len(pool)), replace=False).tolist())
+        picked = sorted(rng.choice(len(pool), size=human.held_out(len(pool), cfg.demos), replace=False).tolist())
         demos = [pool[i] for i in picked]
         how = f"drawn with seed {cfg.selection_seed}"
     progress(f"interference ({prot.name} protocol): {lib.source}, scene {scene.name}; robot -> {cfg.robot_cup}; "
              f"human -> {human.cup}: class {human.name} (mean reach {human.distance:.3f} m from the cup), "
              f"demonstrations {[d.index for d in demos]} ({how}, held out)")
+    if human.warning():
+        progress(human.warning())
     volume = cfg.volume or prot.volume
     model = HeldOutModels(lib, scene, Path(cfg.models_dir), cfg.components, volume).without(demos)
     planners = {flag: build_planner(scene, [cfg.robot_cup], flag, cfg.timing, compile=compile, w_human=cfg.w_human,

@@ -159,7 +159,9 @@ def run_pace(cfg: PaceConfig, progress: Callable[[str], None] = print, compile: 
                                           path_per_step=pace if prot == "paper" else None,
                                           models_dir=cfg.models_dir, work_dir=cfg.work_dir)
                 progress(f"pace: {prot} protocol, {short_name(library)}, pace {pace:g}")
-                res = run_interference(icfg, progress=lambda _line: None, compile=compile)
+                # each run's line, indented under the point's; the setup line said once (the point's says where)
+                res = run_interference(icfg, progress=lambda line: line.startswith("  [") and progress(f"  {line}"),
+                                       compile=compile)
                 result.points.append(_point(res, prot, library, pace))
                 progress(f"  ratio {ratio_text(res.ratio())}")
     return result

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from services.executor.result import ExecutorResult
 from shared.scene import load_scene
 
 from .authors import FIG9_TRACES
@@ -66,6 +67,17 @@ def away_step(chosen: list[str], human_cup: str) -> int | None:
         return None
     last = max((i for i, g in enumerate(chosen) if g == human_cup), default=-1)
     return last + 1
+
+
+def final_reached(result: ExecutorResult | None, goal_names: list[str], chosen: list[str]) -> int | None:
+    """The step the run's final goal (``chosen[-1]``) was first reached, or None.
+
+    Not the first goal reached: a robot that reached the blue cup at step 10 and turned to the red one at step 14
+    was reported "red_cup, reached step 10".
+    """
+    if result is None or not chosen or chosen[-1] not in goal_names:
+        return None
+    return result.reached_steps.get(list(goal_names).index(chosen[-1]))
 
 
 @dataclass(frozen=True)
@@ -219,7 +231,7 @@ def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compi
                             tuple(tuple(float(c) for c in p.cost_total) for p in rec.plans),
                             tuple(tuple(float(c) for c in p.cost_human) for p in rec.plans),
                             settle_step(chosen), away_step(chosen, cfg.human_cup), chosen[-1] if chosen else "",
-                            res.reached_step if res is not None and res.reached and res.reached_step >= 0 else None,
+                            final_reached(res, rec.plans[0].goal_names if rec.plans else [], chosen),
                             contact.min_clearance, contact.time_in_contact,
                             float(np.median([p.planning_ms for p in rec.plans])) if rec.plans else math.nan)
             result.runs.append(run)

@@ -23,6 +23,7 @@ from sklearn.mixture import GaussianMixture
 from tqdm import tqdm
 
 from shared import strict_json
+from shared.atomic_file import ready_to_write
 from shared.feature_sets import describe_features
 from shared.library import MotionLibrary, load_library
 from shared.runtime import UserError, cli_errors
@@ -285,6 +286,10 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             raise UserError(f"--temperatures: {args.temperatures!r} is not a comma-separated list of numbers") from None
         if not grid or not all(t > 0 and np.isfinite(t) for t in (*grid, args.temperature)):
             raise UserError("--temperature/--temperatures: temperatures must be finite numbers > 0")
+        if args.n_jobs == 0:
+            raise UserError("--n-jobs: 0 runs nothing; give >= 1, or a negative number for all cores but -n-1")
+        for png in (args.plot, args.calibration_plot):  # before the work: a file in the way lost it all
+            ready_to_write(png)
         lib = load_library(args.library) if args.library else default_library()
         variants = [(args.features, args.components)]
         for item in filter(None, (s.strip() for s in args.compare.split(","))):

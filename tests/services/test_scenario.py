@@ -63,6 +63,15 @@ def test_summary_switch_step_and_goal_reached():
     assert isinstance(s, Summary)
 
 
+def test_a_goal_reached_before_the_robot_turned_to_another_is_not_the_runs():
+    """The robot at goal 1 at step 1, then going for goal 0 to the end: it did not reach its goal (it said step 1)."""
+    plans = [_plan(0, 1, [2.0, 1.0]), _plan(1, 1, [2.0, 1.5]), _plan(2, 0, [1.0, 3.0]), _plan(3, 0, [1.0, 3.0])]
+    states = [RobotState(stamp=0.1 * i, tick=i, joint_names=["a", "b", "c"], goal=1 if i < 2 else 0, reached=i == 1,
+                         holding=False, reason="", q=np.full(3, 0.15), qd=np.zeros(3)) for i in range(4)]
+    s = summarise(plans, states, _grid(0.5), {}, PointRobot(), "red_cup", None)
+    assert not s.reached and s.reached_step is None
+
+
 def test_summary_has_one_table_with_a_header_and_a_row_per_step():
     plans = [_plan(t, 0, [1.0, 2.0]) for t in range(4)]
     s = summarise(plans, [], None, {}, PointRobot(), "red_cup", None)

@@ -37,3 +37,29 @@ def test_the_experiments_help_loads_no_torch(argv) -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
                          cwd=Path(__file__).resolve().parents[3]).stdout
     assert "usage: foresight eval" in out and out.strip().splitlines()[-1] == "False", out[-500:]
+
+
+@pytest.mark.parametrize("argv", [["switch", "--plot", "{f}/fig9.png"], ["pace", "--plot", "{f}/pace.png"],
+                                  ["occupancy", "--out", "{f}"], ["recognition", "--plot", "{f}/r.png"],
+                                  ["recognition", "--calibration-plot", "{f}/c.png"]])
+def test_an_output_path_a_file_is_in_the_way_of_is_refused_before_the_work(tmp_path, capsys, argv) -> None:
+    """It was refused after every run ('File exists'), the results lost and the table never printed."""
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    argv = [a.format(f=afile) for a in argv]
+    extra = [] if argv[0] in ("recognition", "occupancy") else ["--models-dir", str(tmp_path / "models"),
+                                                                 "--work-dir", str(tmp_path / "work")]
+    with pytest.raises(SystemExit) as stop:
+        main([*argv, *extra])
+    out, err = capsys.readouterr()
+    assert stop.value.code == 2 and err.strip().splitlines() == [
+        f"foresight eval {argv[0]}: error: {afile}: a file is in the way (a directory is needed there)"]
+    assert not out and not (tmp_path / "models").exists() and not (tmp_path / "work").exists()  # no work done
+
+
+def test_recognition_with_no_workers_is_one_line(capsys) -> None:
+    """joblib's 'n_jobs == 0 in Parallel has no meaning' came as a traceback, after the library was read."""
+    with pytest.raises(SystemExit) as stop:
+        main(["recognition", "--n-jobs", "0"])
+    assert stop.value.code == 2 and "--n-jobs: 0 runs nothing" in capsys.readouterr().err
+

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from services.experiments.heldout import (
+    CupClass,
     HeldOutModels,
     class_at_cup,
     cup_class,
@@ -127,3 +128,18 @@ def test_a_human_file_written_by_many_at_once_is_always_whole(tmp_path) -> None:
         with ThreadPoolExecutor(8) as pool:
             assert list(pool.map(write_and_read, range(16))) == [1] * 16
     assert [f.name for f in tmp_path.iterdir() if f.name.startswith(".")] == []  # no temporary file left
+
+
+def test_a_class_far_from_its_cup_is_warned_about_and_every_demonstration_held_out_refused() -> None:
+    """--demos above the class's size held every demonstration out ('no demonstrations for class(es)'), and a
+    class ending 0.72 m from the cup gave a Table I ratio without a word."""
+    from shared.runtime import UserError
+
+    near, far = CupClass("blue_cup", 0, "blue_cup", 0.014), CupClass("blue_cup", 0, "compound_0", 0.716)
+    assert near.warning() == ""
+    assert far.warning().startswith("warning: class compound_0's mean reach ends 0.72 m from blue_cup, more than 0.3")
+    assert near.held_out(3, 2) == 2
+    for demos in (3, 5):
+        with pytest.raises(UserError, match=rf"--demos {demos}: class blue_cup has 3 demonstrations, .* at most 2"):
+            near.held_out(3, demos)
+

@@ -1,0 +1,19 @@
+"""The switch experiment's reached step is the final goal's, not the first goal reached."""
+
+from __future__ import annotations
+
+from services.executor.result import ExecutorResult
+from services.experiments.switch import final_reached
+
+
+def test_the_reached_step_is_the_final_goals() -> None:
+    """A robot that reached the blue cup at step 10 and turned to the red one at step 14 was reported 'red_cup,
+    reached step 10' (eval all --quick)."""
+    r = ExecutorResult()
+    r.note_reached(0, 10)
+    chosen = ["blue_cup"] * 14 + ["red_cup"] * 6
+    assert final_reached(r, ["blue_cup", "red_cup"], chosen) is None  # red never reached
+    r.note_reached(1, 19)
+    assert final_reached(r, ["blue_cup", "red_cup"], chosen) == 19
+    assert final_reached(r, ["blue_cup", "red_cup"], chosen[:10]) == 10  # ended going for blue
+    assert final_reached(None, ["blue_cup"], chosen) is None and final_reached(r, ["blue_cup"], []) is None
