@@ -12,7 +12,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -113,6 +113,7 @@ def interruptible(stop: threading.Event) -> Iterator[None]:
 
     for s in old:
         signal.signal(s, handler)
+    _unblock(old)
     try:
         yield
     finally:
@@ -163,6 +164,7 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
 
     for s in old:
         signal.signal(s, handler)
+    _unblock(old)
 
     def restore() -> None:
         restored.set()
@@ -296,6 +298,16 @@ def _exit_within(grace_s: float, prog: str) -> None:
         _forced_exit(prog, f"did not exit within {grace_s:g} s of stopping while starting")
 
     threading.Thread(target=force, name="start-watchdog", daemon=True).start()
+
+
+def _unblock(signals: Iterable[int]) -> None:
+    """Unblock ``signals`` in this (the main) thread: a handler of a blocked signal never runs.
+
+    A blocked mask is inherited across fork and exec, and Python's ``signal.signal`` leaves it as it is: a process
+    started by a parent (a test runner, a process manager) whose thread had SIGTERM blocked then ignored ``docker
+    compose down``'s SIGTERM and Ctrl-C until it was killed.
+    """
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, list(signals))
 
 
 def _forced_exit(prog: str | None, why: str, stacks: bool = True) -> None:

@@ -54,16 +54,18 @@ while True:
 """
 
 
-def _blocked_process(*args: str) -> subprocess.Popen[str]:
+def _blocked_process(*args: str, masked: bool = False) -> subprocess.Popen[str]:
+    mask = (lambda: signal.pthread_sigmask(signal.SIG_BLOCK, [signal.SIGINT, signal.SIGTERM])) if masked else None
     proc = subprocess.Popen([sys.executable, "-c", BLOCKED, *args], cwd=REPO, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=mask)
     assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
     return proc
 
 
-def _signalled(*signals: tuple[signal.Signals, float], args: tuple[str, ...] = ()) -> tuple[int, str]:
+def _signalled(*signals: tuple[signal.Signals, float], args: tuple[str, ...] = (), masked: bool = False
+               ) -> tuple[int, str]:
     """A blocked process sent each signal after its pause (s); its exit status and stderr."""
-    proc = _blocked_process(*args)
+    proc = _blocked_process(*args, masked=masked)
     try:
         for sig, pause in signals:
             time.sleep(pause)
@@ -81,6 +83,13 @@ def test_a_process_stuck_in_a_call_exits_after_the_grace_and_says_where():
     assert code == 3, err
     assert "blocked: did not stop within 1 s of SIGTERM; exiting with status 3" in err  # named by its prog
     assert 'File "<string>", line 10' in err  # the stack says where it was stuck
+
+
+def test_a_process_started_with_the_signals_blocked_still_obeys_them():
+    """A blocked mask is inherited across exec and signal.signal leaves it: such a process (started by a thread that
+    had them blocked) never ran its handler, and the fresh-clone CI's stuck-process test waited 60 s for nothing."""
+    code, err = _signalled((signal.SIGTERM, 0.0), masked=True)
+    assert code == 3 and "did not stop within 1 s of SIGTERM" in err, err
 
 
 def test_a_second_signal_exits_at_once():
