@@ -87,7 +87,7 @@ def test_a_process_stuck_in_a_call_exits_after_the_grace_and_says_where():
 
 def test_a_process_started_with_the_signals_blocked_still_obeys_them():
     """A blocked mask is inherited across exec and signal.signal leaves it: such a process (started by a thread that
-    had them blocked) never ran its handler, and the fresh-clone CI's stuck-process test waited 60 s for nothing."""
+    had them blocked) never ran its handler and hung until killed."""
     code, err = _signalled((signal.SIGTERM, 0.0), masked=True)
     assert code == 3 and "did not stop within 1 s of SIGTERM" in err, err
 
