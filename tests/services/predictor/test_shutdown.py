@@ -49,8 +49,8 @@ runtime.stop_on_signals(stop, grace_s=1.0, prog="blocked")
 if sys.argv[1:] == ["stopping"]:
     stop.set()  # stopping on its own already (--stop-with, its parent gone) when the signal comes
 print("ready", flush=True)
-while True:
-    time.sleep(600)  # a call that does not look at the stop event
+while True:  # a call that does not look at the stop event, in short slices: Python runs a signal's handler only
+    time.sleep(0.05)  # between bytecodes, and one landing just before a long sleep's syscall waited for it to end
 """
 
 
