@@ -11,22 +11,14 @@ is drawn. Before the first reach no placement is known and nothing is drawn. Eac
 from __future__ import annotations
 
 import numpy as np
-from foxglove.messages import (
-    Color,
-    Duration,
-    Pose,
-    Quaternion,
-    SceneEntity,
-    SceneUpdate,
-    SpherePrimitive,
-    Vector3,
-)
+from foxglove.messages import SceneEntity, SceneUpdate
 
 from shared.human.placement import place_points
 from shared.protocol import HumanKeypoints
 from shared.scene import Scene
 
-from .scene import WORLD_FRAME, timestamp
+from .primitives import duration, spheres, timestamp
+from .scene import WORLD_FRAME
 
 __all__ = ["LIFETIME_S", "KEYPOINT_RGBA", "RADIUS_M", "keypoints_update"]
 
@@ -52,12 +44,6 @@ def keypoints_update(msg: HumanKeypoints, reference: np.ndarray | None, scene: S
     seen = pos[np.all(np.isfinite(pos), axis=1)]
     if not len(seen):
         return None
-    r, g, b, a = KEYPOINT_RGBA
-    spheres = [SpherePrimitive(pose=Pose(position=Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])),
-                                         orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
-                               size=Vector3(x=2 * RADIUS_M, y=2 * RADIUS_M, z=2 * RADIUS_M),
-                               color=Color(r=r, g=g, b=b, a=a))
-               for p in place_points(seen, reference, scene)]
-    life = Duration(sec=int(LIFETIME_S), nsec=int(round(LIFETIME_S % 1 * 1e9)))
-    return SceneUpdate(entities=[SceneEntity(timestamp=timestamp(stamp), frame_id=WORLD_FRAME, id="human/keypoints",
-                                             lifetime=life, spheres=spheres)])
+    return SceneUpdate(entities=[SceneEntity(
+        timestamp=timestamp(stamp), frame_id=WORLD_FRAME, id="human/keypoints", lifetime=duration(LIFETIME_S),
+        spheres=spheres(place_points(seen, reference, scene), RADIUS_M, KEYPOINT_RGBA))])

@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from foxglove.messages import (
-    Color,
     CubePrimitive,
     CylinderPrimitive,
     FrameTransform,
@@ -24,20 +23,17 @@ from foxglove.messages import (
     LinePrimitive,
     PackedElementField,
     PackedElementFieldNumericType,
-    Point3,
     PointCloud,
-    Pose,
     Quaternion,
     SceneEntity,
     SceneUpdate,
-    SpherePrimitive,
-    Timestamp,
-    Vector3,
 )
 from scipy.spatial.transform import Rotation
 
 from shared.protocol import DemoMarker, HumanPose, OccupancyGrid, Plan, RobotState
 from shared.scene import Scene
+
+from .primitives import color, point3, pose_at, spheres, timestamp, vector3
 
 if TYPE_CHECKING:
     import torch
@@ -98,28 +94,6 @@ class PlaceInScene(Protocol):
 # primitives
 
 
-def timestamp(seconds: float) -> Timestamp:
-    """The ``Timestamp`` of a non-negative time in seconds (rounded to the nanosecond)."""
-    ns = max(0, int(round(seconds * 1e9)))
-    return Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
-
-
-def _v(p: np.ndarray | list[float]) -> Vector3:
-    return Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
-
-
-def _p(p: np.ndarray | list[float]) -> Point3:
-    return Point3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
-
-
-def _c(rgba: tuple[float, float, float, float] | np.ndarray) -> Color:
-    return Color(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]), a=float(rgba[3]))
-
-
-def _pose_at(p: np.ndarray | list[float], q: Quaternion | None = None) -> Pose:
-    return Pose(position=_v(p), orientation=q or Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
-
-
 _KEEP_FIRST_POSES = 4
 """Demonstrations whose first pose the scene builder keeps (the current one, and a few late poses of the last)."""
 
@@ -145,8 +119,8 @@ def _entity(entity_id: str, stamp: float, **primitives: list) -> SceneEntity:
 
 
 def _line(points: np.ndarray, rgba: tuple[float, float, float, float], thickness: float) -> LinePrimitive:
-    return LinePrimitive(pose=_pose_at([0, 0, 0]), thickness=float(thickness), scale_invariant=False,
-                         points=[_p(p) for p in points], color=_c(rgba))
+    return LinePrimitive(pose=pose_at([0, 0, 0]), thickness=float(thickness), scale_invariant=False,
+                         points=[point3(p) for p in points], color=color(rgba))
 
 
 # goal colours: a goal named after a colour is drawn in it
@@ -216,12 +190,13 @@ class SceneBuilder:
 
     def static_scene(self, stamp: float) -> SceneUpdate:
         """Table boxes and cups."""
-        cubes = [CubePrimitive(pose=_pose_at(b.center), size=_v(b.size), color=_c((0.55, 0.4, 0.25, 0.9)))
+        cubes = [CubePrimitive(pose=pose_at(b.center), size=vector3(b.size), color=color((0.55, 0.4, 0.25, 0.9)))
                  for b in self.scene.boxes]
         ents = [_entity("obstacles", stamp, cubes=cubes)]
         for k, cup in enumerate(self.scene.cups):
-            cyl = CylinderPrimitive(pose=_pose_at(cup.center), size=_v([2 * cup.radius, 2 * cup.radius, cup.height]),
-                                    bottom_scale=1.0, top_scale=1.0, color=_c((*goal_rgb(cup.name, k), 1.0)))
+            size = vector3([2 * cup.radius, 2 * cup.radius, cup.height])
+            cyl = CylinderPrimitive(pose=pose_at(cup.center), size=size, bottom_scale=1.0, top_scale=1.0,
+                                    color=color((*goal_rgb(cup.name, k), 1.0)))
             ents.append(_entity(f"cup/{cup.name}", stamp, cylinders=[cyl]))
         return SceneUpdate(entities=ents)
 
@@ -232,7 +207,7 @@ class SceneBuilder:
     @staticmethod
     def _tf(stamp: float, child: str, t: np.ndarray) -> FrameTransform:
         return FrameTransform(timestamp=timestamp(stamp), parent_frame_id=WORLD_FRAME, child_frame_id=child,
-                              translation=_v(t[:3, 3]), rotation=_quat_from_matrix(t[:3, :3]))
+                              translation=vector3(t[:3, 3]), rotation=_quat_from_matrix(t[:3, :3]))
 
     # -- robot -----------------------------------------------------------------------------------
 
@@ -268,11 +243,9 @@ class SceneBuilder:
             return None
         centers = self.robot.sphere_centers(self._torch(q)).detach().cpu().numpy().reshape(-1, 3)
         radii = np.asarray(self.robot.sphere_radii.detach().cpu().numpy()).reshape(-1)
-        color = _c((1.0, 0.6, 0.1, 0.8) if state.holding else (0.75, 0.75, 0.8, 0.8))
-        spheres = [SpherePrimitive(pose=_pose_at(c), size=_v([2 * r] * 3), color=color)
-                   for c, r in zip(centers, radii, strict=True)]
+        rgba = (1.0, 0.6, 0.1, 0.8) if state.holding else (0.75, 0.75, 0.8, 0.8)
         return SceneUpdate(entities=[_entity("robot/spheres", state.stamp if stamp is None else stamp,
-                                             spheres=spheres)])
+                                             spheres=spheres(centers, radii, rgba))])
 
     def end_effector_transform(self, state: RobotState, stamp: float | None = None) -> FrameTransforms | None:
         """The transform world -> end_effector at ``state.q``, stamped ``stamp`` (default: ``state.stamp``)."""
@@ -330,7 +303,7 @@ class SceneBuilder:
         points["rgba"] = np.round(probability_color(p) * 255.0)
         fields = [PackedElementField(name=name, offset=offset, type=kind) for name, offset, kind in CLOUD_FIELDS]
         return PointCloud(timestamp=timestamp(occ.stamp if stamp is None else stamp), frame_id=WORLD_FRAME,
-                          pose=_pose_at([0, 0, 0]), point_stride=_CLOUD_DTYPE.itemsize, fields=fields,
+                          pose=pose_at([0, 0, 0]), point_stride=_CLOUD_DTYPE.itemsize, fields=fields,
                           data=points.tobytes())
 
     # -- human -----------------------------------------------------------------------------------
