@@ -63,25 +63,13 @@ class Upright:
             self.frames += 1
 
 
-def _made_of(layout: Layout, point: str) -> tuple[str, ...]:
-    return layout.points.get(point, ())
-
-
 def missing_points(layout: Layout, names: list[str], positions: np.ndarray, points: list[str]) -> str:
     """``points`` (Foresight's) in words: each with the sensor's points it is the mean of, and those not seen.
 
     E.g. ``pelvis (left_hip, right_hip: left_hip not seen)`` for COCO; ``r_wrist`` for Foresight's own names.
     """
     seen = {n for n, p in zip(names, np.asarray(positions), strict=True) if np.all(np.isfinite(p))}
-    words = []
-    for point in points:
-        sources = _made_of(layout, point)
-        if sources == (point,) or not sources:
-            words.append(point)
-            continue
-        unseen = [s for s in sources if s not in seen]
-        words.append(f"{point} ({', '.join(sources)}: {', '.join(unseen)} not seen)")
-    return ", ".join(words)
+    return ", ".join(layout.describe(point, seen) for point in points)
 
 
 def fit_without_outliers(fit: KeypointFit, points: np.ndarray, observed: np.ndarray, prior: np.ndarray | None,
@@ -122,6 +110,4 @@ def furthest_point(layout: Layout, result: FitResult) -> str:
     if not np.isfinite(r).any():
         return "no point"
     j = int(np.nanargmax(r))
-    sources = _made_of(layout, POINT_NAMES[j])
-    made_of = f" ({', '.join(sources)})" if sources and sources != (POINT_NAMES[j],) else ""
-    return f"{POINT_NAMES[j]}{made_of} {r[j] * 100:.0f} cm off"
+    return f"{layout.describe(POINT_NAMES[j])} {r[j] * 100:.0f} cm off"

@@ -47,6 +47,19 @@ class Layout:
         known = {*self.source_names, *self.ignored}
         return [n for n in names if n not in known]
 
+    def describe(self, point: str, seen: set[str] | None = None) -> str:
+        """Foresight's ``point`` in words, with the layout points it is the mean of where they are other names.
+
+        E.g. ``pelvis (left_hip, right_hip)`` for COCO, ``r_wrist`` for Foresight's own names; given ``seen`` (the
+        layout points the frame has), those it lacks too: ``pelvis (left_hip, right_hip: left_hip not seen)``.
+        """
+        sources = self.points.get(point, ())
+        if not sources or sources == (point,):
+            return point
+        unseen = [] if seen is None else [s for s in sources if s not in seen]
+        lacking = f": {', '.join(unseen)} not seen" if unseen else ""
+        return f"{point} ({', '.join(sources)}{lacking})"
+
     def to_model(self, names: list[str], positions: np.ndarray) -> np.ndarray:
         """Positions in the layout's names -> Foresight's points.
 
