@@ -20,8 +20,8 @@ from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolv
 from shared.native_threads import limit_blas_threads
 
 __all__ = ["setup_logging", "fail", "stop_on_signals", "interruptible", "cli_errors", "UserError", "service_main",
-           "help_text", "freeze_startup_heap", "watch_parent", "lower_priority", "SHUTDOWN_GRACE_S", "SIGNAL_ECHO_S",
-           "FORCED_EXIT", "PARENT_ENV", "OWN_LOGGERS"]
+           "help_text", "freeze_startup_heap", "watch_parent", "wait_for_stop", "lower_priority", "SHUTDOWN_GRACE_S",
+           "SIGNAL_ECHO_S", "STOP_POLL_S", "FORCED_EXIT", "PARENT_ENV", "OWN_LOGGERS"]
 
 SHUTDOWN_GRACE_S = 10.0
 """Seconds a process may take to stop after SIGINT/SIGTERM before it exits anyway (:func:`stop_on_signals`)."""
@@ -172,6 +172,22 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
             signal.signal(s, h)
 
     return restore
+
+
+STOP_POLL_S = 0.5
+"""How often :func:`wait_for_stop` wakes to let a pending signal's handler run."""
+
+
+def wait_for_stop(stop: threading.Event, poll_s: float = STOP_POLL_S) -> None:
+    """Block until ``stop`` is set, waking every ``poll_s`` so that a signal's handler always gets to run.
+
+    Python runs a handler in the main thread, between bytecodes. ``stop.wait()`` without a timeout is one long
+    lock wait: a signal that lands after the wait has checked the flag and before it sleeps, or one the kernel
+    hands to another thread (a native library's), only marks the handler as pending, and the handler (which
+    sets ``stop``) would run when the wait ends, that is never. Waking every ``poll_s`` bounds that to ``poll_s``.
+    """
+    while not stop.wait(poll_s):
+        pass
 
 
 def watch_parent(stop: threading.Event, period_s: float = 0.5) -> int | None:

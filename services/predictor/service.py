@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 from shared.config import ZenohConfig
 from shared.protocol import ClassPosterior, DemoMarker, Expectations, HumanPose, Keys, Message, OccupancyGrid, Receipt
+from shared.runtime import wait_for_stop
 from shared.scene import load_scene
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe_ordered
 
@@ -205,7 +206,7 @@ class PredictorService:
             if ready is not None:
                 ready.set()
             try:
-                stop.wait()
+                wait_for_stop(stop)
             finally:
                 presence.close()
                 sub.undeclare()

@@ -29,6 +29,7 @@ from shared.protocol import (
     RobotState,
 )
 from shared.rejects import RejectCounter
+from shared.runtime import wait_for_stop
 from shared.scene import load_scene
 from shared.transport import open_session, subscribe
 
@@ -91,7 +92,7 @@ class ViewService:
             print(f"foresight view: watch live at {server.url}; drawing scene {self.scene.name} (--scene: the "
                   "system's own, e.g. pr2_two_cups_side for foresight demo and docker compose)", flush=True)
             try:
-                stop.wait()
+                wait_for_stop(stop)
             finally:
                 self.server = None
                 for s in subs:

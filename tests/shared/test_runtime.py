@@ -212,3 +212,32 @@ def test_a_worker_left_by_a_stopped_build_does_not_hold_the_exit_past_the_grace(
         proc.kill()
         proc.wait(timeout=10)
     assert proc.returncode == 3 and "did not exit within 1 s of stopping while starting" in err, err[-2000:]
+
+
+WAITING = """
+import signal, sys, threading
+from shared import runtime
+stop = threading.Event()
+threading.Thread(target=threading.Event().wait, daemon=True).start()  # a thread the kernel may hand a signal to
+runtime.stop_on_signals(stop, grace_s=30.0, prog="waiting")
+signal.pthread_sigmask(signal.SIG_BLOCK, [signal.SIGTERM])  # so the kernel does: the main thread's wait is not cut
+print("ready", flush=True)
+runtime.wait_for_stop(stop) if sys.argv[1] == "wait_for_stop" else stop.wait()
+print("stopped", flush=True)
+"""
+
+
+def test_a_signal_another_thread_received_still_ends_the_wait_for_stop() -> None:
+    """The handler of a signal delivered to another thread (or just before the wait's syscall) runs only when the
+    main thread next runs bytecode: a plain ``stop.wait()`` never does, :func:`wait_for_stop` within its poll."""
+    proc = subprocess.Popen([sys.executable, "-c", WAITING, "wait_for_stop"], cwd=REPO, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert (proc.returncode, out.strip()) == (0, "stopped"), err
