@@ -23,6 +23,8 @@ from collections.abc import Callable
 import torch
 
 from shared import strict_json
+from shared.config_tree import ConfigError
+from shared.devices import check_device
 from shared.robot import PR2
 
 __all__ = ["fk_time_ms", "synchronize", "METHODS", "main"]
@@ -103,6 +105,10 @@ def main(argv: list[str] | None = None, prog: str = "python -m services.planner.
     parser.add_argument("--stat", default="median", choices=("median", "min"), help="statistic of the timed calls")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     args = parser.parse_args(argv)
+    try:
+        check_device(args.device, "--device")
+    except ConfigError as exc:
+        parser.error(str(exc))
     if args.threads:
         torch.set_num_threads(args.threads)
     methods = [m for m in METHODS if args.compile or not m.endswith("_compiled")]

@@ -71,7 +71,7 @@ def check_occupancy(occupancy: Any, grid: Grid) -> tuple[np.ndarray, np.ndarray,
         ``(occ (nx, ny, nz), origin (3,), resolution)``.
 
     Raises:
-        PlannerInputError: Wrong shape or geometry, NaN, values outside [0, 1].
+        PlannerInputError: Wrong shape or geometry (fewer than 2 voxels along an axis), NaN, values outside [0, 1].
     """
     if isinstance(occupancy, OccupancyGrid):
         try:
@@ -90,6 +90,9 @@ def check_occupancy(occupancy: Any, grid: Grid) -> tuple[np.ndarray, np.ndarray,
         origin, res = np.asarray(grid.origin, float), float(grid.resolution)
     if dense.ndim != 3:
         raise PlannerInputError(f"occupancy grid must be 3-D, got shape {dense.shape}")
+    if min(dense.shape) < 2:
+        raise PlannerInputError(f"occupancy grid has shape {dense.shape}: the planner's trilinear lookup needs at "
+                                "least 2 voxels along each axis")
     if not np.all(np.isfinite(dense)):
         raise PlannerInputError(f"occupancy grid contains {int(np.sum(~np.isfinite(dense)))} NaN/inf values")
     if dense.size and (dense.min() < 0 or dense.max() > 1):

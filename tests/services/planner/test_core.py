@@ -156,6 +156,17 @@ def test_occupancy_message_equals_dense(scene) -> None:
         toy_planner(scene, iterations=2).step([0.0, -0.2], bad)
 
 
+
+def test_a_grid_message_one_voxel_thin_is_refused_as_planner_input(scene) -> None:
+    """A valid message on the wire, but the planner's trilinear lookup needs two voxels per axis: refused as
+    :class:`PlannerInputError` like every other bad grid (it was a bare ValueError from the cost)."""
+    thin = OccupancyGrid.from_dense(np.zeros((1, 4, 4), np.float32), scene.grid.origin, scene.grid.resolution,
+                                    stamp=0.0, tick=-1, demo_id=0, index=0, method="prediction", tick_last=True)
+    planner = toy_planner(scene, iterations=2)
+    with pytest.raises(PlannerInputError, match=r"\(1, 4, 4\).*at least 2 voxels"):
+        planner.step([0.0, -0.2], thin)
+    assert planner.step_index == 0
+
 def test_invalid_goals_are_reported_and_never_chosen(scene) -> None:
     goals = GoalSet.joint_space(["in", "out", "nan"], [[1.0, -0.2], [2.0, 0.0], [np.nan, 0.0]], ToyRobot)
     assert goals.valid.tolist() == [True, False, False] and "outside the joint limits" in goals.reasons[1]
