@@ -293,9 +293,9 @@ class McapLog:
             self.flush()
 
     def flush(self) -> None:
-        """Write the open chunk to the file now."""
+        """Write the open chunk to the file now (nothing once a full disk has ended the file)."""
         with self._lock:
-            if not self._closed:
+            if not self._closed and self._file.failed is None:
                 self._writer.flush()
                 self._last_flush = time.monotonic()
 
@@ -322,6 +322,10 @@ class McapLog:
                                           {k: str(v) for k, v in sorted(self.reject_reasons.items())})
                 self._writer.finish()
                 self._file.fsync()
+            except OSError as exc:  # a full disk: said here, once, whoever closes (and raised to them)
+                log.error("mcap log %s: could not be finished (%s); readers recover the messages before where it "
+                          "ends", self.path, exc)
+                raise
             finally:
                 self._file.close()
         log.info("mcap log: wrote %s (%d messages on %d channels, %d rejected, %d scene updates dropped)",

@@ -3,7 +3,9 @@ during step n, determinism, safety hold and resume, bad input, MCAP contents."""
 
 from __future__ import annotations
 
+import errno
 import logging
+import os
 import threading
 import time
 
@@ -356,6 +358,30 @@ def test_a_log_that_cannot_be_written_costs_the_robot_nothing(pr2, tmp_path, cap
     assert ["writing the MCAP log failed (1 so far): OSError: [Errno 28] No space left on device"] == [
         r.getMessage().split("executor: ", 1)[1] for r in caplog.records if "MCAP log failed" in r.getMessage()]
 
+
+
+def test_a_disk_that_stays_full_ends_the_log_but_never_the_run(pr2, tmp_path, monkeypatch) -> None:
+    """The loop's own flushes (after each published state; lock-step's waits) and the close at the end went to
+    the log unguarded: once a full disk had ended it, the next state raised and run() ended with an OSError."""
+    import shared.recording.direct_file as direct_file
+    from shared.config import ZenohConfig
+
+    monkeypatch.setattr(direct_file, "MAX_HELD_BYTES", 1024)
+    real_write = os.write
+
+    def full_after_4_kib(fd: int, data) -> int:
+        if os.fstat(fd).st_size > 4096 and os.readlink(f"/proc/self/fd/{fd}").endswith("run.mcap"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_write(fd, data)
+
+    monkeypatch.setattr(direct_file.os, "write", full_after_4_kib)
+    cfg = ExecutorConfig(mode="realtime", steps=10, wait_for=[], require_occupancy=False,
+                         mcap=str(tmp_path / "run.mcap"), mcap_compression="none")
+    service = ExecutorService(cfg, ZenohConfig(listen=["tcp/127.0.0.1:0"], connect=[], multicast_scouting=False),
+                              robot=pr2, human=(None, None), scene=SCENE)
+    result = service.run()
+    assert result.steps == 10 and result.log_write_failures > 0
+    assert not read_log(cfg.mcap).complete  # ends where the disk stopped taking bytes
 
 def test_the_human_source_ending_its_stream_is_not_reported_as_gone(pr2, caplog) -> None:
     """The replayer's normal end after its end marker was logged "replayer is gone: holding the robot"."""
