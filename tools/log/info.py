@@ -13,6 +13,7 @@ from typing import Any
 
 from shared.recording.reader import LogFile
 from shared.recording.schemas import REJECTED_TOPIC
+from shared.runtime import UserError
 
 __all__ = ["info_dict", "format_info"]
 
@@ -23,12 +24,20 @@ def _fmt_time(ns: int | None) -> str:
     return datetime.fromtimestamp(ns / 1e9, UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3] + "Z"
 
 
+def _counts(lf: LogFile, name: str) -> dict[str, int]:
+    """A metadata record of counts; one that is not (another tool's record of that name) is named, not a crash."""
+    try:
+        return {k: int(v) for k, v in lf.metadata.get(name, {}).items()}
+    except ValueError:
+        raise UserError(f"metadata {name!r} holds {lf.metadata[name]!r}, not counts (not a Foresight "
+                        "log, or a damaged one)") from None
+
+
 def info_dict(lf: LogFile) -> dict[str, Any]:
     """The summary :func:`format_info` prints, as a JSON-ready dict."""
     firsts = [c.first_time for c in lf.channels.values() if c.first_time is not None]
     lasts = [c.last_time for c in lf.channels.values() if c.last_time is not None]
-    rejects = {k: int(v) for k, v in lf.metadata.get("foresight.rejects", {}).items()}
-    reasons = {k: int(v) for k, v in lf.metadata.get("foresight.rejects.reasons", {}).items()}
+    rejects, reasons = _counts(lf, "foresight.rejects"), _counts(lf, "foresight.rejects.reasons")
     refused = sum(c.count for c in lf.channels.values() if c.topic == REJECTED_TOPIC)
     return {
         "path": lf.path, "size_bytes": lf.size, "complete": lf.complete, "error": lf.error,

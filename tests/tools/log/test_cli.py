@@ -84,11 +84,20 @@ def test_info_of_a_directory_describes_every_log_under_it(run_log, tmp_path, cap
     (["render", "{log}", "--out", "x.png"], "--step N or --all"),
     (["render", "{log}", "--step", "1", "--out", "{tmp}/step1"], "ending in .png"),  # it wrote step1.png, said step1
     (["info", "{bad}"], "not an MCAP file"),
+    (["info", "{odd}"], "metadata 'foresight.rejects' holds {'k': 'many'}, not counts"),  # was a traceback
 ])
 def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
+    from mcap.writer import Writer
+
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(b"hello, this is not mcap at all")
-    argv = [a.format(log=run_log, bad=bad, tmp=tmp_path) for a in argv]
+    odd = tmp_path / "odd.mcap"  # another tool's record under our metadata name
+    with odd.open("wb") as f:
+        writer = Writer(f)
+        writer.start(profile="other", library="other-tool")
+        writer.add_metadata("foresight.rejects", {"k": "many"})
+        writer.finish()
+    argv = [a.format(log=run_log, bad=bad, odd=odd, tmp=tmp_path) for a in argv]
     with pytest.raises(SystemExit) as exc:
         main(argv)
     assert exc.value.code == 2
