@@ -136,4 +136,10 @@ class ExecutorConfig:
         """The MCAP path to write (``now``: a UTC timestamp for the default name), or None for 'none'."""
         if self.mcap.lower() == "none":
             return None
-        return Path(self.mcap) if self.mcap else Path("runs") / f"{now}.mcap"
+        if self.mcap:
+            return Path(self.mcap)
+        path, n = Path("runs") / f"{now}.mcap", 1
+        while path.exists():  # a run started within the same second: its log is kept
+            n += 1
+            path = Path("runs") / f"{now}-{n}.mcap"
+        return path

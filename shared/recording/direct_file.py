@@ -11,6 +11,8 @@ file then ends where the disk stopped taking bytes, which readers treat like the
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import logging
 import os
 from pathlib import Path
@@ -31,8 +33,20 @@ class DirectFile:
     """
 
     def __init__(self, path: Path) -> None:
+        """Create or empty ``path`` for writing, holding an exclusive lock on it while open.
+
+        Raises:
+            OSError: The OS refuses the path, or another process is writing the file (its lock): that log is left
+                alone (before, the second writer emptied it and the first one's messages were lost without a word).
+        """
         self._path = path
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(self._fd)
+            raise OSError(errno.EBUSY, f"{path}: another run is writing this log (its lock); give another path") from None
+        os.ftruncate(self._fd, 0)
         self._pos = 0
         self._held = bytearray()
         self._failed: OSError | None = None
@@ -92,6 +106,11 @@ class DirectFile:
     def held(self) -> int:
         """Bytes taken but not yet written (the OS refused them)."""
         return len(self._held)
+
+    @property
+    def removed(self) -> bool:
+        """Whether the file has no name left on the disk (it, or its directory, was deleted while open)."""
+        return self._fd >= 0 and os.fstat(self._fd).st_nlink == 0
 
     def tell(self) -> int:
         """Bytes taken so far (written or held)."""

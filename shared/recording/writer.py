@@ -29,6 +29,7 @@ instead of growing the writer's index of a chunk that will never be written.
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import logging
@@ -108,6 +109,7 @@ class McapLog:
         self._channels: dict[str, int] = {}
         self._last_flush = time.monotonic()
         self._closed = False
+        self._removal_said = False
         self.counts: dict[str, int] = {}
         self.rejects: dict[str, int] = {}
         self.reject_reasons: dict[str, int] = {}
@@ -298,6 +300,10 @@ class McapLog:
             if not self._closed and self._file.failed is None:
                 self._writer.flush()
                 self._last_flush = time.monotonic()
+                if not self._removal_said and self._file.removed:
+                    self._removal_said = True
+                    log.error("mcap log %s: the file was deleted while it is written (or its directory); what it "
+                              "holds is lost when the run ends", self.path)
 
     def close(self) -> None:
         """Finish the queued scene updates, write the reject counts, the summary and the footer; idempotent."""
@@ -322,6 +328,9 @@ class McapLog:
                                           {k: str(v) for k, v in sorted(self.reject_reasons.items())})
                 self._writer.finish()
                 self._file.fsync()
+                if self._file.removed:
+                    raise OSError(errno.ENOENT, f"the file was deleted while it was written (or its directory): "
+                                  f"its {sum(self.counts.values())} messages are lost")
             except OSError as exc:  # a full disk: said here, once, whoever closes (and raised to them)
                 log.error("mcap log %s: could not be finished (%s); readers recover the messages before where it "
                           "ends", self.path, exc)

@@ -401,3 +401,13 @@ def test_the_human_source_ending_its_stream_is_not_reported_as_gone(pr2, caplog)
     assert "planner is gone: holding the robot" in caplog.text and "planner" in service.core.gone
     service._on_peer("planner", True)
     assert "planner is back" in caplog.text
+
+
+def test_the_default_log_name_of_a_run_started_in_the_same_second_is_its_own(tmp_path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    config = ExecutorConfig()
+    first = config.mcap_path("20261127T120000Z")
+    first.parent.mkdir()
+    first.write_bytes(b"the first run's log")
+    assert (first.name, config.mcap_path("20261127T120000Z").name) == ("20261127T120000Z.mcap",
+                                                                      "20261127T120000Z-2.mcap")

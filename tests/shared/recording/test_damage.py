@@ -129,3 +129,38 @@ def test_a_copy_cut_within_its_closing_magic_is_not_complete(tmp_path, pr2) -> N
     path.write_bytes(path.read_bytes()[:-3])
     lf = read_log(path)
     assert not lf.complete and lf.error
+
+
+def test_a_second_writer_on_the_path_is_refused_and_the_first_log_is_kept(tmp_path, pr2) -> None:
+    """Two runs on one path (two executors started within the same second, or one given the other's --mcap): the
+    second emptied the file and the first run's messages were gone, both saying they wrote their log."""
+    path = tmp_path / "run.mcap"
+    first = McapLog(path, KEYS, None)
+    for key, payload in sample_messages(pr2):
+        first.on_sample(key, payload)
+    with pytest.raises(OSError, match="another run is writing this log"):
+        McapLog(path, KEYS, None)
+    first.close()
+    lf = read_log(path)
+    assert lf.complete and lf.message_count == len(sample_messages(pr2))
+    McapLog(path, KEYS, None).close()  # once the first has closed, the path may be written again
+
+
+def test_a_log_deleted_while_written_says_so_rather_than_that_it_wrote(tmp_path, pr2, caplog) -> None:
+    run = tmp_path / "run"
+    run.mkdir()
+    log = McapLog(run / "run.mcap", KEYS, None, flush_period_s=0.0)
+    for key, payload in sample_messages(pr2):
+        log.on_sample(key, payload)
+    for f in run.iterdir():
+        f.unlink()
+    run.rmdir()  # a clean-up of runs/ during the run
+    with caplog.at_level("ERROR"):
+        log.flush()
+        log.flush()
+        with pytest.raises(OSError, match="deleted while it was written"):
+            log.close()
+    said = [r.getMessage() for r in caplog.records]
+    assert sum("deleted while it is written" in m for m in said) == 1 and any("could not be finished" in m
+                                                                            for m in said)
+    assert not any("wrote" in m for m in said)
