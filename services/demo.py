@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING
 
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
+from shared.arguments import ArgumentParser
 from shared.atomic_file import make_parent
 from shared.config import LOG_LEVELS, ConfigError, add_config_arguments, check_prefix, opt, resolve_config
 from shared.config_names import SECTIONS, section_class
@@ -361,7 +362,7 @@ LIVE_PORT = DEFAULT_PORT
 
 def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
     """Run the demo; returns 0 when the run completed."""
-    parser = argparse.ArgumentParser(prog=prog, description=help_text(__doc__),
+    parser = ArgumentParser(prog=prog, description=help_text(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_arguments(parser, "demo", DemoConfig, with_zenoh=False)
     args = parser.parse_args(_bare_live(sys.argv[1:] if argv is None else list(argv)))

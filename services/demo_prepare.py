@@ -11,7 +11,6 @@ says where its router is.
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -19,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import tomli_w
 
 from services.demo_run import prepare_inputs, service_options, services_in_order
+from shared.arguments import ArgumentParser
 from shared.config import add_config_arguments, resolve_config
 from shared.config_names import section_class
 from shared.config_tree import config_options
@@ -50,7 +50,7 @@ def config_tables(options: dict[str, list[str]]) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for section, flags in options.items():
         cls = section_class(section)
-        parser = argparse.ArgumentParser(prog=f"foresight {section}")
+        parser = ArgumentParser(prog=f"foresight {section}")
         add_config_arguments(parser, section, cls, with_zenoh=False)
         cfg, _ = resolve_config(section, cls, parser.parse_args(flags), env={}, with_zenoh=False)
         default = cls()

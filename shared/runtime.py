@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import faulthandler
 import gc
 import logging
@@ -16,6 +15,7 @@ from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
+from shared.arguments import ArgumentParser
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
 from shared.native_threads import limit_blas_threads
 
@@ -266,7 +266,7 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
     Returns:
         The exit status: 0 when the service stopped, 2 on bad input.
     """
-    parser = argparse.ArgumentParser(prog=prog, description=description)
+    parser = ArgumentParser(prog=prog, description=description)
     add_config_arguments(parser, section, config_cls)
     args = parser.parse_args(argv)
     stop = threading.Event()

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from shared import strict_json
+from shared.arguments import ArgumentParser
 from shared.recording.reader import read_log
 from shared.runtime import cli_errors, interruptible, setup_logging
 
@@ -144,7 +145,7 @@ def _line(r: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench faults") -> int:
     """Run the fault injection; returns 0 when it ran (the numbers are the result)."""
-    p = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--victims", default="predictor,planner,replayer,router",
                    help=f"what to kill, in order (comma-separated, of {', '.join(PROCESSES)})")
     p.add_argument("--down-s", type=positive_number(inclusive=True), default=3.0, help="seconds each victim stays dead")

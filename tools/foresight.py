@@ -12,6 +12,8 @@ import argparse
 import importlib
 import sys
 
+from shared.arguments import ArgumentParser
+
 __all__ = ["COMMANDS", "SUBCOMMANDS", "subcommands", "main"]
 
 # command -> (module with main(argv), one-line description)
@@ -64,7 +66,7 @@ def _parser() -> argparse.ArgumentParser:
         subs = subcommands(name)
         sub_width = max(map(len, subs), default=0)
         lines += [f"  {'':<{width}}    {sub:<{sub_width}}  {text}" for sub, text in subs.items()]
-    return argparse.ArgumentParser(
+    return ArgumentParser(
         prog="foresight",
         description="Foresight: plan robot motion around the early-predicted workspace occupancy of a human.",
         formatter_class=argparse.RawDescriptionHelpFormatter,

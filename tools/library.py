@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from shared.arguments import ArgumentParser
 from shared.feature_sets import describe_features, require_mapping
 from shared.human import HumanModel, place_in_scene, reach_points
 from shared.library import (
@@ -256,7 +257,7 @@ SUBCOMMANDS: dict[str, tuple[str, Callable[[argparse.ArgumentParser], None], Cal
 
 
 def _parser(prog: str) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=prog, description="Inspect, validate and convert human-motion libraries "
+    parser = ArgumentParser(prog=prog, description="Inspect, validate and convert human-motion libraries "
                                      "(a directory of compound_*.csv in the paper's format, or a native .npz).")
     sub = parser.add_subparsers(dest="subcommand", metavar="{" + ",".join(SUBCOMMANDS) + "}", required=True)
     for name, (text, add_args, run) in SUBCOMMANDS.items():

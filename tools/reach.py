@@ -8,13 +8,13 @@ conventions on a recorded library (docs/human-model.md).
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from shared.arguments import ArgumentParser
 from shared.feature_sets import require_mapping
 from shared.human import HumanModel, reach_points
 from shared.library import load_library
@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m tools.reach") -> 
     Prints each class's mean reach point and spread; the top view shows whether the model's
     conventions put the hand over the table (see docs/human-model.md).
     """
-    parser = argparse.ArgumentParser(prog=prog, description=help_text(main.__doc__.splitlines()[0]))
+    parser = ArgumentParser(prog=prog, description=help_text(main.__doc__.splitlines()[0]))
     parser.add_argument("library", help="a directory of compound_*.csv or a .npz library")
     parser.add_argument("--scene", default=None, help="scene file or embedded name (default pr2_two_cups)")
     parser.add_argument("--out", default="runs/plots/human_goals.png", help="output PNG")

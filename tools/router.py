@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import logging
 import re
 import threading
 
+from shared.arguments import ArgumentParser
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
 from shared.runtime import cli_errors, setup_logging, stop_on_signals, watch_parent
 from shared.transport import describe, open_session
@@ -44,7 +44,7 @@ def check_listen(listen: list[str]) -> None:
 
 def main(argv: list[str] | None = None, prog: str = "foresight router") -> int:
     """Run a router until SIGINT/SIGTERM. Listens on tcp/127.0.0.1:7447 unless --listen says otherwise."""
-    parser = argparse.ArgumentParser(prog=prog, description=main.__doc__)
+    parser = ArgumentParser(prog=prog, description=main.__doc__)
     base = ZenohConfig(mode="router", listen=[ROUTER_ENDPOINT], connect=[])
     add_config_arguments(parser, "router", RouterConfig, zenoh_base=base)
     args = parser.parse_args(argv)

@@ -22,6 +22,7 @@ import json
 import sys
 from pathlib import Path
 
+from shared.arguments import ArgumentParser
 from shared.config import check_prefix
 from shared.protocol import Keys
 from shared.runtime import UserError, cli_errors, help_text
@@ -105,7 +106,7 @@ def _check(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None, prog: str = "foresight security") -> int:
     """Run ``foresight security init|acl|check``; returns the exit status."""
-    parser = argparse.ArgumentParser(prog=prog, description=help_text(__doc__),
+    parser = ArgumentParser(prog=prog, description=help_text(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="cmd", required=True, metavar="{" + ",".join(SUBCOMMANDS) + "}")
     p = sub.add_parser("init", help=SUBCOMMANDS["init"])

@@ -29,6 +29,7 @@ import numpy as np
 from services.executor.core import reason_kind
 from services.replayer.core import MAX_RATE_HZ, MIN_RATE_HZ
 from shared import strict_json
+from shared.arguments import ArgumentParser
 from shared.runtime import cli_errors, interruptible, setup_logging
 
 from .faults import demo_model
@@ -114,7 +115,7 @@ def _fmt(d: dict[str, float | None], scale: float = 1e3, unit: str = "ms") -> st
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> int:
     """Run the soak; returns 0 when every process was still running at the end."""
-    p = argparse.ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--rate-hz", type=positive_number(MIN_RATE_HZ, MAX_RATE_HZ, inclusive=True), default=300.0,
                    help="poses per second")
     p.add_argument("--duration-s", type=positive_number(), default=60.0, help="measured window")

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from services.predictor.volumes import VOLUMES
 from shared import strict_json
+from shared.arguments import ArgumentParser
 from shared.atomic_file import ready_to_write
 from shared.runtime import UserError, cli_errors, help_text, setup_logging
 from shared.scene import SCENE_HELP
@@ -110,7 +111,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
     listing = "\n".join(f"    {prog} {name:<13} {text}" for name, text in EXPERIMENTS.items())
     intro, rest = __doc__.split("\n", 1)
     description = help_text(f"{intro.split(' (')[0]}:\n\n{listing}\n{rest}")
-    parser = argparse.ArgumentParser(prog=prog, description=description,
+    parser = ArgumentParser(prog=prog, description=description,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="what", required=True, metavar="{" + ",".join(EXPERIMENTS) + "}")
     sub.add_parser("recognition", help=EXPERIMENTS["recognition"], add_help=False)

@@ -28,6 +28,7 @@ import numpy as np
 import torch
 
 from shared import strict_json
+from shared.arguments import ArgumentParser
 from shared.runtime import cli_errors, help_text
 from shared.scene import Scene, load_scene
 
@@ -279,7 +280,7 @@ def _memory_probe(k: int, steps: int, cfg: dict[str, Any]) -> None:
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -> int:
     """Run the planner benchmark; see ``--help``."""
-    p = argparse.ArgumentParser(prog=prog, description=help_text(__doc__.split("\n\n")[0]))
+    p = ArgumentParser(prog=prog, description=help_text(__doc__.split("\n\n")[0]))
     p.add_argument("--json", action="store_true", help="print one JSON object (keys K, step_ms, fk_ms, ...)")
     p.add_argument("--k", default="1,2,4,8,16", help="comma-separated goal counts (default 1,2,4,8,16)")
     p.add_argument("--steps", type=int, default=5, help="timed replanning steps per K (median reported)")

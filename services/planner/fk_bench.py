@@ -15,7 +15,6 @@ Timings on a shared machine are noisy: the median of ``repeats`` calls after a w
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 from collections.abc import Callable
@@ -23,6 +22,7 @@ from collections.abc import Callable
 import torch
 
 from shared import strict_json
+from shared.arguments import ArgumentParser
 from shared.config_tree import ConfigError
 from shared.devices import check_device
 from shared.robot import PR2
@@ -96,7 +96,7 @@ def fk_time_ms(n_configs: int, method: str = "spheres", device: str = "cpu", dty
 
 def main(argv: list[str] | None = None, prog: str = "python -m services.planner.fk_bench") -> int:
     """Print the FK timing table."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n")[0])
+    parser = ArgumentParser(prog=prog, description=__doc__.split("\n")[0])
     parser.add_argument("--n", type=int, nargs="+", default=[1280, 5120], help="batch sizes")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--threads", type=int, default=0, help="torch intra-op threads (0: torch's default)")

@@ -16,7 +16,6 @@ the robot at the start and goal configurations (top and side views).
 
 from __future__ import annotations
 
-import argparse
 import logging
 import math
 from collections.abc import Sequence
@@ -27,6 +26,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from shared.arguments import ArgumentParser
 from shared.robot import PR2
 from shared.scene import Cup, Scene, load_scene
 
@@ -334,7 +334,7 @@ def plot_scene(scene: Scene, robot: PR2, configs: dict[str, Any], path: str | Pa
 
 def main(argv: list[str] | None = None, prog: str = "python -m services.planner.goals") -> int:
     """Print the cup goals of a scene (IK) and optionally draw them."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n")[0])
+    parser = ArgumentParser(prog=prog, description=__doc__.split("\n")[0])
     parser.add_argument("--scene", default=None, help="scene file or embedded name (default pr2_two_cups)")
     parser.add_argument("--approach", default="any", choices=("side", "top", "any"))
     parser.add_argument("--plot", default=None, help="PNG of the start and goal configurations")

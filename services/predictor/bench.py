@@ -9,7 +9,6 @@ timed in the same process, and the ``current`` (posture-only) method too.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from shared import strict_json
+from shared.arguments import ArgumentParser
 from shared.protocol import OccupancyGrid, encode
 from shared.runtime import cli_errors
 from shared.scene import Grid, Scene, load_scene
@@ -105,7 +105,7 @@ the fit quality does not change the cost of an update)."""
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench predictor") -> int:
     """``foresight bench predictor``; returns the exit status."""
-    parser = argparse.ArgumentParser(prog=prog, description=DESCRIPTION)
+    parser = ArgumentParser(prog=prog, description=DESCRIPTION)
     parser.add_argument("--model", metavar="PATH", default=None,
                         help="benchmark this model file (its own grid) instead of a quick 64^3 model")
     parser.add_argument("--grid", type=int, default=64, help="voxels per axis of the quick model's grid (default 64)")

@@ -11,12 +11,12 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from shared.arguments import ArgumentParser
 from shared.feature_sets import require_mapping
 from shared.human import HumanModel, place_in_scene, reach_points
 from shared.library import MotionLibrary, heldout_split, load_library
@@ -169,7 +169,7 @@ def plot_prediction_sequence(model: PredictionModel, scene: Scene, features: np.
 
 def main(argv: list[str] | None = None, prog: str = "python -m services.predictor.plots") -> int:
     """Write the two PNGs; returns the exit status."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--model", default="models/model.npz", help="model file (default: models/model.npz)")
     parser.add_argument("--library", default=None, help="library for the reach points and the observed "
                         "demonstration (default: the synthetic library, seed 0)")

@@ -9,7 +9,6 @@ curve(s) and, with ``--json``, prints one JSON object.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections.abc import Callable, MutableMapping
 from dataclasses import dataclass
@@ -23,6 +22,7 @@ from sklearn.mixture import GaussianMixture
 from tqdm import tqdm
 
 from shared import strict_json
+from shared.arguments import ArgumentParser
 from shared.atomic_file import ready_to_write
 from shared.feature_sets import describe_features
 from shared.library import MotionLibrary, load_library
@@ -254,7 +254,7 @@ log-loss; writes a PNG of recognition rate against executed fraction and one of 
 
 def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
     """``foresight eval recognition``; returns the exit status."""
-    parser = argparse.ArgumentParser(prog=prog, description="Evaluate Foresight components.")
+    parser = ArgumentParser(prog=prog, description="Evaluate Foresight components.")
     sub = parser.add_subparsers(dest="what", required=True, metavar="{recognition}")
     p = sub.add_parser("recognition", description=DESCRIPTION, help="leave-one-out early recognition")
     p.add_argument("--library", metavar="PATH", default=None,

@@ -28,6 +28,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
+from shared.arguments import ArgumentParser
 from shared.feature_sets import FeatureMapping
 from shared.human import HumanModel
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
@@ -310,7 +311,7 @@ declares works for the mixtures; the swept volumes need a mapping of the feature
 
 def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
     """``foresight train``; returns the exit status."""
-    parser = argparse.ArgumentParser(prog=prog, description=DESCRIPTION)
+    parser = ArgumentParser(prog=prog, description=DESCRIPTION)
     parser.add_argument("--library", metavar="PATH", default=None,
                         help="motion library: a dir of compound_*.csv or a .npz (default: the synthetic library, "
                              "seed 0)")

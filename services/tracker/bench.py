@@ -12,12 +12,12 @@ sensor's period.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
 import numpy as np
 
+from shared.arguments import ArgumentParser
 from shared.human import HumanModel
 from shared.keypoints.bench import add_source_options, source_library
 from shared.keypoints.fit import POINT_NAMES
@@ -31,7 +31,7 @@ __all__ = ["main"]
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench tracker") -> int:
     """Run the benchmark; returns the exit status."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_source_options(parser, demos=6)
     parser.add_argument("--rate-hz", type=float, default=30.0, help="the sensor's frame rate")
     parser.add_argument("--rest-s", type=float, default=1.0, help="stillness before and after each demonstration")

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from services.processes import free_port
+from shared.arguments import ArgumentParser
 from tools.log.latency import log_latencies
 
 __all__ = ["main", "VARIANTS", "TARGET_MS"]
@@ -48,7 +49,7 @@ def _run(out: Path, variant: str, demo_args: list[str]) -> dict:
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench human") -> int:
     """Run the benchmark; returns the exit status (0: ran; the target's verdict is printed)."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--rounds", type=int, default=3, help="rounds of one run per variant")
     parser.add_argument("--out", default="runs/bench-human", help="the runs' directories")
     parser.add_argument("demo_args", nargs=argparse.REMAINDER, help="after --: more `foresight demo` options")

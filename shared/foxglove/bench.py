@@ -23,7 +23,6 @@ path at least 5x less CPU than the JSON path.
 
 from __future__ import annotations
 
-import argparse
 import io
 import json
 import sys
@@ -38,6 +37,7 @@ from typing import Any
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
+from shared.arguments import ArgumentParser
 from shared.protocol import Keys, OccupancyGrid
 from shared.recording.direct_file import DirectFile
 from shared.recording.schemas import PROFILE
@@ -266,7 +266,7 @@ def _summary(res: dict[str, Any]) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench viz") -> int:
     """Run the benchmark; returns the exit status (1 if the two paths drew different voxels)."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--updates", type=int, default=50, help="occupancy updates timed (default 50)")
     parser.add_argument("--voxels", type=int, default=3000,
                         help="voxels drawn per update, p >= 0.05 (default 3000, as the demo's occupancies)")

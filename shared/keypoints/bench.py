@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from shared.arguments import ArgumentParser
 from shared.human import HumanModel
 from shared.library import MotionLibrary
 from shared.native_threads import limit_blas_threads
@@ -57,7 +58,7 @@ def source_library(path: str | None) -> MotionLibrary:
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench keypoints") -> int:
     """Run the benchmark; returns the exit status."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     add_source_options(parser, demos=4)
     args = parser.parse_args(argv)
     limit_blas_threads(1)

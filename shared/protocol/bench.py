@@ -18,7 +18,6 @@ codec's time over msgpack's. Every message is checked to decode to bytes that en
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from collections.abc import Callable
@@ -28,6 +27,7 @@ import msgpack
 import numpy as np
 
 from shared import strict_json
+from shared.arguments import ArgumentParser
 from shared.runtime import cli_errors
 
 from .codec import decode, encode
@@ -118,7 +118,7 @@ def run_bench(loops: int = 2000, repeats: int = 5, voxels: int = 1500, seed: int
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench codec") -> int:
     """Print the table (or ``--json``); returns the exit status."""
-    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--loops", type=int, default=2000, help="calls per timing (default: 2000)")
     parser.add_argument("--repeats", type=int, default=5, help="timings per call, the best kept (default: 5)")
     parser.add_argument("--voxels", type=int, default=1500, help="voxels of the occupancy grid (default: 1500)")

@@ -45,7 +45,8 @@ class DirectFile:
             fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(self._fd)
-            raise OSError(errno.EBUSY, f"{path}: another run is writing this log (its lock); give another path") from None
+            raise OSError(errno.EBUSY, f"{path}: another run is writing this log (its lock); give another "
+                          "path") from None
         os.ftruncate(self._fd, 0)
         self._pos = 0
         self._held = bytearray()

@@ -55,3 +55,19 @@ def test_no_command_is_an_error_with_the_help_on_stderr(capsys) -> None:
     assert out == "" and "commands:" in err
     assert main(["--help"]) == 0
     assert "commands:" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, line", [
+    (["eval", "interference", "--quick"],
+     "foresight eval interference: error: unrecognized arguments: --quick (--quick is an option of foresight eval "
+     "all)"),
+    (["log", "render", "x.mcap", "--stp", "3", "--out", "x.png"],
+     "foresight log render: error: unrecognized arguments: --stp 3 (did you mean --step?)"),
+    (["demo", "--robot-sped", "0.5"], "foresight demo: error: unrecognized arguments: --robot-sped 0.5 (did you mean "
+                                      "--robot-speed?)"),
+])
+def test_a_mistaken_option_is_named_by_its_command_with_what_was_meant(argv, line, capsys) -> None:
+    """The top parser used to refuse it (``foresight eval: error: unrecognized arguments: --quick``), no hint."""
+    with pytest.raises(SystemExit) as exit_:
+        cli_main(argv)
+    assert exit_.value.code == 2 and capsys.readouterr().err.strip().splitlines()[-1] == line

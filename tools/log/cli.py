@@ -23,6 +23,7 @@ import sys
 from pathlib import Path
 
 from shared import strict_json
+from shared.arguments import ArgumentParser
 from shared.recording.reader import LogFile, read_log
 from shared.runtime import UserError, cli_errors
 
@@ -152,7 +153,7 @@ def _main_latency(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
     """``foresight log info|render|latency|compress|table|snapshot``; returns the exit status."""
-    parser = argparse.ArgumentParser(prog=prog, description="Look at a run's MCAP log without Foxglove: 'info' "
+    parser = ArgumentParser(prog=prog, description="Look at a run's MCAP log without Foxglove: 'info' "
                                      "lists channels, schemas and message counts; 'render' draws replanning steps "
                                      "to PNG (table, cups, human, predicted occupancy, robot spheres, candidate "
                                      "end-effector paths); 'latency' measures pose -> occupancy -> plan; 'compress' "

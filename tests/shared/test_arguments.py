@@ -1,0 +1,48 @@
+"""The command line's parser: a mistake is named in the sub-command it was made in, with the closest option."""
+
+from __future__ import annotations
+
+import pytest
+
+from shared.arguments import ArgumentParser
+
+
+def tool() -> ArgumentParser:
+    """``tool eval {all,interference}`` and ``tool log render``, as the CLI nests its commands."""
+    top = ArgumentParser(prog="tool")
+    top.add_argument("--log-level")
+    commands = top.add_subparsers(dest="command", required=True)
+    evals = commands.add_parser("eval", prog="tool eval").add_subparsers(dest="what", required=True)
+    evals.add_parser("all", prog="tool eval all").add_argument("--quick", action="store_true")
+    evals.add_parser("interference", prog="tool eval interference").add_argument("--robot-speed", type=float)
+    commands.add_parser("render", prog="tool render").add_argument("--step", type=int)
+    return top
+
+
+def refusal(argv: list[str], capsys) -> str:
+    with pytest.raises(SystemExit) as exit_:
+        tool().parse_args(argv)
+    assert exit_.value.code == 2
+    return capsys.readouterr().err.strip().splitlines()[-1]
+
+
+def test_a_misspelt_option_is_refused_by_its_sub_command_with_the_closest_one(capsys) -> None:
+    assert refusal(["eval", "interference", "--robot-sped", "0.5"], capsys) == (
+        "tool eval interference: error: unrecognized arguments: --robot-sped 0.5 (did you mean --robot-speed?)")
+    assert refusal(["render", "--stp=3"], capsys).endswith("--stp=3 (did you mean --step?)")
+
+
+def test_an_option_of_a_sibling_command_names_the_sibling(capsys) -> None:
+    assert refusal(["eval", "interference", "--quick"], capsys) == (
+        "tool eval interference: error: unrecognized arguments: --quick (--quick is an option of tool eval all)")
+
+
+def test_an_argument_nothing_resembles_points_to_the_commands_help(capsys) -> None:
+    assert refusal(["render", "extra"], capsys) == (
+        "tool render: error: unrecognized arguments: extra (see tool render --help)")
+    assert refusal(["--bogus", "render"], capsys).startswith("tool render: error: unrecognized arguments: --bogus")
+
+
+def test_arguments_it_knows_parse_as_argparse_parses_them() -> None:
+    ns = tool().parse_args(["--log-level", "DEBUG", "eval", "interference", "--robot-speed", "0.25"])
+    assert (ns.log_level, ns.command, ns.what, ns.robot_speed) == ("DEBUG", "eval", "interference", 0.25)
