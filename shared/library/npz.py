@@ -85,6 +85,9 @@ def load_npz(path: Path) -> MotionLibrary:
                 raise LibraryError(f"library file {str(path)!r}: one array, not a Foresight library npz")
             with loaded as z:
                 missing = [k for k in _NPZ_KEYS if k not in z.files]
+                if missing and "format" in z.files and z["format"].ndim == 0:  # another Foresight file: say which
+                    raise LibraryError(f"library file {str(path)!r}: a {str(z['format'])!r} file, not a motion "
+                                       "library (its demonstrations)")
                 if missing:
                     raise LibraryError(f"library file {str(path)!r}: not a Foresight library npz "
                                        f"(missing {', '.join(missing)})")

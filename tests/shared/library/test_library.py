@@ -215,6 +215,9 @@ def test_missing_paths(tmp_path):
     np.savez(tmp_path / "other.npz", a=np.zeros(3))
     with pytest.raises(LibraryError, match="not a Foresight library npz"):
         load_library(tmp_path / "other.npz")
+    np.savez(tmp_path / "model.npz", format=np.array("foresight-prediction-model"), means=np.zeros(3))
+    with pytest.raises(LibraryError, match="model.npz': a 'foresight-prediction-model' file, not a motion library"):
+        load_library(tmp_path / "model.npz")  # `foresight train`'s output given for its input: ten missing keys
 
 
 def test_npz_round_trip(tmp_path):
