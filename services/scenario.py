@@ -14,6 +14,7 @@ import logging
 import math
 import os
 import threading
+import zipfile
 from collections.abc import Callable, MutableMapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -91,6 +92,16 @@ def _library_digest(library: MotionLibrary) -> str:
     return h.hexdigest()[:16]
 
 
+def _damage(path: Path) -> str:
+    """What is wrong with a cached model file ('' if nothing): every member's CRC is checked, not the contents."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            bad = z.testzip()
+    except (OSError, zipfile.BadZipFile, EOFError) as exc:
+        return f"{type(exc).__name__}: {exc}"
+    return f"{bad} fails its CRC" if bad else ""
+
+
 def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Sequence[Demonstration],
               models_dir: Path, components: int | None = None, progress: bool = True,
               fit_cache: MutableMapping[str, Any] | None = None, volume: str | None = None,
@@ -132,8 +143,11 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
                                      MODEL_VERSION]).encode()).hexdigest()[:12]
     path = Path(models_dir) / f"demo-{scene.name}-{key}.npz"
     if path.is_file():
-        log.info("using cached model %s", path)
-        return path
+        damage = _damage(path)
+        if not damage:
+            log.info("using cached model %s", path)
+            return path
+        log.warning("cached model %s is damaged (%s): training it again", path, damage)
     if on_train is not None:
         on_train(path)
     skip = set(left)

@@ -157,11 +157,19 @@ def test_model_for_says_when_it_trains_and_not_when_the_model_is_cached(tmp_path
 
     class Trained:
         def save(self, path):
-            path.write_bytes(b"model")
+            np.savez(path, means=np.arange(4.0))
 
     monkeypatch.setattr(train, "train_model", lambda *a, **k: Trained())
     lib = generate_library(2, 3, seed=1)
     said: list = []
     first = model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, on_train=said.append)
     again = model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, on_train=said.append)
-    assert first == again and first.read_bytes() == b"model" and said == [first]
+    assert first == again and said == [first]
+    first.write_bytes(first.read_bytes()[:-30])  # a cached model cut short (a full disk, a killed copy)
+    assert model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, on_train=said.append) == first
+    assert said == [first, first] and np.load(first)["means"].tolist() == [0, 1, 2, 3]  # trained again: whole
+    data = bytearray(first.read_bytes())
+    data[data.index(b"\x93NUMPY") + 128 + 8] ^= 0xFF  # a flipped byte in the array (after its 128-byte header)
+    first.write_bytes(bytes(data))
+    model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, on_train=said.append)
+    assert said == [first, first, first]
