@@ -38,15 +38,14 @@ import argparse
 import dataclasses
 import logging
 import os
-import shutil
 import socket
 import sys
 import threading
 from collections.abc import Callable
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from services.demo_dirs import RunDirectory
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
 from shared.arguments import ArgumentParser
@@ -174,36 +173,6 @@ VARIANTS = (("prediction", {"method": "prediction", "human_cost": True}),
 """The planners ``--compare`` runs: the paper's method and its two baselines (Fig. 8/9, Table I)."""
 
 
-def _run_root(cfg: DemoConfig) -> Path:
-    """This run's own directory under ``cfg.run_dir`` (``<UTC stamp>-<mode>[-compare]``), ``latest`` pointing to it."""
-    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
-    root = Path(cfg.run_dir)
-    run = root / f"{stamp}-{cfg.mode}{'-compare' if cfg.compare else ''}"
-    n = 1
-    while run.exists():  # two runs within a second
-        n += 1
-        run = root / f"{stamp}-{cfg.mode}{'-compare' if cfg.compare else ''}-{n}"
-    run.mkdir(parents=True)
-    return run
-
-
-def _point_latest(run: Path) -> None:
-    """``latest`` beside ``run`` points to it (called as its services start: a failed start leaves it as it was)."""
-    latest = run.parent / "latest"
-    try:
-        if latest.is_symlink() or not latest.exists():
-            latest.unlink(missing_ok=True)
-            latest.symlink_to(run.name, target_is_directory=True)
-    except OSError:  # a file system without symlinks: the directory names still sort by time
-        pass
-
-
-def _discard_unstarted(run: Path) -> None:
-    """Remove a run directory that no service wrote into (it failed or was interrupted before the services)."""
-    if run.is_dir() and not any(p.suffix in (".log", ".mcap") for p in run.rglob("*")):
-        shutil.rmtree(run, ignore_errors=True)
-
-
 def _check_live_port(cfg: DemoConfig) -> None:
     """``--live PORT`` must be free before the services start: the executor found out 20 s later."""
     if not cfg.live:
@@ -242,7 +211,8 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     _check_models_dir(cfg)
     _check_live_port(cfg)
     scene = load_scene(cfg.scene or None)
-    root = _run_root(cfg)
+    run_dir = RunDirectory.create(Path(cfg.run_dir), cfg.mode, cfg.compare)
+    root = run_dir.path
     variants = VARIANTS if cfg.compare else ((_variant_name(cfg), {}),)
     records: list[RunRecord] = []
     status = 0
@@ -252,7 +222,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
                 out(f"foresight demo: --- {name} ---")
             sub = dataclasses.replace(cfg, compare=False, **changes,
                                       run_dir=root / name.replace(" ", "-") if cfg.compare else root)
-            status, record = demo_run.run_once(sub, name, stop, out, started=lambda: _point_latest(root))
+            status, record = demo_run.run_once(sub, name, stop, out, started=run_dir.point_latest)
             if record is None:
                 if records:  # interrupted before this planner's first plan: what the earlier ones did still counts
                     break
@@ -266,8 +236,8 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
                     status = 130
                 break
     finally:
-        if not records:  # a bad option found late, Ctrl-C while training: no run directory without a run in it
-            _discard_unstarted(root)
+        if not records and not run_dir.has_log():  # a bad option found late, Ctrl-C while training or starting
+            run_dir.end_without_log()
     robot = PR2.from_scene(scene)
     reference = records[0].final  # the final prediction of the paper's method
     outcomes = [measure_run(r.name, r.states, r.poses, reference, robot, scene, r.summary) for r in records]

@@ -1,0 +1,77 @@
+"""The demo's run directories: one per run under ``runs/demo/``, and ``latest`` pointing to the newest that ran.
+
+Each run gets ``<UTC stamp>-<mode>[-compare]`` (``-2``, ``-3`` for runs within one second). ``latest`` points to a
+run once its services start, so that their logs can be followed during the run; a run interrupted before it wrote an
+MCAP log hands ``latest`` back to the run it pointed to before (the README's ``foresight log info
+runs/demo/latest`` found nothing after an early Ctrl-C), and a run no service wrote into is removed.
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+
+__all__ = ["RunDirectory"]
+
+
+@dataclass
+class RunDirectory:
+    """One demo run's directory and the ``latest`` link beside it.
+
+    Attributes:
+        path: The run's directory.
+        previous_: What ``latest`` pointed to before :meth:`point_latest` (None: nothing, or not yet pointed).
+    """
+
+    path: Path
+    previous_: str | None = None
+
+    @classmethod
+    def create(cls, root: Path, mode: str, compare: bool) -> RunDirectory:
+        """A new directory under ``root`` named for the time (UTC), ``mode`` and ``compare``."""
+        stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+        name = f"{stamp}-{mode}{'-compare' if compare else ''}"
+        run, n = root / name, 1
+        while run.exists():  # two runs within a second
+            n += 1
+            run = root / f"{name}-{n}"
+        run.mkdir(parents=True)
+        return cls(run)
+
+    @property
+    def latest(self) -> Path:
+        """The ``latest`` link beside the run."""
+        return self.path.parent / "latest"
+
+    def point_latest(self) -> None:
+        """``latest`` points to this run (called as its services start: a failed start leaves it as it was)."""
+        try:
+            if self.latest.is_symlink() or not self.latest.exists():
+                self.previous_ = str(self.latest.readlink()) if self.latest.is_symlink() else None
+                self.latest.unlink(missing_ok=True)
+                self.latest.symlink_to(self.path.name, target_is_directory=True)
+        except OSError:  # a file system without symlinks: the directory names still sort by time
+            pass
+
+    def has_log(self) -> bool:
+        """Whether an MCAP log was written under the run."""
+        return any(p.suffix == ".mcap" for p in self.path.rglob("*"))
+
+    def end_without_log(self) -> None:
+        """The run ended before writing a log: ``latest`` goes back to the run before; an empty directory goes."""
+        try:
+            ours = self.latest.is_symlink() and self.latest.readlink().name == self.path.name
+        except OSError:
+            ours = False
+        if self.path.is_dir() and not any(p.suffix in (".log", ".mcap") for p in self.path.rglob("*")):
+            shutil.rmtree(self.path, ignore_errors=True)
+        if not ours or (self.previous_ is None and self.path.exists()):
+            return  # not ours to move; or a first run's service logs, which it may as well point to
+        try:
+            self.latest.unlink()
+            if self.previous_ is not None:
+                self.latest.symlink_to(self.previous_, target_is_directory=True)
+        except OSError:
+            pass

@@ -1,0 +1,29 @@
+"""The demo's run directories: ``latest`` points to the newest run that wrote a log."""
+
+from __future__ import annotations
+
+from services.demo_dirs import RunDirectory
+
+
+def test_a_run_ended_before_its_log_hands_latest_back_and_keeps_its_service_logs(tmp_path) -> None:
+    """After a Ctrl-C during start-up ``latest`` pointed to a run with no MCAP: ``foresight log info
+    runs/demo/latest``, the README's next command, found nothing while the earlier runs' logs were there."""
+    before = RunDirectory.create(tmp_path, "lockstep", False)
+    before.point_latest()
+    (before.path / "run.mcap").write_bytes(b"a log")
+    run = RunDirectory.create(tmp_path, "lockstep", False)
+    assert run.path != before.path and run.path.name.startswith(before.path.name[:16])
+    run.point_latest()
+    assert (tmp_path / "latest").resolve() == run.path.resolve()  # during the run: its services' logs
+    (run.path / "planner.log").write_text("started\n")
+    assert not run.has_log()
+    run.end_without_log()
+    assert (tmp_path / "latest").resolve() == before.path.resolve() and (run.path / "planner.log").exists()
+
+
+def test_a_run_nothing_was_written_into_is_removed_and_a_first_run_leaves_no_link(tmp_path) -> None:
+    run = RunDirectory.create(tmp_path, "realtime", True)
+    assert run.path.name.endswith("-realtime-compare")
+    run.point_latest()
+    run.end_without_log()
+    assert not run.path.exists() and not (tmp_path / "latest").is_symlink()  # nothing to hand back to: no link
