@@ -304,6 +304,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 subscribe(session, keys.pose, HumanPose, on_other)]
         presence = Presence(session, keys, "demo")
         try:
+            out(f"foresight demo: starting {', '.join(order)}")
             for name in order:
                 if stop.is_set():
                     break
@@ -312,7 +313,9 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                     out(f"foresight demo: watch live at ws://127.0.0.1:{cfg.live} (Foxglove: Open connection -> "
                         "Foxglove WebSocket; layout docs/foresight.foxglove.json)")
                 elif name != "executor":
-                    procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout), stop=stop)
+                    began = time.monotonic()  # each service said as it comes up: the start-up is silent otherwise
+                    if procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout), stop=stop):
+                        out(f"foresight demo: {name} up ({time.monotonic() - began:.1f} s)")
             executor = procs["executor"]
             supervisor = Supervisor(procs, out, restart=cfg.restart, fatal=cfg.mode == "lockstep")
             while not stop.is_set() and executor.running:

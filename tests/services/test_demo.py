@@ -50,6 +50,9 @@ def test_demo_multiprocess_json(tmp_path: Path) -> None:
     # per step, in order, agreeing with the summary
     progress = proc.stderr.splitlines()
     assert any("lockstep mode, 5 steps of 0.5 s" in ln for ln in progress)
+    # the start-up says each service as it comes up (it was silent for 20-40 s before the table)
+    ups = [ln.split(": ", 1)[1].split(" (")[0] for ln in progress if re.match(r"foresight demo: \w+ up \(", ln)]
+    assert ups == ["predictor up", "planner up", "replayer up"]
     header = table_header(summary["goal_names"])
     assert progress.count(header) == 1
     rows = progress[progress.index(header) + 1:][:5]
