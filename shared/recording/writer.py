@@ -230,8 +230,8 @@ class McapLog:
                 cid = self._channel_id(key, f"foresight.{msg.TYPE}", message_json_schema(MESSAGE_TYPES[msg.TYPE]),
                                        "msgpack")
             self._add(cid, key, bytes(payload), log_time, publish)
-        if self._stream is None:
-            return
+        if self._stream is None or self._expected.get(key) is not type(msg):
+            return  # drawn from its own key only: a plan put elsewhere under the prefix is logged, not the robot's
         with self._lock:
             topic = self._stream.due(msg)
             if topic is None:

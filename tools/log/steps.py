@@ -12,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from shared.protocol import HumanPose, OccupancyGrid, Plan, ProtocolError, RobotState, decode
+from shared.protocol import HumanPose, Keys, OccupancyGrid, Plan, ProtocolError, RobotState, decode
 from shared.recording.reader import LogFile
 from shared.runtime import UserError
 from shared.scene import Scene, load_scene, parse_scene
@@ -37,8 +37,12 @@ class StepView:
 
 
 def decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
-    """``(log time ns, message)`` of every valid message of ``schema`` (Foresight's msgpack channels) in the log."""
+    """``(log time ns, message)`` of every valid message of ``schema`` on its key (Foresight's msgpack channels)."""
     topics = {c.topic for c in lf.channels.values() if c.schema_name == schema and c.message_encoding == "msgpack"}
+    prefix = lf.metadata.get("foresight.run", {}).get("prefix")
+    own = {f"foresight.{t.TYPE}": key for key, t in Keys(prefix).data_keys().items()}.get(schema) if prefix else None
+    if own in topics:  # the run's own key: a message of the type put on another key under the prefix is not the run's
+        topics = {own}
     out = []
     for m in lf.messages:
         if m.topic in topics:

@@ -52,3 +52,28 @@ def test_step_titles_lockstep_and_realtime(run_log, tmp_path, robot) -> None:
     assert "Replanning step 6 (t = 1.25 s into the run)" in title
     assert "occupancy of pose 30 at t = 1.00 s (prediction)" in title
     assert "tick -1" not in title and "1700000000" not in title
+
+
+def test_a_plan_put_on_another_key_under_the_prefix_is_logged_but_is_not_the_runs(tmp_path, robot) -> None:
+    """The log keeps every message under the prefix; the scene drew, and the tools read, any Plan as the robot's."""
+    from shared.foxglove.scene import SceneBuilder
+
+    keys = Keys("lab")
+    q0 = robot.q_start.numpy().astype(np.float64)
+    path = tmp_path / "run.mcap"
+    log = McapLog(path, keys, SceneBuilder(load_scene(None), robot), run_metadata={"prefix": "lab"})
+
+    def plan(step: int) -> bytes:
+        traj = np.stack([np.linspace(q0, q0 + 0.1 * (step + 1), 5)] * 2).astype(np.float32)
+        return encode(Plan(stamp=0.5 * step, tick=step, step=step, goal_names=["blue_cup", "red_cup"],
+                           joint_names=robot.joint_names, dt=0.1, chosen=0, planning_ms=1.0, occupancy_tick=-1,
+                           occupancy_index=-1, trajectories=traj, cost_smoothness=np.ones(2),
+                           cost_obstacle=np.zeros(2), cost_human=np.zeros(2), cost_total=np.ones(2),
+                           valid=np.ones(2, bool)))
+
+    log.on_sample(keys.plan, plan(0))
+    log.on_sample("lab/other/thing", plan(1))  # a valid plan, on a key the planner does not own
+    log.close()
+    lf = read_log(path, keep=lambda ch: True)
+    assert len(lf.topic_messages("lab/other/thing")) == 1  # nothing logged is lost
+    assert len(lf.topic_messages("/viz/plan")) == 1 and sorted(step_views(lf)) == [0]
