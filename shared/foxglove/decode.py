@@ -107,13 +107,20 @@ def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[Sce
             chosen = [c.topic for c in summary.channels.values() if wanted(c.topic)]
             if not chosen:  # no scene channel: nothing to read
                 return
-            for schema, channel, message in indexed.iter_messages(topics=chosen, log_time_order=True):
-                if schema is None:
-                    continue
-                yield SceneRecord(channel.topic, schema.name, message.log_time, message.publish_time,
-                                  decoder.decode(channel.topic, schema.name, schema.encoding, schema.data,
-                                                 message.data))
-            return
+            yielded = 0
+            try:
+                for schema, channel, message in indexed.iter_messages(topics=chosen, log_time_order=True):
+                    if schema is None:
+                        continue
+                    yield SceneRecord(channel.topic, schema.name, message.log_time, message.publish_time,
+                                      decoder.decode(channel.topic, schema.name, schema.encoding, schema.data,
+                                                     message.data))
+                    yielded += 1
+            except DAMAGED:  # a damaged chunk (a flipped bit): the scene up to it stands, as the other tools read
+                if yielded:  # a log up to its damage (foresight log says the file is not whole)
+                    return
+            else:
+                return
     schemas: dict[int, Schema] = {}
     channels: dict[int, tuple[Channel, Schema]] = {}
     raw: list[tuple[int, int, int, bytes]] = []  # (log_time, publish_time, channel id, data)

@@ -122,3 +122,22 @@ def test_a_copy_of_a_truncated_log_says_so_and_the_tools_note_a_truncated_log(ru
     assert "complete; copied from a TRUNCATED log" in capsys.readouterr().out
     assert main(["table", str(cut)]) == 0  # it printed a killed run's table as if the run had ended there
     assert "is TRUNCATED (" in capsys.readouterr().err
+
+
+def test_a_snapshot_of_a_log_damaged_at_its_end_draws_the_scene_up_to_the_damage(run_log: Path, tmp_path: Path,
+                                                                                   capsys) -> None:
+    """info and table read such a log up to the damage; snapshot, which reads the scene through the index, refused
+    the whole file ('not a readable MCAP file, or truncated') for one flipped byte in its last chunk."""
+    from mcap.reader import make_reader
+
+    packed = tmp_path / "packed.mcap"
+    compress_log(run_log, packed, "none", chunk_size=4096)
+    with packed.open("rb") as f:
+        last = max(make_reader(f).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset)
+    data = bytearray(packed.read_bytes())
+    data[last.chunk_start_offset + last.chunk_length - 50] ^= 0xFF
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    assert main(["snapshot", str(bad), "--out", str(tmp_path / "s.png")]) == 0
+    err = capsys.readouterr().err
+    assert "is TRUNCATED" in err and (tmp_path / "s.png").read_bytes()[:4] == b"\x89PNG"
