@@ -24,7 +24,7 @@ from mcap.stream_reader import StreamReader
 
 from shared.runtime import UserError
 
-__all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "open_records", "DAMAGED", "MAGIC"]
+__all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "iter_messages", "open_records", "DAMAGED", "MAGIC"]
 
 MAGIC = b"\x89MCAP0\r\n"
 """The first (and last) eight bytes of an MCAP file."""
@@ -189,3 +189,25 @@ def read_log(path: str | Path, keep: Callable[[LogChannel], bool] | None = None)
         except DAMAGED as exc:
             out.error = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
     return out
+
+
+def iter_messages(path: str | Path) -> Iterator[LogMessage]:
+    """Every message of a log in file order, one at a time (what :func:`read_log` keeps, without holding it all).
+
+    Stops where the file is damaged or ends, as :func:`read_log` does (its ``error`` says why).
+
+    Raises:
+        UserError: If the file is missing or not an MCAP file at all.
+    """
+    topics: dict[int, str] = {}
+    with open_records(Path(path)) as reader:
+        try:
+            for rec in reader.records:
+                if isinstance(rec, Channel):
+                    topics.setdefault(rec.id, rec.topic)
+                elif isinstance(rec, Message):
+                    if rec.channel_id not in topics:
+                        raise McapError(f"message on unknown channel {rec.channel_id}")
+                    yield LogMessage(topics[rec.channel_id], rec.log_time, rec.publish_time, bytes(rec.data))
+        except DAMAGED:
+            return

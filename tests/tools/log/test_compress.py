@@ -24,6 +24,38 @@ def test_round_trip_is_identical_and_sizes_follow_the_compression(run_log: Path,
     assert read_log(tmp_path / "packed.mcap").complete
 
 
+
+def test_a_changed_payload_or_a_missing_last_message_is_a_difference(run_log: Path, tmp_path: Path) -> None:
+    """Compared one message at a time (it held both logs' payloads in two lists: 701 MB for 300 x 1 MiB)."""
+    from mcap.writer import Writer
+
+    from shared.recording.reader import iter_messages
+
+    messages = list(iter_messages(run_log))
+    lf = read_log(run_log)
+
+    def copy(path: Path, drop_last: bool = False, flip: int | None = None) -> Path:
+        with path.open("wb") as f:
+            w = Writer(f)
+            w.start(profile=lf.profile, library=lf.library)
+            ids = {}
+            for c in lf.channels.values():
+                sid = w.register_schema(c.schema_name, c.schema_encoding, b"{}") if c.schema_name else 0
+                ids[c.topic] = w.register_channel(c.topic, c.message_encoding, sid)
+            for i, m in enumerate(messages[:-1] if drop_last else messages):
+                data = bytes([m.data[0] ^ 1]) + m.data[1:] if i == flip else m.data
+                w.add_message(ids[m.topic], m.log_time, data, m.publish_time)
+            for name, data in lf.attachments.items():
+                w.add_attachment(0, 0, name, "application/octet-stream", data)
+            for name, meta in lf.metadata.items():
+                w.add_metadata(name, meta)
+            w.finish()
+        return path
+
+    assert same_messages(run_log, copy(tmp_path / "same.mcap"))
+    assert not same_messages(run_log, copy(tmp_path / "flipped.mcap", flip=len(messages) // 2))
+    assert not same_messages(run_log, copy(tmp_path / "short.mcap", drop_last=True))
+
 def test_truncated_input_is_copied_up_to_its_last_chunk(run_log: Path, tmp_path: Path) -> None:
     compress_log(run_log, tmp_path / "plain.mcap", "none", chunk_size=4096)
     data = (tmp_path / "plain.mcap").read_bytes()
