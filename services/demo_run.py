@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from services.processes import ServiceProcess, free_port
+from services.run_log import recorder_from_log
 from services.scenario import (
     RunRecorder,
     Scenario,
@@ -134,8 +135,9 @@ def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_
 def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> str:
     """One phrase on the run's MCAP: complete (the executor finished it) or not, with its message count.
 
-    With ``plan_topic``: its plans too, and how many of the ``received`` ones came after the executor closed it (an
-    interrupt: the planner's last plan may come after; the live table printed it, the log has not).
+    With ``plan_topic``: its plans too, and how many of the ``received`` ones (the rows printed) came after the
+    executor closed it, or how many it logged after the last row (the rows stop at Ctrl-C; the executor logs until
+    it has stopped).
     """
     if not mcap.is_file():
         return "no log was written (the executor had not started)"
@@ -146,7 +148,9 @@ def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> 
     if plan_topic is not None:
         logged = sum(c.count for c in lf.channels.values() if c.topic == plan_topic)
         late = received - logged
-        text += f", {logged} plans" + (f" (the last {late} came after the executor closed it)" if late > 0 else "")
+        text += f", {logged} plans" + (f" (the last {late} came after the executor closed it)" if late > 0 else
+                                       f" ({-late} after the rows above, made while the executor stopped: `foresight "
+                                       f"log table {mcap}` prints every one)" if late < 0 else "")
     return text
 
 
@@ -261,13 +265,22 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     run_start: list[float | None] = [None if realtime else 0.0]
     header_printed = [False]
 
+    # the run is what the executor logged: after Ctrl-C it stops (closing the log) first while the others still
+    # run, and what came later made the summary's rows and final prediction differ from the log's
+    recording = threading.Event()
+    recording.set()
+
     def on_state(msg: RobotState) -> None:
+        if not recording.is_set():
+            return
         with lock:
             if run_start[0] is None:
                 run_start[0] = msg.stamp
         recorder.on_message(msg)
 
     def on_plan(msg: Plan) -> None:
+        if stop.is_set() or not recording.is_set():  # no row after Ctrl-C: the rows stop where the person did
+            return
         with lock:
             if run_start[0] is None:
                 run_start[0] = msg.stamp
@@ -283,6 +296,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
             out(table_row(step_entry(msg, t0), list(msg.goal_names), belief(posterior_for(msg, posteriors))))
 
     def on_other(msg: Message) -> None:
+        if not recording.is_set():
+            return
         if isinstance(msg, ClassPosterior):
             with lock:
                 keep_posterior(posteriors, msg)
@@ -342,16 +357,21 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
         finally:
             for name in reversed(order):
                 code = procs[name].stop(timeout=10.0)
+                if name == "executor":  # its log is closed: what the others still send is not the run's
+                    recording.clear()
                 if code not in (0, None, -15):
                     log.warning("%s exited with status %s", name, code)
             presence.close()
             for s in subs:
                 s.undeclare()
+    received = len(recorder.snapshot()[0])
+    if status and mcap.is_file():  # cut short: the summary is of what the log holds, as foresight log table's is
+        recorder = recorder_from_log(mcap, keys) or recorder
     plans, states, final, posteriors = recorder.snapshot()
     if status:  # interrupted, a dead service, the executor's own failure, a timeout: what the log holds
         done = f"{len(plans)} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{len(plans)} plans"
         out(f"foresight demo: {'interrupted' if status == 130 else 'stopped'} after {done}; "
-            f"{_log_state(mcap, keys.plan, len(plans))}")
+            f"{_log_state(mcap, keys.plan, received)}")
     elif stop.is_set():  # a signal while the services stopped, after the run's end: it ended whole
         out("foresight demo: interrupted while stopping the services, after the run had ended: nothing was lost")
     if not plans:
