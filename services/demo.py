@@ -248,7 +248,9 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
         summary.extra["verdict"] = verdict(outcomes)
     title = (f"foresight demo: {summary.human_class} reach, scene {scene.name}, robot at {cfg.robot_speed:g} of its "
              f"velocity limits, {cfg.steps} steps of {cfg.period_s:g} s")
-    summary.extra["outcome_lines"] = outcome_lines(outcomes)
+    against = ("the prediction planner's final prediction" if summary.scored_against == "final prediction"
+               else f"the run's {summary.scored_against}")
+    summary.extra["outcome_lines"] = outcome_lines(outcomes, against)
     figure = _picture(lambda png: draw_outcomes(outcomes, scene, reference, records[0].poses, png, cfg.period_s,
                                                 title), root / "run.png", out)
     if figure is not None:

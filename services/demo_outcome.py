@@ -150,10 +150,10 @@ def verdict(outcomes: list[Outcome]) -> str:
             "relative to the human")
 
 
-def outcome_lines(outcomes: list[Outcome]) -> list[str]:
-    """The comparison table and its verdict."""
-    out = ["", "comparison (interference: the paper's Table I measure against the prediction planner's final "
-           "prediction; contact: overlap with the real human's body):",
+def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planner's final prediction") -> list[str]:
+    """The comparison table and its verdict; ``against``: what the interference is scored against."""
+    out = ["", f"comparison (interference: the paper's Table I measure against {against}; contact: overlap with the "
+           "real human's body):",
            f"  {'planner':<20}{'interference':>13}{'contact s':>11}{'within 5 cm s':>15}{'min clearance m':>17}"
            f"{'switch step':>13}{'reached step':>14}"]
     for o in outcomes:

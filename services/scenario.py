@@ -253,6 +253,7 @@ class Summary:
     goal_names: list[str] = field(default_factory=list)
     reached_t_s: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    scored_against: str = "final prediction"
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (keys steps, chosen_goal_per_step, switch_step, interference_cost, mcap_path, ...)."""
@@ -290,7 +291,8 @@ class Summary:
                 reached += f" (t = {self.reached_t_s:.2f} s)"
         out.append(f"goal reached: {reached}")
         out.append(f"human class: {self.human_class}; recognised at the end: {self.recognised_class}")
-        out.append(f"interference cost of the executed trajectory (final prediction): {self.interference_cost:.4f}")
+        out.append(f"interference cost of the executed trajectory ({self.scored_against}): "
+                   f"{self.interference_cost:.4f}")
         out.append(f"MCAP log: {self.mcap_path}")
         return out
 
@@ -329,6 +331,11 @@ def posterior_for(plan: Plan, posteriors: dict[int, ClassPosterior]) -> ClassPos
         return posteriors[max(earlier, key=lambda t: posteriors[t].tick)] if earlier else None
     before = [p for p in posteriors.values() if p.stamp <= plan.stamp]
     return max(before, key=lambda p: p.stamp) if before else None
+
+
+def final_label(final: OccupancyGrid | None) -> str:
+    """What a run's interference is scored against: ``final prediction``, or the final grid of another method."""
+    return "final prediction" if final is None or final.method == "prediction" else f"final {final.method} occupancy"
 
 
 def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: OccupancyGrid | None,
@@ -387,4 +394,4 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     return Summary(steps=steps, chosen_goal_per_step=chosen, switch_step=switch, interference_cost=cost,
                    mcap_path=mcap_path, reached=bool(reached_states), reached_step=reached_step,
                    human_class=human_class, recognised_class=recognised, goal_names=goal_names,
-                   reached_t_s=reached_t)
+                   reached_t_s=reached_t, scored_against=final_label(final_occupancy))

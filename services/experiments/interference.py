@@ -82,7 +82,8 @@ class RunScore:
         demo: Index of the demonstration within its class; ``seed``: the run's STOMP seed.
         planner: Variant name (:data:`services.experiments.planners.VARIANTS`).
         interference: Integral penetration of the final prediction (probability-voxels x s).
-        interference_at_goal: The part of it accrued once the robot was at its goal (holding there).
+        interference_at_goal: The part of it accrued from the first state at its goal on (holding there, or
+            moving off it again: both count).
         interference_unrecognised: The part accrued during steps planned with a prediction in which the
             human's true class had probability < 0.5 (not yet recognised).
         min_clearance: Smallest robot-body clearance to the real human (m).
@@ -181,9 +182,12 @@ class InterferenceResult:
         return [n for n in VARIANTS if n in self.config.variants]
 
     def per_demo(self, planner: str, measure: str = "interference") -> tuple[list[float], list[float]]:
-        """Mean and standard deviation over seeds, per demonstration."""
+        """Mean and sample standard deviation over seeds, per demonstration (0 with one seed).
+
+        The sample deviation (N - 1) is Matlab's ``std``, what the authors' costs_motions.m compares with.
+        """
         v = self.values(planner, measure)
-        return v.mean(axis=1).tolist(), v.std(axis=1).tolist()
+        return v.mean(axis=1).tolist(), (v.std(axis=1, ddof=1) if v.shape[1] > 1 else np.zeros(len(v))).tolist()
 
     def ratio(self) -> float:
         """Mean basic interference over mean least-penetration interference (the paper: 46)."""
@@ -240,7 +244,7 @@ class InterferenceResult:
         out.append(f"{'mean':>6}" + "".join(f"{np.mean(stats[n][0]):>22.3f}" for n in names))
         paper = np.mean(PAPER_TABLE1["basic"]) / np.mean(PAPER_TABLE1["least_penetration"])
         out.append(f"basic / least penetration: {ratio_text(self.ratio())} (the paper: {paper:.0f}x)")
-        for part, what in (("interference_at_goal", "holding at the goal"),
+        for part, what in (("interference_at_goal", "once at the goal"),
                            ("interference_unrecognised", "before the human's class was recognised (p < 0.5)")):
             mean = {n: float(self.values(n, part).mean()) for n in names}
             out.append(f"of which accrued {what}: " + ", ".join(f"{VARIANTS[n].label} {mean[n]:.3f}" for n in names))

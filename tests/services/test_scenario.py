@@ -173,3 +173,20 @@ def test_model_for_says_when_it_trains_and_not_when_the_model_is_cached(tmp_path
     first.write_bytes(bytes(data))
     model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, on_train=said.append)
     assert said == [first, first, first]
+
+
+def test_a_run_scored_against_a_final_grid_that_is_no_prediction_says_so() -> None:
+    """A lone `foresight demo --method current` scored its interference against its own final current-occupancy grid
+    and labelled it 'final prediction'."""
+    from services.scenario import Summary, final_label
+    from shared.protocol import OccupancyGrid
+
+    def grid(method: str) -> OccupancyGrid:
+        return OccupancyGrid.from_dense(np.zeros((2, 2, 2), np.float32), [0.0, 0.0, 0.0], 0.05, stamp=0.0, tick=0,
+                                        demo_id=0, index=0, method=method, tick_last=True)
+
+    assert [final_label(None), final_label(grid("prediction")), final_label(grid("current"))] == [
+        "final prediction", "final prediction", "final current occupancy"]
+    summary = Summary([], [], None, 1.5, None, False, None, "blue_cup", None,
+                      scored_against=final_label(grid("current")))
+    assert "interference cost of the executed trajectory (final current occupancy): 1.5000" in summary.lines()

@@ -35,3 +35,5 @@ def test_the_authors_comparison_puts_sample_standard_deviations_side_by_side() -
     assert [r["planner"] for r in rows] == ["basic", "least_penetration"]
     assert rows[0]["ours"]["std"] == pytest.approx(np.std([1.0, 2.0, 4.0], ddof=1))
     assert rows[0]["authors"]["std"] == pytest.approx(np.std(TABLE1_RUNS["basic"][0], ddof=1))
+    # Table I's (std) is the same sample deviation (it was the population one, 5 % smaller with 10 seeds)
+    assert res.per_demo("basic") == ([pytest.approx(7 / 3)], [pytest.approx(np.std([1.0, 2.0, 4.0], ddof=1))])
