@@ -126,8 +126,10 @@ class DemoConfig:
     port: int = opt(0, help="loopback TCP port of the demo's Zenoh router (0 = a free port)")
     prefix: str = opt("foresight", help="key-expression prefix")
     timeout: float = opt(900.0, help="give up after this many seconds")
-    restart: bool = opt(False, help="start a service that dies during the run again (at most 3 times); without "
-                        "it the run carries on without the service (the executor holds the robot)")
+    restart: bool = opt(False, help="start a service that dies or hangs during the run again (at most 3 times; "
+                        "the human's source starts its demonstration over); without it the run carries on without "
+                        "the service (the executor holds the robot). Either way the run is marked as not whole and "
+                        "--compare gives no verdict on it")
     json: bool = opt(False, help="print one JSON object with the summary (progress goes to stderr)")
     log_level: str = opt("WARNING", choices=LOG_LEVELS, help="log level of the demo (DEBUG: the services' logs too, "
                          "e.g. the planner's line per plan; FORESIGHT_<SERVICE>_LOG_LEVEL sets one service's)")

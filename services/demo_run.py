@@ -304,6 +304,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
         recorder.on_message(msg)
 
     status = 0
+    faults: list[str] = []
     # with --ros2 the ROS 2 gateway starts before the executor, so that it sees the whole run; so does the robot
     extra = [*(["ros2"] if cfg.ros2 else []), *(["simrobot"] if cfg.robot == "ros2-sim" else [])]
     services = services_in_order(cfg)
@@ -332,7 +333,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                     if procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout), stop=stop):
                         out(f"foresight demo: {name} up ({time.monotonic() - began:.1f} s)")
             executor = procs["executor"]
-            supervisor = Supervisor(procs, out, restart=cfg.restart, fatal=cfg.mode == "lockstep")
+            supervisor = Supervisor(procs, out, restart=cfg.restart, fatal=cfg.mode == "lockstep",
+                                    is_alive=presence.is_alive)
             while not stop.is_set() and executor.running:
                 if time.monotonic() > deadline:
                     out(f"foresight demo: timeout after {cfg.timeout:g} s")
@@ -350,10 +352,10 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 said = executor.last_words()  # a killed process's last line is not why it died: only an error's is
                 out(f"foresight demo: executor {describe_exit(executor.returncode)}" + (f": {said}" if said else ""))
                 status = 1
-            if supervisor.faults:
-                out("foresight demo: faults during the run: " + ", ".join(
-                    f"{name} ({'killed' if code is not None and code < 0 else code})"
-                    for name, code in supervisor.faults))
+            faults = [f"{name} ({'hung' if code is None else 'killed' if code < 0 else code})"
+                      for name, code in supervisor.faults]
+            if faults:
+                out("foresight demo: faults during the run: " + ", ".join(faults))
         finally:
             for name in reversed(order):
                 code = procs[name].stop(timeout=10.0)
@@ -387,6 +389,10 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     summary.extra["human_cost"] = cfg.human_cost
     if status:  # its numbers are of a part of the run: no comparison may take them for a whole one
         summary.extra["cut_short"] = f"{'interrupted' if status == 130 else 'stopped'} after {done}"
+    elif faults:  # real time goes on without (or with a restarted) service: a run, but not one to compare
+        summary.extra["cut_short"] = "faults during the run: " + ", ".join(faults)
+    if faults:
+        summary.extra["faults"] = faults
     return status, RunRecord(planner, summary, states, final, recorder.human_poses(), run_dir)
 
 

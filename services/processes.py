@@ -143,6 +143,7 @@ class ServiceProcess:
             return None
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
+            self.proc.send_signal(signal.SIGCONT)  # a stopped (SIGSTOP, Ctrl-Z) process holds SIGTERM until it runs
             try:
                 self.proc.wait(timeout=timeout)
             except subprocess.TimeoutExpired:

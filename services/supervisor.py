@@ -1,4 +1,4 @@
-"""Watching a run's service processes: a service that dies is reported once and the run carries on.
+"""Watching a run's service processes: a service that dies or hangs is reported once and the run carries on.
 
 The executor holds the robot while the predictor, the planner or (mid-demonstration) the human's source is
 gone (its ``hold_without``) or its inputs are stale, so one dead service is a fault to report, not a
@@ -11,14 +11,20 @@ would crawl on at one timeout a tick; its death ends the run, its log complete.
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Mapping
 
 from services.processes import ServiceProcess, describe_exit
 from shared.protocol import HUMAN_SOURCES
 
-__all__ = ["Supervisor", "describe_exit"]
+__all__ = ["Supervisor", "describe_exit", "HUNG_AFTER_S"]
 
 log = logging.getLogger("foresight.supervisor")
+
+HUNG_AFTER_S = 2.0
+"""Seconds a running service's liveliness token may stay gone before it counts as hung (after Zenoh's lease)."""
+LEASE_S = 10.0
+"""Zenoh's default lease: a peer silent this long has its link, and its tokens, dropped."""
 
 
 class Supervisor:
@@ -32,14 +38,26 @@ class Supervisor:
         expected: Services whose exit with status 0 is their normal end (the human's source: its stream ends).
         fatal: A service that dies and is not started again ends the run (:attr:`fatal_fault`): in lock-step
             every tick waits for every service's output, so the run would only crawl on, one timeout a tick.
+        is_alive: Whether a service's liveliness token is seen (:meth:`shared.transport.Presence.is_alive`): a
+            running service whose token, once seen, stays gone ``hung_after_s`` is hung (SIGSTOP, a deadlock) and
+            a fault as a death is (restarted: killed first). None: deaths only.
+        hung_after_s: See ``is_alive`` (Zenoh itself drops a silent peer's token after its lease, 10 s).
+        clock: Seconds, monotonic.
 
     Attributes:
-        faults: ``(service, exit status)`` of every death.
+        faults: ``(service, exit status)`` of every death (status None: hung).
         fatal_fault: With ``fatal``, the service whose death ends the run (None while none did).
     """
 
     def __init__(self, procs: Mapping[str, ServiceProcess], out: Callable[[str], None], restart: bool = False,
-                 max_restarts: int = 3, expected: tuple[str, ...] = HUMAN_SOURCES, fatal: bool = False) -> None:
+                 max_restarts: int = 3, expected: tuple[str, ...] = HUMAN_SOURCES, fatal: bool = False,
+                 is_alive: Callable[[str], bool] | None = None, hung_after_s: float = HUNG_AFTER_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.is_alive = is_alive
+        self.hung_after_s = hung_after_s
+        self.clock = clock
+        self._seen: set[str] = set()
+        self._gone_since: dict[str, float] = {}
         self.procs = procs
         self.out = out
         self.restart = restart
@@ -54,27 +72,50 @@ class Supervisor:
     def check(self, skip: tuple[str, ...] = ("executor",)) -> None:
         """Look at every process once (the ``skip`` ones are the caller's to watch)."""
         for name, proc in self.procs.items():
-            if name in skip or proc.proc is None or proc.running or name in self._reported:
+            if name in skip or proc.proc is None or name in self._reported:
+                continue
+            if proc.running:
+                if self._hung(name):
+                    self._fault(name, proc, None, f"{name} stopped answering (its process runs, but its liveliness "
+                                f"token has been gone for {self.hung_after_s + LEASE_S:g} s: hung or stopped)")
                 continue
             code = proc.returncode
             if code == 0 and name in self.expected:
                 self._reported.add(name)
                 continue
-            self.faults.append((name, code))
-            done = self.restarts.get(name, 0)
-            if self.restart and done < self.max_restarts:
-                self.restarts[name] = done + 1
-                self.out(f"foresight demo: {name} {describe_exit(code)}: {proc.tail(1) or '(no output)'}; "
-                         f"restarting it ({done + 1} of {self.max_restarts}); the executor holds until its "
-                         "outputs are fresh")
-                proc.start()
-                continue
-            self._reported.add(name)
-            if self.fatal:
-                self.fatal_fault = self.fatal_fault or name
-                self.out(f"foresight demo: {name} {describe_exit(code)}: {proc.tail(1) or '(no output)'}; a lock-step "
-                         "run cannot go on without it (every tick waits for it): stopping the run (--restart starts "
-                         "a dead service again)")
-                continue
-            self.out(f"foresight demo: {name} {describe_exit(code)}: {proc.tail(1) or '(no output)'}; carrying on "
-                     "without it (the executor holds while its outputs are missing)")
+            said = proc.last_words()  # a killed process's last line is not why it died: only an error's is
+            self._fault(name, proc, code, f"{name} {describe_exit(code)}" + (f": {said}" if said else ""))
+
+    def _hung(self, name: str) -> bool:
+        """Whether ``name``'s token, seen since it (re)started, has stayed gone ``hung_after_s`` while it runs."""
+        if self.is_alive is None:
+            return False
+        if self.is_alive(name):
+            self._seen.add(name)
+            self._gone_since.pop(name, None)
+            return False
+        if name not in self._seen:  # starting, or started again: not up yet
+            return False
+        since = self._gone_since.setdefault(name, self.clock())
+        return self.clock() - since >= self.hung_after_s
+
+    def _fault(self, name: str, proc: ServiceProcess, code: int | None, what: str) -> None:
+        self.faults.append((name, code))
+        self._seen.discard(name)
+        self._gone_since.pop(name, None)
+        done = self.restarts.get(name, 0)
+        if self.restart and done < self.max_restarts:
+            self.restarts[name] = done + 1
+            self.out(f"foresight demo: {what}; restarting it ({done + 1} of {self.max_restarts}); the executor "
+                     "holds until its outputs are fresh")
+            proc.stop(timeout=2.0)  # a hung one is killed; a dead one has its status already
+            proc.start()
+            return
+        self._reported.add(name)
+        if self.fatal:
+            self.fatal_fault = self.fatal_fault or name
+            self.out(f"foresight demo: {what}; a lock-step run cannot go on without it (every tick waits for it): "
+                     "stopping the run (--restart starts it again)")
+            return
+        self.out(f"foresight demo: {what}; carrying on without it (the executor holds while its outputs are "
+                 "missing)")

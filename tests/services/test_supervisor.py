@@ -24,10 +24,18 @@ class FakeProcess:
     def tail(self, lines: int = 3) -> str:
         return "last words"
 
+    def last_words(self) -> str:
+        return self.tail(1) if self.code is not None and self.code > 0 else ""
+
     def start(self) -> FakeProcess:
         self.started += 1
         self.code = None
         return self
+
+    def stop(self, timeout: float = 5.0) -> int | None:
+        self.stopped = getattr(self, "stopped", 0) + 1
+        self.code = -9 if self.code is None else self.code
+        return self.code
 
 
 def test_a_killed_service_is_reported_once_and_the_run_goes_on():
@@ -40,8 +48,9 @@ def test_a_killed_service_is_reported_once_and_the_run_goes_on():
     procs["replayer"].code = 0  # the human's stream ended: normal
     for _ in range(3):
         sup.check()
-    assert lines == ["foresight demo: predictor was killed (SIGKILL): last words; carrying on without it (the "
-                     "executor holds while its outputs are missing)"]
+    # a killed process's last log line is not why it died (it read as if that line had killed it)
+    assert lines == ["foresight demo: predictor was killed (SIGKILL); carrying on without it (the executor holds "
+                     "while its outputs are missing)"]
     assert sup.faults == [("predictor", -9)]
 
 
@@ -73,3 +82,50 @@ def test_in_lock_step_a_dead_service_ends_the_run_unless_it_is_restarted():
                             fatal=True)
     restarting.check()
     assert restarting.fatal_fault is None  # started again instead
+
+
+class Tokens:
+    """Liveliness tokens and a clock the test moves."""
+
+    def __init__(self, *alive: str) -> None:
+        self.alive = set(alive)
+        self.now = 0.0
+
+    def is_alive(self, name: str) -> bool:
+        return name in self.alive
+
+
+def test_a_service_whose_token_stays_gone_while_it_runs_is_hung_and_a_lock_step_run_stops():
+    """A SIGSTOPped planner was never noticed: a lock-step run crept on at 30 s a tick until its --timeout."""
+    lines: list[str] = []
+    tokens = Tokens("planner", "predictor")
+    procs = {"planner": FakeProcess(), "predictor": FakeProcess(), "replayer": FakeProcess(),
+             "executor": FakeProcess()}
+    sup = Supervisor(procs, lines.append, fatal=True, is_alive=tokens.is_alive, clock=lambda: tokens.now)
+    sup.check()  # the replayer's token not seen yet: starting, no fault
+    tokens.alive.discard("planner")
+    tokens.now = 1.0
+    sup.check()
+    assert lines == [] and sup.fatal_fault is None  # gone 0 s: not yet
+    tokens.now = 3.5
+    sup.check()
+    assert sup.fatal_fault == "planner" and sup.faults == [("planner", None)]
+    assert lines == ["foresight demo: planner stopped answering (its process runs, but its liveliness token has been "
+                     "gone for 12 s: hung or stopped); a lock-step run cannot go on without it (every tick waits "
+                     "for it): stopping the run (--restart starts it again)"]
+
+
+def test_a_hung_service_is_killed_and_started_again_with_restart_and_not_judged_until_it_is_up():
+    lines: list[str] = []
+    tokens = Tokens("predictor")
+    procs = {"predictor": FakeProcess(), "executor": FakeProcess()}
+    sup = Supervisor(procs, lines.append, restart=True, is_alive=tokens.is_alive, clock=lambda: tokens.now)
+    sup.check()
+    tokens.alive.clear()
+    sup.check()
+    tokens.now = 5.0
+    sup.check()
+    assert procs["predictor"].stopped == 1 and procs["predictor"].started == 1 and "restarting it (1 of 3)" in lines[0]
+    tokens.now = 60.0  # started again, its token not up yet: starting, not hung
+    sup.check()
+    assert len(lines) == 1 and procs["predictor"].started == 1
