@@ -20,6 +20,8 @@ __all__ = ["ReplayStats", "ReplayerService", "LINGER_S"]
 
 log = logging.getLogger("foresight.replayer")
 
+NO_TICK_WARN_S = 30.0
+"""Seconds without a clock tick (lock-step) after which the replayer says it is waiting, and again each as long."""
 LINGER_S = 0.3
 """Seconds the session stays open after the last message so that it is delivered before closing."""
 
@@ -121,10 +123,17 @@ class ReplayerService:
                       stop: threading.Event) -> None:
         order = TickOrder()
         n = self.config.samples_per_tick
+        last = time.monotonic()  # the start, then the last tick: a replayer with no clock said nothing for ever
         while not stop.is_set() and not core.done:
             tick = ticks.get(timeout=0.1)
             if tick is None:
+                if time.monotonic() - last >= NO_TICK_WARN_S:
+                    log.warning("replayer: no clock tick on %s for %g s; in lock-step it publishes a pose only when "
+                                "the executor ticks (is one running, with prefix %r?)", self.keys.clock,
+                                NO_TICK_WARN_S, self.keys.prefix)
+                    last = time.monotonic()
                 continue
+            last = time.monotonic()
             take, note = order.accept(tick.tick)
             if note:
                 log.warning("replayer: %s", note)

@@ -120,6 +120,24 @@ def test_lockstep_replayer_stops_with_the_executor(zenoh_hub, small_lib, caplog)
     assert not service.stats.finished  # ended by the executor's departure, not by the end of the stream
 
 
+
+def test_a_lockstep_replayer_with_no_clock_says_it_waits(zenoh_hub, small_lib, caplog, monkeypatch):
+    """With no executor ticking it waited for ever, saying only its start line."""
+    import services.replayer.service as replayer_service
+
+    monkeypatch.setattr(replayer_service, "NO_TICK_WARN_S", 0.3)
+    service = ReplayerService(ReplayerConfig(mode="lockstep"), zenoh_hub(), small_lib)
+    stop = threading.Event()
+    caplog.set_level(logging.WARNING, logger="foresight.replayer")
+    th = run_in_thread(service, stop)
+    deadline = time.monotonic() + 10
+    while not any("no clock tick on" in r.getMessage() for r in caplog.records) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    stop.set()
+    th.join(timeout=10.0)
+    said = [r.getMessage() for r in caplog.records if "no clock tick on" in r.getMessage()]
+    assert said and "publishes a pose only when the executor ticks" in said[0] and not th.is_alive()
+
 def test_lockstep_driven_by_clock_ticks(zenoh_hub, small_lib):
     sub_cfg, rep_cfg = zenoh_hub(), zenoh_hub()
     keys = Keys(sub_cfg.prefix)
