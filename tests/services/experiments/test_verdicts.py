@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 
 from services.experiments.heldout import CupClass
-from services.experiments.interference import InterferenceConfig, InterferenceResult, RunScore, ratio_text
+from services.experiments.interference import InterferenceConfig, InterferenceResult, ratio_text
+from services.experiments.scoring import RunScore
 from services.experiments.switch import SwitchConfig, SwitchResult, SwitchRun
 from services.experiments.verdicts import switch_verdict, table1_verdict
 
