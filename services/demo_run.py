@@ -148,7 +148,8 @@ def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> 
     if plan_topic is not None:
         logged = sum(c.count for c in lf.channels.values() if c.topic == plan_topic)
         late = received - logged
-        text += f", {logged} plans" + (f" (the last {late} came after the executor closed it)" if late > 0 else
+        closed = "came after the executor closed it" if lf.complete else "are not in it: it ends before them"
+        text += f", {logged} plans" + (f" (the last {late} {closed})" if late > 0 else
                                        f" ({-late} after the rows above, made while the executor stopped: `foresight "
                                        f"log table {mcap}` prints every one)" if late < 0 else "")
     return text

@@ -15,6 +15,7 @@ import math
 import os
 import threading
 import zipfile
+import zlib
 from collections.abc import Callable, MutableMapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -97,7 +98,7 @@ def _damage(path: Path) -> str:
     try:
         with zipfile.ZipFile(path) as z:
             bad = z.testzip()
-    except (OSError, zipfile.BadZipFile, EOFError) as exc:
+    except (OSError, zipfile.BadZipFile, EOFError, ValueError, zlib.error) as exc:  # zlib: a member's bad stream
         return f"{type(exc).__name__}: {exc}"
     return f"{bad} fails its CRC" if bad else ""
 

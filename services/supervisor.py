@@ -15,16 +15,17 @@ import time
 from collections.abc import Callable, Mapping
 
 from services.processes import ServiceProcess, describe_exit
+from shared.presence import REJOIN_S
 from shared.protocol import HUMAN_SOURCES
 
 __all__ = ["Supervisor", "describe_exit", "HUNG_AFTER_S"]
 
 log = logging.getLogger("foresight.supervisor")
 
-HUNG_AFTER_S = 2.0
-"""Seconds a running service's liveliness token may stay gone before it counts as hung (after Zenoh's lease)."""
-LEASE_S = 10.0
-"""Zenoh's default lease: a peer silent this long has its link, and its tokens, dropped."""
+HUNG_AFTER_S = REJOIN_S
+"""Seconds a running service's liveliness token may stay gone before it counts as hung: as long as a peer whose link
+dropped has to come back (:data:`shared.presence.REJOIN_S`; a link that drops takes 1-4 s to reconnect, and its
+tokens are gone meanwhile). A stopped process's token goes when Zenoh's lease (10 s) drops its link."""
 
 
 class Supervisor:
@@ -41,7 +42,7 @@ class Supervisor:
         is_alive: Whether a service's liveliness token is seen (:meth:`shared.transport.Presence.is_alive`): a
             running service whose token, once seen, stays gone ``hung_after_s`` is hung (SIGSTOP, a deadlock) and
             a fault as a death is (restarted: killed first). None: deaths only.
-        hung_after_s: See ``is_alive`` (Zenoh itself drops a silent peer's token after its lease, 10 s).
+        hung_after_s: See ``is_alive`` (:data:`HUNG_AFTER_S`).
         clock: Seconds, monotonic.
 
     Attributes:
@@ -75,9 +76,10 @@ class Supervisor:
             if name in skip or proc.proc is None or name in self._reported:
                 continue
             if proc.running:
-                if self._hung(name):
+                gone_s = self._hung(name)
+                if gone_s is not None:
                     self._fault(name, proc, None, f"{name} stopped answering (its process runs, but its liveliness "
-                                f"token has been gone for {self.hung_after_s + LEASE_S:g} s: hung or stopped)")
+                                f"token has been gone for {gone_s:.0f} s: hung or stopped)")
                 continue
             code = proc.returncode
             if code == 0 and name in self.expected:
@@ -86,18 +88,18 @@ class Supervisor:
             said = proc.last_words()  # a killed process's last line is not why it died: only an error's is
             self._fault(name, proc, code, f"{name} {describe_exit(code)}" + (f": {said}" if said else ""))
 
-    def _hung(self, name: str) -> bool:
-        """Whether ``name``'s token, seen since it (re)started, has stayed gone ``hung_after_s`` while it runs."""
+    def _hung(self, name: str) -> float | None:
+        """Seconds ``name``'s token, seen since it (re)started, has stayed gone, once that is ``hung_after_s``."""
         if self.is_alive is None:
-            return False
+            return None
         if self.is_alive(name):
             self._seen.add(name)
             self._gone_since.pop(name, None)
-            return False
+            return None
         if name not in self._seen:  # starting, or started again: not up yet
-            return False
-        since = self._gone_since.setdefault(name, self.clock())
-        return self.clock() - since >= self.hung_after_s
+            return None
+        gone = self.clock() - self._gone_since.setdefault(name, self.clock())
+        return gone if gone >= self.hung_after_s else None
 
     def _fault(self, name: str, proc: ServiceProcess, code: int | None, what: str) -> None:
         self.faults.append((name, code))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
+import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -22,27 +23,33 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def parse_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
                    namespace: argparse.Namespace | None = None) -> argparse.Namespace:
-        """As argparse's; an unrecognized argument is an error of the deepest sub-command chosen, with hints."""
-        ns, extras = self.parse_known_args(args, namespace)
+        """As argparse's; an unrecognized argument is an error of the command it was given to, with hints.
+
+        That is the deepest sub-command named before it (``foresight log --bogus info``: ``foresight log``'s).
+        """
+        argv = list(sys.argv[1:] if args is None else args)
+        ns, extras = self.parse_known_args(argv, namespace)
         if extras:
-            chosen, siblings = self.chosen(ns)
-            chosen.error(chosen.unrecognized(extras, siblings))
+            before = argv[:argv.index(extras[0])] if extras[0] in argv else argv
+            blamed, siblings = self, {}
+            for parser, others, name in self.chain(ns):
+                if name in before:
+                    blamed, siblings = parser, others
+            blamed.error(blamed.unrecognized(extras, siblings))
         return ns
 
-    def chosen(self, ns: argparse.Namespace) -> tuple[ArgumentParser, dict[str, ArgumentParser]]:
-        """The deepest sub-command ``ns`` chose (this parser if none) and its siblings by name."""
+    def chain(self, ns: argparse.Namespace) -> list[tuple[ArgumentParser, dict[str, ArgumentParser], str]]:
+        """The sub-commands ``ns`` chose, outermost first: ``(parser, its siblings by name, its name)``."""
         for action in self._actions:
             parsers = getattr(action, "choices", None)
             if action.option_strings or not isinstance(parsers, dict):
                 continue
-            child = parsers.get(getattr(ns, action.dest, None))
+            name = getattr(ns, action.dest, None)
+            child = parsers.get(name)
             if isinstance(child, ArgumentParser):
-                deeper, siblings = child.chosen(ns)
-                if deeper is child:
-                    siblings = {name: p for name, p in parsers.items()
-                                if p is not child and isinstance(p, ArgumentParser)}
-                return deeper, siblings
-        return self, {}
+                siblings = {n: p for n, p in parsers.items() if p is not child and isinstance(p, ArgumentParser)}
+                return [(child, siblings, str(name)), *child.chain(ns)]
+        return []
 
     def option_names(self) -> list[str]:
         """Every option string this parser takes (``--help`` included)."""

@@ -116,6 +116,8 @@ def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[Sce
                                       decoder.decode(channel.topic, schema.name, schema.encoding, schema.data,
                                                      message.data))
                     yielded += 1
+            except SceneDecodeError:  # a ValueError too, but a payload's fault, not the file's: said, not swallowed
+                raise
             except DAMAGED:  # a damaged chunk (a flipped bit): the scene up to it stands, as the other tools read
                 if yielded:  # a log up to its damage (foresight log says the file is not whole)
                     return

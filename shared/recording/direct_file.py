@@ -21,6 +21,10 @@ __all__ = ["DirectFile", "MAX_HELD_BYTES"]
 
 log = logging.getLogger("foresight.recording")
 
+NO_LOCKS = (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL)
+"""What ``flock`` answers on a file system that takes no lock (NFS without its lock daemon, some FUSE mounts): the
+log is written without one, as before the lock was taken."""
+
 MAX_HELD_BYTES = 64 * 2 ** 20
 """Most bytes held in memory while the OS refuses them (about a minute of a real-time run's log)."""
 
@@ -47,7 +51,16 @@ class DirectFile:
             os.close(self._fd)
             raise OSError(errno.EBUSY, f"{path}: another run is writing this log (its lock); give another "
                           "path") from None
-        os.ftruncate(self._fd, 0)
+        except OSError as exc:
+            if exc.errno not in NO_LOCKS:
+                os.close(self._fd)
+                raise
+            log.warning("mcap log %s: this file system takes no lock (%s): written without one", path, exc.strerror)
+        try:
+            os.ftruncate(self._fd, 0)
+        except OSError:
+            os.close(self._fd)
+            raise
         self._pos = 0
         self._held = bytearray()
         self._failed: OSError | None = None

@@ -332,8 +332,11 @@ class McapLog:
                     raise OSError(errno.ENOENT, f"the file was deleted while it was written (or its directory): "
                                   f"its {sum(self.counts.values())} messages are lost")
             except OSError as exc:  # a full disk: said here, once, whoever closes (and raised to them)
-                log.error("mcap log %s: could not be finished (%s); readers recover the messages before where it "
-                          "ends", self.path, exc)
+                if exc.errno == errno.ENOENT:
+                    log.error("mcap log %s: %s", self.path, exc)
+                else:
+                    log.error("mcap log %s: could not be finished (%s); readers recover the messages before where "
+                              "it ends", self.path, exc)
                 raise
             finally:
                 self._file.close()

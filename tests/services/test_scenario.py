@@ -173,6 +173,13 @@ def test_model_for_says_when_it_trains_and_not_when_the_model_is_cached(tmp_path
     first.write_bytes(bytes(data))
     model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, on_train=said.append)
     assert said == [first, first, first]
+    np.savez_compressed(first, means=np.arange(4.0))  # the trainer's files are compressed: a member's stream can
+    data = bytearray(first.read_bytes())  # be damaged beyond its CRC (zlib's own error, which escaped as a traceback)
+    name_len, extra_len = int.from_bytes(data[26:28], "little"), int.from_bytes(data[28:30], "little")
+    data[30 + name_len + extra_len] = 0xFF  # the first deflate block's type: 11, invalid
+    first.write_bytes(bytes(data))
+    model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, on_train=said.append)
+    assert said == [first] * 4
 
 
 def test_a_run_scored_against_a_final_grid_that_is_no_prediction_says_so() -> None:

@@ -40,9 +40,15 @@ def test_an_option_of_a_sibling_command_names_the_sibling(capsys) -> None:
 def test_an_argument_nothing_resembles_points_to_the_commands_help(capsys) -> None:
     assert refusal(["render", "extra"], capsys) == (
         "tool render: error: unrecognized arguments: extra (see tool render --help)")
-    assert refusal(["--bogus", "render"], capsys).startswith("tool render: error: unrecognized arguments: --bogus")
+    assert refusal(["--bogus", "render"], capsys).startswith("tool: error: unrecognized arguments: --bogus")
 
 
 def test_arguments_it_knows_parse_as_argparse_parses_them() -> None:
     ns = tool().parse_args(["--log-level", "DEBUG", "eval", "interference", "--robot-speed", "0.25"])
     assert (ns.log_level, ns.command, ns.what, ns.robot_speed) == ("DEBUG", "eval", "interference", 0.25)
+
+
+def test_an_option_given_to_the_parent_command_is_the_parents_mistake(capsys) -> None:
+    """``foresight log --bogus info x.mcap`` was blamed on ``foresight log info``."""
+    assert refusal(["eval", "--bogus", "all"], capsys) == (
+        "tool eval: error: unrecognized arguments: --bogus (see tool eval --help)")

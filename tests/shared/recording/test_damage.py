@@ -161,6 +161,31 @@ def test_a_log_deleted_while_written_says_so_rather_than_that_it_wrote(tmp_path,
         with pytest.raises(OSError, match="deleted while it was written"):
             log.close()
     said = [r.getMessage() for r in caplog.records]
-    assert sum("deleted while it is written" in m for m in said) == 1 and any("could not be finished" in m
-                                                                            for m in said)
+    assert sum("deleted while it is written" in m for m in said) == 1
+    assert any("deleted while it was written" in m and "messages are lost" in m for m in said)
+    assert not any("readers recover" in m for m in said)  # there is no file left to read
     assert not any("wrote" in m for m in said)
+
+
+def test_a_file_system_that_takes_no_lock_still_gets_its_log_and_no_descriptor_leaks(tmp_path, pr2, monkeypatch,
+                                                                                    caplog) -> None:
+    """NFS without its lock daemon answers flock with ENOLCK: the log was refused there, its descriptor left open."""
+    def no_locks(fd: int, op: int) -> None:
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+
+    monkeypatch.setattr(direct_file.fcntl, "flock", no_locks)
+    fds = len(os.listdir("/proc/self/fd"))
+    with caplog.at_level("WARNING"):
+        log = McapLog(tmp_path / "run.mcap", KEYS, None)
+        for key, payload in sample_messages(pr2):
+            log.on_sample(key, payload)
+        log.close()
+    assert read_log(tmp_path / "run.mcap").complete and any("takes no lock" in r.getMessage() for r in caplog.records)
+
+    def refused(fd: int, op: int) -> None:
+        raise OSError(errno.EIO, os.strerror(errno.EIO))
+
+    monkeypatch.setattr(direct_file.fcntl, "flock", refused)
+    with pytest.raises(OSError, match="Input/output error"):
+        McapLog(tmp_path / "other.mcap", KEYS, None)
+    assert len(os.listdir("/proc/self/fd")) == fds

@@ -114,3 +114,8 @@ def test_the_demos_interrupt_line_says_which_plans_the_log_has(run_log) -> None:
     assert _log_state(run_log, KEYS.plan, 2).endswith("complete, " + _log_state(run_log).split("complete, ")[1]
                                                      + ", 2 plans")
     assert _log_state(run_log, KEYS.plan, 3).endswith(", 2 plans (the last 1 came after the executor closed it)")
+    assert "2 plans (1 after the rows above" in _log_state(run_log, KEYS.plan, 1)  # rows stop at Ctrl-C, the log not
+    cut = run_log.parent / "cut.mcap"  # a killed executor never closed its log: its last plans were never in it
+    data = run_log.read_bytes()
+    cut.write_bytes(data[: len(data) - 200])
+    assert _log_state(cut, KEYS.plan, 3).endswith("2 plans (the last 1 are not in it: it ends before them)")

@@ -141,3 +141,24 @@ def test_a_snapshot_of_a_log_damaged_at_its_end_draws_the_scene_up_to_the_damage
     assert main(["snapshot", str(bad), "--out", str(tmp_path / "s.png")]) == 0
     err = capsys.readouterr().err
     assert "is TRUNCATED" in err and (tmp_path / "s.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_scene_payload_that_does_not_decode_is_raised_not_taken_for_a_damaged_chunk(tmp_path: Path) -> None:
+    """SceneDecodeError is a ValueError, and ValueError means a damaged chunk to the reader: a complete log's bad
+    payload ended its scene early, without a word (a review of the damaged-chunk change)."""
+    import json
+
+    from mcap.writer import Writer
+
+    from shared.foxglove.decode import SceneDecodeError, read_scene
+
+    path = tmp_path / "bad.mcap"
+    with path.open("wb") as f:
+        w = Writer(f)
+        w.start()
+        cid = w.register_channel("/viz/chart", "json", w.register_schema("chart", "jsonschema", b"{}"))
+        for t, data in ((1, json.dumps({"timestamp": {"sec": 0, "nsec": 1}}).encode()), (2, b"{not json")):
+            w.add_message(cid, log_time=t, publish_time=t, data=data)
+        w.finish()
+    with pytest.raises(SceneDecodeError, match="/viz/chart"):
+        list(read_scene(path))
