@@ -95,6 +95,15 @@ class Tokens:
         return name in self.alive
 
 
+def watched(service: str, **options) -> tuple[list[str], Tokens, dict[str, FakeProcess], Supervisor]:
+    """``service`` and the executor under a supervisor that sees tokens; its lines, the tokens, the processes."""
+    lines: list[str] = []
+    tokens = Tokens(service)
+    procs = {service: FakeProcess(), "executor": FakeProcess()}
+    return lines, tokens, procs, Supervisor(procs, lines.append, is_alive=tokens.is_alive, clock=lambda: tokens.now,
+                                            **options)
+
+
 def test_a_service_whose_token_stays_gone_while_it_runs_is_hung_and_a_lock_step_run_stops():
     """A SIGSTOPped planner was never noticed: a lock-step run crept on at 30 s a tick until its --timeout."""
     lines: list[str] = []
@@ -120,10 +129,7 @@ def test_a_service_whose_token_stays_gone_while_it_runs_is_hung_and_a_lock_step_
 def test_a_token_back_within_a_links_reconnection_is_no_fault():
     """A link that drops takes 1-4 s to reconnect and its tokens are gone meanwhile: a healthy planner was killed and
     restarted after 2 s (a review's proxy that dropped the link for 3 s)."""
-    lines: list[str] = []
-    tokens = Tokens("planner")
-    procs = {"planner": FakeProcess(), "executor": FakeProcess()}
-    sup = Supervisor(procs, lines.append, restart=True, is_alive=tokens.is_alive, clock=lambda: tokens.now)
+    lines, tokens, procs, sup = watched("planner", restart=True)
     sup.check()
     tokens.alive.clear()
     for tokens.now in (1.0, 2.5, 4.0):
@@ -135,10 +141,7 @@ def test_a_token_back_within_a_links_reconnection_is_no_fault():
 
 
 def test_a_hung_service_is_killed_and_started_again_with_restart_and_not_judged_until_it_is_up():
-    lines: list[str] = []
-    tokens = Tokens("predictor")
-    procs = {"predictor": FakeProcess(), "executor": FakeProcess()}
-    sup = Supervisor(procs, lines.append, restart=True, is_alive=tokens.is_alive, clock=lambda: tokens.now)
+    lines, tokens, procs, sup = watched("predictor", restart=True)
     sup.check()
     tokens.alive.clear()
     sup.check()
