@@ -96,6 +96,17 @@ def load_replay_library(cfg: ReplayerConfig) -> MotionLibrary:
     return generate_library(seed=0)  # what `foresight train` trains on by default: --seed selects from it
 
 
+def _ranges(values: list[int]) -> str:
+    """Sorted integers as runs: ``[0, 1, 2, 5, 7, 8]`` -> ``0..2, 5, 7..8``."""
+    runs: list[list[int]] = []
+    for v in values:
+        if runs and v == runs[-1][1] + 1:
+            runs[-1][1] = v
+        else:
+            runs.append([v, v])
+    return ", ".join(f"{a}..{b}" if b > a else str(a) for a, b in runs)
+
+
 def select_demos(lib: MotionLibrary, cfg: ReplayerConfig) -> list[Demonstration]:
     """The demonstrations to stream, in streaming order.
 
@@ -119,11 +130,14 @@ def select_demos(lib: MotionLibrary, cfg: ReplayerConfig) -> list[Demonstration]
     if cfg.classes:
         wanted = set(cfg.classes)
         demos = [d for d in demos if d.label in wanted]
+    chosen = demos
     if cfg.indices:
         wanted = set(cfg.indices)
         demos = [d for d in demos if d.index in wanted]
     if not demos:
-        raise ConfigError("replayer: no demonstration matches the selection (--classes/--indices/--heldout)")
+        have = sorted({d.index for d in chosen})  # what --indices could have named, within --classes/--heldout
+        known = f"; the indices there are {_ranges(have)}" if cfg.indices and have else ""
+        raise ConfigError(f"replayer: no demonstration matches the selection (--classes/--indices/--heldout){known}")
     if cfg.shuffle:
         order = np.random.default_rng(cfg.seed).permutation(len(demos))
         demos = [demos[i] for i in order]
