@@ -165,8 +165,10 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench faults") ->
         system = ProcessSystem(spec)
         results: dict[str, Any] = {"kills": []}
         try:  # SIGTERM as Ctrl-C: the processes are closed below, none left behind
+            with interruptible(threading.Event()):
+                system.start_router()  # before the watcher: opened first, it warned the router was unreachable
             with interruptible(threading.Event()), Watcher(system.endpoint) as watcher:
-                system.start_all()
+                system.start_services()
                 for victim in victims:
                     r = measure_kill(system, watcher, victim, args.down_s, args.timeout)
                     results["kills"].append(r)

@@ -129,8 +129,10 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> i
         spec = SystemSpec(run_dir=args.run_dir, model=demo_model(args.models_dir), rate_hz=args.rate_hz)
         system = ProcessSystem(spec)
         try:  # SIGTERM as Ctrl-C: the processes are closed below, none left behind
+            with interruptible(threading.Event()):
+                system.start_router()  # before the watcher: opened first, it warned the router was unreachable
             with interruptible(threading.Event()), Watcher(system.endpoint, poses=True) as watcher:
-                system.start_all()
+                system.start_services()
                 r = soak(system, watcher, args.duration_s, args.timeout)
         finally:
             r_exit = system.close()

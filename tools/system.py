@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -127,7 +128,30 @@ class ProcessSystem:
 
     def start_all(self) -> None:
         """The router, then the services (the executor last)."""
-        self.start("router")
+        self.start_router()
+        self.start_services()
+
+    def start_router(self, timeout: float = 30.0) -> None:
+        """Start the router and wait until it takes connections (a watcher opened before it warned it was unreachable).
+
+        Raises:
+            UserError: The router exited, or took no connection within ``timeout`` s.
+        """
+        router = self.start("router")
+        host, port = self.endpoint.removeprefix("tcp/").rsplit(":", 1)
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                socket.create_connection((host, int(port)), timeout=0.5).close()
+                return
+            except OSError:
+                if not router.running or time.monotonic() > deadline:
+                    raise UserError(f"the router on {self.endpoint} did not take connections "
+                                    f"(see {router.log_path})") from None
+                time.sleep(0.05)
+
+    def start_services(self) -> None:
+        """The services, the executor last (the router first: :meth:`start_router`)."""
         for name in SERVICES:
             self.start(name)
 
