@@ -49,7 +49,10 @@ class RunDirectory:
         """``latest`` points to this run (called as its services start: a failed start leaves it as it was)."""
         try:
             if self.latest.is_symlink() or not self.latest.exists():
-                self.previous_ = str(self.latest.readlink()) if self.latest.is_symlink() else None
+                before = str(self.latest.readlink()) if self.latest.is_symlink() else None
+                if before == self.path.name:  # pointed already (--compare: each planner's services start)
+                    return
+                self.previous_ = before
                 self.latest.unlink(missing_ok=True)
                 self.latest.symlink_to(self.path.name, target_is_directory=True)
         except OSError:  # a file system without symlinks: the directory names still sort by time
