@@ -9,6 +9,7 @@ options. ``python -m tools`` runs this dispatcher too.
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
 import sys
 
@@ -108,7 +109,9 @@ def _dispatch(argv: list[str] | None) -> int:
         return 0
     if command not in COMMANDS:
         _parser().print_usage(sys.stderr)
-        print(f"foresight: error: unknown command {command!r} (choose from {', '.join(COMMANDS)})",
+        close = difflib.get_close_matches(command, list(COMMANDS), n=1, cutoff=0.6)
+        hint = f"did you mean {close[0]}? " if close else ""
+        print(f"foresight: error: unknown command {command!r} ({hint}choose from {', '.join(COMMANDS)})",
               file=sys.stderr)
         return 2
     from shared.config import ConfigError

@@ -71,3 +71,10 @@ def test_a_mistaken_option_is_named_by_its_command_with_what_was_meant(argv, lin
     with pytest.raises(SystemExit) as exit_:
         cli_main(argv)
     assert exit_.value.code == 2 and capsys.readouterr().err.strip().splitlines()[-1] == line
+
+
+def test_a_misspelt_command_gets_the_closest(capsys) -> None:
+    assert cli_main(["demoo"]) == 2
+    assert "unknown command 'demoo' (did you mean demo? choose from demo, " in capsys.readouterr().err
+    assert cli_main(["zzz"]) == 2
+    assert "unknown command 'zzz' (choose from demo, " in capsys.readouterr().err
