@@ -30,6 +30,7 @@ from shared.security.acl import ROLES, access_control, remote_roles
 from shared.security.certificates import (
     CA_DAYS,
     certificate_hosts,
+    check_private,
     fingerprint,
     init_security_dir,
     issued_hosts,
@@ -50,6 +51,7 @@ SUBCOMMANDS: dict[str, str] = {
 def _init(args: argparse.Namespace) -> int:
     if args.days < 1:
         raise UserError(f"--days must be >= 1, got {args.days}")
+    kept = (args.dir / "ca.key").is_file() and not args.new_ca
     try:
         if args.hosts is None:  # rotation keeps the cell's hosts; a first init has none beyond loopback
             hosts = issued_hosts(args.dir, ROLES) if args.dir.is_dir() else []  # --new-ca too: the cell's hosts
@@ -65,6 +67,9 @@ def _init(args: argparse.Namespace) -> int:
     print(f"roles: {', '.join(ROLES)}; hosts: localhost, 127.0.0.1{''.join(', ' + h for h in hosts)}; "
           f"valid {args.days} days. Give each machine ca.crt and only its own roles' .crt/.key; keep ca.key "
           "offline (docs/security.md)")
+    if kept:  # a rotation: the authority, and what it signed, stay
+        print("the authority was kept: the certificates it signed before stay valid until they expire; a key that "
+              "may have leaked is locked out only by --new-ca")
     return 0
 
 
@@ -101,6 +106,14 @@ def _check(args: argparse.Namespace) -> int:
               f"{', '.join(certificate_hosts(args.dir / f'{role}.crt'))}")
     if not args.role:
         print(f"not on this machine: {', '.join(r for r in ROLES if r not in here) or 'none'}")
+    if (ca_key := args.dir / "ca.key").exists():  # it signs every role: only where the certificates are issued
+        try:
+            check_private(ca_key, "if others did read it, --new-ca")
+            print(f"ca.key: here ({ca_key}); it signs certificates of every role: keep it only on the machine "
+                  "that issues them, not on a service's")
+        except (OSError, ValueError) as exc:
+            print(f"ca.key: {exc}")
+            bad += 1
     return 1 if bad else 0
 
 

@@ -31,7 +31,7 @@ from ..atomic_file import atomic_write
 
 __all__ = ["Issued", "CertificateError", "make_authority", "issue", "init_security_dir", "read_role", "verify_role",
            "check_host", "check_directory", "issued_hosts", "certificate_hosts", "load_authority", "fingerprint",
-           "LOOPBACK_HOSTS", "CA_DAYS"]
+           "LOOPBACK_HOSTS", "CA_DAYS", "check_private"]
 
 LOOPBACK_HOSTS = ("localhost", "127.0.0.1")
 """Names every certificate carries, so that a run on one machine verifies."""
@@ -293,6 +293,7 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
                               f"issued where both are (copy the role files from there), or --new-ca makes a new "
                               "authority, which every machine of the cell must then get")
     if ca_crt.is_file() and ca_key.is_file() and not force:
+        check_private(ca_key, "anyone who read it can issue certificates of any role: if others did, --new-ca")
         authority = Issued(ca_crt.read_bytes(), ca_key.read_bytes())
         try:
             key = serialization.load_pem_private_key(authority.key_pem, password=None)
@@ -340,6 +341,17 @@ def read_role(directory: str | os.PathLike[str], role: str) -> tuple[Path, Path,
     return files
 
 
+def check_private(key_path: Path, then: str = "") -> None:
+    """Refuse a key that others than its owner may read (``then``: what to do besides ``chmod 600``).
+
+    Raises:
+        CertificateError: Naming the key and its mode.
+    """
+    if (mode := key_path.stat().st_mode & 0o777) & 0o077:
+        raise CertificateError(f"{key_path}: others than its owner may read it (mode {mode:o}): chmod 600 {key_path}"
+                               + (f"; {then}" if then else ""))
+
+
 def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime | None = None) -> x509.Certificate:
     """Check ``<role>.crt``: signed by the directory's CA, common name ``role``, valid at ``now``; returns it.
 
@@ -352,8 +364,7 @@ def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime |
     ca_path, cert_path, key_path = read_role(directory, role)
     check_directory(directory, ("ca.crt", f"{role}.crt", f"{role}.key"))
     ca, cert = load_authority(ca_path), _load_cert(cert_path)
-    if (mode := key_path.stat().st_mode & 0o777) & 0o077:  # a key others can read is no longer this role's alone
-        raise CertificateError(f"{key_path}: others than its owner may read it (mode {mode:o}): chmod 600 {key_path}")
+    check_private(key_path)  # a key others can read is no longer this role's alone
     try:
         cert.verify_directly_issued_by(ca)
     except (ValueError, TypeError, InvalidSignature) as exc:

@@ -180,6 +180,29 @@ def test_a_private_key_others_may_read_is_refused_naming_the_fix(tmp_path: Path)
         verify_role(tmp_path, "planner")
 
 
+
+def test_an_authority_key_others_may_read_is_refused_and_check_says_so(tmp_path: Path, capsys) -> None:
+    """A world-readable ca.key signed new certificates and `check` printed ok (a security review): whoever read it can
+    issue any role."""
+    assert main(["init", str(tmp_path)]) == 0
+    capsys.readouterr()
+    (tmp_path / "ca.key").chmod(0o644)
+    with pytest.raises(CertificateError, match=r"ca\.key: others than its owner may read it \(mode 644\).*--new-ca"):
+        init_security_dir(tmp_path, ["planner"])
+    assert main(["check", str(tmp_path)]) == 1
+    assert "ca.key: " in capsys.readouterr().out
+    (tmp_path / "ca.key").chmod(0o600)
+    assert main(["check", str(tmp_path)]) == 0
+    assert "keep it only on the machine that issues them" in capsys.readouterr().out
+
+
+def test_a_rotation_says_it_locks_no_old_certificate_out(tmp_path: Path, capsys) -> None:
+    """There is no revocation: a rotation keeps the authority, and a leaked certificate stays valid with it."""
+    assert main(["init", str(tmp_path)]) == 0
+    assert "--new-ca" not in capsys.readouterr().out
+    assert main(["init", str(tmp_path)]) == 0
+    assert "locked out only by --new-ca" in capsys.readouterr().out
+
 def test_a_file_that_is_not_pem_is_named(tmp_path: Path) -> None:
     init_security_dir(tmp_path, ["planner"])
     (tmp_path / "planner.crt").write_text("not a certificate")
