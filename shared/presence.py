@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 import zenoh
 
 from shared.protocol import Keys
+from shared.security.guard import denied
 
 __all__ = ["Presence", "DEPARTURE_GRACE_S", "REJOIN_S", "CUT_WAIT_S", "UNSEEN_WARN_S", "connected"]
 
@@ -88,6 +89,9 @@ class Presence:
         self._is_connected = is_connected or (lambda: connected(session))
         self._closed = threading.Event()
         self._generation: dict[str, int] = {}  # per peer: deletions seen (the newest deletion's watch counts)
+        refused = denied(session, keys.alive(service), "token")
+        if refused:
+            log.warning("access control: %s", refused)
         self._token = session.liveliness().declare_token(keys.alive(service))
         self._sub = session.liveliness().declare_subscriber(keys.alive_all, self._handle, history=True)
         if self._stop_with:

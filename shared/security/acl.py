@@ -31,13 +31,20 @@ from shared.config_tree import ConfigError
 from shared.protocol import SENSOR, SERVICES, Keys
 
 __all__ = ["ROLES", "ROUTER", "OBSERVER", "access_control", "remote_roles", "owned_keys", "consumed_keys",
-           "subscription_exprs"]
+           "subscription_exprs", "token_keys"]
 
 ROUTER = "router"
 OBSERVER = "observer"
 ROLES = (ROUTER, *SERVICES, SENSOR, OBSERVER)
 """Every certificate role: the router, each service (:data:`shared.protocol.SERVICES`), a body tracker's driver
 (:data:`shared.protocol.SENSOR`: keypoints only), the read-only observer."""
+
+
+def token_keys(keys: Keys, role: str) -> list[str]:
+    """The presence tokens ``role`` may declare: a service its own, the router every one, the others none."""
+    if role == ROUTER:
+        return [keys.alive_all]
+    return [keys.alive(role)] if role in SERVICES else []
 
 
 def refuse_ros2_keys(security_dir: str, what: str, option: str = "--security") -> None:
@@ -122,10 +129,9 @@ def access_control(keys: Keys, remotes: Sequence[str] = ROLES) -> dict[str, Any]
         watch = ["declare_liveliness_subscriber", "liveliness_query", "reply"]
         grant(role, _rule("watch presence", watch, ["ingress", "egress"], [keys.alive_all]))
         grant(role, _rule("presence out", ["liveliness_token"], ["egress"], [keys.alive_all]))
-        if role in SERVICES:
-            grant(role, _rule(f"{role}: presence in", ["liveliness_token"], ["ingress"], [keys.alive(role)]))
-        elif role == ROUTER:
-            grant(role, _rule("router: presence in", ["liveliness_token"], ["ingress"], [keys.alive_all]))
+        tokens = token_keys(keys, role)
+        if tokens:
+            grant(role, _rule(f"{role}: presence in", ["liveliness_token"], ["ingress"], tokens))
     unknown = [r for r in remotes if r not in ROLES]
     if unknown or not remotes:
         raise ValueError(f"access_control: remotes {list(remotes)} must be roles of {', '.join(ROLES)}")

@@ -1,9 +1,9 @@
 """What the access control will refuse a session, said by the session itself when it declares it.
 
 Zenoh drops a denied put or subscription silently on the receiving side. A Foresight session knows
-its role and the generated rules (:mod:`shared.security.acl`), so :class:`shared.transport.TypedPublisher`
-and :func:`shared.transport.subscribe` log one line naming the role, the key and the reason when they
-declare something the rules deny, and the service keeps running.
+its role and the generated rules (:mod:`shared.security.acl`), so :class:`shared.transport.TypedPublisher`,
+:func:`shared.transport.subscribe` and :class:`shared.presence.Presence` (its token) log one line naming the role,
+the key and the reason when they declare something the rules deny, and the service keeps running.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from typing import Any
 
 from shared.protocol import Keys
 
-from .acl import consumed_keys, owned_keys
+from .acl import consumed_keys, owned_keys, token_keys
 
 __all__ = ["remember", "forget", "denied"]
 
@@ -30,14 +30,20 @@ def forget(session: Any) -> None:
 
 
 def denied(session: Any, key: str, kind: str) -> str:
-    """Why the access control drops ``kind`` (``put`` or ``subscribe``) on ``key`` from ``session`` ("" if not).
+    """Why the access control drops ``kind`` (``put``, ``subscribe`` or ``token``) on ``key`` from ``session``.
 
-    Only sessions opened with security are known here; others get "".
+    "" if it does not. Only sessions opened with security are known here; others get "".
     """
     entry = _ROLES.get(id(session))
     if entry is None:
         return ""
     role, keys = entry
+    if kind == "token":
+        allowed = token_keys(keys, role)
+        if keys.alive_all in allowed or key in allowed:
+            return ""
+        return (f"role {role} may not declare the presence token {key} (it may declare "
+                f"{', '.join(allowed) or 'none'}): every peer drops it, and one waiting for it never sees it")
     routes = keys.routes()
     if key not in routes:
         return ""

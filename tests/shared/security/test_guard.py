@@ -57,3 +57,23 @@ def test_a_secure_service_logs_what_it_may_not_do(tmp_path: Path, caplog: pytest
     assert lines == ["access control: role planner may not put foresight/human/pose (its owners: replayer, "
                      "tracker): every peer drops it", "access control: role planner may not subscribe to "
                      "foresight/human/pose: it will receive nothing"]
+
+
+def test_a_presence_token_the_role_may_not_declare_is_said(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """`foresight planner --role replayer` logged its denied plan and subscriptions, not its planner token, which
+    the router drops: an executor waiting for the planner got no hint (a security review)."""
+    from shared.presence import Presence
+
+    init_security_dir(tmp_path, ROLES)
+    keys = Keys()
+    for role, service in (("replayer", "planner"), ("observer", "observer"), ("planner", "planner")):
+        cfg = ZenohConfig(mode="peer", listen=[f"tcp/127.0.0.1:{free_port()}"], connect=[],
+                          security_dir=str(tmp_path), role=role)
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="shared.transport"), open_session(cfg) as session:
+            Presence(session, keys, service).close()
+        said = [r.getMessage() for r in caplog.records if "presence token" in r.getMessage()]
+        allowed = {"replayer": "foresight/alive/replayer", "observer": "none"}.get(role)
+        assert said == ([] if allowed is None else [
+            f"access control: role {role} may not declare the presence token foresight/alive/{service} (it may "
+            f"declare {allowed}): every peer drops it, and one waiting for it never sees it"])
