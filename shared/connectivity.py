@@ -49,12 +49,20 @@ def retry_config() -> dict[str, object]:
 
 
 def tls_hint(cfg: ZenohConfig) -> str:
-    """Why a link does not come up under mutual TLS (appended to the warnings), or ``""`` without it.
+    """Why a link does not come up under mutual TLS (appended to the warnings), or ``""``.
+
+    Without security: whether the first ``connect`` endpoint is a secure router's (it answers a TLS handshake).
 
     One handshake with the first ``connect`` endpoint (:func:`shared.security.probe.diagnose`) says which: nothing
     listening, the router's certificate from another authority or for other names, this machine's refused.
     """
-    if not cfg.security_dir:
+    if not cfg.security_dir:  # a plain session at a secure router's port: say so rather than "not reachable"
+        from shared.security.probe import speaks_tls
+
+        first = cfg.connect[0] if cfg.connect else ""
+        if first.startswith("tcp/") and speaks_tls(first):
+            return (f" ({first.removeprefix('tcp/')} speaks TLS: a secure router; give --security DIR and this "
+                    "service's --role)")
         return ""
     from shared.security.probe import diagnose
 

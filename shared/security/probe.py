@@ -14,7 +14,7 @@ import ssl
 
 from .certificates import read_role
 
-__all__ = ["diagnose"]
+__all__ = ["diagnose", "speaks_tls"]
 
 _VERIFY = (("unable to get local issuer certificate", "not issued by this cell's authority (ca.crt)"),
            ("self-signed certificate", "not issued by this cell's authority (ca.crt)"),
@@ -68,3 +68,27 @@ def diagnose(endpoint: str, security_dir: str | os.PathLike[str], role: str, tim
         return f"{where} does not answer within {timeout:g} s"
     except OSError as exc:
         return f"{where} cannot be reached ({exc.strerror or exc})"
+
+
+def speaks_tls(endpoint: str, timeout: float = 2.0) -> bool:
+    """Whether ``endpoint`` (``tcp/HOST:PORT``) answers a TLS handshake: a secure router, "not reachable" without TLS.
+
+    The handshake verifies nothing and presents no certificate: a mutual-TLS router's refusal of that (an alert) says
+    it speaks TLS as well as a finished handshake does; a plain Zenoh port answers no TLS record.
+    """
+    try:
+        host, port = _host_port(endpoint)
+    except ValueError:
+        return False
+    context = ssl.create_default_context()
+    context.check_hostname = False
+    context.verify_mode = ssl.CERT_NONE
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as raw, \
+                context.wrap_socket(raw, server_hostname=host) as tls:
+            tls.settimeout(timeout)
+            return True
+    except ssl.SSLError as exc:
+        return "alert" in str(exc).lower()  # a TLS server's refusal; "wrong version number" etc. is no TLS
+    except OSError:
+        return False

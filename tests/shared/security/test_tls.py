@@ -159,6 +159,20 @@ def test_a_client_that_never_reaches_its_router_under_tls_is_told_what_that_may_
     assert "connect tls/127.0.0.1:" in str(err.value)  # the link as it is made (it said tcp/)
 
 
+
+def test_a_plain_client_at_a_secure_routers_port_is_told_it_speaks_tls(dirs) -> None:
+    """It was told only that the router was not reachable (a security review): the port answers a TLS handshake."""
+    from shared.security.probe import speaks_tls
+
+    with cell(dirs) as (endpoint, _), pytest.raises(TransportError) as err:
+        assert speaks_tls(endpoint)
+        cfg = ZenohConfig(mode="client", listen=[], connect=[endpoint], multicast_scouting=False, connect_timeout_s=0.3)
+        open_with_retry(cfg, sleep=lambda _s: None)
+    assert f"{endpoint.removeprefix('tcp/')} speaks TLS: a secure router; give --security DIR" in str(err.value)
+    with open_session(ZenohConfig(mode="router", listen=[f"tcp/127.0.0.1:{(port := free_port())}"], connect=[])):
+        assert not speaks_tls(f"tcp/127.0.0.1:{port}")  # a plain router
+    assert not speaks_tls(f"tcp/127.0.0.1:{free_port()}")  # nothing there
+
 def test_a_session_whose_ca_file_holds_a_second_authority_fails_at_once(dirs: dict[str, Path], tmp_path) -> None:
     """Zenoh trusts every certificate in ca.crt: an authority appended to it had its own 'planner' let in (a
     review's script: the executor took its plans). A session now refuses such a file before it connects."""
