@@ -85,8 +85,7 @@ def speaks_tls(endpoint: str, timeout: float = 2.0) -> bool:
     context.verify_mode = ssl.CERT_NONE
     try:
         with socket.create_connection((host, port), timeout=timeout) as raw, \
-                context.wrap_socket(raw, server_hostname=host) as tls:
-            tls.settimeout(timeout)
+                context.wrap_socket(raw, server_hostname=host):  # the handshake, within the socket's timeout
             return True
     except ssl.SSLError as exc:
         return "alert" in str(exc).lower()  # a TLS server's refusal; "wrong version number" etc. is no TLS
