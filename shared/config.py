@@ -56,6 +56,7 @@ from shared.security.acl import OBSERVER, ROLES
 __all__ = [
     "ConfigError",
     "ZenohConfig",
+    "endpoint_host_port",
     "opt",
     "nested",
     "Option",
@@ -87,6 +88,21 @@ def check_prefix(prefix: str, option: str) -> None:
     if any(c.isspace() or not c.isprintable() for c in prefix):  # "foresight " would be a key space of its own
         raise ConfigError(f"{option}: {prefix!r} has a space or a control character; a prefix differing by one "
                           "from the other services' would never meet them")
+
+
+def endpoint_host_port(endpoint: str) -> tuple[str, int]:
+    """The host and port of a Zenoh endpoint: ``tcp/127.0.0.1:7447#...`` -> ``("127.0.0.1", 7447)``.
+
+    Any protocol (``tcp/``, ``tls/``, ...); an IPv6 host loses its brackets; ``#`` and ``?`` parts are dropped.
+
+    Raises:
+        ValueError: No ``proto/`` part, or no integer port.
+    """
+    if "/" not in endpoint:
+        raise ValueError(f"endpoint {endpoint!r} is not of the form proto/HOST:PORT")
+    address = endpoint.split("/", 1)[1].split("#")[0].split("?")[0]
+    host, _, port = address.rpartition(":")
+    return host.strip("[]"), int(port)
 
 
 @dataclasses.dataclass

@@ -20,7 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from services.processes import ServiceProcess, free_port
-from shared.config import ZenohConfig
+from shared.config import ZenohConfig, endpoint_host_port
 from shared.protocol import HumanPose, Keys, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.transport import Presence, open_session, subscribe
@@ -138,11 +138,11 @@ class ProcessSystem:
             UserError: The router exited, or took no connection within ``timeout`` s.
         """
         router = self.start("router")
-        host, port = self.endpoint.removeprefix("tcp/").rsplit(":", 1)
+        host, port = endpoint_host_port(self.endpoint)
         deadline = time.monotonic() + timeout
         while True:
             try:
-                socket.create_connection((host, int(port)), timeout=0.5).close()
+                socket.create_connection((host, port), timeout=0.5).close()
                 return
             except OSError:
                 if not router.running or time.monotonic() > deadline:

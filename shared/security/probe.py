@@ -12,6 +12,8 @@ import os
 import socket
 import ssl
 
+from shared.config import endpoint_host_port
+
 from .certificates import read_role
 
 __all__ = ["diagnose", "speaks_tls"]
@@ -21,12 +23,6 @@ _VERIFY = (("unable to get local issuer certificate", "not issued by this cell's
            ("certificate has expired", "expired"),
            ("certificate is not yet valid", "not valid yet (check both machines' clocks)"),
            ("mismatch", "issued for other names (`foresight security init --hosts` names the router's)"))
-
-
-def _host_port(endpoint: str) -> tuple[str, int]:
-    address = endpoint.split("/", 1)[1].split("#")[0].split("?")[0]
-    host, _, port = address.rpartition(":")
-    return host.strip("[]"), int(port)
 
 
 def diagnose(endpoint: str, security_dir: str | os.PathLike[str], role: str, timeout: float = 2.0) -> str:
@@ -39,7 +35,7 @@ def diagnose(endpoint: str, security_dir: str | os.PathLike[str], role: str, tim
         timeout: Seconds for the connection and the handshake.
     """
     try:
-        host, port = _host_port(endpoint)
+        host, port = endpoint_host_port(endpoint)
         ca, cert, key = read_role(security_dir, role)
         context = ssl.create_default_context(cafile=str(ca))
         context.load_cert_chain(str(cert), str(key))
@@ -77,7 +73,7 @@ def speaks_tls(endpoint: str, timeout: float = 2.0) -> bool:
     it speaks TLS as well as a finished handshake does; a plain Zenoh port answers no TLS record.
     """
     try:
-        host, port = _host_port(endpoint)
+        host, port = endpoint_host_port(endpoint)
     except ValueError:
         return False
     context = ssl.create_default_context()

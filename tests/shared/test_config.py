@@ -314,3 +314,22 @@ def test_an_empty_path_from_the_environment_is_unset_and_a_number_is_no_path(tmp
     assert resolve_config("demo", DemoCfg, parse([]), env={"FORESIGHT_DEMO_LIBRARY": ""})[0].library is None
     with pytest.raises(ConfigError, match=r"demo\.library: expected Path, got 5"):
         resolve_config("demo", DemoCfg, parse(["--config", str(write(tmp_path, "[demo]\nlibrary = 5\n"))]), env={})
+
+
+@pytest.mark.parametrize(("endpoint", "expected"), [
+    ("tcp/127.0.0.1:7447", ("127.0.0.1", 7447)),
+    ("tls/router.local:7447#iface=lo", ("router.local", 7447)),
+    ("tcp/[::1]:7448?rel=1", ("::1", 7448)),
+])
+def test_an_endpoints_host_and_port(endpoint: str, expected: tuple[str, int]) -> None:
+    from shared.config import endpoint_host_port
+
+    assert endpoint_host_port(endpoint) == expected
+
+
+@pytest.mark.parametrize("endpoint", ["127.0.0.1:7447", "tcp/127.0.0.1", "tcp/127.0.0.1:port"])
+def test_an_endpoint_without_proto_or_port_is_refused(endpoint: str) -> None:
+    from shared.config import endpoint_host_port
+
+    with pytest.raises(ValueError):
+        endpoint_host_port(endpoint)

@@ -8,9 +8,7 @@ runs of one scenario -- ``foresight demo`` and ``docker compose up``, say -- com
 
 from __future__ import annotations
 
-from typing import Any
-
-from services.scenario import Summary, keep_posterior, summarise
+from services.scenario import RunRecorder, Summary, summarise
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.recording.reader import LogFile
 
@@ -28,14 +26,13 @@ def run_summary(lf: LogFile) -> Summary:
 
     from shared.robot import PR2
 
-    plans = [p for _, p in decode_all(lf, "foresight.Plan", Plan)]
-    states = [s for _, s in decode_all(lf, "foresight.RobotState", RobotState)]
-    grids = [g for _, g in decode_all(lf, "foresight.OccupancyGrid", OccupancyGrid)]
-    posteriors: dict[int, Any] = {}
-    for _, post in decode_all(lf, "foresight.ClassPosterior", ClassPosterior):
-        keep_posterior(posteriors, post)
+    recorder = RunRecorder()  # the demo's own rules: the newest grid by (tick, index), posteriors by tick or arrival
+    for cls in (Plan, RobotState, OccupancyGrid, ClassPosterior):
+        for _, msg in decode_all(lf, f"foresight.{cls.TYPE}", cls):
+            recorder.on_message(msg)
+    plans, states, final, posteriors = recorder.snapshot()
     robot = PR2.from_scene(scene_of(lf), device="cpu", dtype=torch.float32)
-    return summarise(plans, states, grids[-1] if grids else None, posteriors, robot, "", lf.path)
+    return summarise(plans, states, final, posteriors, robot, "", lf.path)
 
 
 def table_lines(summary: Summary) -> list[str]:

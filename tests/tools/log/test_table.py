@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from tools.log.cli import main
@@ -32,3 +33,34 @@ def test_a_log_without_plans_is_one_clear_error(tmp_path, capsys) -> None:
         main(["table", str(path)])
     assert exc.value.code == 2
     assert "no plans logged" in capsys.readouterr().err
+
+
+def test_the_final_grid_is_chosen_as_the_demo_chooses_it(tmp_path, robot) -> None:
+    """The newest grid by (tick, index), not the last in the file: ``log table`` and the demo score one grid."""
+    from services.run_log import recorder_from_log
+    from shared.protocol import Keys, OccupancyGrid, Plan, encode
+    from shared.recording.reader import read_log
+    from shared.recording.writer import McapLog
+    from shared.scene import load_scene
+    from tools.log.table import run_summary
+
+    keys, scene = Keys(), load_scene(None)
+    path = tmp_path / "late.mcap"
+    log = McapLog(path, keys)
+    q0 = robot.q_start.numpy().astype(np.float32)
+    log.on_sample(keys.plan, encode(Plan(
+        stamp=0.0, tick=0, step=0, goal_names=["blue_cup"], joint_names=robot.joint_names, dt=0.1, chosen=0,
+        planning_ms=1.0, occupancy_tick=-1, occupancy_index=-1, trajectories=np.stack([np.stack([q0] * 4)]),
+        cost_smoothness=np.ones(1), cost_obstacle=np.zeros(1), cost_human=np.zeros(1), cost_total=np.ones(1),
+        valid=np.ones(1, bool))))
+    dims = scene.grid.dims
+    for tick, method in ((1, "prediction"), (0, "current")):  # the tick-0 grid is logged late
+        grid = OccupancyGrid.from_dense(np.zeros(dims, np.float32), scene.grid.origin, scene.grid.resolution,
+                                        stamp=0.2 * tick, tick=tick, tick_last=True, demo_id=3, index=tick,
+                                        method=method)
+        log.on_sample(keys.occupancy, encode(grid))
+    log.close()
+    summary = run_summary(read_log(path, keep=lambda ch: True))
+    assert summary.scored_against == "final prediction"
+    recorder = recorder_from_log(path, keys)
+    assert recorder is not None and recorder.snapshot()[2].tick == 1
