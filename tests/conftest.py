@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -55,6 +58,45 @@ def reference_dir() -> Path:
     if not REFERENCE.is_dir():
         pytest.skip("../shared/reference not present")
     return REFERENCE
+
+
+def _signalled(args: Sequence[str], signals: Sequence[tuple[int, float]], ready: str = "ready",
+               timeout: float = 60.0, **popen: Any) -> subprocess.CompletedProcess[str]:
+    """Run ``python ARGS`` in the repo, wait for its first line, send each signal after its pause, collect its end.
+
+    Args:
+        args: The interpreter's arguments (``["-c", CODE, ...]`` or ``["-m", MODULE, ...]``).
+        signals: ``(signal, pause_s)`` pairs, sent in order once the child printed its first line.
+        ready: What that first line starts with (asserted: a child that died before it shows its stderr).
+        timeout: Seconds the child has to end after the last signal.
+        popen: More :class:`subprocess.Popen` arguments (``env``, ``preexec_fn``).
+
+    Returns:
+        The exit status, stdout after the first line, and stderr. The child is killed if it outlives ``timeout``.
+    """
+    proc = subprocess.Popen([sys.executable, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, **popen)
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        if not first.startswith(ready):
+            proc.kill()
+            raise AssertionError(f"the child printed {first!r}, not {ready!r}...: {proc.communicate(timeout=10)[1]}")
+        for sig, pause in signals:
+            time.sleep(pause)
+            proc.send_signal(sig)
+        out, err = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
+@pytest.fixture
+def signalled() -> Callable[..., subprocess.CompletedProcess[str]]:
+    """Start a Python child, signal it once it is ready, and read how it ended (see :func:`_signalled`)."""
+    return _signalled
 
 
 def _wait_until(pred: Callable[[], bool], timeout: float, interval: float = 0.05) -> bool:

@@ -163,21 +163,14 @@ sys.exit(service_main(["--listen", "tcp/127.0.0.1:0"], "foresight planner", sect
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_a_signal_while_the_service_is_built_ends_it_at_once_with_status_0(sig) -> None:
+def test_a_signal_while_the_service_is_built_ends_it_at_once_with_status_0(sig, signalled) -> None:
     """A planner stopped while it compiled its kernels (docker compose down, Ctrl-C at start-up) ran on for the grace,
     then exited with status 3 and ~80 lines of every thread's stack."""
-    proc = subprocess.Popen([sys.executable, "-c", BUILDING], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    try:
-        assert proc.stdout is not None and proc.stdout.readline().strip() == "building"
-        proc.send_signal(sig)
-        out, err = proc.communicate(timeout=30)
-    finally:
-        proc.kill()
-        proc.wait(timeout=10)
-    assert proc.returncode == 0, err
-    assert "foresight planner: stopped while starting" in err and "Traceback" not in err and "stacks" not in err
-    assert "served" not in out
+    end = signalled(["-c", BUILDING], [(sig, 0.0)], ready="building", timeout=30)
+    assert end.returncode == 0, end.stderr
+    assert "foresight planner: stopped while starting" in end.stderr
+    assert "Traceback" not in end.stderr and "stacks" not in end.stderr
+    assert "served" not in end.stdout
 
 
 def test_debug_is_foresights_own_and_other_libraries_stay_at_info() -> None:
@@ -196,22 +189,15 @@ BUILDING_WITH_A_WORKER = BUILDING.replace(
     '    print("building", flush=True)  # after the worker started: the signal comes once it runs')
 
 
-def test_a_worker_left_by_a_stopped_build_does_not_hold_the_exit_past_the_grace() -> None:
+def test_a_worker_left_by_a_stopped_build_does_not_hold_the_exit_past_the_grace(signalled) -> None:
     """A build stopped by a signal returned 0, but a non-daemon thread it had started kept the interpreter waiting as
     long as it ran (a review's script: 25 s), where the shutdown watchdog used to force the exit after the grace."""
     code = BUILDING_WITH_A_WORKER.replace("from shared.runtime import service_main",
                                           "from shared import runtime\nruntime.SHUTDOWN_GRACE_S = 1.0\n"
                                           "from shared.runtime import service_main")
-    proc = subprocess.Popen([sys.executable, "-c", code], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
-    try:
-        assert proc.stdout is not None and proc.stdout.readline().strip() == "building"
-        proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-        proc.wait(timeout=10)
-    assert proc.returncode == 3 and "did not exit within 1 s of stopping while starting" in err, err[-2000:]
+    end = signalled(["-c", code], [(signal.SIGTERM, 0.0)], ready="building")
+    assert end.returncode == 3, end.stderr[-2000:]
+    assert "did not exit within 1 s of stopping while starting" in end.stderr, end.stderr[-2000:]
 
 
 WAITING = """
@@ -227,17 +213,8 @@ print("stopped", flush=True)
 """
 
 
-def test_a_signal_another_thread_received_still_ends_the_wait_for_stop() -> None:
+def test_a_signal_another_thread_received_still_ends_the_wait_for_stop(signalled) -> None:
     """The handler of a signal delivered to another thread (or just before the wait's syscall) runs only when the
     main thread next runs bytecode: a plain ``stop.wait()`` never does, :func:`wait_for_stop` within its poll."""
-    proc = subprocess.Popen([sys.executable, "-c", WAITING, "wait_for_stop"], cwd=REPO, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=20)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
-    assert (proc.returncode, out.strip()) == (0, "stopped"), err
+    end = signalled(["-c", WAITING, "wait_for_stop"], [(signal.SIGTERM, 0.0)], timeout=20)
+    assert (end.returncode, end.stdout.strip()) == (0, "stopped"), end.stderr

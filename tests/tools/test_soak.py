@@ -4,9 +4,6 @@ faults close what they started when stopped by SIGTERM."""
 from __future__ import annotations
 
 import signal
-import subprocess
-import sys
-from pathlib import Path
 from types import SimpleNamespace as NS
 
 import pytest
@@ -56,18 +53,9 @@ sys.exit(main(["bench", "{bench}"]))
 
 
 @pytest.mark.parametrize("bench", ["soak", "faults"])
-def test_a_bench_stopped_by_sigterm_closes_the_processes_it_started(bench):
+def test_a_bench_stopped_by_sigterm_closes_the_processes_it_started(bench, signalled):
     """SIGTERM ended the bench without its ``finally``: the processes it had started were left to notice by
     themselves, and the router never did (tests/tools/test_router.py)."""
-    proc = subprocess.Popen([sys.executable, "-c", SIGTERMED.format(bench=bench)], cwd=Path(__file__).parents[2],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout.readline().strip() == "started"
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
-    assert out.strip() == "closed" and proc.returncode == 130, err
-    assert "foresight: interrupted" in err
+    end = signalled(["-c", SIGTERMED.format(bench=bench)], [(signal.SIGTERM, 0.0)], ready="started", timeout=30)
+    assert end.stdout.strip() == "closed" and end.returncode == 130, end.stderr
+    assert "foresight: interrupted" in end.stderr

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import signal
 import subprocess
-import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from services.processes import ServiceProcess, free_port
@@ -54,60 +54,44 @@ while True:  # a call that does not look at the stop event, in short slices: Pyt
 """
 
 
-def _blocked_process(*args: str, masked: bool = False) -> subprocess.Popen[str]:
-    mask = (lambda: signal.pthread_sigmask(signal.SIG_BLOCK, [signal.SIGINT, signal.SIGTERM])) if masked else None
-    proc = subprocess.Popen([sys.executable, "-c", BLOCKED, *args], cwd=REPO, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, preexec_fn=mask)
-    assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
-    return proc
-
-
-def _signalled(*signals: tuple[signal.Signals, float], args: tuple[str, ...] = (), masked: bool = False
-               ) -> tuple[int, str]:
+def _signalled(signalled: Callable[..., subprocess.CompletedProcess[str]], *signals: tuple[signal.Signals, float],
+               args: tuple[str, ...] = (), masked: bool = False) -> tuple[int, str]:
     """A blocked process sent each signal after its pause (s); its exit status and stderr."""
-    proc = _blocked_process(*args, masked=masked)
-    try:
-        for sig, pause in signals:
-            time.sleep(pause)
-            proc.send_signal(sig)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
-    return proc.returncode, err
+    mask = (lambda: signal.pthread_sigmask(signal.SIG_BLOCK, [signal.SIGINT, signal.SIGTERM])) if masked else None
+    end = signalled(["-c", BLOCKED, *args], signals, preexec_fn=mask)
+    return end.returncode, end.stderr
 
 
-def test_a_process_stuck_in_a_call_exits_after_the_grace_and_says_where():
-    code, err = _signalled((signal.SIGTERM, 0.0))
+def test_a_process_stuck_in_a_call_exits_after_the_grace_and_says_where(signalled):
+    code, err = _signalled(signalled, (signal.SIGTERM, 0.0))
     assert code == 3, err
     assert "blocked: did not stop within 1 s of SIGTERM; exiting with status 3" in err  # named by its prog
     assert 'File "<string>", line 10' in err  # the stack says where it was stuck
 
 
-def test_a_process_started_with_the_signals_blocked_still_obeys_them():
+def test_a_process_started_with_the_signals_blocked_still_obeys_them(signalled):
     """A blocked mask is inherited across exec and signal.signal leaves it: such a process (started by a thread that
     had them blocked) never ran its handler and hung until killed."""
-    code, err = _signalled((signal.SIGTERM, 0.0), masked=True)
+    code, err = _signalled(signalled, (signal.SIGTERM, 0.0), masked=True)
     assert code == 3 and "did not stop within 1 s of SIGTERM" in err, err
 
 
-def test_a_second_signal_exits_at_once():
-    code, err = _signalled((signal.SIGINT, 0.0), (signal.SIGTERM, 0.2))
+def test_a_second_signal_exits_at_once(signalled):
+    code, err = _signalled(signalled, (signal.SIGINT, 0.0), (signal.SIGTERM, 0.2))
     assert code == 3 and "second SIGTERM while stopping" in err, err
     assert "stacks" not in err and "File " not in err  # one line: whoever sent it wants out, not a dump
 
 
-def test_one_interrupt_delivered_twice_at_once_is_one_interrupt():
+def test_one_interrupt_delivered_twice_at_once_is_one_interrupt(signalled):
     """``timeout`` forwards the SIGINT a terminal sent the process group: two within milliseconds dumped every
     thread's stack and exited with status 3 at once."""
-    code, err = _signalled((signal.SIGINT, 0.0), (signal.SIGINT, 0.0))
+    code, err = _signalled(signalled, (signal.SIGINT, 0.0), (signal.SIGINT, 0.0))
     # the process never stops by itself: the grace, not the echo, ends it
     assert code == 3 and "second" not in err and "did not stop within 1 s of SIGINT" in err, err
 
 
-def test_the_first_signal_to_a_process_already_stopping_on_its_own_gets_the_grace():
+def test_the_first_signal_to_a_process_already_stopping_on_its_own_gets_the_grace(signalled):
     """With stop already set (--stop-with, a parent gone) the first and only SIGTERM (docker compose down, the
     demo's stop) was taken for a second one: exit 3 at once, 'second SIGTERM', its shutdown cut off."""
-    code, err = _signalled((signal.SIGTERM, 0.0), args=("stopping",))
+    code, err = _signalled(signalled, (signal.SIGTERM, 0.0), args=("stopping",))
     assert code == 3 and "second" not in err and "did not stop within 1 s of SIGTERM" in err, err

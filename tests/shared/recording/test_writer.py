@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import signal
-import subprocess
-import sys
 import textwrap
 import threading
 import time
@@ -191,19 +189,9 @@ WRITER = textwrap.dedent("""
 """)
 
 
-def test_killed_writer_leaves_a_readable_file_scene_included(tmp_path) -> None:
+def test_killed_writer_leaves_a_readable_file_scene_included(tmp_path, signalled) -> None:
     path = tmp_path / "killed.mcap"
-    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path)], cwd=REPO, stdout=subprocess.PIPE, text=True)
-    try:
-        line = proc.stdout.readline()
-        assert line.startswith("flushed"), line
-        time.sleep(0.3)
-        proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=10)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
+    signalled(["-c", WRITER, str(path)], [(signal.SIGKILL, 0.3)], ready="flushed", timeout=10)
     lf = read_log(path, keep=lambda ch: True)
     assert not lf.complete
     msgs = lf.topic_messages(KEYS.clock)
