@@ -20,14 +20,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from services.processes import ServiceProcess, free_port
-from services.run_log import recorder_from_log
+from services.run_log import RunRecorder, keep_posterior, recorder_from_log
 from services.scenario import (
-    RunRecorder,
     Scenario,
     Summary,
     belief,
     choose_demonstration,
-    keep_posterior,
     model_for,
     posterior_for,
     step_entry,
@@ -259,7 +257,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     out(f"foresight demo: router on {shown}{' (mutual TLS, access control)' if cfg.security else ''}; "
         f"{_run_length(cfg)}; logs in {run_dir}/")
     recorder = RunRecorder()
-    posteriors: dict[int, ClassPosterior] = {}  # the last of each tick (real time: every one, scenario.keep_posterior)
+    posteriors: dict[int, ClassPosterior] = {}  # the last of each tick (real time: every one, run_log.keep_posterior)
     realtime = cfg.mode == "realtime"
     lock = threading.Lock()
     # the run's clock: 0 in lock-step (simulated time); the executor's first state in real time

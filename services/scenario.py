@@ -13,7 +13,6 @@ import json
 import logging
 import math
 import os
-import threading
 import zipfile
 import zlib
 from collections.abc import Callable, MutableMapping, Sequence
@@ -25,13 +24,12 @@ import numpy as np
 
 from services.experiments.measures import interference
 from shared.library import Demonstration, MotionLibrary
-from shared.protocol import ClassPosterior, HumanPose, Message, OccupancyGrid, Plan, RobotState
+from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.scene import Scene
 
-__all__ = ["Scenario", "choose_demonstration", "model_for", "RunRecorder", "Summary", "summarise",
-           "DEFAULT_HUMAN_CLASS", "step_entry", "table_header", "table_row", "belief", "posterior_for",
-           "keep_posterior"]
+__all__ = ["Scenario", "choose_demonstration", "model_for", "Summary", "summarise", "DEFAULT_HUMAN_CLASS",
+           "step_entry", "table_header", "table_row", "belief", "posterior_for"]
 
 log = logging.getLogger("foresight.scenario")
 
@@ -161,44 +159,6 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
     return path
 
 
-class RunRecorder:
-    """Collects what a run publishes (thread-safe; fed by a subscriber, no Zenoh in here)."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self.plans: list[Plan] = []
-        self.states: list[RobotState] = []
-        self.final_occupancy: OccupancyGrid | None = None
-        self.posteriors: dict[int, ClassPosterior] = {}
-        self.poses: list[HumanPose] = []
-
-    def on_message(self, msg: Message) -> None:
-        """Feed one received message."""
-        with self._lock:
-            if isinstance(msg, Plan):
-                self.plans.append(msg)
-            elif isinstance(msg, RobotState):
-                self.states.append(msg)
-            elif isinstance(msg, OccupancyGrid):
-                if self.final_occupancy is None or (msg.tick, msg.index) >= (self.final_occupancy.tick,
-                                                                            self.final_occupancy.index):
-                    self.final_occupancy = msg
-            elif isinstance(msg, ClassPosterior):
-                keep_posterior(self.posteriors, msg)
-            elif isinstance(msg, HumanPose):
-                self.poses.append(msg)
-
-    def snapshot(self) -> tuple[list[Plan], list[RobotState], OccupancyGrid | None, dict[int, ClassPosterior]]:
-        """Copies of what was recorded so far."""
-        with self._lock:
-            return list(self.plans), list(self.states), self.final_occupancy, dict(self.posteriors)
-
-    def human_poses(self) -> list[HumanPose]:
-        """The human's poses received so far, in time order."""
-        with self._lock:
-            return sorted(self.poses, key=lambda p: (p.stamp, p.index))
-
-
 def step_entry(plan: Plan, t0: float, step: int | None = None) -> dict[str, Any]:
     """One row of the run's table (and of ``--json``'s ``steps``) for ``plan``.
 
@@ -304,21 +264,6 @@ def belief(posterior: ClassPosterior | None) -> str:
         return ""
     k = int(np.argmax(posterior.posterior))
     return f"{posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
-
-
-ARRIVAL_KEY0 = 1 << 40
-"""The first key of real-time (tick -1) posteriors in a posteriors-by-tick dict: above every tick."""
-
-
-def keep_posterior(posteriors: dict[int, ClassPosterior], msg: ClassPosterior) -> None:
-    """Keep a received posterior for :func:`posterior_for`: lock-step, the last of its tick; real time, every one.
-
-    Real time stamps every message tick -1: keyed by their tick, each posterior replaced the one before, and the
-    belief of every plan but the last (made before the newest posterior) came out empty in the demo's live table
-    and summary. They are keyed by arrival there, from :data:`ARRIVAL_KEY0` (no tick reaches it: a run that mixed
-    both kinds kept them apart; the newest arrival is still the largest key).
-    """
-    posteriors[msg.tick if msg.tick >= 0 else ARRIVAL_KEY0 + len(posteriors)] = msg
 
 
 def posterior_for(plan: Plan, posteriors: dict[int, ClassPosterior]) -> ClassPosterior | None:

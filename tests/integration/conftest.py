@@ -25,7 +25,8 @@ from services.predictor.service import PredictorService
 from services.processes import free_port
 from services.replayer.core import ReplayerConfig
 from services.replayer.service import ReplayerService
-from services.scenario import RunRecorder, choose_demonstration, model_for
+from services.run_log import RunRecorder
+from services.scenario import choose_demonstration, model_for
 from shared.config import ZenohConfig
 from shared.library import MotionLibrary, save_library
 from shared.protocol import ClassPosterior, Keys, OccupancyGrid, Plan, RobotState

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from services.scenario import RunRecorder, Summary, choose_demonstration, summarise, table_header
+from services.run_log import RunRecorder
+from services.scenario import Summary, choose_demonstration, summarise, table_header
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.synthetic import generate_library
@@ -197,3 +198,16 @@ def test_a_run_scored_against_a_final_grid_that_is_no_prediction_says_so() -> No
     summary = Summary([], [], None, 1.5, None, False, None, "blue_cup", None,
                       scored_against=final_label(grid("current")))
     assert "interference cost of the executed trajectory (final current occupancy): 1.5000" in summary.lines()
+
+
+def test_the_final_grid_of_a_real_time_stream_is_the_newest_demonstrations():
+    """Real time stamps every grid tick -1 and a pose's index restarts with each demonstration: the sample order
+    alone kept the first demonstration's last grid (index 50) over the second's (index 3)."""
+    rec = RunRecorder()
+    dims = (4, 4, 4)
+    for stamp, demo, index in ((1.0, 0, 50), (2.0, 1, 3)):
+        rec.on_message(OccupancyGrid.from_dense(np.zeros(dims, np.float32), (0.0, 0.0, 0.0), 0.05, stamp=stamp,
+                                                tick=-1, tick_last=True, demo_id=demo, index=index,
+                                                method="prediction"))
+    final = rec.snapshot()[2]
+    assert final is not None and (final.demo_id, final.index) == (1, 3)

@@ -8,7 +8,8 @@ runs of one scenario -- ``foresight demo`` and ``docker compose up``, say -- com
 
 from __future__ import annotations
 
-from services.scenario import RunRecorder, Summary, summarise
+from services.run_log import RunRecorder
+from services.scenario import Summary, summarise
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.recording.reader import LogFile
 
