@@ -13,68 +13,23 @@ to a :class:`Backlog` and one worker drains it in batches:
   per pose at 300 Hz is 300 grids a second for the planner, the executor and its log to decode,
   validate and store, though the next plan can use only the newest; the newest pose still gets its
   grid within one interval;
-* the backlog holds at most ``limit`` messages; beyond it the oldest are dropped and counted.
+* the backlog (:class:`shared.backlog.Backlog`) holds at most ``limit`` messages; beyond it the oldest are
+  dropped and counted.
 
 Pure (no Zenoh): unit-tested in ``tests/services/predictor/test_backlog.py``.
 """
 
 from __future__ import annotations
 
-import collections
-import threading
 from collections.abc import Sequence
 from typing import Generic, TypeVar
 
+from shared.backlog import Backlog
 from shared.protocol import HumanPose
 
-__all__ = ["Backlog", "GridPacer", "occupancy_due"]
+__all__ = ["Backlog", "GridPacer", "occupancy_due"]  # Backlog: shared.backlog, re-exported
 
 T = TypeVar("T")
-
-
-class Backlog(Generic[T]):
-    """A bounded FIFO of messages, drained in batches by one consumer.
-
-    Args:
-        limit: Most items held; :meth:`put` beyond it drops the oldest (counted in ``dropped``).
-    """
-
-    def __init__(self, limit: int) -> None:
-        if limit < 1:
-            raise ValueError(f"backlog limit must be >= 1, got {limit}")
-        self.limit = limit
-        self.dropped = 0
-        self.peak = 0
-        self._items: collections.deque[T] = collections.deque()
-        self._cond = threading.Condition()
-
-    def __len__(self) -> int:
-        with self._cond:
-            return len(self._items)
-
-    def put(self, item: T) -> None:
-        """Append ``item`` (dropping the oldest when full) and wake the consumer."""
-        with self._cond:
-            if len(self._items) >= self.limit:
-                self._items.popleft()
-                self.dropped += 1
-            self._items.append(item)
-            self.peak = max(self.peak, len(self._items))
-            self._cond.notify()
-
-    def take_all(self, timeout: float) -> list[T]:
-        """Everything waiting, oldest first; waits up to ``timeout`` s for the first item ([] if none)."""
-        with self._cond:
-            if not self._items:
-                self._cond.wait(timeout)
-            out = list(self._items)
-            self._items.clear()
-            return out
-
-    def wake(self) -> None:
-        """Wake a waiting :meth:`take_all` (e.g. to let the consumer see a stop request)."""
-        with self._cond:
-            self._cond.notify_all()
 
 
 def occupancy_due(batch: Sequence[object]) -> list[bool]:

@@ -3,6 +3,9 @@
 No Zenoh here. Per keypoint frame (``HumanKeypoints``: names, positions (K, 3) in the sensor's frame, a stamp):
 
 0. a frame in another coordinate frame than ``frame_id``, or naming a point its layout does not have, is refused;
+   one stamped less than ``1 / max_fit_hz`` after the last accepted frame is skipped (not fitted, counted in
+   :attr:`TrackerCore.skipped`): the poses come at the library's 30 a second, and fitting every frame of a 120 Hz
+   sensor (5-13 ms each) fell seconds behind it;
 1. the layout's table maps the sensor's points to the human model's (:mod:`shared.keypoints.layouts`); a frame
    without a required point is refused;
 2. the human model is fitted, warm-started from the last accepted frame (:class:`shared.keypoints.fit.KeypointFit`);
@@ -14,10 +17,9 @@ No Zenoh here. Per keypoint frame (``HumanKeypoints``: names, positions (K, 3) i
    the torso twist differently from one frame to the next (docs/keypoints.md) without any joint moving;
 4. the features are smoothed by a One-Euro filter (:mod:`.filters`);
 5. a gap (dropped or refused frames) up to ``max_gap_s`` is bridged: the missing frames, at the sensor's
-   period, are interpolated between the frames on either side; a longer gap ends the reach under way and
-   starts afresh. The period is the median of the recent intervals, leaving out those under half of it or
-   under :data:`MIN_PERIOD_S` (frames that came in a burst, e.g. after a network stall), so a burst never
-   makes the bridge invent frames between the next regular ones;
+   period (:mod:`.rate`: a burst's intervals left out, so it never makes the bridge invent frames between the
+   next regular ones), are interpolated between the frames on either side; a longer gap ends the reach under way
+   and starts afresh;
 5b. a sensor whose rate is more than 10 % off the motion library's (``pose_rate_hz``, 30) has its frames resampled
    to that rate (:mod:`.resample`): the predictor reads a pose's index as its time;
 6. the reach rule (:mod:`.reach`) says when a reach starts and ends: ``DemoMarker`` start and end, the poses
@@ -44,6 +46,7 @@ from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Message
 
 from .checks import Upright, fit_without_outliers, furthest_point, missing_points, torso_tilt_deg
 from .filters import OneEuroFilter
+from .rate import MIN_PERIOD_S, FrameRate
 from .reach import ReachDetector, ReachRule
 from .resample import PoseClock
 
@@ -56,9 +59,6 @@ torso leaning too far from the vertical (keypoints whose up is not z: :mod:`serv
 after the last accepted frame's, a stamp a long gap after it that the next frame has not confirmed yet, a pelvis
 outside the range the fit covers (so the fit cannot reach the points), a fit too far from the points, an implausible
 jump."""
-
-MIN_PERIOD_S = 1.0 / 500
-"""The shortest frame interval taken for the sensor's period (500 Hz): shorter ones are frames of a burst."""
 
 LIBRARY_RATE_HZ = 30.0
 """The rate of the motion libraries (the paper's recordings and the replayer's default): the predictor's time feature
@@ -94,11 +94,14 @@ class TrackerConfig:
     max_reach_s: float = opt(10.0, help="a reach ends after this long in any case (s)")
     pose_rate_hz: float = opt(LIBRARY_RATE_HZ, help="the motion library's pose rate: a sensor more than 10 % off it "
                               "has its poses resampled to it (a pose's index is its time for the predictor)")
+    max_fit_hz: float = opt(2 * LIBRARY_RATE_HZ, help="fit at most this many frames a second: a frame stamped sooner "
+                            "after the last one taken is skipped (a 120 Hz sensor is fitted at 60; the poses come "
+                            "at pose_rate_hz)")
 
     def validate(self) -> None:
         """Check ranges; raises ConfigError naming the option."""
         for name in ("max_residual_m", "max_speed_mps", "max_gap_s", "min_cutoff_hz", "start_m",
-                     "end_m", "end_s", "rest_s", "max_reach_s", "pose_rate_hz"):
+                     "end_m", "end_s", "rest_s", "max_reach_s", "pose_rate_hz", "max_fit_hz"):
             v = getattr(self, name)
             if not (v > 0 and math.isfinite(v)):
                 raise ConfigError(f"tracker.{name}: must be a finite number > 0, got {v}")
@@ -132,6 +135,7 @@ class TrackerCore:
     Attributes:
         refused: Frames refused per reason (:data:`REASONS`).
         accepted: Frames accepted.
+        skipped: Frames not fitted: stamped under ``1 / max_fit_hz`` after the last accepted one.
         bridged: Poses interpolated across gaps.
         reaches: Reaches started.
         points_left_out: Optional points left out of accepted frames' fits, far off them
@@ -147,7 +151,7 @@ class TrackerCore:
         self.filter = OneEuroFilter(self.config.min_cutoff_hz, self.config.beta)
         self.reach = ReachDetector(self.config.rule)
         self.refused = dict.fromkeys(REASONS, 0)
-        self.accepted = self.bridged = self.reaches = self.points_left_out = 0
+        self.accepted = self.skipped = self.bridged = self.reaches = self.points_left_out = 0
         self.upright = Upright()                                 # whether this track's keypoints have z up
         self._wrist, self._pelvis = list(POINT_NAMES).index("r_wrist"), list(POINT_NAMES).index("pelvis")
         self._shoulders = list(POINT_NAMES).index("r_shoulder"), list(POINT_NAMES).index("l_shoulder")
@@ -162,8 +166,9 @@ class TrackerCore:
         self._rate_said = False                                  # the sensor's rate named for this track
         self.clock = PoseClock(self.config.pose_rate_hz)         # a pose per frame, or resampled to the library's
         self._yaw = HERAKLES_NAMES.index("pelvis_yaw")
-        self._dts: deque[float] = deque(maxlen=15)              # recent frame intervals: the sensor's period
-        self._short: deque[float] = deque(maxlen=15)            # intervals in a row under half of it (_faster)
+        self.rate = FrameRate()                                  # the accepted frames' rate: bridging, resampling
+        self.sensor = FrameRate()                                # every frame's: what the sensor sends
+        self._seen: float | None = None                          # the newest frame's stamp (any frame)
         self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
         self.demo_id = -1
         self._index = 0
@@ -189,6 +194,12 @@ class TrackerCore:
         ``frame``: the sensor's frame number, where it numbers them; a gap is then bridged with no more poses
         than the frames it dropped.
         """
+        if self._seen is not None and stamp > self._seen:
+            self.sensor.add(stamp - self._seen)
+        self._seen = stamp if self._seen is None else max(self._seen, stamp)
+        if self._raw is not None and 0 < stamp - self._raw[0] < 0.9 / self.config.max_fit_hz:
+            self.skipped += 1  # (0.9: a 120 Hz sensor's every other frame is 1 / 60 s after the last, not 0.99 of it)
+            return TrackerOutput()
         points = self.layout.to_model(list(names), np.asarray(positions, dtype=np.float64))
         observed = np.all(np.isfinite(points), axis=-1)
         missing = [p for p, j in self._required.items() if not observed[j]]
@@ -244,20 +255,17 @@ class TrackerCore:
             elif moved[j] / dt > self.config.max_speed_mps:
                 self._jump = (stamp, joints, 1)
                 return self._refuse("jump", f"{POINT_NAMES[j]} at {moved[j] / dt:.1f} m/s since the last frame")
-            elif dt >= MIN_PERIOD_S and (len(self._dts) < 3 or dt >= 0.5 * float(np.median(self._dts))):
-                self._dts.append(dt)  # the sensor's period; a burst's intervals are left out
-                self._short.clear()
-            elif dt >= MIN_PERIOD_S:
-                self._faster(dt)
+            else:
+                self.rate.add(dt)
         dropped = None if frame is None or self._frame_no is None or self._raw is None else frame - self._frame_no - 1
         self._raw, self._joints, self._frame_no, self._jump = (stamp, f), joints, frame, None
         self.accepted += 1
         self.upright.accepted(tilt, new_track)
         smooth = self.filter(f, stamp)
-        sensor_hz = 1.0 / float(np.median(self._dts)) if len(self._dts) == self._dts.maxlen else None
-        if self.clock.follow(sensor_hz) and not self._rate_said:  # said once per track
+        taken_hz = self.rate.hz
+        if self.clock.follow(taken_hz) and not self._rate_said:  # said once per track
             self._rate_said = True
-            out.note = (f"the sensor sends {sensor_hz:.0f} frames a second, the motion library's poses came at "
+            out.note = (f"the sensor sends {self._sent(taken_hz)}, the motion library's poses came at "
                         f"{self.clock.rate_hz:g}: its poses are resampled to {self.clock.rate_hz:g} a second (a "
                         "pose's index is its time for the predictor; docs/keypoints.md)")
         if self.clock.resampling:
@@ -279,19 +287,13 @@ class TrackerCore:
 
     # -- internals ---------------------------------------------------------------------------------
 
-    def _faster(self, dt: float) -> None:
-        """An interval under half the period: a burst's, or a sensor that went faster (30 -> 120 Hz mid-track).
-
-        A burst ends when its backlog is flushed; a faster sensor goes on. Once as many such intervals as the period
-        holds came in a row, within 25 % of their median, they are the sensor's period (else a sensor that sped up
-        was measured at its old rate for good, and its poses never resampled).
-        """
-        self._short.append(dt)
-        if len(self._short) == self._short.maxlen:
-            med = float(np.median(self._short))
-            if all(abs(x - med) <= 0.25 * med for x in self._short):
-                self._dts = deque(self._short, maxlen=self._dts.maxlen)
-                self._short.clear()
+    def _sent(self, taken_hz: float) -> str:
+        """The sensor's rate in words, and the rate taken where it differs (skipped or refused frames)."""
+        sent_hz = self.sensor.hz or taken_hz
+        if abs(sent_hz / taken_hz - 1.0) <= 0.1:
+            return f"{taken_hz:.0f} frames a second"
+        why = f"max_fit_hz {self.config.max_fit_hz:g}" if self.skipped else "the others refused"
+        return f"{sent_hz:.0f} frames a second ({taken_hz:.0f} a second taken: {why})"
 
     def _follows(self, refused: tuple[float, np.ndarray, int], joints: np.ndarray, stamp: float) -> bool:
         """Whether ``joints`` ``(J, 3)`` at ``stamp`` continue the body of the frame last refused as a jump."""
@@ -317,8 +319,8 @@ class TrackerCore:
         self.reach.reset()
         self.filter.reset()
         self._recent.clear()
-        self._dts.clear()  # the next frames may come from a sensor restarted at another rate
-        self._short.clear()
+        self.rate.reset()  # the next frames may come from a sensor restarted at another rate
+        self.sensor.reset()
         self._raw = self._out = self._joints = self._frame_no = self._leap = self._jump = None
         self._ended_at = -math.inf  # a sensor restarted, or a clock stepped back: its frames may precede the last end
         self._rate_said, self.upright.frames = False, 0
@@ -332,11 +334,8 @@ class TrackerCore:
         either way (a backlog flushed after a stall, arrival-stamped a few ms apart, is no sensor's period),
         and never more than ``dropped`` frames where the sensor numbers its frames.
         """
-        if self._out is None or len(self._dts) < 3:
-            return []
-        period = float(np.median(self._dts))
-        last = list(self._dts)[-4:-1] if len(self._dts) > 3 else list(self._dts)[:3]
-        if any(not 0.5 * period <= dt <= 1.5 * period for dt in last):
+        period = self.rate.period
+        if self._out is None or period is None or not self.rate.steady():
             return []
         t0, f0 = self._out
         n = int(round((stamp - t0) / period)) - 1

@@ -1,11 +1,14 @@
 """The tracker's Zenoh loop: keypoint frames in (Foresight's key or ROS 2), ``HumanPose`` and ``DemoMarker`` out.
 
 Each frame is checked on receipt (``shared.protocol.Receipt``: form, coordinates within range of the sensor,
-frame numbers increasing per sender), then goes through :class:`~services.tracker.core.TrackerCore` under a
-lock (Zenoh calls subscribers on threads of its own). A refused frame gets one logged line and is counted
-(per reason, in the shutdown line); nothing of it is published. With ``--from FILE`` the service plays a
-keypoint recording on the keypoints key in real time from a session of its own that presents the ``sensor``
-role, so the frames take the same way as a sensor driver's (:mod:`services.tracker.playback`).
+frame numbers increasing per sender) and queued (:class:`shared.backlog.Backlog`); a worker takes the waiting
+frames through :class:`~services.tracker.core.TrackerCore` under a lock, thinned when they span too long to
+catch up (:mod:`.catch_up`; counted, and said once). Before, Zenoh's thread fitted every frame in turn, and with a
+sensor faster than the fit the poses fell behind the person by seconds, with no word said. A refused frame gets
+one logged line and is counted (per reason, in the shutdown line); nothing of it is published. With
+``--from FILE`` the service plays a keypoint recording on the keypoints key in real time from a session of its
+own that presents the ``sensor`` role, so the frames take the same way as a sensor driver's
+(:mod:`services.tracker.playback`).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from shared.backlog import Backlog
 from shared.config import ConfigError, ZenohConfig
 from shared.human import HumanModel
 from shared.human_source import HumanPublisher
@@ -36,16 +40,19 @@ from shared.protocol import (
 )
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, subscribe
 
+from .catch_up import frames_to_fit
 from .config import TrackerServiceConfig
 from .core import REASONS, TrackerCore
 from .playback import Playback
 
-__all__ = ["TrackerService", "TrackerStats", "NODE_NAME"]
+__all__ = ["TrackerService", "TrackerStats", "NODE_NAME", "BACKLOG_LIMIT"]
 
 log = logging.getLogger("foresight.tracker")
 
 NODE_NAME = "foresight_tracker"
 """The tracker's ROS 2 node name (input ros2)."""
+BACKLOG_LIMIT = 1024
+"""Most frames waiting for the worker (4 s of a 240 Hz sensor); beyond it the oldest are dropped and counted."""
 REFUSAL_LOG_PERIOD_S = 1.0
 """At most one log line per refusal reason in this time (every refusal is counted)."""
 
@@ -59,6 +66,7 @@ class TrackerStats:
     markers: int = 0
     reaches: int = 0
     played: int = 0
+    behind: int = 0  # frames dropped unfitted to catch up (catch_up)
     refused: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REASONS, 0))
 
 
@@ -88,6 +96,7 @@ class TrackerService:
         self._accepted_at = time.monotonic()  # when the core last took a frame (check_silence)
         self._refusal_logged: dict[str, float] = {}  # reason -> when a refusal of it was last logged
         self._ros2_receipt = Receipt(Expectations(clock="realtime"))
+        self.backlog: Backlog[tuple[HumanKeypoints, bool]] = Backlog(BACKLOG_LIMIT)
         self._human: HumanPublisher | None = None
         self.playback: Playback | None = None
         if config.from_file is not None:
@@ -149,6 +158,8 @@ class TrackerService:
 
     def _publish(self, messages: list) -> None:
         """The core's poses and markers on their keys (under the lock)."""
+        if not messages:
+            return
         human = self._human
         assert human is not None
         for m in messages:
@@ -170,7 +181,28 @@ class TrackerService:
         self._ros2_frame += 1
         msg.check()  # ProtocolError (a ValueError): refused and counted by the node
         self._ros2_receipt.check(self.config.ros2_topic, msg)
-        self.on_keypoints(msg, numbered=False)
+        self.backlog.put((msg, False))
+
+    def work(self, batch: list[tuple[HumanKeypoints, bool]]) -> None:
+        """Frames taken from the backlog (oldest first) through :meth:`on_keypoints`, thinned if they span too long.
+
+        ``batch``: ``(frame, numbered)`` pairs.
+        """
+        keep = frames_to_fit([m.stamp for m, _ in batch], self.config.tracker.max_gap_s / 2)
+        if len(keep) < len(batch):
+            if not self.stats.behind:
+                log.info("tracker: the fit fell behind the sensor (%d frames waiting, over %.2f s of it): fitting %d "
+                         "of them, %.2f s apart at least, to catch up (frames dropped so are counted)", len(batch),
+                         batch[-1][0].stamp - batch[0][0].stamp, len(keep), self.config.tracker.max_gap_s / 2)
+            self.stats.behind += len(batch) - len(keep)
+        for i in keep:
+            self.on_keypoints(*batch[i])
+
+    def _work(self, stop: threading.Event) -> None:
+        """The worker: the backlog's frames through :meth:`work`, until ``stop``."""
+        while not stop.is_set():
+            if batch := self.backlog.take_all(0.1):
+                self.work(batch)
 
     # -- the loop ----------------------------------------------------------------------------------------------
 
@@ -180,6 +212,9 @@ class TrackerService:
         cfg = self.config
         with open_session(self.zenoh_config, stop, "tracker") as session:
             self._human = HumanPublisher(session, self.keys)
+            done = threading.Event()
+            worker = threading.Thread(target=self._work, args=(done,), name="tracker-fit", daemon=True)
+            worker.start()
             closers = self._inputs(session)
             presence = Presence(session, self.keys, "tracker", stop_with=cfg.stop_with, stop=stop)
             log.info("tracker: %s keypoints (layout %s, frame %s) -> %s, session %s", self._source(),
@@ -195,16 +230,23 @@ class TrackerService:
             finally:
                 for close in closers:
                     close()
+                done.set()
+                self.backlog.wake()
+                worker.join(timeout=10.0)
+                if left := self.backlog.take_all(0.0):  # the last frames received, not yet fitted
+                    self.work(left)
                 with self._lock:  # no frame comes any more: a reach under way ends, so the stream is whole
                     last = self.core.finish().messages
                     self._publish(last)
                 if last:
                     time.sleep(0.2)  # delivered before the session closes
                 presence.close()
-        self.stats.refused = dict(self.core.refused)
-        log.info("tracker: stopped after %d frames (%d played), %d reaches, %d poses, %d markers; refused: %s; "
+        self.stats.refused, self.stats.behind = dict(self.core.refused), self.stats.behind + self.backlog.dropped
+        log.info("tracker: stopped after %d frames (%d played; %d skipped over max_fit_hz, %d dropped to catch up), "
+                 "%d reaches, %d poses, %d markers; refused: %s; "
                  "optional points left out, far off the fit: %d; rejected on receipt: %s", self.stats.frames,
-                 self.stats.played, self.stats.reaches, self.stats.poses, self.stats.markers,
+                 self.stats.played, self.core.skipped, self.stats.behind, self.stats.reaches, self.stats.poses,
+                 self.stats.markers,
                  ", ".join(f"{k} {v}" for k, v in self.stats.refused.items()) or "none", self.core.points_left_out,
                  self.rejects.summary())
         return self.stats
@@ -218,8 +260,8 @@ class TrackerService:
         """Subscribe to the configured input; returns what to close."""
         cfg = self.config
         if cfg.input == "zenoh":
-            sub = subscribe(session, self.keys.keypoints, HumanKeypoints, self.on_keypoints, self.rejects,
-                            Receipt(Expectations(clock="realtime")))
+            sub = subscribe(session, self.keys.keypoints, HumanKeypoints, lambda msg: self.backlog.put((msg, True)),
+                            self.rejects, Receipt(Expectations(clock="realtime")))
             return [sub.undeclare]
         from services.ros2.core import KEYPOINTS_TYPE, Ros2Config, Ros2Mapping
         from services.ros2.node import Ros2Node

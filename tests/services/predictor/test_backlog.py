@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from services.predictor.backlog import Backlog, GridPacer, occupancy_due
+from services.predictor.backlog import GridPacer, occupancy_due
 from services.predictor.core import PredictorConfig
 from services.predictor.service import PredictorService
 from shared.config import ZenohConfig
@@ -26,29 +26,6 @@ def _pose(demo_id: int, i: int, f: np.ndarray, tick: int = -1) -> HumanPose:
 def _marker(demo_id: int) -> DemoMarker:
     return DemoMarker(stamp=time.time(), tick=-1, demo_id=demo_id, event="start", true_class=0, class_name="x",
                       n_samples=10)
-
-
-def test_backlog_keeps_order_drops_the_oldest_beyond_its_limit_and_counts():
-    b: Backlog[int] = Backlog(3)
-    assert b.take_all(0.01) == []
-    for i in range(5):
-        b.put(i)
-    assert len(b) == 3 and b.dropped == 2 and b.peak == 3
-    assert b.take_all(0.01) == [2, 3, 4]
-    assert len(b) == 0
-    with pytest.raises(ValueError, match="limit"):
-        Backlog(0)
-
-
-def test_backlog_wakes_a_waiting_consumer():
-    b: Backlog[str] = Backlog(10)
-    got: list[list[str]] = []
-    th = threading.Thread(target=lambda: got.append(b.take_all(5.0)))
-    th.start()
-    time.sleep(0.05)
-    b.put("x")
-    th.join(5.0)
-    assert got == [["x"]]
 
 
 def test_occupancy_due_marks_the_newest_real_time_pose_of_each_run_and_every_lockstep_pose():

@@ -13,7 +13,7 @@ def test_bench_tracker_prints_a_row_per_demonstration_and_the_time(capsys: pytes
     assert out[1].split()[:3] == ["demo", "reaches", "lag"]
     rows = out[2:4]
     assert len(rows) == 2 and all(int(r.split()[2]) >= 1 for r in rows)  # a reach found in each
-    assert out[4].startswith("time per frame: median") and "33.3 ms" in out[4]
+    assert out[4].startswith("time per frame fitted: median") and "33.3 ms" in out[4]
 
 
 def test_bench_tracker_at_120_hz_gives_the_poses_of_30_hz(capsys: pytest.CaptureFixture[str]) -> None:

@@ -365,3 +365,27 @@ def test_a_sensor_that_speeds_up_mid_track_is_resampled(reach) -> None:
     assert core.clock.resampling
     late = np.array([p.stamp for p in poses if p.stamp > cut + 0.5])
     assert len(late) > 10 and np.allclose(np.diff(late), 1.0 / RATE, atol=1e-6)
+
+
+def test_a_fast_sensors_frames_are_fitted_at_most_max_fit_hz(reach) -> None:
+    """Every frame of a 120 Hz sensor was fitted (5-13 ms each, over its 8.3 ms period): the tracker fell behind.
+    Now every other one is skipped before the fit, and the note names both rates."""
+    core, notes = TrackerCore(), []
+    stamps, joints = _at_rate(reach, 120.0)
+    for t, p in zip(stamps, joints, strict=True):
+        out = core.on_frame(float(t), NAMES, p)
+        notes += [out.note] if out.note else []
+    assert core.accepted + core.skipped == len(stamps) and abs(core.skipped - len(stamps) / 2) <= 1
+    assert len(notes) == 1 and "sends 120 frames a second (60 a second taken: max_fit_hz 60)" in notes[0], notes
+
+
+def test_the_note_names_the_sensors_rate_when_half_its_frames_are_another_persons(reach) -> None:
+    """Two people in view, every other frame the other one (refused as a jump): the note said 'the sensor sends 15
+    frames a second' of a 30 Hz sensor."""
+    core, notes = TrackerCore(), []
+    joints = MODEL.joint_positions(reach)
+    other = joints[0] + [0.0, 1.0, 0.0]  # another person, 1 m to the side
+    for i, p in enumerate(joints):
+        out = core.on_frame(i / RATE, NAMES, p if i % 2 == 0 else other)
+        notes += [out.note] if out.note else []
+    assert len(notes) == 1 and "sends 30 frames a second (15 a second taken: the others refused)" in notes[0], notes

@@ -391,3 +391,20 @@ def test_a_recording_in_millimetres_is_refused_before_it_plays(tmp_path: Path, c
     assert info.value.code == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "tracker.from_file" in line and "demo 0: coordinates beyond 20 m" in line and "millimetres?" in line
+
+
+def test_a_backlog_spanning_too_long_is_thinned_to_catch_up_and_said_once(caplog) -> None:
+    """Zenoh's thread fitted every frame in turn: with a sensor faster than the fit the poses fell seconds behind
+    the person (a review: 0.5 s at 60 Hz, 4.5 s at 240 Hz), and nothing was said."""
+    service = TrackerService(TrackerServiceConfig(), ZenohConfig())
+    caplog.set_level(logging.INFO, logger="foresight.tracker")
+    still = _reach_frames()[0]
+    t0 = time.time()
+    batch = [(dataclasses.replace(_kp(i, still), stamp=t0 + i / 240), True) for i in range(240)]  # 1 s waiting
+    service.work(batch)
+    taken = service.stats.frames
+    assert 240 - service.stats.behind == taken and 2 <= taken <= 9  # 0.15 s apart (max_gap_s / 2), the newest too
+    service.work([(dataclasses.replace(_kp(240 + i, still), stamp=t0 + 1 + i / 240), True) for i in range(3)])
+    assert service.stats.frames == taken + 3  # a short batch is taken whole
+    said = [r.getMessage() for r in caplog.records if "fell behind" in r.getMessage()]
+    assert len(said) == 1 and "240 frames waiting" in said[0], said
