@@ -88,7 +88,10 @@ RUN --mount=type=secret,id=ca --mount=type=secret,id=pipconf,target=/etc/pip.con
     rm -f /tmp/ca.pem; \
     foresight --help >/dev/null
 
-USER foresight
+# started as root, every command runs as the owner of the mounted runs/ (tools/docker_entrypoint.sh; the image's
+# own /app/runs is uid 1000's, so a container without mounts runs as foresight)
+COPY --chmod=755 tools/docker_entrypoint.sh /usr/local/bin/foresight-entrypoint
+ENTRYPOINT ["/usr/local/bin/foresight-entrypoint"]
 
 # every service is a `foresight` sub-command; compose.yaml picks one per container
 CMD ["foresight", "--help"]

@@ -42,8 +42,8 @@ OTHER_VARIABLES: dict[str, str] = {
     f"{ENV_PREFIX}_CONFIG": "the TOML config file",
     f"{ENV_PREFIX}_BLAS_THREADS": "BLAS threads per process (shared.native_threads)",
     f"{ENV_PREFIX}_PARENT_PID": "set by foresight demo for its services (shared.runtime.watch_parent)",
-    f"{ENV_PREFIX}_UID": "compose.yaml: the user id the containers run as (default 1000)",
-    f"{ENV_PREFIX}_GID": "compose.yaml: the group id the containers run as (default 1000)",
+    f"{ENV_PREFIX}_RUN_AS": "the image's entrypoint: UID:GID to run the command as (default: the owner of runs/)",
+    f"{ENV_PREFIX}_RUNS_DIR": "the image's entrypoint: the directory whose owner runs the command (default /app/runs)",
     f"{ENV_PREFIX}_BASE_IMAGE": "compose.yaml / tools/compose_check.sh: the image's base (default python:3.11-slim)",
     f"{ENV_PREFIX}_WHEELHOUSE": "compose.yaml: an image whose root holds wheels the build prefers (docs/docker.md)",
     f"{ENV_PREFIX}_WHEELHOUSE_DIR": "tools/compose_check.sh: a directory of wheels the build prefers",
@@ -66,7 +66,7 @@ def closest(name: str, valid: Iterable[str], prefix: str = "") -> str:
     """``"; did you mean X?"`` for the valid name closest to ``name``, or ``""`` when none is close.
 
     ``prefix``, shared by ``name`` and the names compared, is left out of the comparison: ``FORESIGHT_FOO`` is not
-    close to ``FORESIGHT_UID`` for their common ``FORESIGHT_``.
+    close to ``FORESIGHT_CONFIG`` for their common ``FORESIGHT_``.
     """
     rest = name[len(prefix):] if name.startswith(prefix) else name
     names = {v[len(prefix):]: v for v in valid if v.startswith(prefix)}

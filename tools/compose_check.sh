@@ -42,7 +42,6 @@ docker info >/dev/null 2>&1 || cannot "no Docker engine answers ($(docker info 2
 docker compose version >/dev/null 2>&1 || cannot "no compose v2 plugin (\`docker compose\`)"
 [ -x "$FORESIGHT" ] || cannot "no foresight command on the host to check the log with ($FORESIGHT: make setup)"
 mkdir -p models runs "$OUT"
-export FORESIGHT_UID=${FORESIGHT_UID:-$(id -u)} FORESIGHT_GID=${FORESIGHT_GID:-$(id -g)}
 compose() { docker compose -p "$PROJECT" "${FILES[@]}" "$@"; }
 if [ ${#FILES[@]} -gt 2 ]; then  # the secure variant: a CA and one certificate per role, the router's for `router`
   export FORESIGHT_SECURITY_DIR=$PWD/$OUT/security

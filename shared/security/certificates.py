@@ -28,19 +28,16 @@ from cryptography.hazmat.primitives.asymmetric.types import PrivateKeyTypes
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from ..atomic_file import atomic_write
+from .files import CertificateError, check_directory, check_private, check_readable, read_role
 
 __all__ = ["Issued", "CertificateError", "make_authority", "issue", "init_security_dir", "read_role", "verify_role",
            "check_host", "check_directory", "issued_hosts", "certificate_hosts", "load_authority", "fingerprint",
-           "LOOPBACK_HOSTS", "CA_DAYS", "check_private"]
+           "LOOPBACK_HOSTS", "CA_DAYS", "check_private", "check_readable"]
 
 LOOPBACK_HOSTS = ("localhost", "127.0.0.1")
 """Names every certificate carries, so that a run on one machine verifies."""
 CA_DAYS = 3650
 """Validity of a new authority (days); no role certificate outlives it."""
-
-
-class CertificateError(ValueError):
-    """A role's certificate or key that cannot be used; the message names the file and what is wrong."""
 
 
 @dataclass(frozen=True)
@@ -173,32 +170,6 @@ def _load_cert(path: Path) -> x509.Certificate:
         raise CertificateError(f"{path}: not a PEM certificate ({str(exc).splitlines()[0][:80]})") from None
 
 
-def check_directory(directory: str | os.PathLike[str], files: Sequence[str] = ("ca.crt",)) -> None:
-    """Refuse a security directory, or a file of it, that someone else may write.
-
-    Whoever may write them could put an authority of their own in ca.crt (Zenoh trusts every certificate that file
-    holds), or replace a role's certificate and key.
-
-    Args:
-        directory: The security directory.
-        files: Its files to check as well, where they exist (followed where they are links: what is read counts).
-
-    Raises:
-        CertificateError: The directory or one of ``files`` is writable by its group or others, or belongs to
-            another user (root excepted).
-    """
-    d = Path(directory)
-    for path, what in ((d, "security directory"), *((d / f, "security file") for f in files if (d / f).exists())):
-        st = path.stat()
-        if st.st_mode & 0o022:
-            raise CertificateError(f"{what} {path}: writable by {'others' if st.st_mode & 0o002 else 'its group'} "
-                                   f"(mode {st.st_mode & 0o777:o}); whoever can write it can put an authority of "
-                                   f"their own in ca.crt: chmod go-w {path}")
-        if st.st_uid not in (os.getuid(), 0):
-            raise CertificateError(f"{what} {path}: belongs to user id {st.st_uid}, not to this user "
-                                   f"({os.getuid()}) or root; its owner could put an authority of their own in ca.crt")
-
-
 def load_authority(path: Path) -> x509.Certificate:
     """The cell's one authority from ``ca.crt``.
 
@@ -323,35 +294,6 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
     return written
 
 
-def read_role(directory: str | os.PathLike[str], role: str) -> tuple[Path, Path, Path]:
-    """``(ca.crt, <role>.crt, <role>.key)`` of a security directory.
-
-    Raises:
-        FileNotFoundError: Naming the missing file and how to make it.
-    """
-    d = Path(directory)
-    if not d.is_dir():
-        raise FileNotFoundError(f"security directory {d} does not exist (make one with `foresight security init DIR`)")
-    files = (d / "ca.crt", d / f"{role}.crt", d / f"{role}.key")
-    for f in files:
-        if not f.is_file():
-            raise FileNotFoundError(f"security directory {d}: {f.name} is missing (make the certificates with "
-                                    f"`foresight security init DIR` where the cell's ca.key is, and copy ca.crt "
-                                    f"and this role's files here)")
-    return files
-
-
-def check_private(key_path: Path, then: str = "") -> None:
-    """Refuse a key that others than its owner may read (``then``: what to do besides ``chmod 600``).
-
-    Raises:
-        CertificateError: Naming the key and its mode.
-    """
-    if (mode := key_path.stat().st_mode & 0o777) & 0o077:
-        raise CertificateError(f"{key_path}: others than its owner may read it (mode {mode:o}): chmod 600 {key_path}"
-                               + (f"; {then}" if then else ""))
-
-
 def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime | None = None) -> x509.Certificate:
     """Check ``<role>.crt``: signed by the directory's CA, common name ``role``, valid at ``now``; returns it.
 
@@ -363,6 +305,8 @@ def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime |
     """
     ca_path, cert_path, key_path = read_role(directory, role)
     check_directory(directory, ("ca.crt", f"{role}.crt", f"{role}.key"))
+    for path in (ca_path, cert_path, key_path):
+        check_readable(path)
     ca, cert = load_authority(ca_path), _load_cert(cert_path)
     check_private(key_path)  # a key others can read is no longer this role's alone
     try:

@@ -273,3 +273,19 @@ def test_init_makes_its_directory_0700_whatever_the_umask(tmp_path: Path) -> Non
     finally:
         os.umask(old)
     assert (tmp_path / "cell").stat().st_mode & 0o777 == 0o700
+
+
+def test_a_key_this_user_cannot_read_names_its_owner_and_this_user(tmp_path: Path, monkeypatch) -> None:
+    """A container run as another user than the one who made the keys read only '...router.key: Permission
+    denied' (a review of docker compose with compose.secure.yaml)."""
+    import shared.security.certificates as certificates
+
+    init_security_dir(tmp_path, ["router"], hosts=["router"])
+    key = tmp_path / "router.key"
+    if os.getuid() == 0:  # root reads every file: the check is made to see what another user would
+        monkeypatch.setattr(certificates.os, "access", lambda path, mode: Path(path) != key)
+    else:
+        key.chmod(0)
+    with pytest.raises(CertificateError, match=r"router\.key: this process \(uid \d+\) cannot read it \(owner uid "
+                                               r"\d+, mode (600|0)\).*containers run as the owner of runs/"):
+        verify_role(tmp_path, "router")
