@@ -38,7 +38,6 @@ from shared.config import ZenohConfig
 from shared.foxglove.scene import SceneBuilder
 from shared.lockstep import FIRST_PLAN, Adoption, LockstepMaster, PlanInbox, StepClock
 from shared.protocol import (
-    HUMAN_SOURCES,
     DemoMarker,
     Expectations,
     GridSpec,
@@ -58,6 +57,7 @@ from shared.transport import Presence, RejectCounter, TypedPublisher, describe, 
 
 from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, reason_kind
 from .models import HumanBody, PlaceInScene, RobotModel, load_models, start_configuration
+from .peers import PeerWatch
 from .result import ExecutorResult
 
 if TYPE_CHECKING:
@@ -118,6 +118,7 @@ class ExecutorService:
         self.result = ExecutorResult()
         self.inbox = PlanInbox()
         self._pose_arrival: OrderedDict[tuple[int, int], float] = OrderedDict()  # (demo_id, index) -> arrival
+        self.peers = PeerWatch(config)
         self.mcap: McapLog | None = None
         self.live: LiveServer | None = None  # the live server (live_port), fed by the log
         self._times: list[float] = []
@@ -188,14 +189,7 @@ class ExecutorService:
             self.inbox.put_occupancy(msg.tick, min(now, self._pose_arrival.get((msg.demo_id, msg.index), now)))
 
     def _on_peer(self, service: str, alive: bool) -> None:
-        if self.config.mode == "lockstep":
-            return  # the clock protocol decides; a liveliness event's timing must not change a lock-step run
-        was_gone = service in self.core.gone
-        self.core.note_peer(service, alive)  # the human's source ending its stream after its end marker is no fault
-        if (service in self.core.gone) != was_gone:
-            log.warning("executor: %s %s", service, "is back" if alive else "is gone: holding the robot")
-        elif service in HUMAN_SOURCES and service in self.config.hold_without and not alive:
-            log.info("executor: %s ended its stream after the demonstration's end: the robot goes on", service)
+        self.peers.note(service, alive, self.core)
 
     # -- run -------------------------------------------------------------------------------------
 
@@ -252,6 +246,10 @@ class ExecutorService:
         r.plans = self.core.plans_adopted
         r.times = np.asarray(self._times)
         r.q = np.asarray(self._qs).reshape(len(self._qs), self.limits.dof)
+        if r.lockstep_timeouts:
+            log.warning("executor: %d tick(s) went on without their plan or prediction (waited %.0f s each): not the "
+                        "run its seed makes (the experiments refuse such a run)", r.lockstep_timeouts,
+                        self.config.lockstep_timeout_s)
         held = "steps" if self.config.mode == "lockstep" else "state samples"  # what ExecutorResult.held_steps counts
         log.info("executor: done after %d steps, goal %s, reached=%s (step %d), %d plans, held during %d %s, "
                  "%d rejected: %s", r.steps, r.goal_per_step[-1] if r.goal_per_step else -1, r.reached,

@@ -76,7 +76,7 @@ class ReplayerService:
                      describe(session)["zid"])
             try:
                 if clock_sub is not None:
-                    self._run_lockstep(ticks, core, human, stop)
+                    self._run_lockstep(ticks, core, human, stop, presence)
                 else:
                     presence.wait_for(cfg.wait_for, cfg.wait_timeout, stop)
                     self._run_realtime(core, human, stop)
@@ -120,7 +120,7 @@ class ReplayerService:
                 next_t = time.monotonic()
 
     def _run_lockstep(self, ticks: TickQueue, core: ReplayerCore, human: HumanPublisher,
-                      stop: threading.Event) -> None:
+                      stop: threading.Event, presence: Presence) -> None:
         order = TickOrder()
         n = self.config.samples_per_tick
         last = time.monotonic()  # the start, then the last tick: a replayer with no clock said nothing for ever
@@ -128,9 +128,14 @@ class ReplayerService:
             tick = ticks.get(timeout=0.1)
             if tick is None:
                 if time.monotonic() - last >= NO_TICK_WARN_S:
-                    log.warning("replayer: no clock tick on %s for %g s; in lock-step it publishes a pose only when "
-                                "the executor ticks (is one running, with prefix %r?)", self.keys.clock,
-                                NO_TICK_WARN_S, self.keys.prefix)
+                    if presence.is_alive("executor"):  # up, waiting for a service (a planner compiling): no fault
+                        log.info("replayer: no clock tick on %s for %g s; the executor is up: it ticks once the "
+                                 "services it waits for are (a planner compiles for up to a minute on a first "
+                                 "start)", self.keys.clock, NO_TICK_WARN_S)
+                    else:
+                        log.warning("replayer: no clock tick on %s for %g s; in lock-step it publishes a pose only "
+                                    "when the executor ticks (is one running, with prefix %r?)", self.keys.clock,
+                                    NO_TICK_WARN_S, self.keys.prefix)
                     last = time.monotonic()
                 continue
             last = time.monotonic()

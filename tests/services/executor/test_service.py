@@ -411,3 +411,23 @@ def test_the_default_log_name_of_a_run_started_in_the_same_second_is_its_own(tmp
     first.write_bytes(b"the first run's log")
     assert (first.name, config.mcap_path("20261127T120000Z").name) == ("20261127T120000Z.mcap",
                                                                       "20261127T120000Z-2.mcap")
+
+
+def test_a_service_gone_mid_lockstep_run_is_said_and_the_run_says_it_went_on_without_it(pr2, caplog) -> None:
+    """Lock-step acts on no liveliness event, and said none: a compose run whose planner was killed went quiet for
+    30 s a tick and ended with exit 0 as if nothing had happened (a review of docker compose run for real)."""
+    from shared.config import ZenohConfig
+
+    cfg = ExecutorConfig(mode="lockstep", steps=2, wait_for=[], lockstep_timeout_s=0.2, mcap="")
+    service = ExecutorService(cfg, ZenohConfig(listen=["tcp/127.0.0.1:0"], connect=[], multicast_scouting=False),
+                              robot=pr2, human=(None, None), scene=SCENE)
+    caplog.set_level(logging.INFO, logger="foresight.executor")
+    for name, alive in (("planner", True), ("replayer", False), ("planner", False), ("planner", False),
+                        ("planner", True)):
+        service._on_peer(name, alive)
+    gone = [r for r in caplog.records if "is gone" in r.getMessage()]
+    assert len(gone) == 1 and gone[0].levelno == logging.WARNING and "planner is gone: each tick" in gone[0].message
+    assert "planner is back" in caplog.text and not service.core.gone  # said, not acted on
+    result = service.run()  # no planner at all: each tick waits 0.2 s and goes on
+    assert result.lockstep_timeouts == 2
+    assert "2 tick(s) went on without their plan or prediction" in caplog.text

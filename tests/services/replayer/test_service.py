@@ -138,6 +138,30 @@ def test_a_lockstep_replayer_with_no_clock_says_it_waits(zenoh_hub, small_lib, c
     said = [r.getMessage() for r in caplog.records if "no clock tick on" in r.getMessage()]
     assert said and "publishes a pose only when the executor ticks" in said[0] and not th.is_alive()
 
+def test_a_lockstep_replayer_waiting_while_the_executor_is_up_says_it_is_no_fault(zenoh_hub, small_lib, caplog,
+                                                                                   monkeypatch):
+    """The executor waits for its services before the first tick (a planner compiles for up to a minute on a first
+    `docker compose up`): the replayer's warning asked whether an executor was running while one was."""
+    import services.replayer.service as replayer_service
+
+    monkeypatch.setattr(replayer_service, "NO_TICK_WARN_S", 1.0)  # the executor's token is seen well before
+    executor_cfg = zenoh_hub()
+    with open_session(executor_cfg) as session:
+        executor = Presence(session, Keys(executor_cfg.prefix), "executor")
+        service = ReplayerService(ReplayerConfig(mode="lockstep"), zenoh_hub(), small_lib)
+        stop = threading.Event()
+        caplog.set_level(logging.INFO, logger="foresight.replayer")
+        th = run_in_thread(service, stop)
+        deadline = time.monotonic() + 10
+        while not any("no clock tick on" in r.getMessage() for r in caplog.records) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        stop.set()
+        th.join(timeout=10.0)
+        executor.close()
+    said = [r for r in caplog.records if "no clock tick on" in r.getMessage()]
+    assert said and said[0].levelno == logging.INFO and "the executor is up" in said[0].getMessage()
+
+
 def test_lockstep_driven_by_clock_ticks(zenoh_hub, small_lib):
     sub_cfg, rep_cfg = zenoh_hub(), zenoh_hub()
     keys = Keys(sub_cfg.prefix)
