@@ -121,22 +121,28 @@ def test_lockstep_replayer_stops_with_the_executor(zenoh_hub, small_lib, caplog)
 
 
 
-def test_a_lockstep_replayer_with_no_clock_says_it_waits(zenoh_hub, small_lib, caplog, monkeypatch):
-    """With no executor ticking it waited for ever, saying only its start line."""
-    import services.replayer.service as replayer_service
-
-    monkeypatch.setattr(replayer_service, "NO_TICK_WARN_S", 0.3)
-    service = ReplayerService(ReplayerConfig(mode="lockstep"), zenoh_hub(), small_lib)
+def _waiting_lines(service: ReplayerService, caplog) -> list[logging.LogRecord]:
+    """Run a lock-step replayer that gets no tick until it says it waits (10 s at most); its 'no clock tick' lines."""
     stop = threading.Event()
-    caplog.set_level(logging.WARNING, logger="foresight.replayer")
     th = run_in_thread(service, stop)
     deadline = time.monotonic() + 10
     while not any("no clock tick on" in r.getMessage() for r in caplog.records) and time.monotonic() < deadline:
         time.sleep(0.05)
     stop.set()
     th.join(timeout=10.0)
-    said = [r.getMessage() for r in caplog.records if "no clock tick on" in r.getMessage()]
-    assert said and "publishes a pose only when the executor ticks" in said[0] and not th.is_alive()
+    assert not th.is_alive()
+    return [r for r in caplog.records if "no clock tick on" in r.getMessage()]
+
+
+def test_a_lockstep_replayer_with_no_clock_says_it_waits(zenoh_hub, small_lib, caplog, monkeypatch):
+    """With no executor ticking it waited for ever, saying only its start line."""
+    import services.replayer.service as replayer_service
+
+    monkeypatch.setattr(replayer_service, "NO_TICK_WARN_S", 0.3)
+    caplog.set_level(logging.WARNING, logger="foresight.replayer")
+    said = _waiting_lines(ReplayerService(ReplayerConfig(mode="lockstep"), zenoh_hub(), small_lib), caplog)
+    assert said and "publishes a pose only when the executor ticks" in said[0].getMessage()
+
 
 def test_a_lockstep_replayer_waiting_while_the_executor_is_up_says_it_is_no_fault(zenoh_hub, small_lib, caplog,
                                                                                    monkeypatch):
@@ -145,20 +151,12 @@ def test_a_lockstep_replayer_waiting_while_the_executor_is_up_says_it_is_no_faul
     import services.replayer.service as replayer_service
 
     monkeypatch.setattr(replayer_service, "NO_TICK_WARN_S", 1.0)  # the executor's token is seen well before
+    caplog.set_level(logging.INFO, logger="foresight.replayer")
     executor_cfg = zenoh_hub()
     with open_session(executor_cfg) as session:
         executor = Presence(session, Keys(executor_cfg.prefix), "executor")
-        service = ReplayerService(ReplayerConfig(mode="lockstep"), zenoh_hub(), small_lib)
-        stop = threading.Event()
-        caplog.set_level(logging.INFO, logger="foresight.replayer")
-        th = run_in_thread(service, stop)
-        deadline = time.monotonic() + 10
-        while not any("no clock tick on" in r.getMessage() for r in caplog.records) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        stop.set()
-        th.join(timeout=10.0)
+        said = _waiting_lines(ReplayerService(ReplayerConfig(mode="lockstep"), zenoh_hub(), small_lib), caplog)
         executor.close()
-    said = [r for r in caplog.records if "no clock tick on" in r.getMessage()]
     assert said and said[0].levelno == logging.INFO and "the executor is up" in said[0].getMessage()
 
 
