@@ -14,6 +14,13 @@ hand going out and back within the window does not show (the paper's motions end
 ``max_s``. After such a forced end the hand may still move, so its rest position is learnt again (over
 ``rest_s``, no reach starting meanwhile) rather than taken from a moving hand, which started a new reach at
 once with the ended one's last poses.
+
+A reach starts **from rest**, as the library's demonstrations do. One that ended with the hand away from its rest
+position (at the goal) leaves the rule *returning*: the hand going back is no reach, and the next one can start
+once the wrist is within ``start_m`` of its rest again. Before, the goal became the rest position and the way back
+was published as a reach of its own, recognised as some class with full confidence (a review's live run:
+``near_centre p=1.00`` for a return). If the hand stays away for ``max_s``, its rest position is learnt again
+where it is.
 """
 
 from __future__ import annotations
@@ -66,6 +73,7 @@ class ReachDetector:
         self._n = 0
         self._start_t = 0.0
         self._window: deque[tuple[float, np.ndarray]] = deque()  # the wrist over the last end_s of the reach
+        self._away: float | None = None  # when a reach ended with the hand away from rest (returning until back)
 
     def update(self, wrist: np.ndarray, t: float) -> ReachEvent | None:
         """The event at this frame, if any (``wrist``: ``(3,)`` body-frame position, m; ``t``: s)."""
@@ -80,6 +88,12 @@ class ReachDetector:
             if t - self._since < r.rest_s:  # learning where the hand rests: the mean of these frames
                 self._n += 1
                 self._rest = self._rest + (w - self._rest) / self._n
+                return None
+            if self._away is not None:  # the hand on its way back from the last reach's goal: no reach
+                if np.linalg.norm(w - self._rest) <= r.start_m:
+                    self._away = None  # back at rest: the next reach may start
+                elif t - self._away >= r.max_s:  # it stays away: where it rests is learnt again, from here
+                    self._away, self._since, self._rest, self._n = None, t, w.copy(), 1
                 return None
             if np.linalg.norm(w - self._rest) > r.start_m:
                 self.active, self._start_t = True, t
@@ -96,7 +110,11 @@ class ReachDetector:
             self.active = False
             if still:
                 half = self._window[-1][0] - 0.5 * r.end_s  # where the hand came to rest (the window's recent half)
-                self._rest = np.mean([p for s, p in self._window if s >= half], axis=0)
+                stop = np.mean([p for s, p in self._window if s >= half], axis=0)
+                if np.linalg.norm(stop - self._rest) > r.start_m:
+                    self._away = t  # at the goal: the way back is no reach
+                else:
+                    self._rest = stop  # back home (a reach out and back within the window)
             else:  # ended by max_s while the hand still moves: where it rests is learnt again, over rest_s
                 self._since = self._rest = None
             return ReachEvent("end", t)
