@@ -176,6 +176,7 @@ class ExecutorCore:
         self.plans_adopted = 0
         self.gone: frozenset[str] = frozenset()  # services of hold_without whose token was lost (replaced, never
         # mutated: the transport's thread writes it while the loop reads it)
+        self.seen: frozenset[str] = frozenset()  # services whose token was seen (replaced the same way)
 
     # ------------------------------------------------------------------------------------------
     # inputs
@@ -246,6 +247,8 @@ class ExecutorCore:
         The human's source (the replayer or the tracker: ``shared.protocol.HUMAN_SOURCES``) counts as gone only when it
         goes in the middle of a demonstration: after its end marker the human stands still and its stream may end.
         """
+        if alive:
+            self.seen = self.seen | {service}
         if service not in self.config.hold_without:
             return
         if service in HUMAN_SOURCES and not alive and self.fresh.demo_end is not None:
@@ -268,8 +271,10 @@ class ExecutorCore:
         if age > limit + 1e-9:
             return f"plan is {age:.2f} s old (limit {limit:.2f} s)"
         if self.config.require_occupancy and not (self.human_ended and self.fresh.occupancy is not None):
-            if self.fresh.occupancy is None:
-                return "no occupancy prediction received yet"
+            if self.fresh.occupancy is None:  # a live person's tracker publishes poses only during a reach
+                return "no occupancy prediction received yet" + (
+                    " (the tracker publishes poses only during a reach: the robot moves once the person's first "
+                    "reach is seen)" if "tracker" in self.seen else "")
             age = t - self.fresh.occupancy
             if age > limit + 1e-9:
                 return f"occupancy is {age:.2f} s old (limit {limit:.2f} s)"

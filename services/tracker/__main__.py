@@ -19,7 +19,8 @@ DESCRIPTION = """Take a body tracker's keypoint frames (HumanKeypoints on <prefi
 geometry_msgs/PoseArray with --input ros2), fit the human model to each (the paper's 12 posture features),
 refuse implausible frames (each counted; at most one line per reason a second), smooth, bridge short gaps,
 and publish HumanPose with DemoMarker start/end around each reach, as the replayer does for a recording.
---from FILE plays a keypoint recording (<class>.csv of a keypoint library) in real time instead of a sensor.
+--from FILE (short for --from-file) plays a keypoint recording (<class>.csv of a keypoint library) in real time
+instead of a sensor.
 docs/keypoints.md. Options come from the dataclass defaults < --config FILE ([tracker], [zenoh]) < env
 FORESIGHT_TRACKER_<NAME> / FORESIGHT_ZENOH_<NAME> < flags."""
 
@@ -33,7 +34,9 @@ def _make(cfg: TrackerServiceConfig, zcfg: ZenohConfig, stop: threading.Event) -
 
 def main(argv: list[str] | None = None, prog: str = "python -m services.tracker") -> int:
     """Run the tracker; returns the exit status (0 stopped or played, 2 bad input)."""
-    return service_main(argv, prog, section="tracker", config_cls=TrackerServiceConfig, description=DESCRIPTION,
+    args = sys.argv[1:] if argv is None else argv  # --from, as the docs write it: --from-file's name, not a prefix
+    args = ["--from-file" if a == "--from" else "--from-file=" + a[7:] if a.startswith("--from=") else a for a in args]
+    return service_main(args, prog, section="tracker", config_cls=TrackerServiceConfig, description=DESCRIPTION,
                         make=_make)
 
 

@@ -319,3 +319,16 @@ def test_a_lagging_arm_stays_on_the_path_at_a_bend() -> None:
         worst = max(worst, min(np.hypot(x - np.clip(x, 0, 1), y), np.hypot(x - 1, y - np.clip(y, 0, 1))))
         assert np.all(np.abs(core.qd) <= limits.velocity + 1e-9)
     assert core.reached and worst < 0.02, worst
+
+
+def test_the_hold_before_a_live_persons_first_reach_says_why() -> None:
+    """A live run held for as long as the person stood still (32 s in a review's run), saying only 'no occupancy
+    prediction received yet': the tracker publishes poses only during a reach."""
+    limits = ArmLimits(("a",), np.array([-1.0]), np.array([1.0]), np.array([1.0]))
+    core = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=10.0))
+    core.adopt(_one_joint_plan())
+    core.step(0.02)
+    assert core.holding and core.reason == "no occupancy prediction received yet"  # the replayer's case: as before
+    core.note_peer("tracker", True)
+    core.step(0.02)
+    assert core.holding and "the tracker publishes poses only during a reach" in core.reason

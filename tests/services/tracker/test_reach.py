@@ -8,6 +8,7 @@ from services.tracker.reach import ReachDetector, ReachRule
 
 RATE = 30.0
 HOME, GOAL = np.array([0.2, -0.2, -0.3]), np.array([0.6, 0.1, 0.0])
+RULE = ReachRule(end_s=1.0)  # the tracker's end_s
 
 
 def _path(*legs: tuple[np.ndarray, np.ndarray, float]) -> np.ndarray:
@@ -15,7 +16,7 @@ def _path(*legs: tuple[np.ndarray, np.ndarray, float]) -> np.ndarray:
     return np.concatenate([np.linspace(a, b, max(1, int(s * RATE)), endpoint=False) for a, b, s in legs])
 
 
-def _events(wrist: np.ndarray, rule: ReachRule = ReachRule(end_s=1.0)) -> list[tuple[str, float]]:
+def _events(wrist: np.ndarray, rule: ReachRule = RULE) -> list[tuple[str, float]]:
     det = ReachDetector(rule)
     out = []
     for i, w in enumerate(wrist):

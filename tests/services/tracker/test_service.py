@@ -260,9 +260,11 @@ def test_cli_refuses_a_recording_that_is_not_one(tmp_path: Path, capsys) -> None
     assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "tracker.from_file" in err[0] and "header must be demo,frame" in err[0]
-    with pytest.raises(SystemExit):
-        tracker_main(["--from", str(tmp_path / "none.csv")], prog="foresight tracker")
-    assert "is not a file" in capsys.readouterr().err
+    for given in (["--from", str(tmp_path / "none.csv")], [f"--from={tmp_path / 'none.csv'}"],
+                  ["--from-file", str(tmp_path / "none.csv")]):  # --from is the option's name, not only a prefix
+        with pytest.raises(SystemExit):
+            tracker_main(given, prog="foresight tracker")
+        assert "is not a file" in capsys.readouterr().err
 
 
 def test_a_recording_in_another_layout_is_refused_before_it_plays(tmp_path: Path, capsys) -> None:
