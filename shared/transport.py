@@ -252,7 +252,7 @@ def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str,
         except Exception:  # a bug in one handler must not kill the subscription
             log.exception("handler for %s failed", key)
 
-    for key in types:
+    for key in dict.fromkeys((key_expr, *types)):  # the expression itself too: one refused is refused whole
         refused = denied(session, key, "subscribe")
         if refused:
             log.warning("access control: %s", refused)

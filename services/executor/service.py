@@ -53,6 +53,7 @@ from shared.protocol import (
 )
 from shared.recording.writer import McapLog
 from shared.scene import Scene, load_scene
+from shared.security.guard import denied
 from shared.transport import Presence, RejectCounter, TypedPublisher, describe, open_session, sender_of
 
 from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, reason_kind
@@ -221,6 +222,8 @@ class ExecutorService:
                 closing.callback(self._write, self.mcap.close)  # a full disk's failure: counted, said
                 self.result.mcap_path = str(path)
             link = self._connect_robot(session) if cfg.robot == "ros2" else None
+            if refused := denied(session, f"{self.zenoh.prefix}/**", "subscribe"):  # the log would stay empty
+                log.warning("access control: %s", refused)
             sub = session.declare_subscriber(f"{self.zenoh.prefix}/**", self._on_zenoh)
             # block (never drop) under congestion: lock-step consumers count on every state and tick
             state_pub: TypedPublisher[Any] = TypedPublisher(session, self.keys.robot_state, block=True)

@@ -12,7 +12,7 @@ from typing import Any
 
 from shared.protocol import Keys
 
-from .acl import consumed_keys, owned_keys, token_keys
+from .acl import consumed_keys, owned_keys, subscription_exprs, token_keys
 
 __all__ = ["remember", "forget", "denied"]
 
@@ -45,6 +45,8 @@ def denied(session: Any, key: str, kind: str) -> str:
         return (f"role {role} may not declare the presence token {key} (it may declare "
                 f"{', '.join(allowed) or 'none'}): every peer drops it, and one waiting for it never sees it")
     routes = keys.routes()
+    if kind == "subscribe" and key not in routes and any(c in key for c in "*$"):
+        return _wildcard_denied(keys, role, key)
     if key not in routes:
         return ""
     if kind == "put" and key not in owned_keys(keys, role):
@@ -52,3 +54,25 @@ def denied(session: Any, key: str, kind: str) -> str:
     if kind == "subscribe" and key not in consumed_keys(keys, role):
         return f"role {role} may not subscribe to {key}: it will receive nothing"
     return ""
+
+
+def _wildcard_denied(keys: Keys, role: str, expr: str) -> str:
+    """Why a subscription to the wildcard ``expr`` is refused ("" if it is not).
+
+    Zenoh checks a subscription's own key expression: one that also matches a key the role does not consume is
+    refused whole, so the keys it does consume are lost with it (a planner's ``foresight/human/*``, an executor run
+    under another role's certificate: its log's ``foresight/**``).
+    """
+    import zenoh
+
+    wanted = zenoh.KeyExpr(expr)
+    if any(zenoh.KeyExpr(a).includes(wanted) for a in subscription_exprs(keys, role)):
+        return ""
+    consumed = set(consumed_keys(keys, role))
+    lost = [k for k in keys.routes() if k not in consumed and wanted.intersects(zenoh.KeyExpr(k))]
+    if not lost:
+        return ""
+    return (f"role {role} may not subscribe to {expr}: it also matches {', '.join(lost[:3])}"
+            f"{' ...' if len(lost) > 3 else ''}, which the role does not consume, so the access control refuses the "
+            "whole expression and it will receive nothing")
+

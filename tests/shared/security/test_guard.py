@@ -32,6 +32,31 @@ def test_denied_names_role_key_and_reason() -> None:
     assert denied(session, keys.pose, "put") == ""
 
 
+def test_a_wildcard_subscription_that_also_matches_keys_the_role_does_not_consume_is_named() -> None:
+    """Zenoh refuses such a subscription whole: a planner's foresight/human/* lost the markers it consumes too, and
+    an executor run under another role's certificate its whole log, with no word (a security review)."""
+    session, keys = object(), Keys()
+    remember(session, "planner", keys)
+    try:
+        why = denied(session, keys.human_all, "subscribe")
+        assert why.startswith(f"role planner may not subscribe to {keys.human_all}: it also matches "
+                              f"{keys.pose}") and "refuses the whole expression" in why
+        assert "foresight/**" in denied(session, f"{keys.prefix}/**", "subscribe")
+    finally:
+        forget(session)
+    for role in ("executor", "observer"):  # the executor's log and an observer's: allowed whole
+        remember(session, role, keys)
+        try:
+            assert denied(session, f"{keys.prefix}/**", "subscribe") == ""
+        finally:
+            forget(session)
+    remember(session, "predictor", keys)  # its ordered subscription to poses and markers: allowed
+    try:
+        assert denied(session, keys.human_all, "subscribe") == ""
+    finally:
+        forget(session)
+
+
 def test_endpoints_and_the_plain_tcp_warning() -> None:
     assert secure_endpoints(["tcp/127.0.0.1:7447", "tls/h:1"]) == ["tls/127.0.0.1:7447", "tls/h:1"]
     with pytest.raises(ConfigError, match="with security every link is TLS .* udp/h:2, ws/h:3 would not be"):
