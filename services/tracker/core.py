@@ -47,7 +47,7 @@ from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Message
 from .checks import Upright, fit_without_outliers, furthest_point, missing_points, torso_tilt_deg
 from .filters import OneEuroFilter
 from .rate import MIN_PERIOD_S, FrameRate
-from .reach import ReachDetector, ReachRule
+from .reach import ReachDetector, ReachRule, body_wrist
 from .resample import PoseClock
 
 __all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S", "JUMP_CONFIRM",
@@ -136,6 +136,7 @@ class TrackerCore:
         refused: Frames refused per reason (:data:`REASONS`).
         accepted: Frames accepted.
         skipped: Frames not fitted: stamped under ``1 / max_fit_hz`` after the last accepted one.
+        unfitted: Frames not fitted to catch up with a backlog (``fit`` False).
         bridged: Poses interpolated across gaps.
         reaches: Reaches started.
         points_left_out: Optional points left out of accepted frames' fits, far off them
@@ -151,10 +152,8 @@ class TrackerCore:
         self.filter = OneEuroFilter(self.config.min_cutoff_hz, self.config.beta)
         self.reach = ReachDetector(self.config.rule)
         self.refused = dict.fromkeys(REASONS, 0)
-        self.accepted = self.skipped = self.bridged = self.reaches = self.points_left_out = 0
+        self.accepted = self.skipped = self.unfitted = self.bridged = self.reaches = self.points_left_out = 0
         self.upright = Upright()                                 # whether this track's keypoints have z up
-        self._wrist, self._pelvis = list(POINT_NAMES).index("r_wrist"), list(POINT_NAMES).index("pelvis")
-        self._shoulders = list(POINT_NAMES).index("r_shoulder"), list(POINT_NAMES).index("l_shoulder")
         self._required = {p: list(POINT_NAMES).index(p) for p in REQUIRED}
         self._raw: tuple[float, np.ndarray] | None = None      # the last accepted fit (stamp, features)
         self._joints: np.ndarray | None = None                  # its joint positions (J, 3), for the jump check
@@ -173,10 +172,11 @@ class TrackerCore:
         self.demo_id = -1
         self._index = 0
 
-    def on_keypoints(self, msg: HumanKeypoints, numbered: bool = True) -> TrackerOutput:
+    def on_keypoints(self, msg: HumanKeypoints, numbered: bool = True, fit: bool = True) -> TrackerOutput:
         """One frame off the wire (decoded and checked): its coordinate frame and names, then :meth:`on_frame`.
 
-        ``numbered``: ``msg.frame`` is the sensor's frame number (False: it only counts arrivals, as for ROS 2).
+        ``numbered``: ``msg.frame`` is the sensor's frame number (False: it only counts arrivals, as for ROS 2);
+        ``fit``: False for a frame left unfitted to catch up with a backlog (:mod:`.catch_up`).
         """
         if msg.frame_id != self.config.frame_id:
             return self._refuse("frame", f"frame {msg.frame} is in {msg.frame_id!r}, the tracker takes "
@@ -185,18 +185,21 @@ class TrackerCore:
         if unknown:
             return self._refuse("names", f"frame {msg.frame} names {', '.join(map(repr, unknown[:4]))}, not points of "
                                 f"the layout {self.layout.name} (e.g. {', '.join(self.layout.source_names[:4])})")
-        return self.on_frame(msg.stamp, list(msg.names), msg.positions, msg.frame if numbered else None)
+        return self.on_frame(msg.stamp, list(msg.names), msg.positions, msg.frame if numbered else None, fit)
 
     def on_frame(self, stamp: float, names: list[str], positions: np.ndarray,
-                 frame: int | None = None) -> TrackerOutput:
+                 frame: int | None = None, fit: bool = True) -> TrackerOutput:
         """One keypoint frame: ``names`` (K) and ``positions`` ``(K, 3)`` m, NaN where missing; ``stamp`` s.
 
         ``frame``: the sensor's frame number, where it numbers them; a gap is then bridged with no more poses
-        than the frames it dropped.
+        than the frames it dropped. ``fit`` False: only counted (the sensor's rate, :attr:`unfitted`).
         """
         if self._seen is not None and stamp > self._seen:
             self.sensor.add(stamp - self._seen)
         self._seen = stamp if self._seen is None else max(self._seen, stamp)
+        if not fit:
+            self.unfitted += 1
+            return TrackerOutput()
         if self._raw is not None and 0 < stamp - self._raw[0] < 0.9 / self.config.max_fit_hz:
             self.skipped += 1  # (0.9: a 120 Hz sensor's every other frame is 1 / 60 s after the last, not 0.99 of it)
             return TrackerOutput()
@@ -292,7 +295,8 @@ class TrackerCore:
         sent_hz = self.sensor.hz or taken_hz
         if abs(sent_hz / taken_hz - 1.0) <= 0.1:
             return f"{taken_hz:.0f} frames a second"
-        why = f"max_fit_hz {self.config.max_fit_hz:g}" if self.skipped else "the others refused"
+        why = (f"max_fit_hz {self.config.max_fit_hz:g}" if self.skipped else "catching up with a backlog"
+               if self.unfitted else "the others refused")
         return f"{sent_hz:.0f} frames a second ({taken_hz:.0f} a second taken: {why})"
 
     def _follows(self, refused: tuple[float, np.ndarray, int], joints: np.ndarray, stamp: float) -> bool:
@@ -353,7 +357,7 @@ class TrackerCore:
         self._recent.append((t, f))
         while self._recent and self._recent[0][0] < t - self.config.pre_s - 1e-9:
             self._recent.popleft()
-        event = self.reach.update(self._body_wrist(f), t)
+        event = self.reach.update(body_wrist(self.model.joint_positions(np.asarray(f, dtype=np.float64))), t)
         if event is not None and event.event == "start":
             self.demo_id += 1
             self.reaches += 1
@@ -383,17 +387,3 @@ class TrackerCore:
     def _end(self, t: float) -> list[Message]:
         return [DemoMarker(stamp=t, tick=-1, demo_id=self.demo_id, event="end", true_class=-1, class_name="live",
                            n_samples=self._index)]
-
-    def _body_wrist(self, f: np.ndarray) -> np.ndarray:
-        """The right wrist relative to the pelvis, turned by the shoulder line's yaw (the body's frame).
-
-        The yaw is the shoulder line's, from the fitted joint positions, not the pelvis yaw feature: the fit splits a
-        turn between the pelvis yaw and the torso twist, which under 2 cm of sensor noise swung the wrist 14.5 cm
-        (p99) in a frame turned by the yaw feature, against 3.1 cm in this one (a still person, 10 s).
-        """
-        j = self.model.joint_positions(np.asarray(f, dtype=np.float64))
-        across = j[self._shoulders[1]] - j[self._shoulders[0]]  # right to left shoulder: the body's +y
-        yaw = float(np.arctan2(across[1], across[0])) - 0.5 * np.pi
-        c, s = np.cos(yaw), np.sin(yaw)
-        v = j[self._wrist] - j[self._pelvis]
-        return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])

@@ -17,10 +17,11 @@ once with the ended one's last poses.
 
 A reach starts **from rest**, as the library's demonstrations do. One that ended with the hand away from its rest
 position (at the goal) leaves the rule *returning*: the hand going back is no reach, and the next one can start
-once the wrist is within ``start_m`` of its rest again. Before, the goal became the rest position and the way back
-was published as a reach of its own, recognised as some class with full confidence (a review's live run:
-``near_centre p=1.00`` for a return). If the hand stays away for ``max_s``, its rest position is learnt again
-where it is.
+once the wrist is within ``start_m`` of its rest again, or has left the goal and come to rest elsewhere (that is
+its rest position then). Before, the goal became the rest position and the way back was published as a reach of
+its own, recognised as some class with full confidence (a review's live run: ``near_centre p=1.00`` for a
+return). If the hand stays at the goal for ``max_s``, its rest position is learnt again where it is. A motion from
+one goal straight to another is no reach either (it does not start at rest, and the library has none like it).
 """
 
 from __future__ import annotations
@@ -30,7 +31,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ReachRule", "ReachDetector", "ReachEvent"]
+from shared.keypoints.fit import POINT_NAMES
+
+__all__ = ["ReachRule", "ReachDetector", "ReachEvent", "body_wrist"]
+
+_WRIST, _PELVIS = POINT_NAMES.index("r_wrist"), POINT_NAMES.index("pelvis")
+_SHOULDERS = POINT_NAMES.index("r_shoulder"), POINT_NAMES.index("l_shoulder")
+
+
+def body_wrist(joints: np.ndarray) -> np.ndarray:
+    """The right wrist relative to the pelvis, turned by the shoulder line's yaw (the body's frame): ``(3,)``.
+
+    Args:
+        joints: ``(J, 3)`` the human model's joint positions (``shared.keypoints.fit.POINT_NAMES`` order).
+
+    The yaw is the shoulder line's, from the fitted joint positions, not the pelvis yaw feature: the fit splits a
+    turn between the pelvis yaw and the torso twist, which under 2 cm of sensor noise swung the wrist 14.5 cm
+    (p99) in a frame turned by the yaw feature, against 3.1 cm in this one (a still person, 10 s).
+    """
+    across = joints[_SHOULDERS[1]] - joints[_SHOULDERS[0]]  # right to left shoulder: the body's +y
+    yaw = float(np.arctan2(across[1], across[0])) - 0.5 * np.pi
+    c, s = np.cos(yaw), np.sin(yaw)
+    v = joints[_WRIST] - joints[_PELVIS]
+    return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
 
 
 @dataclass(frozen=True)
@@ -74,6 +97,8 @@ class ReachDetector:
         self._start_t = 0.0
         self._window: deque[tuple[float, np.ndarray]] = deque()  # the wrist over the last end_s of the reach
         self._away: float | None = None  # when a reach ended with the hand away from rest (returning until back)
+        self._goal = np.zeros(3)  # where that reach ended
+        self._left_goal = False  # the hand has left it since
 
     def update(self, wrist: np.ndarray, t: float) -> ReachEvent | None:
         """The event at this frame, if any (``wrist``: ``(3,)`` body-frame position, m; ``t``: s)."""
@@ -90,10 +115,7 @@ class ReachDetector:
                 self._rest = self._rest + (w - self._rest) / self._n
                 return None
             if self._away is not None:  # the hand on its way back from the last reach's goal: no reach
-                if np.linalg.norm(w - self._rest) <= r.start_m:
-                    self._away = None  # back at rest: the next reach may start
-                elif t - self._away >= r.max_s:  # it stays away: where it rests is learnt again, from here
-                    self._away, self._since, self._rest, self._n = None, t, w.copy(), 1
+                self._returning(w, t)
                 return None
             if np.linalg.norm(w - self._rest) > r.start_m:
                 self.active, self._start_t = True, t
@@ -112,13 +134,35 @@ class ReachDetector:
                 half = self._window[-1][0] - 0.5 * r.end_s  # where the hand came to rest (the window's recent half)
                 stop = np.mean([p for s, p in self._window if s >= half], axis=0)
                 if np.linalg.norm(stop - self._rest) > r.start_m:
-                    self._away = t  # at the goal: the way back is no reach
+                    self._away, self._goal, self._left_goal = t, stop, False  # at the goal: the way back is no reach
+                    self._window.clear()
                 else:
                     self._rest = stop  # back home (a reach out and back within the window)
             else:  # ended by max_s while the hand still moves: where it rests is learnt again, over rest_s
                 self._since = self._rest = None
             return ReachEvent("end", t)
         return None
+
+    def _returning(self, w: np.ndarray, t: float) -> None:
+        """The hand after a reach that ended at its goal: back at rest, or at rest somewhere else, ends the return.
+
+        Put down a little off its old rest (12 cm, say), the hand would have stayed "returning" for ``max_s`` and
+        every reach meanwhile missed: once it has left the goal and been still for ``end_s``, where it is becomes
+        the rest position.
+        """
+        r = self.rule
+        self._window.append((t, w))
+        while len(self._window) > 1 and t - self._window[1][0] >= r.end_s:
+            self._window.popleft()
+        self._left_goal = self._left_goal or bool(np.linalg.norm(w - self._goal) > r.start_m)
+        if np.linalg.norm(w - self._rest) <= r.start_m:
+            self._away = None  # back at rest: the next reach may start
+        elif self._left_goal and self._still():
+            self._rest, self._away = np.mean([p for _, p in self._window], axis=0), None
+        elif t - self._away >= r.max_s:  # it stays at the goal: where it rests is learnt again, from here
+            self._away, self._since, self._rest, self._n = None, t, w.copy(), 1
+        if self._away is None:
+            self._window.clear()
 
     def _still(self) -> bool:
         """Whether the window spans ``end_s`` and its wrist positions lie within ``end_m`` (rms) of their mean."""

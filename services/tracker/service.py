@@ -66,7 +66,8 @@ class TrackerStats:
     markers: int = 0
     reaches: int = 0
     played: int = 0
-    behind: int = 0  # frames dropped unfitted to catch up (catch_up)
+    behind: int = 0  # frames left unfitted to catch up (catch_up), or dropped by a full backlog
+    failed: int = 0  # batches whose processing raised (logged with their traceback)
     refused: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REASONS, 0))
 
 
@@ -97,6 +98,7 @@ class TrackerService:
         self._refusal_logged: dict[str, float] = {}  # reason -> when a refusal of it was last logged
         self._ros2_receipt = Receipt(Expectations(clock="realtime"))
         self.backlog: Backlog[tuple[HumanKeypoints, bool]] = Backlog(BACKLOG_LIMIT)
+        self._working = False  # the worker is inside a batch (check_silence waits for it)
         self._human: HumanPublisher | None = None
         self.playback: Playback | None = None
         if config.from_file is not None:
@@ -120,15 +122,15 @@ class TrackerService:
 
     # -- frames ------------------------------------------------------------------------------------------------
 
-    def on_keypoints(self, msg: HumanKeypoints, numbered: bool = True) -> None:
+    def on_keypoints(self, msg: HumanKeypoints, numbered: bool = True, fit: bool = True) -> None:
         """One checked frame: through the core, its messages published, a refusal logged and counted.
 
         ``numbered``: ``msg.frame`` is the sensor's own frame number (a gap is a dropped frame); a ROS 2 frame
-        has none, its number only counts arrivals.
+        has none, its number only counts arrivals. ``fit`` False: a frame left unfitted to catch up.
         """
         with self._lock:
             self.stats.frames += 1
-            out = self.core.on_keypoints(msg, numbered)
+            out = self.core.on_keypoints(msg, numbered, fit)
             if out.refused is not None:
                 reason, now = out.refused.split(":", 1)[0], time.monotonic()
                 if now - self._refusal_logged.get(reason, -math.inf) >= REFUSAL_LOG_PERIOD_S:  # a sensor with no
@@ -150,8 +152,8 @@ class TrackerService:
         """
         with self._lock:
             quiet = time.monotonic() - self._accepted_at
-            if not self.core.tracking or quiet <= self.config.tracker.max_gap_s:
-                return False
+            if not self.core.tracking or quiet <= self.config.tracker.max_gap_s or len(self.backlog) or self._working:
+                return False  # frames that may continue the reach are waiting for the worker: no silence
             self._publish(self.core.finish().messages)
         log.info("tracker: no frame taken for %.1f s: starting afresh with the next", quiet)
         return True
@@ -188,21 +190,33 @@ class TrackerService:
 
         ``batch``: ``(frame, numbered)`` pairs.
         """
-        keep = frames_to_fit([m.stamp for m, _ in batch], self.config.tracker.max_gap_s / 2)
+        spacing = self.config.tracker.max_gap_s / 3
+        keep = set(frames_to_fit([m.stamp for m, _ in batch], spacing))
         if len(keep) < len(batch):
             if not self.stats.behind:
-                log.info("tracker: the fit fell behind the sensor (%d frames waiting, over %.2f s of it): fitting %d "
-                         "of them, %.2f s apart at least, to catch up (frames dropped so are counted)", len(batch),
-                         batch[-1][0].stamp - batch[0][0].stamp, len(keep), self.config.tracker.max_gap_s / 2)
+                log.info("tracker: the fit fell behind the sensor (%d frames waiting): fitting %d of them, at most "
+                         "%.2f s apart, to catch up (the others are counted, not fitted)", len(batch), len(keep),
+                         spacing)
             self.stats.behind += len(batch) - len(keep)
-        for i in keep:
-            self.on_keypoints(*batch[i])
+        self._working = True
+        try:
+            for i, (msg, numbered) in enumerate(batch):
+                self.on_keypoints(msg, numbered, fit=i in keep)
+        finally:
+            self._working = False
 
     def _work(self, stop: threading.Event) -> None:
-        """The worker: the backlog's frames through :meth:`work`, until ``stop``."""
+        """The worker: the backlog's frames through :meth:`work`, until ``stop``; a frame's failure is logged."""
         while not stop.is_set():
             if batch := self.backlog.take_all(0.1):
-                self.work(batch)
+                self._work_safely(batch)
+
+    def _work_safely(self, batch: list[tuple[HumanKeypoints, bool]]) -> None:
+        try:
+            self.work(batch)
+        except Exception:  # a bug on one batch must not end the worker: every later frame would wait unfitted
+            self.stats.failed += 1
+            log.exception("tracker: a batch of %d frames failed (the tracker goes on with the next)", len(batch))
 
     # -- the loop ----------------------------------------------------------------------------------------------
 
@@ -234,7 +248,7 @@ class TrackerService:
                 self.backlog.wake()
                 worker.join(timeout=10.0)
                 if left := self.backlog.take_all(0.0):  # the last frames received, not yet fitted
-                    self.work(left)
+                    self._work_safely(left)
                 with self._lock:  # no frame comes any more: a reach under way ends, so the stream is whole
                     last = self.core.finish().messages
                     self._publish(last)
@@ -242,7 +256,8 @@ class TrackerService:
                     time.sleep(0.2)  # delivered before the session closes
                 presence.close()
         self.stats.refused, self.stats.behind = dict(self.core.refused), self.stats.behind + self.backlog.dropped
-        log.info("tracker: stopped after %d frames (%d played; %d skipped over max_fit_hz, %d dropped to catch up), "
+        log.info("tracker: stopped after %d frames (%d played; %d skipped over max_fit_hz, %d unfitted or dropped to "
+                 "catch up), "
                  "%d reaches, %d poses, %d markers; refused: %s; "
                  "optional points left out, far off the fit: %d; rejected on receipt: %s", self.stats.frames,
                  self.stats.played, self.core.skipped, self.stats.behind, self.stats.reaches, self.stats.poses,

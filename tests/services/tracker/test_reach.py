@@ -43,3 +43,12 @@ def test_a_hand_that_stays_away_learns_its_rest_again_after_max_s() -> None:
     wrist = _path((HOME, HOME, 1.5), (HOME, GOAL, 1.0), (GOAL, GOAL, 6.0), (GOAL, HOME + [0, 0, 0.5], 1.0),
                   (HOME + [0, 0, 0.5], HOME + [0, 0, 0.5], 1.5))
     assert [e for e, _ in _events(wrist, rule)] == ["start", "end", "start", "end"]
+
+
+def test_a_hand_put_down_off_its_old_rest_takes_that_as_its_rest() -> None:
+    """Back from the goal but 12 cm off its old rest, the hand stayed 'returning' for max_s: the next reaches were
+    missed (a review of the returning state)."""
+    near = HOME + [0.0, 0.12, 0.0]
+    wrist = _path((HOME, HOME, 1.5), (HOME, GOAL, 1.0), (GOAL, GOAL, 1.5), (GOAL, near, 1.0), (near, near, 1.5),
+                  (near, GOAL, 1.0), (GOAL, GOAL, 1.5))
+    assert [e for e, _ in _events(wrist)] == ["start", "end", "start", "end"]

@@ -395,7 +395,7 @@ def test_a_recording_in_millimetres_is_refused_before_it_plays(tmp_path: Path, c
     assert "tracker.from_file" in line and "demo 0: coordinates beyond 20 m" in line and "millimetres?" in line
 
 
-def test_a_backlog_spanning_too_long_is_thinned_to_catch_up_and_said_once(caplog) -> None:
+def test_a_backlog_standing_for_too_long_is_thinned_to_catch_up_and_said_once(caplog) -> None:
     """Zenoh's thread fitted every frame in turn: with a sensor faster than the fit the poses fell seconds behind
     the person (a review: 0.5 s at 60 Hz, 4.5 s at 240 Hz), and nothing was said."""
     service = TrackerService(TrackerServiceConfig(), ZenohConfig())
@@ -404,9 +404,56 @@ def test_a_backlog_spanning_too_long_is_thinned_to_catch_up_and_said_once(caplog
     t0 = time.time()
     batch = [(dataclasses.replace(_kp(i, still), stamp=t0 + i / 240), True) for i in range(240)]  # 1 s waiting
     service.work(batch)
-    taken = service.stats.frames
-    assert 240 - service.stats.behind == taken and 2 <= taken <= 9  # 0.15 s apart (max_gap_s / 2), the newest too
+    unfitted = service.core.unfitted
+    assert service.stats.frames == 240 and service.stats.behind == unfitted  # every frame counted, most unfitted
+    assert 240 - unfitted == 11  # every 24th (0.1 s: max_gap_s / 3) and the newest
     service.work([(dataclasses.replace(_kp(240 + i, still), stamp=t0 + 1 + i / 240), True) for i in range(3)])
-    assert service.stats.frames == taken + 3  # a short batch is taken whole
+    assert service.core.unfitted == unfitted  # a short batch is taken whole
     said = [r.getMessage() for r in caplog.records if "fell behind" in r.getMessage()]
     assert len(said) == 1 and "240 frames waiting" in said[0], said
+
+
+def test_a_batch_that_fails_is_logged_and_the_worker_goes_on(caplog, monkeypatch) -> None:
+    """A frame whose processing raised ended the worker thread: every later frame waited unfitted (a review)."""
+    service = TrackerService(TrackerServiceConfig(), ZenohConfig())
+    still, calls = _reach_frames()[0], []
+    real = service.core.on_keypoints
+
+    def first_fails(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise RuntimeError("a bug")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(service.core, "on_keypoints", first_fails)
+    caplog.set_level(logging.ERROR, logger="foresight.tracker")
+    stop = threading.Event()
+    worker = threading.Thread(target=service._work, args=(stop,), daemon=True)
+    worker.start()
+    try:
+        service.backlog.put((_kp(0, still), True))
+        deadline = time.monotonic() + 5
+        while not service.stats.failed and time.monotonic() < deadline:
+            time.sleep(0.01)
+        service.backlog.put((_kp(1, still), True))
+        while service.core.accepted < 1 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        stop.set()
+        worker.join(5)
+    assert service.stats.failed == 1 and service.core.accepted == 1 and "a batch of 1 frames failed" in caplog.text
+
+
+def test_frames_waiting_for_the_worker_are_no_silence() -> None:
+    """check_silence ended the reach under way when the worker was late, though the frames that continue it were
+    already queued (a review)."""
+    cfg = TrackerServiceConfig(tracker=dataclasses.replace(TrackerConfig(), max_gap_s=0.05))
+    service = TrackerService(cfg, ZenohConfig())
+    frame = _reach_frames()[0]
+    service.on_keypoints(_kp(0, frame))
+    assert service.core.tracking
+    service.backlog.put((_kp(1, frame), True))
+    time.sleep(0.1)
+    assert not service.check_silence() and service.core.tracking  # a frame waits: no silence
+    service.backlog.take_all(0.0)
+    assert service.check_silence() and not service.core.tracking  # nothing waits: the usual rule

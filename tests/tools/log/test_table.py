@@ -36,7 +36,7 @@ def test_a_log_without_plans_is_one_clear_error(tmp_path, capsys) -> None:
 
 
 def test_the_final_grid_is_chosen_as_the_demo_chooses_it(tmp_path, robot) -> None:
-    """The newest grid by (tick, index), not the last in the file: ``log table`` and the demo score one grid."""
+    """The newest grid by (tick, stamp, ...), not the last in the file: ``log table`` and the demo score one grid."""
     from services.run_log import recorder_from_log
     from shared.protocol import Keys, OccupancyGrid, Plan, encode
     from shared.recording.reader import read_log
