@@ -27,7 +27,7 @@ def run_summary(lf: LogFile) -> Summary:
 
     from shared.robot import PR2
 
-    recorder = RunRecorder()  # the demo's own rules: the newest grid by (tick, stamp, demonstration, sample), posteriors by tick or arrival
+    recorder = RunRecorder()  # the demo's own rules: the newest grid, posteriors by tick or arrival (run_log.py)
     for cls in (Plan, RobotState, OccupancyGrid, ClassPosterior):
         for _, msg in decode_all(lf, f"foresight.{cls.TYPE}", cls):
             recorder.on_message(msg)
