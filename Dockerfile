@@ -33,7 +33,8 @@ ENV PYTHONUNBUFFERED=1 \
 
 WORKDIR /app
 
-# a C++ compiler and Python's headers for torch.compile (inductor): the planner's fused cost is compiled at
+# setpriv (the entrypoint steps down with it; util-linux, or its own package on newer Debian), a C++ compiler and
+# Python's headers for torch.compile (inductor): the planner's fused cost is compiled at
 # start-up (without them it falls back to eager mode, about 3x slower per cost evaluation); venv and headers
 # come with python:3.11-slim, a bare Debian base image gets them from its packages
 RUN --mount=type=secret,id=ca \
@@ -46,7 +47,10 @@ RUN --mount=type=secret,id=ca \
     python3 -c "import os, sysconfig as s; assert os.path.isfile(s.get_paths()['include'] + '/Python.h')" 2>/dev/null \
         || pkgs="$pkgs python3-dev"; \
     apt-get update; \
+    command -v setpriv >/dev/null 2>&1 \
+        || pkgs="$pkgs $(apt-cache show setpriv >/dev/null 2>&1 && echo setpriv || echo util-linux)"; \
     apt-get install -y --no-install-recommends $pkgs; \
+    command -v setpriv >/dev/null; \
     rm -rf /var/lib/apt/lists/*; \
     if [ -f "$extra" ]; then rm "$extra"; update-ca-certificates --fresh >/dev/null; fi
 

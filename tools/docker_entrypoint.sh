@@ -7,15 +7,36 @@
 # "Permission denied" after a minute of training, and a secure cell's keys (0600, their maker's) were unreadable.
 # A container started as another user already (`docker run --user`, compose `user:`) runs as that user; a runs/
 # owned by root runs the command as root. FORESIGHT_RUN_AS=UID:GID names another user (FORESIGHT_RUNS_DIR: the
-# directory whose owner it is, for tests).
+# directory whose owner it is, for tests). Every refusal is one line naming what was wrong.
 set -eu
+say() { echo "foresight-entrypoint: $*" >&2; }
 if [ "$(id -u)" = 0 ]; then
-  owner=${FORESIGHT_RUN_AS:-$(stat -c %u:%g "${FORESIGHT_RUNS_DIR:-/app/runs}")}
-  if [ "${owner%%:*}" != 0 ]; then
-    HOME=/tmp/foresight-home-${owner%%:*}  # the image's /home/foresight is uid 1000's
-    mkdir -p "$HOME" && chown "$owner" "$HOME"
-    export HOME
-    exec setpriv --reuid="${owner%%:*}" --regid="${owner#*:}" --clear-groups -- "$@"
+  runs=${FORESIGHT_RUNS_DIR:-/app/runs}
+  if [ -n "${FORESIGHT_RUN_AS:-}" ]; then
+    owner=$FORESIGHT_RUN_AS
+    case $owner in
+      *[!0-9:]* | :* | *: | *:*:* | [!0-9]* ) say "FORESIGHT_RUN_AS=$owner is not UID:GID (numbers)"; exit 2 ;;
+      *:*) ;;
+      *) say "FORESIGHT_RUN_AS=$owner is not UID:GID (numbers)"; exit 2 ;;
+    esac
+  elif [ -d "$runs" ]; then
+    owner=$(stat -c %u:%g "$runs")
+  else
+    say "$runs is not a directory: mount the clone's runs/ there (compose.yaml does), or set FORESIGHT_RUN_AS=UID:GID"
+    exit 2
+  fi
+  uid=${owner%%:*} gid=${owner#*:}
+  if [ "$uid" != 0 ]; then
+    if ! command -v setpriv >/dev/null 2>&1; then
+      say "setpriv (util-linux) is missing from this image: cannot run as $owner, the owner of $runs; running as root"
+      exec "$@"
+    fi
+    HOME=/tmp/foresight-home-$uid  # the image's /home/foresight is uid 1000's
+    mkdir -p "$HOME" && chown -h "$uid:$gid" "$HOME"
+    cache=${TORCHINDUCTOR_CACHE_DIR:-}  # a volume kept from one up to the next, perhaps filled by another user
+    if [ -n "$cache" ] && [ -d "$cache" ]; then chown -R -h "$uid:$gid" "$cache"; fi
+    export HOME USER="$uid"
+    exec setpriv --reuid="$uid" --regid="$gid" --clear-groups -- "$@"
   fi
 fi
 exec "$@"

@@ -16,9 +16,13 @@ from shared.protocol import HUMAN_SOURCES
 
 from .config import ExecutorConfig
 
-__all__ = ["PeerWatch"]
+__all__ = ["PeerWatch", "LOCKSTEP_INPUTS"]
 
 log = logging.getLogger("foresight.executor")
+
+LOCKSTEP_INPUTS = ("planner", "predictor")
+"""The services whose output a lock-step tick waits for (the plan; the prediction with ``require_occupancy``): one
+gone is said. Others (a ROS 2 gateway, a view, a watcher) may come and go without a tick waiting for them."""
 
 
 class PeerWatch:
@@ -38,7 +42,7 @@ class PeerWatch:
     def note(self, service: str, alive: bool, core: Any) -> None:
         """``service`` appeared (``alive``) or disappeared; ``core``: the executor's core (or robot arm) now."""
         if self.config.mode == "lockstep":
-            if service not in HUMAN_SOURCES:
+            if service in LOCKSTEP_INPUTS:  # what a tick waits for (the human's source ends its stream by design)
                 self._say_lockstep(service, alive)
             return
         was_gone = service in core.gone

@@ -59,20 +59,23 @@ def denied(session: Any, key: str, kind: str) -> str:
 def _wildcard_denied(keys: Keys, role: str, expr: str) -> str:
     """Why a subscription to the wildcard ``expr`` is refused ("" if it is not).
 
-    Zenoh checks a subscription's own key expression: one that also matches a key the role does not consume is
-    refused whole, so the keys it does consume are lost with it (a planner's ``foresight/human/*``, an executor run
-    under another role's certificate: its log's ``foresight/**``).
+    Zenoh allows a subscription only where an allowed key expression includes it whole; one that also matches a
+    key the role does not consume is refused, so the keys it does consume are lost with it (a planner's
+    ``foresight/human/*``, an executor run under another role's certificate: its log's ``foresight/**``). An
+    expression that meets no key of the contract (a ROS 2 node's keys) is not judged here.
     """
     import zenoh
 
     wanted = zenoh.KeyExpr(expr)
-    if any(zenoh.KeyExpr(a).includes(wanted) for a in subscription_exprs(keys, role)):
+    if not any(wanted.intersects(zenoh.KeyExpr(k)) for k in keys.routes()):
+        return ""
+    allowed = subscription_exprs(keys, role)
+    if any(zenoh.KeyExpr(a).includes(wanted) for a in allowed):
         return ""
     consumed = set(consumed_keys(keys, role))
     lost = [k for k in keys.routes() if k not in consumed and wanted.intersects(zenoh.KeyExpr(k))]
-    if not lost:
-        return ""
-    return (f"role {role} may not subscribe to {expr}: it also matches {', '.join(lost[:3])}"
-            f"{' ...' if len(lost) > 3 else ''}, which the role does not consume, so the access control refuses the "
-            "whole expression and it will receive nothing")
-
+    why = (f"it also matches {', '.join(lost[:3])}{' ...' if len(lost) > 3 else ''}, which the role does not consume"
+           if lost else f"it is within none of the expressions the role may subscribe to "
+           f"({', '.join(a for a in allowed if '*' in a) or 'only its keys, one by one'})")
+    return (f"role {role} may not subscribe to {expr}: {why}, so the access control refuses the whole expression "
+            "and it will receive nothing")

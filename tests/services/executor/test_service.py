@@ -422,8 +422,8 @@ def test_a_service_gone_mid_lockstep_run_is_said_and_the_run_says_it_went_on_wit
     service = ExecutorService(cfg, ZenohConfig(listen=["tcp/127.0.0.1:0"], connect=[], multicast_scouting=False),
                               robot=pr2, human=(None, None), scene=SCENE)
     caplog.set_level(logging.INFO, logger="foresight.executor")
-    for name, alive in (("planner", True), ("replayer", False), ("planner", False), ("planner", False),
-                        ("planner", True)):
+    for name, alive in (("planner", True), ("replayer", False), ("view", False), ("planner", False),
+                        ("planner", False), ("planner", True)):  # a view leaving: no tick waits for it
         service._on_peer(name, alive)
     gone = [r for r in caplog.records if "is gone" in r.getMessage()]
     assert len(gone) == 1 and gone[0].levelno == logging.WARNING and "planner is gone: each tick" in gone[0].message

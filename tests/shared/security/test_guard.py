@@ -53,6 +53,14 @@ def test_a_wildcard_subscription_that_also_matches_keys_the_role_does_not_consum
     remember(session, "predictor", keys)  # its ordered subscription to poses and markers: allowed
     try:
         assert denied(session, keys.human_all, "subscribe") == ""
+        # allowed only where an allowed expression includes it whole (Zenoh's rule), not where it meets no other key
+        assert "within none of the expressions" in denied(session, f"{keys.prefix}/human/**", "subscribe")
+        assert denied(session, "0/some_ros2_topic/**", "subscribe") == ""  # outside the contract: not judged
+    finally:
+        forget(session)
+    remember(session, "executor", keys)
+    try:
+        assert "may not subscribe to **" in denied(session, "**", "subscribe")
     finally:
         forget(session)
 
