@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import select
 import subprocess
 import sys
 import time
@@ -61,7 +62,7 @@ def reference_dir() -> Path:
 
 
 def _signalled(args: Sequence[str], signals: Sequence[tuple[int, float]], ready: str = "ready",
-               timeout: float = 60.0, **popen: Any) -> subprocess.CompletedProcess[str]:
+               timeout: float = 60.0, ready_timeout: float = 180.0, **popen: Any) -> subprocess.CompletedProcess[str]:
     """Run ``python ARGS`` in the repo, wait for its first line, send each signal after its pause, collect its end.
 
     Args:
@@ -69,6 +70,7 @@ def _signalled(args: Sequence[str], signals: Sequence[tuple[int, float]], ready:
         signals: ``(signal, pause_s)`` pairs, sent in order once the child printed its first line.
         ready: What that first line starts with (asserted: a child that died before it shows its stderr).
         timeout: Seconds the child has to end after the last signal.
+        ready_timeout: Seconds it has to print its first line (imports on a loaded machine take a while).
         popen: More :class:`subprocess.Popen` arguments (``env``, ``preexec_fn``).
 
     Returns:
@@ -78,6 +80,10 @@ def _signalled(args: Sequence[str], signals: Sequence[tuple[int, float]], ready:
                             text=True, **popen)
     try:
         assert proc.stdout is not None
+        if not select.select([proc.stdout], [], [], ready_timeout)[0]:  # a child that hangs before its first line
+            proc.kill()
+            raise AssertionError(f"the child printed nothing in {ready_timeout:g} s: "
+                                 f"{proc.communicate(timeout=10)[1]}")
         first = proc.stdout.readline()
         if not first.startswith(ready):
             proc.kill()
