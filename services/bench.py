@@ -17,6 +17,8 @@ BENCHES: dict[str, tuple[str, str]] = {
     "faults": ("tools.faults", "kill -9 each service of a moving robot's run: hold and resume latency, MCAP recovery"),
     "tracker": ("services.tracker.bench", "the live tracker's core on a library's reaches: lag, error, refusals, "
                 "time per frame"),
+    "tracker-live": ("services.tracker.live_bench", "the tracker as a process behind a router, one reach played at "
+                     "30/60/120/240 Hz: how late its poses come"),
     "human": ("services.tracker.demo_bench", "foresight demo in real time, the human from the replayer against the "
               "human through the tracker (keypoints, clean and noisy): pose -> plan p99, keypoints -> pose"),
     "keypoints": ("shared.keypoints.bench", "fit the human model to a frame of body keypoints: live, baseline, batch"),

@@ -26,7 +26,7 @@ from shared.protocol import HumanPose
 
 from .core import LIBRARY_RATE_HZ, TrackerConfig, TrackerCore
 
-__all__ = ["main"]
+__all__ = ["main", "sample_at"]
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench tracker") -> int:
@@ -47,7 +47,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench tracker") -
         feats = np.concatenate([np.repeat(d.features[:1], rest, 0), d.features, np.repeat(d.features[-1:], rest, 0)])
         recorded = np.arange(len(feats)) / LIBRARY_RATE_HZ
         stamps = np.arange(0.0, recorded[-1] + 1e-9, 1.0 / args.rate_hz)
-        points = model.joint_positions(_at(stamps, recorded, feats))
+        points = model.joint_positions(sample_at(stamps, recorded, feats))
         if args.noise_m > 0:
             points = points + rng.normal(0.0, args.noise_m, points.shape)
         core, poses = TrackerCore(model=model), []
@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench tracker") -
             print(f"{name:<22}{core.reaches:>8}{'-':>5}{'-':>7}{len(d.features):>8}{'-':>10}{'-':>11}  {refused}")
             continue
         at = np.array([p.stamp for p in poses])
-        err = np.abs(np.array([p.features for p in poses]) - _at(at, recorded, feats))
+        err = np.abs(np.array([p.features for p in poses]) - sample_at(at, recorded, feats))
         print(f"{name:<22}{core.reaches:>8}{int(round(at[0] * LIBRARY_RATE_HZ)) - rest:>5}{len(poses):>7}"
               f"{len(d.features):>8}{np.median(err[:, :3]) * 1e3:>10.1f}{np.median(err[:, 3:]):>11.3f}  {refused}")
     ms = np.array(times) * 1e3
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench tracker") -
     return 0
 
 
-def _at(t: np.ndarray, recorded: np.ndarray, feats: np.ndarray) -> np.ndarray:
+def sample_at(t: np.ndarray, recorded: np.ndarray, feats: np.ndarray) -> np.ndarray:
     """The recording ``feats (N, 12)`` at ``recorded (N,)`` s, interpolated at times ``t (M,)``: ``(M, 12)``."""
     return np.stack([np.interp(t, recorded, feats[:, j]) for j in range(feats.shape[1])], axis=-1)
 
