@@ -26,7 +26,6 @@ from shared.config import ZenohConfig
 from shared.human import HumanModel
 from shared.keypoints.bench import source_library
 from shared.keypoints.fit import POINT_NAMES
-from shared.presence import Presence
 from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Keys
 from shared.transport import TypedPublisher, open_session, subscribe
 
@@ -100,12 +99,11 @@ def _measure(endpoint: str, rates: list[float], feats: np.ndarray, rest_s: float
     with open_session(cfg, stop, "tracker-live bench") as session:
         subscribe(session, keys.pose, HumanPose, take)
         subscribe(session, keys.demo, DemoMarker, take)
-        presence = Presence(session, keys, "bench")
-        if presence.wait_for(["tracker"], 120.0):
-            raise RuntimeError("the tracker did not come up within 120 s")
         pub: TypedPublisher[HumanKeypoints] = TypedPublisher(session, keys.keypoints, block=True)
-        deadline = time.monotonic() + 10.0
-        while not pub.matched() and time.monotonic() < deadline:
+        deadline = time.monotonic() + 120.0  # the tracker is up once its subscription to keypoints reaches here
+        while not pub.matched():
+            if time.monotonic() > deadline:
+                raise RuntimeError("the tracker did not subscribe to the keypoints within 120 s")
             time.sleep(0.05)
         for rate in rates:
             with lock:
@@ -125,7 +123,6 @@ def _measure(endpoint: str, rates: list[float], feats: np.ndarray, rest_s: float
             rows.append((rate, len(frames), len(delays), float(np.median(delays)) if len(delays) else float("nan"),
                          float(delays.max()) if len(delays) else float("nan")))
             time.sleep(1.0)  # the tracker's silence ends the track: the next rate starts afresh
-        presence.close()
     return rows
 
 
