@@ -110,3 +110,21 @@ def test_a_presence_token_the_role_may_not_declare_is_said(tmp_path: Path, caplo
         assert said == ([] if allowed is None else [
             f"access control: role {role} may not declare the presence token foresight/alive/{service} (it may "
             f"declare {allowed}): every peer drops it, and one waiting for it never sees it"])
+
+
+def test_a_secure_session_says_its_refused_wildcard_subscription(tmp_path: Path,
+                                                                  caplog: pytest.LogCaptureFixture) -> None:
+    """A real planner-role session subscribing in order to foresight/human/*: Zenoh refuses it whole, and it says so."""
+    from shared.protocol import DemoMarker
+    from shared.transport import subscribe_ordered
+
+    init_security_dir(tmp_path, ROLES)
+    cfg = ZenohConfig(mode="peer", listen=[f"tcp/127.0.0.1:{free_port()}"], connect=[], security_dir=str(tmp_path),
+                      role="planner")
+    keys = Keys()
+    with caplog.at_level(logging.WARNING, logger="shared.transport"), open_session(cfg) as session:
+        sub = subscribe_ordered(session, keys.human_all, {keys.pose: HumanPose, keys.demo: DemoMarker},
+                                lambda m: None)
+        sub.undeclare()
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("access control:")]
+    assert any(f"may not subscribe to {keys.human_all}: it also matches {keys.pose}" in line for line in lines), lines
