@@ -115,6 +115,7 @@ def _parser(prog: str) -> argparse.ArgumentParser:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="what", required=True, metavar="{" + ",".join(EXPERIMENTS) + "}")
     sub.add_parser("recognition", help=EXPERIMENTS["recognition"], add_help=False)
+    sub.add_parser("novelty", help=EXPERIMENTS["novelty"], add_help=False)
     p = sub.add_parser("interference", help=EXPERIMENTS["interference"],
                        description=_doc("interference"),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -283,6 +284,10 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
         from services.predictor.recognition import main as recognition_main
 
         return recognition_main(argv, prog=prog)
+    if argv and argv[0] == "novelty":
+        from services.predictor.novelty_eval import main as novelty_main
+
+        return novelty_main(argv, prog=prog)
     args = _parser(prog).parse_args(argv)
     setup_logging("WARNING")
     with cli_errors(f"{prog} {args.what}"), _user_errors():

@@ -10,6 +10,7 @@ __all__ = ["EXPERIMENTS"]
 
 EXPERIMENTS: dict[str, str] = {
     "recognition": "early recognition, leave-one-out (Fig. 6)",
+    "novelty": "is a class the model never saw called unfamiliar (leave one class out)",
     "interference": "one robot task against a human reaching across it (Table I)",
     "switch": "two robot tasks, when the robot settles on its goal (Fig. 8-9)",
     "occupancy": "does the predicted occupancy hold where the human really goes (leave-one-out)",

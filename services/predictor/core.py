@@ -15,6 +15,12 @@ Only voxels inside the union of the swept volumes can be non-zero, so the occupa
 ``(M,) @ (M, U)`` float32 product over those U voxels. The baseline ``current`` method returns
 the voxels of the current posture only (placed in the scene relative to the demonstration's
 first pelvis pose).
+
+The posterior sums to 1 for a motion unlike every class too, often with one class near 1. So each posture
+also updates the motion's familiarity (:mod:`services.predictor.novelty`): how well the best class explains
+the last frames, against the model's novelty threshold. An unfamiliar motion is flagged; with
+``unfamiliar = "all-classes"`` its occupancy is every known class's volume at once (``max_m p(x | C_m)``)
+rather than the posterior's mixture.
 """
 
 from __future__ import annotations
@@ -32,11 +38,13 @@ from shared.scene import SCENE_HELP, Grid, Scene
 
 from .gmm import posterior_from_log_likelihood
 from .model import PredictionModel
+from .novelty import DEFAULT_WINDOW, FamiliarityWindow
 from .swept_volume import posture_voxels
 
 __all__ = ["PredictorConfig", "PredictionResult", "PredictorCore", "PredictorError", "METHODS"]
 
 METHODS = ("prediction", "current")
+UNFAMILIAR = ("report", "all-classes")
 
 
 class PredictorError(ValueError):
@@ -56,6 +64,10 @@ class PredictorConfig:
     evidence: str = opt("sum", help="how the observed frames weigh: 'sum' (ln p(xi|C_m) summed over the frames, the "
                         "paper's text) or 'mean' (divided by the frames observed: the per-frame mean log-likelihood "
                         "whose softmax the authors' code takes, HRICS_ClassifyMotion.cpp)", choices=("sum", "mean"))
+    unfamiliar: str = opt("report", help="a motion the model finds unfamiliar (below its novelty threshold): "
+                          "'report' (flagged in the ClassPosterior, occupancy from the posterior as ever) or "
+                          "'all-classes' (flagged, and the occupancy is every class's volume at once)",
+                          choices=UNFAMILIAR)
     grid_interval_s: float = opt(0.02, help="real time: at least this long between two occupancy grids (the "
                                  "newest pose's grid is owed and sent once due; 0: a grid for every pose)")
     backlog: int = opt(3000, help="most messages waiting to be processed (about 10 s at 300 Hz); beyond it the "
@@ -68,6 +80,8 @@ class PredictorConfig:
         """Check the options."""
         if not str(self.model):
             raise ConfigError("predictor.model: must name a model file")
+        if self.unfamiliar not in UNFAMILIAR:
+            raise ConfigError(f"predictor.unfamiliar: one of {', '.join(UNFAMILIAR)}, got {self.unfamiliar!r}")
         if self.evidence not in ("sum", "mean"):
             raise ConfigError(f"predictor.evidence: 'sum' or 'mean', got {self.evidence!r}")
         if not (self.temperature >= 0 and np.isfinite(self.temperature)):
@@ -95,6 +109,9 @@ class PredictionResult:
         indices: ``(N,)`` flat C-order indices of the voxels with non-zero probability.
         values: ``(N,)`` float32 their probability.
         n_observed: Number of postures observed in this demonstration.
+        familiarity: How well the best class explains the last frames (nats per frame,
+            :mod:`services.predictor.novelty`).
+        familiar: Whether that is at or above the model's novelty threshold (always, for a model without one).
     """
 
     posterior: np.ndarray
@@ -104,6 +121,8 @@ class PredictionResult:
     indices: np.ndarray
     values: np.ndarray
     n_observed: int
+    familiarity: float = 0.0
+    familiar: bool = True
 
     @property
     def occupancy(self) -> np.ndarray:
@@ -172,6 +191,11 @@ class PredictorCore:
         self._first: np.ndarray | None = None
         self._last: tuple[np.ndarray, int, np.ndarray] | None = None  # the last posture, its index, the posterior
         self._count = 0
+        self.novelty = model.novelty
+        self._window = FamiliarityWindow(model.novelty.window if model.novelty is not None else DEFAULT_WINDOW)
+        self._familiarity = 0.0
+        # every class's volume at once: the occupancy of a motion no class explains (unfamiliar = all-classes)
+        self._all_u: np.ndarray | None = None
 
     @property
     def n_observed(self) -> int:
@@ -186,6 +210,18 @@ class PredictorCore:
         self._last = None
         self._count = 0
         self.encoder.reset()
+        self._window.reset()
+        self._familiarity = 0.0
+
+    @property
+    def familiarity(self) -> float:
+        """The familiarity after the last observed posture (nats per frame; 0 before any)."""
+        return self._familiarity
+
+    @property
+    def familiar(self) -> bool:
+        """Whether the motion so far is familiar: its familiarity at or above the model's novelty threshold."""
+        return self.novelty is None or self._count == 0 or self._familiarity >= self.novelty.threshold
 
     def log_likelihood(self) -> np.ndarray:
         """``(M,)`` running ln p(xi | C_m)."""
@@ -237,7 +273,9 @@ class PredictorCore:
         if self._first is None:
             self._first = f.copy()
         x = self.encoder.step(f, t)
-        self._ll = self._ll + self.bank.log_likelihood(x[None])[0]
+        frame = self.bank.log_likelihood(x[None])[0]
+        self._ll = self._ll + frame
+        self._familiarity = self._window.push(frame)
         self._count += 1
         ll = self._ll / self._count if self.config.evidence == "mean" else self._ll
         self._last = (f, t, posterior_from_log_likelihood(ll, temperature=self.temperature))
@@ -252,14 +290,29 @@ class PredictorCore:
         if self._last is None or self._first is None:
             raise PredictorError("predict: no posture observed since the last reset")
         f, t, post = self._last
-        if self.config.method == "prediction":
+        if self.config.method == "prediction" and self.config.unfamiliar == "all-classes" and not self.familiar:
+            idx, val = self.support, self.every_class(t)
+        elif self.config.method == "prediction":
             idx, val = self.occupancy_for(post, t)
         else:
             placed = place_in_scene(f, self._first, self.scene)
             idx = posture_voxels(self.human.surface_points(placed, spacing=self.model.spacing,
                                                            interior=self.model.interior), self.model.grid)
             val = np.ones(len(idx), dtype=np.float32)
-        return PredictionResult(post, self._ll.copy(), self.model.grid, self.config.method, idx, val, self._count)
+        return PredictionResult(post, self._ll.copy(), self.model.grid, self.config.method, idx, val, self._count,
+                                self._familiarity, self.familiar)
+
+    def every_class(self, index: int = 0) -> np.ndarray:
+        """``(U,)`` float32 ``max_m p(x|C_m)`` over the support: every known class's volume at once.
+
+        Args:
+            index: The observed sample index (a ``timed`` model: what is still to come of every class).
+        """
+        if self.timed_u is not None:
+            return self.timed_u[self.model.timed.bin(index)].max(axis=0)  # type: ignore[union-attr]
+        if self._all_u is None:
+            self._all_u = self.volumes_u.max(axis=0)
+        return self._all_u
 
     def update(self, features: np.ndarray, index: int | None = None) -> PredictionResult:
         """Observe one posture and predict (:meth:`observe` then :meth:`predict`).

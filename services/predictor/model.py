@@ -30,6 +30,8 @@ Contents (M classes, K Gaussians at most per class, F posture features, D featur
 | ``interior`` | bool | whether the body's inside was sampled too |
 | ``meta`` | str | JSON: library source, demonstrations per class, options, timestamp, ``last_index`` |
 | ``temperature`` | float | posterior temperature tau (optional: files without it use 1, the paper's) |
+| ``novelty_threshold``, ``novelty_window``, ``novelty_quantile``, ``novelty_heldout`` | f8, i8, f8, i8 | the novelty
+  test (:mod:`services.predictor.novelty`; optional: files without it call every motion familiar) |
 
 Version 2 added ``volume_method``, ``volume_probabilities`` and the ``timed_*`` arrays; version 1 files
 (paper volumes) still load.
@@ -53,6 +55,7 @@ from shared.scene import Grid, Scene
 
 from .features import FeatureEncoder
 from .gmm import MixtureBank
+from .novelty import NoveltyTest
 from .swept_volume import pack_volumes, unpack_volumes
 from .volumes import VOLUMES
 
@@ -132,6 +135,7 @@ class PredictionModel:
     feature_names: tuple[str, ...] = HERAKLES_NAMES
     volume_method: str = "paper"
     timed: TimedVolumes | None = None
+    novelty: NoveltyTest | None = None
 
     @property
     def n_classes(self) -> int:
@@ -206,6 +210,11 @@ class PredictionModel:
             arrays["volumes"] = pack_volumes(self.volumes > 0.5)
         elif self.volumes is not None:
             arrays["volume_probabilities"] = to_bytes(self.volumes).reshape(self.n_classes, -1)
+        if self.novelty is not None:
+            arrays["novelty_threshold"] = np.array(float(self.novelty.threshold))
+            arrays["novelty_window"] = np.array(int(self.novelty.window), dtype=np.int64)
+            arrays["novelty_quantile"] = np.array(float(self.novelty.quantile))
+            arrays["novelty_heldout"] = np.array(int(self.novelty.heldout), dtype=np.int64)
         with atomic_write(p) as f:  # an interrupted save leaves no half model in the cache
             np.savez_compressed(f, **arrays)
 
@@ -294,6 +303,10 @@ class PredictionModel:
         pelvis = d["human_pelvis"]
         if pelvis.shape != (4,) or not np.all(np.isfinite(pelvis)):
             raise ValueError(f"human_pelvis must be 4 finite numbers (x, y, z, yaw), got shape {pelvis.shape}")
+        novelty = None
+        if "novelty_threshold" in d:
+            novelty = NoveltyTest(float(d["novelty_threshold"]), int(d["novelty_window"]),
+                                  float(d["novelty_quantile"]), int(d["novelty_heldout"]))
         motions = d["motions"].astype(np.float64)
         lengths = d["motion_lengths"].astype(np.int64)
         if motions.shape[0] != m or motions.shape[2] != len(feature_names) or lengths.shape != (m,) \
@@ -306,7 +319,7 @@ class PredictionModel:
                     scene_name=str(d["scene_name"]), human_pelvis=d["human_pelvis"].astype(np.float64),
                     spacing=float(d["spacing"]), interior=bool(d["interior"]), meta=json.loads(str(d["meta"])),
                     temperature=temperature, feature_names=feature_names, volume_method=method,
-                    timed=timed)
+                    timed=timed, novelty=novelty)
         if model.encoder().dim != mu.shape[2]:
             raise ValueError(f"feature variant {model.feature_variant!r} has {model.encoder().dim} dimensions, "
                              f"the mixtures {mu.shape[2]}")

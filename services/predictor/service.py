@@ -7,6 +7,8 @@ import threading
 import time
 from dataclasses import dataclass
 
+import numpy as np
+
 from shared.config import ZenohConfig
 from shared.protocol import ClassPosterior, DemoMarker, Expectations, HumanPose, Keys, Message, OccupancyGrid, Receipt
 from shared.runtime import wait_for_stop
@@ -36,6 +38,7 @@ class PredictorStats:
     coalesced: int = 0
     dropped: int = 0
     unprocessed: int = 0
+    unfamiliar: int = 0  # poses of a motion the model found unfamiliar (services.predictor.novelty)
 
 
 class PredictorService:
@@ -73,6 +76,7 @@ class PredictorService:
         self.pacer: GridPacer[HumanPose] = GridPacer(config.grid_interval_s)
         self._lock = threading.Lock()
         self._behind_logged = -1e9
+        self._unfamiliar_in_demo = 0  # poses of the current demonstration found unfamiliar (said once it is over)
         self._post_pub: TypedPublisher[ClassPosterior] | None = None
         self._occ_pub: TypedPublisher[OccupancyGrid] | None = None
 
@@ -109,6 +113,7 @@ class PredictorService:
                                               demo_id=msg.demo_id, index=msg.index)
 
     def _reset(self, demo_id: int) -> None:
+        self._say_unfamiliar()
         self.core.reset(demo_id)
         self.pacer.forget()  # a grid owed to the old demonstration is void
         self.stats.resets += 1
@@ -129,13 +134,16 @@ class PredictorService:
             self.stats.rejected += 1
             return []
         self.stats.poses += 1
+        if not self.core.familiar:
+            self._unfamiliar(msg, posterior)
         # stamped with the pose it was predicted from, as a Plan is with its input: a pose that waited in the backlog
         # gives a prediction as old as it (stamped 'now', a 5 s old pose's grid looked fresh to every reader)
         stamp = msg.stamp
         out: list[ClassPosterior | OccupancyGrid] = [
             ClassPosterior(stamp=stamp, tick=msg.tick, demo_id=msg.demo_id, index=msg.index,
                            class_names=list(self.model.class_names), posterior=posterior,
-                           log_likelihood=self.core.log_likelihood())]
+                           log_likelihood=self.core.log_likelihood(), familiar=self.core.familiar,
+                           familiarity=self.core.familiarity)]
         realtime = msg.tick < 0
         if realtime:
             self.pacer.forget()  # a newer pose supersedes the owed one
@@ -149,6 +157,28 @@ class PredictorService:
         else:
             self.stats.coalesced += 1
         return out
+
+    def _unfamiliar(self, pose: HumanPose, posterior: np.ndarray) -> None:
+        """Count an unfamiliar pose; the demonstration's first is said at once, with what it means."""
+        self.stats.unfamiliar += 1
+        self._unfamiliar_in_demo += 1
+        if self._unfamiliar_in_demo == 1:
+            best = int(np.argmax(posterior))
+            novelty = self.core.novelty
+            assert novelty is not None  # without a novelty test every motion is familiar
+            log.warning("predictor: demo %d: the motion is unlike every class from sample %d on (familiarity %.1f "
+                        "below the model's threshold %.1f nats/frame; the posterior's best, %s at %.2f, is only the "
+                        "least unlikely); occupancy %s", pose.demo_id, pose.index, self.core.familiarity,
+                        novelty.threshold, self.model.class_names[best], float(posterior[best]),
+                        "of every class at once" if self.config.unfamiliar == "all-classes" else
+                        "from the posterior as ever (predictor.unfamiliar = all-classes keeps every class's volume)")
+
+    def _say_unfamiliar(self) -> None:
+        """At the end of a demonstration with unfamiliar poses: how many."""
+        if self._unfamiliar_in_demo:
+            log.info("predictor: demo %d: %d of %d poses unfamiliar", self.core.demo_id, self._unfamiliar_in_demo,
+                     self.core.n_observed)
+        self._unfamiliar_in_demo = 0
 
     def _on_message(self, msg: Message) -> None:
         self.backlog.put(msg)  # on Zenoh's thread: never block it
@@ -198,9 +228,12 @@ class PredictorService:
             sub = subscribe_ordered(session, self.keys.human_all, types, self._on_message, self.rejects,
                                     self.receipt)
             presence = Presence(session, self.keys, "predictor", stop_with=self.config.stop_with, stop=stop)
-            log.info("predictor: model %s (%d classes, grid %s at %g m, features %s), method %s, scene %s, session %s",
-                     self.config.model, self.model.n_classes, self.model.grid.dims, self.model.grid.resolution,
-                     self.model.feature_variant, self.config.method, self.scene.name, describe(session)["zid"])
+            log.info("predictor: model %s (%d classes, grid %s at %g m, features %s, %s), method %s, scene %s, "
+                     "session %s", self.config.model, self.model.n_classes, self.model.grid.dims,
+                     self.model.grid.resolution, self.model.feature_variant,
+                     self.model.novelty.describe() if self.model.novelty is not None else
+                     "no novelty test: every motion is called familiar (retrain to learn one)",
+                     self.config.method, self.scene.name, describe(session)["zid"])
             worker = threading.Thread(target=self._drain, args=(stop,), name="predictor-worker", daemon=True)
             worker.start()
             if ready is not None:
@@ -220,8 +253,10 @@ class PredictorService:
                 self._post_pub.undeclare()
                 self._occ_pub.undeclare()
                 self._post_pub = self._occ_pub = None
+        self._say_unfamiliar()
         log.info("predictor: stopped after %d poses (%d grids published, %d poses without their own grid while "
-                 "behind, %d dropped from a full backlog, %d left unprocessed at stop, %d resets, %d rejected: %s)",
-                 self.stats.poses, self.stats.published, self.stats.coalesced, self.stats.dropped,
-                 self.stats.unprocessed, self.stats.resets, self.rejects.total, self.rejects.summary())
+                 "behind, %d dropped from a full backlog, %d left unprocessed at stop, %d resets, %d unfamiliar, "
+                 "%d rejected: %s)", self.stats.poses, self.stats.published, self.stats.coalesced, self.stats.dropped,
+                 self.stats.unprocessed, self.stats.resets, self.stats.unfamiliar, self.rejects.total,
+                 self.rejects.summary())
         return self.stats

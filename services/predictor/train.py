@@ -29,20 +29,20 @@ from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from shared.arguments import ArgumentParser
-from shared.feature_sets import FeatureMapping
-from shared.human import HumanModel
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
 from shared.runtime import UserError, cli_errors, setup_logging
 from shared.scene import SCENE_HELP, Scene, load_scene
 
 from .calibration import DEFAULT_FOLDS, TemperatureChoice, choose_temperature
+from .class_volumes import class_volumes, demo_sweep_key, timed_class_volumes
 from .features import VARIANTS, FeatureEncoder
 from .fit_cache import cached, class_fit
 from .gmm import GMMConfig, MixtureBank
 from .gmr import gmr
 from .model import PredictionModel, TimedVolumes, quantised
-from .swept_volume import surface_spacing, swept_volume
-from .volumes import DEFAULT_VOLUME, VOLUMES, Sweep, demos_volume, digest, spread_volume, sweep, timed_volume
+from .novelty import DEFAULT_QUANTILE, DEFAULT_WINDOW, learn_novelty
+from .swept_volume import surface_spacing
+from .volumes import DEFAULT_VOLUME, VOLUMES
 
 __all__ = ["TrainConfig", "train_model", "regress_motions", "default_library", "demo_sweep_key", "cached", "main"]
 
@@ -68,6 +68,9 @@ class TrainConfig:
         volume: How the per-class occupancy is built (:data:`services.predictor.volumes.VOLUMES`).
         folds: Folds of the temperature's cross-validation.
         time_bin: Samples per time bin of the ``timed`` volumes.
+        novelty_quantile: The novelty threshold's quantile of the held-out demonstrations' least familiarity
+            (:mod:`services.predictor.novelty`).
+        novelty_window: Frames of the familiarity's median.
     """
 
     gmm: GMMConfig = GMMConfig()
@@ -81,6 +84,8 @@ class TrainConfig:
     volume: str = DEFAULT_VOLUME
     folds: int = DEFAULT_FOLDS
     time_bin: int = 5
+    novelty_quantile: float = DEFAULT_QUANTILE
+    novelty_window: int = DEFAULT_WINDOW
 
 
 def default_library(scene: Scene | None = None) -> MotionLibrary:
@@ -150,6 +155,10 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
         raise UserError(f"--volume {cfg.volume!r} is not one of {', '.join(VOLUMES)}")
     if cfg.folds < 2:
         raise UserError(f"--folds must be >= 2, got {cfg.folds}")
+    if not (0.0 <= cfg.novelty_quantile < 1.0):
+        raise UserError(f"--novelty-quantile must be in [0, 1), got {cfg.novelty_quantile}")
+    if not (1 <= cfg.novelty_window <= 10_000):
+        raise UserError(f"novelty window must be in [1, 10000] frames, got {cfg.novelty_window}")
     demos = list(library.demos) if demos is None else demos
     encoder = FeatureEncoder(cfg.features, cfg.time_scale, feature_names=library.feature_names,
                              source=f"library {library.source}")
@@ -175,19 +184,21 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
             choice = choose_temperature(feats, fit, folds=cfg.folds)
     else:
         choice = TemperatureChoice(float(cfg.temperature), "given")
+    with threadpool_limits(1):  # the same folds: their fits are in the cache when the temperature was chosen
+        novelty = learn_novelty(feats, fit, cfg.folds, cfg.novelty_window, cfg.novelty_quantile)
     bank = MixtureBank.from_sklearn(mixtures)
     lengths = [int(np.median([d.n_samples for d in ds])) for ds in by_class]
     motions = regress_motions(bank, lengths, encoder)
     mapping = library.mapping
     volumes = timed = None
     if mapping is not None and cfg.volume == "timed":
-        timed = _timed_volumes(mapping, scene, grid, cfg, by_class, cache, progress)
+        timed = timed_class_volumes(mapping, scene, grid, cfg, by_class, cache, progress)
         timed = TimedVolumes(timed.support, quantised(timed.values), timed.time_bin)  # as its file holds it
         volumes = np.zeros((library.n_classes, int(np.prod(grid.dims))), np.float32)
         volumes[:, timed.support] = timed.values[:, 0]
         volumes = volumes.reshape(library.n_classes, *grid.dims)
     elif mapping is not None:
-        volumes = _class_volumes(bank, lengths, encoder, mapping, scene, grid, cfg, by_class, cache, progress)
+        volumes = class_volumes(bank, lengths, encoder, mapping, scene, grid, cfg, by_class, cache, progress)
         if cfg.volume != "paper":
             volumes = quantised(volumes)  # probabilities as its file holds them: a model equals its saved copy
     t_max = max(lengths)
@@ -199,6 +210,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
             "components": [int(g.n_components) for g in mixtures], "gmm": asdict(cfg.gmm),
             "oversample": cfg.oversample, "temperature": choice.temperature, "temperature_choice": choice.method,
             "temperature_log_loss": {f"{t:g}": v for t, v in choice.mean_log_loss.items()},
+            "novelty": novelty.describe() if novelty is not None else "none: a class has fewer than 2 demonstrations",
             "volume": cfg.volume, "last_index": max(d.n_samples for d in demos) - 1,
             "trained_at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")}
     return PredictionModel(class_names=list(library.class_names), feature_variant=cfg.features,
@@ -209,85 +221,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
                            human_pelvis=np.array([*scene.human.pelvis_xyz, scene.human.pelvis_yaw]),
                            spacing=cfg.spacing, interior=cfg.interior, meta=meta, temperature=choice.temperature,
                            feature_names=tuple(library.feature_names), volume_method=cfg.volume,
-                           timed=timed)
-
-
-def _volume_key_parts(scene: Scene, grid, cfg: TrainConfig) -> tuple:
-    pelvis = np.array([*scene.human.pelvis_xyz, scene.human.pelvis_yaw])
-    return grid.min, grid.max, grid.resolution, pelvis, cfg.spacing, cfg.interior, cfg.oversample
-
-
-def demo_sweep_key(features: np.ndarray, scene: Scene, grid, cfg: TrainConfig) -> str:
-    """The ``fit_cache`` key of a demonstration's :class:`~services.predictor.volumes.Sweep` (``demos`` volumes).
-
-    Args:
-        features: ``(T, F)`` the demonstration's features.
-        scene: The scene it is placed in.
-        grid: The voxel grid.
-        cfg: Training options (spacing, interior, oversample).
-    """
-    return "sweep:" + digest(np.asarray(features, dtype=np.float64), *_volume_key_parts(scene, grid, cfg))
-
-
-def _sweeps(demos: list[Demonstration], mapping: FeatureMapping, scene: Scene, grid, cfg: TrainConfig,
-            cache: MutableMapping[str, Any], human: HumanModel) -> list[Sweep]:
-    """The (cached) sweep of every demonstration of ``demos``."""
-    out = []
-    for d in demos:
-        key = demo_sweep_key(d.features, scene, grid, cfg)
-        out.append(cached(cache, key, lambda d=d: sweep(mapping.to_human(d.features), scene, grid, human, cfg.spacing,
-                                                        cfg.interior, cfg.oversample)))
-    return out
-
-
-def _timed_volumes(mapping: FeatureMapping, scene: Scene, grid, cfg: TrainConfig, by_class: list[list[Demonstration]],
-                   cache: MutableMapping[str, Any], progress: bool) -> TimedVolumes:
-    """The ``timed`` volumes of every class on the union of their supports."""
-    if cfg.time_bin < 1:
-        raise UserError(f"time bin must be >= 1 sample, got {cfg.time_bin}")
-    human = HumanModel()
-    n_bins = -(-max(d.n_samples for ds in by_class for d in ds) // cfg.time_bin)
-    parts = [timed_volume(_sweeps(ds, mapping, scene, grid, cfg, cache, human), grid, cfg.time_bin, n_bins)
-             for ds in tqdm(by_class, desc="timed volumes", unit="class", disable=not progress)]
-    support = np.unique(np.concatenate([p[0] for p in parts]))
-    values = np.zeros((len(parts), n_bins, len(support)), np.float32)
-    for m, (sup, val) in enumerate(parts):
-        values[m][:, np.searchsorted(support, sup)] = val
-    return TimedVolumes(support, values, cfg.time_bin)
-
-
-def _class_volumes(bank: MixtureBank, lengths: list[int], encoder: FeatureEncoder, mapping: FeatureMapping,
-                   scene: Scene, grid, cfg: TrainConfig, by_class: list[list[Demonstration]],
-                   cache: MutableMapping[str, Any], progress: bool) -> np.ndarray:
-    """``(M, nx, ny, nz)`` float32 ``p(x|C_m)`` of each class by ``cfg.volume`` (human model via ``mapping``).
-
-    Volumes are cached in ``cache`` by a digest of what they depend on (the class mixture or the
-    demonstration, the grid, the placement and the sampling options).
-    """
-    human = HumanModel()
-    common = _volume_key_parts(scene, grid, cfg)
-    cols = encoder.posture_columns()
-    out = []
-    for m in tqdm(range(len(lengths)), desc=f"{cfg.volume} volumes", unit="class", disable=not progress):
-        w, mu, cov = bank.weights_[m], bank.means_[m], bank.covariances_[m]
-        if cfg.volume == "demos":
-            out.append(demos_volume(_sweeps(by_class[m], mapping, scene, grid, cfg, cache, human), grid))
-            continue
-        key = f"volume:{cfg.volume}:" + digest(w, mu, cov, lengths[m], encoder.time_scale, *common)
-
-        def make(w: np.ndarray = w, mu: np.ndarray = mu, cov: np.ndarray = cov, n: int = lengths[m]) -> np.ndarray:
-            t = np.arange((n - 1) * cfg.oversample + 1) / cfg.oversample * encoder.time_scale
-            if cfg.volume == "paper":
-                y = np.asarray(gmr(w, mu, cov, t))[:, cols.start - 1: cols.stop - 1]
-                return swept_volume(mapping.to_human(y), scene, grid, human, cfg.spacing,
-                                    cfg.interior).astype(np.float32)
-            y, c = gmr(w, mu, cov, t, return_covariance=True)
-            o = slice(cols.start - 1, cols.stop - 1)
-            return spread_volume(y[:, o], c[:, o, o], scene, grid, human, cfg.spacing, cfg.interior,
-                                 to_human=mapping.to_human)
-
-        out.append(cached(cache, key, make))
-    return np.stack(out)
+                           timed=timed, novelty=novelty)
 
 
 def _temperature(text: str) -> float | None:
@@ -333,6 +267,10 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
                              "cross-validated log-loss on the training demonstrations")
     parser.add_argument("--folds", type=int, default=DEFAULT_FOLDS,
                         help=f"folds of the temperature's cross-validation (default: {DEFAULT_FOLDS})")
+    parser.add_argument("--novelty-quantile", type=float, default=DEFAULT_QUANTILE, metavar="Q",
+                        help="the novelty test's threshold: the Q quantile of the held-out training demonstrations' "
+                             "least familiarity, so about Q of known motions are called unfamiliar at some moment "
+                             f"(0: the least of them; default: {DEFAULT_QUANTILE})")
     parser.add_argument("--volume", choices=VOLUMES, default=DEFAULT_VOLUME,
                         help="per-class occupancy p(x|C_m): paper = body swept along the mean motion (0/1); "
                              "spread = trajectories drawn within the GMR covariance; demos = the training "
@@ -359,7 +297,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
         except ValueError as exc:
             raise UserError(str(exc)) from None
         cfg = TrainConfig(gmm=gcfg, features=args.features, resolution=args.resolution, interior=args.interior,
-                          temperature=args.temperature, volume=args.volume, folds=args.folds)
+                          temperature=args.temperature, volume=args.volume, folds=args.folds,
+                          novelty_quantile=args.novelty_quantile)
         model = train_model(lib, scene, cfg, demos, progress=not args.quiet)
         model.save(args.out)
         size = Path(args.out).stat().st_size
@@ -378,6 +317,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
         if losses:
             print(f"temperature {model.temperature:g}: least mean log-loss of {cfg.folds}-fold cross-validation; "
                   "by tau: " + ", ".join(f"{t}: {v:.3f}" for t, v in losses.items()))
+        print(model.novelty.describe() if model.novelty is not None else
+              f"no novelty test: {model.meta['novelty']} (every motion will be called familiar)")
     return 0
 
 

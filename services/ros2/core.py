@@ -268,12 +268,17 @@ class Ros2Mapping:
         return self._cdr(msg, TOPICS["human"].msgtype)
 
     def posterior(self, post: ClassPosterior) -> bytes:
-        """The class posterior as a ``DiagnosticStatus``: one key-value per class, the best class as message."""
+        """The class posterior as a ``DiagnosticStatus``: one key-value per class, the best class as message.
+
+        ``level`` is OK (0) for a familiar motion and WARN (1) for one unlike every class
+        (``ClassPosterior.familiar``): then the best class is only the least unlikely.
+        """
         t = self.ts.types
         best = int(np.argmax(post.posterior))
         values = [t["diagnostic_msgs/msg/KeyValue"](key=name, value=f"{float(p):.6f}")
                   for name, p in zip(post.class_names, post.posterior, strict=True)]
-        msg = t["diagnostic_msgs/msg/DiagnosticStatus"](level=0, name="foresight/posterior",
+        level = 0 if post.familiar else 1
+        msg = t["diagnostic_msgs/msg/DiagnosticStatus"](level=level, name="foresight/posterior",
                                                          message=post.class_names[best], hardware_id="",
                                                          values=values)
         return self._cdr(msg, TOPICS["posterior"].msgtype)

@@ -36,6 +36,10 @@ POSTERIOR_SCHEMA: dict[str, Any] = {
         "probability": _by_name("p(c|xi) per class name"),
         "recognised": {"type": "string", "description": "the most probable class"},
         "recognised_probability": {"type": "number"},
+        "familiar": {"type": "boolean", "description": "whether any class explains the motion's last frames (if "
+                     "not, 'recognised' is only the least unlikely class)"},
+        "familiarity": {"type": "number", "description": "nats per frame; below the model's novelty threshold: "
+                        "unfamiliar"},
     },
 }
 
@@ -70,7 +74,8 @@ def posterior_chart(post: ClassPosterior, stamp: float) -> dict[str, Any]:
     k = int(np.argmax(post.posterior))
     return {"timestamp": _time(stamp), "demo_id": int(post.demo_id), "index": int(post.index),
             "probability": _named(list(post.class_names), post.posterior),
-            "recognised": post.class_names[k], "recognised_probability": float(post.posterior[k])}
+            "recognised": post.class_names[k], "recognised_probability": float(post.posterior[k]),
+            "familiar": bool(post.familiar), "familiarity": float(post.familiarity)}
 
 
 def costs_chart(plan: Plan, stamp: float) -> dict[str, Any]:

@@ -30,11 +30,12 @@ from .messages import (
     RobotState,
 )
 from .receipt import Receipt, SenderOrder
-from .schema import REASONS, SCHEMA_VERSION, ArraySpec, Message, ProtocolError
+from .schema import READABLE_VERSIONS, REASONS, SCHEMA_VERSION, ArraySpec, Message, ProtocolError
 from .validation import Expectations, GridSpec, RobotSpec, check_values
 
 __all__ = [
     "SCHEMA_VERSION",
+    "READABLE_VERSIONS",
     "ProtocolError",
     "REASONS",
     "ArraySpec",

@@ -19,7 +19,7 @@ import numpy as np
 
 from .limits import AXIS_LIMITS, MAX_CLASSES, MAX_GOALS, MAX_KEYPOINTS, MAX_PAYLOAD_BYTES, MAX_STRING_CHARS
 from .messages import MESSAGE_TYPES
-from .schema import SCHEMA_VERSION, ArraySpec, Message, ProtocolError
+from .schema import READABLE_VERSIONS, SCHEMA_VERSION, ArraySpec, Message, ProtocolError
 from .schema import field_error as _err
 
 __all__ = ["encode", "decode"]
@@ -73,18 +73,21 @@ class _Field:
     hint: Any  # the scalar's type (float, int, bool, str, list[str])
     want: np.dtype | None  # the array's dtype, and as it travels (little-endian: what encode writes)
     wire: np.dtype | None
+    since: int = 1  # the schema version that added the field (shared.protocol.schema.added)
+    default: Any = None  # its value in a message of an earlier version
 
 
 @functools.cache
-def _layout(cls: type) -> tuple[tuple[_Field, ...], frozenset[str]]:
-    """A message class's fields and every key its payload may hold (resolved once: every message needs them)."""
+def _layout(cls: type, version: int = SCHEMA_VERSION) -> tuple[tuple[_Field, ...], frozenset[str]]:
+    """A message class's fields and every key its payload of ``version`` may hold (resolved once per version)."""
     hints = typing.get_type_hints(cls)
     out = []
     for f in dataclasses.fields(cls):
         spec = f.metadata.get("array")
         want = np.dtype(spec.dtype) if spec is not None else None
-        out.append(_Field(f.name, spec, hints[f.name], want, want.newbyteorder("<") if want is not None else None))
-    return tuple(out), frozenset({"_type", "_v", *(f.name for f in out)})
+        out.append(_Field(f.name, spec, hints[f.name], want, want.newbyteorder("<") if want is not None else None,
+                          f.metadata.get("since", 1), None if f.default is dataclasses.MISSING else f.default))
+    return tuple(out), frozenset({"_type", "_v", *(f.name for f in out if f.since <= version)})
 
 
 def encode(msg: Message) -> bytes:
@@ -220,10 +223,11 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     cls = MESSAGE_TYPES[t]
     if expected is not None and cls is not expected:
         raise ProtocolError(f"message._type: got {t}, expected {expected.TYPE}", "wrong-type")
-    if type(raw.get("_v")) is not int or raw["_v"] != SCHEMA_VERSION:  # not True, not 1.0
-        raise ProtocolError(f"{t}._v: schema version {str(raw.get('_v'))[:40]!r}, this build speaks "
-                            f"{SCHEMA_VERSION}", "version")
-    fields, known = _layout(cls)
+    version = raw.get("_v")
+    if type(version) is not int or version not in READABLE_VERSIONS:  # not True, not 1.0
+        raise ProtocolError(f"{t}._v: schema version {str(version)[:40]!r}, this build speaks {SCHEMA_VERSION} "
+                            f"and reads {', '.join(map(str, READABLE_VERSIONS))}", "version")
+    fields, known = _layout(cls, version)
     unknown = raw.keys() - known
     if unknown:
         raise ProtocolError(f"{t}: unknown field(s) {', '.join(repr(k[:40]) for k in sorted(unknown)[:5])}",
@@ -232,6 +236,9 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     dims: dict[str, int] = {}
     for f in fields:
         if f.name not in raw:
+            if f.since > version:  # added after the sender's version: it did not know the field
+                kwargs[f.name] = f.default
+                continue
             raise _err(t, f.name, "missing", "malformed")
         if f.spec is not None:
             kwargs[f.name] = _decode_array(t, f, raw[f.name], dims)

@@ -12,7 +12,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .limits import MAX_GRID_CELLS, MAX_GRID_DIM
-from .schema import Message, array
+from .schema import Message, added, array
 from .schema import field_error as _err
 
 __all__ = ["N_FEATURES", "HumanKeypoints", "HumanPose", "DemoMarker", "ClassPosterior", "OccupancyGrid", "Plan",
@@ -103,7 +103,12 @@ class DemoMarker(Message):
 
 @dataclass
 class ClassPosterior(Message):
-    """The predictor's belief over the M motion classes after pose ``index`` of ``demo_id``."""
+    """The predictor's belief over the M motion classes after pose ``index`` of ``demo_id``.
+
+    ``familiar`` says whether any class explains the motion's last frames (its ``familiarity``, nats per frame,
+    at or above the model's novelty threshold): the posterior sums to 1 for a motion unlike every class too.
+    Both were added in schema version 2; a version-1 message is familiar with familiarity 0.
+    """
 
     TYPE: ClassVar[str] = "ClassPosterior"
     stamp: float
@@ -113,6 +118,8 @@ class ClassPosterior(Message):
     class_names: list[str]
     posterior: np.ndarray = array("float64", "M")
     log_likelihood: np.ndarray = array("float64", "M", finite=False)
+    familiar: bool = added(2, True)
+    familiarity: float = added(2, 0.0)
 
     def check(self) -> None:
         """Validate this message's invariants (see the class docstring)."""

@@ -13,9 +13,14 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-__all__ = ["SCHEMA_VERSION", "REASONS", "ProtocolError", "ArraySpec", "array", "Message", "field_error"]
+__all__ = ["SCHEMA_VERSION", "READABLE_VERSIONS", "REASONS", "ProtocolError", "ArraySpec", "array", "added", "Message",
+           "field_error"]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+"""The version every message is written with. 2 added ``ClassPosterior.familiar`` and ``.familiarity``."""
+READABLE_VERSIONS = (1, 2)
+"""Versions a receiver decodes: a field :func:`added` after a message's version takes its default (a version-1
+``ClassPosterior`` is familiar), and must not be in its payload."""
 
 REASONS: dict[str, str] = {
     # decoding (shared.protocol.codec, Message.check)
@@ -70,6 +75,11 @@ class ArraySpec:
 def array(dtype: str, *shape: int | str, finite: bool = True) -> Any:
     """Declare an array field of a message dataclass."""
     return dataclasses.field(metadata={"array": ArraySpec(dtype, tuple(shape), finite)})
+
+
+def added(version: int, default: Any) -> Any:
+    """Declare a scalar field added in schema ``version``: a message of an earlier version has it at ``default``."""
+    return dataclasses.field(default=default, metadata={"since": version})
 
 
 class Message:

@@ -218,6 +218,8 @@ def _posterior(msg: ClassPosterior, exp: Expectations) -> None:
     _counter(msg.TYPE, "index", msg.index, 0, L.MAX_SAMPLES)
     if np.any(msg.posterior > 1.0 + 1e-9):
         raise _err(msg.TYPE, "posterior", f"probability {float(msg.posterior.max()):.6g} above 1", "out-of-range")
+    if not -1e9 <= msg.familiarity <= 1e6:  # nats per frame; the predictor floors it at -1e9 (novelty.SCORE_FLOOR)
+        raise _err(msg.TYPE, "familiarity", f"{msg.familiarity:.6g} outside [-1e9, 1e6] nats per frame", "out-of-range")
     if exp.n_classes is not None and msg.posterior.shape[0] != exp.n_classes:
         raise _err(msg.TYPE, "posterior", f"{msg.posterior.shape[0]} classes, the receiver has {exp.n_classes}",
                    "mismatch")

@@ -146,6 +146,21 @@ def test_wrong_version():
         decode(pack(d))
 
 
+def test_version_1_is_still_read_its_posterior_familiar_and_without_the_fields_it_did_not_have():
+    for name, msg in samples().items():
+        d = raw(msg)
+        d["_v"] = 1
+        if name == "ClassPosterior":
+            with pytest.raises(ProtocolError, match=r"ClassPosterior: unknown field\(s\) 'familiar', 'familiarity'"):
+                decode(pack(d))  # a version-1 sender did not know them
+            del d["familiar"], d["familiarity"]
+            got = decode(pack(d))
+            assert got.familiar is True and got.familiarity == 0.0
+        else:
+            assert encode(decode(pack(d))) == encode(msg)  # the same message, written at version 2
+    assert raw(samples()["ClassPosterior"])["_v"] == SCHEMA_VERSION == 2  # what is written
+
+
 @pytest.mark.parametrize("version", [True, 1.0, "1", None])
 def test_a_version_that_only_compares_equal_is_refused(version):
     d = raw(samples()["HumanPose"])

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import services.experiments.fit_store as fit_store_module
+import services.predictor.class_volumes as class_volumes
 import services.predictor.fit_cache as fit_cache
-import services.predictor.train as train
 from services.experiments.fit_store import FitStore, store_tag
 from services.predictor.gmm import GMMConfig, fit_class_gmm
 from services.predictor.train import TrainConfig, train_model
@@ -38,7 +38,7 @@ def test_a_model_from_the_store_read_back_is_the_model_without_it(tmp_path, monk
 
     monkeypatch.setattr(fit_cache, "fit_class_gmm", refused)
     for name in ("sweep", "swept_volume"):
-        monkeypatch.setattr(train, name, refused)
+        monkeypatch.setattr(class_volumes, name, refused)
     again = train_model(lib, scene, cfg, progress=False, fit_cache=FitStore(tmp_path))  # another process's view
     assert again.temperature == plain.temperature
     for field in ("weights", "means", "covariances", "motions", "volumes"):

@@ -39,3 +39,15 @@ def paper_model(small_library: MotionLibrary, scene: Scene) -> PredictionModel:
     """The same mixtures with the paper's volume (0/1 along the mean motion, stored bit-packed as ``volumes``)."""
     return train_model(small_library, scene, dataclasses.replace(SMALL, volume="paper"), progress=False,
                        fit_cache=_FITS)
+
+
+def _two_of_three(library: MotionLibrary) -> MotionLibrary:
+    demos = [d for d in library.demos if d.label < 2]
+    return dataclasses.replace(library, class_names=library.class_names[:2], demos=demos)
+
+
+@pytest.fixture(scope="session")
+def two_class_model(small_library, scene) -> PredictionModel:
+    """Trained on two of the small library's three classes: the third is a motion it never saw."""
+    return train_model(_two_of_three(small_library), scene, dataclasses.replace(SMALL, novelty_quantile=0.0),
+                       progress=False)

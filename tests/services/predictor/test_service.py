@@ -184,3 +184,25 @@ def test_a_prediction_is_stamped_with_the_pose_it_was_made_from(zenoh_hub, small
                                            features=demo.features[0])], time.monotonic())
     kinds = {type(o).__name__: o.stamp for o in outs}
     assert kinds == {"ClassPosterior": old, "OccupancyGrid": old}
+
+
+def test_an_unfamiliar_motion_is_flagged_on_its_posterior_said_once_and_counted(zenoh_hub, two_class_model,
+                                                                                 small_library, caplog) -> None:
+    """A motion of a class the model never saw got posteriors like any other (one class near 1, no word)."""
+    service = PredictorService(PredictorConfig(), zenoh_hub(), model=two_class_model)
+    flags = []
+    with caplog.at_level("INFO", logger="foresight.predictor"):
+        for demo_id, demo in enumerate(small_library.by_class(2)):
+            for i, f in enumerate(demo.features):
+                post, _grid = service.handle(_pose(demo_id, i, f, tick=i))
+                flags.append((demo_id, post.familiar, post.familiarity))
+        service.handle(DemoMarker(stamp=0.0, tick=0, demo_id=99, event="start", true_class=0, class_name="x",
+                                  n_samples=1))
+    unfamiliar = [d for d, familiar, _ in flags if not familiar]
+    assert unfamiliar and service.stats.unfamiliar == len(unfamiliar)
+    assert all(s < two_class_model.novelty.threshold for _, familiar, s in flags if not familiar)
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert len(warned) == len(set(unfamiliar))  # once per demonstration, however many poses
+    assert all("unlike every class" in w and "least unlikely" in w for w in warned)
+    said = [r.getMessage() for r in caplog.records if "poses unfamiliar" in r.getMessage()]
+    assert len(said) == len(set(unfamiliar))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
@@ -58,6 +60,10 @@ def test_plan_goal_state_posterior_round_trip(mapping: Ros2Mapping) -> None:
                           posterior=np.array([0.25, 0.75]), log_likelihood=np.array([-3.0, -2.0]))
     ds = TS.deserialize_cdr(mapping.posterior(post), "diagnostic_msgs/msg/DiagnosticStatus")
     assert ds.message == "b" and [(kv.key, float(kv.value)) for kv in ds.values] == [("a", 0.25), ("b", 0.75)]
+    assert ds.level == 0
+    unlike = TS.deserialize_cdr(mapping.posterior(dataclasses.replace(post, familiar=False, familiarity=-80.0)),
+                                "diagnostic_msgs/msg/DiagnosticStatus")
+    assert unlike.level == 1 and unlike.message == "b"  # WARN: the best class is only the least unlikely
 
 
 def test_occupancy_and_human_markers(mapping: Ros2Mapping) -> None:

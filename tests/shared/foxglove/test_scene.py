@@ -3,6 +3,7 @@ with protobuf and the schema the SDK declares (not with the SDK)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -97,6 +98,9 @@ def test_human_body_and_posterior(builder) -> None:
     post = got["/viz/posterior"]
     assert post["probability"] == {"blue_cup": 0.25, "red_cup": 0.75}
     assert post["recognised"] == "red_cup" and post["index"] == 40
+    assert post["familiar"] is True and post["familiarity"] == 0.0
+    unlike = decoded(SceneStream(builder).draw(dataclasses.replace(posterior(), familiar=False, familiarity=-75.5), T))
+    assert unlike["/viz/posterior"]["familiar"] is False and unlike["/viz/posterior"]["familiarity"] == -75.5
 
 
 def test_a_demonstrations_end_draws_its_last_body_again_in_grey(builder) -> None:

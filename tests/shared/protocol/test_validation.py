@@ -212,6 +212,8 @@ def test_posterior_probabilities_and_class_count():
     refused(p, realtime(n_classes=3), "mismatch", "3")
     above = dataclasses.replace(p, posterior=np.array([1.0 + 5e-7, 0.0]))  # passes the sum check, not [0, 1]
     refused(above, realtime(), "out-of-range", "above 1")
+    check_values(dataclasses.replace(p, familiar=False, familiarity=-1e9), realtime())  # the predictor's floor
+    refused(dataclasses.replace(p, familiarity=-2e9), realtime(), "out-of-range", "familiarity")
 
 
 def test_occupancy_geometry_and_the_receivers_grid():

@@ -1,0 +1,156 @@
+"""Whether the observed motion is one the model knows: a novelty test on how well the last frames fit.
+
+The class posterior says which known class explains the motion best, never whether any of them does: a
+motion unlike every class still gets posteriors that sum to 1, often with one class near 1 (the least
+unlikely). The predictor therefore also reports the motion's *familiarity* at frame t::
+
+    s_t = max_m median_{t - W < u <= t} ln p(x_u | C_m)
+
+how well the best-fitting class explains the last ``W`` frames (fewer at the start of a motion), in nats
+per frame. The median over the window lets one glitch frame pass (a single implausible posture drops
+``ln p`` by thousands) while a motion that leaves every class drops it for good.
+
+The threshold is learnt by ``foresight train`` from the training demonstrations themselves: each is held out
+once (the folds of the temperature's cross-validation, :mod:`services.predictor.calibration`: its class's
+mixture refitted without it, as a new person's known motion would be) and scored frame by frame as the
+predictor scores a live motion. Its least ``s_t`` is how unfamiliar a known motion ever looked. The threshold
+is the ``quantile`` of those minima: with the default 0.05, about one held-out demonstration of a known
+class in twenty is called unfamiliar at some moment of its motion.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from sklearn.mixture import GaussianMixture
+
+from .gmm import MixtureBank
+
+__all__ = ["DEFAULT_WINDOW", "DEFAULT_QUANTILE", "NoveltyTest", "familiarity", "FamiliarityWindow",
+           "heldout_minima", "learn_novelty"]
+
+DEFAULT_WINDOW = 10
+"""Frames the familiarity looks back over (a third of a second at 30 Hz)."""
+DEFAULT_QUANTILE = 0.05
+"""Share of held-out demonstrations of known classes called unfamiliar at some moment."""
+SCORE_FLOOR = -1e9
+"""Familiarity is reported no lower than this (nats per frame): a finite number on the wire."""
+
+
+@dataclass(frozen=True)
+class NoveltyTest:
+    """The learnt novelty test of a model.
+
+    Attributes:
+        threshold: A motion whose familiarity falls below it is unfamiliar (nats per frame).
+        window: Frames W of the familiarity's median.
+        quantile: The share of held-out training demonstrations the threshold lets fall below it.
+        heldout: How many held-out demonstrations it was learnt from.
+    """
+
+    threshold: float
+    window: int = DEFAULT_WINDOW
+    quantile: float = DEFAULT_QUANTILE
+    heldout: int = 0
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.threshold):
+            raise ValueError(f"novelty threshold must be finite, got {self.threshold}")
+        if not (isinstance(self.window, int | np.integer) and 1 <= self.window <= 10_000):
+            raise ValueError(f"novelty window must be an integer in [1, 10000] frames, got {self.window!r}")
+        if not (0.0 <= self.quantile < 1.0):
+            raise ValueError(f"novelty quantile must be in [0, 1), got {self.quantile}")
+
+    def describe(self) -> str:
+        """One line for ``foresight train``'s output and the predictor's start line."""
+        return (f"novelty threshold {self.threshold:.2f} nats/frame over {self.window} frames (the "
+                f"{self.quantile:g} quantile of {self.heldout} held-out demonstrations' least familiarity)")
+
+
+def familiarity(log_likelihood: np.ndarray, window: int = DEFAULT_WINDOW) -> np.ndarray:
+    """The familiarity of every frame of one motion (what :class:`FamiliarityWindow` gives frame by frame).
+
+    Args:
+        log_likelihood: ``(T, M)`` per-frame ``ln p(x_t | C_m)``.
+        window: Frames W of the median.
+
+    Returns:
+        ``(T,)`` ``s_t = max_m median(ln p(x_u | C_m), t - W < u <= t)``, floored at :data:`SCORE_FLOOR`.
+    """
+    ll = np.nan_to_num(np.asarray(log_likelihood, dtype=np.float64), nan=SCORE_FLOOR, neginf=SCORE_FLOOR)
+    if ll.ndim != 2 or len(ll) == 0:
+        raise ValueError(f"familiarity: expected (T >= 1, M) log-likelihoods, got shape {ll.shape}")
+    padded = np.concatenate([np.full((window - 1, ll.shape[1]), np.nan), ll])   # the first windows are shorter
+    windows = np.lib.stride_tricks.sliding_window_view(padded, window, axis=0)  # (T, M, W)
+    return np.maximum(np.nanmedian(windows, axis=-1).max(axis=-1), SCORE_FLOOR)
+
+
+class FamiliarityWindow:
+    """The familiarity of a live motion, one frame at a time (equals :func:`familiarity` of the frames so far).
+
+    Args:
+        window: Frames W of the median.
+    """
+
+    def __init__(self, window: int = DEFAULT_WINDOW) -> None:
+        self.window = int(window)
+        self._frames: deque[np.ndarray] = deque(maxlen=self.window)
+
+    def reset(self) -> None:
+        """Forget the frames (a new motion)."""
+        self._frames.clear()
+
+    def push(self, log_likelihood: np.ndarray) -> float:
+        """Add one frame's ``(M,)`` ``ln p(x_t | C_m)``; returns the familiarity ``s_t``."""
+        self._frames.append(np.asarray(log_likelihood, dtype=np.float64))
+        return float(familiarity(np.stack(self._frames), self.window)[-1])
+
+
+def heldout_minima(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], GaussianMixture], folds: int,
+                   window: int = DEFAULT_WINDOW) -> np.ndarray:
+    """The least familiarity of every training demonstration, each scored with its fold held out.
+
+    Args:
+        feats: Per class, the encoded ``(T, D)`` feature vectors of each training demonstration.
+        fit: Fits one class mixture to stacked ``(N, D)`` vectors (the trainer's, cached: the temperature's
+            cross-validation fitted the same folds).
+        folds: Folds (demonstration j of a class is in fold ``j % folds``, as for the temperature).
+        window: Frames W of the familiarity.
+
+    Returns:
+        ``(N,)`` one minimum per held-out demonstration (empty when a class has fewer than 2).
+    """
+    if min(len(f) for f in feats) < 2 or folds < 2:
+        return np.empty(0)
+    out = []
+    for k in range(folds):
+        held = [[j for j in range(len(f)) if j % folds == k] for f in feats]
+        if not any(held):
+            continue
+        bank = MixtureBank.from_sklearn([fit(np.vstack([f[j] for j in range(len(f)) if j % folds != k]))
+                                         for f in feats])
+        for m, js in enumerate(held):
+            out.extend(float(familiarity(bank.log_likelihood(feats[m][j]), window).min()) for j in js)
+    return np.array(out)
+
+
+def learn_novelty(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], GaussianMixture], folds: int,
+                  window: int = DEFAULT_WINDOW, quantile: float = DEFAULT_QUANTILE) -> NoveltyTest | None:
+    """The novelty test of a training set, or None when no demonstration can be held out.
+
+    Args:
+        feats: Per class, the encoded ``(T, D)`` feature vectors of each training demonstration.
+        fit: The trainer's (cached) class mixture fit.
+        folds: Folds of the held-out scoring.
+        window: Frames W of the familiarity.
+        quantile: The threshold's quantile of the held-out minima (0: the least of them).
+    """
+    minima = heldout_minima(feats, fit, folds, window)
+    if minima.size == 0:
+        return None
+    # 'lower': the threshold is one of the minima, so exactly the demonstrations below it are called unfamiliar
+    threshold = float(np.quantile(minima, quantile, method="lower"))
+    return NoveltyTest(threshold, window, quantile, int(minima.size))
