@@ -3,7 +3,7 @@
 The same inputs ``foresight demo`` makes before it starts the services -- the human's demonstration
 (``DIR/human.npz``) and the prediction model trained without it (cached under ``--models-dir``) -- and one
 config file, ``DIR/foresight.toml``, with each service's section holding exactly the options the demo passes
-it on its command line (:func:`services.demo_run.service_options`), so that services started with
+it on its command line (:func:`services.demo_services.service_options`), so that services started with
 ``--config DIR/foresight.toml`` (or ``FORESIGHT_CONFIG``) run the demo's scenario and print the same step
 table. compose.yaml runs it as its one-shot ``prepare`` service. Zenoh options are left out: each deployment
 says where its router is.
@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING, Any
 
 import tomli_w
 
-from services.demo_run import prepare_inputs, service_options, services_in_order
+from services.demo_run import prepare_inputs
+from services.demo_services import service_options, services_in_order
 from shared.arguments import ArgumentParser
 from shared.config import add_config_arguments, resolve_config
 from shared.config_names import section_class

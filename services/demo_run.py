@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import os
 import shutil
 import threading
 import time
@@ -19,6 +18,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from services.demo_services import (
+    KEYPOINT_REST_S,
+    KEYPOINTS_FILE,
+    MODULES,
+    service_args,
+    services_in_order,
+)
 from services.processes import ServiceProcess, free_port
 from services.run_log import RunRecorder, keep_posterior, recorder_from_log
 from services.scenario import (
@@ -34,7 +40,6 @@ from services.scenario import (
     table_row,
 )
 from services.supervisor import Supervisor, describe_exit
-from services.view.config import DEFAULT_PORT
 from shared.config import ConfigError, ZenohConfig
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library, save_library
@@ -47,26 +52,9 @@ from shared.transport import Presence, open_session, subscribe
 if TYPE_CHECKING:
     from services.demo import DemoConfig
 
-__all__ = ["SERVICES_IN_ORDER", "KEYPOINTS_FILE", "services_in_order", "MODULES", "RunRecord", "run_once",
-           "service_args", "service_options",
-           "prepare_inputs"]
+__all__ = ["RunRecord", "run_once", "prepare_inputs"]
 
 log = logging.getLogger("foresight.demo")
-
-
-SERVICES_IN_ORDER = ("predictor", "planner", "replayer", "executor")
-"""Start order: the executor (simulation master) last, once the others listen."""
-
-KEYPOINTS_FILE = "human-keypoints.csv"
-"""``--human keypoints``: the human's demonstration as a keypoint recording, in the run's directory."""
-
-KEYPOINT_REST_S = 1.5
-"""``--human keypoints``: seconds the person stands still before and after the reach in the recording."""
-
-
-def services_in_order(cfg: DemoConfig) -> tuple[str, ...]:
-    """The demo's four services in start order, the tracker in the replayer's place with ``--human keypoints``."""
-    return tuple("tracker" if s == "replayer" and cfg.human == "keypoints" else s for s in SERVICES_IN_ORDER)
 
 
 def _library(cfg: DemoConfig, scene: Scene) -> MotionLibrary:
@@ -78,56 +66,6 @@ def _library(cfg: DemoConfig, scene: Scene) -> MotionLibrary:
     require_mapping(lib.feature_names, "foresight demo (HumanPose messages, occupancy)",
                     f"library {lib.source}", exact=LIVE_MAPPING)
     return lib
-
-
-MODULES = {"simrobot": "services.ros2.robot_sim"}
-"""Services whose module is not ``services.<name>``."""
-
-
-def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Path, samples_per_tick: int,
-                 mcap: Path) -> dict[str, list[str]]:
-    """Command-line arguments of each service for this demo."""
-    common = ["--connect", endpoint, "--listen", "tcp/127.0.0.1:0", "--prefix", cfg.prefix, "--zenoh-mode", "peer",
-              *(["--security", str(cfg.security)] if cfg.security else [])]
-    own = service_options(cfg, model, replay_library, samples_per_tick, mcap)
-    return {name: [*flags, *common, *_log_level(name, cfg.log_level)] for name, flags in own.items()}
-
-
-def _log_level(service: str, demo_level: str) -> list[str]:
-    """A service's ``--log-level``: INFO into its log, DEBUG with the demo's; none where the user set its variable.
-
-    ``FORESIGHT_PLANNER_LOG_LEVEL=DEBUG foresight demo`` gave the planner's per-plan lines nowhere: a flag beats the
-    variable, and the demo passed INFO to every service.
-    """
-    if os.environ.get(f"FORESIGHT_{service.upper()}_LOG_LEVEL"):
-        return []
-    return ["--log-level", "DEBUG" if demo_level.upper() == "DEBUG" else "INFO"]
-
-
-def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_per_tick: int,
-                    mcap: Path | None) -> dict[str, list[str]]:
-    """Each service's own options (flags, no Zenoh ones) for this demo's scenario; ``mcap`` None: the default."""
-    scene = ["--scene", cfg.scene] if cfg.scene else []
-    lockstep = cfg.mode == "lockstep"
-    return {
-        "predictor": ["--model", str(model), "--method", cfg.method, *scene],
-        "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
-                    "--velocity-scale", str(cfg.robot_speed), *(["--goals", cfg.goals] if cfg.goals else []),
-                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--cost.w-human", "0"]), *scene],
-        "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
-                     "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", "executor"])],
-        "tracker": ["--from-file", str(Path(replay_library).parent / KEYPOINTS_FILE), "--rate-hz", str(cfg.rate_hz),
-                    "--lead-s", "0", "--hold-s", "0", "--wait-for", "executor"],  # the rest is in the recording
-        "ros2": [*scene, *([] if cfg.robot == "sim" else ["--no-joint-states"])],  # a ROS 2 robot has its own
-        "simrobot": [*scene, "--sim-time" if lockstep else "--no-sim-time"],
-        "view": ["--port", str(cfg.live or DEFAULT_PORT), *scene],
-        "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
-                     *(["--wait-for", "tracker,predictor,planner"] if cfg.human == "keypoints" else []),
-                     *([] if cfg.robot == "sim" else ["--robot", "ros2"]),
-                     *(["--finish-path"] if lockstep and cfg.finish else []),
-                     *(["--live-port", str(cfg.live)] if cfg.live else []),
-                     *(["--mcap", str(mcap)] if mcap is not None else []), *scene],
-    }
 
 
 def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> str:

@@ -135,6 +135,12 @@ class ZenohConfig:
             for ep in getattr(self, name):
                 if "/" not in ep or not ep.split("/", 1)[1]:
                     raise ConfigError(f"zenoh.{name}: endpoint {ep!r} is not of the form proto/address")
+        if not self.connect and self.mode != "router" and not self.multicast_scouting:
+            fixed = [ep for ep in self.listen if not ep.split("#")[0].split("?")[0].endswith(":0")]
+            if self.mode == "client" or not fixed:  # an empty FORESIGHT_ZENOH_CONNECT ran a service nobody could find
+                raise ConfigError(f"zenoh.connect: empty, and this {self.mode} listens on no fixed port "
+                                  f"({', '.join(self.listen) or 'nothing'}) with scouting off: nothing can reach it; "
+                                  "give the router's endpoint, e.g. tcp/127.0.0.1:7447")
         if self.role and self.role not in ROLES:
             raise ConfigError(f"zenoh.role: {self.role!r} is no role{closest(self.role, ROLES)} "
                               f"(roles: {', '.join(ROLES)})")
@@ -152,6 +158,8 @@ def load_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
         ConfigError: If the file is missing or not valid TOML.
     """
     p = Path(path)
+    if p.is_dir():
+        raise ConfigError(f"config file {str(p)!r} is a directory, not a TOML file")
     if not p.is_file():
         raise ConfigError(f"config file {str(p)!r} not found")
     try:

@@ -149,13 +149,19 @@ def parse_value(name: str, tp: Any, raw: Any, choices: Sequence[Any] | None = No
                 if type(None) in typing.get_args(tp):
                     return None
                 raise ConfigError(f"{name}: an empty path")
-            value = Path(str(raw)).expanduser()
+            try:
+                value = Path(str(raw)).expanduser()
+            except RuntimeError:  # '~user' of no such user, or '~' without a home directory
+                raise ConfigError(f"{name}: cannot expand '~' in {str(raw)[:200]!r} (no such user, or no home "
+                                  "directory); give the path in full") from None
         elif inner is str:
             if not isinstance(raw, str):
                 raise ValueError
             value = raw
         else:  # pragma: no cover - config dataclasses only use the types above
             raise ConfigError(f"{name}: unsupported option type {inner!r}")
+    except ConfigError:  # already names what is wrong
+        raise
     except (TypeError, ValueError):
         kind = getattr(inner, "__name__", str(inner))
         raise ConfigError(f"{name}: expected {kind}, got {raw!r}") from None

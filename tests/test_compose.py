@@ -119,7 +119,7 @@ def prepared(tmp_path_factory) -> tuple[Path, dict[str, list[str]]]:
 
     from services.demo import DemoConfig
     from services.demo_prepare import config_tables
-    from services.demo_run import service_options
+    from services.demo_services import service_options
 
     options = service_options(DemoConfig(), Path("models/demo-x.npz"), Path("models/compose/human.npz"), 5, None)
     path = tmp_path_factory.mktemp("prepared") / "foresight.toml"

@@ -29,7 +29,10 @@ from .replan import TRIGGERS
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["PlannerConfig", "PlannerServiceConfig", "StompConfig", "StompError", "CostConfig"]
+__all__ = ["PlannerConfig", "PlannerServiceConfig", "StompConfig", "StompError", "CostConfig", "MAX_ROLLOUTS"]
+
+MAX_ROLLOUTS = 1024
+"""Most noisy rollouts per goal and iteration: 100 times the default; the rollouts' tensors grow with it."""
 
 
 class StompError(ValueError):
@@ -77,12 +80,12 @@ class StompConfig:
 
     def validate(self) -> None:
         """Raise :class:`StompError` naming the first bad field."""
-        if self.rollouts < 2:
-            raise StompError(f"stomp.rollouts must be >= 2, got {self.rollouts}")
+        if not 2 <= self.rollouts <= MAX_ROLLOUTS:  # 10^12 asked torch for 2.5 PB in a traceback
+            raise StompError(f"stomp.rollouts must be in [2, {MAX_ROLLOUTS}], got {self.rollouts}")
         if not 0 <= self.reuse < self.rollouts:
             raise StompError(f"stomp.reuse must be in [0, rollouts - 1 = {self.rollouts - 1}], got {self.reuse}")
-        if self.waypoints < 3:
-            raise StompError(f"stomp.waypoints must be >= 3, got {self.waypoints}")
+        if not 3 <= self.waypoints <= MAX_WAYPOINTS:  # a Plan carries at most MAX_WAYPOINTS
+            raise StompError(f"stomp.waypoints must be in [3, {MAX_WAYPOINTS}], got {self.waypoints}")
         if self.iterations < 1:  # 0 was let through and failed in the first plan (an IndexError)
             raise StompError(f"stomp.iterations must be >= 1, got {self.iterations}")
         if not (self.noise_std >= 0 and math.isfinite(self.noise_std)):

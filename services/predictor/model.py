@@ -40,6 +40,7 @@ Version 2 added ``volume_method``, ``volume_probabilities`` and the ``timed_*`` 
 from __future__ import annotations
 
 import json
+import os
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -226,33 +227,67 @@ class PredictionModel:
             ModelError: If the file is missing, not a model file, of another version, or corrupt.
         """
         p = Path(path)
+        if p.is_dir():
+            raise ModelError(f"model file {str(p)!r} is a directory; give the model file itself (foresight train "
+                             "--out FILE writes one)")
         if not p.is_file():
             raise ModelError(f"model file {str(p)!r} not found; run `foresight train --out {p}` first")
+        if not os.access(p, os.R_OK):
+            st = p.stat()
+            raise ModelError(f"model file {str(p)!r}: this process (uid {os.getuid()}) cannot read it (owner uid "
+                             f"{st.st_uid}, mode {st.st_mode & 0o777:o}); run as its owner or chmod a+r it")
         try:
-            with NPZ_LOCK, np.load(p, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except (zipfile.BadZipFile, zlib.error, OSError, ValueError, EOFError) as exc:
+            with NPZ_LOCK:
+                z = np.load(p, allow_pickle=False)
+                if not isinstance(z, np.lib.npyio.NpzFile):  # np.save's one array
+                    raise ModelError(f"model file {str(p)!r} holds one numpy array ({z.dtype} {z.shape}), not a "
+                                     "model (foresight train writes an .npz of many)")
+                with z:
+                    data = {k: z[k] for k in z.files}
+        except ModelError:
+            raise
+        except (zipfile.BadZipFile, zlib.error, OSError, ValueError, EOFError, MemoryError) as exc:
             raise ModelError(f"model file {str(p)!r} is corrupt or not a model file ({type(exc).__name__}: "
-                             f"{exc}); retrain with `foresight train`") from None
+                             f"{str(exc)[:200]}); retrain with `foresight train`") from None
         if str(data.get("format", "")) != MODEL_FORMAT:
             raise ModelError(f"model file {str(p)!r} is not a Foresight prediction model (format "
                              f"{str(data.get('format', 'missing'))!r})")
-        try:
-            version = int(data["version"]) if "version" in data else None
-        except (TypeError, ValueError):
-            version = str(data["version"])[:40]  # type: ignore[assignment]
+        raw = data.get("version")
+        version = int(raw) if raw is not None and raw.dtype.kind in "iu" and raw.shape == () else (
+            None if raw is None else str(raw)[:40])  # 2.9 is not version 2
         if version not in READABLE_VERSIONS:
             raise ModelError(f"model file {str(p)!r} has version {version}, this build reads versions "
                              f"{', '.join(map(str, READABLE_VERSIONS))}; retrain with `foresight train`")
         try:
             return cls._from_arrays(data)
-        except (KeyError, ValueError, TypeError, IndexError) as exc:
-            raise ModelError(f"model file {str(p)!r} is inconsistent: {exc}") from None
+        except KeyError as exc:
+            raise ModelError(f"model file {str(p)!r} is inconsistent: it has no array {exc}") from None
+        except (ValueError, TypeError, IndexError, AttributeError, OverflowError, MemoryError) as exc:
+            raise ModelError(f"model file {str(p)!r} is inconsistent: {str(exc)[:300]}") from None
 
     @classmethod
     def _from_arrays(cls, d: dict[str, np.ndarray]) -> PredictionModel:
-        names = [str(s) for s in d["class_names"].tolist()]
+        names = [str(s) for s in np.atleast_1d(d["class_names"]).tolist()]
         m = len(names)
+        if m == 0:
+            raise ValueError("it has no classes")
+        meta = json.loads(str(d["meta"]))
+        if not isinstance(meta, dict):
+            raise ValueError(f"meta must be a JSON object, got {type(meta).__name__}")
+        last = meta.get("last_index", 0)
+        if isinstance(last, bool) or not isinstance(last, int) or last < 0:
+            raise ValueError(f"meta.last_index must be an integer >= 0, got {str(last)[:40]}")
+        for name in ("grid_min", "grid_max"):
+            if d[name].shape != (3,) or not np.all(np.isfinite(d[name])):
+                raise ValueError(f"{name} must be 3 finite numbers, got {np.array2string(d[name], precision=4)}")
+        res = d["grid_resolution"]
+        if res.shape != () or not (float(res) > 0 and np.isfinite(float(res))):
+            raise ValueError(f"grid_resolution must be a finite number > 0 (m), got {res}")
+        if np.any(d["grid_max"] <= d["grid_min"]):
+            raise ValueError(f"grid_max {d['grid_max'].tolist()} must exceed grid_min {d['grid_min'].tolist()} on "
+                             "every axis")
+        if d["interior"].dtype != np.bool_:
+            raise ValueError(f"interior must be a boolean, got {d['interior'].dtype} {d['interior']}")
         w, mu, cov = d["weights"], d["means"], d["covariances"]
         if w.shape[0] != m or mu.shape[:2] != w.shape or cov.shape != (*mu.shape, mu.shape[2]):
             raise ValueError(f"mixture shapes {w.shape}, {mu.shape}, {cov.shape} do not fit {m} classes")
@@ -269,6 +304,8 @@ class PredictionModel:
         feature_names = (tuple(str(s) for s in d["feature_names"].tolist()) if "feature_names" in d
                          else HERAKLES_NAMES)
         method = str(d["volume_method"]) if "volume_method" in d else "paper"
+        if method == "timed" and "timed_values" not in d:
+            raise ValueError("volume method 'timed' but no timed_values / timed_support / time_bin arrays")
         if method not in VOLUMES:
             raise ValueError(f"volume method {method!r} is not one of {', '.join(VOLUMES)}")
         volumes = None
@@ -317,7 +354,7 @@ class PredictionModel:
                     means=mu.astype(np.float64), covariances=cov.astype(np.float64), motions=motions,
                     motion_lengths=lengths, grid=grid, volumes=volumes,
                     scene_name=str(d["scene_name"]), human_pelvis=d["human_pelvis"].astype(np.float64),
-                    spacing=float(d["spacing"]), interior=bool(d["interior"]), meta=json.loads(str(d["meta"])),
+                    spacing=float(d["spacing"]), interior=bool(d["interior"]), meta=meta,
                     temperature=temperature, feature_names=feature_names, volume_method=method,
                     timed=timed, novelty=novelty)
         if model.encoder().dim != mu.shape[2]:

@@ -29,6 +29,7 @@ from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from shared.arguments import ArgumentParser
+from shared.atomic_file import ready_to_write
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
 from shared.runtime import UserError, cli_errors, setup_logging
 from shared.scene import SCENE_HELP, Scene, load_scene
@@ -288,6 +289,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
     with cli_errors(prog):
         if args.seed < 0:  # numpy's and sklearn's errors said neither which option nor which command
             raise UserError(f"--seed must be >= 0, got {args.seed}")
+        ready_to_write(args.out)  # before the minutes of training: a directory in the way was found only after them
         scene = load_scene(args.scene)
         lib = load_library(args.library) if args.library else default_library(scene)
         demos = heldout_split(lib, args.heldout, args.seed)[0] if args.heldout else list(lib.demos)

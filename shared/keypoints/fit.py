@@ -175,29 +175,30 @@ class KeypointFit:
         active = np.ones(len(f), dtype=bool)
         steps = 0
         for steps in range(1, self.config.iterations + 1):  # noqa: B007 (the count is reported)
+            i = np.flatnonzero(active)  # a converged frame stays as it is: only the others are computed
+            fi, yi, wi, f0i, ri, mui = f[i], y[i], w[i], f0[i], r[i], mu[i]
             shifts = np.eye(12) * eps  # (12, 12)
-            fp = f[:, None, :] + shifts  # (B, 12, 12)
-            fm = f[:, None, :] - shifts
-            jac = (self._residuals(fp, y[:, None], w[:, None], f0[:, None])
-                   - self._residuals(fm, y[:, None], w[:, None], f0[:, None])) / (2 * eps)  # (B, 12, R)
+            fp = fi[:, None, :] + shifts  # (A, 12, 12)
+            fm = fi[:, None, :] - shifts
+            jac = (self._residuals(fp, yi[:, None], wi[:, None], f0i[:, None])
+                   - self._residuals(fm, yi[:, None], wi[:, None], f0i[:, None])) / (2 * eps)  # (A, 12, R)
             jt = jac  # rows: d r / d f_k
-            jtj = jt @ np.swapaxes(jt, -1, -2)  # (B, 12, 12)
-            g = np.einsum("bkr,br->bk", jt, r)
-            a = jtj + mu[:, None, None] * (np.eye(12) * np.diagonal(jtj, axis1=-2, axis2=-1)[:, None, :] + np.eye(12)
-                                           * 1e-9)
+            jtj = jt @ np.swapaxes(jt, -1, -2)  # (A, 12, 12)
+            g = np.einsum("bkr,br->bk", jt, ri)
+            a = jtj + mui[:, None, None] * (np.eye(12) * np.diagonal(jtj, axis1=-2, axis2=-1)[:, None, :]
+                                            + np.eye(12) * 1e-9)
             delta = -np.linalg.solve(a, g[..., None])[..., 0]
-            f_old = f
-            f_new = np.clip(f + delta, self.low, self.high)
-            r_new = self._residuals(f_new, y, w, f0)
+            f_new = np.clip(fi + delta, self.low, self.high)
+            r_new = self._residuals(f_new, yi, wi, f0i)
             cost_new = np.sum(r_new ** 2, axis=-1)
-            better = (cost_new <= cost) & active  # a frame that has converged stays as it is (batched == looped)
-            small = better & (cost - cost_new <= self.config.rel_tolerance * cost)  # noisy points: at the optimum
-            f = np.where(better[:, None], f_new, f)
-            r = np.where(better[:, None], r_new, r)
-            cost = np.where(better, cost_new, cost)
-            mu = np.where(active, np.where(better, mu * 0.3, mu * 10.0), mu)
-            moved = np.max(np.abs(f_new - f_old), axis=-1)  # the clipped step: at a bound a feature stays
-            active &= ~((better & (moved < self.config.tolerance_m)) | small | (mu > 1e6))
+            better = cost_new <= cost[i]
+            small = better & (cost[i] - cost_new <= self.config.rel_tolerance * cost[i])  # noisy points: at the optimum
+            moved = np.max(np.abs(f_new - fi), axis=-1)  # the clipped step: at a bound a feature stays
+            f[i] = np.where(better[:, None], f_new, fi)
+            r[i] = np.where(better[:, None], r_new, ri)
+            cost[i] = np.where(better, cost_new, cost[i])
+            mu[i] = np.where(better, mui * 0.3, mui * 10.0)
+            active[i] = ~((better & (moved < self.config.tolerance_m)) | small | (mu[i] > 1e6))
             if not active.any():
                 break
         p = self.model.joint_positions(f)

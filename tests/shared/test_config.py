@@ -115,6 +115,10 @@ def test_section_field_shadowing_a_zenoh_flag():
     (["--prefix", "cell#1"], {}, r"^zenoh\.prefix: 'cell#1' must be a Zenoh key.*\(it has #\)"),
     (["--prefix", "robot?x"], {}, r"\(it has \?\)"),
     (["--prefix", "lab$1"], {}, r"\(it has \$\)"),
+    # an empty connect (a blank $ROUTER) ran a service nothing could reach, without a word
+    ([], {"FORESIGHT_ZENOH_CONNECT": ""}, r"zenoh\.connect: empty, and this peer listens on no fixed port .*"
+                                          r"nothing can reach it.*\(set by FORESIGHT_ZENOH_CONNECT\)"),
+    (["--zenoh-mode", "client", "--connect", ""], {}, r"zenoh\.connect: empty, and this client"),
 ])
 def test_bad_values(argv, env, pattern):
     with pytest.raises(ConfigError, match=pattern):
@@ -308,6 +312,20 @@ def test_a_config_file_that_is_not_utf8_is_named(tmp_path):
     bad.write_bytes("[demo]\nmode = 'caf\xe9'\n".encode("latin-1"))
     with pytest.raises(ConfigError, match=r"^config file '.*latin1\.toml': .*utf-8"):
         resolve_config("demo", DemoCfg, parse(["--config", str(bad)]), env={})
+
+
+def test_an_empty_connect_is_fine_where_others_can_reach_this_session():
+    for argv in (["--connect", "", "--listen", "tcp/127.0.0.1:7450"], ["--connect", "", "--zenoh-mode", "router"]):
+        assert resolve_config("demo", DemoCfg, parse(argv), env={})[1].connect == []
+
+
+def test_a_path_whose_home_cannot_be_found_and_a_directory_as_config_are_one_line(tmp_path):
+    """'~nosuchuser/m.npz' was a RuntimeError traceback from every path option; a directory 'not found'."""
+    with pytest.raises(ConfigError, match=r"FORESIGHT_DEMO_LIBRARY: cannot expand '~' in '~nosuchuser-x/lib' "
+                                          r"\(no such user"):
+        resolve_config("demo", DemoCfg, parse([]), env={"FORESIGHT_DEMO_LIBRARY": "~nosuchuser-x/lib"})
+    with pytest.raises(ConfigError, match="is a directory, not a TOML file"):
+        resolve_config("demo", DemoCfg, parse(["--config", str(tmp_path)]), env={})
 
 
 def test_an_empty_path_from_the_environment_is_unset_and_a_number_is_no_path(tmp_path):

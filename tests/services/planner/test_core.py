@@ -258,8 +258,12 @@ def test_config_resolves_and_names_bad_values() -> None:
     p = cfg.planner
     assert (p.stomp.rollouts, p.goals, p.cost.w_smooth, cfg.mode) == (24, ["red_cup", "blue_cup"], 50.0, "lockstep")
     assert p.stomp_config().rollouts == 24 and cfg.planner_config().lookahead_s == 0.0 and p.lookahead_s == 0.5
-    with pytest.raises(ConfigError, match=r"planner\.stomp\.rollouts must be >= 2"):
+    with pytest.raises(ConfigError, match=r"planner\.stomp\.rollouts must be in \[2, 1024\], got 1"):
         PlannerConfig(stomp=StompConfig(rollouts=1)).validate()
+    with pytest.raises(ConfigError, match=r"planner\.stomp\.rollouts must be in \[2, 1024\]"):  # 10^12: torch
+        PlannerConfig(stomp=StompConfig(rollouts=10**12)).validate()  # asked for 2.5 PB, in a traceback
+    with pytest.raises(ConfigError, match=r"planner\.stomp\.waypoints must be in \[3, 4096\]"):
+        PlannerConfig(stomp=StompConfig(waypoints=10**6)).validate()
     with pytest.raises(ConfigError, match=r"planner\.stomp\.iterations must be >= 1"):  # 0 failed in the first plan
         PlannerConfig(stomp=StompConfig(iterations=0)).validate()
     with pytest.raises(ConfigError, match=r"planner\.cost\.w_human"):

@@ -42,6 +42,18 @@ def test_train_cli_bad_options_are_one_line_errors(tiny_library_path, tmp_path, 
         assert len(err) == 1 and "error" in err[0]
 
 
+def test_train_refuses_an_out_it_cannot_write_before_it_trains(tiny_library_path, tmp_path, capsys,
+                                                               monkeypatch) -> None:
+    """A directory in the way was found after the whole training, named as a temporary file."""
+    import services.predictor.train as train
+
+    monkeypatch.setattr(train, "train_model", lambda *a, **k: pytest.fail("trained before checking --out"))
+    (tmp_path / "dir.npz").mkdir()
+    with pytest.raises(SystemExit):
+        train_main(["--library", str(tiny_library_path), "--out", str(tmp_path / "dir.npz"), "--quiet"])
+    assert f"{tmp_path / 'dir.npz'}: a directory is in the way" in capsys.readouterr().err
+
+
 def test_eval_recognition_json(tiny_library_path, tmp_path, capsys) -> None:
     png = tmp_path / "rec.png"
     assert eval_main(["recognition", "--library", str(tiny_library_path), "--components", "2", "--n-jobs", "1",

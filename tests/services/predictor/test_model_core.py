@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -287,6 +288,18 @@ def test_the_velocity_over_a_missing_pose_is_the_change_per_sample(small_library
     ("spacing", np.array(0.0), "spacing must be a finite number > 0"),
     ("human_pelvis", np.zeros(3), r"human_pelvis must be 4 finite numbers .* shape \(3,\)"),
     ("version", np.array("abc"), "has version abc"),
+    # a review's hand-made files (2026-11-28): tracebacks, warnings, or a message that named no field
+    ("version", np.array(2.9), "has version 2.9"),
+    ("meta", np.array("[]"), "meta must be a JSON object, got list"),
+    ("meta", np.array('{"last_index": 1e400}'), "meta.last_index must be an integer >= 0, got inf"),
+    ("grid_resolution", np.array(0.0), r"grid_resolution must be a finite number > 0 \(m\), got 0.0"),
+    ("grid_resolution", np.array(np.nan), "grid_resolution must be a finite number > 0"),
+    ("grid_max", np.array([1.0, 2.0, np.inf]), "grid_max must be 3 finite numbers"),
+    ("grid_min", np.array([9.0, 9.0, 9.0]), "grid_max .* must exceed grid_min"),
+    ("class_names", np.array([], dtype=str), "it has no classes"),
+    ("weights", None, "it has no array 'weights'"),
+    ("volume_method", np.array("timed"), "volume method 'timed' but no timed_values"),
+    ("interior", np.array("False"), "interior must be a boolean"),
 ])
 def test_a_model_file_with_a_bad_scalar_is_a_model_error(small_model, tmp_path, key, value, match) -> None:
     """These used to load (and fail at run time) or end in a ValueError traceback, not a ModelError."""
@@ -294,7 +307,7 @@ def test_a_model_file_with_a_bad_scalar_is_a_model_error(small_model, tmp_path, 
     with np.load(tmp_path / "m.npz", allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
     arrays[key] = value
-    np.savez(tmp_path / "bad.npz", **arrays)
+    np.savez(tmp_path / "bad.npz", **{k: v for k, v in arrays.items() if v is not None})
     with pytest.raises(ModelError, match=match):
         PredictionModel.load(tmp_path / "bad.npz")
 
@@ -313,3 +326,20 @@ def test_a_model_file_with_bad_mixing_weights_is_a_model_error(small_model, tmp_
     np.savez(tmp_path / "bad.npz", **arrays)
     with pytest.raises(ModelError, match=match):
         PredictionModel.load(tmp_path / "bad.npz")
+
+
+def test_a_model_path_that_is_no_model_file_says_what_it_is(tmp_path) -> None:
+    """A directory was 'not found; run foresight train' (it exists), a .npy a TypeError traceback."""
+    with pytest.raises(ModelError, match="is a directory; give the model file itself"):
+        PredictionModel.load(tmp_path)
+    np.save(tmp_path / "one.npy", np.arange(3))
+    with pytest.raises(ModelError, match=r"holds one numpy array \(int64 \(3,\)\), not a model"):
+        PredictionModel.load(tmp_path / "one.npy")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root reads any file: the check needs another user")
+def test_an_unreadable_model_file_names_its_owner_not_corruption(small_model, tmp_path) -> None:
+    small_model.save(tmp_path / "m.npz")
+    (tmp_path / "m.npz").chmod(0)
+    with pytest.raises(ModelError, match=r"cannot read it \(owner uid \d+, mode 0\)"):
+        PredictionModel.load(tmp_path / "m.npz")
