@@ -258,13 +258,14 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
         config_cls: The section's config dataclass (with a ``log_level`` field).
         description: ``--help`` text.
         make: ``(config, zenoh_config, stop) -> run``: builds the service (bad input raises a
-            one-line error) and returns a callable that serves until ``stop`` is set.
+            one-line error) and returns a callable that serves until ``stop`` is set; an ``int`` it returns is
+            the exit status (the executor's 1: a lock-step run that went on without its inputs).
 
     ``make`` may not open anything that must be closed (a session, a log): a SIGINT/SIGTERM while it builds ends
     the process at once (:func:`interruptible`), status 0; while the service runs, the signal sets ``stop``.
 
     Returns:
-        The exit status: 0 when the service stopped, 2 on bad input.
+        The exit status: 0 when the service stopped (or what ``run`` returned), 2 on bad input.
     """
     parser = ArgumentParser(prog=prog, description=description)
     add_config_arguments(parser, section, config_cls)
@@ -296,10 +297,10 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
                 return 0
             logging.getLogger("foresight").debug("%d start-up objects frozen out of the garbage collector",
                                                  freeze_startup_heap())
-            run()
+            status = run()
         finally:
             restore()
-    return 0
+    return status if isinstance(status, int) and not isinstance(status, bool) else 0
 
 
 def _exit_within(grace_s: float, prog: str) -> None:

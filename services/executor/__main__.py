@@ -14,7 +14,10 @@ from shared.security.acl import refuse_ros2_keys
 from .core import ExecutorConfig
 from .service import ExecutorService
 
-__all__ = ["main"]
+__all__ = ["main", "INCOMPLETE"]
+
+INCOMPLETE = 1
+"""Exit status of a lock-step run that finished with ticks that went on without their plan or prediction."""
 
 DESCRIPTION = """Simulate the PR2 arm following the chosen trajectory of the latest Plan (within its
 joint and velocity limits; the plan of replanning step n-1 runs during step n), publish RobotState,
@@ -22,7 +25,8 @@ hold the robot when plans or predictions go stale, and log every message under t
 MCAP file (plus Foxglove 3D channels). In lock-step mode the executor is the simulation master and
 emits the ClockTicks. Stops after --steps, or on SIGINT/SIGTERM (the MCAP file is finalised either
 way). Options come from the dataclass defaults < --config FILE ([executor], [zenoh]) < env
-FORESIGHT_EXECUTOR_<NAME> / FORESIGHT_ZENOH_<NAME> < flags."""
+FORESIGHT_EXECUTOR_<NAME> / FORESIGHT_ZENOH_<NAME> < flags. Exit status 1: a lock-step run finished with
+ticks that went on without their plan or prediction (a service gone mid-run), not the run its seed makes."""
 
 
 SWITCH_INTERVAL_S = 0.001
@@ -41,16 +45,19 @@ def _make(cfg: ExecutorConfig, zcfg: ZenohConfig, stop: threading.Event) -> Call
     limit_torch_threads(1)  # its torch work is the scene's forward kinematics: a second thread only spins
     service = ExecutorService(cfg, zcfg, stop)
 
-    def run() -> None:
+    def run() -> int:
         result = service.run()
         if result.mcap_path:
             print(f"mcap: {result.mcap_path}")
+        # a lock-step run whose ticks went on without their plan or prediction is not the run its seed makes: a
+        # planner killed mid-run ended 'done ... reached=True', status 0, and compose and scripts took it for one
+        return INCOMPLETE if result.lockstep_timeouts else 0
 
     return run
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m services.executor") -> int:
-    """Run the executor; returns the exit status (0 done or stopped, 2 bad input)."""
+    """Run the executor; returns the exit status (0 done or stopped, 1 :data:`INCOMPLETE`, 2 bad input)."""
     return service_main(argv, prog, section="executor", config_cls=ExecutorConfig, description=DESCRIPTION,
                         make=_make)
 

@@ -431,3 +431,23 @@ def test_a_service_gone_mid_lockstep_run_is_said_and_the_run_says_it_went_on_wit
     result = service.run()  # no planner at all: each tick waits 0.2 s and goes on
     assert result.lockstep_timeouts == 2
     assert "2 tick(s) went on without their plan or prediction" in caplog.text
+
+
+def test_a_lockstep_run_that_went_on_without_its_inputs_exits_1(monkeypatch, capsys) -> None:
+    """A compose run whose planner was killed ended 'done ... reached=True' with status 0: scripts took it for a run."""
+    import services.executor.__main__ as executor_main
+    from services.executor.result import ExecutorResult
+
+    class Ran:
+        def __init__(self, *_a) -> None:
+            pass
+
+        def run(self) -> ExecutorResult:
+            return ExecutorResult(mcap_path="runs/x.mcap", lockstep_timeouts=self.timeouts)
+
+    argv = ["--mode", "lockstep", "--steps", "1", "--connect", "tcp/127.0.0.1:9"]
+    for timeouts, status in ((2, executor_main.INCOMPLETE), (0, 0)):
+        Ran.timeouts = timeouts
+        monkeypatch.setattr(executor_main, "ExecutorService", Ran)
+        assert executor_main.main(argv) == status
+        assert "mcap: runs/x.mcap" in capsys.readouterr().out
