@@ -38,7 +38,7 @@ from shared.scene import SCENE_HELP, Grid, Scene
 
 from .gmm import posterior_from_log_likelihood
 from .model import PredictionModel
-from .novelty import DEFAULT_WINDOW, FamiliarityWindow
+from .novelty import DEFAULT_WINDOW, MIN_FRAMES, FamiliarityWindow
 from .swept_volume import posture_voxels
 
 __all__ = ["PredictorConfig", "PredictionResult", "PredictorCore", "PredictorError", "METHODS"]
@@ -220,8 +220,11 @@ class PredictorCore:
 
     @property
     def familiar(self) -> bool:
-        """Whether the motion so far is familiar: its familiarity at or above the model's novelty threshold."""
-        return self.novelty is None or self._count == 0 or self._familiarity >= self.novelty.threshold
+        """Whether the motion so far is familiar: its familiarity at or above the model's novelty threshold.
+
+        Judged from the :data:`~services.predictor.novelty.MIN_FRAMES`-th posture on.
+        """
+        return self.novelty is None or self._count < MIN_FRAMES or self._familiarity >= self.novelty.threshold
 
     def log_likelihood(self) -> np.ndarray:
         """``(M,)`` running ln p(xi | C_m)."""

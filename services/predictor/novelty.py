@@ -8,14 +8,16 @@ unlikely). The predictor therefore also reports the motion's *familiarity* at fr
 
 how well the best-fitting class explains the last ``W`` frames (fewer at the start of a motion), in nats
 per frame. The median over the window lets one glitch frame pass (a single implausible posture drops
-``ln p`` by thousands) while a motion that leaves every class drops it for good.
+``ln p`` by thousands) while a motion that leaves every class drops it for good; with one or two frames in the
+window a median is no such guard, so a motion is judged from its :data:`MIN_FRAMES`-th frame on.
 
 The threshold is learnt by ``foresight train`` from the training demonstrations themselves: each is held out
 once (the folds of the temperature's cross-validation, :mod:`services.predictor.calibration`: its class's
 mixture refitted without it, as a new person's known motion would be) and scored frame by frame as the
-predictor scores a live motion. Its least ``s_t`` is how unfamiliar a known motion ever looked. The threshold
-is the ``quantile`` of those minima: with the default 0.05, about one held-out demonstration of a known
-class in twenty is called unfamiliar at some moment of its motion.
+predictor scores a live motion. Its least ``s_t`` (from its third frame on) is how unfamiliar a known motion ever
+looked. The threshold is the ``quantile`` of those minima (the one at ``floor(q (n - 1))`` of n, sorted): with
+the default 0.05, about one held-out demonstration of a known class in twenty is called unfamiliar at some moment
+of its motion, given enough of them; with 20 or fewer, none is (the least minimum: as quantile 0).
 """
 
 from __future__ import annotations
@@ -29,13 +31,16 @@ from sklearn.mixture import GaussianMixture
 
 from .gmm import MixtureBank
 
-__all__ = ["DEFAULT_WINDOW", "DEFAULT_QUANTILE", "NoveltyTest", "familiarity", "FamiliarityWindow",
-           "heldout_minima", "learn_novelty"]
+__all__ = ["DEFAULT_WINDOW", "DEFAULT_QUANTILE", "MIN_FRAMES", "NoveltyTest", "familiarity", "least_familiarity",
+           "FamiliarityWindow", "heldout_minima", "learn_novelty"]
 
 DEFAULT_WINDOW = 10
 """Frames the familiarity looks back over (a third of a second at 30 Hz)."""
 DEFAULT_QUANTILE = 0.05
 """Share of held-out demonstrations of known classes called unfamiliar at some moment."""
+MIN_FRAMES = 3
+"""Frames a motion is observed before it can be called unfamiliar: the median of 3 passes one glitch frame (of 1
+or 2 it is that frame, or half of it: a glitch at the first frame flagged the motion)."""
 SCORE_FLOOR = -1e9
 """Familiarity is reported no lower than this (nats per frame): a finite number on the wire."""
 
@@ -88,6 +93,15 @@ def familiarity(log_likelihood: np.ndarray, window: int = DEFAULT_WINDOW) -> np.
     return np.maximum(np.nanmedian(windows, axis=-1).max(axis=-1), SCORE_FLOOR)
 
 
+def least_familiarity(scores: np.ndarray) -> float:
+    """The least of a motion's ``(T,)`` familiarity scores from its :data:`MIN_FRAMES`-th frame on.
+
+    (The last one for a shorter motion.) What :func:`heldout_minima` records and the threshold is compared with.
+    """
+    s = np.asarray(scores, dtype=np.float64)
+    return float(s[min(MIN_FRAMES, len(s)) - 1:].min())
+
+
 class FamiliarityWindow:
     """The familiarity of a live motion, one frame at a time (equals :func:`familiarity` of the frames so far).
 
@@ -133,7 +147,7 @@ def heldout_minima(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], Ga
         bank = MixtureBank.from_sklearn([fit(np.vstack([f[j] for j in range(len(f)) if j % folds != k]))
                                          for f in feats])
         for m, js in enumerate(held):
-            out.extend(float(familiarity(bank.log_likelihood(feats[m][j]), window).min()) for j in js)
+            out.extend(least_familiarity(familiarity(bank.log_likelihood(feats[m][j]), window)) for j in js)
     return np.array(out)
 
 

@@ -35,7 +35,7 @@ from .calibration import DEFAULT_FOLDS
 from .features import FeatureEncoder
 from .fit_cache import class_fit
 from .gmm import GMMConfig, MixtureBank
-from .novelty import DEFAULT_QUANTILE, DEFAULT_WINDOW, familiarity, heldout_minima
+from .novelty import DEFAULT_QUANTILE, DEFAULT_WINDOW, MIN_FRAMES, familiarity, heldout_minima, least_familiarity
 from .train import DEFAULT_FEATURES, default_library
 
 __all__ = ["TRADE_OFF", "LeftOut", "NoveltyResult", "run_novelty", "plot_novelty", "main"]
@@ -70,7 +70,7 @@ class LeftOut:
         thr = self.threshold(quantile)
         out = []
         for s in self.traces:
-            below = np.flatnonzero(s < thr)
+            below = np.flatnonzero(s[MIN_FRAMES - 1:] < thr) + MIN_FRAMES - 1  # judged from the third frame on
             out.append((below[0] + 1) / len(s) if below.size else np.nan)
         return np.array(out)
 
@@ -132,7 +132,7 @@ class NoveltyResult:
                              "flagged": c.flagged(q), "first_flag": c.first_flag(q).tolist(),
                              "taken_for": c.taken_for, "known_flagged": c.known_flagged(q),
                              "known_heldout": int(c.known_minima.size),
-                             "least_familiarity": [float(s.min()) for s in c.traces]}
+                             "least_familiarity": [least_familiarity(s) for s in c.traces]}
                             for c in self.classes]}
 
 

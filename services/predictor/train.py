@@ -271,7 +271,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
     parser.add_argument("--novelty-quantile", type=float, default=DEFAULT_QUANTILE, metavar="Q",
                         help="the novelty test's threshold: the Q quantile of the held-out training demonstrations' "
                              "least familiarity, so about Q of known motions are called unfamiliar at some moment "
-                             f"(0: the least of them; default: {DEFAULT_QUANTILE})")
+                             "(given more than 1/Q demonstrations; 0: the least of them; default: "
+                             f"{DEFAULT_QUANTILE})")
     parser.add_argument("--volume", choices=VOLUMES, default=DEFAULT_VOLUME,
                         help="per-class occupancy p(x|C_m): paper = body swept along the mean motion (0/1); "
                              "spread = trajectories drawn within the GMR covariance; demos = the training "

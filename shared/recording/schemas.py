@@ -15,7 +15,7 @@ import dataclasses
 import typing
 from typing import Any
 
-from shared.protocol import SCHEMA_VERSION, Message
+from shared.protocol import READABLE_VERSIONS, SCHEMA_VERSION, Message
 
 __all__ = ["PROFILE", "REJECTED_TOPIC", "REJECTED_SCHEMA", "message_json_schema"]
 
@@ -42,12 +42,18 @@ def message_json_schema(cls: type[Message]) -> dict[str, Any]:
     Arrays are described as maps ``{dtype, shape, data}`` with ``data`` the raw little-endian bytes
     (msgpack ``bin``); ``x-dtype`` / ``x-shape`` give the expected dtype and shape (symbols such as
     ``"K"`` must agree across the fields of one message).
+
+    A log keeps the bytes it received, and a receiver reads :data:`~shared.protocol.READABLE_VERSIONS`: ``_v`` may
+    be any of them, and a field added after version 1 (:func:`shared.protocol.schema.added`) is required only of
+    the versions that have it (a version-1 ``ClassPosterior`` from an older predictor, logged by this build, fits
+    its channel's schema).
     """
     hints = typing.get_type_hints(cls)
     props: dict[str, Any] = {
         "_type": {"const": cls.TYPE, "description": "message type name"},
-        "_v": {"const": SCHEMA_VERSION, "description": "schema version"},
+        "_v": {"enum": list(READABLE_VERSIONS), "description": f"schema version (written: {SCHEMA_VERSION})"},
     }
+    later: dict[int, list[str]] = {}  # version -> the fields it added
     scalar = {float: {"type": "number"}, int: {"type": "integer"}, bool: {"type": "boolean"},
               str: {"type": "string"}}
     for f in dataclasses.fields(cls):  # type: ignore[arg-type]
@@ -68,6 +74,17 @@ def message_json_schema(cls: type[Message]) -> dict[str, Any]:
             tp = hints[f.name]
             props[f.name] = ({"type": "array", "items": {"type": "string"}} if typing.get_origin(tp) is list
                              else dict(scalar[tp]))
+        since = f.metadata.get("since", 1)
+        if since > 1:
+            later.setdefault(since, []).append(f.name)
+            props[f.name]["description"] = f"added in schema version {since}"
     doc = (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
-    return {"title": f"foresight.{cls.TYPE}", "description": doc, "type": "object", "properties": props,
-            "required": list(props)}
+    added = {name for names in later.values() for name in names}
+    out = {"title": f"foresight.{cls.TYPE}", "description": doc, "type": "object", "properties": props,
+           "required": [p for p in props if p not in added]}
+    if later:  # each version requires what it has, and an earlier one must not carry what came after it
+        out["allOf"] = [{"if": {"properties": {"_v": {"minimum": v}}},
+                         "then": {"required": names},
+                         "else": {"not": {"anyOf": [{"required": [n]} for n in names]}}}
+                        for v, names in sorted(later.items())]
+    return out

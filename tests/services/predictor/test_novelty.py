@@ -18,6 +18,7 @@ from services.predictor.novelty import (
     familiarity,
     heldout_minima,
     learn_novelty,
+    least_familiarity,
 )
 from services.predictor.train import TrainConfig, train_model
 
@@ -41,6 +42,10 @@ def test_one_glitch_frame_leaves_the_familiarity_but_a_motion_that_leaves_every_
     ll = np.full((30, 2), -5.0)
     ll[12] = -5000.0  # one implausible posture
     assert familiarity(ll, 10).min() == -5.0
+    first = np.full((30, 2), 10.0)
+    first[0] = -5000.0  # a glitch at the first frame: a median of one or two frames is no guard (a review)
+    assert familiarity(first, 10)[:3].tolist() == [-5000.0, -2495.0, 10.0]
+    assert least_familiarity(familiarity(first, 10)) == 10.0  # judged from the third frame on (MIN_FRAMES)
     ll[15:] = -500.0  # from frame 15 on, no class explains the motion
     s = familiarity(ll, 10)
     assert s[15:19].max() == -5.0 and s[20:].max() == -500.0  # once most of the window is new
