@@ -131,6 +131,7 @@ class _Freshness:
     occupancy: float | None = None  # time (core clock) of the latest occupancy
     occupancy_of: tuple[int, int] | None = None  # (demo_id, index) of the pose the latest occupancy predicts from
     demo_end: tuple[int, int] | None = None      # (demo_id, last index) of the demonstration that ended
+    lost: int | None = None                      # demo_id of the reach the tracker lost (until a reach starts)
 
 
 class ExecutorCore:
@@ -212,13 +213,20 @@ class ExecutorCore:
         self._update_reached()
 
     def note_demonstration(self, event: str, demo_id: int = -1, n_samples: int = 0) -> None:
-        """Record a DemoMarker event (``"start"`` or ``"end"``) of demonstration ``demo_id``.
+        """Record a DemoMarker event (``"start"``, ``"end"`` or ``"lost"``) of demonstration ``demo_id``.
 
         After the end of the observed demonstration the human stands still: the prediction made from its
         last pose (index ``n_samples - 1``) stays valid and its age no longer holds the robot, once that
-        prediction has arrived (:attr:`human_ended`). A start requires fresh predictions again.
+        prediction has arrived (:attr:`human_ended`). A start requires fresh predictions again. A reach the
+        tracker lost mid-way (the person out of view, another body) leaves the person's whereabouts unknown: with
+        ``require_occupancy`` the robot holds until a reach starts again (an end marker had let it go on as if the
+        person stood still where the tracker last saw them).
         """
         self.fresh.demo_end = (int(demo_id), int(n_samples) - 1) if event == "end" else None
+        if event == "lost":
+            self.fresh.lost = int(demo_id)
+        elif event == "start":
+            self.fresh.lost = None
 
     def note_occupancy(self, stamp: float | None = None) -> None:
         """Record that an occupancy prediction was received at ``stamp`` (core clock; default now)."""
@@ -270,6 +278,9 @@ class ExecutorCore:
         age = t - self.fresh.plan
         if age > limit + 1e-9:
             return f"plan is {age:.2f} s old (limit {limit:.2f} s)"
+        if self.config.require_occupancy and self.fresh.lost is not None:
+            return (f"the person was lost mid-reach (reach {self.fresh.lost}: out of the sensor's view, or another "
+                    "body): holding until a reach is seen again")
         if self.config.require_occupancy and not (self.human_ended and self.fresh.occupancy is not None):
             if self.fresh.occupancy is None:  # a live person's tracker publishes poses only during a reach
                 return "no occupancy prediction received yet" + (

@@ -18,8 +18,8 @@ No Zenoh here. Per keypoint frame (``HumanKeypoints``: names, positions (K, 3) i
 4. the features are smoothed by a One-Euro filter (:mod:`.filters`);
 5. a gap (dropped or refused frames) up to ``max_gap_s`` is bridged: the missing frames, at the sensor's
    period (:mod:`.rate`: a burst's intervals left out, so it never makes the bridge invent frames between the
-   next regular ones), are interpolated between the frames on either side; a longer gap ends the reach under way
-   and starts afresh;
+   next regular ones), are interpolated between the frames on either side; a longer gap loses the reach under way
+   (a ``lost`` marker: not ended, the person's whereabouts unknown) and starts afresh;
 5b. a sensor whose rate is more than 10 % off the motion library's (``pose_rate_hz``, 30) has its frames resampled
    to that rate (:mod:`.resample`): the predictor reads a pose's index as its time;
 6. the reach rule (:mod:`.reach`) says when a reach starts and ends: ``DemoMarker`` start and end, the poses
@@ -138,7 +138,7 @@ class TrackerCore:
         skipped: Frames not fitted: stamped under ``1 / max_fit_hz`` after the last accepted one.
         unfitted: Frames not fitted to catch up with a backlog (``fit`` False).
         bridged: Poses interpolated across gaps.
-        reaches: Reaches started.
+        reaches: Reaches started; ``lost``: of them, lost mid-reach (a gap, another body, the tracker stopping).
         points_left_out: Optional points left out of accepted frames' fits, far off them
             (:func:`~services.tracker.checks.fit_without_outliers`).
     """
@@ -153,6 +153,7 @@ class TrackerCore:
         self.reach = ReachDetector(self.config.rule)
         self.refused = dict.fromkeys(REASONS, 0)
         self.accepted = self.skipped = self.unfitted = self.bridged = self.reaches = self.points_left_out = 0
+        self.lost = 0
         self.upright = Upright()                                 # whether this track's keypoints have z up
         self._required = {p: list(POINT_NAMES).index(p) for p in REQUIRED}
         self._raw: tuple[float, np.ndarray] | None = None      # the last accepted fit (stamp, features)
@@ -318,8 +319,12 @@ class TrackerCore:
         return TrackerOutput(refused=f"{reason}: {why}")
 
     def _lost(self, last: float) -> list[Message]:
-        """A gap too long: end the reach under way (at the last frame), forget the past."""
-        msgs = self._end(last) if self.reach.active else []
+        """A gap too long, another body, or the tracker stopping: the reach under way is lost, the past forgotten.
+
+        Lost, not ended: where the person went is unknown; its marker says so (``lost``, at the last frame).
+        """
+        msgs = self._end(last, "lost") if self.reach.active else []
+        self.lost += bool(msgs)
         self.reach.reset()
         self.filter.reset()
         self._recent.clear()
@@ -384,6 +389,6 @@ class TrackerCore:
         self._index += 1
         return pose
 
-    def _end(self, t: float) -> list[Message]:
-        return [DemoMarker(stamp=t, tick=-1, demo_id=self.demo_id, event="end", true_class=-1, class_name="live",
+    def _end(self, t: float, event: str = "end") -> list[Message]:
+        return [DemoMarker(stamp=t, tick=-1, demo_id=self.demo_id, event=event, true_class=-1, class_name="live",
                            n_samples=self._index)]

@@ -169,6 +169,10 @@ class TrackerService:
             human.put(m)
             if isinstance(m, DemoMarker) and m.event == "start":
                 log.info("tracker: reach %d starts (its first pose at %.3f)", m.demo_id, m.stamp)
+            elif isinstance(m, DemoMarker) and m.event == "lost":
+                log.warning("tracker: reach %d lost at %.3f after %d poses (no frame for over %g s, another body, or "
+                            "the tracker stopping): the executor holds the robot until a reach is seen again",
+                            m.demo_id, m.stamp, m.n_samples, self.config.tracker.max_gap_s)
             elif isinstance(m, DemoMarker):
                 log.info("tracker: reach %d ends at %.3f after %d poses", m.demo_id, m.stamp, m.n_samples)
         self.stats.poses, self.stats.markers, self.stats.reaches = human.poses, human.markers, human.starts
@@ -258,9 +262,10 @@ class TrackerService:
         self.stats.refused, self.stats.behind = dict(self.core.refused), self.stats.behind + self.backlog.dropped
         log.info("tracker: stopped after %d frames (%d played; %d skipped over max_fit_hz, %d unfitted or dropped to "
                  "catch up), "
-                 "%d reaches, %d poses, %d markers; refused: %s; "
+                 "%d reaches (%d lost), %d poses, %d markers; refused: %s; "
                  "optional points left out, far off the fit: %d; rejected on receipt: %s", self.stats.frames,
-                 self.stats.played, self.core.skipped, self.stats.behind, self.stats.reaches, self.stats.poses,
+                 self.stats.played, self.core.skipped, self.stats.behind, self.stats.reaches, self.core.lost,
+                 self.stats.poses,
                  self.stats.markers,
                  ", ".join(f"{k} {v}" for k, v in self.stats.refused.items()) or "none", self.core.points_left_out,
                  self.rejects.summary())

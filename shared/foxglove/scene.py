@@ -327,12 +327,12 @@ class SceneBuilder:
         return self._body_update(ends, radii, HUMAN_RGBA, pose.stamp if stamp is None else stamp)
 
     def human_ended(self, marker: DemoMarker, stamp: float | None = None) -> SceneUpdate | None:
-        """At a demonstration's end marker, its last drawn body again in grey: no pose updates it any more.
+        """At a demonstration's end (or loss) marker, its last drawn body again in grey: no pose updates it any more.
 
         A live tracker publishes poses during reaches only, so its last reach's body stayed on show, as if live,
         while the person moved on or left. None for a start marker, or when no body of that demonstration is drawn.
         """
-        if marker.event != "end" or self._body is None or self._body[0] != marker.demo_id:
+        if marker.event not in ("end", "lost") or self._body is None or self._body[0] != marker.demo_id:
             return None
         _, ends, radii = self._body
         return self._body_update(ends, radii, ENDED_HUMAN_RGBA, marker.stamp if stamp is None else stamp)

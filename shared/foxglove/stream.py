@@ -133,8 +133,8 @@ class SceneStream:
         """
         if isinstance(msg, HumanPose):
             self.builder.note_pose(msg)
-        if isinstance(msg, DemoMarker):  # a demonstration's end: its body greyed, never held back by the throttle
-            return "/viz/human" if msg.event == "end" else None
+        if isinstance(msg, DemoMarker):  # a demonstration's end or loss: its body greyed, never held back
+            return "/viz/human" if msg.event in ("end", "lost") else None
         topic = _kind(msg)
         if topic is None or topic in _EVERY:
             return topic

@@ -15,8 +15,8 @@ from .limits import MAX_GRID_CELLS, MAX_GRID_DIM
 from .schema import Message, added, array
 from .schema import field_error as _err
 
-__all__ = ["N_FEATURES", "HumanKeypoints", "HumanPose", "DemoMarker", "ClassPosterior", "OccupancyGrid", "Plan",
-           "RobotState",
+__all__ = ["N_FEATURES", "DEMO_EVENTS", "HumanKeypoints", "HumanPose", "DemoMarker", "ClassPosterior",
+           "OccupancyGrid", "Plan", "RobotState",
            "ClockTick", "MESSAGE_TYPES"]
 
 N_FEATURES = 12
@@ -80,9 +80,14 @@ class HumanPose(Message):
             raise _err(self.TYPE, "index", f"must be >= 0, got {self.index}")
 
 
+DEMO_EVENTS = ("start", "end", "lost")
+"""A ``DemoMarker``'s events: a demonstration (a reach) starts, ends, or is lost mid-way (the tracker lost the person:
+where they went is unknown). ``lost`` came with schema version 2."""
+
+
 @dataclass
 class DemoMarker(Message):
-    """Start or end of a streamed demonstration. ``true_class`` is for evaluation only."""
+    """Start, end or loss (:data:`DEMO_EVENTS`) of a streamed demonstration. ``true_class`` is for evaluation only."""
 
     TYPE: ClassVar[str] = "DemoMarker"
     stamp: float
@@ -95,8 +100,8 @@ class DemoMarker(Message):
 
     def check(self) -> None:
         """Validate this message's invariants (see the class docstring)."""
-        if self.event not in ("start", "end"):
-            raise _err(self.TYPE, "event", f"must be 'start' or 'end', got {self.event!r}")
+        if self.event not in DEMO_EVENTS:
+            raise _err(self.TYPE, "event", f"must be one of {', '.join(map(repr, DEMO_EVENTS))}, got {self.event!r}")
         if self.n_samples < 0:
             raise _err(self.TYPE, "n_samples", f"must be >= 0, got {self.n_samples}")
 

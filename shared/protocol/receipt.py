@@ -44,7 +44,7 @@ def _sequence(msg: Message) -> tuple[int, ...] | None:
     if isinstance(msg, HumanPose):
         return (msg.demo_id, msg.index)
     if isinstance(msg, DemoMarker):
-        return (msg.demo_id, 0 if msg.event == "start" else 1)
+        return (msg.demo_id, 0 if msg.event == "start" else 1)  # then its end or its loss, one of them
     if isinstance(msg, Plan):
         return (msg.step,)
     if isinstance(msg, HumanKeypoints):

@@ -301,7 +301,8 @@ def test_wrong_scalar_types():
 def test_invariants():
     s = samples()
     cases = [
-        (dataclasses.replace(s["DemoMarker"], event="middle"), r"DemoMarker\.event"),
+        (dataclasses.replace(s["DemoMarker"], event="middle"), r"DemoMarker\.event: must be one of 'start', 'end', "
+                                                               r"'lost', got 'middle'"),
         (dataclasses.replace(s["ClassPosterior"], posterior=np.array([0.5, 0.5, 0.5])), r"ClassPosterior\.posterior"),
         (dataclasses.replace(s["ClockTick"], tick=-2), r"ClockTick\.tick"),
         (dataclasses.replace(s["ClockTick"], period=0.0), r"ClockTick\.period"),

@@ -222,6 +222,29 @@ def test_last_prediction_stays_valid_after_the_demonstration_ends():
     assert "occupancy" in core.stale_reason(1.0)
 
 
+def test_a_reach_lost_mid_way_holds_the_robot_until_a_reach_starts_again():
+    """The tracker ended a reach it lost (the person out of view) with an end marker, and the robot went on with
+    the lost reach's last prediction as if the person stood still where they were last seen."""
+    limits = ArmLimits(("a",), np.array([-1.0]), np.array([1.0]), np.array([1.0]))
+    core = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=0.5))
+    core.adopt(_one_joint_plan())
+    core.note_occupancy()
+    core.note_occupancy_of(4, 39)  # the prediction of the last pose the tracker saw (40 poses)
+    core.note_demonstration("lost", demo_id=4, n_samples=40)
+    assert not core.human_ended
+    assert core.stale_reason() == ("the person was lost mid-reach (reach 4: out of the sensor's view, or another "
+                                   "body): holding until a reach is seen again")
+    core.step(0.02)
+    assert core.holding and "lost mid-reach" in core.reason
+    core.note_demonstration("start", demo_id=5)  # seen again: fresh predictions decide
+    core.note_occupancy()
+    assert core.stale_reason() == ""
+    free = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=0.5, require_occupancy=False))
+    free.adopt(_one_joint_plan())
+    free.note_demonstration("lost", demo_id=4, n_samples=40)
+    assert free.stale_reason() == ""  # no prediction required: none holds it
+
+
 def test_an_end_marker_does_not_release_a_prediction_of_an_earlier_pose():
     """The predictor died mid-demonstration: its last occupancy is of pose 40, the demonstration ends at
     pose 99. The end marker must not let the robot move on that old prediction (issue 12)."""

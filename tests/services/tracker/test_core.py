@@ -100,7 +100,7 @@ def test_a_person_beyond_the_fits_range_is_refused_as_out_of_range_not_as_a_bad_
     wild[NAMES.index("r_wrist")] += [0.0, 0.0, 1.0]  # within range, one point wild: still a bad fit
     assert core.on_frame(0.0, NAMES, wild).refused.startswith("residual: ")
 
-def test_a_short_gap_is_bridged_a_long_one_ends_the_reach(reach) -> None:
+def test_a_short_gap_is_bridged_a_long_one_loses_the_reach(reach) -> None:
     core = TrackerCore()
     poses = [m for m in messages(run(core, reach, skip={60, 61, 62})) if isinstance(m, HumanPose)]
     assert core.bridged == 3
@@ -108,8 +108,10 @@ def test_a_short_gap_is_bridged_a_long_one_ends_the_reach(reach) -> None:
     assert np.allclose(np.diff(stamps), 1 / RATE, atol=1e-6)  # every period has its pose, the gap's interpolated
     core = TrackerCore()
     msgs = messages(run(core, reach, skip=set(range(60, 90))))  # a second without frames, mid-reach
-    ends = [m for m in msgs if isinstance(m, DemoMarker) and m.event == "end"]
-    assert ends[0].stamp == pytest.approx(59 / RATE) and core.bridged == 0
+    # lost, not ended: the person did not come to rest there (an 'end' let the robot go on as if they had)
+    lost = [m for m in msgs if isinstance(m, DemoMarker) and m.event == "lost"]
+    assert lost[0].stamp == pytest.approx(59 / RATE) and core.bridged == 0 and core.lost == 1
+    assert [m.event for m in msgs if isinstance(m, DemoMarker) and m.demo_id == lost[0].demo_id] == ["start", "lost"]
 
 
 def test_one_frame_stamped_ahead_ends_no_reach_a_real_gap_does_once_confirmed(reach) -> None:
@@ -122,13 +124,13 @@ def test_one_frame_stamped_ahead_ends_no_reach_a_real_gap_does_once_confirmed(re
     assert outs[80][1].refused.startswith("leap: ") and core.refused["leap"] == 1 and core.refused["order"] == 0
     markers = [(m.event, m.stamp) for m in messages(outs) if isinstance(m, DemoMarker)]
     assert markers == [(m.event, m.stamp) for m in clean if isinstance(m, DemoMarker)]  # the reach as without it
-    # a real gap: the frame after it is held, the next confirms it, and the reach under way ends at its last frame
+    # a real gap: the frame after it is held, the next confirms it, and the reach under way is lost at its last frame
     core = TrackerCore()
     outs = [(i, core.on_frame(i / RATE + (1.0 if i >= 80 else 0.0), NAMES, p))
             for i, p in enumerate(MODEL.joint_positions(reach))]
     assert outs[80][1].refused.startswith("leap: ") and outs[81][1].refused is None and core.refused["leap"] == 1
-    ends = [m for m in messages(outs) if isinstance(m, DemoMarker) and m.event == "end"]
-    assert ends[0].stamp == pytest.approx(79 / RATE)
+    lost = [m for m in messages(outs) if isinstance(m, DemoMarker) and m.event == "lost"]
+    assert lost[0].stamp == pytest.approx(79 / RATE)
 
 
 def test_the_same_frames_give_the_same_messages(reach) -> None:
@@ -164,13 +166,13 @@ def test_a_sensors_noise_makes_no_reach_and_ends_the_real_one(reach, noise_m) ->
     assert markers[-1].stamp < (len(held) - 30) / RATE  # ended by stillness, not by the data's end
 
 
-def test_finish_ends_the_reach_under_way(reach) -> None:
+def test_finish_loses_the_reach_under_way(reach) -> None:
     core = TrackerCore()
     outs = run(core, reach[: len(reach) // 2])  # stopped mid-reach
     assert [m.event for m in messages(outs) if isinstance(m, DemoMarker)] == ["start"]
     (end,) = core.finish().messages
     poses = [m for m in messages(outs) if isinstance(m, HumanPose)]
-    assert isinstance(end, DemoMarker) and end.event == "end" and end.n_samples == len(poses)
+    assert isinstance(end, DemoMarker) and end.event == "lost" and end.n_samples == len(poses)  # not at rest
     assert core.finish().messages == []  # nothing under way any more
 
 
@@ -300,7 +302,7 @@ def test_another_body_in_view_ends_the_track_instead_of_being_glided_to(reach) -
     refused = [o.refused for _, o in later[:JUMP_CONFIRM - 1]]
     assert all(r.startswith("jump: ") for r in refused) and "another person?" in refused[-1]
     after = messages(later)
-    assert [m.event for m in after if isinstance(m, DemoMarker)] == ["end"]  # the reach ended, nothing glided on
+    assert [m.event for m in after if isinstance(m, DemoMarker)] == ["lost"]  # the reach lost, nothing glided on
     assert not [m for m in after if isinstance(m, HumanPose)]
 
 

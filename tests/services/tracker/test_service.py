@@ -123,7 +123,7 @@ def test_a_sensors_reach_becomes_poses_between_markers(zenoh_hub) -> None:
     assert stats.frames == len(frames) and stats.reaches == 1 and sum(stats.refused.values()) == 0
 
 
-def test_a_sensor_gone_quiet_mid_reach_ends_the_reach_at_once(zenoh_hub) -> None:
+def test_a_sensor_gone_quiet_mid_reach_loses_the_reach_at_once(zenoh_hub) -> None:
     hub = zenoh_hub
     tester = hub()
     keys = Keys(tester.prefix)
@@ -140,8 +140,8 @@ def test_a_sensor_gone_quiet_mid_reach_ends_the_reach_at_once(zenoh_hub) -> None
                 pub.put(sent[-1])
                 time.sleep(1 / 30)
             assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "start" for m in items))
-            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "end" for m in items),
-                            timeout=10.0)  # no further frame came: the silence ended it
+            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "lost" for m in items),
+                            timeout=10.0)  # no further frame came: the silence lost it (not at rest: no 'end')
             assert thread.thread.is_alive()  # the tracker goes on, ready for the next reach
             end = got.markers()[-1]
         finally:
@@ -308,7 +308,7 @@ def test_refusals_are_counted_each_but_logged_once_a_second_per_reason(caplog) -
     assert "frame 0 refused (missing" in lines[0] and "frame 90 refused (frame:" in lines[1]
 
 
-def test_a_recordings_silence_ends_the_reach_before_its_next_frame(zenoh_hub, tmp_path: Path) -> None:
+def test_a_recordings_silence_loses_the_reach_before_its_next_frame(zenoh_hub, tmp_path: Path) -> None:
     """Frames missing from a recording are a silence like a live sensor's; playback did not check for it, so the
     reach stayed open until the next frame, seconds later."""
     hub = zenoh_hub
@@ -330,15 +330,15 @@ def test_a_recordings_silence_ends_the_reach_before_its_next_frame(zenoh_hub, tm
         service, thread = _service(hub, from_file=recording, playback=play)
         add = got.add
 
-        def note(msg) -> None:  # how far the playback was when the end marker came
-            if isinstance(msg, DemoMarker) and msg.event == "end":
+        def note(msg) -> None:  # how far the playback was when the lost marker came
+            if isinstance(msg, DemoMarker) and msg.event == "lost":
                 played_at_end.append(service.stats.played)
             add(msg)
         got.add = note
         got.sub.undeclare()
         got.sub = subscribe_ordered(session, keys.human_all, {keys.pose: HumanPose, keys.demo: DemoMarker}, note)
         thread.join(60.0)
-        assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "end" for m in items))
+        assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "lost" for m in items))
     lead = round(play.lead_s * play.rate_hz)
     assert played_at_end and played_at_end[0] <= lead + half  # it ended before a frame after the silence was played
 

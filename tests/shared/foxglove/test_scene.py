@@ -129,6 +129,10 @@ def test_a_demonstrations_end_draws_its_last_body_again_in_grey(builder) -> None
         [[(p.x, p.y, p.z) for p in ln.points] for ln in live.lines]
     assert {rgba(ln.color) for ln in live.lines} == {tuple(round(v, 3) for v in HUMAN_RGBA)}
     assert {rgba(ln.color) for ln in ended.lines} == {tuple(round(v, 3) for v in ENDED_HUMAN_RGBA)}
+    lost = marker("lost")  # a reach the tracker lost: no pose updates that body either
+    assert stream.due(lost) == "/viz/human"
+    assert {rgba(ln.color) for ln in decoded(stream.draw(lost, T))["/viz/human"].entities[0].lines} == \
+        {tuple(round(v, 3) for v in ENDED_HUMAN_RGBA)}
     later = pose()
     later.stamp = 1.505  # the marker held back no pose: the next one is due a period after the last pose (1.0)
     assert stream.due(later) == "/viz/human"
