@@ -41,7 +41,7 @@ def _watch(url: str, counts: dict[str, int], done: threading.Event, read: bool =
     ``read`` False: subscribe, then read nothing until ``done`` (a client that has stalled).
     """
     try:
-        with FoxgloveClient(url, timeout_s=300) as client:
+        with FoxgloveClient(url, timeout_s=300, keepalive=read) as client:
             client.subscribe()
             if not read:
                 counts["nothing read (a stalled client)"] = 0

@@ -42,15 +42,19 @@ class FoxgloveClient:
     Args:
         url: ``ws://HOST:PORT``.
         timeout_s: How long :meth:`connect` keeps trying (the server may still be starting).
+        keepalive: Ping the server every 20 s (websockets' default). A client that reads nothing stops reading the
+            pongs too, and its own keepalive closed it after 40 s with a traceback: a stalled client (``foresight
+            bench live --slow-client``) keeps its connection without.
 
     Attributes:
         server_info: The server's ``serverInfo`` message.
         channels: Advertised channels by id (each the ``advertise`` entry: topic, encoding, schemaName, ...).
     """
 
-    def __init__(self, url: str, timeout_s: float = 10.0) -> None:
+    def __init__(self, url: str, timeout_s: float = 10.0, keepalive: bool = True) -> None:
         self.url = url
         self.timeout_s = timeout_s
+        self.keepalive = keepalive
         self.server_info: dict[str, Any] = {}
         self.channels: dict[int, dict[str, Any]] = {}
         self._subscriptions: dict[int, str] = {}
@@ -63,7 +67,8 @@ class FoxgloveClient:
         while True:
             try:
                 self._ws = self._stack.enter_context(
-                    connect(self.url, subprotocols=[SUBPROTOCOL], open_timeout=2.0))  # type: ignore[list-item]
+                    connect(self.url, subprotocols=[SUBPROTOCOL], open_timeout=2.0,  # type: ignore[list-item]
+                            ping_interval=20.0 if self.keepalive else None))
                 break
             except (OSError, TimeoutError):
                 if time.monotonic() > deadline:
