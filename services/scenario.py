@@ -73,7 +73,10 @@ def choose_demonstration(library: MotionLibrary, steps: int, seed: int, human_cl
     elif human_class.isdigit() and int(human_class) < len(names):
         label = int(human_class)
     else:
-        raise UserError(f"--human-class {human_class!r}: not a class of {library.source} ({', '.join(names)})")
+        hint = ("; the paper's library: --human-class compound_1, the reach of its authors' Table I trials "
+                "(docs/experiments.md)" if "compound_1" in names else "")  # the default, blue_cup, is the synthetic's
+        raise UserError(f"--human-class {human_class!r}: not a class of {library.source} ({', '.join(names)})"
+                        + hint)
     demos = library.by_class(label)
     if not demos:
         raise UserError(f"library {library.source}: class {names[label]} has no valid demonstration")

@@ -152,7 +152,8 @@ class PlannerConfig:
 
     device: str = opt("cpu", help="torch device (cpu, cuda, cuda:1, ...)")
     dtype: str = opt("float32", help="torch float dtype", choices=("float32", "float64"))
-    threads: int = opt(1, help="torch intra-op threads of the process (0: torch's default; >1 is slow on shared cores)")
+    threads: int = opt(1, help="torch intra-op threads of the process (0: torch's default; >1 is slow on shared cores, "
+                       "and another count sums in another order: plans differ from the 7th digit)")
     fused_cost: bool = opt(True, help="evaluate the PR2 cost with the fused kernel (same numbers as the reference "
                            "StateCost path, fewer ops)")
     compile: bool = opt(True, help="torch.compile the fused cost and STOMP's rollout and update steps (once at "
