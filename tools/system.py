@@ -25,7 +25,8 @@ from shared.protocol import HumanPose, Keys, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.transport import Presence, open_session, subscribe
 
-__all__ = ["SystemSpec", "ProcessSystem", "Watcher", "rss_mb", "positive_number", "SERVICES", "PROCESSES"]
+__all__ = ["SystemSpec", "ProcessSystem", "Watcher", "rss_mb", "peak_rss_mb", "positive_number", "SERVICES",
+           "PROCESSES"]
 
 SERVICES = ("predictor", "planner", "replayer", "executor")
 PROCESSES = ("router", *SERVICES)
@@ -46,15 +47,27 @@ def positive_number(low: float = 0.0, high: float = math.inf, inclusive: bool = 
     return parse
 
 
-def rss_mb(pid: int) -> float:
-    """Resident memory of process ``pid`` in MB (0 when it is gone)."""
+def _status_mb(pid: int, key: str) -> float | None:
+    """A memory line (``VmRSS``, ``VmHWM``) of ``/proc/PID/status`` in MB; None when the process is gone."""
     try:
         for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
+            if line.startswith(f"{key}:"):
                 return int(line.split()[1]) / 1024.0
     except OSError:
         pass
-    return 0.0
+    return None
+
+
+def rss_mb(pid: int) -> float:
+    """Resident memory of process ``pid`` in MB (0 when it is gone)."""
+    mb = _status_mb(pid, "VmRSS")
+    return 0.0 if mb is None else mb
+
+
+def peak_rss_mb(pid: int) -> float:
+    """A live process's peak resident memory (``VmHWM``) in MB; NaN when it is gone."""
+    mb = _status_mb(pid, "VmHWM")
+    return float("nan") if mb is None else mb
 
 
 @dataclasses.dataclass

@@ -29,6 +29,7 @@ from services.processes import free_port
 from shared.arguments import ArgumentParser
 from shared.foxglove.client import FoxgloveClient
 from tools.log.latency import log_latencies
+from tools.system import peak_rss_mb
 
 __all__ = ["main"]
 
@@ -58,17 +59,6 @@ VARIANTS = ("none", "live", "view")
 """No live view; ``foresight demo --live`` (the executor serves); ``foresight view`` beside the demo."""
 SLOW = "view-slow"
 """``--slow-client``: ``foresight view`` beside the demo, its client reading nothing."""
-
-
-def peak_rss_mb(pid: int) -> float:
-    """A live process's peak resident memory (``VmHWM`` of ``/proc/PID/status``), MB; NaN where it cannot be read."""
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return float("nan")
 
 
 def _run(out: Path, variant: str, demo_args: list[str]) -> tuple[dict, dict[str, int], float]:
