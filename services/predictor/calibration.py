@@ -19,7 +19,7 @@ bank computes it, with the same padding; tested).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,7 +28,7 @@ from sklearn.mixture import GaussianMixture
 from .gmm import DEFAULT_TEMPERATURE, MixtureBank, posterior_from_log_likelihood
 from .volumes import digest
 
-__all__ = ["TEMPERATURE_GRID", "CV_FRACTIONS", "TemperatureChoice", "choose_temperature", "log_loss"]
+__all__ = ["TEMPERATURE_GRID", "CV_FRACTIONS", "TemperatureChoice", "choose_temperature", "log_loss", "fold_mixtures"]
 
 TEMPERATURE_GRID = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 150.0, 200.0, 300.0, 500.0, 1000.0)
 CV_FRACTIONS = tuple(round(0.1 * i, 1) for i in range(1, 11))
@@ -96,6 +96,28 @@ class _PrefixScorer:
         return out
 
 
+def fold_mixtures(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], GaussianMixture],
+                  folds: int) -> Iterator[tuple[list[list[int]], list[GaussianMixture]]]:
+    """The folds: for each, the held-out demonstrations of every class and every class's mixture fitted without them.
+
+    Demonstration j of a class is in fold ``j % folds``; a fold holding none is skipped. The temperature's
+    cross-validation and the novelty test (:mod:`services.predictor.novelty`) hold out the same folds, so a cached
+    ``fit`` fits each fold's mixtures once for both.
+
+    Args:
+        feats: Per class, the encoded ``(T, D)`` feature vectors of each training demonstration.
+        fit: Fits one class mixture to stacked ``(N, D)`` vectors.
+        folds: Number of folds.
+
+    Yields:
+        ``(held, mixtures)``: per class the indices held out, and per class its mixture.
+    """
+    for k in range(folds):
+        held = [[j for j in range(len(f)) if j % folds == k] for f in feats]
+        if any(held):
+            yield held, [fit(np.vstack([f[j] for j in range(len(f)) if j % folds != k])) for f in feats]
+
+
 def log_loss(cum: np.ndarray, labels: np.ndarray, temperature: float) -> float:
     """Mean ``-ln p(true class | prefix)`` over ``cum (N, F, M)`` summed log-likelihoods (floored at 1e-12)."""
     p = posterior_from_log_likelihood(cum, temperature=temperature)
@@ -122,11 +144,7 @@ def choose_temperature(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray]
     if min(len(f) for f in feats) < 2 or folds < 2:
         return TemperatureChoice(DEFAULT_TEMPERATURE, "default: a class has fewer than 2 demonstrations")
     cums, labels = [], []
-    for k in range(folds):
-        held = [[j for j in range(len(f)) if j % folds == k] for f in feats]
-        if not any(held):
-            continue
-        mixtures = [fit(np.vstack([f[j] for j in range(len(f)) if j % folds != k])) for f in feats]
+    for held, mixtures in fold_mixtures(feats, fit, folds):
         scorers = [_PrefixScorer(g, max(g.n_components for g in mixtures)) for g in mixtures]
         for m, js in enumerate(held):
             for j in js:

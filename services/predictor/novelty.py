@@ -29,10 +29,11 @@ from dataclasses import dataclass
 import numpy as np
 from sklearn.mixture import GaussianMixture
 
+from .calibration import fold_mixtures
 from .gmm import MixtureBank
 
 __all__ = ["DEFAULT_WINDOW", "DEFAULT_QUANTILE", "MIN_FRAMES", "NoveltyTest", "familiarity", "least_familiarity",
-           "FamiliarityWindow", "heldout_minima", "learn_novelty"]
+           "FamiliarityWindow", "heldout_minima", "learn_novelty", "threshold_at", "first_unfamiliar"]
 
 DEFAULT_WINDOW = 10
 """Frames the familiarity looks back over (a third of a second at 30 Hz)."""
@@ -134,7 +135,7 @@ def heldout_minima(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], Ga
         feats: Per class, the encoded ``(T, D)`` feature vectors of each training demonstration.
         fit: Fits one class mixture to stacked ``(N, D)`` vectors (the trainer's, cached: the temperature's
             cross-validation fitted the same folds).
-        folds: Folds (demonstration j of a class is in fold ``j % folds``, as for the temperature).
+        folds: Folds (:func:`~services.predictor.calibration.fold_mixtures`, the temperature's).
         window: Frames W of the familiarity.
 
     Returns:
@@ -143,12 +144,8 @@ def heldout_minima(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], Ga
     if min(len(f) for f in feats) < 2 or folds < 2:
         return np.empty(0)
     out = []
-    for k in range(folds):
-        held = [[j for j in range(len(f)) if j % folds == k] for f in feats]
-        if not any(held):
-            continue
-        bank = MixtureBank.from_sklearn([fit(np.vstack([f[j] for j in range(len(f)) if j % folds != k]))
-                                         for f in feats])
+    for held, mixtures in fold_mixtures(feats, fit, folds):
+        bank = MixtureBank.from_sklearn(mixtures)
         for m, js in enumerate(held):
             out.extend(least_familiarity(familiarity(bank.log_likelihood(feats[m][j]), window)) for j in js)
     return np.array(out)
@@ -168,6 +165,21 @@ def learn_novelty(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], Gau
     minima = heldout_minima(feats, fit, folds, window)
     if minima.size == 0:
         return None
-    # 'lower': the threshold is one of the minima, so exactly the demonstrations below it are called unfamiliar
-    threshold = float(np.quantile(minima, quantile, method="lower"))
-    return NoveltyTest(threshold, window, quantile, int(minima.size))
+    return NoveltyTest(threshold_at(minima, quantile), window, quantile, int(minima.size))
+
+
+def threshold_at(minima: np.ndarray, quantile: float) -> float:
+    """The threshold of held-out ``(N,)`` least familiarities at ``quantile``.
+
+    'lower': the threshold is one of the minima, so exactly the demonstrations below it are called unfamiliar.
+    """
+    return float(np.quantile(minima, quantile, method="lower"))
+
+
+def first_unfamiliar(scores: np.ndarray, threshold: float) -> int | None:
+    """The first frame of a motion's ``(T,)`` familiarity below ``threshold``; None when none is.
+
+    Judged from the :data:`MIN_FRAMES`-th frame on, as :attr:`~services.predictor.core.PredictorCore.familiar` is.
+    """
+    below = np.flatnonzero(np.asarray(scores)[MIN_FRAMES - 1:] < threshold)
+    return int(below[0]) + MIN_FRAMES - 1 if below.size else None

@@ -35,7 +35,15 @@ from .calibration import DEFAULT_FOLDS
 from .features import FeatureEncoder
 from .fit_cache import class_fit
 from .gmm import GMMConfig, MixtureBank
-from .novelty import DEFAULT_QUANTILE, DEFAULT_WINDOW, MIN_FRAMES, familiarity, heldout_minima, least_familiarity
+from .novelty import (
+    DEFAULT_QUANTILE,
+    DEFAULT_WINDOW,
+    familiarity,
+    first_unfamiliar,
+    heldout_minima,
+    least_familiarity,
+    threshold_at,
+)
 from .train import DEFAULT_FEATURES, default_library
 
 __all__ = ["TRADE_OFF", "LeftOut", "NoveltyResult", "run_novelty", "plot_novelty", "main"]
@@ -63,16 +71,13 @@ class LeftOut:
 
     def threshold(self, quantile: float) -> float:
         """The threshold learnt at ``quantile`` (as :func:`~services.predictor.novelty.learn_novelty`)."""
-        return float(np.quantile(self.known_minima, quantile, method="lower"))
+        return threshold_at(self.known_minima, quantile)
 
     def first_flag(self, quantile: float) -> np.ndarray:
         """``(N,)`` per demonstration, the executed fraction at its first frame below the threshold (NaN: none)."""
         thr = self.threshold(quantile)
-        out = []
-        for s in self.traces:
-            below = np.flatnonzero(s[MIN_FRAMES - 1:] < thr) + MIN_FRAMES - 1  # judged from the third frame on
-            out.append((below[0] + 1) / len(s) if below.size else np.nan)
-        return np.array(out)
+        first = [first_unfamiliar(s, thr) for s in self.traces]
+        return np.array([np.nan if t is None else (t + 1) / len(s) for t, s in zip(first, self.traces, strict=True)])
 
     def flagged(self, quantile: float) -> float:
         """Share of the class's demonstrations flagged at some frame."""
