@@ -105,6 +105,14 @@ def endpoint_host_port(endpoint: str) -> tuple[str, int]:
     return host.strip("[]"), int(port)
 
 
+def _picked_port(endpoint: str) -> bool:
+    """Whether ``endpoint`` listens on a port picked at random (``:0``), which nothing can know to connect to."""
+    try:
+        return endpoint_host_port(endpoint)[1] == 0
+    except ValueError:  # no port (a unix socket's path): a fixed address
+        return False
+
+
 @dataclasses.dataclass
 class ZenohConfig:
     """The Zenoh section shared by every service (``[zenoh]`` in the TOML file)."""
@@ -136,8 +144,8 @@ class ZenohConfig:
                 if "/" not in ep or not ep.split("/", 1)[1]:
                     raise ConfigError(f"zenoh.{name}: endpoint {ep!r} is not of the form proto/address")
         if not self.connect and self.mode != "router" and not self.multicast_scouting:
-            fixed = [ep for ep in self.listen if not ep.split("#")[0].split("?")[0].endswith(":0")]
-            if self.mode == "client" or not fixed:  # an empty FORESIGHT_ZENOH_CONNECT ran a service nobody could find
+            # an empty FORESIGHT_ZENOH_CONNECT ran a service nobody could find
+            if self.mode == "client" or all(_picked_port(ep) for ep in self.listen):
                 raise ConfigError(f"zenoh.connect: empty, and this {self.mode} listens on no fixed port "
                                   f"({', '.join(self.listen) or 'nothing'}) with scouting off: nothing can reach it; "
                                   "give the router's endpoint, e.g. tcp/127.0.0.1:7447")
