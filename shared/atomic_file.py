@@ -2,7 +2,8 @@
 
 A reader (or a crash, a full disk, Ctrl-C) never sees half a file: the target is either the old file
 or the new one. Used for every output a later run reads back (libraries, certificates, compressed
-logs, cached fits).
+logs, cached fits). Beside it, the checks made before the work: a path that can be written
+(:func:`ready_to_write`), a file that cannot be read (:func:`unreadable`).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["atomic_write", "make_parent", "ready_to_write"]
+__all__ = ["atomic_write", "make_parent", "ready_to_write", "unreadable"]
 
 
 def make_parent(path: str | os.PathLike[str]) -> Path:
@@ -81,3 +82,15 @@ def atomic_write(path: str | os.PathLike[str], mode: int = 0o644, fsync: bool = 
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def unreadable(path: str | os.PathLike[str]) -> str:
+    """Why this process cannot read the file at ``path``, in words naming its owner and mode; ``""`` if it can.
+
+    The counterpart of :func:`ready_to_write`'s check, for a file written by another user (a container's, a key
+    kept private to its owner): "Permission denied" alone named neither.
+    """
+    if os.access(path, os.R_OK):
+        return ""
+    st = Path(path).stat()
+    return f"this process (uid {os.getuid()}) cannot read it (owner uid {st.st_uid}, mode {st.st_mode & 0o777:o})"

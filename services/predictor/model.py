@@ -40,7 +40,6 @@ Version 2 added ``volume_method``, ``volume_probabilities`` and the ``timed_*`` 
 from __future__ import annotations
 
 import json
-import os
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -49,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from shared.atomic_file import atomic_write
+from shared.atomic_file import atomic_write, unreadable
 from shared.feature_sets import HERAKLES_NAMES, MAPPINGS, count_features, mapping_for
 from shared.npz_reading import NPZ_LOCK
 from shared.scene import Grid, Scene
@@ -232,10 +231,8 @@ class PredictionModel:
                              "--out FILE writes one)")
         if not p.is_file():
             raise ModelError(f"model file {str(p)!r} not found; run `foresight train --out {p}` first")
-        if not os.access(p, os.R_OK):
-            st = p.stat()
-            raise ModelError(f"model file {str(p)!r}: this process (uid {os.getuid()}) cannot read it (owner uid "
-                             f"{st.st_uid}, mode {st.st_mode & 0o777:o}); run as its owner or chmod a+r it")
+        if why := unreadable(p):
+            raise ModelError(f"model file {str(p)!r}: {why}; run as its owner or chmod a+r it")
         try:
             with NPZ_LOCK:
                 z = np.load(p, allow_pickle=False)

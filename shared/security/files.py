@@ -10,6 +10,8 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
+from shared.atomic_file import unreadable
+
 __all__ = ["CertificateError", "read_role", "check_directory", "check_readable", "check_private"]
 
 
@@ -44,12 +46,10 @@ def check_readable(path: Path) -> None:
     Raises:
         CertificateError: Naming the file, its owner and mode, and this process's user.
     """
-    if not os.access(path, os.R_OK):
-        st = path.stat()
-        raise CertificateError(f"{path}: this process (uid {os.getuid()}) cannot read it (owner uid {st.st_uid}, "
-                               f"mode {st.st_mode & 0o777:o}): run the service as its owner, or give the security "
-                               f"directory to this user (chown -R {os.getuid()} DIR); under Docker the containers run "
-                               "as the owner of runs/ (docs/docker.md)")
+    if why := unreadable(path):
+        raise CertificateError(f"{path}: {why}: run the service as its owner, or give the security directory to this "
+                               f"user (chown -R {os.getuid()} DIR); under Docker the containers run as the owner of "
+                               "runs/ (docs/docker.md)")
 
 
 def check_private(key_path: Path, then: str = "") -> None:

@@ -36,3 +36,14 @@ def test_a_file_in_the_way_is_named(tmp_path, below):
     with pytest.raises(NotADirectoryError) as exc:
         make_parent(tmp_path / "afile" / below)
     assert exc.value.filename == str(tmp_path / "afile") and "a file is in the way" in str(exc.value)
+
+
+def test_unreadable_names_the_owner_and_mode_of_a_file_this_process_cannot_read(tmp_path, monkeypatch):
+    from shared.atomic_file import unreadable
+
+    f = tmp_path / "m.npz"
+    f.write_bytes(b"x")
+    f.chmod(0o640)
+    assert unreadable(f) == ""
+    monkeypatch.setattr("os.access", lambda *_a: False)  # root reads any file: another user's view, stood in for
+    assert unreadable(f) == f"this process (uid {os.getuid()}) cannot read it (owner uid {f.stat().st_uid}, mode 640)"
