@@ -32,9 +32,10 @@ from joblib import Parallel, delayed
 from sklearn.metrics import average_precision_score
 from threadpoolctl import threadpool_limits
 
+from services.predictor.class_volumes import demo_sweep_key
 from services.predictor.core import PredictorCore
 from services.predictor.gmm import GMMConfig
-from services.predictor.train import TrainConfig, demo_sweep_key, train_model
+from services.predictor.train import TrainConfig, train_model
 from services.predictor.volumes import VOLUMES, Sweep, sweep
 from shared.human import HumanModel
 from shared.library import Demonstration, MotionLibrary

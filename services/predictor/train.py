@@ -35,7 +35,7 @@ from shared.runtime import UserError, cli_errors, setup_logging
 from shared.scene import SCENE_HELP, Scene, load_scene
 
 from .calibration import DEFAULT_FOLDS, TemperatureChoice, choose_temperature
-from .class_volumes import class_volumes, demo_sweep_key, timed_class_volumes
+from .class_volumes import class_volumes, timed_class_volumes
 from .features import VARIANTS, FeatureEncoder
 from .fit_cache import cached, class_fit
 from .gmm import GMMConfig, MixtureBank
@@ -45,7 +45,7 @@ from .novelty import DEFAULT_QUANTILE, DEFAULT_WINDOW, learn_novelty
 from .swept_volume import surface_spacing
 from .volumes import DEFAULT_VOLUME, VOLUMES
 
-__all__ = ["TrainConfig", "train_model", "regress_motions", "default_library", "demo_sweep_key", "cached", "main"]
+__all__ = ["TrainConfig", "train_model", "regress_motions", "default_library", "cached", "main"]
 
 log = logging.getLogger("foresight.train")
 
