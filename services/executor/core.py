@@ -219,8 +219,8 @@ class ExecutorCore:
         last pose (index ``n_samples - 1``) stays valid and its age no longer holds the robot, once that
         prediction has arrived (:attr:`human_ended`). A start requires fresh predictions again. A reach the
         tracker lost mid-way (the person out of view, another body) leaves the person's whereabouts unknown: with
-        ``require_occupancy`` the robot holds until a reach starts again (an end marker had let it go on as if the
-        person stood still where the tracker last saw them).
+        ``require_occupancy`` the robot holds until a demonstration starts again, a reach or the tracker's person
+        seen at rest (an end marker had let it go on as if the person stood still where the tracker last saw them).
         """
         self.fresh.demo_end = (int(demo_id), int(n_samples) - 1) if event == "end" else None
         if event == "lost":
@@ -280,12 +280,12 @@ class ExecutorCore:
             return f"plan is {age:.2f} s old (limit {limit:.2f} s)"
         if self.config.require_occupancy and self.fresh.lost is not None:
             return (f"the person was lost mid-reach (reach {self.fresh.lost}: out of the sensor's view, or another "
-                    "body): holding until a reach is seen again")
+                    "body): holding until the person is seen again (at rest or reaching)")
         if self.config.require_occupancy and not (self.human_ended and self.fresh.occupancy is not None):
-            if self.fresh.occupancy is None:  # a live person's tracker publishes poses only during a reach
+            if self.fresh.occupancy is None:  # a live tracker publishes poses once the person is seen
                 return "no occupancy prediction received yet" + (
-                    " (the tracker publishes poses only during a reach: the robot moves once the person's first "
-                    "reach is seen)" if "tracker" in self.seen else "")
+                    " (the tracker publishes poses once it has seen the person at rest, and during reaches: the robot "
+                    "moves once the person is seen)" if "tracker" in self.seen else "")
             age = t - self.fresh.occupancy
             if age > limit + 1e-9:
                 return f"occupancy is {age:.2f} s old (limit {limit:.2f} s)"

@@ -22,9 +22,9 @@ from shared.human import HumanModel
 from shared.keypoints.bench import add_source_options, source_library
 from shared.keypoints.fit import POINT_NAMES
 from shared.native_threads import limit_blas_threads
-from shared.protocol import HumanPose
 
 from .core import LIBRARY_RATE_HZ, TrackerConfig, TrackerCore
+from .demos import reach_poses
 
 __all__ = ["main", "sample_at"]
 
@@ -50,22 +50,22 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench tracker") -
         points = model.joint_positions(sample_at(stamps, recorded, feats))
         if args.noise_m > 0:
             points = points + rng.normal(0.0, args.noise_m, points.shape)
-        core, poses = TrackerCore(model=model), []
+        core, poses, at_rest = TrackerCore(model=model), [], set()
         for i, p in enumerate(points):
             t0, skipped = time.perf_counter(), core.skipped
             out = core.on_frame(float(stamps[i]), list(POINT_NAMES), p)
             if core.skipped == skipped:  # a frame skipped over max_fit_hz costs nothing: not timed
                 times.append(time.perf_counter() - t0)
             frames += 1
-            poses += [m for m in out.messages if isinstance(m, HumanPose)]
+            poses += reach_poses(out.messages, at_rest)
         refused = ", ".join(f"{k} {n}" for k, n in core.refused.items() if n) or "-"
         name = f"{d.class_name} #{d.index}"
         if not poses:
-            print(f"{name:<22}{core.reaches:>8}{'-':>5}{'-':>7}{len(d.features):>8}{'-':>10}{'-':>11}  {refused}")
+            print(f"{name:<22}{core.demos.reaches:>8}{'-':>5}{'-':>7}{len(d.features):>8}{'-':>10}{'-':>11}  {refused}")
             continue
         at = np.array([p.stamp for p in poses])
         err = np.abs(np.array([p.features for p in poses]) - sample_at(at, recorded, feats))
-        print(f"{name:<22}{core.reaches:>8}{int(round(at[0] * LIBRARY_RATE_HZ)) - rest:>5}{len(poses):>7}"
+        print(f"{name:<22}{core.demos.reaches:>8}{int(round(at[0] * LIBRARY_RATE_HZ)) - rest:>5}{len(poses):>7}"
               f"{len(d.features):>8}{np.median(err[:, :3]) * 1e3:>10.1f}{np.median(err[:, 3:]):>11.3f}  {refused}")
     ms = np.array(times) * 1e3
     fit_hz = TrackerConfig().max_fit_hz

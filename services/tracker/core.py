@@ -22,9 +22,10 @@ No Zenoh here. Per keypoint frame (``HumanKeypoints``: names, positions (K, 3) i
    (a ``lost`` marker: not ended, the person's whereabouts unknown) and starts afresh;
 5b. a sensor whose rate is more than 10 % off the motion library's (``pose_rate_hz``, 30) has its frames resampled
    to that rate (:mod:`.resample`): the predictor reads a pose's index as its time;
-6. the reach rule (:mod:`.reach`) says when a reach starts and ends: ``DemoMarker`` start and end, the poses
-   in between as ``HumanPose`` (index 0, 1, ... from the start; ``demo_id`` one per reach). Between reaches
-   nothing is published: the predictor recognises reaches, as it does the recorder's demonstrations.
+6. the reach rule (:mod:`.reach`) says when a reach starts and ends, and :mod:`.demos` makes the demonstrations
+   the predictor reads: ``DemoMarker`` start and end, the poses in between as ``HumanPose`` (index 0, 1, ... from
+   the start; ``demo_id`` one per demonstration), and once per track the person seen at rest (a short demonstration
+   of its own, class ``AT_REST``). Between them nothing is published.
 
 Every refused frame is counted by reason (:attr:`TrackerCore.refused`) and named in :attr:`TrackerOutput.refused`.
 """
@@ -32,7 +33,6 @@ Every refused frame is counted by reason (:attr:`TrackerCore.refused`) and named
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,12 +42,13 @@ from shared.feature_sets import HERAKLES_NAMES
 from shared.human import HumanModel
 from shared.keypoints.fit import POINT_NAMES, REQUIRED, KeypointFit
 from shared.keypoints.layouts import LAYOUTS, load_layout
-from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Message
+from shared.protocol import HumanKeypoints, Message
 
 from .checks import Upright, fit_without_outliers, furthest_point, missing_points, torso_tilt_deg
+from .demos import Demonstrations
 from .filters import OneEuroFilter
 from .rate import MIN_PERIOD_S, FrameRate
-from .reach import ReachDetector, ReachRule, body_wrist
+from .reach import ReachRule
 from .resample import PoseClock
 
 __all__ = ["TrackerConfig", "TrackerCore", "TrackerOutput", "REASONS", "MIN_PERIOD_S", "JUMP_CONFIRM",
@@ -91,6 +92,9 @@ class TrackerConfig:
     pre_s: float = opt(0.3, help="a reach's first pose is this long before the start threshold was crossed (s)")
     rest_s: float = opt(1.0, help="the hand's rest position is learnt over this long after a (re)start; no reach "
                         "starts before (s)")
+    announce_rest: bool = opt(True, help="once the rest position is learnt (at a track's start, and after a lost "
+                              "reach), publish the person at rest as a short demonstration (class 'rest'): the "
+                              "robot moves around its prediction instead of waiting for the first reach")
     max_reach_s: float = opt(10.0, help="a reach ends after this long in any case (s)")
     pose_rate_hz: float = opt(LIBRARY_RATE_HZ, help="the motion library's pose rate: a sensor more than 10 % off it "
                               "has its poses resampled to it (a pose's index is its time for the predictor)")
@@ -138,7 +142,8 @@ class TrackerCore:
         skipped: Frames not fitted: stamped under ``1 / max_fit_hz`` after the last accepted one.
         unfitted: Frames not fitted to catch up with a backlog (``fit`` False).
         bridged: Poses interpolated across gaps.
-        reaches: Reaches started; ``lost``: of them, lost mid-reach (a gap, another body, the tracker stopping).
+        demos: The demonstrations made of the smoothed frames (:class:`~services.tracker.demos.Demonstrations`:
+            ``reaches``, ``lost``, ``rests``).
         points_left_out: Optional points left out of accepted frames' fits, far off them
             (:func:`~services.tracker.checks.fit_without_outliers`).
     """
@@ -150,10 +155,9 @@ class TrackerCore:
         self.layout = load_layout(self.config.layout)
         self.fit = KeypointFit(model=self.model)
         self.filter = OneEuroFilter(self.config.min_cutoff_hz, self.config.beta)
-        self.reach = ReachDetector(self.config.rule)
+        self.demos = Demonstrations(self.config.rule, self.model, self.config.announce_rest)
         self.refused = dict.fromkeys(REASONS, 0)
-        self.accepted = self.skipped = self.unfitted = self.bridged = self.reaches = self.points_left_out = 0
-        self.lost = 0
+        self.accepted = self.skipped = self.unfitted = self.bridged = self.points_left_out = 0
         self.upright = Upright()                                 # whether this track's keypoints have z up
         self._required = {p: list(POINT_NAMES).index(p) for p in REQUIRED}
         self._raw: tuple[float, np.ndarray] | None = None      # the last accepted fit (stamp, features)
@@ -161,17 +165,12 @@ class TrackerCore:
         self._out: tuple[float, np.ndarray] | None = None      # the last smoothed frame
         self._frame_no: int | None = None                       # the last accepted frame's number (if given)
         self._leap: float | None = None                         # a refused frame's stamp a long gap after the last
-        self._ended_at = -math.inf                              # the last reach's end stamp
         self._jump: tuple[float, np.ndarray, int] | None = None  # refused as a jump: (stamp, joints, frames in a row)
         self._rate_said = False                                  # the sensor's rate named for this track
         self.clock = PoseClock(self.config.pose_rate_hz)         # a pose per frame, or resampled to the library's
-        self._yaw = HERAKLES_NAMES.index("pelvis_yaw")
         self.rate = FrameRate()                                  # the accepted frames' rate: bridging, resampling
         self.sensor = FrameRate()                                # every frame's: what the sensor sends
         self._seen: float | None = None                          # the newest frame's stamp (any frame)
-        self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
-        self.demo_id = -1
-        self._index = 0
 
     def on_keypoints(self, msg: HumanKeypoints, numbered: bool = True, fit: bool = True) -> TrackerOutput:
         """One frame off the wire (decoded and checked): its coordinate frame and names, then :meth:`on_frame`.
@@ -323,15 +322,11 @@ class TrackerCore:
 
         Lost, not ended: where the person went is unknown; its marker says so (``lost``, at the last frame).
         """
-        msgs = self._end(last, "lost") if self.reach.active else []
-        self.lost += bool(msgs)
-        self.reach.reset()
+        msgs = self.demos.lose(last)
         self.filter.reset()
-        self._recent.clear()
         self.rate.reset()  # the next frames may come from a sensor restarted at another rate
         self.sensor.reset()
         self._raw = self._out = self._joints = self._frame_no = self._leap = self._jump = None
-        self._ended_at = -math.inf  # a sensor restarted, or a clock stepped back: its frames may precede the last end
         self._rate_said, self.upright.frames = False, 0
         self.clock.reset()
         return msgs
@@ -358,37 +353,5 @@ class TrackerCore:
         return msgs
 
     def _frame(self, t: float, f: np.ndarray) -> list[Message]:
-        """A smoothed frame through the reach rule: the markers and poses it gives."""
-        self._recent.append((t, f))
-        while self._recent and self._recent[0][0] < t - self.config.pre_s - 1e-9:
-            self._recent.popleft()
-        event = self.reach.update(body_wrist(self.model.joint_positions(np.asarray(f, dtype=np.float64))), t)
-        if event is not None and event.event == "start":
-            self.demo_id += 1
-            self.reaches += 1
-            self._index = 0
-            first = [(s, g) for s, g in self._recent if s >= event.stamp - 1e-9 and s > self._ended_at] or [(t, f)]
-            msgs: list[Message] = [DemoMarker(stamp=first[0][0], tick=-1, demo_id=self.demo_id, event="start",
-                                              true_class=-1, class_name="live", n_samples=0)]
-            return msgs + [self._pose(s, g) for s, g in first]
-        if not self.reach.active and event is None:
-            return []
-        msgs = [self._pose(t, f)]
-        if event is not None and event.event == "end":
-            self._ended_at = t  # no pose of the ended reach is a pose of the next one
-            return msgs + self._end(t)
-        return msgs
-
-    def _pose(self, t: float, f: np.ndarray) -> HumanPose:
-        features = np.asarray(f, dtype=np.float64).copy()
-        # the fit follows the yaw continuously from its first guess: a track begun on the other side of +-pi, or a
-        # person who turned round, published it 2 pi off the libraries' convention (recognised 10 of 40 reaches)
-        features[self._yaw] = (features[self._yaw] + math.pi) % (2 * math.pi) - math.pi
-        pose = HumanPose(stamp=t, tick=-1, tick_last=True, demo_id=self.demo_id, index=self._index,
-                         features=features)
-        self._index += 1
-        return pose
-
-    def _end(self, t: float, event: str = "end") -> list[Message]:
-        return [DemoMarker(stamp=t, tick=-1, demo_id=self.demo_id, event=event, true_class=-1, class_name="live",
-                           n_samples=self._index)]
+        """A smoothed frame through the reach rule: the markers and poses it gives (:mod:`.demos`)."""
+        return self.demos.frame(t, f)

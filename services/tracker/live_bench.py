@@ -26,7 +26,7 @@ from shared.config import ZenohConfig
 from shared.human import HumanModel
 from shared.keypoints.bench import source_library
 from shared.keypoints.fit import POINT_NAMES
-from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Keys
+from shared.protocol import AT_REST, DemoMarker, HumanKeypoints, HumanPose, Keys
 from shared.transport import TypedPublisher, open_session, subscribe
 
 from .bench import sample_at
@@ -88,11 +88,14 @@ def _measure(endpoint: str, rates: list[float], feats: np.ndarray, rest_s: float
              model: HumanModel) -> list[tuple[float, int, int, float, float]]:
     """``(rate, frames sent, poses received, median delay ms, max delay ms)`` per rate."""
     keys, lock = Keys(), threading.Lock()
-    got: list[tuple[str, float]] = []  # ("pose" / "start" / "end", delay s)
+    got: list[tuple[str, int, float]] = []  # ("pose" / "start" / "end" / "lost", demo_id, delay s)
+    rest: set[int] = set()  # the demonstrations of the person at rest (services.tracker.demos): not the reach's
 
     def take(msg: HumanPose | DemoMarker) -> None:
         with lock:
-            got.append(("pose" if isinstance(msg, HumanPose) else msg.event, time.time() - msg.stamp))
+            if isinstance(msg, DemoMarker) and msg.class_name == AT_REST:
+                rest.add(msg.demo_id)
+            got.append(("pose" if isinstance(msg, HumanPose) else msg.event, msg.demo_id, time.time() - msg.stamp))
 
     cfg = ZenohConfig(mode="peer", connect=[endpoint], listen=[], multicast_scouting=False)
     rows, frame_no, stop = [], 0, threading.Event()
@@ -116,10 +119,10 @@ def _measure(endpoint: str, rates: list[float], feats: np.ndarray, rest_s: float
                                        names=list(POINT_NAMES), positions=p))
                 frame_no += 1
             end = time.monotonic() + 15.0
-            while time.monotonic() < end and not any(e == "end" for e, _ in list(got)):
+            while time.monotonic() < end and not any(e == "end" and i not in rest for e, i, _ in list(got)):
                 time.sleep(0.05)
             with lock:
-                delays = np.array([d for e, d in got if e == "pose"]) * 1e3
+                delays = np.array([d for e, i, d in got if e == "pose" and i not in rest]) * 1e3
             rows.append((rate, len(frames), len(delays), float(np.median(delays)) if len(delays) else float("nan"),
                          float(delays.max()) if len(delays) else float("nan")))
             time.sleep(1.0)  # the tracker's silence ends the track: the next rate starts afresh

@@ -100,6 +100,12 @@ class ReachDetector:
         self._goal = np.zeros(3)  # where that reach ended
         self._left_goal = False  # the hand has left it since
 
+    @property
+    def settled(self) -> bool:
+        """Whether the hand's rest position is known: learnt over ``rest_s`` since the track began (or was relearnt)."""
+        return (self._since is not None and self._rest is not None and self._t is not None
+                and self._t - self._since >= self.rule.rest_s)
+
     def update(self, wrist: np.ndarray, t: float) -> ReachEvent | None:
         """The event at this frame, if any (``wrist``: ``(3,)`` body-frame position, m; ``t``: s)."""
         r = self.rule

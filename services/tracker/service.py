@@ -29,6 +29,7 @@ from shared.keypoints.fit import REQUIRED
 from shared.keypoints.library import read_keypoint_csv
 from shared.keypoints.plausibility import units_problem
 from shared.protocol import (
+    AT_REST,
     SENSOR,
     DemoMarker,
     Expectations,
@@ -65,6 +66,7 @@ class TrackerStats:
     poses: int = 0
     markers: int = 0
     reaches: int = 0
+    rests: int = 0  # the person seen at rest, published (services.tracker.demos)
     played: int = 0
     behind: int = 0  # frames left unfitted to catch up (catch_up), or dropped by a full backlog
     failed: int = 0  # batches whose processing raised (logged with their traceback)
@@ -167,15 +169,20 @@ class TrackerService:
         for m in messages:
             assert isinstance(m, HumanPose | DemoMarker)
             human.put(m)
-            if isinstance(m, DemoMarker) and m.event == "start":
+            if isinstance(m, DemoMarker) and m.class_name == AT_REST:
+                if m.event == "end":
+                    log.info("tracker: the person is seen at rest (demonstration %d, %d poses at %.3f): the predictor "
+                             "predicts from there until a reach starts", m.demo_id, m.n_samples, m.stamp)
+            elif isinstance(m, DemoMarker) and m.event == "start":
                 log.info("tracker: reach %d starts (its first pose at %.3f)", m.demo_id, m.stamp)
             elif isinstance(m, DemoMarker) and m.event == "lost":
                 log.warning("tracker: reach %d lost at %.3f after %d poses (no frame for over %g s, another body, or "
-                            "the tracker stopping): the executor holds the robot until a reach is seen again",
+                            "the tracker stopping): the executor holds the robot until the person is seen again",
                             m.demo_id, m.stamp, m.n_samples, self.config.tracker.max_gap_s)
             elif isinstance(m, DemoMarker):
                 log.info("tracker: reach %d ends at %.3f after %d poses", m.demo_id, m.stamp, m.n_samples)
-        self.stats.poses, self.stats.markers, self.stats.reaches = human.poses, human.markers, human.starts
+        self.stats.poses, self.stats.markers = human.poses, human.markers
+        self.stats.reaches, self.stats.rests = self.core.demos.reaches, self.core.demos.rests
 
     def _on_pose_array(self, mapping: Any, names: list[str], payload: bytes) -> None:
         """A ROS 2 ``PoseArray``: as a ``HumanKeypoints`` frame, checked like one off Foresight's key."""
@@ -262,10 +269,10 @@ class TrackerService:
         self.stats.refused, self.stats.behind = dict(self.core.refused), self.stats.behind + self.backlog.dropped
         log.info("tracker: stopped after %d frames (%d played; %d skipped over max_fit_hz, %d unfitted or dropped to "
                  "catch up), "
-                 "%d reaches (%d lost), %d poses, %d markers; refused: %s; "
+                 "%d reaches (%d lost), seen at rest %d times, %d poses, %d markers; refused: %s; "
                  "optional points left out, far off the fit: %d; rejected on receipt: %s", self.stats.frames,
-                 self.stats.played, self.core.skipped, self.stats.behind, self.stats.reaches, self.core.lost,
-                 self.stats.poses,
+                 self.stats.played, self.core.skipped, self.stats.behind, self.stats.reaches, self.core.demos.lost,
+                 self.stats.rests, self.stats.poses,
                  self.stats.markers,
                  ", ".join(f"{k} {v}" for k, v in self.stats.refused.items()) or "none", self.core.points_left_out,
                  self.rejects.summary())

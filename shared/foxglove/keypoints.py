@@ -1,11 +1,12 @@
 """A body tracker's keypoints in the 3D scene, between reaches too (``/viz/keypoints``).
 
-The tracker publishes the human's poses during reaches only, so the body on ``/viz/human`` shows a reach and
-stays grey between reaches. The sensor's own points show the person all the time: each frame's points as small
-spheres, placed in the scene as the poses are (:func:`shared.human.placement.place_points`: the rigid motion that
-takes the newest demonstration's first pelvis pose to the scene's human), so that they meet the body where a reach
-is drawn. Before the first reach no placement is known and nothing is drawn. Each frame's spheres live
-:data:`LIFETIME_S`: when the sensor stops or the person leaves, they go.
+The tracker publishes the human's poses during reaches (and a few of the person seen at rest, once per track),
+so the body on ``/viz/human`` shows a reach and stays grey between reaches. The sensor's own points show the person
+all the time: each frame's points as small spheres, placed in the scene as the poses are
+(:func:`shared.human.placement.place_points`: the rigid motion that takes the newest demonstration's first pelvis
+pose to the scene's human), so that they meet the body where a reach is drawn. Before the first demonstration (the
+person seen at rest, unless the tracker's ``announce_rest`` is off) no placement is known and nothing is drawn.
+Each frame's spheres live :data:`LIFETIME_S`: when the sensor stops or the person leaves, they go.
 """
 
 from __future__ import annotations

@@ -329,8 +329,9 @@ class SceneBuilder:
     def human_ended(self, marker: DemoMarker, stamp: float | None = None) -> SceneUpdate | None:
         """At a demonstration's end (or loss) marker, its last drawn body again in grey: no pose updates it any more.
 
-        A live tracker publishes poses during reaches only, so its last reach's body stayed on show, as if live,
-        while the person moved on or left. None for a start marker, or when no body of that demonstration is drawn.
+        A live tracker publishes poses during reaches (and briefly the person at rest), so its last reach's body
+        stayed on show, as if live, while the person moved on or left. None for a start marker, or when no body of
+        that demonstration is drawn.
         """
         if marker.event not in ("end", "lost") or self._body is None or self._body[0] != marker.demo_id:
             return None

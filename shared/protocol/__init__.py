@@ -19,6 +19,7 @@ the services call). Import the names from here (``from shared.protocol import Pl
 from .codec import decode, encode
 from .keys import HUMAN_SOURCES, ROUTES, SENSOR, SERVICES, Keys
 from .messages import (
+    AT_REST,
     DEMO_EVENTS,
     MESSAGE_TYPES,
     ClassPosterior,
@@ -50,6 +51,7 @@ __all__ = [
     "RobotState",
     "ClockTick",
     "MESSAGE_TYPES",
+    "AT_REST",
     "DEMO_EVENTS",
     "Keys",
     "SERVICES",

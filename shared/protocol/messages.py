@@ -15,7 +15,7 @@ from .limits import MAX_GRID_CELLS, MAX_GRID_DIM
 from .schema import Message, added, array
 from .schema import field_error as _err
 
-__all__ = ["N_FEATURES", "DEMO_EVENTS", "HumanKeypoints", "HumanPose", "DemoMarker", "ClassPosterior",
+__all__ = ["N_FEATURES", "DEMO_EVENTS", "AT_REST", "HumanKeypoints", "HumanPose", "DemoMarker", "ClassPosterior",
            "OccupancyGrid", "Plan", "RobotState",
            "ClockTick", "MESSAGE_TYPES"]
 
@@ -83,6 +83,11 @@ class HumanPose(Message):
 DEMO_EVENTS = ("start", "end", "lost")
 """A ``DemoMarker``'s events: a demonstration (a reach) starts, ends, or is lost mid-way (the tracker lost the person:
 where they went is unknown). ``lost`` came with schema version 2."""
+
+AT_REST = "rest"
+"""The ``class_name`` of a live tracker's demonstration of the person seen at rest (no reach): its poses are those
+of the person standing still before any reach of a track (the first one, or the one after a loss), so the predictor
+predicts from where the person really is and the robot need not wait for the first reach (docs/keypoints.md)."""
 
 
 @dataclass

@@ -22,7 +22,7 @@ from services.tracker.service import TrackerService
 from shared.config import ZenohConfig
 from shared.keypoints.library import write_keypoint_library
 from shared.library import load_library
-from shared.protocol import ClassPosterior, DemoMarker, HumanPose, Keys, OccupancyGrid
+from shared.protocol import AT_REST, ClassPosterior, DemoMarker, HumanPose, Keys, OccupancyGrid
 from shared.security.acl import ROLES
 from shared.security.certificates import init_security_dir
 from shared.transport import Presence, open_session, subscribe, subscribe_ordered
@@ -72,15 +72,19 @@ def test_a_recorded_person_through_the_tracker_is_recognised_by_the_predictor(sy
     assert tracker.rejects.total == 0 and sum(stats.refused.values()) == 0
     assert stats.played == stats.frames > human.demos[0].n_samples  # every frame crossed the secure router
     markers = [m for m in human_msgs if isinstance(m, DemoMarker)]
-    assert [(m.event, m.demo_id) for m in markers] == [("start", 0), ("end", 0)]
-    poses = [m for m in human_msgs if isinstance(m, HumanPose)]
+    # the person seen at rest before the reach (the recording's lead), a demonstration of its own; then the reach
+    assert [(m.event, m.demo_id, m.class_name) for m in markers] == [
+        ("start", 0, AT_REST), ("end", 0, AT_REST), ("start", 1, "live"), ("end", 1, "live")]
+    rest = [p for p in posteriors if p.demo_id == 0]
+    assert rest and max(p.index for p in rest) == markers[1].n_samples - 1  # predicted from where the person stood
+    poses = [m for m in human_msgs if isinstance(m, HumanPose) and m.demo_id == 1]
     # the reach ends once the wrist's last second spreads less than 2 cm (rms): this synthetic reach's slow final
     # approach (minimum-jerk-like) does, before its last samples
     assert len(poses) == markers[-1].n_samples >= 0.5 * human.demos[0].n_samples
     # the predictor took the reach's poses (the first ones arrive at once, the reach known only then: it predicts
     # for the newest of a burst) up to the last, and answered with its belief and occupancy
-    indices = [p.index for p in posteriors if p.demo_id == 0]
+    indices = [p.index for p in posteriors if p.demo_id == 1]
     assert max(indices) == len(poses) - 1 and len(indices) >= 0.8 * len(poses)
-    assert len(grids) >= 0.8 * len(poses) and all(g.indices.size > 0 for g in grids)
-    final = max(posteriors, key=lambda p: p.index)
+    assert len([g for g in grids if g.demo_id == 1]) >= 0.8 * len(poses) and all(g.indices.size > 0 for g in grids)
+    final = max((p for p in posteriors if p.demo_id == 1), key=lambda p: p.index)
     assert final.class_names[int(np.argmax(final.posterior))] == system_files.human_class

@@ -233,7 +233,7 @@ def test_a_reach_lost_mid_way_holds_the_robot_until_a_reach_starts_again():
     core.note_demonstration("lost", demo_id=4, n_samples=40)
     assert not core.human_ended
     assert core.stale_reason() == ("the person was lost mid-reach (reach 4: out of the sensor's view, or another "
-                                   "body): holding until a reach is seen again")
+                                   "body): holding until the person is seen again (at rest or reaching)")
     core.step(0.02)
     assert core.holding and "lost mid-reach" in core.reason
     core.note_demonstration("start", demo_id=5)  # seen again: fresh predictions decide
@@ -346,7 +346,7 @@ def test_a_lagging_arm_stays_on_the_path_at_a_bend() -> None:
 
 def test_the_hold_before_a_live_persons_first_reach_says_why() -> None:
     """A live run held for as long as the person stood still (32 s in a review's run), saying only 'no occupancy
-    prediction received yet': the tracker publishes poses only during a reach."""
+    prediction received yet': the tracker publishes poses once it has seen the person (at rest, or reaching)."""
     limits = ArmLimits(("a",), np.array([-1.0]), np.array([1.0]), np.array([1.0]))
     core = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=10.0))
     core.adopt(_one_joint_plan())
@@ -354,4 +354,4 @@ def test_the_hold_before_a_live_persons_first_reach_says_why() -> None:
     assert core.holding and core.reason == "no occupancy prediction received yet"  # the replayer's case: as before
     core.note_peer("tracker", True)
     core.step(0.02)
-    assert core.holding and "the tracker publishes poses only during a reach" in core.reason
+    assert core.holding and "the tracker publishes poses once it has seen the person at rest" in core.reason

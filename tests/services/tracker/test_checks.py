@@ -82,7 +82,7 @@ def test_an_optional_point_reported_at_the_origin_is_left_out_and_the_reach_goes
     assert [type(m) for m in spoilt] == [type(m) for m in clean]  # the same markers and as many poses
     got = np.array([m.features for m in spoilt if isinstance(m, HumanPose)])
     want = np.array([m.features for m in clean if isinstance(m, HumanPose)])
-    assert np.abs(got - want).max() < 0.05 and sum(isinstance(m, DemoMarker) for m in spoilt) == 2
+    assert np.abs(got - want).max() < 0.05 and sum(isinstance(m, DemoMarker) for m in spoilt) == 4  # at rest, reach
 
 
 def test_a_required_point_far_off_is_still_refused_naming_the_furthest_point(joints) -> None:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from services.tracker.core import TrackerConfig, TrackerCore
+from services.tracker.demos import reach_messages, reach_poses
 from services.tracker.filters import OneEuroFilter
 from shared.config import ConfigError
 from shared.feature_sets import HERAKLES_NAMES
@@ -30,8 +31,10 @@ def run(core: TrackerCore, feats: np.ndarray, skip: set[int] = frozenset(), edit
     return outs
 
 
-def messages(outs) -> list:  # noqa: ANN001
-    return [m for _, o in outs for m in o.messages]
+def messages(outs, rest: bool = False) -> list:  # noqa: ANN001
+    """Every message of ``outs``; without the demonstrations of the person at rest unless ``rest``."""
+    every = [m for _, o in outs for m in o.messages]
+    return every if rest else reach_messages(every, set())
 
 
 def test_one_euro_smooths_jitter_and_follows_motion() -> None:
@@ -52,7 +55,7 @@ def test_a_reach_gives_start_poses_end_with_the_recorded_features(reach) -> None
     msgs = messages(run(core, reach))
     markers = [m for m in msgs if isinstance(m, DemoMarker)]
     poses = [m for m in msgs if isinstance(m, HumanPose)]
-    assert markers[0].event == "start" and markers[-1].event == "end" and core.reaches >= 1
+    assert markers[0].event == "start" and markers[-1].event == "end" and core.demos.reaches >= 1
     for demo in {p.demo_id for p in poses}:
         idx = [p.index for p in poses if p.demo_id == demo]
         assert idx == list(range(len(idx)))  # contiguous from 0
@@ -110,7 +113,7 @@ def test_a_short_gap_is_bridged_a_long_one_loses_the_reach(reach) -> None:
     msgs = messages(run(core, reach, skip=set(range(60, 90))))  # a second without frames, mid-reach
     # lost, not ended: the person did not come to rest there (an 'end' let the robot go on as if they had)
     lost = [m for m in msgs if isinstance(m, DemoMarker) and m.event == "lost"]
-    assert lost[0].stamp == pytest.approx(59 / RATE) and core.bridged == 0 and core.lost == 1
+    assert lost[0].stamp == pytest.approx(59 / RATE) and core.bridged == 0 and core.demos.lost == 1
     assert [m.event for m in msgs if isinstance(m, DemoMarker) and m.demo_id == lost[0].demo_id] == ["start", "lost"]
 
 
@@ -317,10 +320,10 @@ def _at_rate(feats: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _poses_of(rate: float, feats: np.ndarray) -> tuple[list[HumanPose], list[str]]:
-    core, poses, notes = TrackerCore(), [], []
+    core, poses, notes, rest = TrackerCore(), [], [], set()
     for t, p in zip(*_at_rate(feats, rate), strict=True):
         out = core.on_frame(float(t), NAMES, p)
-        poses += [m for m in out.messages if isinstance(m, HumanPose)]
+        poses += reach_poses(out.messages, rest)
         notes += [out.note] if out.note else []
     return poses, notes
 

@@ -19,12 +19,13 @@ from services.ros2.node import Ros2Node
 from services.tracker.__main__ import main as tracker_main
 from services.tracker.config import PlaybackConfig, TrackerServiceConfig
 from services.tracker.core import TrackerConfig
+from services.tracker.demos import REST_POSES, reach_messages
 from services.tracker.service import TrackerService
 from shared.config import ConfigError, ZenohConfig
 from shared.human import HumanModel
 from shared.keypoints.library import write_keypoint_library
 from shared.library import MotionLibrary
-from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, Keys, encode
+from shared.protocol import AT_REST, DemoMarker, HumanKeypoints, HumanPose, Keys, encode
 from shared.rejects import RejectCounter
 from shared.synthetic import generate_library
 from shared.transport import Presence, TypedPublisher, open_session, subscribe_ordered
@@ -110,8 +111,12 @@ def test_a_sensors_reach_becomes_poses_between_markers(zenoh_hub) -> None:
             items = list(got.items)
         finally:
             stats = thread.stop()
-    assert [(m.event, m.demo_id, m.true_class) for m in items if isinstance(m, DemoMarker)] == [
-        ("start", 0, -1), ("end", 0, -1)]
+    # the person seen at rest (a demonstration of its own, once the rest is learnt), then the reach
+    assert [(m.event, m.demo_id, m.true_class, m.class_name) for m in items if isinstance(m, DemoMarker)] == [
+        ("start", 0, -1, AT_REST), ("end", 0, -1, AT_REST), ("start", 1, -1, "live"), ("end", 1, -1, "live")]
+    rest = [m for m in items if isinstance(m, HumanPose) and m.demo_id == 0]
+    assert 1 <= len(rest) <= REST_POSES and items[len(rest) + 1].n_samples == len(rest)
+    items = reach_messages(items, set())
     poses = [m for m in items if isinstance(m, HumanPose)]
     assert isinstance(items[0], DemoMarker) and isinstance(items[-1], DemoMarker)
     assert [p.index for p in poses] == list(range(len(poses))) and items[-1].n_samples == len(poses)
@@ -146,7 +151,8 @@ def test_a_sensor_gone_quiet_mid_reach_loses_the_reach_at_once(zenoh_hub) -> Non
             end = got.markers()[-1]
         finally:
             thread.stop()
-    assert end.stamp == sent[-1].stamp and end.n_samples == sum(isinstance(m, HumanPose) for m in got.items)
+    assert end.stamp == sent[-1].stamp
+    assert end.n_samples == sum(isinstance(m, HumanPose) and m.demo_id == end.demo_id for m in got.items)
 
 
 def test_bad_frames_get_one_line_each_are_never_published_and_the_tracker_goes_on(zenoh_hub, caplog) -> None:
@@ -222,7 +228,7 @@ def test_from_file_plays_a_recording_through_the_wire(zenoh_hub, tmp_path: Path)
         assert got.wait(lambda items: sum(isinstance(m, DemoMarker) and m.event == "end" for m in items) >= 1)
     n = sum(d.n_samples for d in lib.demos[:2] if d.class_name == lib.demos[0].class_name)
     assert stats.played >= n and stats.frames == stats.played  # every played frame came back through Zenoh
-    starts = [m for m in got.markers() if m.event == "start"]
+    starts = [m for m in got.markers() if m.event == "start" and m.class_name == "live"]
     assert len(starts) == stats.reaches >= 1
 
 
