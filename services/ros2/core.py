@@ -13,6 +13,7 @@ OccupancyGrid              ``/foresight/occupancy``                    ``visuali
 HumanPose                  ``/foresight/human``                        ``visualization_msgs/msg/MarkerArray``
 ClassPosterior             ``/foresight/posterior``                    ``diagnostic_msgs/msg/KeyValue`` list as
                                                                         ``diagnostic_msgs/msg/DiagnosticStatus``
+ClockTick, RobotState      ``/clock`` (lock-step only)                 ``rosgraph_msgs/msg/Clock``
 =========================  ==========================================  =========================================
 
 Frames: everything in the scene's frame, ``frame_id`` (default ``world``, as in the MCAP's scene).
@@ -57,6 +58,7 @@ TOPICS = {
     "occupancy": Topic("foresight/occupancy", "visualization_msgs/msg/MarkerArray"),
     "human": Topic("foresight/human", "visualization_msgs/msg/MarkerArray"),
     "posterior": Topic("foresight/posterior", "diagnostic_msgs/msg/DiagnosticStatus"),
+    "clock": Topic("/clock", "rosgraph_msgs/msg/Clock"),
 }
 """What the ``ros2`` service publishes, by role."""
 
@@ -81,6 +83,8 @@ class Ros2Config:
     frame_id: str = opt("world", help="frame of the markers and the trajectory header (the scene's frame)")
     joint_states: bool = opt(True, help="publish /joint_states from Foresight's executor (off when a real robot "
                              "publishes them)")
+    clock: bool = opt(True, help="in a lock-step run, publish its simulated time on /clock (RViz and other nodes "
+                      "with use_sim_time follow it; the messages' stamps are that time, from 0)")
     min_probability: float = opt(0.05, help="occupancy markers: voxels below this probability are left out")
     log_level: str = opt("INFO", choices=LOG_LEVELS, help="log level")
 
@@ -104,6 +108,10 @@ class Ros2Config:
     def node_namespace(self) -> str:
         """The namespace as ROS 2 writes it: ``/`` or ``/a/b``, without a trailing ``/`` (``/a/`` is ``/a``)."""
         return "/" + "/".join(p for p in self.namespace.split("/") if p)
+
+    def enabled(self, role: str) -> bool:
+        """Whether ``role``'s topic is published (the joint states and the clock may be turned off)."""
+        return {"joint_states": self.joint_states, "clock": self.clock}.get(role, True)
 
     def topic(self, role: str) -> str:
         """The absolute topic name of ``role``."""

@@ -24,6 +24,7 @@ from shared.config_names import check_services
 from shared.protocol import (
     SERVICES,
     ClassPosterior,
+    ClockTick,
     DemoMarker,
     Expectations,
     HumanPose,
@@ -100,7 +101,9 @@ class Ros2Service:
         self._first_pose: tuple[int, np.ndarray] | None = None  # (demo id, its first pose): the human's placement
         self._last_viz: dict[str, float] = {}
         self._pending: dict[str, Callable[[], bytes]] = {}  # role -> the newest marker held back by the rate limit
-        self._drivers: dict[str, str] = {}  # graph token -> node, of other nodes publishing the joint states topic
+        self._others: dict[str, dict[str, str]] = {"joint_states": {}, "clock": {}}  # role -> graph token -> node,
+        # of other nodes publishing that role's topic (a robot's driver; a simulator's clock)
+        self._sim_time: float | None = None  # the lock-step run's simulated time (None: no ClockTick seen, real time)
         self._zid = ""
 
     def _put(self, role: str, payload: bytes) -> None:
@@ -143,39 +146,85 @@ class Ros2Service:
     @property
     def robot_publishes(self) -> str | None:
         """A node other than the gateway publishing the joint states topic (a robot's driver), or None."""
+        return self.publishes("joint_states")
+
+    def publishes(self, role: str) -> str | None:
+        """A node other than the gateway publishing ``role``'s topic (``joint_states`` or ``clock``), or None."""
         with self._lock:
-            return next(iter(self._drivers.values()), None)
+            return next(iter(self._others[role].values()), None)
 
     def on_state(self, state: RobotState) -> None:
-        """The simulated robot's joints (not when another node publishes the joint states: :meth:`on_graph`)."""
-        if self.config.joint_states and self.robot_publishes is None:
+        """The simulated robot's joints (not when another node publishes the joint states: :meth:`on_graph`).
+
+        In a lock-step run its stamp also advances ``/clock`` (:meth:`on_tick`): the states come every state
+        period, the ticks every replanning step.
+        """
+        if self.config.joint_states and self.publishes("joint_states") is None:
             self._put("joint_states", self.mapping.joint_state(state))
+        if self._sim_time is not None:
+            self._advance_clock(state.stamp)
+
+    def on_tick(self, tick: ClockTick) -> None:
+        """A lock-step clock tick: the run's time is simulated, from 0, and ``/clock`` says it.
+
+        Before, a lock-step run's messages went out stamped 1970-01-01 plus a few seconds, with no ``/clock``: a
+        ROS 2 node on the wall clock (RViz by default) saw them 56 years old, and one with ``use_sim_time`` never
+        saw time pass. Not in real time (no ticks; the stamps are the wall clock's), nor while another node
+        publishes ``/clock`` (the executor's ROS 2 robot link, a simulator: :meth:`on_graph`).
+        """
+        if tick.tick == 0:  # a new run: its time starts again (ROS 2 nodes reset on a jump back)
+            with self._lock:
+                self._sim_time = None
+        if self._sim_time is None:
+            other = self.publishes("clock")
+            log.info("ros2: a lock-step run (clock tick %d at %.3f s): its simulated time goes out on %s%s; ROS 2 "
+                     "nodes follow it with use_sim_time", tick.tick, tick.stamp, self.config.topic("clock"),
+                     f" (from {other})" if other else "" if self.config.clock else " (not from here: --no-clock)")
+        self._advance_clock(tick.stamp)
+
+    def _advance_clock(self, t: float) -> None:
+        """Publish ``/clock`` = ``t`` s if it is later than the last (a clock never goes back)."""
+        with self._lock:
+            if self._sim_time is not None and t <= self._sim_time:
+                return
+            self._sim_time = t
+        if self.config.clock and self.publishes("clock") is None:
+            self._put("clock", self.mapping.clock(t))
 
     def on_graph(self, key: str, alive: bool = True) -> None:
-        """A graph token (``alive`` False: withdrawn): another node publishing the joint states is a robot's driver.
+        """A graph token (``alive`` False: withdrawn): another node publishing the joint states or ``/clock``.
 
         The executor driving a ROS 2 robot (``robot = "ros2"``) publishes the robot's measured joints as its
         RobotState; echoed onto the robot's own topic they came back as a second publisher's states (116 refused
         by the executor in a review run, the rest taken for fresh measurements). While another node publishes
-        there the gateway publishes no joint states, and says so when that starts and ends.
+        there the gateway publishes no joint states, and says so when that starts and ends. The same for
+        ``/clock``: beside a ROS 2 robot in lock-step the executor publishes the simulated time itself, at every
+        state period, and two clocks would take turns.
         """
         ep = parse_endpoint_token(key)
-        topic = self.config.topic("joint_states")
-        if ep is None or ep.kind != "MP" or ep.topic != topic or ep.zid == self._zid or not self.config.joint_states:
+        if ep is None or ep.kind != "MP" or ep.zid == self._zid:
+            return
+        role = next((r for r in self._others if ep.topic == self.config.topic(r) and self.config.enabled(r)), None)
+        if role is None:
             return
         node = f"{ep.namespace.rstrip('/')}/{ep.node}"
         with self._lock:
-            before = bool(self._drivers)
+            others = self._others[role]
+            before = bool(others)
             if alive:
-                self._drivers[key] = node
+                others[key] = node
             else:
-                self._drivers.pop(key, None)
-            started, ended = not before and bool(self._drivers), before and not self._drivers
-        if started:
-            log.warning("ros2: node %s publishes %s (a robot's driver): the executor's RobotState is not echoed there "
-                        "(run the gateway with --no-joint-states beside a ROS 2 robot)", node, topic)
+                others.pop(key, None)
+            started, ended = not before and bool(others), before and not others
+        topic = self.config.topic(role)
+        what = ("(a robot's driver): the executor's RobotState is not echoed there (run the gateway with "
+                "--no-joint-states beside a ROS 2 robot)" if role == "joint_states" else
+                "(a simulator, the executor's ROS 2 robot link): the gateway publishes no simulated time there")
+        if started:  # the joint states: a setting to change; the clock: as it should be beside a ROS 2 robot
+            log.log(logging.WARNING if role == "joint_states" else logging.INFO, "ros2: node %s publishes %s %s", node,
+                    topic, what)
         elif ended:
-            log.info("ros2: no other node publishes %s now; the executor's RobotState goes there again", topic)
+            log.info("ros2: no other node publishes %s now; the gateway publishes it again", topic)
 
     def on_occupancy(self, grid: OccupancyGrid) -> None:
         """The predicted occupancy (rate-limited)."""
@@ -209,13 +258,13 @@ class Ros2Service:
 
             graph = session.liveliness().declare_subscriber(f"@ros2_lv/{cfg.domain_id}/**", on_token, history=True)
             for role, topic in TOPICS.items():
-                if role != "joint_states" or cfg.joint_states:
+                if cfg.enabled(role):
                     self._pubs[role] = node.publisher(cfg.topic(role), topic.msgtype)
             k = self.keys
             subs = [subscribe(session, key, cls, handler, self.rejects, self.receipt) for key, cls, handler in (
                 (k.plan, Plan, self.on_plan), (k.robot_state, RobotState, self.on_state),
                 (k.occupancy, OccupancyGrid, self.on_occupancy), (k.posterior, ClassPosterior, self.on_posterior),
-                (k.pose, HumanPose, self.on_human))]
+                (k.pose, HumanPose, self.on_human), (k.clock, ClockTick, self.on_tick))]
             ends = [cfg.stop_with] if cfg.stop_with else []  # one service's name, not its letters
             presence = Presence(session, self.keys, "ros2", stop_with=ends, stop=stop)
             log.info("ros2: node %s%s on domain %d, topics %s, session %s", cfg.node_namespace.rstrip("/") + "/",

@@ -7,11 +7,13 @@ with per-topic sequence numbers 1, 2, ..., and every topic must have its publish
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
 
 import numpy as np
+import pytest
 import zenoh
 from rosbags.typesys import Stores, get_typestore
 
@@ -20,7 +22,7 @@ from services.ros2.node import Ros2Node
 from services.ros2.service import Ros2Service, Ros2ServiceConfig
 from services.ros2.wire import Attachment
 from shared.config import ZenohConfig
-from shared.protocol import ClassPosterior, HumanPose, Keys, OccupancyGrid, Plan, RobotState
+from shared.protocol import ClassPosterior, ClockTick, HumanPose, Keys, OccupancyGrid, Plan, RobotState
 from shared.rejects import RejectCounter
 from shared.transport import TypedPublisher, open_session
 
@@ -52,7 +54,7 @@ def test_every_sample_decodes_with_its_attachment_and_every_topic_has_a_token(
         thread = threading.Thread(target=service.run, args=(stop,), daemon=True)
         thread.start()
         try:
-            assert wait_until(lambda: len(list(ros.liveliness().get("@ros2_lv/0/**", timeout=1.0))) >= 7, 30.0)
+            assert wait_until(lambda: len(list(ros.liveliness().get("@ros2_lv/0/**", timeout=1.0))) >= 8, 30.0)
             tokens = [str(r.ok.key_expr) for r in ros.liveliness().get("@ros2_lv/0/**", timeout=2.0) if r.ok]
             time.sleep(0.3)
             traj = np.zeros((2, 4, 2), np.float32)
@@ -60,6 +62,8 @@ def test_every_sample_decodes_with_its_attachment_and_every_topic_has_a_token(
                         chosen=0, planning_ms=1.0, occupancy_tick=-1, occupancy_index=-1, trajectories=traj,
                         cost_smoothness=np.zeros(2), cost_obstacle=np.zeros(2), cost_human=np.zeros(2),
                         cost_total=np.ones(2), valid=np.ones(2, bool))
+            TypedPublisher(foresight, keys.clock).put(ClockTick(stamp=0.0, tick=0, period=0.5))  # lock-step: /clock
+            time.sleep(0.1)
             TypedPublisher(foresight, keys.plan).put(plan)
             state_pub = TypedPublisher(foresight, keys.robot_state)
             for i in range(3):
@@ -75,7 +79,7 @@ def test_every_sample_decodes_with_its_attachment_and_every_topic_has_a_token(
             TypedPublisher(foresight, keys.pose).put(HumanPose(
                 stamp=1.0, tick=0, tick_last=True, demo_id=0, index=0,
                 features=np.array([0.0, 0.0, 0.95, 0.0, 0.0, 0.0, 0.0, 0.2, 0.1, 0.3, 0.0, 0.5])))
-            assert wait_until(lambda: len(got) >= 8, 20.0), got
+            assert wait_until(lambda: len(got) >= 11, 20.0), got
         finally:
             stop.set()
             thread.join(10.0)
@@ -125,16 +129,8 @@ def test_the_newest_marker_held_back_by_the_rate_limit_is_sent_when_its_window_p
     from shared.config import ZenohConfig
     from shared.protocol import OccupancyGrid
 
-    class Pub:
-        def __init__(self) -> None:
-            self.sent, self.payloads = 0, []
-
-        def put(self, payload: bytes) -> None:
-            self.sent += 1
-            self.payloads.append(payload)
-
     svc = Ros2Service(Ros2ServiceConfig(viz_rate_hz=1e-3), ZenohConfig())  # a window far longer than the test
-    svc._pubs = {"occupancy": Pub()}
+    svc._pubs = {"occupancy": _Sent()}
     grids = []
     for i in range(3):
         dense = np.zeros((8, 8, 8))
@@ -198,3 +194,52 @@ def test_once_the_other_publisher_is_gone_the_gateway_publishes_the_joint_states
     assert service.robot_publishes == "/topic_pub"
     service.on_graph(token, alive=False)
     assert service.robot_publishes is None
+
+
+class _Sent:
+    """A publisher that keeps what it is given (the service's ``_put`` counts ``sent``)."""
+
+    def __init__(self) -> None:
+        self.payloads: list[bytes] = []
+        self.sent = 0
+
+    def put(self, payload: bytes) -> None:
+        self.payloads.append(payload)
+        self.sent += 1
+
+
+def _state(t: float) -> RobotState:
+    return RobotState(stamp=t, tick=-1, joint_names=JOINTS, goal=0, reached=False, holding=False, reason="",
+                      q=np.zeros(2), qd=np.zeros(2))
+
+
+def test_a_lock_step_run_publishes_its_simulated_time_on_clock(caplog) -> None:
+    """A lock-step run's messages went out stamped from 0 (1970) with no /clock: RViz on the wall clock saw them 56
+    years old, and a node with use_sim_time never saw time pass."""
+    from services.ros2.wire import endpoint_token
+
+    caplog.set_level(logging.INFO)
+    service = Ros2Service(Ros2ServiceConfig(), ZenohConfig())
+    clock = service._pubs["clock"] = _Sent()  # the node's publisher, as run() makes it
+    times = lambda: [service.mapping.clock_in(p) for p in clock.payloads]  # noqa: E731
+    service.on_state(_state(1.7e9))  # real time: no ticks, the stamps are the wall clock's, no /clock
+    assert times() == []
+    service.on_tick(ClockTick(stamp=0.0, tick=0, period=0.5))
+    for i in range(1, 4):
+        service.on_state(_state(0.02 * i))
+    service.on_state(_state(0.04))  # a state again: the clock never goes back
+    service.on_tick(ClockTick(stamp=0.5, tick=1, period=0.5))
+    assert times() == pytest.approx([0.0, 0.02, 0.04, 0.06, 0.5])
+    token = endpoint_token(0, "other", 1, 2, "MP", "/", "executor_robot", "/clock", "rosgraph_msgs/msg/Clock",
+                           "RIHS01_x", "q")
+    service.on_graph(token)  # the executor's ROS 2 robot link publishes the simulated time itself
+    service.on_tick(ClockTick(stamp=1.0, tick=2, period=0.5))
+    assert len(times()) == 5 and service.publishes("clock") == "/executor_robot"
+    assert "node /executor_robot publishes /clock (a simulator" in caplog.text
+    service.on_graph(token, alive=False)
+    service.on_tick(ClockTick(stamp=0.0, tick=0, period=0.5))  # the next run: its time starts again
+    assert times()[-1] == 0.0 and len(times()) == 6
+    off = Ros2Service(Ros2ServiceConfig(clock=False), ZenohConfig())
+    off._pubs["clock"] = _Sent()
+    off.on_tick(ClockTick(stamp=0.0, tick=0, period=0.5))
+    assert off._pubs["clock"].sent == 0
