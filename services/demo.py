@@ -248,8 +248,9 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     summary.extra["comparison"] = [o.to_json() for o in outcomes]
     if cfg.compare and len(outcomes) == len(VARIANTS):
         summary.extra["verdict"] = verdict(outcomes)
+    cut = "; ".join(f"{o.planner} {o.cut_short}" for o in outcomes if o.cut_short)
     title = (f"foresight demo: {summary.human_class} reach, scene {scene.name}, robot at {cfg.robot_speed:g} of its "
-             f"velocity limits, {cfg.steps} steps of {cfg.period_s:g} s")
+             f"velocity limits, {cfg.steps} steps of {cfg.period_s:g} s" + (f": the {cut}" if cut else ""))
     against = ("the prediction planner's final prediction" if summary.scored_against == "final prediction"
                else f"the run's {summary.scored_against}")
     summary.extra["outcome_lines"] = outcome_lines(outcomes, against)

@@ -20,7 +20,7 @@ from services.experiments.plots import save_figure
 from shared.protocol import HumanPose, OccupancyGrid
 from shared.scene import Scene
 
-__all__ = ["draw_outcomes"]
+__all__ = ["draw_outcomes", "poses_of_the_run"]
 
 _PLANNER_COLORS = ("#2a9d3a", "#8a5cc2", "#7f7f7f", "#d08c1a")
 _GOAL_COLORS = {"blue": "#2659f2", "red": "#e62626", "green": "#1ab233", "yellow": "#e6cc1a"}
@@ -42,6 +42,16 @@ def _hand_path(poses: list[HumanPose], scene: Scene) -> tuple[np.ndarray, tuple[
     hands = np.array([model.hand_position(f) for f in placed])
     ends, radii = model.capsules(placed[-1])
     return hands, (np.asarray(ends), np.asarray(radii))
+
+
+def poses_of_the_run(poses: list[HumanPose], outcomes: list[Outcome]) -> list[HumanPose]:
+    """The poses up to the last robot state of any run (all of them when there is none).
+
+    An interrupted run's replayer went on while the services stopped, and its figure drew the whole reach (a review:
+    the hand at the cup in a run cut short at 1.35 s).
+    """
+    ends_at = max((float(o.stamps[-1]) for o in outcomes if len(o.stamps)), default=None)
+    return poses if ends_at is None else [p for p in poses if p.stamp <= ends_at + 1e-9]
 
 
 def _seconds(o: Outcome) -> np.ndarray:
@@ -77,6 +87,7 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Rectangle
+    from matplotlib.ticker import MaxNLocator
 
     fig = plt.figure(figsize=(15, 7.5))
     grid = fig.add_gridspec(2, 2, width_ratios=(1.15, 1.0), height_ratios=(1.4, 1.0))
@@ -104,14 +115,14 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
                              prediction.origin[1] + prediction.resolution * (ij[o, 1] + 0.5), c=v[o], cmap="YlOrRd",
                              vmin=0, vmax=1, marker="s", s=30, alpha=0.55, linewidths=0, zorder=1)
             fig.colorbar(sc, ax=top, shrink=0.6, label="predicted occupancy p(x|ξ), final (column max)")
-    hands, body = _hand_path(poses, scene)
+    hands, body = _hand_path(poses_of_the_run(poses, outcomes), scene)
     if len(hands):
         top.plot(hands[:, 0], hands[:, 1], color="#333333", lw=1.5, ls="--", zorder=3, label="human's hand")
     if body is not None:
         ends, radii = body
-        for (a, b), r in zip(ends, radii, strict=True):
+        for i, ((a, b), r) in enumerate(zip(ends, radii, strict=True)):
             top.plot([a[0], b[0]], [a[1], b[1]], color="#f0b7a0", lw=max(2.0, 120 * float(r)), alpha=0.7,
-                     solid_capstyle="round", zorder=2)
+                     solid_capstyle="round", zorder=2, label="human's body at the run's end" if i == 0 else None)
     steps = max((len(o.chosen_goal_per_step) for o in outcomes), default=0)
     for k, o in enumerate(outcomes):
         col = _PLANNER_COLORS[k % len(_PLANNER_COLORS)]
@@ -133,16 +144,19 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
     top.set_ylabel("y (m)")
     top.set_title("top view: robot hand paths (dots: replanning steps, in the chosen cup's colour)", fontsize=10)
     if any(len(o.ee_path) for o in outcomes):  # the start and end marks, in each planner's colour
-        top.scatter([], [], marker="o", s=70, facecolors="white", edgecolors="k", linewidths=1.8, label="hand's start")
-        top.scatter([], [], marker="X", s=80, color="k", label="hand's end")
-    top.legend(loc="best", fontsize=8)
+        top.scatter([], [], marker="o", s=70, facecolors="white", edgecolors="k", linewidths=1.8,
+                    label="robot hand's start")
+        top.scatter([], [], marker="X", s=80, color="k", label="robot hand's end")
+    if top.get_legend_handles_labels()[0]:
+        top.legend(loc="best", fontsize=8)
     clear.axhline(0.0, color="k", lw=0.8)
     clear.set_ylabel("robot-human clearance (m)")
     clear.set_xlabel("t (s)")
     clear.set_title("clearance to the real human (below 0: contact)", fontsize=10)
-    clear.legend(fontsize=8)
+    if clear.get_legend_handles_labels()[0]:  # a run with no robot state draws no line
+        clear.legend(fontsize=8)
     goals.set_yticks(range(len(outcomes)), [o.planner for o in outcomes])
-    goals.set_xticks(range(steps))
+    goals.xaxis.set_major_locator(MaxNLocator(nbins=min(max(steps, 1), 20), integer=True))  # 30 plans: unreadable
     goals.set_xlabel("replanning step")
     goals.set_title("goal chosen at each step (square colour = cup)", fontsize=10)
     goals.set_ylim(-0.6, len(outcomes) - 0.4)

@@ -167,7 +167,7 @@ def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planne
     text = verdict(outcomes)
     if text:
         out.append(f"verdict: {text}")
-    elif len(outcomes) == 1:  # one row says nothing of what prediction changes: say where the comparison is
+    elif len(outcomes) == 1 and not outcomes[0].cut_short:  # one row says nothing of what prediction changes
         out.append("one planner, nothing to compare with: `foresight demo --compare` (make demo "
                    "DEMO_ARGS=--compare) runs the same scenario with the current occupancy and with no human cost, "
                    "and says whether predicting the human kept the robot further from them")

@@ -158,8 +158,8 @@ class PlannerService:
             else:
                 self._run_realtime(session, pub, stop)
         self.summary.flush()
-        log.info("planner: stopped after %d plans (%d failed), rejected: %s", self.stats.plans, self.stats.failures,
-                 self.rejects.summary())
+        log.info("planner: stopped after making %d plans (%d failed), rejected: %s", self.stats.plans,
+                 self.stats.failures, self.rejects.summary())
         return self.stats
 
     def _run_lockstep(self, session: object, pub: TypedPublisher[Plan], stop: threading.Event) -> None:

@@ -48,3 +48,14 @@ def test_step_marks_follow_the_runs_own_clock_in_real_time() -> None:
     for t0 in (0.0, time.time()):
         o = Outcome("p", 0.0, 0.0, 0.0, 1.0, None, None, ["red_cup"] * 3, t0 + np.arange(n) * 0.1, ee, np.zeros(n))
         assert _step_points(o, 3, 0.5)[:, 0].tolist() == [0.0, 5.0, 10.0]
+
+
+def test_an_interrupted_run_draws_only_the_poses_it_saw() -> None:
+    """Ctrl-C at 1.35 s: the replayer went on while the services stopped, and the figure drew the whole reach."""
+    from services.demo_figure import poses_of_the_run
+
+    feats = np.zeros(12)
+    poses = [HumanPose(stamp=0.1 * i, tick=-1, tick_last=True, demo_id=0, index=i, features=feats) for i in range(40)]
+    run = _outcome("prediction", ["red_cup"] * 3)  # its states end at 2.0 s
+    assert [p.index for p in poses_of_the_run(poses, [run])] == list(range(21))
+    assert poses_of_the_run(poses, []) == poses  # no state: every pose

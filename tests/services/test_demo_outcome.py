@@ -46,6 +46,9 @@ def test_a_run_cut_short_gets_no_verdict_and_is_marked_in_the_table() -> None:
     assert any(ln.startswith("  current occupancy *") for ln in lines)
     assert "  * current occupancy: interrupted after 9 of 20 steps" in lines
     assert f"verdict: {text}" in lines and not any("shown" in ln for ln in lines)
+    # one interrupted run: no advice to run the whole comparison (a review found it printed after Ctrl-C)
+    lines = outcome_lines(runs[1:])
+    assert lines[-1] == "  * current occupancy: interrupted after 9 of 20 steps" and "--compare" not in "".join(lines)
 
 
 def test_verdict_on_a_contact_tie_with_one_baseline_goes_by_nearness() -> None:
