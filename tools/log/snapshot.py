@@ -230,9 +230,10 @@ def draw_snapshot(state: SceneState, out_png: str | Path, title: str | None = No
         v, col = state.voxels[o], state.rgba[o] / 255.0
         ax3.scatter(*v.T, c=col, s=10, depthshade=False, linewidths=0)
         ax2.scatter(*v[:, :2].T, c=col, marker="s", s=24, linewidths=0, zorder=1, label=f"{len(v)} voxels")
-    for name, t in state.frames.items():
+    for name, t in state.frames.items():  # each /tf frame named where it is (the base's "+" read as a second hand)
         ax3.scatter(*t, color="k", s=20)
-        ax2.plot(*t[:2], "k+", ms=8, zorder=8, label=name if name == "end_effector" else None)
+        ax2.plot(*t[:2], "k+", ms=8, zorder=8, label="frames (/tf)" if name == next(iter(state.frames)) else None)
+        ax2.annotate(name, t[:2], xytext=(4, -10), textcoords="offset points", fontsize=7, zorder=8)
     allp = np.concatenate([np.reshape(p, (-1, 3)) for p in pts] + [np.zeros((1, 3))])  # the floor's origin too
     lo, hi = allp.min(0) - 0.1, allp.max(0) + 0.1
     pts_per_m = 0.45 * 7.2 * 72 / float(np.max(hi - lo))  # roughly, a metre in points in the 3D view
