@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from services.experiments.measures import interference
+from shared.config_names import closest
 from shared.library import Demonstration, MotionLibrary
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
@@ -76,7 +77,7 @@ def choose_demonstration(library: MotionLibrary, steps: int, seed: int, human_cl
         hint = ("; the paper's library: --human-class compound_1, the reach of its authors' Table I trials "
                 "(docs/experiments.md)" if "compound_1" in names else "")  # the default, blue_cup, is the synthetic's
         raise UserError(f"--human-class {human_class!r}: not a class of {library.source} ({', '.join(names)})"
-                        + hint)
+                        + (closest(human_class, names) or hint))
     demos = library.by_class(label)
     if not demos:
         raise UserError(f"library {library.source}: class {names[label]} has no valid demonstration")

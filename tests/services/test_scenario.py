@@ -49,6 +49,8 @@ def test_choose_demonstration_is_seeded_and_spreads_the_motion():
     assert choose_demonstration(lib, steps=20, seed=3, human_class="0").demo.label == 0
     with pytest.raises(UserError, match="nope"):
         choose_demonstration(lib, steps=20, seed=0, human_class="nope")
+    with pytest.raises(UserError, match=r"'blue_cupp': not a class .*; did you mean blue_cup\?$"):  # as options do
+        choose_demonstration(lib, steps=20, seed=0, human_class="blue_cupp")
     paper_like = dataclasses.replace(lib, class_names=[f"compound_{i}" for i in range(8)])
     with pytest.raises(UserError, match=r"'blue_cup': not a class .*; the paper's library: --human-class compound_1"):
         choose_demonstration(paper_like, steps=20, seed=0, human_class="blue_cup")  # the demo's default
