@@ -11,9 +11,11 @@ session with ``connect`` endpoints) polls the session's routers and peers and lo
   then again after 6, 12, 24, 48, 60, 60, ... s while nothing answers (a bounded back-off of the reports);
 * ``connected to tcp/127.0.0.1:7447 after 7.2 s`` once something answers (only after a warning);
 * ``lost every router and peer (tcp/127.0.0.1:7447)`` when all connections drop, then the same reports;
-* with ``ZenohConfig.require_connection`` and nothing reached within ``connect_timeout_s``: it sets the
-  service's stop event, and the session's ``with`` block raises :class:`shared.transport.TransportError`
-  ``gave up: no router or peer at ... within N s`` (the service exits with that one line, status 2).
+* with ``ZenohConfig.require_connection`` the session's ``with`` body starts only once something answers; with
+  nothing reached within ``connect_timeout_s`` it sets the service's stop event, and the ``with`` raises
+  :class:`shared.transport.TransportError` ``gave up: no router or peer at ... within N s`` (the service exits with
+  that one line, status 2) without having begun its work (before, a service waited for its peers and wrote a log
+  file meanwhile: a review's executor wrote a 5-message MCAP, then gave up).
 """
 
 from __future__ import annotations
@@ -135,6 +137,12 @@ class ConnectionWatch:
         if self._thread is not None:
             self._thread.join(timeout)
 
+    def wait_connected(self, stop: threading.Event | None = None) -> None:
+        """Block until the session has reached a router or peer, the watch gave up, or ``stop`` (or :meth:`close`)."""
+        while not (self._ever_up or self.failed is not None or self._done.is_set()
+                   or (stop is not None and stop.is_set())):
+            time.sleep(POLL_S / 4)
+
     def _loop(self) -> None:
         while not self._done.wait(POLL_S):
             try:
@@ -187,12 +195,17 @@ def watched(session: zenoh.Session, cfg: ZenohConfig, name: str, stop: threading
     if not cfg.connect or cfg.mode == "router":
         yield
         return
+    from shared.transport import TransportError
+
     watch = ConnectionWatch(lambda: ConnectionWatch.reaches(session), cfg, name, stop).start()
+    if cfg.require_connection:  # the body (a service's work: its log file, its waits for peers) only once connected
+        watch.wait_connected(stop)
+        if watch.failed is not None:
+            watch.close()
+            raise TransportError(watch.failed)
     try:
         yield
     finally:
         watch.close()
     if watch.failed is not None:
-        from shared.transport import TransportError
-
         raise TransportError(watch.failed)

@@ -95,9 +95,21 @@ def test_require_connection_ends_the_session_with_one_line():
     stop = threading.Event()
     peer = ZenohConfig(mode="peer", listen=["tcp/127.0.0.1:0"], connect=[endpoint], require_connection=True,
                        connect_timeout_s=0.5)
+    began = []
     with pytest.raises(TransportError, match=rf"^executor: gave up: no router or peer at {endpoint} within 0\.5 s"):
         with open_session(peer, stop, "executor"):
-            assert stop.wait(30.0), "the watch sets the service's stop event"
+            began.append(True)
+    assert stop.is_set(), "the watch sets the service's stop event"
+    assert began == []  # the service's work never began (a review's executor wrote an MCAP, then gave up)
+
+
+def test_require_connection_begins_the_work_once_connected():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = ZenohConfig(mode="router", listen=[endpoint], connect=[])
+    peer = ZenohConfig(mode="peer", listen=["tcp/127.0.0.1:0"], connect=[endpoint], require_connection=True,
+                       connect_timeout_s=30.0)
+    with open_session(router), open_session(peer, threading.Event(), "executor") as session:
+        assert ConnectionWatch.reaches(session)  # connected before the body
 
 
 def test_client_retries_end_when_the_service_is_stopped():
