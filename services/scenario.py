@@ -219,6 +219,8 @@ class Summary:
     reached_t_s: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
     scored_against: str = "final prediction"
+    recognised_p: float | None = None  # the recognised class's probability in the last posterior
+    recognised_index: int | None = None  # the pose that posterior was made after
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (keys steps, chosen_goal_per_step, switch_step, interference_cost, mcap_path, ...)."""
@@ -226,7 +228,8 @@ class Summary:
                "interference_cost": self.interference_cost, "mcap_path": self.mcap_path, "reached": self.reached,
                "reached_step": self.reached_step, "human_class": self.human_class,
                "recognised_class": self.recognised_class, "goal_names": self.goal_names,
-               "reached_t_s": self.reached_t_s}
+               "reached_t_s": self.reached_t_s, "recognised_p": self.recognised_p,
+               "recognised_index": self.recognised_index}
         out.update(self.extra)
         return out
 
@@ -255,7 +258,9 @@ class Summary:
             if self.reached_t_s is not None:
                 reached += f" (t = {self.reached_t_s:.2f} s)"
         out.append(f"goal reached: {reached}")
-        out.append(f"human class: {self.human_class}; recognised at the end: {self.recognised_class}")
+        at = (f" (p {self.recognised_p:.2f}, after pose {self.recognised_index})"  # an interrupted run's belief
+              if self.recognised_p is not None else "")                        # differed from its last row's
+        out.append(f"human class: {self.human_class}; recognised at the end: {self.recognised_class}{at}")
         out.append(f"interference cost of the executed trajectory ({self.scored_against}): "
                    f"{self.interference_cost:.4f}")
         out.append(f"MCAP log: {self.mcap_path}")
@@ -336,12 +341,14 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
         else:  # real time: the step whose plan was the newest when it was reached
             before = [s for s in steps if s["t_s"] <= reached_t + 1e-9]
             reached_step = before[-1]["step"] if before else None
-    recognised = None
+    recognised = recognised_p = recognised_index = None
     if posteriors:
         last = posteriors[max(posteriors)]
-        recognised = last.class_names[int(np.argmax(last.posterior))]
+        best = int(np.argmax(last.posterior))
+        recognised, recognised_p, recognised_index = last.class_names[best], float(last.posterior[best]), last.index
     goal_names = list(ordered[-1].goal_names) if ordered else []
     return Summary(steps=steps, chosen_goal_per_step=chosen, switch_step=switch, interference_cost=cost,
                    mcap_path=mcap_path, reached=bool(reached_states), reached_step=reached_step,
                    human_class=human_class, recognised_class=recognised, goal_names=goal_names,
-                   reached_t_s=reached_t, scored_against=final_label(final_occupancy))
+                   reached_t_s=reached_t, scored_against=final_label(final_occupancy), recognised_p=recognised_p,
+                   recognised_index=recognised_index)

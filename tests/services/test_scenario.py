@@ -120,6 +120,9 @@ def test_each_row_shows_the_belief_its_plan_was_made_with():
     realtime = summarise([_plan(-1, 0, [1.0, 2.0], stamp=t) for t in (0.05, 0.2, 0.5)], [], None,
                          {0: _posterior(-1, 0.1, [0.7, 0.3]), 1: _posterior(-1, 0.3, [0.2, 0.8])}, None, "x", None)
     assert [e["belief"] for e in realtime.steps] == ["", "far_left p=0.70", "blue_cup p=0.80"]  # the newest before
+    # the end's recognition says its probability and pose: an interrupted run's differed from its last row's belief
+    assert "human class: x; recognised at the end: blue_cup (p 0.80, after pose " in "\n".join(realtime.lines())
+    assert realtime.to_json()["recognised_p"] == pytest.approx(0.8)
 
 
 def test_the_recorder_keeps_every_real_time_posterior_for_the_beliefs():
