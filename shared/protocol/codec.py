@@ -246,4 +246,6 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
             kwargs[f.name] = _check_scalar(t, f.name, f.hint, raw[f.name])
     msg = cls(**kwargs)
     msg.check()
+    if version < SCHEMA_VERSION:
+        msg.check_version(version)
     return msg  # type: ignore[return-value]

@@ -82,7 +82,10 @@ class HumanPose(Message):
 
 DEMO_EVENTS = ("start", "end", "lost")
 """A ``DemoMarker``'s events: a demonstration (a reach) starts, ends, or is lost mid-way (the tracker lost the person:
-where they went is unknown). ``lost`` came with schema version 2."""
+where they went is unknown). ``lost`` came with schema version 2 (:data:`EVENT_SINCE`)."""
+
+EVENT_SINCE = {"lost": 2}
+"""The schema version that added each later ``DemoMarker`` event: an older message carrying it is refused."""
 
 AT_REST = "rest"
 """The ``class_name`` of a live tracker's demonstration of the person seen at rest (no reach): its poses are those
@@ -109,6 +112,13 @@ class DemoMarker(Message):
             raise _err(self.TYPE, "event", f"must be one of {', '.join(map(repr, DEMO_EVENTS))}, got {self.event!r}")
         if self.n_samples < 0:
             raise _err(self.TYPE, "n_samples", f"must be >= 0, got {self.n_samples}")
+
+    def check_version(self, version: int) -> None:
+        """Refuse an event added after ``version`` (``lost``: 2), reason ``version``: its sender knew no such event."""
+        since = EVENT_SINCE.get(self.event, 1)
+        if version < since:
+            raise _err(self.TYPE, "event", f"{self.event!r} came with schema version {since}; this message is "
+                       f"version {version}", "version")
 
 
 @dataclass

@@ -90,6 +90,9 @@ class Message:
     def check(self) -> None:
         """Per-message invariants beyond field types and shapes; raise ProtocolError."""
 
+    def check_version(self, version: int) -> None:
+        """Values a message of schema ``version`` (older than this build's) cannot hold; raise ProtocolError."""
+
 
 def field_error(msg_type: str, field: str, text: str, reason: str = "invariant") -> ProtocolError:
     """The error for ``msg_type.field``: ``ProtocolError("Type.field: text", reason)``."""
