@@ -168,6 +168,7 @@ class TrackerCore:
         self._jump: tuple[float, np.ndarray, int] | None = None  # refused as a jump: (stamp, joints, frames in a row)
         self._rate_said = False                                  # the sensor's rate named for this track
         self.clock = PoseClock(self.config.pose_rate_hz)         # a pose per frame, or resampled to the library's
+        self._unfitted: list[float] = []                         # stamps of frames left unfitted since the last taken
         self.rate = FrameRate()                                  # the accepted frames' rate: bridging, resampling
         self.sensor = FrameRate()                                # every frame's: what the sensor sends
         self._seen: float | None = None                          # the newest frame's stamp (any frame)
@@ -199,6 +200,7 @@ class TrackerCore:
         self._seen = stamp if self._seen is None else max(self._seen, stamp)
         if not fit:
             self.unfitted += 1
+            self._unfitted.append(stamp)  # its pose is interpolated once the next frame is fitted (_bridge)
             return TrackerOutput()
         if self._raw is not None and 0 < stamp - self._raw[0] < 0.9 / self.config.max_fit_hz:
             self.skipped += 1  # (0.9: a 120 Hz sensor's every other frame is 1 / 60 s after the last, not 0.99 of it)
@@ -271,7 +273,8 @@ class TrackerCore:
             out.note = (f"the sensor sends {self._sent(taken_hz)}, the motion library's poses came at "
                         f"{self.clock.rate_hz:g}: its poses are resampled to {self.clock.rate_hz:g} a second (a "
                         "pose's index is its time for the predictor; docs/keypoints.md)")
-        if self.clock.resampling:
+        if self.clock.resampling:  # poses at the library's clock between the frames taken, unfitted ones or not
+            self._unfitted.clear()
             for t, g in self.clock.poses(self._out, stamp, smooth):
                 out.messages += self._frame(t, g)
         else:
@@ -327,17 +330,25 @@ class TrackerCore:
         self.rate.reset()  # the next frames may come from a sensor restarted at another rate
         self.sensor.reset()
         self._raw = self._out = self._joints = self._frame_no = self._leap = self._jump = None
-        self._rate_said, self.upright.frames = False, 0
+        self._rate_said, self.upright.frames, self._unfitted = False, 0, []
         self.clock.reset()
         return msgs
 
     def _bridge(self, stamp: float, f: np.ndarray, dropped: int | None = None) -> list[Message]:
-        """Frames interpolated between the last smoothed one and this, at the sensor's period, across a gap.
+        """Frames interpolated between the last smoothed one and this, across frames left unfitted or a gap.
 
-        Only while the period is known: three intervals at least, the last three of them within half of it
-        either way (a backlog flushed after a stall, arrival-stamped a few ms apart, is no sensor's period),
-        and never more than ``dropped`` frames where the sensor numbers its frames.
+        Frames left unfitted to catch up (:mod:`.catch_up`): one at each of their stamps. A gap: at the sensor's
+        period, only while it is known (three intervals at least, the last three of them within half of it either
+        way: a backlog flushed after a stall, arrival-stamped a few ms apart, is no sensor's period), and never more
+        than ``dropped`` frames where the sensor numbers its frames.
         """
+        unfitted, self._unfitted = self._unfitted, []
+        if self._out is not None and (between := sorted({t for t in unfitted if self._out[0] < t < stamp})):
+            # frames left unfitted to catch up with a backlog: a pose at each, interpolated, so that the poses keep
+            # the sensor's time (the kept frames alone made a 30 Hz reach's indices run at 23 a second)
+            t0, f0 = self._out
+            self.bridged += len(between)
+            return [m for t in between for m in self._frame(t, f0 + (t - t0) / (stamp - t0) * (f - f0))]
         period = self.rate.period
         if self._out is None or period is None or not self.rate.steady():
             return []

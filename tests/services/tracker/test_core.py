@@ -394,3 +394,23 @@ def test_the_note_names_the_sensors_rate_when_half_its_frames_are_another_person
         out = core.on_frame(i / RATE, NAMES, p if i % 2 == 0 else other)
         notes += [out.note] if out.note else []
     assert len(notes) == 1 and "sends 30 frames a second (15 a second taken: the others refused)" in notes[0], notes
+
+
+def test_frames_left_unfitted_to_catch_up_still_give_poses_at_their_time(reach) -> None:
+    """A 30 Hz reach whose backlog was thinned to every third frame gave a pose per kept frame only: its indices, the
+    predictor's time feature, ran at 23 a second (bridging made up some of them while the period held)."""
+    from shared.protocol import HumanKeypoints
+
+    def poses(thin: int) -> list[HumanPose]:
+        core, out, rest = TrackerCore(), [], set()
+        for i, p in enumerate(MODEL.joint_positions(reach)):
+            msg = HumanKeypoints(stamp=i / RATE, tick=-1, frame=i, frame_id="recorder", names=NAMES, positions=p)
+            out += reach_poses(core.on_keypoints(msg, True, fit=i < 60 or i % thin == 0).messages, rest)
+        return out
+
+    whole, thinned = poses(1), poses(3)
+    rate = (thinned[-1].index - thinned[0].index) / (thinned[-1].stamp - thinned[0].stamp)
+    assert rate == pytest.approx(RATE, rel=0.05) and abs(len(thinned) - len(whole)) <= 3
+    assert [p.index for p in thinned] == list(range(len(thinned)))
+    truth = np.array([np.interp(p.stamp, np.arange(len(reach)) / RATE, reach[:, 0]) for p in thinned])
+    assert np.median(np.abs([p.features[0] for p in thinned] - truth)) < 0.01  # interpolated where the body was
