@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, OccupancyGrid, Plan, ProtocolError, decode
+from shared.runtime import UserError
 
 __all__ = ["Stat", "run_latencies", "format_latencies"]
 
@@ -75,7 +76,9 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
     kp_to_plan: list[float] = []
     current_demo = -1
     streaming = True
+    decoded, refused, relevant = 0, [], set(topics.values())
     for m in sorted(messages, key=lambda m: m.log_time):
+        decoded += m.topic in relevant  # less the refused below
         try:
             if m.topic == topics.get("keypoints"):
                 frame_time[decode(m.data, HumanKeypoints).stamp] = m.log_time
@@ -108,8 +111,12 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
                     occ_to_plan.append((m.log_time - occ_time[key]) / 1e6)
                 if plan.occupancy_index >= 0 and key in pose_frame:
                     kp_to_plan.append((m.log_time - pose_frame[key]) / 1e6)
-        except ProtocolError:
-            continue
+        except ProtocolError as exc:
+            decoded -= 1
+            refused.append(exc)
+    if not decoded and refused and all(e.reason == "version" for e in refused):  # not an empty run: a newer build's
+        raise UserError(f"its {len(refused)} message(s) are of a schema version this build does not read "
+                        f"({refused[0]})")
     period = list(np.diff(np.asarray(plan_times, dtype=np.float64)) / 1e6)
     stats = {"pose_to_occupancy": Stat.of(pose_to_occ), "pose_to_plan": Stat.of(pose_to_plan),
              "occupancy_to_plan": Stat.of(occ_to_plan), "replanning_period": Stat.of(period),
@@ -154,4 +161,7 @@ def log_latencies(path: str | Path, read: list[Any] | None = None) -> dict[str, 
                 topics[key] = ch.topic
     if not {"pose", "occupancy", "plan"} <= set(topics):
         raise ValueError(f"{path}: needs HumanPose, OccupancyGrid and Plan channels, found {sorted(topics)}")
-    return run_latencies(lf.messages, topics)
+    try:
+        return run_latencies(lf.messages, topics)
+    except UserError as exc:  # which log
+        raise UserError(f"{path}: {exc}") from None

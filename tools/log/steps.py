@@ -43,13 +43,16 @@ def decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
     own = {f"foresight.{t.TYPE}": key for key, t in Keys(prefix).data_keys().items()}.get(schema) if prefix else None
     if own in topics:  # the run's own key: a message of the type put on another key under the prefix is not the run's
         topics = {own}
-    out = []
+    out, refused = [], []
     for m in lf.messages:
         if m.topic in topics:
             try:
                 out.append((m.log_time, decode(m.data, cls)))
-            except ProtocolError:
-                continue  # only valid payloads are on these channels; be tolerant anyway
+            except ProtocolError as exc:  # only valid payloads are on these channels; be tolerant anyway
+                refused.append(exc)
+    if not out and refused and all(e.reason == "version" for e in refused):  # not an empty run: another build's log
+        raise UserError(f"{lf.path}: its {len(refused)} {schema.removeprefix('foresight.')} message(s) are of a schema "
+                        f"version this build does not read ({refused[0]})")
     return out
 
 

@@ -46,6 +46,24 @@ def test_latencies_from_log_times():
     assert "pose to occupancy" in format_latencies(stats)
 
 
+def test_a_log_of_a_schema_version_this_build_does_not_read_is_said_so_not_zeros():
+    """A review's `_v` 3 log: `log latency` printed a table of zero counts and exited 0."""
+    import msgpack
+    import pytest
+
+    from shared.runtime import UserError
+
+    def newer(data: bytes) -> bytes:
+        return msgpack.packb({**msgpack.unpackb(data, raw=False), "_v": 3}, use_bin_type=True)
+
+    msgs = [Msg("p", 0, newer(encode(HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=3, index=0,
+                                                 features=np.zeros(12))))), Msg("x", 5, newer(encode(_plan(0))))]
+    with pytest.raises(UserError, match=r"its 2 message\(s\) are of a schema version this build does not read "
+                       r"\(HumanPose\._v: schema version '3', this build speaks 2"):
+        run_latencies(msgs, {"pose": "p", "occupancy": "o", "plan": "x"})
+    assert run_latencies([], {"pose": "p", "occupancy": "o", "plan": "x"})["planning"].count == 0  # empty: zeros
+
+
 def test_empty_series_is_nan():
     s = Stat.of([])
     assert s.count == 0 and np.isnan(s.p50)

@@ -77,3 +77,27 @@ def test_a_plan_put_on_another_key_under_the_prefix_is_logged_but_is_not_the_run
     lf = read_log(path, keep=lambda ch: True)
     assert len(lf.topic_messages("lab/other/thing")) == 1  # nothing logged is lost
     assert len(lf.topic_messages("/viz/plan")) == 1 and sorted(step_views(lf)) == [0]
+
+
+def test_a_log_of_a_schema_version_this_build_does_not_read_is_said_so_not_empty(run_log, tmp_path) -> None:
+    """A review rewrote a demo's MCAP with `_v` 3: `log table` said 'no plans logged', `log render` 'no Plan
+    messages': a newer build's log read as an empty run, nothing naming the version."""
+    import dataclasses
+
+    import msgpack
+    import pytest
+
+    from shared.runtime import UserError
+    from tools.log.steps import decode_all
+
+    lf = read_log(run_log, keep=lambda ch: ch.message_encoding == "msgpack")
+    assert decode_all(lf, "foresight.Plan", Plan)  # as written
+
+    def bump(data: bytes) -> bytes:
+        raw = msgpack.unpackb(data, raw=False)
+        return msgpack.packb({**raw, "_v": 3}, use_bin_type=True)
+
+    newer = dataclasses.replace(lf, messages=[dataclasses.replace(m, data=bump(m.data)) for m in lf.messages])
+    with pytest.raises(UserError, match=r"its 2 Plan message\(s\) are of a schema version this build does not read "
+                       r"\(Plan\._v: schema version '3', this build speaks 2 and reads 1, 2\)"):
+        decode_all(newer, "foresight.Plan", Plan)
