@@ -99,9 +99,9 @@ class ViewService:
                     s.undeclare()
         sent = {t: n for t, n in server.sent.items() if n}
         usage = resource.getrusage(resource.RUSAGE_SELF)
-        log.info("view: stopped; sent %s; CPU %.2f s (user %.2f, system %.2f)",
-                 ", ".join(f"{t} {n}" for t, n in sent.items()) or "nothing", usage.ru_utime + usage.ru_stime,
-                 usage.ru_utime, usage.ru_stime)
+        log.info("view: stopped; sent %s; rejected %s; CPU %.2f s (user %.2f, system %.2f)",
+                 ", ".join(f"{t} {n}" for t, n in sent.items()) or "nothing", self.rejects.summary(),
+                 usage.ru_utime + usage.ru_stime, usage.ru_utime, usage.ru_stime)
         return sent
 
 

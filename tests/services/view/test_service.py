@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 
@@ -12,9 +13,11 @@ from services.view.service import ViewService
 from shared.config import ConfigError
 
 
-def test_the_view_says_which_scene_it_draws_and_stops(zenoh_hub, capsys) -> None:
+def test_the_view_says_which_scene_it_draws_and_stops(zenoh_hub, capsys, caplog) -> None:
     """The wire carries no scene: a view of another scene than the system's drew the cups where they are not,
-    without a word (the demo and compose run pr2_two_cups_side, the view's default is pr2_two_cups)."""
+    without a word (the demo and compose run pr2_two_cups_side, the view's default is pr2_two_cups). Its closing
+    line names what it rejected, as every service's does (a review: the view's alone had no counts)."""
+    caplog.set_level(logging.INFO, logger="foresight.view")
     service = ViewService(ViewConfig(port=0, scene="pr2_two_cups_side"), zenoh_hub())
     stop = threading.Event()
     thread = threading.Thread(target=service.run, args=(stop,), daemon=True)
@@ -31,6 +34,7 @@ def test_the_view_says_which_scene_it_draws_and_stops(zenoh_hub, capsys) -> None
         thread.join(30.0)
     assert not thread.is_alive()
     assert "watch live at ws://127.0.0.1:" in out and "drawing scene pr2_two_cups_side" in out, out
+    assert "view: stopped; sent" in caplog.text and "; rejected none; CPU" in caplog.text, caplog.text
 
 
 @pytest.mark.parametrize(("option", "value", "match"), [
