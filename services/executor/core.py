@@ -131,7 +131,7 @@ class _Freshness:
     occupancy: float | None = None  # time (core clock) of the latest occupancy
     occupancy_of: tuple[int, int] | None = None  # (demo_id, index) of the pose the latest occupancy predicts from
     demo_end: tuple[int, int] | None = None      # (demo_id, last index) of the demonstration that ended
-    lost: int | None = None                      # demo_id of the reach the tracker lost (until a reach starts)
+    lost: int | None = None                      # demo_id of the reach the tracker lost (until a demonstration starts)
 
 
 class ExecutorCore:

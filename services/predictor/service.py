@@ -123,7 +123,7 @@ class PredictorService:
             if msg.event == "start":
                 self._reset(msg.demo_id)
                 log.info("predictor: demo %d start (%s)", msg.demo_id, msg.class_name)
-            elif msg.event == "lost":  # its last grid stands; the executor holds the robot until a reach starts
+            elif msg.event == "lost":  # its last grid stands; the executor holds the robot until a demonstration starts
                 log.info("predictor: demo %d lost by the tracker after %d poses", msg.demo_id, msg.n_samples)
             return []
         assert isinstance(msg, HumanPose)

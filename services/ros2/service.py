@@ -161,7 +161,10 @@ class Ros2Service:
         """
         if self.config.joint_states and self.publishes("joint_states") is None:
             self._put("joint_states", self.mapping.joint_state(state))
-        if self._sim_time is not None:
+        if state.tick < 0:  # a real-time state: no simulated time (a gateway that saw a lock-step run before sent
+            with self._lock:  # the wall clock on /clock)
+                self._sim_time = None
+        elif self._sim_time is not None:
             self._advance_clock(state.stamp)
 
     def on_tick(self, tick: ClockTick) -> None:

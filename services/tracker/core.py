@@ -141,7 +141,7 @@ class TrackerCore:
         accepted: Frames accepted.
         skipped: Frames not fitted: stamped under ``1 / max_fit_hz`` after the last accepted one.
         unfitted: Frames not fitted to catch up with a backlog (``fit`` False).
-        bridged: Poses interpolated across gaps.
+        bridged: Poses interpolated across gaps and at frames left unfitted to catch up.
         demos: The demonstrations made of the smoothed frames (:class:`~services.tracker.demos.Demonstrations`:
             ``reaches``, ``lost``, ``rests``).
         points_left_out: Optional points left out of accepted frames' fits, far off them

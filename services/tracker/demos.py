@@ -70,7 +70,10 @@ class Demonstrations:
         while self._recent and self._recent[0][0] < t - self.rule.pre_s - 1e-9:
             self._recent.popleft()
         event = self.reach.update(body_wrist(self.model.joint_positions(np.asarray(f, dtype=np.float64))), t)
-        msgs = self._at_rest() if self.announce_rest and not self._rest_said and self.reach.settled else []
+        msgs: list[Message] = []
+        if self.announce_rest and not self._rest_said and self.reach.settled:
+            self._rest_said = True  # a reach starting on this very frame is the person seen: no rest of a moving hand
+            msgs = self._at_rest() if event is None and not self.reach.active else []
         if event is not None and event.event == "start":
             self.reaches += 1
             first = [(s, g) for s, g in self._recent if s >= event.stamp - 1e-9 and s > self._ended_at] or [(t, f)]
@@ -99,9 +102,9 @@ class Demonstrations:
 
     def _at_rest(self) -> list[Message]:
         """The person standing still, as a demonstration of its own (class :data:`AT_REST`), started and ended."""
-        self._rest_said = True
         self.rests += 1
         frames = list(self._recent)[-REST_POSES:]
+        self._ended_at = frames[-1][0]  # the next reach's first poses come after these (its stamps never go back)
         return [self._start(frames[0][0], AT_REST), *(self._pose(s, g) for s, g in frames),
                 self._marker(frames[-1][0], "end", AT_REST)]
 

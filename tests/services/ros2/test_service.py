@@ -208,8 +208,8 @@ class _Sent:
         self.sent += 1
 
 
-def _state(t: float) -> RobotState:
-    return RobotState(stamp=t, tick=-1, joint_names=JOINTS, goal=0, reached=False, holding=False, reason="",
+def _state(t: float, tick: int = -1) -> RobotState:
+    return RobotState(stamp=t, tick=tick, joint_names=JOINTS, goal=0, reached=False, holding=False, reason="",
                       q=np.zeros(2), qd=np.zeros(2))
 
 
@@ -226,8 +226,8 @@ def test_a_lock_step_run_publishes_its_simulated_time_on_clock(caplog) -> None:
     assert times() == []
     service.on_tick(ClockTick(stamp=0.0, tick=0, period=0.5))
     for i in range(1, 4):
-        service.on_state(_state(0.02 * i))
-    service.on_state(_state(0.04))  # a state again: the clock never goes back
+        service.on_state(_state(0.02 * i, tick=0))
+    service.on_state(_state(0.04, tick=0))  # a state again: the clock never goes back
     service.on_tick(ClockTick(stamp=0.5, tick=1, period=0.5))
     assert times() == pytest.approx([0.0, 0.02, 0.04, 0.06, 0.5])
     token = endpoint_token(0, "other", 1, 2, "MP", "/", "executor_robot", "/clock", "rosgraph_msgs/msg/Clock",
@@ -239,6 +239,9 @@ def test_a_lock_step_run_publishes_its_simulated_time_on_clock(caplog) -> None:
     service.on_graph(token, alive=False)
     service.on_tick(ClockTick(stamp=0.0, tick=0, period=0.5))  # the next run: its time starts again
     assert times()[-1] == 0.0 and len(times()) == 6
+    service.on_state(_state(1.7e9 + 5))  # a real-time run after it (a review: the wall clock went out on /clock)
+    service.on_state(_state(1.7e9 + 6))
+    assert len(times()) == 6
     off = Ros2Service(Ros2ServiceConfig(clock=False), ZenohConfig())
     off._pubs["clock"] = _Sent()
     off.on_tick(ClockTick(stamp=0.0, tick=0, period=0.5))

@@ -88,6 +88,22 @@ def test_a_reach_ended_at_rest_is_not_followed_by_another_rest(reach) -> None:
     assert core.demos.reaches >= 1 and core.demos.rests == 1
 
 
+def test_a_track_begun_mid_motion_publishes_no_rest_of_a_moving_hand_and_its_stamps_never_go_back(reach) -> None:
+    """A review: a track that began as the hand moved published a 'rest' of the moving hand (15 cm) on the frame its
+    reach started, and the reach's first poses repeated the rest's, stamped before its end (1.0 s, then 0.7 s)."""
+    from services.tracker.reach import body_wrist
+
+    for k in (30, 35, 40, 45):  # the recording's rest is its first 30 frames: these begin as the hand moves
+        msgs = _feed(TrackerCore(), reach[k:])
+        rest = {m.demo_id for m in msgs if isinstance(m, DemoMarker) and m.class_name == AT_REST}
+        wrists = np.array([body_wrist(MODEL.joint_positions(m.features)) for m in msgs
+                           if isinstance(m, HumanPose) and m.demo_id in rest]).reshape(-1, 3)
+        assert not len(wrists) or np.ptp(wrists, axis=0).max() < 0.03, k
+        stamps = [m.stamp for m in msgs if isinstance(m, HumanPose)]
+        assert stamps == sorted(stamps), k
+        assert ("start", 0, LIVE_CLASS) in _markers(msgs) or rest, k
+
+
 def _plan() -> Plan:
     traj = np.linspace(0.0, 0.9, 51)[None, :, None].astype(np.float32)
     return Plan(stamp=0.0, tick=-1, step=0, goal_names=["g"], joint_names=["a"], dt=0.1, chosen=0, planning_ms=1.0,
