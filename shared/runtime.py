@@ -18,6 +18,7 @@ from typing import Any
 from shared.arguments import ArgumentParser
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
 from shared.native_threads import limit_blas_threads
+from shared.signal_relay import interrupt_main_thread, watch_signals
 
 __all__ = ["setup_logging", "fail", "stop_on_signals", "interruptible", "cli_errors", "UserError", "service_main",
            "help_text", "freeze_startup_heap", "watch_parent", "wait_for_stop", "lower_priority", "SHUTDOWN_GRACE_S",
@@ -28,6 +29,8 @@ SHUTDOWN_GRACE_S = 10.0
 SIGNAL_ECHO_S = 0.1
 """A second signal this soon after the first is the same interrupt, delivered twice (coreutils ``timeout`` forwards
 the SIGINT the terminal sent the whole process group), not a second one: :func:`stop_on_signals` ignores it."""
+RELAY_AFTER_S = 0.05
+"""How long :func:`interruptible` lets the main thread run its handler itself before passing the signal on to it."""
 FORCED_EXIT = 3
 """Exit status of a process that did not stop within :data:`SHUTDOWN_GRACE_S` (or got a second signal)."""
 OWN_LOGGERS = ("foresight", "shared", "services", "tools")
@@ -100,23 +103,43 @@ def interruptible(stop: threading.Event) -> Iterator[None]:
 
     For work that checks no stop event and leaves nothing to close or finalise when cut short (training a
     prediction model, written whole or not at all, before any service has started): Ctrl-C then takes effect
-    at once, not after a minute of training. Outside the main thread it changes nothing.
+    at once, not after a minute of training. A signal the kernel handed to another thread is passed on to the
+    main thread (:mod:`shared.signal_relay`): it would otherwise wait for the main thread's sleep to end. Outside
+    the main thread it changes nothing.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    handled = threading.Event()
+    lock = threading.Lock()
+    open_ = [True]
 
     def handler(signum: int, frame: object) -> None:
         stop.set()
-        raise KeyboardInterrupt
+        if not handled.is_set():  # once: a relayed copy of the same signal must not interrupt the clean-up
+            handled.set()
+            raise KeyboardInterrupt
+
+    def arrived(signum: int) -> None:  # the relay thread
+        stop.set()
+        if handled.wait(RELAY_AFTER_S):
+            return  # the main thread got it, or was running bytecode and ran its handler
+        with lock:
+            if open_[0] and not handled.is_set():
+                interrupt_main_thread(signum)
 
     for s in old:
         signal.signal(s, handler)
     _unblock(old)
+    unwatch = watch_signals(arrived)
     try:
         yield
     finally:
+        with lock:  # no relayed signal reaches the handlers restored below
+            open_[0] = False
+        if unwatch is not None:
+            unwatch()
         for s, h in old.items():
             signal.signal(s, h)
 
@@ -134,7 +157,9 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
     finished by then (the executor's MCAP, closed before its session) is kept. The first signal is the first
     one received, whether or not ``stop`` was already set (by ``--stop-with``, a parent gone, the service itself):
     a process that is stopping on its own still gets its grace. ``prog`` names the process in those lines
-    (default: the script's name).
+    (default: the script's name). All of this happens in the signal relay's thread (:mod:`shared.signal_relay`),
+    not in the handler: the main thread may be the one stuck, and the kernel may give the signal to any thread.
+    Where there is no relay (another owner of the wakeup descriptor), the handler acts, when it gets to run.
     """
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
@@ -143,6 +168,7 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
     grace = SHUTDOWN_GRACE_S if grace_s is None else grace_s
 
     first_at: list[float] = []
+    lock = threading.Lock()
 
     def force(why: str, stacks: bool = True) -> None:
         if not restored.is_set():
@@ -152,22 +178,31 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
         if not restored.wait(grace):
             force(f"did not stop within {grace:g} s of {signame}")
 
-    def handler(signum: int, frame: object) -> None:
+    def on_signal(signum: int) -> None:  # in the relay thread (or in the handler where there is none)
         name = signal.Signals(signum).name
-        if first_at:
-            if time.monotonic() - first_at[0] < SIGNAL_ECHO_S:
-                return  # the first interrupt, delivered again
-            force(f"second {name} while stopping", stacks=False)
-        first_at.append(time.monotonic())
+        with lock:
+            if first_at:
+                if time.monotonic() - first_at[0] < SIGNAL_ECHO_S:
+                    return  # the first interrupt, delivered again
+                force(f"second {name} while stopping", stacks=False)
+            first_at.append(time.monotonic())
         stop.set()
         threading.Thread(target=watchdog, args=(name,), name="shutdown-watchdog", daemon=True).start()
 
+    def handler(signum: int, frame: object) -> None:
+        if unwatch is None:  # no relay: the main thread acts, when it next runs bytecode
+            on_signal(signum)
+
+    unwatch: Callable[[], None] | None = None
     for s in old:
         signal.signal(s, handler)
-    _unblock(old)
+    _unblock(old)  # before the relay thread starts: it inherits the mask
+    unwatch = watch_signals(on_signal)
 
     def restore() -> None:
         restored.set()
+        if unwatch is not None:
+            unwatch()
         for s, h in old.items():
             signal.signal(s, h)
 
@@ -184,7 +219,8 @@ def wait_for_stop(stop: threading.Event, poll_s: float = STOP_POLL_S) -> None:
     Python runs a handler in the main thread, between bytecodes. ``stop.wait()`` without a timeout is one long
     lock wait: a signal that lands after the wait has checked the flag and before it sleeps, or one the kernel
     hands to another thread (a native library's), only marks the handler as pending, and the handler (which
-    sets ``stop``) would run when the wait ends, that is never. Waking every ``poll_s`` bounds that to ``poll_s``.
+    sets ``stop``) would run when the wait ends, that is never. Waking every ``poll_s`` bounds that to ``poll_s``
+    where :func:`stop_on_signals` has no relay thread to set ``stop`` at once (:mod:`shared.signal_relay`).
     """
     while not stop.wait(poll_s):
         pass

@@ -173,6 +173,54 @@ def test_a_signal_while_the_service_is_built_ends_it_at_once_with_status_0(sig, 
     assert "served" not in end.stdout
 
 
+SIGNAL_ANOTHER_THREAD = """
+import signal, threading, time
+
+def signal_another_thread(sig, after_s=0.5):
+    # a thread that takes sig itself once the main thread is asleep: the kernel's choice, made every time
+    threading.Thread(target=lambda: (time.sleep(after_s), signal.pthread_kill(threading.get_ident(), sig)),
+                     daemon=True).start()
+"""
+
+
+def _build(body: str) -> str:
+    """:data:`BUILDING` with the grace at 1 s, ``signal_another_thread`` defined, and ``body`` as ``make``'s."""
+    head, tail = BUILDING.split("def make(cfg, zcfg, stop):\n")
+    tail = tail[tail.index("\nsys.exit"):]
+    return (head.replace("from shared.runtime import service_main",
+                         "from shared import runtime\nruntime.SHUTDOWN_GRACE_S = 1.0\n"
+                         "from shared.runtime import service_main")
+            + SIGNAL_ANOTHER_THREAD + "def make(cfg, zcfg, stop):\n" + body + tail)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_another_thread_received_while_the_service_is_built_ends_it_at_once(sig, signalled) -> None:
+    """The kernel hands a process's signal to any of its threads: when it chose another (OpenBLAS's) while the main
+    thread slept in the build, the handler waited for the sleep to end. A CI run: Ctrl-C at start-up did not end
+    the service in 30 s (the test above, which signals the process, not one of its threads)."""
+    code = _build(f"    signal_another_thread({int(sig)})\n"
+                  '    print("building", flush=True)\n'
+                  "    time.sleep(600)\n"
+                  '    return lambda: print("served", flush=True)\n')
+    end = signalled(["-c", code], [], ready="building", timeout=30)
+    assert end.returncode == 0, end.stderr[-2000:]
+    assert "foresight planner: stopped while starting" in end.stderr
+    assert "Traceback" not in end.stderr and "served" not in end.stdout
+
+
+def test_a_service_stuck_in_a_call_exits_after_the_grace_when_another_thread_got_the_signal(signalled) -> None:
+    """The shutdown watchdog was started by the handler, in the main thread: with the signal on another thread
+    and the main thread stuck in a call, it never started, and the service hung until killed."""
+    code = _build("    def run():\n"
+                  "        signal_another_thread(signal.SIGTERM)\n"
+                  '        print("serving", flush=True)\n'
+                  "        time.sleep(600)  # a call that does not look at the stop event\n"
+                  "    return run\n")
+    end = signalled(["-c", code], [], ready="serving", timeout=30)
+    assert end.returncode == 3, end.stderr[-2000:]
+    assert "foresight planner: did not stop within 1 s of SIGTERM" in end.stderr, end.stderr[-2000:]
+
+
 def test_debug_is_foresights_own_and_other_libraries_stay_at_info() -> None:
     """`--log-level DEBUG` set the root logger: 292 of a demo's 294 DEBUG lines were matplotlib's font search, and a
     planner's per-plan lines came with filelock's every lock."""
@@ -213,8 +261,10 @@ print("stopped", flush=True)
 """
 
 
-def test_a_signal_another_thread_received_still_ends_the_wait_for_stop(signalled) -> None:
+@pytest.mark.parametrize("wait", ["wait_for_stop", "plain"])
+def test_a_signal_another_thread_received_still_ends_the_wait_for_stop(wait, signalled) -> None:
     """The handler of a signal delivered to another thread (or just before the wait's syscall) runs only when the
-    main thread next runs bytecode: a plain ``stop.wait()`` never does, :func:`wait_for_stop` within its poll."""
-    end = signalled(["-c", WAITING, "wait_for_stop"], [(signal.SIGTERM, 0.0)], timeout=20)
+    main thread next runs bytecode: a plain ``stop.wait()`` never ended, :func:`wait_for_stop` within its poll.
+    Now the relay (:mod:`shared.signal_relay`) sets ``stop`` from a thread of its own: both end at once."""
+    end = signalled(["-c", WAITING, wait], [(signal.SIGTERM, 0.0)], timeout=20)
     assert (end.returncode, end.stdout.strip()) == (0, "stopped"), end.stderr

@@ -1,0 +1,120 @@
+"""SIGINT and SIGTERM seen at once, whichever thread the kernel delivered them to.
+
+The kernel hands a signal sent to a process (Ctrl-C, ``kill``, ``docker compose down``) to any one of its threads
+that does not block it, not always the main thread. Python runs a signal's handler only in the main thread,
+between bytecodes. So when the signal landed on another thread (OpenBLAS's, a Zenoh runtime's, torch's) while
+the main thread slept or waited in a native call (the planner compiling its kernels), the handler ran when that
+call ended: a build that checked no stop event ran on, and a stuck call was never cut short by the shutdown
+watchdog, which the handler starts. A CI run saw it: a service signalled while it was built did not end in 30 s.
+
+Python's own C-level handler runs in whichever thread got the signal, and writes the signal's number to the
+wakeup file descriptor (:func:`signal.set_wakeup_fd`). :func:`watch_signals` points that descriptor at a socket
+read by a thread of its own, which calls back as soon as the signal arrives. The callbacks form a stack, like
+the handlers they stand beside: only the innermost (the last one registered and not yet removed) is called.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import socket
+import threading
+from collections.abc import Callable
+
+__all__ = ["WATCHED", "watch_signals", "interrupt_main_thread"]
+
+WATCHED = (signal.SIGINT, signal.SIGTERM)
+"""The signals relayed (those a person or a process manager stops a Foresight process with)."""
+
+log = logging.getLogger("foresight.signals")
+
+
+class _Relay:
+    """The process's wakeup socket and the thread reading it (one per process: the wakeup descriptor is one)."""
+
+    def __init__(self) -> None:
+        self.pid = os.getpid()
+        self._read, self._write = socket.socketpair()
+        self._write.setblocking(False)  # the C handler must never block; a full buffer drops the byte
+        self._stack: list[Callable[[int], None]] = []
+        self._lock = threading.Lock()
+        threading.Thread(target=self._serve, name="signal-relay", daemon=True).start()
+
+    def claim(self) -> bool:
+        """Point the wakeup descriptor at this relay; False (and left as it was) when another owner has it."""
+        old = signal.set_wakeup_fd(self._write.fileno(), warn_on_full_buffer=False)
+        if old not in (-1, self._write.fileno()):  # an event loop's: not ours to take
+            signal.set_wakeup_fd(old)
+            return False
+        return True
+
+    def push(self, callback: Callable[[int], None]) -> Callable[[], None]:
+        with self._lock:
+            self._stack.append(callback)
+
+        def remove() -> None:
+            with self._lock:
+                if callback in self._stack:
+                    self._stack.remove(callback)
+        return remove
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                data = self._read.recv(256)
+            except OSError:  # pragma: no cover - the socket is never closed while the process lives
+                return
+            for signum in data:
+                if signum not in WATCHED:
+                    continue
+                with self._lock:
+                    callback = self._stack[-1] if self._stack else None
+                if callback is None:
+                    continue
+                try:
+                    callback(signum)
+                except Exception:  # a bug in a callback must not end the relay for every later signal
+                    log.exception("handling %s", signal.Signals(signum).name)
+
+
+_relay: _Relay | None = None
+_relay_lock = threading.Lock()
+
+
+def watch_signals(callback: Callable[[int], None]) -> Callable[[], None] | None:
+    """Call ``callback(signum)`` in a relay thread as soon as the process gets SIGINT or SIGTERM, in any thread.
+
+    Call it from the main thread, with a Python handler installed for both signals (without one, the C handler
+    neither runs nor writes the wakeup byte). The handler still runs in the main thread when it can: the caller
+    decides which of the two acts (:func:`shared.runtime.stop_on_signals` acts in the relay only).
+
+    Args:
+        callback: Called with the signal's number, in the relay thread, for each signal received while it is the
+            innermost callback. It must be quick (the next signal waits for it) and thread-safe.
+
+    Returns:
+        A function removing ``callback``, or None where signals cannot be relayed (not the main thread, or the
+        wakeup descriptor belongs to something else, such as an asyncio loop): the caller then acts in its
+        handler, as before.
+    """
+    global _relay
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    with _relay_lock:
+        if _relay is None or _relay.pid != os.getpid():  # a forked child has the socket but not the thread
+            _relay = _Relay()
+        if not _relay.claim():
+            return None
+        return _relay.push(callback)
+
+
+def interrupt_main_thread(signum: int) -> None:
+    """Deliver ``signum`` to the main thread itself, cutting short a sleep or a wait there (EINTR).
+
+    Its handler then runs at once, in the main thread. A native call that retries on EINTR is not cut short: its
+    handler runs when the call returns.
+    """
+    main = threading.main_thread().ident
+    if main is not None:
+        signal.pthread_kill(main, signum)
