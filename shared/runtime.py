@@ -18,7 +18,7 @@ from typing import Any
 from shared.arguments import ArgumentParser
 from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
 from shared.native_threads import limit_blas_threads
-from shared.signal_relay import interrupt_main_thread, watch_signals
+from shared.signal_relay import interrupt_main_thread, relaying, watch_signals
 
 __all__ = ["setup_logging", "fail", "stop_on_signals", "interruptible", "cli_errors", "UserError", "service_main",
            "help_text", "freeze_startup_heap", "watch_parent", "wait_for_stop", "lower_priority", "SHUTDOWN_GRACE_S",
@@ -114,6 +114,7 @@ def interruptible(stop: threading.Event) -> Iterator[None]:
     handled = threading.Event()
     lock = threading.Lock()
     open_ = [True]
+    relayed: list[int] = []
 
     def handler(signum: int, frame: object) -> None:
         stop.set()
@@ -126,7 +127,8 @@ def interruptible(stop: threading.Event) -> Iterator[None]:
         if handled.wait(RELAY_AFTER_S):
             return  # the main thread got it, or was running bytecode and ran its handler
         with lock:
-            if open_[0] and not handled.is_set():
+            if open_[0] and not handled.is_set() and not relayed:
+                relayed.append(signum)  # once: a native call that retries on EINTR would get one every 50 ms
                 interrupt_main_thread(signum)
 
     for s in old:
@@ -159,7 +161,8 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
     a process that is stopping on its own still gets its grace. ``prog`` names the process in those lines
     (default: the script's name). All of this happens in the signal relay's thread (:mod:`shared.signal_relay`),
     not in the handler: the main thread may be the one stuck, and the kernel may give the signal to any thread.
-    Where there is no relay (another owner of the wakeup descriptor), the handler acts, when it gets to run.
+    Where there is no relay (another owner of the wakeup descriptor, now or since; a forked child), the handler
+    acts, when it gets to run.
     """
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
@@ -190,13 +193,13 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
         threading.Thread(target=watchdog, args=(name,), name="shutdown-watchdog", daemon=True).start()
 
     def handler(signum: int, frame: object) -> None:
-        if unwatch is None:  # no relay: the main thread acts, when it next runs bytecode
+        if unwatch is None or not relaying():  # no relay (or none any more): the main thread acts, when it can
             on_signal(signum)
 
     unwatch: Callable[[], None] | None = None
     for s in old:
         signal.signal(s, handler)
-    _unblock(old)  # before the relay thread starts: it inherits the mask
+    _unblock(old)  # before the relay thread starts (the first call in a process): it inherits the mask
     unwatch = watch_signals(on_signal)
 
     def restore() -> None:

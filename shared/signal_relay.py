@@ -20,24 +20,31 @@ import os
 import signal
 import socket
 import threading
+import time
 from collections.abc import Callable
 
-__all__ = ["WATCHED", "watch_signals", "interrupt_main_thread"]
+__all__ = ["WATCHED", "watch_signals", "relaying", "interrupt_main_thread"]
 
 WATCHED = (signal.SIGINT, signal.SIGTERM)
 """The signals relayed (those a person or a process manager stops a Foresight process with)."""
+ECHO_S = 1.0
+"""How long the wakeup byte of a signal :func:`interrupt_main_thread` sent is waited for, to be dropped."""
 
 log = logging.getLogger("foresight.signals")
 
 
 class _Relay:
-    """The process's wakeup socket and the thread reading it (one per process: the wakeup descriptor is one)."""
+    """The process's wakeup socket and the thread reading it.
+
+    One per process: the wakeup descriptor is one. A forked child forgets its parent's and makes its own.
+    """
 
     def __init__(self) -> None:
         self.pid = os.getpid()
         self._read, self._write = socket.socketpair()
         self._write.setblocking(False)  # the C handler must never block; a full buffer drops the byte
         self._stack: list[Callable[[int], None]] = []
+        self._echoes: list[tuple[int, float]] = []  # (signum, until): a copy sent to the main thread, not a signal
         self._lock = threading.Lock()
         threading.Thread(target=self._serve, name="signal-relay", daemon=True).start()
 
@@ -48,6 +55,19 @@ class _Relay:
             signal.set_wakeup_fd(old)
             return False
         return True
+
+    def owns(self) -> bool:
+        """Whether the wakeup descriptor is still this relay's (main thread only; an asyncio loop may have taken it)."""
+        fd = self._write.fileno()
+        old = signal.set_wakeup_fd(fd, warn_on_full_buffer=False)
+        if old != fd:
+            signal.set_wakeup_fd(old)
+        return old == fd
+
+    def expect_echo(self, signum: int) -> None:
+        """The next wakeup byte of ``signum`` within :data:`ECHO_S` is a copy sent on: not dispatched."""
+        with self._lock:
+            self._echoes.append((signum, time.monotonic() + ECHO_S))
 
     def push(self, callback: Callable[[int], None]) -> Callable[[], None]:
         with self._lock:
@@ -69,7 +89,12 @@ class _Relay:
                 if signum not in WATCHED:
                     continue
                 with self._lock:
-                    callback = self._stack[-1] if self._stack else None
+                    now = time.monotonic()
+                    self._echoes = [e for e in self._echoes if e[1] > now]
+                    echo = next((e for e in self._echoes if e[0] == signum), None)
+                    if echo is not None:  # the copy interrupt_main_thread sent: that signal was dispatched already
+                        self._echoes.remove(echo)
+                    callback = self._stack[-1] if self._stack and echo is None else None
                 if callback is None:
                     continue
                 try:
@@ -80,6 +105,20 @@ class _Relay:
 
 _relay: _Relay | None = None
 _relay_lock = threading.Lock()
+
+
+def _forget_in_child() -> None:
+    """A forked child: the parent's relay thread is not in it, and the descriptor's socket is the parent's."""
+    global _relay
+    if _relay is not None:
+        _relay = None
+        try:
+            signal.set_wakeup_fd(-1)  # else the child's signals woke the parent's relay, and stopped the parent
+        except ValueError:  # pragma: no cover - forked from a thread other than the main one
+            pass
+
+
+os.register_at_fork(after_in_child=_forget_in_child)
 
 
 def watch_signals(callback: Callable[[int], None]) -> Callable[[], None] | None:
@@ -96,25 +135,37 @@ def watch_signals(callback: Callable[[int], None]) -> Callable[[], None] | None:
     Returns:
         A function removing ``callback``, or None where signals cannot be relayed (not the main thread, or the
         wakeup descriptor belongs to something else, such as an asyncio loop): the caller then acts in its
-        handler, as before.
+        handler, as before. The handler should also act when :func:`relaying` turns False (the descriptor taken
+        since, a forked child).
     """
     global _relay
     if threading.current_thread() is not threading.main_thread():
         return None
     with _relay_lock:
-        if _relay is None or _relay.pid != os.getpid():  # a forked child has the socket but not the thread
+        if _relay is None:
             _relay = _Relay()
         if not _relay.claim():
             return None
         return _relay.push(callback)
 
 
+def relaying() -> bool:
+    """Whether this process's signals reach the relay: its descriptor not taken since (call from the main thread)."""
+    relay = _relay
+    return relay is not None and relay.pid == os.getpid() and relay.owns()
+
+
 def interrupt_main_thread(signum: int) -> None:
     """Deliver ``signum`` to the main thread itself, cutting short a sleep or a wait there (EINTR).
 
     Its handler then runs at once, in the main thread. A native call that retries on EINTR is not cut short: its
-    handler runs when the call returns.
+    handler runs when the call returns. The copy's own wakeup byte is not dispatched again (an outer callback, once
+    the inner one is removed, took it for a new signal).
     """
     main = threading.main_thread().ident
-    if main is not None:
-        signal.pthread_kill(main, signum)
+    relay = _relay
+    if main is None:
+        return
+    if relay is not None:
+        relay.expect_echo(signum)
+    signal.pthread_kill(main, signum)

@@ -72,3 +72,45 @@ def test_outside_the_main_thread_nothing_is_relayed() -> None:
     thread.start()
     thread.join(timeout=10)
     assert got == [None]
+
+
+FORKED = """
+import os, signal, threading, time
+from shared import runtime
+
+stop = threading.Event()
+runtime.stop_on_signals(stop, grace_s=30.0, prog="parent")
+pid = os.fork()
+if pid == 0:
+    os._exit(7 if stop.wait(5.0) else 8)  # the child's own stop, set by its own handler
+time.sleep(1.0)
+os.kill(pid, signal.SIGTERM)
+_, status = os.waitpid(pid, 0)
+print(os.waitstatus_to_exitcode(status), stop.is_set())
+"""
+
+
+def test_a_forked_child_obeys_its_own_signals_and_leaves_the_parent_alone() -> None:
+    """A review: the child inherited the descriptor (the parent's socket) and a handler that left the acting to the
+    relay; its SIGTERM set the parent's stop (the parent then exited 3 after its grace) and not its own."""
+    assert _run(FORKED) == ["7 False"]
+
+
+TAKEN = """
+import asyncio, os, signal, threading
+from shared import runtime
+
+stop = threading.Event()
+runtime.stop_on_signals(stop, grace_s=30.0, prog="taken")
+loop = asyncio.new_event_loop()  # takes the wakeup descriptor for its own handler, and gives it back as -1
+loop.add_signal_handler(signal.SIGUSR1, lambda: None)
+loop.remove_signal_handler(signal.SIGUSR1)
+loop.close()
+os.kill(os.getpid(), signal.SIGTERM)
+print(stop.wait(5.0))
+"""
+
+
+def test_a_descriptor_taken_after_the_relay_claimed_it_leaves_the_acting_to_the_handler() -> None:
+    """A review: an asyncio loop that took the descriptor (and reset it) left SIGTERM with no one to act on it."""
+    assert _run(TAKEN) == ["True"]
