@@ -83,7 +83,8 @@ def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_
         "simrobot": [*scene, "--sim-time" if lockstep else "--no-sim-time"],
         "view": ["--port", str(cfg.live or DEFAULT_PORT), *scene],
         "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
-                     *(["--wait-for", "tracker,predictor,planner"] if cfg.human == "keypoints" else []),
+                     *(["--wait-for", "tracker,predictor,planner", "--recorded-sources", "replayer,tracker"]
+                       if cfg.human == "keypoints" else []),  # its tracker plays a file: the file's end is no fault
                      *([] if cfg.robot == "sim" else ["--robot", "ros2"]),
                      *(["--finish-path"] if lockstep and cfg.finish else []),
                      *(["--live-port", str(cfg.live)] if cfg.live else []),

@@ -11,7 +11,7 @@ from services.ros2.wire import ROS_NAME, topic_problem
 from shared.config import LOG_LEVELS, ConfigError, opt
 from shared.config_names import check_services
 from shared.devices import check_device
-from shared.protocol import SERVICES
+from shared.protocol import HUMAN_SOURCES, SERVICES
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.scene import SCENE_HELP
 
@@ -53,9 +53,14 @@ class ExecutorConfig:
     require_occupancy: bool = opt(True, help="also hold when the occupancy prediction is missing or stale")
     hold_without: list[str] = opt(default_factory=lambda: ["predictor", "planner", "replayer", "tracker"],
                                   help="hold while one of these services, once seen, is gone (its liveliness "
-                                  "token lost: stopped or killed), before its inputs are stale; the human's source "
-                                  "(replayer, tracker) only when it goes in the middle of a demonstration or reach; "
+                                  "token lost: stopped or killed), before its inputs are stale; a human's source of "
+                                  "recorded_sources only when it goes in the middle of a demonstration or reach; "
                                   "empty = never")
+    recorded_sources: list[str] = opt(default_factory=lambda: ["replayer"],
+                                      help="the human's sources that play a recording: one that goes after a "
+                                      "demonstration's end ended its stream (the person stands as last seen); the "
+                                      "others (a live tracker) going means nobody watches the person, and holds the "
+                                      "robot (foresight demo --human keypoints adds its tracker, which plays a file)")
     goal_tolerance: float = opt(0.02, help="goal reached when every joint is within this of the goal (rad or m)")
     velocity_scale: float = opt(1.0, help="fraction of the robot's joint velocity limits the simulation may use")
     stop_on_goal: bool = opt(False, help="end the run at the end of the step in which the goal is reached")
@@ -116,6 +121,7 @@ class ExecutorConfig:
             raise ConfigError(f"executor.path_weights: must be finite and > 0, got {self.path_weights}")
         for name in ("wait_for", "hold_without"):
             check_services(getattr(self, name), f"executor.{name}", [s for s in SERVICES if s != "executor"])
+        check_services(self.recorded_sources, "executor.recorded_sources", list(HUMAN_SOURCES))
         if self.robot == "ros2" or self.ros2_domain_id != UNREADABLE_DOMAIN:  # the shell's ROS_DOMAIN_ID: if used
             check_domain_id(self.ros2_domain_id, "executor.ros2_domain_id", "--ros2-domain-id")
         check_robot_names(self.ros2_controller, self.ros2_joint_states, "executor.ros2_")

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shared.lockstep import FIRST_PLAN
-from shared.protocol import HUMAN_SOURCES, Plan, RobotState
+from shared.protocol import Plan, RobotState
 
 from .config import ExecutorConfig, ExecutorError
 from .reference import Reference
@@ -131,7 +131,7 @@ class _Freshness:
     occupancy: float | None = None  # time (core clock) of the latest occupancy
     occupancy_of: tuple[int, int] | None = None  # (demo_id, index) of the pose the latest occupancy predicts from
     demo_end: tuple[int, int] | None = None      # (demo_id, last index) of the demonstration that ended
-    lost: int | None = None                      # demo_id of the reach the tracker lost (until a demonstration starts)
+    lost: int | None = None  # demo_id of the demonstration the tracker lost the person in or after (until one starts)
 
 
 class ExecutorCore:
@@ -217,10 +217,10 @@ class ExecutorCore:
 
         After the end of the observed demonstration the human stands still: the prediction made from its
         last pose (index ``n_samples - 1``) stays valid and its age no longer holds the robot, once that
-        prediction has arrived (:attr:`human_ended`). A start requires fresh predictions again. A reach the
-        tracker lost mid-way (the person out of view, another body) leaves the person's whereabouts unknown: with
-        ``require_occupancy`` the robot holds until a demonstration starts again, a reach or the tracker's person
-        seen at rest (an end marker had let it go on as if the person stood still where the tracker last saw them).
+        prediction has arrived (:attr:`human_ended`). A start requires fresh predictions again. A demonstration the
+        tracker lost, mid-reach or after its end (the person out of view, another body, moved away from where it
+        showed them), leaves the person's whereabouts unknown: with ``require_occupancy`` the robot holds until a
+        demonstration starts again, a reach or the tracker's person seen at rest.
         """
         self.fresh.demo_end = (int(demo_id), int(n_samples) - 1) if event == "end" else None
         if event == "lost":
@@ -251,16 +251,18 @@ class ExecutorCore:
     def note_peer(self, service: str, alive: bool) -> None:
         """Record that ``service``'s liveliness token appeared (``alive``) or was lost.
 
-        While a service of ``hold_without`` is gone the robot holds, whatever the age of its last output.
-        The human's source (the replayer or the tracker: ``shared.protocol.HUMAN_SOURCES``) counts as gone only when it
-        goes in the middle of a demonstration: after its end marker the human stands still and its stream may end.
+        While a service of ``hold_without`` is gone the robot holds, whatever the age of its last output. A human's
+        source that plays a recording (``recorded_sources``: the replayer) counts as gone only when it goes in the
+        middle of a demonstration: after its end marker the human stands still and its stream may end. A live one
+        (the tracker) going at any time means nobody watches the person: before, a tracker killed after a reach's
+        end let the robot go on around that reach's last prediction for good.
         """
         if alive:
             self.seen = self.seen | {service}
         if service not in self.config.hold_without:
             return
-        if service in HUMAN_SOURCES and not alive and self.fresh.demo_end is not None:
-            return  # the human's stream ended (its end marker came first): the human stands still, no fault
+        if service in self.config.recorded_sources and not alive and self.fresh.demo_end is not None:
+            return  # the recording's stream ended (its end marker came first): the human stands still, no fault
         self.gone = self.gone - {service} if alive else self.gone | {service}
 
     # ------------------------------------------------------------------------------------------
@@ -279,8 +281,8 @@ class ExecutorCore:
         if age > limit + 1e-9:
             return f"plan is {age:.2f} s old (limit {limit:.2f} s)"
         if self.config.require_occupancy and self.fresh.lost is not None:
-            return (f"the person was lost mid-reach (reach {self.fresh.lost}: out of the sensor's view, or another "
-                    "body): holding until the person is seen again (at rest or reaching)")
+            return (f"the tracker lost the person (demonstration {self.fresh.lost}: out of the sensor's view, another "
+                    "body, or moved away): holding until the person is seen again (at rest or reaching)")
         if self.config.require_occupancy and not (self.human_ended and self.fresh.occupancy is not None):
             if self.fresh.occupancy is None:  # a live tracker publishes poses once the person is seen
                 return "no occupancy prediction received yet" + (

@@ -1,18 +1,17 @@
 """What the executor does when a service of the run appears or disappears (its liveliness token).
 
 Real time: the core notes it (``ExecutorCore.note_peer``: the robot holds while a service of ``hold_without`` is
-gone) and a change is logged; the human's source ending its stream after its end marker is no fault. Lock-step: the
-clock protocol decides, and a liveliness event's timing must not change a lock-step run, so nothing is acted on;
-but a service gone mid-run is said, with what follows (each tick waits ``lockstep_timeout_s`` for it): before, a
-compose run whose planner was killed went quiet for 30 s a tick and ended as if nothing had happened.
+gone) and a change is logged; a recording's source (``recorded_sources``) ending its stream after its end marker is
+no fault, a live tracker going is. Lock-step: the clock protocol decides, and a liveliness event's timing must not
+change a lock-step run, so nothing is acted on; but a service gone mid-run is said, with what follows (each tick
+waits ``lockstep_timeout_s`` for it): before, a compose run whose planner was killed went quiet for 30 s a tick and
+ended as if nothing had happened.
 """
 
 from __future__ import annotations
 
 import logging
 from typing import Any
-
-from shared.protocol import HUMAN_SOURCES
 
 from .config import ExecutorConfig
 
@@ -46,10 +45,10 @@ class PeerWatch:
                 self._say_lockstep(service, alive)
             return
         was_gone = service in core.gone
-        core.note_peer(service, alive)  # the human's source ending its stream after its end marker is no fault
+        core.note_peer(service, alive)  # a recording ending its stream after its end marker is no fault
         if (service in core.gone) != was_gone:
             log.warning("executor: %s %s", service, "is back" if alive else "is gone: holding the robot")
-        elif service in HUMAN_SOURCES and service in self.config.hold_without and not alive:
+        elif service in self.config.recorded_sources and service in self.config.hold_without and not alive:
             log.info("executor: %s ended its stream after the demonstration's end: the robot goes on", service)
 
     def _say_lockstep(self, service: str, alive: bool) -> None:

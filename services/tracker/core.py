@@ -96,6 +96,10 @@ class TrackerConfig:
                               "reach), publish the person at rest as a short demonstration (class 'rest'): the "
                               "robot moves around its prediction instead of waiting for the first reach")
     max_reach_s: float = opt(10.0, help="a reach ends after this long in any case (s)")
+    moved_m: float = opt(0.10, help="after a demonstration's end, the person has moved away (its prediction no longer "
+                         "says where they are: 'lost', the robot holds until they are seen again) once their pelvis "
+                         "or a shoulder is this far from every place the demonstration showed it in (m; as far as a "
+                         "hand leaves its rest to start a reach)")
     pose_rate_hz: float = opt(LIBRARY_RATE_HZ, help="the motion library's pose rate: a sensor more than 10 % off it "
                               "has its poses resampled to it (a pose's index is its time for the predictor)")
     max_fit_hz: float = opt(2 * LIBRARY_RATE_HZ, help="fit at most this many frames a second: a frame stamped sooner "
@@ -105,7 +109,7 @@ class TrackerConfig:
     def validate(self) -> None:
         """Check ranges; raises ConfigError naming the option."""
         for name in ("max_residual_m", "max_speed_mps", "max_gap_s", "min_cutoff_hz", "start_m",
-                     "end_m", "end_s", "rest_s", "max_reach_s", "pose_rate_hz", "max_fit_hz"):
+                     "end_m", "end_s", "rest_s", "max_reach_s", "moved_m", "pose_rate_hz", "max_fit_hz"):
             v = getattr(self, name)
             if not (v > 0 and math.isfinite(v)):
                 raise ConfigError(f"tracker.{name}: must be a finite number > 0, got {v}")
@@ -155,7 +159,7 @@ class TrackerCore:
         self.layout = load_layout(self.config.layout)
         self.fit = KeypointFit(model=self.model)
         self.filter = OneEuroFilter(self.config.min_cutoff_hz, self.config.beta)
-        self.demos = Demonstrations(self.config.rule, self.model, self.config.announce_rest)
+        self.demos = Demonstrations(self.config.rule, self.model, self.config.announce_rest, self.config.moved_m)
         self.refused = dict.fromkeys(REASONS, 0)
         self.accepted = self.skipped = self.unfitted = self.bridged = self.points_left_out = 0
         self.upright = Upright()                                 # whether this track's keypoints have z up
@@ -287,9 +291,13 @@ class TrackerCore:
         """Whether a frame was accepted since the start or the last loss (the core keeps a past to continue)."""
         return self._raw is not None
 
-    def finish(self) -> TrackerOutput:
-        """The frames have stopped for good (the tracker is stopping): end the reach under way, forget the past."""
-        return TrackerOutput(self._lost(self._raw[0]) if self._raw is not None else [])
+    def finish(self, recording_ended: bool = False) -> TrackerOutput:
+        """The frames have stopped (the sensor quiet, the tracker stopping): the person is lost, the past forgotten.
+
+        ``recording_ended``: the end of a recording played, where only a reach under way is lost (the person stands
+        as last seen, as at a replayer's end).
+        """
+        return TrackerOutput(self._lost(self._raw[0], recording_ended) if self._raw is not None else [])
 
     # -- internals ---------------------------------------------------------------------------------
 
@@ -320,12 +328,13 @@ class TrackerCore:
         self.refused[reason] += 1
         return TrackerOutput(refused=f"{reason}: {why}")
 
-    def _lost(self, last: float) -> list[Message]:
-        """A gap too long, another body, or the tracker stopping: the reach under way is lost, the past forgotten.
+    def _lost(self, last: float, recording_ended: bool = False) -> list[Message]:
+        """A gap too long, another body, or the tracker stopping: the person is lost, the past forgotten.
 
-        Lost, not ended: where the person went is unknown; its marker says so (``lost``, at the last frame).
+        Lost, not ended: where the person went is unknown; the marker of the reach under way, or of the ended
+        demonstration that showed where they were, says so (``lost``, at the last frame; :meth:`Demonstrations.lose`).
         """
-        msgs = self.demos.lose(last)
+        msgs = self.demos.lose(last, recording_ended)
         self.filter.reset()
         self.rate.reset()  # the next frames may come from a sensor restarted at another rate
         self.sensor.reset()

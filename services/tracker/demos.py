@@ -7,13 +7,21 @@ The predictor recognises demonstrations as the recorder gave them: a ``DemoMarke
   crossed), the poses, and an ``end`` when the hand has come to rest, or ``lost`` when the tracker loses the person
   mid-reach (a gap, another body, the tracker stopping: where the person went is unknown);
 - **the person at rest**: once per track (the first, and each after a loss), when the rule has learnt where the hand
-  rests, a short demonstration of the person standing still (class name :data:`~shared.protocol.AT_REST`, the last
-  ``pre_s`` of frames, at most 10 poses), ended at once. The predictor predicts from it where the person may reach
-  (every class's volume by its posterior, as at the start of any reach), and the executor, which does not move the
-  robot without a prediction, need not wait for the first reach; after a lost reach it holds until the person is
-  seen again, at rest or reaching (before, only a reach let it go on).
+  rests and the body stands still, a short demonstration of the person at rest (class name
+  :data:`~shared.protocol.AT_REST`, the last ``pre_s`` of frames, at most 10 poses), ended at once. The predictor
+  predicts from it where the person may reach (every class's volume by its posterior, as at the start of any
+  reach), and the executor, which does not move the robot without a prediction, need not wait for the first reach.
 
-Between demonstrations nothing is published.
+After a demonstration's end the executor goes on with the prediction of its last pose: the person is taken to stay
+where it showed them. So the tracker says when that no longer holds, with a ``lost`` marker of the ended
+demonstration: the person out of view (a gap, another body, a live tracker stopping), or moved away from every
+place the demonstration showed them in (pelvis or a shoulder more than ``moved_m`` from its path: walking off, or
+turning round, with the arm still; a hand going back from a reach's goal retraces its path and is not). Before, the
+robot went on around the old prediction. The executor then holds until the person is seen again, at rest (said
+again, once the body is still) or reaching. The end of a recording played (``finish`` with ``recording_ended``) is
+no loss: the person stands as last seen, as at a replayer's end.
+
+Between demonstrations nothing else is published.
 """
 
 from __future__ import annotations
@@ -25,6 +33,7 @@ import numpy as np
 
 from shared.feature_sets import HERAKLES_NAMES
 from shared.human import HumanModel
+from shared.keypoints.fit import POINT_NAMES
 from shared.protocol import AT_REST, DemoMarker, HumanPose, Message
 
 from .reach import ReachDetector, ReachRule, body_wrist
@@ -32,6 +41,8 @@ from .reach import ReachDetector, ReachRule, body_wrist
 __all__ = ["Demonstrations", "REST_POSES", "LIVE_CLASS", "reach_messages", "reach_poses"]
 
 _YAW = HERAKLES_NAMES.index("pelvis_yaw")
+_BODY = [POINT_NAMES.index(n) for n in ("pelvis", "r_shoulder", "l_shoulder")]
+"""The points whose places say where the person is (not the arms: a reach moves them, and its rule watches them)."""
 
 LIVE_CLASS = "live"
 """The ``class_name`` of a live person's reaches (the class is what the predictor recognises)."""
@@ -48,73 +59,130 @@ class Demonstrations:
         rule: The reach rule's thresholds.
         model: The human model (the wrist's position from the features).
         announce_rest: Publish the person seen at rest once per track.
+        moved_m: The person has moved away once their pelvis or a shoulder is this far (m) from every place the
+            last demonstration showed it in.
 
     Attributes:
         reaches: Reaches started; ``lost``: of them, lost mid-reach. ``rests``: demonstrations of the person at rest.
+        unseen: Ended demonstrations lost (the person out of view, or moved away from where they showed them).
         demo_id: The last demonstration's number (-1 before the first).
     """
 
-    def __init__(self, rule: ReachRule, model: HumanModel, announce_rest: bool = True) -> None:
-        self.rule, self.model, self.announce_rest = rule, model, announce_rest
+    def __init__(self, rule: ReachRule, model: HumanModel, announce_rest: bool = True, moved_m: float = 0.10) -> None:
+        self.rule, self.model, self.announce_rest, self.moved_m = rule, model, announce_rest, moved_m
         self.reach = ReachDetector(rule)
-        self.reaches = self.lost = self.rests = 0
+        self.reaches = self.lost = self.rests = self.unseen = 0
         self.demo_id = -1
         self._index = 0
-        self._recent: deque[tuple[float, np.ndarray]] = deque()  # smoothed frames of the last pre_s (pre-trigger)
+        self._class = LIVE_CLASS
+        # smoothed frames of the last pre_s (pre-trigger): stamp, features, the body's points (3, 3)
+        self._recent: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
         self._ended_at = -math.inf                              # the last reach's end stamp
         self._rest_said = False                                  # the person at rest published for this track
+        self._body: deque[tuple[float, np.ndarray]] = deque()  # the body's points over the last end_s (is it still?)
+        self._path: list[np.ndarray] = []                        # the body's points at each pose of the demonstration
+        self._shown: np.ndarray | None = None  # (N, 3, 3): where the ended demonstration showed the body, until lost
 
     def frame(self, t: float, f: np.ndarray) -> list[Message]:
         """A smoothed frame (features ``(12,)`` at ``t`` s) through the reach rule: the markers and poses it gives."""
-        self._recent.append((t, f))
+        joints = self.model.joint_positions(np.asarray(f, dtype=np.float64))
+        body = joints[_BODY]
+        self._recent.append((t, f, body))
         while self._recent and self._recent[0][0] < t - self.rule.pre_s - 1e-9:
             self._recent.popleft()
-        event = self.reach.update(body_wrist(self.model.joint_positions(np.asarray(f, dtype=np.float64))), t)
+        self._body.append((t, body))
+        while len(self._body) > 1 and t - self._body[1][0] >= self.rule.end_s:  # the oldest kept: end_s ago or more
+            self._body.popleft()
+        event = self.reach.update(body_wrist(joints), t)
         msgs: list[Message] = []
-        if self.announce_rest and not self._rest_said and self.reach.settled:
+        if event is None and not self.reach.active and self._moved_away(body):
+            return self._unseen(t)  # the rest is learnt again, and said again once the body is still
+        if self.announce_rest and not self._rest_said and self.reach.settled and self._still():
             self._rest_said = True  # a reach starting on this very frame is the person seen: no rest of a moving hand
             msgs = self._at_rest() if event is None and not self.reach.active else []
         if event is not None and event.event == "start":
             self.reaches += 1
-            first = [(s, g) for s, g in self._recent if s >= event.stamp - 1e-9 and s > self._ended_at] or [(t, f)]
+            first = [r for r in self._recent if r[0] >= event.stamp - 1e-9 and r[0] > self._ended_at] or [(t, f, body)]
             msgs += [self._start(first[0][0], LIVE_CLASS)]
-            return msgs + [self._pose(s, g) for s, g in first]
+            return msgs + [self._pose(s, g, b) for s, g, b in first]
         if not self.reach.active and event is None:
             return msgs
-        msgs.append(self._pose(t, f))
+        msgs.append(self._pose(t, f, body))
         if event is not None and event.event == "end":
             self._ended_at = t  # no pose of the ended reach is a pose of the next one
-            return msgs + [self._marker(t, "end", LIVE_CLASS)]
+            return msgs + [self._end(t)]
         return msgs
 
-    def lose(self, last: float) -> list[Message]:
+    def lose(self, last: float, recording_ended: bool = False) -> list[Message]:
         """The track is lost (a gap, another body, the tracker stopping): a reach under way is ``lost`` at ``last``.
 
-        Everything about the track is forgotten: the next frames start a new one (its rest learnt, and said, again).
+        So is the ended demonstration that showed where the person is, unless ``recording_ended`` (the end of a
+        recording played: the person stands as last seen, as at a replayer's end). Everything about the track is
+        forgotten: the next frames start a new one (its rest learnt, and said, again).
         """
-        msgs = [self._marker(last, "lost", LIVE_CLASS)] if self.reach.active else []
-        self.lost += bool(msgs)
+        if self.reach.active:
+            msgs = [self._marker(last, "lost", self._class)]
+            self.lost += 1
+        elif self._shown is not None and not recording_ended:
+            msgs = self._unseen(last)
+        else:
+            msgs = []
         self.reach.reset()
         self._recent.clear()
+        self._body.clear()
         self._ended_at = -math.inf  # a sensor restarted, or a clock stepped back: its frames may precede the last end
         self._rest_said = False
+        self._shown = None
         return msgs
+
+    def _moved_away(self, body: np.ndarray) -> bool:
+        """Whether a point of ``body`` ``(3, 3)`` is over ``moved_m`` from every place the shown demonstration had."""
+        if self._shown is None:
+            return False
+        nearest = np.linalg.norm(self._shown - body, axis=-1).min(axis=0)  # (3,): each point's nearest place
+        return bool(nearest.max() > self.moved_m)
+
+    def _still(self) -> bool:
+        """Whether the body's points over the last ``end_s`` lie within ``end_m`` (rms) of their mean.
+
+        The reach rule's test of a hand come to rest, on the body: a person walking with the arm still is settled for
+        the rule (it watches the wrist in the body's frame), and was said to be at rest, at one place of the walk.
+        """
+        if self._body[-1][0] - self._body[0][0] < self.rule.end_s - 1e-9:
+            return False
+        body = np.array([b for _, b in self._body])
+        return bool(np.sqrt(np.mean(np.sum((body - body.mean(axis=0)) ** 2, axis=-1))) < self.rule.end_m)
+
+    def _unseen(self, t: float) -> list[Message]:
+        """The ended demonstration lost at ``t``: the person is no longer where it showed them."""
+        self.unseen += 1
+        self._shown = None
+        self.reach.reset()  # where the hand rests is learnt again, wherever the person is now
+        self._rest_said = False
+        return [self._marker(t, "lost", self._class)]
 
     def _at_rest(self) -> list[Message]:
         """The person standing still, as a demonstration of its own (class :data:`AT_REST`), started and ended."""
         self.rests += 1
         frames = list(self._recent)[-REST_POSES:]
         self._ended_at = frames[-1][0]  # the next reach's first poses come after these (its stamps never go back)
-        return [self._start(frames[0][0], AT_REST), *(self._pose(s, g) for s, g in frames),
-                self._marker(frames[-1][0], "end", AT_REST)]
+        return [self._start(frames[0][0], AT_REST), *(self._pose(s, g, b) for s, g, b in frames),
+                self._end(frames[-1][0])]
 
     def _start(self, t: float, class_name: str) -> DemoMarker:
         self.demo_id += 1
         self._index = 0
+        self._class = class_name
+        self._path = []
+        self._shown = None  # this demonstration shows the person now
         return DemoMarker(stamp=t, tick=-1, demo_id=self.demo_id, event="start", true_class=-1,
                           class_name=class_name, n_samples=0)
 
-    def _pose(self, t: float, f: np.ndarray) -> HumanPose:
+    def _end(self, t: float) -> DemoMarker:
+        self._shown = np.array(self._path)
+        return self._marker(t, "end", self._class)
+
+    def _pose(self, t: float, f: np.ndarray, body: np.ndarray) -> HumanPose:
         features = np.asarray(f, dtype=np.float64).copy()
         # the fit follows the yaw continuously from its first guess: a track begun on the other side of +-pi, or a
         # person who turned round, published it 2 pi off the libraries' convention (recognised 10 of 40 reaches)
@@ -122,6 +190,7 @@ class Demonstrations:
         pose = HumanPose(stamp=t, tick=-1, tick_last=True, demo_id=self.demo_id, index=self._index,
                          features=features)
         self._index += 1
+        self._path.append(body)
         return pose
 
     def _marker(self, t: float, event: str, class_name: str) -> DemoMarker:

@@ -176,9 +176,11 @@ class TrackerService:
             elif isinstance(m, DemoMarker) and m.event == "start":
                 log.info("tracker: reach %d starts (its first pose at %.3f)", m.demo_id, m.stamp)
             elif isinstance(m, DemoMarker) and m.event == "lost":
-                log.warning("tracker: reach %d lost at %.3f after %d poses (no frame for over %g s, another body, or "
-                            "the tracker stopping): the executor holds the robot until the person is seen again",
-                            m.demo_id, m.stamp, m.n_samples, self.config.tracker.max_gap_s)
+                what = f"the person at rest (demonstration {m.demo_id})" if m.class_name == AT_REST else \
+                    f"reach {m.demo_id}"
+                log.warning("tracker: %s lost at %.3f after %d poses (no frame for over %g s, another body, moved "
+                            "away, or the tracker stopping): the executor holds the robot until the person is seen "
+                            "again", what, m.stamp, m.n_samples, self.config.tracker.max_gap_s)
             elif isinstance(m, DemoMarker):
                 log.info("tracker: reach %d ends at %.3f after %d poses", m.demo_id, m.stamp, m.n_samples)
         self.stats.poses, self.stats.markers = human.poses, human.markers
@@ -260,8 +262,8 @@ class TrackerService:
                 worker.join(timeout=10.0)
                 if left := self.backlog.take_all(0.0):  # the last frames received, not yet fitted
                     self._work_safely(left)
-                with self._lock:  # no frame comes any more: a reach under way ends, so the stream is whole
-                    last = self.core.finish().messages
+                with self._lock:  # no frame comes any more: the person is lost (at a recording's end, only a reach)
+                    last = self.core.finish(recording_ended=self.playback is not None).messages
                     self._publish(last)
                 if last:
                     time.sleep(0.2)  # delivered before the session closes
@@ -269,10 +271,11 @@ class TrackerService:
         self.stats.refused, self.stats.behind = dict(self.core.refused), self.stats.behind + self.backlog.dropped
         log.info("tracker: stopped after %d frames (%d played; %d skipped over max_fit_hz, %d unfitted or dropped to "
                  "catch up), "
-                 "%d reaches (%d lost), seen at rest %d times, %d poses, %d markers; refused: %s; "
+                 "%d reaches (%d lost), seen at rest %d times, lost after an end %d times (out of view or moved "
+                 "away), %d poses, %d markers; refused: %s; "
                  "optional points left out, far off the fit: %d; rejected on receipt: %s", self.stats.frames,
                  self.stats.played, self.core.skipped, self.stats.behind, self.stats.reaches, self.core.demos.lost,
-                 self.stats.rests, self.stats.poses,
+                 self.stats.rests, self.core.demos.unseen, self.stats.poses,
                  self.stats.markers,
                  ", ".join(f"{k} {v}" for k, v in self.stats.refused.items()) or "none", self.core.points_left_out,
                  self.rejects.summary())

@@ -11,7 +11,7 @@ Order rules, per key and sender:
 
 * ``tick`` (when >= 0) never decreases; ``ClockTick.tick`` strictly increases. A tick of 0 after a
   higher one starts a new lock-step run and resets that sender's record on that key.
-* ``HumanPose``: ``(demo_id, index)`` strictly increases; ``DemoMarker``: ``(demo_id, start < end)``
+* ``HumanPose``: ``(demo_id, index)`` strictly increases; ``DemoMarker``: ``(demo_id, start < end < lost)``
   strictly increases; ``Plan.step`` and ``HumanKeypoints.frame`` strictly increase.
 """
 
@@ -44,7 +44,8 @@ def _sequence(msg: Message) -> tuple[int, ...] | None:
     if isinstance(msg, HumanPose):
         return (msg.demo_id, msg.index)
     if isinstance(msg, DemoMarker):
-        return (msg.demo_id, 0 if msg.event == "start" else 1)  # then its end or its loss, one of them
+        # then its end or its loss; a loss may follow the end (the person left where the demonstration showed them)
+        return (msg.demo_id, {"start": 0, "end": 1}.get(msg.event, 2))
     if isinstance(msg, Plan):
         return (msg.step,)
     if isinstance(msg, HumanKeypoints):

@@ -232,10 +232,10 @@ def test_a_reach_lost_mid_way_holds_the_robot_until_a_reach_starts_again():
     core.note_occupancy_of(4, 39)  # the prediction of the last pose the tracker saw (40 poses)
     core.note_demonstration("lost", demo_id=4, n_samples=40)
     assert not core.human_ended
-    assert core.stale_reason() == ("the person was lost mid-reach (reach 4: out of the sensor's view, or another "
-                                   "body): holding until the person is seen again (at rest or reaching)")
+    assert core.stale_reason() == ("the tracker lost the person (demonstration 4: out of the sensor's view, another "
+                                   "body, or moved away): holding until the person is seen again (at rest or reaching)")
     core.step(0.02)
-    assert core.holding and "lost mid-reach" in core.reason
+    assert core.holding and "lost the person" in core.reason
     core.note_demonstration("start", demo_id=5)  # seen again: fresh predictions decide
     core.note_occupancy()
     assert core.stale_reason() == ""
@@ -309,6 +309,45 @@ def test_holds_while_a_service_it_depends_on_is_gone_and_not_after():
     quiet.note_occupancy()
     quiet.note_peer("planner", False)
     assert quiet.stale_reason() == ""
+
+
+def test_a_person_lost_after_a_demonstration_s_end_holds_the_robot_until_one_starts():
+    """The tracker's `lost` after an end (the person out of view, or moved away from where it showed them)."""
+    limits = ArmLimits(("a",), np.array([-1.0]), np.array([1.0]), np.array([1.0]))
+    core = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=0.5))
+    core.adopt(_one_joint_plan())
+    core.note_occupancy()
+    core.note_demonstration("end", demo_id=2, n_samples=10)
+    core.note_occupancy_of(2, 9)
+    assert core.human_ended and core.stale_reason() == ""
+    core.note_demonstration("lost", demo_id=2, n_samples=10)
+    assert not core.human_ended and "the tracker lost the person (demonstration 2" in core.stale_reason()
+    core.note_demonstration("start", demo_id=3)
+    core.note_occupancy()
+    assert core.stale_reason() == ""
+
+
+@pytest.mark.parametrize(("recorded", "holds"), [(["replayer"], True), (["replayer", "tracker"], False)])
+def test_a_live_tracker_gone_after_an_end_holds_the_robot_a_recording_s_does_not(recorded, holds):
+    """Before, any human source going after an end marker let the robot go on for good: a live tracker killed after
+    a reach's end left the robot moving around that reach's last prediction, nobody watching the person. A tracker
+    that plays a file (`foresight demo --human keypoints`: `recorded_sources`) ends its stream as a replayer does."""
+    limits = ArmLimits(("a",), np.array([-1.0]), np.array([1.0]), np.array([1.0]))
+    core = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=10.0, recorded_sources=recorded))
+    core.adopt(_one_joint_plan())
+    core.note_occupancy()
+    core.note_peer("tracker", True)
+    core.note_demonstration("end", 3, 10)
+    core.note_occupancy_of(3, 9)
+    core.note_peer("tracker", False)
+    assert core.stale_reason() == ("tracker gone (liveliness token lost)" if holds else "")
+    core.note_peer("tracker", True)
+    assert core.stale_reason() == ""
+
+
+def test_a_human_source_not_named_among_the_sources_is_a_config_error():
+    with pytest.raises(ConfigError, match="executor.recorded_sources: unknown service 'planner'"):
+        ExecutorConfig(recorded_sources=["planner"]).validate()
 
 
 def test_reason_kind_ignores_the_ages():

@@ -155,6 +155,34 @@ def test_a_sensor_gone_quiet_mid_reach_loses_the_reach_at_once(zenoh_hub) -> Non
     assert end.n_samples == sum(isinstance(m, HumanPose) and m.demo_id == end.demo_id for m in got.items)
 
 
+def test_a_sensor_gone_quiet_after_the_person_was_seen_at_rest_loses_them_on_the_wire(zenoh_hub) -> None:
+    """The person at rest said, then the sensor quiet (the person out of view): nothing was published, and the
+    executor went on around the rest's prediction, nobody watching. Now a `lost` of that demonstration, after its
+    end (which the receivers' order rule refused before)."""
+    hub = zenoh_hub
+    tester = hub()
+    keys = Keys(tester.prefix)
+    still = np.repeat(_reach_frames()[:1], 60, 0)  # 2 s at rest
+    with open_session(tester) as session:
+        service, thread = _service(hub, session, keys)
+        try:
+            got = Collector(session, keys)
+            pub = _sensor(session, keys)
+            sent = []
+            for i, pos in enumerate(still):
+                sent.append(_kp(i, pos))
+                pub.put(sent[-1])
+                time.sleep(1 / 30)
+            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "lost" for m in items),
+                            timeout=10.0)
+            assert thread.thread.is_alive()
+        finally:
+            thread.stop()
+    assert [(m.event, m.demo_id, m.class_name) for m in got.markers()] == [
+        ("start", 0, AT_REST), ("end", 0, AT_REST), ("lost", 0, AT_REST)]
+    assert got.markers()[-1].stamp == sent[-1].stamp  # at the last frame seen
+
+
 def test_bad_frames_get_one_line_each_are_never_published_and_the_tracker_goes_on(zenoh_hub, caplog) -> None:
     hub = zenoh_hub
     tester = hub()

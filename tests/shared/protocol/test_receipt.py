@@ -80,9 +80,13 @@ def test_marker_and_plan_sequences():
     order.check("d", "r", marker(0, "end"))
     order_refused(order, "d", "r", marker(0, "start"), "sequence-order")
     order.check("d", "r", marker(1, "start"))
-    order.check("d", "r", marker(1, "lost"))  # a reach the tracker lost: its end, as far as order goes
-    order_refused(order, "d", "r", marker(1, "end"), "sequence-order")  # one of them, never both
+    order.check("d", "r", marker(1, "lost"))  # a reach the tracker lost: after its start
+    order_refused(order, "d", "r", marker(1, "end"), "sequence-order")  # a lost reach has no end
     order.check("d", "r", marker(2, "start"))
+    order.check("d", "r", marker(2, "end"))
+    order.check("d", "r", marker(2, "lost"))  # the person gone from where it showed them (refused before)
+    order_refused(order, "d", "r", marker(2, "lost"), "sequence-order")  # once
+    order.check("d", "r", marker(3, "start"))
     plan = Plan(stamp=1.0, tick=-1, step=4, goal_names=["g"], joint_names=["a"], dt=0.1, chosen=0, planning_ms=1.0,
                 occupancy_tick=-1, occupancy_index=-1, trajectories=np.zeros((1, 2, 1), np.float32),
                 cost_smoothness=np.zeros(1), cost_obstacle=np.zeros(1), cost_human=np.zeros(1),
