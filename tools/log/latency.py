@@ -29,6 +29,8 @@ import numpy as np
 from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, OccupancyGrid, Plan, ProtocolError, decode
 from shared.runtime import UserError
 
+from .versions import check_readable
+
 __all__ = ["Stat", "run_latencies", "format_latencies"]
 
 
@@ -114,9 +116,7 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
         except ProtocolError as exc:
             decoded -= 1
             refused.append(exc)
-    if not decoded and refused and all(e.reason == "version" for e in refused):  # not an empty run: a newer build's
-        raise UserError(f"its {len(refused)} message(s) are of a schema version this build does not read "
-                        f"({refused[0]})")
+    check_readable(decoded, refused)
     period = list(np.diff(np.asarray(plan_times, dtype=np.float64)) / 1e6)
     stats = {"pose_to_occupancy": Stat.of(pose_to_occ), "pose_to_plan": Stat.of(pose_to_plan),
              "occupancy_to_plan": Stat.of(occ_to_plan), "replanning_period": Stat.of(period),

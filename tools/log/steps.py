@@ -17,6 +17,8 @@ from shared.recording.reader import LogFile
 from shared.runtime import UserError
 from shared.scene import Scene, load_scene, parse_scene
 
+from .versions import check_readable
+
 __all__ = ["StepView", "step_views", "step_title", "scene_of", "decode_all"]
 
 
@@ -50,9 +52,10 @@ def decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
                 out.append((m.log_time, decode(m.data, cls)))
             except ProtocolError as exc:  # only valid payloads are on these channels; be tolerant anyway
                 refused.append(exc)
-    if not out and refused and all(e.reason == "version" for e in refused):  # not an empty run: another build's log
-        raise UserError(f"{lf.path}: its {len(refused)} {schema.removeprefix('foresight.')} message(s) are of a schema "
-                        f"version this build does not read ({refused[0]})")
+    try:
+        check_readable(len(out), refused, f"{schema.removeprefix('foresight.')} message(s)")
+    except UserError as exc:
+        raise UserError(f"{lf.path}: {exc}") from None
     return out
 
 
