@@ -97,6 +97,7 @@ class Ros2Service:
         self.receipt = Receipt(Expectations(clock="auto"))  # values, stamps and each sender's order, as any service
         self.stats = Ros2Stats({role: 0 for role in TOPICS})
         self._lock = threading.Lock()
+        self._clock_lock = threading.Lock()  # /clock samples leave in the order their times were taken
         self._pubs: dict[str, Ros2Publisher] = {}
         self._first_pose: tuple[int, np.ndarray] | None = None  # (demo id, its first pose): the human's placement
         self._last_viz: dict[str, float] = {}
@@ -186,13 +187,18 @@ class Ros2Service:
         self._advance_clock(tick.stamp)
 
     def _advance_clock(self, t: float) -> None:
-        """Publish ``/clock`` = ``t`` s if it is later than the last (a clock never goes back)."""
-        with self._lock:
-            if self._sim_time is not None and t <= self._sim_time:
-                return
-            self._sim_time = t
-        if self.config.clock and self.publishes("clock") is None:
-            self._put("clock", self.mapping.clock(t))
+        """Publish ``/clock`` = ``t`` s if it is later than the last (a clock never goes back).
+
+        One at a time: a tick and a state (two subscriber threads) each took their time under the lock and sent it
+        after, so the later could go out first and the clock stepped back on the wire.
+        """
+        with self._clock_lock:
+            with self._lock:
+                if self._sim_time is not None and t <= self._sim_time:
+                    return
+                self._sim_time = t
+            if self.config.clock and self.publishes("clock") is None:
+                self._put("clock", self.mapping.clock(t))
 
     def on_graph(self, key: str, alive: bool = True) -> None:
         """A graph token (``alive`` False: withdrawn): another node publishing the joint states or ``/clock``.

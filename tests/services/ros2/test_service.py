@@ -246,3 +246,26 @@ def test_a_lock_step_run_publishes_its_simulated_time_on_clock(caplog) -> None:
     off._pubs["clock"] = _Sent()
     off.on_tick(ClockTick(stamp=0.0, tick=0, period=0.5))
     assert off._pubs["clock"].sent == 0
+
+
+def test_clock_samples_leave_in_the_order_their_times_were_taken() -> None:
+    """A tick's thread took t = 1.0, a state's t = 1.1 while the first was still sending: 1.1 went out first, and
+    the clock stepped back to 1.0 on the wire (the last note's left-alone item)."""
+    service = Ros2Service(Ros2ServiceConfig(), ZenohConfig())
+    sent: list[float] = []
+
+    class _Slow(_Sent):
+        def put(self, payload: bytes) -> None:
+            t = service.mapping.clock_in(payload)
+            if t == 1.0:
+                time.sleep(0.3)  # the first sample's put takes a while (a congested link)
+            sent.append(t)
+
+    service._pubs["clock"] = _Slow()
+    service.on_tick(ClockTick(stamp=0.0, tick=0, period=0.5))
+    first = threading.Thread(target=service.on_tick, args=(ClockTick(stamp=1.0, tick=2, period=0.5),))
+    first.start()
+    time.sleep(0.1)
+    service.on_state(_state(1.1, tick=2))
+    first.join(timeout=10)
+    assert sent == [0.0, 1.0, 1.1]
