@@ -46,6 +46,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from services.demo_dirs import RunDirectory
+from services.demo_inputs import check_inputs
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
 from shared.arguments import ArgumentParser
@@ -343,6 +344,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
     args = parser.parse_args(_bare_live(sys.argv[1:] if argv is None else list(argv)))
     with cli_errors(prog):
         cfg, _ = resolve_config("demo", DemoConfig, args, with_zenoh=False)
+        check_inputs(cfg)  # a misspelt class, scene or library: said now, not after the imports below (8-10 s)
         # the services inherit the environment and the file: a misspelt name or bad value of any of them is an error
         # now, not later (each section's variables are checked as it is resolved)
         _share_config_file(args.config)

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from services.demo_inputs import check_goals, library_for
 from services.demo_services import (
     KEYPOINT_REST_S,
     KEYPOINTS_FILE,
@@ -40,9 +41,8 @@ from services.scenario import (
     table_row,
 )
 from services.supervisor import Supervisor, describe_exit
-from shared.config import ConfigError, ZenohConfig
-from shared.feature_sets import LIVE_MAPPING, require_mapping
-from shared.library import MotionLibrary, load_library, save_library
+from shared.config import ZenohConfig
+from shared.library import MotionLibrary, save_library
 from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyGrid, Plan, RobotState
 from shared.runtime import interruptible
 from shared.scene import Scene, load_scene
@@ -55,17 +55,6 @@ if TYPE_CHECKING:
 __all__ = ["RunRecord", "run_once", "prepare_inputs"]
 
 log = logging.getLogger("foresight.demo")
-
-
-def _library(cfg: DemoConfig, scene: Scene) -> MotionLibrary:
-    if cfg.library is None:
-        from shared.synthetic import generate_library
-
-        return generate_library(seed=0, scene=scene)  # its cup classes reach for this scene's cups
-    lib = load_library(cfg.library)
-    require_mapping(lib.feature_names, "foresight demo (HumanPose messages, occupancy)",
-                    f"library {lib.source}", exact=LIVE_MAPPING)
-    return lib
 
 
 def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> str:
@@ -120,12 +109,8 @@ def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable
     The library, the human's demonstration (``directory/human.npz``, a library of one) and the prediction model
     trained without it (cached in ``cfg.models_dir``).
     """
-    cups = [c.name for c in scene.cups]
-    unknown = [g for g in cfg.goals.split(",") if g.strip() and g.strip() not in cups]
-    if unknown:
-        raise ConfigError(f"demo.goals: {', '.join(map(repr, unknown))} not a cup of scene {scene.name} "
-                          f"(its cups: {', '.join(cups)})")
-    lib = _library(cfg, scene)
+    check_goals(cfg, scene)
+    lib = library_for(cfg, scene)
     scenario = choose_demonstration(lib, cfg.steps, cfg.seed, cfg.human_class)
     demo = scenario.demo
     out(f"foresight demo: library {lib.source}: {lib.n_classes} classes, {len(lib.demos)} demonstrations; "

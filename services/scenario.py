@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from services.demo_inputs import DEFAULT_HUMAN_CLASS, human_label
 from services.experiments.measures import interference
-from shared.config_names import closest
 from shared.library import Demonstration, MotionLibrary
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
@@ -33,9 +33,6 @@ __all__ = ["Scenario", "choose_demonstration", "model_for", "Summary", "summaris
            "step_entry", "table_header", "table_row", "belief", "posterior_for"]
 
 log = logging.getLogger("foresight.scenario")
-
-DEFAULT_HUMAN_CLASS = "red_cup"
-"""The human reaches for the red cup (the paper's Fig. 8); the robot plans for both cups."""
 
 
 @dataclass(frozen=True)
@@ -67,17 +64,7 @@ def choose_demonstration(library: MotionLibrary, steps: int, seed: int, human_cl
         UserError: Unknown class.
     """
     names = list(library.class_names)
-    if not human_class:
-        label = names.index(DEFAULT_HUMAN_CLASS) if DEFAULT_HUMAN_CLASS in names else len(names) - 1
-    elif human_class in names:
-        label = names.index(human_class)
-    elif human_class.isdigit() and int(human_class) < len(names):
-        label = int(human_class)
-    else:
-        hint = ("; the paper's library: --human-class compound_1, the reach of its authors' Table I trials "
-                "(docs/experiments.md)" if "compound_1" in names else "")  # the default, blue_cup, is the synthetic's
-        raise UserError(f"--human-class {human_class!r}: not a class of {library.source} ({', '.join(names)})"
-                        + (closest(human_class, names) or hint))
+    label = human_label(names, human_class, str(library.source))
     demos = library.by_class(label)
     if not demos:
         raise UserError(f"library {library.source}: class {names[label]} has no valid demonstration")

@@ -36,9 +36,12 @@ from shared.data_files import finite_vector, read_toml
 from shared.human import HumanModel
 from shared.library import Demonstration, LibraryError, MotionLibrary
 
-__all__ = ["SyntheticConfig", "GoalLayout", "load_layout", "generate_library", "DEFAULT_LAYOUT", "pelvis_frame"]
+__all__ = ["SyntheticConfig", "GoalLayout", "load_layout", "generate_library", "DEFAULT_LAYOUT", "DEFAULT_CLASSES",
+           "pelvis_frame"]
 
 DEFAULT_LAYOUT = "table_8"
+DEFAULT_CLASSES = 8
+"""Classes of a generated library unless asked: the layout's first goals, by name."""
 FEATURE_SETS = ("herakles", "wide16")
 
 # Degrees of freedom the IK moves (feature indices): pelvis x, y, yaw, torso X, Y, Z, shoulder X, Z, Y, elbow.
@@ -241,7 +244,7 @@ class _IK:
         return np.clip(out, self.lo, self.hi)
 
 
-def generate_library(n_classes: int = 8, n_demos: int = 25, seed: int = 0,
+def generate_library(n_classes: int = DEFAULT_CLASSES, n_demos: int = 25, seed: int = 0,
                      layout: str | Path | GoalLayout | None = None, scene=None,
                      config: SyntheticConfig | None = None) -> MotionLibrary:
     """Generate a synthetic library of right-hand reaches to table goals.

@@ -1,0 +1,102 @@
+"""The demo's inputs, checked before anything heavy is imported: a misspelt class, scene or library is said at once.
+
+``foresight demo --human-class nonsense`` (or ``--scene``, ``--library``) said so after 8-10 s, the time the demo
+took to import the planner, the predictor and matplotlib (a newcomer's review). These checks need the scene, the
+library's class names and, for a library file, the library: a second at most.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from shared.config import ConfigError
+from shared.config_names import closest
+from shared.feature_sets import LIVE_MAPPING, require_mapping
+from shared.library import MotionLibrary, load_library
+from shared.runtime import UserError
+from shared.scene import Scene, load_scene
+
+if TYPE_CHECKING:
+    from services.demo import DemoConfig
+
+__all__ = ["DEFAULT_HUMAN_CLASS", "human_label", "library_for", "check_goals", "check_inputs"]
+
+DEFAULT_HUMAN_CLASS = "red_cup"
+"""The human reaches for the red cup (the paper's Fig. 8); the robot plans for both cups."""
+
+
+def human_label(names: Sequence[str], human_class: str, source: str) -> int:
+    """The label of ``human_class`` among a library's class ``names`` (by name or index; ``""``: the default).
+
+    ``""`` is :data:`DEFAULT_HUMAN_CLASS` if the library has it, else the last class.
+
+    Raises:
+        UserError: Unknown class, with the library's classes and the closest name.
+    """
+    names = list(names)
+    if not human_class:
+        return names.index(DEFAULT_HUMAN_CLASS) if DEFAULT_HUMAN_CLASS in names else len(names) - 1
+    if human_class in names:
+        return names.index(human_class)
+    if human_class.isdigit() and int(human_class) < len(names):
+        return int(human_class)
+    hint = ("; the paper's library: --human-class compound_1, the reach of its authors' Table I trials "
+            "(docs/experiments.md)" if "compound_1" in names else "")  # the default, blue_cup, is the synthetic's
+    raise UserError(f"--human-class {human_class!r}: not a class of {source} ({', '.join(names)})"
+                    + (closest(human_class, names) or hint))
+
+
+_loaded: dict[tuple[str, int], MotionLibrary] = {}
+"""Library files loaded by this process, by path and modification time (the check, then each run of --compare)."""
+
+
+def library_for(cfg: DemoConfig, scene: Scene) -> MotionLibrary:
+    """The demo's motion library: ``cfg.library``, or the synthetic one for ``scene``'s cups (generated: 2 s)."""
+    if cfg.library is None:
+        from shared.synthetic import generate_library
+
+        return generate_library(seed=0, scene=scene)  # its cup classes reach for this scene's cups
+    path = Path(cfg.library)
+    try:
+        key = (str(path.resolve()), path.stat().st_mtime_ns)
+    except OSError:
+        key = None  # load_library names what is wrong with it
+    lib = _loaded.get(key) if key else None
+    if lib is None:
+        lib = load_library(cfg.library)  # its warnings (demonstrations dropped) once, not at each check and run
+        if key:
+            _loaded[key] = lib
+    require_mapping(lib.feature_names, "foresight demo (HumanPose messages, occupancy)",
+                    f"library {lib.source}", exact=LIVE_MAPPING)
+    return lib
+
+
+def check_goals(cfg: DemoConfig, scene: Scene) -> None:
+    """Raise ConfigError for a goal of ``cfg.goals`` that is not a cup of ``scene``."""
+    cups = [c.name for c in scene.cups]
+    unknown = [g for g in cfg.goals.split(",") if g.strip() and g.strip() not in cups]
+    if unknown:
+        raise ConfigError(f"demo.goals: {', '.join(map(repr, unknown))} not a cup of scene {scene.name} "
+                          f"(its cups: {', '.join(cups)})")
+
+
+def check_inputs(cfg: DemoConfig) -> None:
+    """Raise the error the run would raise later for its scene, library or human class.
+
+    Raises:
+        ConfigError, SceneError, LibraryError, FeatureError, UserError: As the run would (one line each, by
+            ``cli_errors``).
+    """
+    scene = load_scene(cfg.scene or None)
+    check_goals(cfg, scene)
+    if cfg.library is None:  # the synthetic library's classes are its layout's goals: no need to generate it
+        from shared.synthetic import DEFAULT_CLASSES, load_layout
+
+        layout = load_layout(None, scene)
+        names, source = layout.goal_names[:DEFAULT_CLASSES], f"the synthetic library (layout {layout.name})"
+    else:
+        lib = library_for(cfg, scene)
+        names, source = list(lib.class_names), str(lib.source)
+    human_label(names, cfg.human_class, source)
