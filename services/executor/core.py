@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shared.lockstep import FIRST_PLAN
-from shared.protocol import Plan, RobotState
+from shared.protocol import HUMAN_SOURCES, Plan, RobotState
 
 from .config import ExecutorConfig, ExecutorError
 from .reference import Reference
@@ -131,7 +131,8 @@ class _Freshness:
     occupancy: float | None = None  # time (core clock) of the latest occupancy
     occupancy_of: tuple[int, int] | None = None  # (demo_id, index) of the pose the latest occupancy predicts from
     demo_end: tuple[int, int] | None = None      # (demo_id, last index) of the demonstration that ended
-    lost: int | None = None  # demo_id of the demonstration the tracker lost the person in or after (until one starts)
+    lost: str | None = None  # why the person is not seen: the tracker lost them, or went (until a demonstration starts)
+    last_demo: int | None = None  # demo_id of the last demonstration marker
 
 
 class ExecutorCore:
@@ -223,8 +224,10 @@ class ExecutorCore:
         demonstration starts again, a reach or the tracker's person seen at rest.
         """
         self.fresh.demo_end = (int(demo_id), int(n_samples) - 1) if event == "end" else None
+        self.fresh.last_demo = int(demo_id)
         if event == "lost":
-            self.fresh.lost = int(demo_id)
+            self.fresh.lost = (f"the tracker lost the person (demonstration {int(demo_id)}: out of the sensor's view, "
+                               "another body, or moved away)")
         elif event == "start":
             self.fresh.lost = None
 
@@ -263,6 +266,12 @@ class ExecutorCore:
             return
         if service in self.config.recorded_sources and not alive and self.fresh.demo_end is not None:
             return  # the recording's stream ended (its end marker came first): the human stands still, no fault
+        if service in HUMAN_SOURCES and service not in self.config.recorded_sources and not alive \
+                and self.fresh.last_demo is not None:
+            # back (a lost link) or started anew (a crash, restarted), it must say the person again: its last
+            # demonstration may describe someone gone meanwhile (the tracker says the person again to an executor
+            # that appears)
+            self.fresh.lost = f"the {service} was gone (its last demonstration, {self.fresh.last_demo}, may be stale)"
         self.gone = self.gone - {service} if alive else self.gone | {service}
 
     # ------------------------------------------------------------------------------------------
@@ -281,8 +290,7 @@ class ExecutorCore:
         if age > limit + 1e-9:
             return f"plan is {age:.2f} s old (limit {limit:.2f} s)"
         if self.config.require_occupancy and self.fresh.lost is not None:
-            return (f"the tracker lost the person (demonstration {self.fresh.lost}: out of the sensor's view, another "
-                    "body, or moved away): holding until the person is seen again (at rest or reaching)")
+            return f"{self.fresh.lost}: holding until the person is seen again (at rest or reaching)"
         if self.config.require_occupancy and not (self.human_ended and self.fresh.occupancy is not None):
             if self.fresh.occupancy is None:  # a live tracker publishes poses once the person is seen
                 return "no occupancy prediction received yet" + (

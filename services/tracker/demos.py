@@ -98,8 +98,12 @@ class Demonstrations:
         if event is None and not self.reach.active and self._moved_away(body):
             return self._unseen(t)  # the rest is learnt again, and said again once the body is still
         if self.announce_rest and not self._rest_said and self.reach.settled and self._still():
-            self._rest_said = True  # a reach starting on this very frame is the person seen: no rest of a moving hand
-            msgs = self._at_rest() if event is None and not self.reach.active else []
+            if event is None and not self.reach.active:
+                self._rest_said = True
+                msgs = self._at_rest()
+            elif event is not None and event.event == "start":
+                self._rest_said = True  # the person seen in the reach starting on this frame: no rest of a moving hand
+            # mid-reach, or at its end: said on the next frame at rest (say_again during a reach)
         if event is not None and event.event == "start":
             self.reaches += 1
             first = [r for r in self._recent if r[0] >= event.stamp - 1e-9 and r[0] > self._ended_at] or [(t, f, body)]
@@ -134,6 +138,15 @@ class Demonstrations:
         self._rest_said = False
         self._shown = None
         return msgs
+
+    def say_again(self) -> None:
+        """Publish the person at rest again (once still, no reach under way), as at a track's start.
+
+        For an executor that (re)appeared: one started anew has no prediction, and one that saw this tracker go
+        (a lost link) holds until a demonstration starts. Before, the person at rest was said once per track, and
+        a restarted executor held until the person's next reach.
+        """
+        self._rest_said = False
 
     def _moved_away(self, body: np.ndarray) -> bool:
         """Whether a point of ``body`` ``(3, 3)`` is over ``moved_m`` from every place the shown demonstration had."""

@@ -160,6 +160,14 @@ class TrackerService:
         log.info("tracker: no frame taken for %.1f s: starting afresh with the next", quiet)
         return True
 
+    def _on_peer(self, peer: str, appeared: bool) -> None:
+        """An executor (re)appeared: the person at rest is said again (:meth:`Demonstrations.say_again`)."""
+        if peer == "executor" and appeared:
+            with self._lock:
+                if self.core.tracking:
+                    self.core.demos.say_again()
+                    log.info("tracker: an executor appeared: the person is said again once seen at rest")
+
     def _publish(self, messages: list) -> None:
         """The core's poses and markers on their keys (under the lock)."""
         if not messages:
@@ -243,7 +251,8 @@ class TrackerService:
             worker = threading.Thread(target=self._work, args=(done,), name="tracker-fit", daemon=True)
             worker.start()
             closers = self._inputs(session)
-            presence = Presence(session, self.keys, "tracker", stop_with=cfg.stop_with, stop=stop)
+            presence = Presence(session, self.keys, "tracker", on_change=self._on_peer, stop_with=cfg.stop_with,
+                                stop=stop)
             log.info("tracker: %s keypoints (layout %s, frame %s) -> %s, session %s", self._source(),
                      cfg.tracker.layout, cfg.tracker.frame_id, self.keys.pose, describe(session)["zid"])
             try:

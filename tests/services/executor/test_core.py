@@ -341,7 +341,11 @@ def test_a_live_tracker_gone_after_an_end_holds_the_robot_a_recording_s_does_not
     core.note_occupancy_of(3, 9)
     core.note_peer("tracker", False)
     assert core.stale_reason() == ("tracker gone (liveliness token lost)" if holds else "")
-    core.note_peer("tracker", True)
+    core.note_peer("tracker", True)  # back (a lost link), or a new one (restarted): it must say the person again
+    assert core.stale_reason() == ("the tracker was gone (its last demonstration, 3, may be stale): holding until "
+                                   "the person is seen again (at rest or reaching)" if holds else "")
+    core.note_demonstration("start", 4)  # the tracker says the person again to the executor it sees appear
+    core.note_occupancy()
     assert core.stale_reason() == ""
 
 

@@ -206,3 +206,24 @@ def test_the_end_of_a_recording_played_is_no_loss_but_a_live_tracker_stopping_is
     _feed(live, np.repeat(reach[:1], 60, 0))
     assert played.finish(recording_ended=True).messages == []  # the person stands as last seen, as after a replayer
     assert _markers(live.finish().messages) == [("lost", 0, AT_REST)]
+
+
+def test_the_person_is_said_again_for_an_executor_that_appears_even_mid_reach(reach) -> None:
+    """The person at rest was said once per track: an executor started anew (or one that saw the tracker go, and
+    holds until a demonstration starts) held until the person's next reach."""
+    core = TrackerCore()
+    msgs = _feed(core, np.repeat(reach[:1], 60, 0))
+    core.demos.say_again()
+    msgs += _feed(core, np.repeat(reach[:1], 5, 0), t0=60 / RATE)
+    assert _markers(msgs) == [("start", 0, AT_REST), ("end", 0, AT_REST), ("start", 1, AT_REST), ("end", 1, AT_REST)]
+    moving = next(i for i in range(30, len(reach)) if np.abs(reach[i] - reach[0]).max() > 0.2)
+    t0 = 65 / RATE
+    during = _feed(core, reach[30:moving + 10], t0=t0)  # a reach under way ...
+    assert core.demos.reach.active
+    core.demos.say_again()  # ... when the executor appears: said once the reach has ended and the body is still
+    after = _feed(core, reach[moving + 10:], t0=t0 + (moving - 20) / RATE)
+    events = _markers(during + after)
+    assert events[:2] == [("start", 2, LIVE_CLASS), ("end", 2, LIVE_CLASS)] and events[2:] == [
+        ("start", 3, AT_REST), ("end", 3, AT_REST)]
+    executor = _executor_after(msgs + during + after)
+    assert executor.stale_reason() == ""

@@ -183,6 +183,41 @@ def test_a_sensor_gone_quiet_after_the_person_was_seen_at_rest_loses_them_on_the
     assert got.markers()[-1].stamp == sent[-1].stamp  # at the last frame seen
 
 
+def test_an_executor_that_appears_gets_the_person_at_rest_said_again(zenoh_hub) -> None:
+    """Once per track: an executor started (or reconnected) after the person was said at rest held until their next
+    reach. The executor's liveliness token appearing has the tracker say the person again."""
+    hub = zenoh_hub
+    tester = hub()
+    keys = Keys(tester.prefix)
+    still = _reach_frames()[0]
+    with open_session(tester) as session:
+        service, thread = _service(hub, session, keys)
+        token = None
+        try:
+            got = Collector(session, keys)
+            pub = _sensor(session, keys)
+            i = 0
+
+            def rests() -> int:
+                return sum(m.event == "end" and m.class_name == AT_REST for m in got.markers())
+
+            while rests() < 1 and i < 150:
+                pub.put(_kp(i, still))
+                i += 1
+                time.sleep(1 / 30)
+            token = session.liveliness().declare_token(keys.alive("executor"))  # an executor appears
+            for _ in range(60):
+                pub.put(_kp(i, still))
+                i += 1
+                time.sleep(1 / 30)
+            assert got.wait(lambda items: rests() >= 2, timeout=10.0), got.markers()
+        finally:
+            if token is not None:
+                token.undeclare()
+            thread.stop()
+    assert [(m.event, m.demo_id) for m in got.markers()][:4] == [("start", 0), ("end", 0), ("start", 1), ("end", 1)]
+
+
 def test_bad_frames_get_one_line_each_are_never_published_and_the_tracker_goes_on(zenoh_hub, caplog) -> None:
     hub = zenoh_hub
     tester = hub()
