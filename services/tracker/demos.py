@@ -82,9 +82,18 @@ class Demonstrations:
         self._body: deque[tuple[float, np.ndarray]] = deque()  # the body's points over the last end_s (is it still?)
         self._path: list[np.ndarray] = []                        # the body's points at each pose of the demonstration
         self._shown: np.ndarray | None = None  # (N, 3, 3): where the ended demonstration showed the body, until lost
+        self._clock_at = -math.inf  # the first pose on the library's clock (inf: not yet)
 
-    def frame(self, t: float, f: np.ndarray) -> list[Message]:
-        """A smoothed frame (features ``(12,)`` at ``t`` s) through the reach rule: the markers and poses it gives."""
+    def frame(self, t: float, f: np.ndarray, on_clock: bool = True) -> list[Message]:
+        """A smoothed frame (features ``(12,)`` at ``t`` s) through the reach rule: the markers and poses it gives.
+
+        ``on_clock``: the frame is a pose on the library's clock (the sensor's rate known); the person at rest is said
+        only with poses that all are.
+        """
+        if not on_clock:
+            self._clock_at = math.inf
+        elif self._clock_at == math.inf:
+            self._clock_at = t
         joints = self.model.joint_positions(np.asarray(f, dtype=np.float64))
         body = joints[_BODY]
         self._recent.append((t, f, body))
@@ -97,7 +106,8 @@ class Demonstrations:
         msgs: list[Message] = []
         if event is None and not self.reach.active and self._moved_away(body):
             return self._unseen(t)  # the rest is learnt again, and said again once the body is still
-        if self.announce_rest and not self._rest_said and self.reach.settled and self._still():
+        if (self.announce_rest and not self._rest_said and self.reach.settled and self._still()
+                and self._recent[0][0] >= self._clock_at):
             if event is None and not self.reach.active:
                 self._rest_said = True
                 msgs = self._at_rest()
@@ -134,6 +144,7 @@ class Demonstrations:
         self.reach.reset()
         self._recent.clear()
         self._body.clear()
+        self._clock_at = -math.inf
         self._ended_at = -math.inf  # a sensor restarted, or a clock stepped back: its frames may precede the last end
         self._rest_said = False
         self._shown = None

@@ -227,3 +227,15 @@ def test_the_person_is_said_again_for_an_executor_that_appears_even_mid_reach(re
         ("start", 3, AT_REST), ("end", 3, AT_REST)]
     executor = _executor_after(msgs + during + after)
     assert executor.stale_reason() == ""
+
+
+def test_a_15_hz_sensor_s_person_at_rest_is_said_with_poses_on_the_library_s_clock(reach) -> None:
+    """Its rate is known after a second, as the person at rest was said: its poses came at 15 a second, and the
+    predictor reads their indices as time (30 a second). Now the rest waits for poses that all are on the clock."""
+    core = TrackerCore()
+    msgs = []
+    for i, p in enumerate(MODEL.joint_positions(np.repeat(reach[:1], 45, 0))):  # 3 s at 15 Hz
+        msgs += core.on_frame(i / 15.0, NAMES, p).messages
+    assert _markers(msgs) == [("start", 0, AT_REST), ("end", 0, AT_REST)]
+    stamps = [m.stamp for m in msgs if isinstance(m, HumanPose)]
+    assert len(stamps) >= 5 and np.allclose(np.diff(stamps), 1 / RATE)
