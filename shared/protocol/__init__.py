@@ -1,7 +1,7 @@
 """The wire contract: key expressions and message schemas (documented in docs/protocol.md).
 
-Every message is a msgpack map with ``_type`` (the message type name), ``_v`` (the schema version,
-:data:`SCHEMA_VERSION`) and one entry per field. Numeric arrays travel as maps
+Every message is a msgpack map with ``_type`` (the message type name), ``_v`` (the lowest schema version that
+holds it, at most :data:`SCHEMA_VERSION`) and one entry per field. Numeric arrays travel as maps
 ``{"dtype": "<f8", "shape": [..], "data": <raw little-endian bytes>}``.
 
 :func:`decode` validates everything (type, version, field presence, scalar types, array dtypes,

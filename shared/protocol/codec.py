@@ -22,7 +22,7 @@ from .messages import MESSAGE_TYPES
 from .schema import READABLE_VERSIONS, SCHEMA_VERSION, ArraySpec, Message, ProtocolError
 from .schema import field_error as _err
 
-__all__ = ["encode", "decode"]
+__all__ = ["encode", "decode", "written_version"]
 
 M = TypeVar("M", bound=Message)
 
@@ -90,14 +90,33 @@ def _layout(cls: type, version: int = SCHEMA_VERSION) -> tuple[tuple[_Field, ...
     return tuple(out), frozenset({"_type", "_v", *(f.name for f in out if f.since <= version)})
 
 
+def written_version(msg: Message) -> int:
+    """The lowest schema version that holds ``msg``: what :func:`encode` writes as its ``_v``.
+
+    A field :func:`~shared.protocol.schema.added` later counts only when it is off its default (a version-1 reader
+    takes the default), and so does a value a later version added (:meth:`Message.since`: a ``lost`` marker).
+    Before, every message was written at :data:`SCHEMA_VERSION`: a build that reads version 1 refused every message
+    of a newer one, a ``HumanPose`` or a ``Plan`` as much as the ``ClassPosterior`` whose fields had changed, so a
+    system upgraded one machine at a time stopped at the first.
+    """
+    version = msg.since()
+    for f in _layout(type(msg))[0]:
+        if f.since > version and f.spec is None and getattr(msg, f.name) != f.default:
+            version = f.since
+    return version
+
+
 def encode(msg: Message) -> bytes:
     """Encode a message to msgpack bytes (validating it first, so bad data never leaves).
 
     Raises:
         ProtocolError: If the message does not satisfy its own schema.
     """
-    out: dict[str, Any] = {"_type": msg.TYPE, "_v": SCHEMA_VERSION}
+    version = written_version(msg)
+    out: dict[str, Any] = {"_type": msg.TYPE, "_v": version}
     for f in _layout(type(msg))[0]:
+        if f.since > version:  # at its default: the version written did not have it
+            continue
         value = getattr(msg, f.name)
         if f.wire is not None:
             src = np.asarray(value)

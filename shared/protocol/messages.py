@@ -113,9 +113,13 @@ class DemoMarker(Message):
         if self.n_samples < 0:
             raise _err(self.TYPE, "n_samples", f"must be >= 0, got {self.n_samples}")
 
+    def since(self) -> int:
+        """The version that added this marker's event (``lost``: 2; :data:`EVENT_SINCE`)."""
+        return EVENT_SINCE.get(self.event, 1)
+
     def check_version(self, version: int) -> None:
         """Refuse an event added after ``version`` (``lost``: 2), reason ``version``: its sender knew no such event."""
-        since = EVENT_SINCE.get(self.event, 1)
+        since = self.since()
         if version < since:
             raise _err(self.TYPE, "event", f"{self.event!r} came with schema version {since}; this message is "
                        f"version {version}", "version")

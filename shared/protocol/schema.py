@@ -17,7 +17,8 @@ __all__ = ["SCHEMA_VERSION", "READABLE_VERSIONS", "REASONS", "ProtocolError", "A
            "field_error"]
 
 SCHEMA_VERSION = 2
-"""The version every message is written with. 2 added ``ClassPosterior.familiar`` and ``.familiarity``."""
+"""This build's schema version: 2 added ``ClassPosterior.familiar`` and ``.familiarity`` and the ``DemoMarker`` event
+``lost``. A message is written with the lowest version that holds it (``codec.written_version``)."""
 READABLE_VERSIONS = (1, 2)
 """Versions a receiver decodes: a field :func:`added` after a message's version takes its default (a version-1
 ``ClassPosterior`` is familiar), and must not be in its payload."""
@@ -92,6 +93,10 @@ class Message:
 
     def check_version(self, version: int) -> None:
         """Values a message of schema ``version`` (older than this build's) cannot hold; raise ProtocolError."""
+
+    def since(self) -> int:
+        """The first schema version that holds this message's values (its added fields: ``codec.written_version``)."""
+        return 1
 
 
 def field_error(msg_type: str, field: str, text: str, reason: str = "invariant") -> ProtocolError:

@@ -51,7 +51,8 @@ def message_json_schema(cls: type[Message]) -> dict[str, Any]:
     hints = typing.get_type_hints(cls)
     props: dict[str, Any] = {
         "_type": {"const": cls.TYPE, "description": "message type name"},
-        "_v": {"enum": list(READABLE_VERSIONS), "description": f"schema version (written: {SCHEMA_VERSION})"},
+        "_v": {"enum": list(READABLE_VERSIONS), "description": "schema version: the lowest that holds the message "
+               f"(this build's: {SCHEMA_VERSION})"},
     }
     later: dict[int, list[str]] = {}  # version -> the fields it added
     scalar = {float: {"type": "number"}, int: {"type": "integer"}, bool: {"type": "boolean"},

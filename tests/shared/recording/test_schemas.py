@@ -41,7 +41,7 @@ def test_a_version_1_payload_fits_its_channels_schema_and_a_version_2_one_too() 
 
     schema = message_json_schema(ClassPosterior)
     post = ClassPosterior(stamp=1.0, tick=-1, demo_id=0, index=3, class_names=["a", "b"],
-                          posterior=np.array([0.25, 0.75]), log_likelihood=np.array([-1.0, -2.0]))
+                          posterior=np.array([0.25, 0.75]), log_likelihood=np.array([-1.0, -2.0]), familiarity=-2.5)
     v2 = as_json(encode(post))
     jsonschema.validate(v2, schema)
     v1 = {k: v for k, v in v2.items() if k not in ("familiar", "familiarity")} | {"_v": 1}
