@@ -18,8 +18,9 @@ No Zenoh here. Per keypoint frame (``HumanKeypoints``: names, positions (K, 3) i
 4. the features are smoothed by a One-Euro filter (:mod:`.filters`);
 5. a gap (dropped or refused frames) up to ``max_gap_s`` is bridged: the missing frames, at the sensor's
    period (:mod:`.rate`: a burst's intervals left out, so it never makes the bridge invent frames between the
-   next regular ones), are interpolated between the frames on either side; a longer gap loses the reach under way
-   (a ``lost`` marker: not ended, the person's whereabouts unknown) and starts afresh;
+   next regular ones), are interpolated between the frames on either side; a longer gap loses the person (a
+   ``lost`` marker of the reach under way, or of the ended demonstration that showed them: their whereabouts
+   unknown) and starts afresh;
 5b. a sensor whose rate is more than 10 % off the motion library's (``pose_rate_hz``, 30) has its frames resampled
    to that rate (:mod:`.resample`): the predictor reads a pose's index as its time;
 6. the reach rule (:mod:`.reach`) says when a reach starts and ends, and :mod:`.demos` makes the demonstrations
@@ -83,7 +84,7 @@ class TrackerConfig:
     max_speed_mps: float = opt(6.0, help="refuse a frame one of whose fitted joints moved faster than this since the "
                                "last accepted frame (m/s; a fast reach's hand: 2-4)")
     max_gap_s: float = opt(0.3, help="bridge a gap in the frames up to this long (interpolated); a longer one "
-                           "ends the reach under way")
+                           "loses the person (the reach under way, or the demonstration that showed them)")
     min_cutoff_hz: float = opt(1.5, help="One-Euro smoothing: the cutoff on a still person (Hz)")
     beta: float = opt(0.3, help="One-Euro smoothing: how fast the cutoff rises with speed")
     start_m: float = opt(0.10, help="a reach starts when the right wrist is this far from its rest position (m)")
@@ -92,9 +93,10 @@ class TrackerConfig:
     pre_s: float = opt(0.3, help="a reach's first pose is this long before the start threshold was crossed (s)")
     rest_s: float = opt(1.0, help="the hand's rest position is learnt over this long after a (re)start; no reach "
                         "starts before (s)")
-    announce_rest: bool = opt(True, help="once the rest position is learnt (at a track's start, and after a lost "
-                              "reach), publish the person at rest as a short demonstration (class 'rest'): the "
-                              "robot moves around its prediction instead of waiting for the first reach")
+    announce_rest: bool = opt(True, help="once the rest position is learnt and the body is still (at a track's "
+                              "start, after a loss, and for an executor that appears), publish the person at rest "
+                              "as a short demonstration (class 'rest'): the robot moves around its prediction "
+                              "instead of waiting for the first reach")
     max_reach_s: float = opt(10.0, help="a reach ends after this long in any case (s)")
     moved_m: float = opt(0.10, help="after a demonstration's end, the person has moved away (its prediction no longer "
                          "says where they are: 'lost', the robot holds until they are seen again) once their pelvis "
@@ -251,7 +253,7 @@ class TrackerCore:
             dt = stamp - self._raw[0]
             moved = np.linalg.norm(joints - self._joints, axis=-1)
             j = int(np.argmax(moved))
-            if self._jump is not None and self._follows(self._jump, joints, stamp):
+            if self._jump is not None and self._follows(self._jump, joints, stamp, moved):
                 # the body of the refused frames goes on (another person, a re-identified skeleton): never glide
                 # over to it once the time since the last accepted frame has grown; JUMP_CONFIRM frames of it in a
                 # row, and it is taken as a new track (the reach under way ends)
@@ -261,7 +263,7 @@ class TrackerCore:
                     return self._refuse("jump", f"the body of the frame refused before goes on ({n} of "
                                         f"{JUMP_CONFIRM} frames): another person?")
                 out.messages += self._lost(self._raw[0])
-            elif moved[j] / dt > self.config.max_speed_mps:
+            elif moved[j] > max(self.config.max_speed_mps * dt, 2 * self.config.max_residual_m):
                 self._jump = (stamp, joints, 1)
                 return self._refuse("jump", f"{POINT_NAMES[j]} at {moved[j] / dt:.1f} m/s since the last frame")
             else:
@@ -310,11 +312,18 @@ class TrackerCore:
                if self.unfitted else "the others refused")
         return f"{sent_hz:.0f} frames a second ({taken_hz:.0f} a second taken: {why})"
 
-    def _follows(self, refused: tuple[float, np.ndarray, int], joints: np.ndarray, stamp: float) -> bool:
-        """Whether ``joints`` ``(J, 3)`` at ``stamp`` continue the body of the frame last refused as a jump."""
+    def _follows(self, refused: tuple[float, np.ndarray, int], joints: np.ndarray, stamp: float,
+                 moved: np.ndarray) -> bool:
+        """Whether ``joints`` ``(J, 3)`` at ``stamp`` continue the body of the frame last refused as a jump.
+
+        And not the track's own body (``moved``: ``(J,)`` each joint's distance from the last accepted frame): a
+        still person under noise (3 cm at 30 Hz, 2 cm at 60) had a frame refused, and the next ones, near both
+        bodies, taken for another person's after three: the track started afresh (a review: 6 in 30 s at 60 Hz).
+        """
         last_t, last_joints, _ = refused
         dt = max(stamp - last_t, MIN_PERIOD_S)
-        return float(np.max(np.linalg.norm(joints - last_joints, axis=-1))) / dt <= self.config.max_speed_mps
+        near = float(np.max(np.linalg.norm(joints - last_joints, axis=-1)))
+        return near / dt <= self.config.max_speed_mps and near < 0.5 * float(np.max(moved))
 
     def _outside(self, pelvis: np.ndarray) -> str:
         """Where the observed pelvis ``(3,)`` lies beyond the fit's pelvis bounds, in words ('' if within)."""

@@ -124,7 +124,7 @@ class Demonstrations:
         msgs.append(self._pose(t, f, body))
         if event is not None and event.event == "end":
             self._ended_at = t  # no pose of the ended reach is a pose of the next one
-            return msgs + [self._end(t)]
+            return msgs + [self._end(t, whole=not event.forced)]
         return msgs
 
     def lose(self, last: float, recording_ended: bool = False) -> list[Message]:
@@ -202,8 +202,14 @@ class Demonstrations:
         return DemoMarker(stamp=t, tick=-1, demo_id=self.demo_id, event="start", true_class=-1,
                           class_name=class_name, n_samples=0)
 
-    def _end(self, t: float) -> DemoMarker:
-        self._shown = np.array(self._path)
+    def _end(self, t: float, whole: bool = True) -> DemoMarker:
+        """The end marker; the demonstration's places kept, to tell when the person has left them.
+
+        ``whole`` False (a reach ended by ``max_s``, the hand still moving: no reach, a walk with the arm swinging,
+        say): only its last pose's places. A review: a walk taken for a 10 s reach left its whole path as the
+        person's places, and walking on along it with the arm still was no loss.
+        """
+        self._shown = np.array(self._path if whole else self._path[-1:])
         return self._marker(t, "end", self._class)
 
     def _pose(self, t: float, f: np.ndarray, body: np.ndarray) -> HumanPose:

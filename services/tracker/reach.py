@@ -70,10 +70,11 @@ class ReachRule:
 
 @dataclass(frozen=True)
 class ReachEvent:
-    """``"start"`` (with the stamp of the reach's first pose) or ``"end"``."""
+    """``"start"`` (with the stamp of the reach's first pose) or ``"end"`` (``forced``: by ``max_s``, hand moving)."""
 
     event: str
     stamp: float
+    forced: bool = False
 
 
 class ReachDetector:
@@ -146,7 +147,7 @@ class ReachDetector:
                     self._rest = stop  # back home (a reach out and back within the window)
             else:  # ended by max_s while the hand still moves: where it rests is learnt again, over rest_s
                 self._since = self._rest = None
-            return ReachEvent("end", t)
+            return ReachEvent("end", t, forced=not still)
         return None
 
     def _returning(self, w: np.ndarray, t: float) -> None:

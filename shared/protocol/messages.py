@@ -81,8 +81,9 @@ class HumanPose(Message):
 
 
 DEMO_EVENTS = ("start", "end", "lost")
-"""A ``DemoMarker``'s events: a demonstration (a reach) starts, ends, or is lost mid-way (the tracker lost the person:
-where they went is unknown). ``lost`` came with schema version 2 (:data:`EVENT_SINCE`)."""
+"""A ``DemoMarker``'s events: a demonstration (a reach) starts, ends, or is lost, mid-way or after its end (the tracker
+lost the person, or they moved away from where it showed them: where they are is unknown). ``lost`` came with schema
+version 2 (:data:`EVENT_SINCE`)."""
 
 EVENT_SINCE = {"lost": 2}
 """The schema version that added each later ``DemoMarker`` event: an older message carrying it is refused."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from services.executor.config import ExecutorConfig
 from services.executor.core import ArmLimits, ExecutorCore
@@ -239,3 +240,37 @@ def test_a_15_hz_sensor_s_person_at_rest_is_said_with_poses_on_the_library_s_clo
     assert _markers(msgs) == [("start", 0, AT_REST), ("end", 0, AT_REST)]
     stamps = [m.stamp for m in msgs if isinstance(m, HumanPose)]
     assert len(stamps) >= 5 and np.allclose(np.diff(stamps), 1 / RATE)
+
+
+@pytest.mark.parametrize(("rate", "noise", "seconds"), [(60.0, 0.02, 20.0), (30.0, 0.03, 10.0)])
+def test_a_person_standing_still_under_a_noisy_fast_sensor_is_never_lost(reach, rate: float, noise: float,
+                                                                            seconds: float) -> None:
+    """A review: a frame refused as a jump for its noise (a hand 'at 6.7 m/s' between two 60 Hz frames), and the next
+    ones, near the track's body and the refused one alike, taken for another person after three: each new track was
+    a 'lost' and a second's hold (60 Hz, 2 cm: 6 in 30 s, the robot held 21 s)."""
+    rng = np.random.default_rng(1)
+    core = TrackerCore()
+    msgs = []
+    for i, p in enumerate(MODEL.joint_positions(np.repeat(reach[:1], int(seconds * rate), 0))):
+        msgs += core.on_frame(i / rate, NAMES, p + rng.normal(0.0, noise, p.shape)).messages
+    events = _markers(msgs)
+    assert events[:2] == [("start", 0, AT_REST), ("end", 0, AT_REST)] and core.demos.rests == 1, events
+    assert not [e for e in events if e[0] == "lost"] and core.demos.unseen == 0, core.refused
+
+
+def test_a_walk_taken_for_a_reach_ended_by_its_time_limit_leaves_only_its_last_place(reach) -> None:
+    """A review: a walk with the arm swinging is a 'reach' until max_reach_s ends it; its whole path was kept as the
+    person's places, and walking on along it with the arm still was no loss (the robot went on, the person 0.6 m
+    from its prediction). A reach ended by the time limit keeps only its last pose's places."""
+    n = 330  # 11 s: pelvis out 0.8 m and back every 5.5 s, the arm swinging
+    t = np.arange(n) / RATE
+    walk = np.repeat(reach[:1], n, 0)
+    walk[:, PELVIS_X] += 0.4 * (1 - np.cos(2 * np.pi * t / 5.5))
+    walk[:, 7] += 0.5 * np.sin(2 * np.pi * t)  # r_shoulder_x
+    on = np.repeat(walk[-1:], 30, 0)
+    on[:, 7] = reach[0, 7]
+    on[:, PELVIS_X] += np.linspace(0.0, 0.5, 30)  # then on along it, the arm still
+    msgs = _feed(TrackerCore(), np.concatenate([np.repeat(reach[:1], 60, 0), walk, on]))
+    events = _markers(msgs)
+    assert ("end", 1, LIVE_CLASS) in events and events[events.index(("end", 1, LIVE_CLASS)) + 1] == (
+        "lost", 1, LIVE_CLASS)
