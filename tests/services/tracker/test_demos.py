@@ -274,3 +274,17 @@ def test_a_walk_taken_for_a_reach_ended_by_its_time_limit_leaves_only_its_last_p
     events = _markers(msgs)
     assert ("end", 1, LIVE_CLASS) in events and events[events.index(("end", 1, LIVE_CLASS)) + 1] == (
         "lost", 1, LIVE_CLASS)
+
+
+def test_a_body_that_moves_first_is_lost_and_its_reach_starts_as_it_would_have(reach) -> None:
+    """Losing the person relearnt the hand's rest, and held back by a second each reach whose body moved first (the
+    paper library's compound_0 #0 and #3 lean before the wrist leaves its rest: 39 frames after the onset, not 14
+    and 9). The rest is the hand's in the body's frame: it stands, and the reach starts when it would have."""
+    leaning = reach.copy()
+    onset = next(i for i in range(30, len(reach)) if np.abs(reach[i] - reach[0]).max() > 0.02)
+    leaning[onset:, PELVIS_X] += np.minimum(np.arange(len(reach) - onset) / 10, 1.0) * 0.15  # 15 cm in 1/3 s
+    msgs = _feed(TrackerCore(), leaning)
+    still = _feed(TrackerCore(TrackerConfig(moved_m=10.0)), leaning)  # never moved away
+    starts = [[m.stamp for m in ms if isinstance(m, DemoMarker) and m.event == "start" and m.class_name == LIVE_CLASS]
+              for ms in (msgs, still)]
+    assert ("lost", 0, AT_REST) in _markers(msgs) and starts[0] == starts[1] and len(starts[0]) == 1
