@@ -128,29 +128,34 @@ def test_a_sensors_reach_becomes_poses_between_markers(zenoh_hub) -> None:
     assert stats.frames == len(frames) and stats.reaches == 1 and sum(stats.refused.values()) == 0
 
 
-def test_a_sensor_gone_quiet_mid_reach_loses_the_reach_at_once(zenoh_hub) -> None:
-    hub = zenoh_hub
+def _gone_quiet(hub, frames: np.ndarray) -> tuple[Collector, list[HumanKeypoints]]:
+    """A tracker sent ``frames`` at 30 Hz, then nothing: what it published (once its ``lost`` came), what was sent."""
     tester = hub()
     keys = Keys(tester.prefix)
-    frames = _reach_frames()
-    half = 45 + (len(frames) - 90) // 2  # the hold, then half of the reach: then the sensor stops
     with open_session(tester) as session:
         service, thread = _service(hub, session, keys)
         try:
             got = Collector(session, keys)
             pub = _sensor(session, keys)
             sent = []
-            for i, pos in enumerate(frames[:half]):
+            for i, pos in enumerate(frames):
                 sent.append(_kp(i, pos))
                 pub.put(sent[-1])
                 time.sleep(1 / 30)
-            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "start" for m in items))
             assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "lost" for m in items),
-                            timeout=10.0)  # no further frame came: the silence lost it (not at rest: no 'end')
-            assert thread.thread.is_alive()  # the tracker goes on, ready for the next reach
-            end = got.markers()[-1]
+                            timeout=10.0)  # no further frame came: the silence lost it
+            assert thread.thread.is_alive()  # the tracker goes on, ready for the next person
         finally:
             thread.stop()
+    return got, sent
+
+
+def test_a_sensor_gone_quiet_mid_reach_loses_the_reach_at_once(zenoh_hub) -> None:
+    frames = _reach_frames()
+    half = 45 + (len(frames) - 90) // 2  # the hold, then half of the reach: then the sensor stops
+    got, sent = _gone_quiet(zenoh_hub, frames[:half])
+    end = got.markers()[-1]
+    assert [m.event for m in got.markers()][-2:] == ["start", "lost"]  # not at rest: no 'end'
     assert end.stamp == sent[-1].stamp
     assert end.n_samples == sum(isinstance(m, HumanPose) and m.demo_id == end.demo_id for m in got.items)
 
@@ -159,25 +164,7 @@ def test_a_sensor_gone_quiet_after_the_person_was_seen_at_rest_loses_them_on_the
     """The person at rest said, then the sensor quiet (the person out of view): nothing was published, and the
     executor went on around the rest's prediction, nobody watching. Now a `lost` of that demonstration, after its
     end (which the receivers' order rule refused before)."""
-    hub = zenoh_hub
-    tester = hub()
-    keys = Keys(tester.prefix)
-    still = np.repeat(_reach_frames()[:1], 60, 0)  # 2 s at rest
-    with open_session(tester) as session:
-        service, thread = _service(hub, session, keys)
-        try:
-            got = Collector(session, keys)
-            pub = _sensor(session, keys)
-            sent = []
-            for i, pos in enumerate(still):
-                sent.append(_kp(i, pos))
-                pub.put(sent[-1])
-                time.sleep(1 / 30)
-            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "lost" for m in items),
-                            timeout=10.0)
-            assert thread.thread.is_alive()
-        finally:
-            thread.stop()
+    got, sent = _gone_quiet(zenoh_hub, np.repeat(_reach_frames()[:1], 60, 0))  # 2 s at rest
     assert [(m.event, m.demo_id, m.class_name) for m in got.markers()] == [
         ("start", 0, AT_REST), ("end", 0, AT_REST), ("lost", 0, AT_REST)]
     assert got.markers()[-1].stamp == sent[-1].stamp  # at the last frame seen
