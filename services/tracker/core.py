@@ -25,7 +25,7 @@ No Zenoh here. Per keypoint frame (``HumanKeypoints``: names, positions (K, 3) i
    to that rate (:mod:`.resample`): the predictor reads a pose's index as its time;
 6. the reach rule (:mod:`.reach`) says when a reach starts and ends, and :mod:`.demos` makes the demonstrations
    the predictor reads: ``DemoMarker`` start and end, the poses in between as ``HumanPose`` (index 0, 1, ... from
-   the start; ``demo_id`` one per demonstration), and once per track the person seen at rest (a short demonstration
+   the start; ``demo_id`` one per demonstration), and the person seen at rest (a short demonstration
    of its own, class ``AT_REST``). Between them nothing is published.
 
 Every refused frame is counted by reason (:attr:`TrackerCore.refused`) and named in :attr:`TrackerOutput.refused`.
@@ -384,8 +384,8 @@ class TrackerCore:
     def _frame(self, t: float, f: np.ndarray) -> list[Message]:
         """A smoothed frame through the reach rule: the markers and poses it gives (:mod:`.demos`).
 
-        ``on_clock``: the sensor's rate is known, so this pose is on the library's clock (resampled, or a frame
-        within 10 % of it); a 15 Hz sensor's rate is known after a second, as its person at rest was said, with
-        the poses of its last 0.3 s at 15 a second (the predictor reads their indices as time).
+        It is on the library's clock once the sensor's rate is known (resampled, or a frame within 10 % of it); a 15 Hz
+        sensor's rate is known after a second, as its person at rest was said, with the poses of its last 0.3 s at
+        15 a second (the predictor reads their indices as time).
         """
         return self.demos.frame(t, f, on_clock=self.rate.hz is not None)

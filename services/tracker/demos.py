@@ -6,7 +6,8 @@ The predictor recognises demonstrations as the recorder gave them: a ``DemoMarke
 - **reaches**, from the reach rule (:mod:`.reach`): a start (its first pose ``pre_s`` before the threshold was
   crossed), the poses, and an ``end`` when the hand has come to rest, or ``lost`` when the tracker loses the person
   mid-reach (a gap, another body, the tracker stopping: where the person went is unknown);
-- **the person at rest**: once per track (the first, and each after a loss), when the rule has learnt where the hand
+- **the person at rest**: once per track (the first, each after a loss, and for an executor that appears:
+  :meth:`Demonstrations.say_again`), unless a reach says the person first, when the rule has learnt where the hand
   rests and the body stands still, a short demonstration of the person at rest (class name
   :data:`~shared.protocol.AT_REST`, the last ``pre_s`` of frames, at most 10 poses), ended at once. The predictor
   predicts from it where the person may reach (every class's volume by its posterior, as at the start of any
@@ -58,7 +59,7 @@ class Demonstrations:
     Args:
         rule: The reach rule's thresholds.
         model: The human model (the wrist's position from the features).
-        announce_rest: Publish the person seen at rest once per track.
+        announce_rest: Publish the person seen at rest (once per track, and again after a loss or for an executor).
         moved_m: The person has moved away once their pelvis or a shoulder is this far (m) from every place the
             last demonstration showed it in.
 
