@@ -157,6 +157,9 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     """
     scene = load_scene(cfg.scene or None)
     run_dir = Path(cfg.run_dir)
+    if stop.is_set():  # Ctrl-C during the imports: preparing (loading or training the model) went on for 6 s or more
+        out("foresight demo: interrupted before the run was prepared; no service had started, nothing was recorded")
+        return 130, None
     try:
         with interruptible(stop):  # training checks no stop event: Ctrl-C cuts it short at once
             scenario, model, replay_lib = prepare_inputs(cfg, scene, run_dir, out)
