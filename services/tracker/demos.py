@@ -37,7 +37,7 @@ from shared.human import HumanModel
 from shared.keypoints.fit import POINT_NAMES
 from shared.protocol import AT_REST, DemoMarker, HumanPose, Message
 
-from .reach import ReachDetector, ReachRule, body_wrist
+from .reach import ReachDetector, ReachRule, body_wrist, spread
 
 __all__ = ["Demonstrations", "REST_POSES", "LIVE_CLASS", "reach_messages", "reach_poses"]
 
@@ -106,7 +106,7 @@ class Demonstrations:
         event = self.reach.update(body_wrist(joints), t)
         msgs: list[Message] = []
         if event is None and not self.reach.active and self._moved_away(body):
-            return self._unseen(t)  # the rest is learnt again, and said again once the body is still
+            return self._unseen(t)  # said again once the body is still, unless a reach starts first
         if event is not None and event.event == "start":
             self._rest_said = True  # the person seen, reaching: no rest (of a moving hand) to say, now or at its end
         elif (self.announce_rest and not self._rest_said and event is None and not self.reach.active
@@ -174,8 +174,7 @@ class Demonstrations:
         """
         if self._body[-1][0] - self._body[0][0] < self.rule.end_s - 1e-9:
             return False
-        body = np.array([b for _, b in self._body])
-        return bool(np.sqrt(np.mean(np.sum((body - body.mean(axis=0)) ** 2, axis=-1))) < self.rule.end_m)
+        return spread(np.array([b for _, b in self._body])) < self.rule.end_m
 
     def _unseen(self, t: float) -> list[Message]:
         """The ended demonstration lost at ``t``: the person is no longer where it showed them.

@@ -33,7 +33,7 @@ import numpy as np
 
 from shared.keypoints.fit import POINT_NAMES
 
-__all__ = ["ReachRule", "ReachDetector", "ReachEvent", "body_wrist"]
+__all__ = ["ReachRule", "ReachDetector", "ReachEvent", "body_wrist", "spread"]
 
 _WRIST, _PELVIS = POINT_NAMES.index("r_wrist"), POINT_NAMES.index("pelvis")
 _SHOULDERS = POINT_NAMES.index("r_shoulder"), POINT_NAMES.index("l_shoulder")
@@ -176,5 +176,9 @@ class ReachDetector:
         r = self.rule
         if self._window[-1][0] - self._window[0][0] < r.end_s - 1e-9 or len(self._window) < 4:
             return False
-        p = np.array([w for _, w in self._window])
-        return bool(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=-1))) < r.end_m)
+        return spread(np.array([w for _, w in self._window])) < r.end_m
+
+
+def spread(points: np.ndarray) -> float:
+    """The rms distance of positions ``(N, ..., 3)`` from their mean over the ``N`` frames (m): how still they are."""
+    return float(np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=-1))))
