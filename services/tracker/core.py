@@ -319,11 +319,15 @@ class TrackerCore:
         And not the track's own body (``moved``: ``(J,)`` each joint's distance from the last accepted frame): a
         still person under noise (3 cm at 30 Hz, 2 cm at 60) had a frame refused, and the next ones, near both
         bodies, taken for another person's after three: the track started afresh (a review: 6 in 30 s at 60 Hz).
+        And a body elsewhere as a whole: most of its joints (the median) further from the track's than the fit's
+        tolerance allows over two frames; noise and a swapped point move a few joints (60 Hz, 3 cm: the frames
+        taken for another person lay a median 5-9 cm from the track, a person beside it lies half a metre away).
         """
         last_t, last_joints, _ = refused
         dt = max(stamp - last_t, MIN_PERIOD_S)
         near = float(np.max(np.linalg.norm(joints - last_joints, axis=-1)))
-        return near / dt <= self.config.max_speed_mps and near < 0.5 * float(np.max(moved))
+        elsewhere = float(np.median(moved)) > 2 * self.config.max_residual_m
+        return near / dt <= self.config.max_speed_mps and near < 0.5 * float(np.max(moved)) and elsewhere
 
     def _outside(self, pelvis: np.ndarray) -> str:
         """Where the observed pelvis ``(3,)`` lies beyond the fit's pelvis bounds, in words ('' if within)."""
