@@ -251,7 +251,7 @@ class ExecutorCore:
         end = self.fresh.demo_end
         return end is not None and self.fresh.occupancy_of == end
 
-    def note_peer(self, service: str, alive: bool) -> None:
+    def note_peer(self, service: str, alive: bool) -> bool:
         """Record that ``service``'s liveliness token appeared (``alive``) or was lost.
 
         While a service of ``hold_without`` is gone the robot holds, whatever the age of its last output. A human's
@@ -259,13 +259,16 @@ class ExecutorCore:
         middle of a demonstration: after its end marker the human stands still and its stream may end. A live one
         (the tracker) going at any time means nobody watches the person: before, a tracker killed after a reach's
         end let the robot go on around that reach's last prediction for good.
+
+        Returns:
+            Whether it was a recording's stream ending after its end marker (no fault, nothing changed).
         """
         if alive:
             self.seen = self.seen | {service}
         if service not in self.config.hold_without:
-            return
+            return False
         if service in self.config.recorded_sources and not alive and self.fresh.demo_end is not None:
-            return  # the recording's stream ended (its end marker came first): the human stands still, no fault
+            return True  # the recording's stream ended (its end marker came first): the human stands still
         if service in HUMAN_SOURCES and service not in self.config.recorded_sources and not alive \
                 and self.fresh.last_demo is not None:
             # back (a lost link) or started anew (a crash, restarted), it must say the person again: its last
@@ -273,6 +276,7 @@ class ExecutorCore:
             # that appears)
             self.fresh.lost = f"the {service} was gone (its last demonstration, {self.fresh.last_demo}, may be stale)"
         self.gone = self.gone - {service} if alive else self.gone | {service}
+        return False
 
     # ------------------------------------------------------------------------------------------
     # simulation

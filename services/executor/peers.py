@@ -45,11 +45,10 @@ class PeerWatch:
                 self._say_lockstep(service, alive)
             return
         was_gone = service in core.gone
-        core.note_peer(service, alive)  # a recording ending its stream after its end marker is no fault
-        if (service in core.gone) != was_gone:
-            log.warning("executor: %s %s", service, "is back" if alive else "is gone: holding the robot")
-        elif service in self.config.recorded_sources and service in self.config.hold_without and not alive:
+        if core.note_peer(service, alive):  # a recording ending its stream after its end marker is no fault
             log.info("executor: %s ended its stream after the demonstration's end: the robot goes on", service)
+        elif (service in core.gone) != was_gone:
+            log.warning("executor: %s %s", service, "is back" if alive else "is gone: holding the robot")
 
     def _say_lockstep(self, service: str, alive: bool) -> None:
         if not alive and service not in self.gone_lockstep:

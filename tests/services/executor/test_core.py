@@ -284,12 +284,13 @@ def test_holds_while_a_service_it_depends_on_is_gone_and_not_after():
     core.step(0.02)
     assert not core.holding
     core.note_demonstration("end", 3, 100)
-    core.note_peer("replayer", False)  # after its end marker: the human's stream may end
+    assert core.note_peer("replayer", False)  # after its end marker: the human's stream may end (said so)
     core.step(0.02)
     assert not core.holding
-    core.note_peer("replayer", True)
+    assert not core.note_peer("replayer", True)
     core.note_demonstration("start", 4, 100)
-    core.note_peer("replayer", False)  # in the middle of a demonstration: the human is unobserved
+    assert not core.note_peer("replayer", False)  # in the middle of a demonstration: the human is unobserved
+    assert not core.note_peer("replayer", False)  # told twice: still no stream's end to say
     core.step(0.02)
     assert core.holding and core.reason == "replayer gone (liveliness token lost)"
     core.note_peer("replayer", True)
