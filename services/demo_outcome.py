@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from services.experiments.measures import body_clearance, contact_summary, interference, postures_at
+from services.experiments.measures import contact_summary, interference, postures_at
+from shared.clearance import body_clearance
 from shared.protocol import HumanPose, OccupancyGrid, RobotState
 from shared.scene import Scene
 

@@ -162,6 +162,16 @@ class Scene:
         """What :func:`load_scene` takes to load this scene again: its embedded name, else its file path."""
         return self.name if self.source == f"{self.name}.toml" else self.source
 
+    def text(self) -> str | None:
+        """The scene file's text (its file, else the embedded one of that name), or None where neither is found."""
+        from importlib import resources
+
+        path = Path(self.source)
+        if path.is_file():
+            return path.read_text()
+        res = resources.files("shared") / "data" / "scenes" / path.name
+        return res.read_text() if res.is_file() else None
+
     def cup(self, name: str) -> Cup:
         """The cup called ``name``."""
         for c in self.cups:

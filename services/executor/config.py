@@ -8,14 +8,14 @@ from pathlib import Path
 
 from services.ros2.domain import UNREADABLE_DOMAIN, check_domain_id, ros_domain_id
 from services.ros2.wire import ROS_NAME, topic_problem
-from shared.config import LOG_LEVELS, ConfigError, opt
+from shared.config import LOG_LEVELS, ConfigError, nested, opt
 from shared.config_names import check_services
 from shared.devices import check_device
 from shared.protocol import HUMAN_SOURCES, SERVICES
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.scene import SCENE_HELP
 
-__all__ = ["ExecutorConfig", "ExecutorError", "ROBOTS", "check_robot_names"]
+__all__ = ["ExecutorConfig", "ExecutorError", "SeparationConfig", "ROBOTS", "check_robot_names"]
 
 ROBOTS = ("sim", "ros2")
 """What the executor drives: its own simulated arm, or a ROS 2 robot's joint_trajectory_controller."""
@@ -37,6 +37,21 @@ def check_robot_names(controller: str, joint_states: str, prefix: str) -> None:
 
 class ExecutorError(ValueError):
     """A plan or configuration the executor cannot use; the message names what is wrong."""
+
+
+@dataclass
+class SeparationConfig:
+    """The separation guard's options (``[executor.separation]``; :mod:`services.executor.separation`)."""
+
+    stop_m: float = opt(0.10, help="real time: a robot nearer the person's body than this (m, its collision spheres to "
+                        "the body's capsules) makes no move that brings it closer; it holds until a move keeps or "
+                        "widens the gap (0.10: the keypoint fit's tolerance, 8 cm, and a depth camera's 2 cm of "
+                        "noise); 0: off")
+
+    def validate(self) -> None:
+        """Raise :class:`ConfigError` naming a bad value."""
+        if not (self.stop_m >= 0 and math.isfinite(self.stop_m)):
+            raise ConfigError(f"executor.separation.stop_m: must be a finite number >= 0 (0: off), got {self.stop_m}")
 
 
 @dataclass
@@ -99,9 +114,12 @@ class ExecutorConfig:
     ros2_domain_id: int = opt(default_factory=lambda: ros_domain_id(), help="robot=ros2: the ROS 2 domain id "
                               "(default: $ROS_DOMAIN_ID, else 0)")
     log_level: str = opt("INFO", help="log level", choices=LOG_LEVELS)
+    separation: SeparationConfig = nested(SeparationConfig, help="real time: the separation guard (no move closer to "
+                                          "the person once within stop_m; docs/executor.md)")
 
     def validate(self) -> None:
         """Check ranges; raises ConfigError naming the option."""
+        self.separation.validate()
         positive = ("step_period_s", "state_rate_hz", "stale_limit_s", "goal_tolerance", "velocity_scale",
                     "lockstep_timeout_s", "startup_timeout_s", "viz_rate_hz")
         for name in positive:

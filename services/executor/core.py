@@ -12,7 +12,8 @@ adopted (:meth:`ExecutorCore.adopt`) and at which time a message counts as recei
 (:meth:`ExecutorCore.note_occupancy`). Safety: :meth:`ExecutorCore.stale_reason` says why the robot
 must hold (zero velocity) -- no plan yet, the latest plan or occupancy older than ``stale_limit_s``,
 or a service it depends on gone (:meth:`ExecutorCore.note_peer`) -- and the reference's own clock
-stops while the robot holds, so execution resumes where it stopped when fresh data arrives.
+stops while the robot holds, so execution resumes where it stopped when fresh data arrives. A ``guard`` (real time:
+the separation guard, :mod:`services.executor.separation`) may refuse a step by saying why: the robot holds as well.
 :func:`reason_kind` tells a change of hold reason from the same reason with another age (what the
 service logs once).
 """
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -179,6 +181,8 @@ class ExecutorCore:
         self.gone: frozenset[str] = frozenset()  # services of hold_without whose token was lost (replaced, never
         # mutated: the transport's thread writes it while the loop reads it)
         self.seen: frozenset[str] = frozenset()  # services whose token was seen (replaced the same way)
+        self.guard: Callable[[np.ndarray, np.ndarray], str] | None = None  # (q, q_next) -> why not to step there
+        # (the separation guard, real time: services.executor.separation), or None
 
     # ------------------------------------------------------------------------------------------
     # inputs
@@ -336,10 +340,15 @@ class ExecutorCore:
                 scale = float(np.max(np.abs(v) / vmax))
                 if scale > 1.0:
                     v = v / scale
-            self.tau += advance
             q_new = self.limits.clamp(self.q + v * h)
-            self.qd = (q_new - self.q) / h
-            self.q = q_new
+            why = self.guard(self.q, q_new) if self.guard is not None else ""
+            if why:  # the step would close in on the person: the robot and its reference's clock stay
+                self.holding, self.reason = True, why
+                self.qd = np.zeros(self.limits.dof)
+            else:
+                self.tau += advance
+                self.qd = (q_new - self.q) / h
+                self.q = q_new
         self.t += h
         self._update_reached()
 

@@ -19,6 +19,8 @@ class ExecutorResult:
             ``reached_steps`` the first step each goal (index) was, where the robot switched goals.
         goal_per_step: Goal index executed during each step (-1: none yet).
         held_steps: Steps (lock-step) or state samples (real time) during which the robot held.
+        separation_holds: Of those, the state samples held by the separation guard (real time: a step would have
+            closed in on the person within ``separation.stop_m``).
         lockstep_timeouts: Lock-step waits for a tick's plan or prediction that ran out (the step went on without
             it: a run whose numbers depend on timing; the experiments refuse such a run).
         finish_steps: Steps after the last one that executed the rest of the last plan (``finish_path``).
@@ -35,6 +37,7 @@ class ExecutorResult:
     reached_steps: dict[int, int] = field(default_factory=dict)
     goal_per_step: list[int] = field(default_factory=list)
     held_steps: int = 0
+    separation_holds: int = 0
     lockstep_timeouts: int = 0
     finish_steps: int = 0
     plans: int = 0

@@ -29,7 +29,6 @@ from collections.abc import Callable
 from contextlib import ExitStack
 from datetime import UTC, datetime
 from functools import partial
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -60,6 +59,7 @@ from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, reason
 from .models import HumanBody, PlaceInScene, RobotModel, load_models, start_configuration
 from .peers import PeerWatch
 from .result import ExecutorResult
+from .separation import separation_guard
 
 if TYPE_CHECKING:
     from shared.foxglove.live import LiveServer
@@ -104,6 +104,7 @@ class ExecutorService:
         self.limits = ArmLimits.from_robot(robot)
         q0 = start_configuration(self.limits, config, robot, self.scene)
         self.core = ExecutorCore(self.limits, q0, config)
+        self.guard = self.core.guard = separation_guard(config, robot, self.scene)  # real time, else None
         self.rejects = RejectCounter("executor")
         lim = self.limits
         lockstep = config.mode == "lockstep"
@@ -180,6 +181,8 @@ class ExecutorService:
             self.inbox.put_marker(msg.event, msg.tick)
         elif key == self.keys.pose and isinstance(msg, HumanPose):
             self._pose_arrival[(msg.demo_id, msg.index)] = time.monotonic()
+            if self.guard is not None:
+                self.guard.note_pose(msg.demo_id, msg.index, msg.features)
             if len(self._pose_arrival) > POSES_KEPT:
                 self._pose_arrival.popitem(last=False)
         elif key == self.keys.occupancy and isinstance(msg, OccupancyGrid):
@@ -203,12 +206,7 @@ class ExecutorService:
         with open_session(self.zenoh, self.stop, "executor") as session, ExitStack() as closing:
             if path is not None:
                 builder = SceneBuilder(self.scene, self.robot, *self.human)
-                text = Path(self.scene.source).read_text() if Path(self.scene.source).is_file() else None
-                if text is None:
-                    from importlib import resources
-
-                    res = resources.files("shared") / "data" / "scenes" / Path(self.scene.source).name
-                    text = res.read_text() if res.is_file() else None
+                text = self.scene.text()
                 meta = {f.name: str(getattr(cfg, f.name)) for f in dataclasses.fields(cfg)}
                 meta.update(prefix=self.zenoh.prefix, joint_names=",".join(self.limits.joint_names))
                 # real time: Foxglove updates on a background thread (never ahead of a plan's receipt); lock-step:
@@ -247,6 +245,7 @@ class ExecutorService:
         r.rejects = dict(self.rejects.counts)
         r.reject_reasons = {f"{k} {why}": n for (k, why), n in sorted(self.rejects.by_reason.items())}
         r.plans = self.core.plans_adopted
+        r.separation_holds = self.guard.holds_ if self.guard is not None else 0
         r.times = np.asarray(self._times)
         r.q = np.asarray(self._qs).reshape(len(self._qs), self.limits.dof)
         if r.lockstep_timeouts:
@@ -254,6 +253,7 @@ class ExecutorService:
                         "run its seed makes (the experiments refuse such a run)", r.lockstep_timeouts,
                         self.config.lockstep_timeout_s)
         held = "steps" if self.config.mode == "lockstep" else "state samples"  # what ExecutorResult.held_steps counts
+        held += f" ({r.separation_holds} by the separation guard)" * bool(r.separation_holds)
         reached = "not reached" if not r.reached else f"reached during step {r.reached_step}" * (r.reached_step >= 0)
         log.info("executor: done after %d steps, goal %s %s, %d plans adopted, held during %d %s, %d rejected: %s",
                  r.steps, r.goal_per_step[-1] if r.goal_per_step else "none", reached or "reached", r.plans,

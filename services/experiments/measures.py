@@ -10,8 +10,8 @@
   centre's) is not counted, and one the surface only grazes can fall between the points (one sphere of
   0.17 m in 0.05 m voxels all at p = 1: 180 counted of the 294 it reaches into, 75 of them wholly
   inside). Each voxel counts once per configuration, however many points fall in it.
-* :func:`clearance` measures against the human who was really there: the distance between the
-  robot's collision spheres and the human model's body capsules, posed at the same instant.
+* :func:`body_clearance` (``shared.clearance``) measures against the human who was really there: the distance
+  between the robot's collision spheres and the human model's body capsules, posed at the same instant.
 
 Both are pure numpy/torch functions of logged data (configurations, stamps, grids, postures).
 """
@@ -26,13 +26,12 @@ import numpy as np
 import torch
 from scipy.ndimage import distance_transform_edt
 
-from shared.human import HumanModel
 from shared.protocol import OccupancyGrid
 
 __all__ = ["sphere_surface_offsets", "robot_points", "penetration_per_state", "spheres_near_occupancy", "interference",
            "interference_over_time", "penetration", "path_samples", "interference_along_path",
            "ContactSummary",
-           "postures_at", "body_clearance", "contact_summary", "NEAR_M"]
+           "postures_at", "contact_summary", "NEAR_M"]
 
 NEAR_M = 0.05
 """Clearance (m) under which the robot counts as near the human (``time_near``)."""
@@ -284,36 +283,6 @@ def interference(robot: Any, q: np.ndarray, stamps: np.ndarray, occupancy: Occup
         ``sum_{n >= 1} cost(q_n) * (t_n - t_{n-1})`` in probability-voxels x seconds (0 for N < 2).
     """
     return float(interference_over_time(robot, q, stamps, occupancy, spacing).sum())
-
-
-def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance from points to segments, broadcast: ``p (..., 3)``, ``a, b (..., 3)`` -> ``(...)``."""
-    ab = b - a
-    t = np.clip(np.sum((p - a) * ab, -1) / np.maximum(np.sum(ab * ab, -1), 1e-12), 0.0, 1.0)
-    return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
-
-
-def body_clearance(robot: Any, q: np.ndarray, postures: np.ndarray, human: HumanModel | None = None) -> np.ndarray:
-    """Clearance between the robot and the human's body at each instant.
-
-    Args:
-        robot: Robot model with ``sphere_centers`` and ``sphere_radii``.
-        q: ``(N, D)`` robot configurations.
-        postures: ``(N, 12)`` scene-frame human postures at the same instants.
-        human: The human model (default: a new :class:`HumanModel`).
-
-    Returns:
-        ``(N,)`` the smallest surface-to-surface distance (m) between any robot sphere and any body
-        capsule; negative where they overlap.
-    """
-    human = human or HumanModel()
-    qt = torch.as_tensor(np.asarray(q, dtype=np.float64), dtype=robot.lower.dtype, device=robot.lower.device)
-    with torch.no_grad():
-        centres = robot.sphere_centers(qt).double().cpu().numpy()  # (N, S, 3)
-    r_robot = robot.sphere_radii.double().cpu().numpy()  # (S,)
-    ends, r_body = human.capsules(np.asarray(postures, dtype=np.float64))  # (N, C, 2, 3), (C,)
-    d = _segment_distance(centres[:, :, None, :], ends[:, None, :, 0, :], ends[:, None, :, 1, :])  # (N, S, C)
-    return (d - r_robot[None, :, None] - np.asarray(r_body)[None, None, :]).min(axis=(1, 2))
 
 
 @dataclass(frozen=True)

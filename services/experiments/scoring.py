@@ -15,10 +15,11 @@ from typing import Any
 
 import numpy as np
 
+from shared.clearance import body_clearance
 from shared.scene import Scene
 
 from .harness import RunRecord
-from .measures import body_clearance, contact_summary, interference_along_path, interference_over_time, postures_at
+from .measures import contact_summary, interference_along_path, interference_over_time, postures_at
 
 __all__ = ["RunScore", "score_run", "executed_belief"]
 

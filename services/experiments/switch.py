@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from services.executor.result import ExecutorResult
+from shared.clearance import body_clearance
 from shared.scene import load_scene
 
 from .authors import FIG9_TRACES
@@ -36,7 +37,7 @@ from .heldout import (
     samples_per_tick,
     short_name,
 )
-from .measures import body_clearance, contact_summary, postures_at
+from .measures import contact_summary, postures_at
 from .planners import Timing, build_planner
 from .protocol import SWITCH_SCENE, authors_trial, move3d_path_weights, protocol, run_pacing
 

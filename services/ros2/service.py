@@ -16,11 +16,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import numpy as np
 import zenoh
 
 from shared.config import ConfigError, ZenohConfig, opt
 from shared.config_names import check_services
+from shared.human import StreamPlacement
 from shared.protocol import (
     SERVICES,
     ClassPosterior,
@@ -99,7 +99,7 @@ class Ros2Service:
         self._lock = threading.Lock()
         self._clock_lock = threading.Lock()  # /clock samples leave in the order their times were taken
         self._pubs: dict[str, Ros2Publisher] = {}
-        self._first_pose: tuple[int, np.ndarray] | None = None  # (demo id, its first pose): the human's placement
+        self._placement = StreamPlacement(self.scene)  # the human's, as the predictor places it
         self._last_viz: dict[str, float] = {}
         self._pending: dict[str, Callable[[], bytes]] = {}  # role -> the newest marker held back by the rate limit
         self._others: dict[str, dict[str, str]] = {"joint_states": {}, "clock": {}}  # role -> graph token -> node,
@@ -241,14 +241,10 @@ class Ros2Service:
 
     def on_human(self, msg: HumanPose | DemoMarker) -> None:
         """The human's body, placed as the predictor places it (relative to the demonstration's first pose)."""
-        from shared.human import place_in_scene
-
         if isinstance(msg, DemoMarker):
             return
-        if msg.index == 0 or self._first_pose is None or self._first_pose[0] != msg.demo_id:  # ids restart with a run
-            self._first_pose = (msg.demo_id, np.asarray(msg.features, dtype=np.float64))
-        first = self._first_pose[1]
-        self._viz("human", lambda: self.mapping.human(msg, place_in_scene(msg.features, first, self.scene)))
+        placed = self._placement.place(msg.demo_id, msg.index, msg.features)
+        self._viz("human", lambda: self.mapping.human(msg, placed))
 
     def on_posterior(self, post: ClassPosterior) -> None:
         """The class posterior."""

@@ -14,7 +14,7 @@ import numpy as np
 
 from .model import HumanError, HumanModel, check_features
 
-__all__ = ["place_in_scene", "place_points", "voxelize", "reach_points"]
+__all__ = ["place_in_scene", "place_points", "StreamPlacement", "voxelize", "reach_points"]
 
 
 def place_in_scene(features: np.ndarray, first_pose: np.ndarray, scene) -> np.ndarray:
@@ -59,6 +59,27 @@ def place_points(points: np.ndarray, first_pose: np.ndarray, scene) -> np.ndarra
     out[..., 1] = s * d[..., 0] + c * d[..., 1] + scene.human.pelvis_xyz[1]
     out[..., 2] = d[..., 2] + scene.human.pelvis_xyz[2]
     return out
+
+
+class StreamPlacement:
+    """A stream of poses placed in a scene as the predictor places them: relative to their demonstration's first pose.
+
+    A demonstration joined part-way (a receiver started late, a first pose lost) is placed from the first of its
+    poses seen; demonstration ids restart with a run, so a pose of index 0 always starts a placement.
+
+    Args:
+        scene: A :class:`shared.scene.Scene` (its ``human``).
+    """
+
+    def __init__(self, scene) -> None:
+        self.scene = scene
+        self.first_: tuple[int, np.ndarray] | None = None  # (demonstration id, its first pose seen (12,))
+
+    def place(self, demo_id: int, index: int, features: np.ndarray) -> np.ndarray:
+        """``(12,)`` the scene-frame posture of the pose ``features (12,)``, the ``index``-th of ``demo_id``."""
+        if index == 0 or self.first_ is None or self.first_[0] != demo_id:
+            self.first_ = (int(demo_id), np.array(features, dtype=np.float64))
+        return place_in_scene(features, self.first_[1], self.scene)
 
 
 def voxelize(points: np.ndarray, grid) -> np.ndarray:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from shared.human import HumanError, HumanModel, place_in_scene, reach_points, voxelize
+from shared.human import HumanError, HumanModel, StreamPlacement, place_in_scene, reach_points, voxelize
 from shared.scene import Grid, load_scene
 
 REF = {  # herakles-human.macro zero pose, pelvis frame
@@ -198,3 +198,17 @@ def test_paper_library_reach_points_over_table(paper_library, model: HumanModel)
     # most reach points lie over the table top
     inside = np.all((reach[:, :2] > table.lower[:2]) & (reach[:, :2] < table.upper[:2]), axis=1)
     assert inside.mean() > 0.9
+
+
+def test_a_stream_is_placed_from_each_demonstration_s_first_pose_seen() -> None:
+    """``StreamPlacement``: index 0 (or a new demonstration, or the first pose seen of one joined part-way) is the
+    reference; the later poses move with it."""
+    scene = load_scene(None)
+    first, later = np.zeros(12), np.zeros(12)
+    first[:4] = [1.0, 2.0, 1.0, 0.3]
+    later[:4] = [1.2, 2.0, 1.0, 0.3]
+    placement = StreamPlacement(scene)
+    np.testing.assert_allclose(placement.place(4, 0, first)[:3], scene.human.pelvis_xyz)
+    np.testing.assert_allclose(placement.place(4, 1, later), place_in_scene(later, first, scene))
+    np.testing.assert_allclose(placement.place(5, 7, later)[:3], scene.human.pelvis_xyz)  # joined part-way
+    np.testing.assert_allclose(placement.place(5, 0, first)[:3], scene.human.pelvis_xyz)  # a run's ids restart

@@ -7,7 +7,6 @@ import pytest
 import torch
 
 from services.experiments.measures import (
-    body_clearance,
     contact_summary,
     interference,
     interference_along_path,
@@ -17,7 +16,6 @@ from services.experiments.measures import (
     robot_points,
     sphere_surface_offsets,
 )
-from shared.human import HumanModel
 from shared.protocol import HumanPose, OccupancyGrid
 from shared.scene import load_scene
 
@@ -116,22 +114,6 @@ def test_penetration_counts_each_voxel_once_whatever_the_sampling():
     vox = {tuple(v) for v in np.floor(pts[0] / 0.05).astype(int) if all(8 <= c < 12 for c in v)}
     assert fine[0] == pytest.approx(len(vox) * 128 / 255)
     assert len(vox) > 8
-
-
-def test_clearance_of_a_sphere_at_a_known_distance_from_the_body():
-    human = HumanModel()
-    posture = np.zeros(12)
-    ends, radii = human.capsules(posture)
-    # the capsule farthest out along -y is the hand/forearm: place the sphere above its middle
-    k = int(np.argmin(ends[:, :, 1].mean(axis=1)))
-    mid = ends[k].mean(axis=0)
-    r = 0.03
-    for d in (0.02, 0.10, 0.25):
-        centre = mid + np.array([0.0, 0.0, radii[k] + r + d])
-        c = body_clearance(PointRobot(r), centre[None], posture[None], human)
-        assert c[0] == pytest.approx(d, abs=1e-6)
-    inside = mid + np.array([0.0, 0.0, radii[k] - 0.01])
-    assert body_clearance(PointRobot(r), inside[None], posture[None], human)[0] < 0
 
 
 def test_contact_summary_integrates_time():

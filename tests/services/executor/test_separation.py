@@ -1,0 +1,190 @@
+"""The separation guard (``services.executor.separation``): no move closer to the person within ``stop_m``."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from services.executor.config import ExecutorConfig, SeparationConfig
+from services.executor.core import ArmLimits, ExecutorCore
+from services.executor.models import start_configuration
+from services.executor.separation import SeparationGuard, separation_guard
+from shared.clearance import body_clearance
+from shared.config import ConfigError
+from shared.human import HumanModel, StreamPlacement
+
+from .conftest import SCENE, goals_for, straight_plan
+
+H = 0.02  # the simulation step (50 states a second)
+
+
+@pytest.fixture(scope="module")
+def setting():
+    """The PR2, its start and a goal, and two poses of a person (the recorder's frame, plausible on the wire): where
+    the scene places them (a synthetic demonstration's first pose), and moved so that one of the body's capsules lies
+    on the robot's hand at the goal (the straight path's clearance falls from over 0.15 m to under 0)."""
+    import torch
+
+    from shared.protocol import HumanPose, ProtocolError
+    from shared.robot import PR2
+    from shared.synthetic import generate_library
+
+    robot = PR2.from_scene(SCENE, device="cpu", dtype=torch.float32)
+    limits = ArmLimits.from_robot(robot)
+    q0 = start_configuration(limits, ExecutorConfig(), robot, SCENE)
+    goal = goals_for(q0)[0]
+    centres = [robot.sphere_centers(torch.as_tensor(q[None], dtype=torch.float32))[0].numpy() for q in (q0, goal)]
+    hand = int(np.argmax(np.linalg.norm(centres[1] - centres[0], axis=1)))  # the sphere the path moves most
+    human, away = HumanModel(), generate_library(seed=0).demos[0].features[0].astype(np.float64)
+    ends, _ = human.capsules(_placed(away, away))
+    turn = away[3] - SCENE.human.pelvis_yaw  # the scene's frame back to the recorder's
+    rotate = np.array([[np.cos(turn), -np.sin(turn), 0.0], [np.sin(turn), np.cos(turn), 0.0], [0.0, 0.0, 1.0]])
+    path = np.linspace(q0, goal, 30)
+    for capsule in ends.mean(axis=1):
+        near = away.copy()
+        near[:3] += rotate @ (centres[1][hand] - capsule)
+        try:
+            HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=0, index=1, features=near).check()
+        except ProtocolError:
+            continue  # a pelvis the wire would refuse
+        clear = body_clearance(robot, path, np.repeat(_placed(away, near)[None], 30, 0), human)
+        if clear[0] > 0.15 and clear[-1] < 0:
+            return robot, limits, q0, goal, away, near
+    raise AssertionError("no capsule of the body lies across the path")
+
+
+def _placed(first: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    placement = StreamPlacement(SCENE)
+    placement.place(0, 0, first)
+    return placement.place(0, 1, pose)
+
+
+def _core(limits: ArmLimits, q0: np.ndarray, goal: np.ndarray, guard: SeparationGuard | None) -> ExecutorCore:
+    core = ExecutorCore(limits, q0, ExecutorConfig(mode="realtime", require_occupancy=False, stale_limit_s=1e6))
+    core.guard = guard
+    core.adopt(straight_plan(q0, [goal], list(limits.joint_names), tick=-1, step=0, chosen=0))
+    return core
+
+
+def _run(core: ExecutorCore, seconds: float) -> None:
+    for _ in range(round(seconds / H)):
+        core.step(H)
+
+
+def test_the_robot_stops_short_of_the_person_and_goes_on_once_they_step_back(setting) -> None:
+    robot, limits, q0, goal, away, near = setting
+    guard = SeparationGuard(SeparationConfig(stop_m=0.10), robot, SCENE)
+    guard.note_pose(0, 0, away)
+    guard.note_pose(0, 1, near)  # the person stands where the robot's hand is going
+    core = _core(limits, q0, goal, guard)
+    _run(core, 6.0)
+    assert core.holding and core.reason.startswith("the person is 0.1"), core.reason
+    assert not core.reached and guard.holds_ > 0
+    human = HumanModel()
+    clearance = body_clearance(robot, core.q[None], _placed(away, near)[None], human)[0]
+    assert 0.10 <= clearance < 0.13, clearance  # the last step that kept stop_m, at most a step's approach short
+    q_held, tau = core.q.copy(), core.tau
+    _run(core, 0.5)
+    assert np.array_equal(core.q, q_held) and core.tau == tau and not np.any(core.qd)  # its path's clock stopped too
+    guard.note_pose(0, 2, away)  # the person steps back
+    _run(core, 6.0)
+    assert core.reached and not core.holding
+
+
+def test_within_stop_m_a_move_away_from_the_person_is_taken(setting) -> None:
+    robot, limits, q0, goal, away, near = setting
+    guard = SeparationGuard(SeparationConfig(stop_m=0.10), robot, SCENE)
+    guard.note_pose(0, 0, away)
+    guard.note_pose(0, 1, near)
+    path = np.linspace(q0, goal, 30)
+    clear = body_clearance(robot, path, np.repeat(_placed(away, near)[None], 30, 0), HumanModel())
+    inside = path[int(np.argmax(clear < 0.06))]  # 4-6 cm from the body, on the way to it
+    core = _core(limits, inside, q0, guard)  # and back to the start from there
+    _run(core, 6.0)
+    assert core.reached and guard.holds_ == 0 and guard.clearance_ > 0.15
+
+
+@pytest.mark.parametrize("why", ["off", "no pose"])
+def test_off_or_without_a_person_seen_the_robot_goes_its_way(setting, why: str) -> None:
+    robot, limits, q0, goal, away, near = setting
+    guard = SeparationGuard(SeparationConfig(stop_m=0.0 if why == "off" else 0.10), robot, SCENE)
+    if why == "off":
+        guard.note_pose(0, 0, away)
+        guard.note_pose(0, 1, near)
+    core = _core(limits, q0, goal, guard)
+    _run(core, 6.0)
+    assert core.reached and guard.holds_ == 0
+
+
+def test_the_guard_watches_real_time_runs_only() -> None:
+    """A lock-step run is a measurement of the planners (their contact with the human): no guard there."""
+    assert separation_guard(ExecutorConfig(mode="lockstep"), None, SCENE) is None
+    assert separation_guard(ExecutorConfig(mode="realtime", separation=SeparationConfig(stop_m=0.0)), None,
+                            SCENE) is None
+    assert isinstance(separation_guard(ExecutorConfig(mode="realtime"), None, SCENE), SeparationGuard)
+
+
+@pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf")])
+def test_a_bad_stop_m_is_named(bad: float) -> None:
+    with pytest.raises(ConfigError, match=r"executor\.separation\.stop_m"):
+        ExecutorConfig(separation=SeparationConfig(stop_m=bad)).validate()
+
+
+def test_a_real_time_executor_holds_short_of_the_person_it_is_sent(setting, zenoh_hub) -> None:
+    """The wiring: the poses on the wire reach the guard, its hold goes out as the state's reason, and it ends."""
+    from services.executor.service import ExecutorService
+    from shared.protocol import HumanPose, Keys, RobotState, decode
+    from shared.transport import TypedPublisher, open_session
+
+    from .conftest import FakeSystem
+
+    robot, limits, q0, goal, away, near = setting
+    exec_z = zenoh_hub()
+    cfg = ExecutorConfig(mode="realtime", steps=0, mcap="none", wait_for=["planner"], require_occupancy=False)
+    fake = FakeSystem(zenoh_hub(), waypoints=15)  # plans from the latest state to goals_for(q0)[0], 10 a second
+    service = ExecutorService(cfg, exec_z, robot=robot, human=(None, None), scene=SCENE)
+    states: list[RobotState] = []
+    keys = Keys(exec_z.prefix)
+
+    def wait_for(what, seconds: float = 15.0) -> RobotState:
+        deadline = time.monotonic() + seconds
+        while not (states and what(states[-1])) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert states and what(states[-1]), states[-1].reason if states else "no state"
+        return states[-1]
+
+    with fake.running(realtime_hz=10.0), open_session(zenoh_hub()) as watch:
+        poses = TypedPublisher(watch, keys.pose, block=True)
+        sub = watch.declare_subscriber(keys.robot_state,
+                                       lambda s: states.append(decode(s.payload.to_bytes(), RobotState)))
+        person = [away]  # where the person is: a tracker's poses, 30 a second (the first seen places them)
+        sending = threading.Event()
+
+        def send() -> None:
+            i = 0
+            while not sending.wait(1 / 30):
+                poses.put(HumanPose(stamp=time.time(), tick=-1, tick_last=True, demo_id=0, index=i, features=person[0]))
+                i += 1
+
+        sender = threading.Thread(target=send)
+        t = threading.Thread(target=service.run)
+        sender.start()
+        t.start()
+        try:
+            wait_for(lambda s: True)  # the executor is up: it sees the person where the scene places them ...
+            time.sleep(0.2)
+            person[0] = near  # ... who steps to where the robot's hand is going
+            held = wait_for(lambda s: s.holding and s.reason.startswith("the person is"))
+            assert not held.reached
+            person[0] = away  # the person steps back
+            wait_for(lambda s: s.reached and not s.holding)
+        finally:
+            sending.set()
+            service.stop.set()
+            t.join(timeout=10)
+            sender.join(timeout=10)
+            sub.undeclare()
+    assert not t.is_alive() and not sender.is_alive() and service.result.separation_holds > 0
