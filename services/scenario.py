@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from services.demo_inputs import DEFAULT_HUMAN_CLASS, human_label
+from services.executor.config import is_separation_hold
 from services.experiments.measures import interference
 from shared.library import Demonstration, MotionLibrary
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
@@ -208,6 +209,7 @@ class Summary:
     scored_against: str = "final prediction"
     recognised_p: float | None = None  # the recognised class's probability in the last posterior
     recognised_index: int | None = None  # the pose that posterior was made after
+    separation_held_s: float = 0.0  # real time: seconds the separation guard held the robot (docs/executor.md)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (keys steps, chosen_goal_per_step, switch_step, interference_cost, mcap_path, ...)."""
@@ -216,7 +218,7 @@ class Summary:
                "reached_step": self.reached_step, "human_class": self.human_class,
                "recognised_class": self.recognised_class, "goal_names": self.goal_names,
                "reached_t_s": self.reached_t_s, "recognised_p": self.recognised_p,
-               "recognised_index": self.recognised_index}
+               "recognised_index": self.recognised_index, "separation_held_s": self.separation_held_s}
         out.update(self.extra)
         return out
 
@@ -245,6 +247,9 @@ class Summary:
             if self.reached_t_s is not None:
                 reached += f" (t = {self.reached_t_s:.2f} s)"
         out.append(f"goal reached: {reached}")
+        if self.separation_held_s > 0:
+            out.append(f"separation guard: held the robot {self.separation_held_s:.2f} s (a step would have brought it "
+                       "nearer the person than separation.stop_m; docs/executor.md)")
         at = (f" (p {self.recognised_p:.2f}, after pose {self.recognised_index})"  # an interrupted run's belief
               if self.recognised_p is not None else "")                        # differed from its last row's
         out.append(f"human class: {self.human_class}; recognised at the end: {self.recognised_class}{at}")
@@ -328,6 +333,8 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
         else:  # real time: the step whose plan was the newest when it was reached
             before = [s for s in steps if s["t_s"] <= reached_t + 1e-9]
             reached_step = before[-1]["step"] if before else None
+    guarded = [i for i in range(1, len(states)) if is_separation_hold(states[i].reason)]
+    separation_held = float(sum(states[i].stamp - states[i - 1].stamp for i in guarded))
     recognised = recognised_p = recognised_index = None
     if posteriors:
         last = posteriors[max(posteriors)]
@@ -338,4 +345,4 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
                    mcap_path=mcap_path, reached=bool(reached_states), reached_step=reached_step,
                    human_class=human_class, recognised_class=recognised, goal_names=goal_names,
                    reached_t_s=reached_t, scored_against=final_label(final_occupancy), recognised_p=recognised_p,
-                   recognised_index=recognised_index)
+                   recognised_index=recognised_index, separation_held_s=separation_held)

@@ -15,7 +15,8 @@ from shared.protocol import HUMAN_SOURCES, SERVICES
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.scene import SCENE_HELP
 
-__all__ = ["ExecutorConfig", "ExecutorError", "SeparationConfig", "ROBOTS", "check_robot_names"]
+__all__ = ["ExecutorConfig", "ExecutorError", "SeparationConfig", "SEPARATION_REASON", "is_separation_hold", "ROBOTS",
+           "check_robot_names"]
 
 ROBOTS = ("sim", "ros2")
 """What the executor drives: its own simulated arm, or a ROS 2 robot's joint_trajectory_controller."""
@@ -39,14 +40,25 @@ class ExecutorError(ValueError):
     """A plan or configuration the executor cannot use; the message names what is wrong."""
 
 
+SEPARATION_REASON = ("the person is {clearance:.2f} m from the robot (separation stop_m {stop_m:.2f} m): no move "
+                     "closer; it moves again when its next step keeps its distance")
+"""The hold reason of the separation guard (``RobotState.reason``)."""
+
+
+def is_separation_hold(reason: str) -> bool:
+    """Whether a ``RobotState.reason`` is the separation guard's (:data:`SEPARATION_REASON`)."""
+    head, _, rest = SEPARATION_REASON.partition("{clearance:.2f}")
+    return reason.startswith(head) and rest.split("{")[0] in reason
+
+
 @dataclass
 class SeparationConfig:
     """The separation guard's options (``[executor.separation]``; :mod:`services.executor.separation`)."""
 
-    stop_m: float = opt(0.10, help="real time: a robot nearer the person's body than this (m, its collision spheres to "
+    stop_m: float = opt(0.05, help="real time: a robot nearer the person's body than this (m, its collision spheres to "
                         "the body's capsules) makes no move that brings it closer; it holds until a move keeps or "
-                        "widens the gap (0.10: the keypoint fit's tolerance, 8 cm, and a depth camera's 2 cm of "
-                        "noise); 0: off")
+                        "widens the gap (0.05: the posed body's error under a depth camera's noise, about 4 cm at the "
+                        "hand; docs/executor.md); 0: off")
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming a bad value."""

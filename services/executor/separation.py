@@ -22,7 +22,7 @@ import numpy as np
 from shared.clearance import body_clearance
 from shared.human import HumanModel, StreamPlacement
 
-from .config import ExecutorConfig, SeparationConfig
+from .config import SEPARATION_REASON, ExecutorConfig, SeparationConfig
 
 __all__ = ["SeparationGuard", "separation_guard"]
 
@@ -66,8 +66,7 @@ class SeparationGuard:
         self.clearance_ = float(now)
         if then < self.config.stop_m and then < now:
             self.holds_ += 1
-            return (f"the person is {now:.2f} m from the robot (separation stop_m {self.config.stop_m:.2f} m): no move "
-                    "closer; it moves again when its next step keeps its distance")
+            return SEPARATION_REASON.format(clearance=float(now), stop_m=self.config.stop_m)
         return ""
 
 

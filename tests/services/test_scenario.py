@@ -106,6 +106,21 @@ def test_realtime_summary_counts_time_from_the_run_start_and_names_the_step_of_t
     assert all(str(int(t0)) not in ln for ln in s.lines())  # no raw epoch anywhere
 
 
+def test_a_real_time_summary_says_how_long_the_separation_guard_held_the_robot():
+    from services.executor.config import SEPARATION_REASON
+
+    t0 = 1_700_000_000.0
+    guard = SEPARATION_REASON.format(clearance=0.1, stop_m=0.1)
+    reasons = ["waiting for the first plan"] * 5 + [""] * 10 + [guard] * 25 + ["plan is 0.51 s old (limit 0.50 s)"] * 10
+    states = [RobotState(stamp=t0 + 0.02 * i, tick=-1, joint_names=["a", "b", "c"], goal=0, reached=False,
+                         holding=bool(r), reason=r, q=np.full(3, 0.15), qd=np.zeros(3)) for i, r in enumerate(reasons)]
+    s = summarise([_plan(-1, 0, [1.0, 2.0], stamp=t0 + 0.05)], states, None, {}, PointRobot(), "red_cup", None)
+    assert s.separation_held_s == pytest.approx(0.5) and s.to_json()["separation_held_s"] == pytest.approx(0.5)
+    assert any(ln.startswith("separation guard: held the robot 0.50 s") for ln in s.lines())
+    quiet = summarise([_plan(-1, 0, [1.0, 2.0], stamp=t0 + 0.05)], states[:15], None, {}, PointRobot(), "x", None)
+    assert quiet.separation_held_s == 0 and not any("separation" in ln for ln in quiet.lines())
+
+
 def _posterior(tick: int, stamp: float, p: list[float]) -> ClassPosterior:
     return ClassPosterior(stamp=stamp, tick=tick, demo_id=1, index=0, class_names=["far_left", "blue_cup"],
                           posterior=np.array(p), log_likelihood=np.log(np.array(p)))
