@@ -210,6 +210,8 @@ class Summary:
     recognised_p: float | None = None  # the recognised class's probability in the last posterior
     recognised_index: int | None = None  # the pose that posterior was made after
     separation_held_s: float = 0.0  # real time: seconds the separation guard held the robot (docs/executor.md)
+    left_goal: dict[str, Any] | None = None  # not reached: a goal it reached earlier and left ({goal, reached_t_s,
+    # left_t_s}: the robot turned to another, or was sent back later)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (keys steps, chosen_goal_per_step, switch_step, interference_cost, mcap_path, ...)."""
@@ -218,7 +220,8 @@ class Summary:
                "reached_step": self.reached_step, "human_class": self.human_class,
                "recognised_class": self.recognised_class, "goal_names": self.goal_names,
                "reached_t_s": self.reached_t_s, "recognised_p": self.recognised_p,
-               "recognised_index": self.recognised_index, "separation_held_s": self.separation_held_s}
+               "recognised_index": self.recognised_index, "separation_held_s": self.separation_held_s,
+               "left_goal": self.left_goal}
         out.update(self.extra)
         return out
 
@@ -246,6 +249,10 @@ class Summary:
                 reached += f", during step {self.reached_step}"
             if self.reached_t_s is not None:
                 reached += f" (t = {self.reached_t_s:.2f} s)"
+        if not self.reached and self.left_goal is not None:
+            g = self.left_goal
+            reached += (f" (it reached {g['goal']} at t = {g['reached_t_s']:.2f} s and left it at "
+                        f"{g['left_t_s']:.2f} s, turned to another goal)")
         out.append(f"goal reached: {reached}")
         if self.separation_held_s > 0:
             out.append(f"separation guard: held the robot {self.separation_held_s:.2f} s (a step would have brought it "
@@ -322,8 +329,19 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     q = np.array([s.q for s in states]) if states else np.zeros((0, 0))
     stamps = np.array([s.stamp for s in states])
     cost = interference(robot, q, stamps, final_occupancy) if final_occupancy is not None and len(q) else 0.0
-    # the goal it ended going for (a robot that reached one cup and then turned to the other has not reached it)
-    reached_states = [s for s in states if s.reached and s.goal == states[-1].goal]
+    # the goal it ended going for, since it last turned to it (a robot that reached one cup and then turned to the
+    # other, or went back to the first later, has not reached it: it said so for the first time it got there)
+    start = len(states)
+    while start > 0 and states[start - 1].goal == states[-1].goal:
+        start -= 1
+    reached_states = [s for s in states[start:] if s.reached]
+    left = None
+    earlier = next((i for i in range(start) if states[i].reached), None) if not reached_states else None
+    if earlier is not None:  # a goal reached and left: said, the run's goal is not
+        gone = next(j for j in range(earlier, len(states)) if not states[j].reached or states[j].goal != states[
+            earlier].goal)
+        left = {"goal": states[earlier].goal, "reached_t_s": float(states[earlier].stamp - t0),
+                "left_t_s": float(states[gone].stamp - t0)}
     reached_step = reached_t = None
     if reached_states:
         first = reached_states[0]
@@ -341,8 +359,10 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
         best = int(np.argmax(last.posterior))
         recognised, recognised_p, recognised_index = last.class_names[best], float(last.posterior[best]), last.index
     goal_names = list(ordered[-1].goal_names) if ordered else []
+    if left is not None and 0 <= left["goal"] < len(goal_names):
+        left["goal"] = goal_names[left["goal"]]
     return Summary(steps=steps, chosen_goal_per_step=chosen, switch_step=switch, interference_cost=cost,
                    mcap_path=mcap_path, reached=bool(reached_states), reached_step=reached_step,
                    human_class=human_class, recognised_class=recognised, goal_names=goal_names,
                    reached_t_s=reached_t, scored_against=final_label(final_occupancy), recognised_p=recognised_p,
-                   recognised_index=recognised_index, separation_held_s=separation_held)
+                   recognised_index=recognised_index, separation_held_s=separation_held, left_goal=left)

@@ -78,6 +78,23 @@ def test_a_goal_reached_before_the_robot_turned_to_another_is_not_the_runs():
                          holding=False, reason="", q=np.full(3, 0.15), qd=np.zeros(3)) for i in range(4)]
     s = summarise(plans, states, _grid(0.5), {}, PointRobot(), "red_cup", None)
     assert not s.reached and s.reached_step is None
+    assert s.left_goal == {"goal": "red_cup", "reached_t_s": pytest.approx(0.1), "left_t_s": pytest.approx(0.2)}
+    assert "goal reached: no (it reached red_cup at t = 0.10 s and left it at 0.20 s, turned to another goal)" in (
+        s.lines())
+
+
+def test_a_goal_reached_left_and_gone_back_to_is_not_reached_until_it_is_there_again():
+    """A review (the README's real-time run): goal 1 reached at 2.88 s, then goal 0, then goal 1 again to the end,
+    never there: the summary said 'goal reached: yes, during step 85 (t = 2.88 s)'."""
+    plans = [_plan(k, 1 if k < 2 or k > 3 else 0, [2.0, 1.0]) for k in range(6)]
+    goals, reached = [1, 1, 0, 0, 1, 1], [False, True, False, False, False, False]
+    states = [RobotState(stamp=0.1 * i, tick=i, joint_names=["a", "b", "c"], goal=goals[i], reached=reached[i],
+                         holding=False, reason="", q=np.full(3, 0.15), qd=np.zeros(3)) for i in range(6)]
+    s = summarise(plans, states, _grid(0.5), {}, PointRobot(), "red_cup", None)
+    assert not s.reached and s.left_goal is not None and s.left_goal["left_t_s"] == pytest.approx(0.2)
+    there = [dataclasses.replace(st, reached=st.reached or i == 5) for i, st in enumerate(states)]
+    again = summarise(plans, there, _grid(0.5), {}, PointRobot(), "red_cup", None)
+    assert again.reached and again.reached_step == 5 and again.left_goal is None
 
 
 def test_summary_has_one_table_with_a_header_and_a_row_per_step():
