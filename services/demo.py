@@ -82,8 +82,9 @@ class DemoConfig:
     steps: int = opt(20, help="replanning steps (the paper: 20)")
     seed: int = opt(0, help="seed of the demonstration choice and of STOMP")
     human_class: str = opt("blue_cup", help="class (name or index) the human performs. blue_cup: the reach of the "
-                           "paper's Table I, across the robot's way to the red cup. Empty: the class named red_cup, "
-                           "or the library's last class if none is")
+                           "paper's Table I, across the robot's way to the red cup. An empty value (\"\") names "
+                           "another: the class red_cup, the reach of the paper's Fig. 8 (the robot switches cups), "
+                           "or the library's last class if it has none")
     goals: str = opt("red_cup", help="cups the robot plans for, comma-separated, in order (empty: every cup of the "
                      "scene). red_cup: the robot's one task in the paper's Table I, the situation "
                      "`foresight eval pace` measured; blue_cup,red_cup: the robot also chooses the cup each step "

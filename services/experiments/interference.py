@@ -158,8 +158,9 @@ class InterferenceResult:
         head = f"{'demo':>6}" + "".join(f"{VARIANTS[n].label:>22}" for n in names)
         unit = "probability-voxels x s" if self.config.protocol == "product" else \
             "probability-voxels x configuration-space length"
+        seeds = f"{self.config.seeds} seed{'s' * (self.config.seeds != 1)}"
         out = [f"interference with the final prediction ({unit}), {self.config.protocol} protocol, mean (std) of "
-               f"{self.config.seeds} seeds; {self.library}, scene {self.config.scene}, human: {self.human.name}", head]
+               f"{seeds}; {self.library}, scene {self.config.scene}, human: {self.human.name}", head]
         stats = {n: self.per_demo(n) for n in names}
         for i, d in enumerate(self.demos):
             cells = "".join(f"{stats[n][0][i]:>14.3f} ({stats[n][1][i]:5.3f})" for n in names)
@@ -185,7 +186,8 @@ class InterferenceResult:
         out.append(f"runs where least penetration touched the human longer than basic STOMP: "
                    f"{self.contact_violations()} of {len(self.demos) * self.config.seeds}")
         reached = self.to_json()["reached"]
-        out.append("runs that reached the goal: " + ", ".join(f"{VARIANTS[n].label} {reached[n]}" for n in names))
+        out.append("runs that reached the goal by their end: " + ", ".join(f"{VARIANTS[n].label} {reached[n]}"
+                                                                            for n in names))
         if self.borrowed:
             out.append(f"basic STOMP ignores the human: its path was the same on every demonstration at seed 0 "
                        f"(compared to the bit), so at the other seeds it was planned on #{self.demos[0]} and scored "
@@ -303,9 +305,11 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
                                                              seed, name, human.label, weights), borrowed=borrowed)
                 done += 1
                 how = f"  (demo #{demos[0].index}'s path: basic STOMP ignores the human)" if borrowed else ""
+                step = scores[name].reached_step
+                reached = f"reached step {step}" if step is not None else "not at its goal by the run's end"
                 progress(f"  [{done}/{total}] demo #{demo.index} seed {seed} {variant.label:<18} interference "
                          f"{scores[name].interference:8.3f}  min clearance {scores[name].min_clearance:+.3f} m  "
-                         f"reached step {scores[name].reached_step}{how}")
+                         f"{reached}{how}")
             result.runs.extend(scores[name] for name in variants)
             if once and "basic" in recs and not borrow:
                 basic_of_seed.setdefault(seed, recs["basic"])

@@ -58,13 +58,16 @@ class _Bounded:
 def open_records(path: str | Path) -> Iterator[StreamReader]:
     """The records of an MCAP file, read in file order with CRCs checked, for every reader of the logs.
 
+    A directory with one log under it (a demo run's, ``runs/demo/latest``) is that log.
+
     Raises:
-        UserError: The path is missing, a directory, not a regular file (a pipe), empty, or does not start with
-            the MCAP magic.
+        UserError: The path is missing, a directory with no log or several under it, not a regular file (a pipe),
+            empty, or does not start with the MCAP magic.
     """
     p = Path(path)
+    if p.is_dir() and len(logs := sorted(p.rglob("*.mcap"))) == 1:
+        p = logs[0]
     if p.is_dir():
-        logs = sorted(p.rglob("*.mcap"))
         listed = ", ".join(str(f) for f in logs[:6]) + (f" and {len(logs) - 6} more" if len(logs) > 6 else "")
         raise UserError(f"log file {str(p)!r} is a directory" + (f"; the logs under it: {listed}" if logs else
                                                                    ", with no .mcap file under it"))

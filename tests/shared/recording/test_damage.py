@@ -116,7 +116,11 @@ def test_a_short_file_is_not_an_mcap_file(tmp_path, content) -> None:
     (tmp_path / "x.mcap").write_bytes(content)
     with pytest.raises(UserError, match="not an MCAP file"):
         read_log(tmp_path / "x.mcap")
-    with pytest.raises(UserError, match="is a directory; the logs under it: .*x.mcap"):
+    with pytest.raises(UserError, match="not an MCAP file"):
+        read_log(tmp_path)  # a directory with one log under it (a demo run's) is that log
+    (tmp_path / "y").mkdir()
+    (tmp_path / "y" / "y.mcap").write_bytes(content)
+    with pytest.raises(UserError, match="is a directory; the logs under it: .*x.mcap, .*y.mcap"):
         read_log(tmp_path)  # after --compare each planner's log is in a directory of its own: they are named
     (tmp_path / "empty").mkdir()
     with pytest.raises(UserError, match="is a directory, with no .mcap file under it"):
