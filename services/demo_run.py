@@ -252,7 +252,9 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 procs[name].start()
                 if name == "executor" and cfg.live:  # it serves the scene it logs
                     out(f"foresight demo: watch live at ws://127.0.0.1:{cfg.live} (Foxglove: Open connection -> "
-                        "Foxglove WebSocket; layout docs/foresight.foxglove.json)")
+                        "Foxglove WebSocket; layout docs/foresight.foxglove.json)" + (
+                            "; a lock-step run is over in seconds: --mode realtime is the one to watch"
+                            if cfg.mode == "lockstep" else ""))
                 elif name != "executor":
                     began = time.monotonic()  # each service said as it comes up: the start-up is silent otherwise
                     if procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout), stop=stop):
