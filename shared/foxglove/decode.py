@@ -19,7 +19,7 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Schema
 from mcap.records import Message as McapMessage
 
-from shared.recording.reader import DAMAGED, open_records
+from shared.recording.reader import DAMAGED, log_path, open_records
 
 __all__ = ["SceneRecord", "SceneDecodeError", "SchemaDecoder", "read_scene", "scene_stamps"]
 
@@ -97,7 +97,7 @@ def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[Sce
     with open_records(path):  # what the path is (missing, a directory, a pipe, not an MCAP file) is said here
         pass
     decoder = SchemaDecoder()
-    with Path(path).open("rb") as f:
+    with log_path(path).open("rb") as f:
         indexed = make_reader(f, validate_crcs=True)
         try:
             summary = indexed.get_summary()

@@ -129,9 +129,10 @@ _NAMED = {"blue": (0.15, 0.35, 0.95), "red": (0.9, 0.15, 0.15), "green": (0.1, 0
 CHOSEN_RGBA = (0.1, 0.85, 0.2, 1.0)
 HUMAN_RGBA = (0.25, 0.5, 0.95, 0.6)
 """The human's body while its demonstration (a reach) goes on."""
-ENDED_HUMAN_RGBA = (0.35, 0.4, 0.55, 0.45)
-"""The body of a demonstration that has ended: its last pose, no longer updated. A dark slate grey: the light grey
-it was (0.55, alpha 0.35) read as part of the robot's grey spheres in `foresight log snapshot` (a review)."""
+ENDED_HUMAN_RGBA = (0.1, 0.2, 0.45, 0.7)
+"""The body of a demonstration that has ended: its last pose, no longer updated. A dark navy: the light grey it was
+(0.55, alpha 0.35) and then a slate grey (0.35, 0.4, 0.55, alpha 0.45) both read as part of the robot's grey spheres
+in `foresight log snapshot` (two reviews)."""
 
 
 def goal_rgb(name: str, k: int) -> tuple[float, float, float]:

@@ -24,7 +24,8 @@ from mcap.stream_reader import StreamReader
 
 from shared.runtime import UserError
 
-__all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "iter_messages", "open_records", "DAMAGED", "MAGIC"]
+__all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "iter_messages", "open_records", "log_path", "DAMAGED",
+           "MAGIC"]
 
 MAGIC = b"\x89MCAP0\r\n"
 """The first (and last) eight bytes of an MCAP file."""
@@ -54,6 +55,17 @@ class _Bounded:
         return data
 
 
+def log_path(path: str | Path) -> Path:
+    """The log a path names: the path itself, or the one ``.mcap`` under a directory (``runs/demo/latest``).
+
+    A directory with none or several under it stays a directory (:func:`open_records` says which logs it holds).
+    """
+    p = Path(path)
+    if p.is_dir() and len(logs := sorted(p.rglob("*.mcap"))) == 1:
+        return logs[0]
+    return p
+
+
 @contextmanager
 def open_records(path: str | Path) -> Iterator[StreamReader]:
     """The records of an MCAP file, read in file order with CRCs checked, for every reader of the logs.
@@ -64,10 +76,9 @@ def open_records(path: str | Path) -> Iterator[StreamReader]:
         UserError: The path is missing, a directory with no log or several under it, not a regular file (a pipe),
             empty, or does not start with the MCAP magic.
     """
-    p = Path(path)
-    if p.is_dir() and len(logs := sorted(p.rglob("*.mcap"))) == 1:
-        p = logs[0]
+    p = log_path(path)
     if p.is_dir():
+        logs = sorted(p.rglob("*.mcap"))
         listed = ", ".join(str(f) for f in logs[:6]) + (f" and {len(logs) - 6} more" if len(logs) > 6 else "")
         raise UserError(f"log file {str(p)!r} is a directory" + (f"; the logs under it: {listed}" if logs else
                                                                    ", with no .mcap file under it"))

@@ -22,7 +22,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
 from shared.atomic_file import atomic_write
-from shared.recording.reader import DAMAGED, iter_messages, open_records, read_log
+from shared.recording.reader import DAMAGED, iter_messages, log_path, open_records, read_log
 from shared.recording.writer import COMPRESSION
 from shared.runtime import UserError
 
@@ -62,7 +62,7 @@ def compress_log(src: str | Path, dst: str | Path, compression: str = "zstd",
     Raises:
         UserError: If ``src`` is missing or not an MCAP file, ``dst`` is ``src``, or the compression is unknown.
     """
-    src, dst = Path(src), Path(dst)
+    src, dst = log_path(src), Path(dst)
     if compression not in COMPRESSION:
         raise UserError(f"--compression must be one of {', '.join(COMPRESSION)}, got {compression!r}")
     if dst.is_dir():
