@@ -133,3 +133,14 @@ def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0] and "Traceback" not in err[0]
     assert not (tmp_path / "bad-snapshot.png").exists()
+
+
+def test_a_run_s_directory_with_one_log_is_that_log(run_log, tmp_path) -> None:
+    """`foresight log snapshot runs/demo/latest` (the README's commands) read the directory's one log; the scene's
+    indexed reader opened the directory itself ('Is a directory')."""
+    run = tmp_path / "run"
+    run.mkdir()
+    shutil.copy(run_log, run / "run.mcap")
+    (run / "executor.log").write_text("the services' logs sit beside it\n")
+    assert scene_at(run, None).summary() == scene_at(run_log, None).summary()
+    assert main(["table", str(run)]) == 0
