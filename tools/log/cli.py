@@ -24,7 +24,7 @@ from pathlib import Path
 
 from shared import strict_json
 from shared.arguments import ArgumentParser
-from shared.recording.reader import LogFile, read_log
+from shared.recording.reader import LogFile, log_path, read_log
 from shared.runtime import UserError, cli_errors
 
 from ..png import check_png
@@ -121,7 +121,7 @@ def _main_table(args: argparse.Namespace) -> int:
 def _main_snapshot(args: argparse.Namespace) -> int:
     from .snapshot import draw_snapshot, scene_at
 
-    file = Path(args.file)
+    file = log_path(args.file)  # a run's directory: its log (the picture beside it, named for it)
     if args.out is not None:
         check_png(args.out, "--out")
     out = Path(args.out) if args.out is not None else file.with_name(f"{file.stem}-snapshot.png")
@@ -192,7 +192,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
             return _main_table(args)
         if args.cmd == "compress":
             result = compress_log(args.file, args.out, args.compression)
-            print(result.line(Path(args.file), Path(args.out)))
+            print(result.line(log_path(args.file), Path(args.out)))
             return 0 if result.identical else 1
         if args.cmd == "info":
             return _main_info(args)
