@@ -252,13 +252,21 @@ def _check_tables(section: str, cls: type, data: dict[str, Any], source: str) ->
 
     ``source`` starts each message: the file that holds the table.
     """
-    for table, (_, allowed) in config_tables(section, cls).items():
+    tables = config_tables(section, cls)
+    for table, (_, allowed) in tables.items():
         values: Any = data
         for step in table[1:]:
             values = values.get(step, {}) if isinstance(values, dict) else {}
         if not isinstance(values, dict):
             raise ConfigError(f"{source}[{'.'.join(table)}]: must be a table, got {values!r}")
         unknown = sorted(set(values) - allowed)
+        tables_named = [k for k in unknown if isinstance(values[k], dict)]  # [planner.stom]: a table, not an option
+        if tables_named:
+            subs = [".".join((*table, k)) for k in allowed if (*table, k) in tables]
+            hint = closest(".".join((*table, tables_named[0])), subs)
+            hint = hint.replace("mean ", "mean [").replace("?", "]?") if hint else ""
+            raise ConfigError(f"{source}[{'.'.join((*table, tables_named[0]))}]: unknown table{hint}" + (
+                f" ([{'.'.join(table)}] has {', '.join(f'[{t}]' for t in sorted(subs))})" if subs and not hint else ""))
         if unknown:
             hint = closest(unknown[0], allowed)
             raise ConfigError(f"{source}[{'.'.join(table)}]: unknown option(s) {', '.join(unknown)}{hint}")

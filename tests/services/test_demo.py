@@ -268,7 +268,7 @@ def test_the_demos_config_file_reaches_its_services_and_is_checked_whole(tmp_pat
     good.write_text("[planner.cost]\nw_human = 0\n")
     _share_config_file(str(good))
     assert os.environ["FORESIGHT_CONFIG"] == str(good.resolve())  # what every service process inherits
-    for text, named in (("[planner.stmp]\niterations = 10\n", "unknown option(s) stmp; did you mean stomp?"),
+    for text, named in (("[planner.stmp]\niterations = 10\n", "unknown table; did you mean [planner.stomp]?"),
                         ("[replayer]\nrate_hz = -1\n", "replayer.rate_hz")):
         bad = tmp_path / "bad.toml"
         bad.write_text(text)

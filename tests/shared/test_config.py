@@ -235,7 +235,10 @@ def test_nested_precedence_file_env_flag(tmp_path) -> None:
     ("[svc.inner]\ndevice = 'cuda'\n", [], {},
      r"^config file '.*c\.toml': \[svc\.inner\]: unknown option\(s\) device$"),
     ("[svc]\ninner = 3\n", [], {}, r"^config file '.*c\.toml': \[svc\.inner\]: must be a table"),
-    ("[svc]\ncore = {}\n", [], {}, r"^config file '.*c\.toml': \[svc\]: unknown option\(s\) core$"),
+    ("[svc]\ncore = {}\n", [], {}, r"^config file '.*c\.toml': \[svc\.core\]: unknown table \(\[svc\] has "
+     r"\[svc\.inner\]\)$"),
+    ("[svc.innr]\nsteps = 2\n", [], {},  # it said "[svc]: unknown option(s) innr; did you mean inner?"
+     r"^config file '.*c\.toml': \[svc\.innr\]: unknown table; did you mean \[svc\.inner\]\?$"),
     ("[svc.inner]\nsteps = 'many'\n", [], {}, r"^config file '.*c\.toml': svc\.inner\.steps: expected int"),
     ("", ["--inner.steps", "x"], {}, r"^--inner\.steps: expected int, got 'x'$"),
     ("", [], {"FORESIGHT_SVC_INNER_GAIN": "fast"}, r"^FORESIGHT_SVC_INNER_GAIN: expected float"),
