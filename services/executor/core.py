@@ -145,6 +145,8 @@ class ExecutorCore:
         q0: ``(D,)`` start configuration (clamped into the limits).
         config: The executor's options (uses ``stale_limit_s``, ``require_occupancy``, ``goal_tolerance``,
             ``velocity_scale``).
+        guard: ``(q (D,), q_next (D,)) -> str``: why a step from ``q`` to ``q_next`` must not be taken (``""``: it
+            may), asked before each step that moves (real time: :class:`services.executor.separation.SeparationGuard`).
 
     Attributes:
         t: Simulated time, seconds.
@@ -156,7 +158,8 @@ class ExecutorCore:
         reached: Whether the configuration is within ``goal_tolerance`` of the executed goal.
     """
 
-    def __init__(self, limits: ArmLimits, q0: np.ndarray, config: ExecutorConfig | None = None) -> None:
+    def __init__(self, limits: ArmLimits, q0: np.ndarray, config: ExecutorConfig | None = None,
+                 guard: Callable[[np.ndarray, np.ndarray], str] | None = None) -> None:
         self.limits = limits
         self.config = config or ExecutorConfig()
         q0 = np.asarray(q0, dtype=np.float64)
@@ -181,8 +184,7 @@ class ExecutorCore:
         self.gone: frozenset[str] = frozenset()  # services of hold_without whose token was lost (replaced, never
         # mutated: the transport's thread writes it while the loop reads it)
         self.seen: frozenset[str] = frozenset()  # services whose token was seen (replaced the same way)
-        self.guard: Callable[[np.ndarray, np.ndarray], str] | None = None  # (q, q_next) -> why not to step there
-        # (the separation guard, real time: services.executor.separation), or None
+        self.guard = guard  # (q, q_next) -> why not to step there (the separation guard, real time), or None
 
     # ------------------------------------------------------------------------------------------
     # inputs
@@ -314,8 +316,9 @@ class ExecutorCore:
 
         Args:
             h: Step length, seconds (> 0).
-            hold_reason: If given, use it instead of :meth:`stale_reason` (lock-step mode decides once
-                per replanning step); ``""`` means move.
+            hold_reason: If given, use it instead of :meth:`stale_reason` and the ``guard`` (lock-step mode decides
+                once per replanning step; a ROS 2 robot's arm asks the guard before it commands the robot); ``""``
+                means move.
         """
         if not (h > 0 and math.isfinite(h)):
             raise ExecutorError(f"step: h must be > 0, got {h}")
@@ -325,10 +328,7 @@ class ExecutorCore:
             self.qd = np.zeros(self.limits.dof)
         else:
             self.holding, self.reason = False, ""
-            if self.config.path_per_step > 0:  # the paper authors' pace: a fixed length of the path per step
-                advance, at = self.config.path_per_step * h / self.config.step_period_s, self.reference.at_length
-            else:
-                advance, at = h, self.reference.at
+            advance, at = self._pace(h, self.reference)
             target = at(self.tau + advance)
             vmax = self.limits.velocity * self.config.velocity_scale
             v = (target - self.q) / h
@@ -341,7 +341,7 @@ class ExecutorCore:
                 if scale > 1.0:
                     v = v / scale
             q_new = self.limits.clamp(self.q + v * h)
-            why = self.guard(self.q, q_new) if self.guard is not None else ""
+            why = self.guard(self.q, q_new) if self.guard is not None and hold_reason is None else ""
             if why:  # the step would close in on the person: the robot and its reference's clock stay
                 self.holding, self.reason = True, why
                 self.qd = np.zeros(self.limits.dof)
@@ -351,6 +351,19 @@ class ExecutorCore:
                 self.q = q_new
         self.t += h
         self._update_reached()
+
+    def target_after(self, h: float) -> np.ndarray:
+        """``(D,)`` where the reference asks the arm to be ``h`` seconds on (its present place without a plan)."""
+        if self.reference is None:
+            return self.q.copy()
+        advance, at = self._pace(h, self.reference)
+        return self.limits.clamp(at(self.tau + advance))
+
+    def _pace(self, h: float, ref: Reference) -> tuple[float, Callable[[float], np.ndarray]]:
+        """How far along ``ref`` a step of ``h`` seconds goes, and the reference's lookup for that measure."""
+        if self.config.path_per_step > 0:  # the paper authors' pace: a fixed length of the path per step
+            return self.config.path_per_step * h / self.config.step_period_s, ref.at_length
+        return h, ref.at
 
     @property
     def remaining(self) -> float:

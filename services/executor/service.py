@@ -103,8 +103,8 @@ class ExecutorService:
         self.human: tuple[HumanBody | None, PlaceInScene | None] = human or (None, None)
         self.limits = ArmLimits.from_robot(robot)
         q0 = start_configuration(self.limits, config, robot, self.scene)
-        self.core = ExecutorCore(self.limits, q0, config)
-        self.guard = self.core.guard = separation_guard(config, robot, self.scene)  # real time, else None
+        self.guard = separation_guard(config, robot, self.scene)  # real time, else None
+        self.core = ExecutorCore(self.limits, q0, config, guard=self.guard)
         self.rejects = RejectCounter("executor")
         lim = self.limits
         lockstep = config.mode == "lockstep"
@@ -286,7 +286,7 @@ class ExecutorService:
             if self.mcap is not None:
                 self._write(self.mcap.close)  # complete, with what it has: the run never started
             raise
-        self.core = Ros2Arm(self.limits, q0, self.config, link)
+        self.core = Ros2Arm(self.limits, q0, self.config, link, guard=self.guard)
         return link
 
     def _publish_state(self, pub: TypedPublisher[Any], state: RobotState) -> None:

@@ -20,6 +20,7 @@ hold rules, reference and its pace -- whose configuration is measured rather tha
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -125,10 +126,12 @@ class Ros2Arm(ExecutorCore):
         q0: ``(D,)`` the robot's configuration at the start (as it reported it).
         config: The executor's options (``stale_limit_s`` also bounds the age of the robot's joint states).
         link: The robot.
+        guard: The separation guard (:class:`ExecutorCore`), asked before the robot is commanded.
     """
 
-    def __init__(self, limits: ArmLimits, q0: np.ndarray, config: ExecutorConfig, link: RobotLink) -> None:
-        super().__init__(limits, q0, config)
+    def __init__(self, limits: ArmLimits, q0: np.ndarray, config: ExecutorConfig, link: RobotLink,
+                 guard: Callable[[np.ndarray, np.ndarray], str] | None = None) -> None:
+        super().__init__(limits, q0, config, guard)
         self.link = link
         self.sent_plans = 0
         self.sent_holds = 0
@@ -147,6 +150,9 @@ class Ros2Arm(ExecutorCore):
     def step(self, h: float, hold_reason: str | None = None) -> None:
         """Command the robot for the next ``h`` seconds (the plan, once, or a hold), then read its state back."""
         reason = self.stale_reason() if hold_reason is None else hold_reason
+        if not reason and self.reference is not None and self.guard is not None:
+            # the separation guard (real time) is asked before the robot is commanded: it moves on its own once sent
+            reason = self.guard(self.q, self.target_after(h))
         if not reason and self.reference is not None:
             if self._commanded is not self.plan:
                 # where the arm is, not its report: read at the end of the last step, h ago in real time (in lock-step

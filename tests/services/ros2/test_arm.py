@@ -169,3 +169,33 @@ def test_a_continuous_joint_reported_unwrapped_is_wrapped_and_commanded_the_shor
     np.testing.assert_allclose(arm.q[1], 0.1 + (0.5 - 0.1) * 0.1, atol=1e-6)  # measured, wrapped back
     with pytest.raises(Exception, match="continuous"):
         ArmLimits(NAMES, limits.lower, limits.upper, limits.velocity, continuous=("j7",))
+
+
+def test_the_separation_guard_is_asked_before_the_robot_is_commanded() -> None:
+    """A ROS 2 robot runs the trajectory it was sent on its own: the guard refusing a step in the core's simulated
+    bookkeeping held nothing (the state said 'holding', the robot went on). The arm asks it first and sends a hold."""
+    arm, robot = _arm(ExecutorConfig(mode="realtime", stale_limit_s=5.0))
+    asked: list[tuple[np.ndarray, np.ndarray]] = []
+    near = [True]
+
+    def guard(q: np.ndarray, q_next: np.ndarray) -> str:  # the person stands beyond j0 = 0.3
+        asked.append((q.copy(), q_next.copy()))
+        return "the person is near" if near[0] and q_next[0] > 0.3 and q_next[0] > q[0] else ""
+
+    arm.guard = guard
+    arm.adopt(make_plan(np.zeros(2), [np.array([0.5, 1.0])], t=11, dt=0.1, names=NAMES))
+    for _ in range(8):
+        arm.note_occupancy()
+        arm.step(0.1)
+    assert arm.holding and arm.reason == "the person is near" and arm.sent_holds == 1
+    assert 0.25 <= arm.q[0] <= 0.35  # the robot itself stopped, a step's travel at most past the line
+    np.testing.assert_allclose(asked[-1][0], arm.q)  # asked with where the robot is, measured
+    held = arm.q.copy()
+    arm.note_occupancy()
+    arm.step(0.1)
+    np.testing.assert_allclose(arm.q, held)
+    near[0] = False  # the person steps back: the plan is sent again, from where the robot is
+    for _ in range(12):
+        arm.note_occupancy()
+        arm.step(0.1)
+    assert arm.reached and not arm.holding and arm.sent_plans == 2
