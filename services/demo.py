@@ -285,10 +285,11 @@ def _closing_lines(cfg: DemoConfig, summary: Summary) -> list[str]:
     """What the demo prints at the end: the run's summary (or the comparison), the picture, where everything is."""
     extra = summary.extra
     lines = [] if cfg.compare else summary.lines(table=False)[:-1]  # the table was printed live; the log comes last
-    if cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra and summary.separation_held_s > 0:
-        lines.append(f"note: the robot had not arrived: the separation guard held it {summary.separation_held_s:.1f} s "
-                     "of the run, its path passing nearer the person than separation.stop_m (docs/executor.md: it "
-                     "waits for the person to step back; --config with [executor.separation] stop_m = 0 turns it off)")
+    if cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra and summary.separation_at_end:
+        lines.append(f"note: the robot had not arrived: the separation guard held it at the end "
+                     f"({summary.separation_held_s:.1f} s of the run in all), its path passing nearer the person than "
+                     "separation.stop_m (docs/executor.md: it waits for the person to step back; --config with "
+                     "[executor.separation] stop_m = 0 turns it off)")
     elif cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra:
         lines.append(f"note: a real-time run ends after its {cfg.steps} steps of {cfg.period_s:g} s "
                      f"({cfg.steps * cfg.period_s:g} s), and the robot, at {cfg.robot_speed:g} of its velocity limits, "

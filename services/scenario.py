@@ -210,6 +210,7 @@ class Summary:
     recognised_p: float | None = None  # the recognised class's probability in the last posterior
     recognised_index: int | None = None  # the pose that posterior was made after
     separation_held_s: float = 0.0  # real time: seconds the separation guard held the robot (docs/executor.md)
+    separation_at_end: bool = False  # and whether it held the robot at the run's end
     left_goal: dict[str, Any] | None = None  # not reached: a goal it reached earlier and left ({goal, reached_t_s,
     # left_t_s}: the robot turned to another, or was sent back later)
 
@@ -221,7 +222,7 @@ class Summary:
                "recognised_class": self.recognised_class, "goal_names": self.goal_names,
                "reached_t_s": self.reached_t_s, "recognised_p": self.recognised_p,
                "recognised_index": self.recognised_index, "separation_held_s": self.separation_held_s,
-               "left_goal": self.left_goal}
+               "separation_at_end": self.separation_at_end, "left_goal": self.left_goal}
         out.update(self.extra)
         return out
 
@@ -365,4 +366,5 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
                    mcap_path=mcap_path, reached=bool(reached_states), reached_step=reached_step,
                    human_class=human_class, recognised_class=recognised, goal_names=goal_names,
                    reached_t_s=reached_t, scored_against=final_label(final_occupancy), recognised_p=recognised_p,
-                   recognised_index=recognised_index, separation_held_s=separation_held, left_goal=left)
+                   recognised_index=recognised_index, separation_held_s=separation_held, left_goal=left,
+                   separation_at_end=bool(states) and is_separation_hold(states[-1].reason))

@@ -14,7 +14,7 @@ import torch
 
 from shared.human import HumanModel
 
-__all__ = ["body_clearance", "segment_distance"]
+__all__ = ["body_clearance", "sphere_capsule_clearance", "segment_distance"]
 
 
 def segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -22,6 +22,26 @@ def segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ab = b - a
     t = np.clip(np.sum((p - a) * ab, -1) / np.maximum(np.sum(ab * ab, -1), 1e-12), 0.0, 1.0)
     return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
+
+
+def sphere_capsule_clearance(centres: np.ndarray, radii: np.ndarray, ends: np.ndarray,
+                             body_radii: np.ndarray) -> np.ndarray:
+    """The smallest surface-to-surface distance between spheres and capsules, broadcast over leading axes.
+
+    Args:
+        centres: ``(..., S, 3)`` sphere centres.
+        radii: ``(S,)`` sphere radii.
+        ends: ``(..., C, 2, 3)`` capsule end points (leading axes broadcast against ``centres``').
+        body_radii: ``(C,)`` capsule radii.
+
+    Returns:
+        ``(...)`` the smallest distance (m) over every sphere and capsule; negative where they overlap.
+    """
+    c = np.asarray(centres, dtype=np.float64)[..., :, None, :]  # (..., S, 1, 3)
+    e = np.asarray(ends, dtype=np.float64)[..., None, :, :, :]  # (..., 1, C, 2, 3)
+    d = segment_distance(c, e[..., 0, :], e[..., 1, :])  # (..., S, C)
+    gap = d - np.asarray(radii, dtype=np.float64)[:, None] - np.asarray(body_radii, dtype=np.float64)[None, :]
+    return gap.min(axis=(-2, -1))
 
 
 def body_clearance(robot: Any, q: np.ndarray, postures: np.ndarray, human: HumanModel | None = None) -> np.ndarray:
@@ -41,7 +61,5 @@ def body_clearance(robot: Any, q: np.ndarray, postures: np.ndarray, human: Human
     qt = torch.as_tensor(np.asarray(q, dtype=np.float64), dtype=robot.lower.dtype, device=robot.lower.device)
     with torch.no_grad():
         centres = robot.sphere_centers(qt).double().cpu().numpy()  # (N, S, 3)
-    r_robot = robot.sphere_radii.double().cpu().numpy()  # (S,)
     ends, r_body = human.capsules(np.asarray(postures, dtype=np.float64))  # (N, C, 2, 3), (C,)
-    d = segment_distance(centres[:, :, None, :], ends[:, None, :, 0, :], ends[:, None, :, 1, :])  # (N, S, C)
-    return (d - r_robot[None, :, None] - np.asarray(r_body)[None, None, :]).min(axis=(1, 2))
+    return sphere_capsule_clearance(centres, robot.sphere_radii.double().cpu().numpy(), ends, np.asarray(r_body))

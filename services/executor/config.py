@@ -59,11 +59,15 @@ class SeparationConfig:
                         "the body's capsules) makes no move that brings it closer; it holds until a move keeps or "
                         "widens the gap (0.05: the posed body's error under a depth camera's noise, about 4 cm at the "
                         "hand; docs/executor.md); 0: off")
+    window_s: float = opt(0.5, help="the person is where any of their poses of the last window_s puts them (the "
+                          "nearest counts: a noisy pose that shows them further away lets the robot no nearer; s)")
 
     def validate(self) -> None:
         """Raise :class:`ConfigError` naming a bad value."""
         if not (self.stop_m >= 0 and math.isfinite(self.stop_m)):
             raise ConfigError(f"executor.separation.stop_m: must be a finite number >= 0 (0: off), got {self.stop_m}")
+        if not (self.window_s >= 0 and math.isfinite(self.window_s)):
+            raise ConfigError(f"executor.separation.window_s: must be a finite number >= 0 s, got {self.window_s}")
 
 
 @dataclass

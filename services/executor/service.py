@@ -182,7 +182,7 @@ class ExecutorService:
         elif key == self.keys.pose and isinstance(msg, HumanPose):
             self._pose_arrival[(msg.demo_id, msg.index)] = time.monotonic()
             if self.guard is not None:
-                self.guard.note_pose(msg.demo_id, msg.index, msg.features)
+                self.guard.note_pose(msg.demo_id, msg.index, msg.features, msg.stamp)
             if len(self._pose_arrival) > POSES_KEPT:
                 self._pose_arrival.popitem(last=False)
         elif key == self.keys.occupancy and isinstance(msg, OccupancyGrid):

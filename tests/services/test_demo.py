@@ -302,9 +302,12 @@ def test_a_real_time_run_that_ends_before_the_goal_says_why_and_what_to_do() -> 
         if quiet is cfg:
             summary = dataclasses.replace(summary, reached=True)
         assert not [ln for ln in _closing_lines(quiet, summary) if ln.startswith("note: a real-time run")]
-    guarded = dataclasses.replace(summary, reached=False, separation_held_s=6.2)  # more time would not have helped
-    note = [ln for ln in _closing_lines(cfg, guarded) if ln.startswith("note: ")]
-    assert len(note) == 1 and "the separation guard held it 6.2 s" in note[0] and "--steps" not in note[0]
+    guarded = dataclasses.replace(summary, reached=False, separation_held_s=6.2, separation_at_end=True)
+    note = [ln for ln in _closing_lines(cfg, guarded) if ln.startswith("note: ")]  # more time would not have helped
+    assert len(note) == 1 and "the separation guard held it at the end (6.2 s" in note[0] and "--steps" not in note[0]
+    once = dataclasses.replace(guarded, separation_held_s=0.02, separation_at_end=False)  # a hold on the way: the
+    note = [ln for ln in _closing_lines(cfg, once) if ln.startswith("note: ")]  # time ran out (it blamed the guard)
+    assert len(note) == 1 and "--steps 40" in note[0]
 
 
 def test_the_services_log_at_debug_with_the_demos_debug_or_their_own_variable(monkeypatch) -> None:

@@ -133,6 +133,9 @@ def test_a_real_time_summary_says_how_long_the_separation_guard_held_the_robot()
                          holding=bool(r), reason=r, q=np.full(3, 0.15), qd=np.zeros(3)) for i, r in enumerate(reasons)]
     s = summarise([_plan(-1, 0, [1.0, 2.0], stamp=t0 + 0.05)], states, None, {}, PointRobot(), "red_cup", None)
     assert s.separation_held_s == pytest.approx(0.5) and s.to_json()["separation_held_s"] == pytest.approx(0.5)
+    assert not s.separation_at_end  # the last states held for a stale plan
+    at_end = summarise([_plan(-1, 0, [1.0, 2.0], stamp=t0 + 0.05)], states[:40], None, {}, PointRobot(), "x", None)
+    assert at_end.separation_at_end and at_end.to_json()["separation_at_end"]
     assert any(ln.startswith("separation guard: held the robot 0.50 s") for ln in s.lines())
     quiet = summarise([_plan(-1, 0, [1.0, 2.0], stamp=t0 + 0.05)], states[:15], None, {}, PointRobot(), "x", None)
     assert quiet.separation_held_s == 0 and not any("separation" in ln for ln in quiet.lines())

@@ -77,8 +77,8 @@ def _run(core: ExecutorCore, seconds: float) -> None:
 def test_the_robot_stops_short_of_the_person_and_goes_on_once_they_step_back(setting) -> None:
     robot, limits, q0, goal, away, near = setting
     guard = SeparationGuard(SeparationConfig(stop_m=0.10), robot, SCENE)
-    guard.note_pose(0, 0, away)
-    guard.note_pose(0, 1, near)  # the person stands where the robot's hand is going
+    guard.note_pose(0, 0, away, 0.0)
+    guard.note_pose(0, 1, near, 1.0)  # the person stands where the robot's hand is going
     core = _core(limits, q0, goal, guard)
     _run(core, 6.0)
     assert core.holding and core.reason.startswith("the person is 0.1"), core.reason
@@ -89,7 +89,7 @@ def test_the_robot_stops_short_of_the_person_and_goes_on_once_they_step_back(set
     q_held, tau = core.q.copy(), core.tau
     _run(core, 0.5)
     assert np.array_equal(core.q, q_held) and core.tau == tau and not np.any(core.qd)  # its path's clock stopped too
-    guard.note_pose(0, 2, away)  # the person steps back
+    guard.note_pose(0, 2, away, 2.0)  # the person steps back
     _run(core, 6.0)
     assert core.reached and not core.holding
 
@@ -97,8 +97,8 @@ def test_the_robot_stops_short_of_the_person_and_goes_on_once_they_step_back(set
 def test_within_stop_m_a_move_away_from_the_person_is_taken(setting) -> None:
     robot, limits, q0, goal, away, near = setting
     guard = SeparationGuard(SeparationConfig(stop_m=0.10), robot, SCENE)
-    guard.note_pose(0, 0, away)
-    guard.note_pose(0, 1, near)
+    guard.note_pose(0, 0, away, 0.0)
+    guard.note_pose(0, 1, near, 1.0)
     path = np.linspace(q0, goal, 30)
     clear = body_clearance(robot, path, np.repeat(_placed(away, near)[None], 30, 0), HumanModel())
     inside = path[int(np.argmax(clear < 0.06))]  # 4-6 cm from the body, on the way to it
@@ -107,13 +107,47 @@ def test_within_stop_m_a_move_away_from_the_person_is_taken(setting) -> None:
     assert core.reached and guard.holds_ == 0 and guard.clearance_ > 0.15
 
 
+def test_noisy_poses_let_the_robot_no_nearer_than_the_nearest_of_the_last_half_second(setting) -> None:
+    """A review: judged against the newest pose alone, the robot stepped whenever noise showed the person further
+    away and never back: with 2 cm and 0.05 rad of noise per pose it ended inside the body (-0.058 m)."""
+    robot, limits, q0, goal, away, near = setting
+    rng = np.random.default_rng(0)
+    guard = SeparationGuard(SeparationConfig(stop_m=0.05), robot, SCENE)
+    guard.note_pose(0, 0, away, 0.0)
+    core = _core(limits, q0, goal, guard)
+    for i in range(300):  # 6 s, a pose every step
+        f = near.copy()
+        f[:3] += rng.normal(0.0, 0.02, 3)
+        f[4:] += rng.normal(0.0, 0.05, 8)
+        guard.note_pose(0, i + 1, f, (i + 1) * H)
+        core.step(H)
+    clearance = body_clearance(robot, core.q[None], _placed(away, near)[None], HumanModel())[0]
+    assert core.holding and clearance > 0.05, clearance  # short of the true body, by more than stop_m
+
+
+def test_a_long_step_cannot_jump_across_the_body(setting) -> None:
+    """Only the ends of a step were checked: a step the loop made long (a stall) from before the body to beyond it,
+    both ends outside stop_m, was taken. Points along it are checked too."""
+    robot, limits, q0, goal, away, near = setting
+    guard = SeparationGuard(SeparationConfig(stop_m=0.05), robot, SCENE)
+    guard.note_pose(0, 0, away, 0.0)
+    guard.note_pose(0, 1, near, 1.0)
+    far = np.clip(q0 + 2.2 * (goal - q0), limits.lower + 1e-3, limits.upper - 1e-3)  # on, through the body, out
+    path = np.linspace(q0, far, 200)
+    clear = body_clearance(robot, path, np.repeat(_placed(away, near)[None], 200, 0), HumanModel())
+    before = int(np.argmax(clear < 0.05)) - 1  # the last point outside stop_m before the body, the first after it
+    after = len(clear) - int(np.argmax((clear < 0.05)[::-1]))
+    assert clear[before] >= 0.05 and clear[after] >= 0.05 and clear.min() < 0, (clear[before], clear[after])
+    assert guard(path[before], path[after]).startswith("the person is")
+
+
 @pytest.mark.parametrize("why", ["off", "no pose"])
 def test_off_or_without_a_person_seen_the_robot_goes_its_way(setting, why: str) -> None:
     robot, limits, q0, goal, away, near = setting
     guard = SeparationGuard(SeparationConfig(stop_m=0.0 if why == "off" else 0.10), robot, SCENE)
     if why == "off":
-        guard.note_pose(0, 0, away)
-        guard.note_pose(0, 1, near)
+        guard.note_pose(0, 0, away, 0.0)
+        guard.note_pose(0, 1, near, 1.0)
     core = _core(limits, q0, goal, guard)
     _run(core, 6.0)
     assert core.reached and guard.holds_ == 0
