@@ -222,3 +222,26 @@ def test_a_real_time_executor_holds_short_of_the_person_it_is_sent(setting, zeno
             sender.join(timeout=10)
             sub.undeclare()
     assert not t.is_alive() and not sender.is_alive() and service.result.separation_holds > 0
+
+
+def test_the_executor_s_ros2_arm_gets_the_guard(setting, monkeypatch) -> None:
+    """The executor replaced its core with the ROS 2 arm when it found the robot, and the guard was left behind: a
+    real robot went on while its states said nothing (a review)."""
+    import services.ros2.link as link_module
+    from services.executor.service import ExecutorService
+    from shared.config import ZenohConfig
+
+    robot, limits, q0, goal, away, near = setting
+
+    class FoundRobot:  # the link once the robot answered, at q0
+        def __init__(self, *args: object) -> None:
+            pass
+
+        def initial(self, timeout_s: float) -> np.ndarray:
+            return q0.copy()
+
+    monkeypatch.setattr(link_module, "Ros2RobotLink", FoundRobot)
+    cfg = ExecutorConfig(mode="realtime", robot="ros2", mcap="none")
+    service = ExecutorService(cfg, ZenohConfig(multicast_scouting=False), robot=robot, human=(None, None), scene=SCENE)
+    service._connect_robot(None)
+    assert type(service.core).__name__ == "Ros2Arm" and service.core.guard is service.guard is not None
