@@ -56,6 +56,7 @@ class Outcome:
     clearance: np.ndarray = field(repr=False)
     mcap_path: str | None = None
     cut_short: str = ""
+    unit: str = "step"  # what switch_step and reached_step count (a real-time run's: its plans)
 
     def to_json(self) -> dict[str, Any]:
         """The scalar fields (the arrays stay out of ``--json``)."""
@@ -95,7 +96,7 @@ def measure_run(planner: str, states: list[RobotState], poses: list[HumanPose], 
           if len(q) else np.zeros((0, 3)))
     return Outcome(planner, float(cost), contact.time_in_contact, contact.time_near, contact.min_clearance,
                    summary.switch_step, summary.reached_step, list(summary.chosen_goal_per_step), t, ee, clearance,
-                   summary.mcap_path, str(summary.extra.get("cut_short", "")))
+                   summary.mcap_path, str(summary.extra.get("cut_short", "")), summary.unit)
 
 
 def _kept_further(main: Outcome, other: Outcome) -> bool:
@@ -153,10 +154,11 @@ def verdict(outcomes: list[Outcome]) -> str:
 
 def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planner's final prediction") -> list[str]:
     """The comparison table and its verdict; ``against``: what the interference is scored against."""
+    unit = outcomes[0].unit if outcomes else "step"
     out = ["", f"comparison (interference: the paper's Table I measure against {against}; contact: overlap with the "
            "real human's body):",
            f"  {'planner':<20}{'interference':>13}{'contact s':>11}{'within 5 cm s':>15}{'min clearance m':>17}"
-           f"{'switch step':>13}{'reached step':>14}"]
+           f"{'switch ' + unit:>13}{'reached ' + unit:>14}"]
     for o in outcomes:
         sw = "-" if o.switch_step is None else str(o.switch_step)
         re = "-" if o.reached_step is None else str(o.reached_step)

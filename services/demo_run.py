@@ -214,7 +214,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 return  # planned after the executor's run ended: never executed, not part of the run
             recorder.on_message(msg)
             if not header_printed[0]:
-                out(table_header(list(msg.goal_names)))
+                out(table_header(list(msg.goal_names), "plan" if realtime else "step"))
                 header_printed[0] = True
             # the belief the plan was made with, as the summary, `foresight log table` and --json give it (whichever
             # posterior came last made the live column differ from them, and from run to run)

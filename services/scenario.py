@@ -172,9 +172,12 @@ def step_entry(plan: Plan, t0: float, step: int | None = None) -> dict[str, Any]
             "cost_human": {n: float(c) for n, c, v in zip(names, plan.cost_human, plan.valid, strict=True) if v}}
 
 
-def table_header(goal_names: list[str]) -> str:
-    """The header of the run's table (one column per goal's total cost)."""
-    return (f"{'step':>4} {'t (s)':>6}  {'chosen':<12}" + "".join(f"{'cost ' + n:>16}" for n in goal_names)
+def table_header(goal_names: list[str], unit: str = "step") -> str:
+    """The header of the run's table (one column per goal's total cost).
+
+    ``unit``: what a row is (a real-time run's rows are its plans, several a replanning step).
+    """
+    return (f"{unit:>4} {'t (s)':>6}  {'chosen':<12}" + "".join(f"{'cost ' + n:>16}" for n in goal_names)
             + f"{'plan ms':>9}  human (belief)")
 
 
@@ -213,6 +216,7 @@ class Summary:
     separation_at_end: bool = False  # and whether it held the robot at the run's end
     left_goal: dict[str, Any] | None = None  # not reached: a goal it reached earlier and left ({goal, reached_t_s,
     # left_t_s}: the robot turned to another, or was sent back later)
+    unit: str = "step"  # what the rows and the steps named count: lock-step's ticks, or a real-time run's plans
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (keys steps, chosen_goal_per_step, switch_step, interference_cost, mcap_path, ...)."""
@@ -222,7 +226,7 @@ class Summary:
                "recognised_class": self.recognised_class, "goal_names": self.goal_names,
                "reached_t_s": self.reached_t_s, "recognised_p": self.recognised_p,
                "recognised_index": self.recognised_index, "separation_held_s": self.separation_held_s,
-               "separation_at_end": self.separation_at_end, "left_goal": self.left_goal}
+               "separation_at_end": self.separation_at_end, "left_goal": self.left_goal, "unit": self.unit}
         out.update(self.extra)
         return out
 
@@ -236,18 +240,19 @@ class Summary:
             The lines: the table, then the switch, the goal, the recognition, the interference cost, the log.
         """
         names = self.goal_names
-        out = [table_header(names), *(table_row(s, names, s.get("belief", "")) for s in self.steps)] if table else []
+        out = [table_header(names, self.unit), *(table_row(s, names, s.get("belief", "")) for s in self.steps)] \
+            if table else []
         by_step = {s["step"]: s for s in self.steps}
         if self.switch_step is None:
-            out.append("switch step: none (never switched)")
+            out.append(f"switch {self.unit}: none (never switched)")
         else:
             entry = by_step.get(self.switch_step)
-            out.append(f"switch step: {_at(entry) if entry is not None else self.switch_step}")
+            out.append(f"switch {self.unit}: {_at(entry) if entry is not None else self.switch_step}")
         reached = "no"
         if self.reached:
             reached = "yes"
             if self.reached_step is not None:
-                reached += f", during step {self.reached_step}"
+                reached += f", during {self.unit} {self.reached_step}"
             if self.reached_t_s is not None:
                 reached += f" (t = {self.reached_t_s:.2f} s)"
         if not self.reached and self.left_goal is not None:
@@ -367,4 +372,5 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
                    human_class=human_class, recognised_class=recognised, goal_names=goal_names,
                    reached_t_s=reached_t, scored_against=final_label(final_occupancy), recognised_p=recognised_p,
                    recognised_index=recognised_index, separation_held_s=separation_held, left_goal=left,
-                   separation_at_end=bool(states) and is_separation_hold(states[-1].reason))
+                   separation_at_end=bool(states) and is_separation_hold(states[-1].reason),
+                   unit="plan" if realtime else "step")

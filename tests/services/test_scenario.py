@@ -118,7 +118,8 @@ def test_realtime_summary_counts_time_from_the_run_start_and_names_the_step_of_t
     s = summarise(plans, states, None, {}, PointRobot(), "red_cup", None)
     assert [round(e["t_s"], 2) for e in s.steps] == [0.05, 0.25, 0.45, 0.65, 0.85]
     assert s.reached and s.reached_t_s == pytest.approx(0.66) and s.reached_step == 3
-    assert "goal reached: yes, during step 3 (t = 0.66 s)" in s.lines()
+    assert "goal reached: yes, during plan 3 (t = 0.66 s)" in s.lines()  # a real-time run's rows are its plans
+    assert s.lines()[0].startswith("plan  t (s)")  # (it said 'step 99' of a 40-step run: its 99th plan)
     assert s.to_json()["reached_t_s"] == pytest.approx(0.66)
     assert all(str(int(t0)) not in ln for ln in s.lines())  # no raw epoch anywhere
 
