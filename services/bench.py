@@ -24,6 +24,8 @@ BENCHES: dict[str, tuple[str, str]] = {
     "keypoints": ("shared.keypoints.bench", "fit the human model to a frame of body keypoints: live, baseline, batch"),
     "live": ("services.view.bench", "foresight demo in real time without a live view, with --live, with foresight "
              "view (a Foxglove client on each): pose -> plan p99"),
+    "separation": ("services.executor.separation_bench", "the executor's separation guard: noisy poses of a person "
+                   "in the robot's way, the nearest of the window against the newest pose alone; time per state"),
     "soak": ("tools.soak", "poses at 300 Hz for 60 s: predictor latency and drops, replanning period, RSS"),
     "codec": ("shared.protocol.bench", "encode and decode of each wire message against bare msgpack: what the "
               "checks cost"),
