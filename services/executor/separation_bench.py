@@ -30,7 +30,7 @@ from .core import ArmLimits, ExecutorCore
 from .models import load_models, start_configuration
 from .separation import SeparationGuard
 
-__all__ = ["main", "person_in_the_way"]
+__all__ = ["main", "in_the_way"]
 
 H = 0.02  # s, one state
 NOISE = (("none", 0.0, 0.0, False), ("1 cm, 0.03 rad", 0.01, 0.03, False), ("2 cm, 0.05 rad", 0.02, 0.05, False),
@@ -38,13 +38,21 @@ NOISE = (("none", 0.0, 0.0, False), ("1 cm, 0.03 rad", 0.01, 0.03, False), ("2 c
 """(name, pelvis noise m, joint-angle noise rad, drifting) of each row."""
 
 
-def person_in_the_way(robot, scene, q0: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(away (12,), near (12,))``: recorder-frame features of the person where the scene places them, and moved.
+def in_the_way(robot, scene, limits: ArmLimits) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The bench's setting (the guard's tests share it): ``(q0, goal, away, near)``, each ``(D,)`` or ``(12,)``.
 
-    Moved so that one of the body's capsules lies on the robot's hand (the sphere the path moves most) at ``goal``.
+    The robot's start ``q0`` and a ``goal`` 0.3-0.5 rad away on the first four arm joints (towards the side with
+    room); recorder-frame features of the person where the scene places them (a synthetic demonstration's first
+    pose), ``away``, and moved so that one of the body's capsules lies on the robot's hand (the sphere the path moves
+    most) at the goal, ``near``: the straight path's clearance falls from over 0.15 m to under 0.
     """
     import torch
 
+    q0 = start_configuration(limits, ExecutorConfig(), robot, scene)
+    goal = q0.copy()
+    for i, d in enumerate((0.5, 0.3, -0.4, -0.5), start=1):
+        goal[i] = q0[i] + d if limits.lower[i] + 0.05 <= q0[i] + d <= limits.upper[i] - 0.05 else q0[i] - d
+    goal = np.clip(goal, limits.lower + 0.05, limits.upper - 0.05)
     centres = [robot.sphere_centers(torch.as_tensor(q[None], dtype=robot.lower.dtype))[0].cpu().numpy()
                for q in (q0, goal)]
     hand = int(np.argmax(np.linalg.norm(centres[1] - centres[0], axis=1)))
@@ -57,13 +65,13 @@ def person_in_the_way(robot, scene, q0: np.ndarray, goal: np.ndarray) -> tuple[n
     for capsule in ends.mean(axis=1):
         near = away.copy()
         near[:3] += rotate @ (centres[1][hand] - capsule)
-        clear = body_clearance(robot, path, np.repeat(placement.place(0, 1, near)[None], 30, 0), human)
         try:
             HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=0, index=1, features=near).check()
         except ProtocolError:
             continue  # a pelvis the wire would refuse
+        clear = body_clearance(robot, path, np.repeat(placement.place(0, 1, near)[None], 30, 0), human)
         if clear[0] > 0.15 and clear[-1] < 0:
-            return away, near
+            return q0, goal, away, near
     raise RuntimeError("bench separation: no capsule of the body lies across the robot's path")
 
 
@@ -83,11 +91,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench separation"
     scene = load_scene(None)
     robot, _, _ = load_models(scene, "cpu")
     limits = ArmLimits.from_robot(robot)
-    q0 = start_configuration(limits, ExecutorConfig(), robot, scene)
-    goal = q0.copy()  # 0.3-0.5 rad on the first four arm joints, towards the side with room
-    for i, d in enumerate((0.5, 0.3, -0.4, -0.5), start=1):
-        goal[i] = q0[i] + d if limits.lower[i] + 0.05 <= q0[i] + d <= limits.upper[i] - 0.05 else q0[i] - d
-    away, near = person_in_the_way(robot, scene, q0, goal)
+    q0, goal, away, near = in_the_way(robot, scene, limits)
     placement = StreamPlacement(scene)
     placement.place(0, 0, away)
     truth, human = placement.place(0, 1, near), HumanModel()

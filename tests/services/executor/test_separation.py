@@ -10,50 +10,28 @@ import pytest
 
 from services.executor.config import ExecutorConfig, SeparationConfig
 from services.executor.core import ArmLimits, ExecutorCore
-from services.executor.models import start_configuration
 from services.executor.separation import SeparationGuard, separation_guard
 from shared.clearance import body_clearance
 from shared.config import ConfigError
 from shared.human import HumanModel, StreamPlacement
 
-from .conftest import SCENE, goals_for, straight_plan
+from .conftest import SCENE, straight_plan
 
 H = 0.02  # the simulation step (50 states a second)
 
 
 @pytest.fixture(scope="module")
 def setting():
-    """The PR2, its start and a goal, and two poses of a person (the recorder's frame, plausible on the wire): where
-    the scene places them (a synthetic demonstration's first pose), and moved so that one of the body's capsules lies
-    on the robot's hand at the goal (the straight path's clearance falls from over 0.15 m to under 0)."""
+    """The PR2, its start and a goal, and two poses of a person: where the scene places them, and moved so that one
+    of the body's capsules lies on the robot's hand at the goal (``foresight bench separation``'s setting)."""
     import torch
 
-    from shared.protocol import HumanPose, ProtocolError
+    from services.executor.separation_bench import in_the_way
     from shared.robot import PR2
-    from shared.synthetic import generate_library
 
     robot = PR2.from_scene(SCENE, device="cpu", dtype=torch.float32)
     limits = ArmLimits.from_robot(robot)
-    q0 = start_configuration(limits, ExecutorConfig(), robot, SCENE)
-    goal = goals_for(q0)[0]
-    centres = [robot.sphere_centers(torch.as_tensor(q[None], dtype=torch.float32))[0].numpy() for q in (q0, goal)]
-    hand = int(np.argmax(np.linalg.norm(centres[1] - centres[0], axis=1)))  # the sphere the path moves most
-    human, away = HumanModel(), generate_library(seed=0).demos[0].features[0].astype(np.float64)
-    ends, _ = human.capsules(_placed(away, away))
-    turn = away[3] - SCENE.human.pelvis_yaw  # the scene's frame back to the recorder's
-    rotate = np.array([[np.cos(turn), -np.sin(turn), 0.0], [np.sin(turn), np.cos(turn), 0.0], [0.0, 0.0, 1.0]])
-    path = np.linspace(q0, goal, 30)
-    for capsule in ends.mean(axis=1):
-        near = away.copy()
-        near[:3] += rotate @ (centres[1][hand] - capsule)
-        try:
-            HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=0, index=1, features=near).check()
-        except ProtocolError:
-            continue  # a pelvis the wire would refuse
-        clear = body_clearance(robot, path, np.repeat(_placed(away, near)[None], 30, 0), human)
-        if clear[0] > 0.15 and clear[-1] < 0:
-            return robot, limits, q0, goal, away, near
-    raise AssertionError("no capsule of the body lies across the path")
+    return robot, limits, *in_the_way(robot, SCENE, limits)
 
 
 def _placed(first: np.ndarray, pose: np.ndarray) -> np.ndarray:
