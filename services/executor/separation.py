@@ -53,7 +53,6 @@ class SeparationGuard:
         human: The human model (default: a new :class:`HumanModel`).
 
     Attributes:
-        posture_: ``(12,)`` the person's latest scene-frame posture (None before any pose).
         clearance_: The robot's clearance to the nearest body of the window at the last check (m; inf before any).
         holds_: Steps the guard held.
     """
@@ -63,8 +62,7 @@ class SeparationGuard:
         self.robot = robot
         self.human = human or HumanModel()
         self.placement = StreamPlacement(scene)
-        self.radii = robot.sphere_radii.double().cpu().numpy() if robot is not None else np.zeros(0)  # (S,)
-        self.posture_: np.ndarray | None = None
+        self.radii = robot.sphere_radii.double().cpu().numpy()  # (S,)
         self.clearance_ = math.inf
         self.holds_ = 0
         # (stamp, capsule ends (C, 2, 3)) of the poses of the last window_s, and the capsules' radii (C,): replaced
@@ -77,12 +75,10 @@ class SeparationGuard:
 
         Its body joins those of the last ``window_s``; a stamp before theirs (a new run's clock) starts afresh.
         """
-        posture = self.placement.place(demo_id, index, features)
-        ends, radii = self.human.capsules(posture)
+        ends, radii = self.human.capsules(self.placement.place(demo_id, index, features))
         kept = tuple(b for b in self._bodies if stamp - self.config.window_s <= b[0] <= stamp)
         self._body_radii = np.asarray(radii, dtype=np.float64)
         self._bodies = (*kept, (float(stamp), np.asarray(ends, dtype=np.float64)))
-        self.posture_ = posture
 
     def __call__(self, q: np.ndarray, q_next: np.ndarray) -> str:
         """Why the step from ``q`` to ``q_next`` (each ``(D,)``) must not be taken, or ``""``.

@@ -131,12 +131,13 @@ def test_off_or_without_a_person_seen_the_robot_goes_its_way(setting, why: str) 
     assert core.reached and guard.holds_ == 0
 
 
-def test_the_guard_watches_real_time_runs_only() -> None:
+def test_the_guard_watches_real_time_runs_only(setting) -> None:
     """A lock-step run is a measurement of the planners (their contact with the human): no guard there."""
-    assert separation_guard(ExecutorConfig(mode="lockstep"), None, SCENE) is None
-    assert separation_guard(ExecutorConfig(mode="realtime", separation=SeparationConfig(stop_m=0.0)), None,
+    robot = setting[0]
+    assert separation_guard(ExecutorConfig(mode="lockstep"), robot, SCENE) is None
+    assert separation_guard(ExecutorConfig(mode="realtime", separation=SeparationConfig(stop_m=0.0)), robot,
                             SCENE) is None
-    assert isinstance(separation_guard(ExecutorConfig(mode="realtime"), None, SCENE), SeparationGuard)
+    assert isinstance(separation_guard(ExecutorConfig(mode="realtime"), robot, SCENE), SeparationGuard)
 
 
 @pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf")])
