@@ -14,7 +14,7 @@ import torch
 
 from shared.human import HumanModel
 
-__all__ = ["body_clearance", "sphere_capsule_clearance", "segment_distance"]
+__all__ = ["body_clearance", "sphere_centres", "sphere_capsule_clearance", "segment_distance"]
 
 
 def segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -22,6 +22,13 @@ def segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ab = b - a
     t = np.clip(np.sum((p - a) * ab, -1) / np.maximum(np.sum(ab * ab, -1), 1e-12), 0.0, 1.0)
     return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
+
+
+def sphere_centres(robot: Any, q: np.ndarray) -> np.ndarray:
+    """``(N, S, 3)`` float64 centres of the robot's collision spheres at configurations ``q`` ``(N, D)``."""
+    qt = torch.as_tensor(np.asarray(q, dtype=np.float64), dtype=robot.lower.dtype, device=robot.lower.device)
+    with torch.no_grad():
+        return robot.sphere_centers(qt).double().cpu().numpy()
 
 
 def sphere_capsule_clearance(centres: np.ndarray, radii: np.ndarray, ends: np.ndarray,
@@ -58,8 +65,6 @@ def body_clearance(robot: Any, q: np.ndarray, postures: np.ndarray, human: Human
         capsule; negative where they overlap.
     """
     human = human or HumanModel()
-    qt = torch.as_tensor(np.asarray(q, dtype=np.float64), dtype=robot.lower.dtype, device=robot.lower.device)
-    with torch.no_grad():
-        centres = robot.sphere_centers(qt).double().cpu().numpy()  # (N, S, 3)
+    centres = sphere_centres(robot, q)  # (N, S, 3)
     ends, r_body = human.capsules(np.asarray(postures, dtype=np.float64))  # (N, C, 2, 3), (C,)
     return sphere_capsule_clearance(centres, robot.sphere_radii.double().cpu().numpy(), ends, np.asarray(r_body))

@@ -19,9 +19,8 @@ import math
 from typing import Any
 
 import numpy as np
-import torch
 
-from shared.clearance import sphere_capsule_clearance
+from shared.clearance import sphere_capsule_clearance, sphere_centres
 from shared.human import HumanModel, StreamPlacement
 
 from .config import SEPARATION_REASON, ExecutorConfig, SeparationConfig
@@ -92,9 +91,7 @@ class SeparationGuard:
         q, q_next = np.asarray(q, dtype=np.float64), np.asarray(q_next, dtype=np.float64)
         n = min(MAX_POINTS, max(1, math.ceil(float(np.max(np.abs(q_next - q))) / MAX_STEP_RAD)))
         path = q + (q_next - q) * np.linspace(0.0, 1.0, n + 1)[:, None]  # (n + 1, D)
-        qt = torch.as_tensor(path, dtype=self.robot.lower.dtype, device=self.robot.lower.device)
-        with torch.no_grad():
-            centres = self.robot.sphere_centers(qt).double().cpu().numpy()  # (n + 1, S, 3)
+        centres = sphere_centres(self.robot, path)  # (n + 1, S, 3)
         ends = np.stack([e for _, e in bodies])  # (P, C, 2, 3)
         gaps = sphere_capsule_clearance(centres[:, None], self.radii, ends[None], body_radii)  # (n + 1, P)
         nearest = gaps.min(axis=1)

@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from shared.arguments import ArgumentParser
-from shared.clearance import body_clearance
+from shared.clearance import body_clearance, sphere_centres
 from shared.human import HumanModel, StreamPlacement
 from shared.native_threads import limit_blas_threads
 from shared.protocol import HumanPose, Plan, ProtocolError
@@ -46,15 +46,12 @@ def in_the_way(robot, scene, limits: ArmLimits) -> tuple[np.ndarray, np.ndarray,
     pose), ``away``, and moved so that one of the body's capsules lies on the robot's hand (the sphere the path moves
     most) at the goal, ``near``: the straight path's clearance falls from over 0.15 m to under 0.
     """
-    import torch
-
     q0 = start_configuration(limits, ExecutorConfig(), robot, scene)
     goal = q0.copy()
     for i, d in enumerate((0.5, 0.3, -0.4, -0.5), start=1):
         goal[i] = q0[i] + d if limits.lower[i] + 0.05 <= q0[i] + d <= limits.upper[i] - 0.05 else q0[i] - d
     goal = np.clip(goal, limits.lower + 0.05, limits.upper - 0.05)
-    centres = [robot.sphere_centers(torch.as_tensor(q[None], dtype=robot.lower.dtype))[0].cpu().numpy()
-               for q in (q0, goal)]
+    centres = sphere_centres(robot, np.stack([q0, goal]))
     hand = int(np.argmax(np.linalg.norm(centres[1] - centres[0], axis=1)))
     human, away = HumanModel(), generate_library(seed=0).demos[0].features[0].astype(np.float64)
     placement = StreamPlacement(scene)
