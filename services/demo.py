@@ -251,8 +251,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     if cfg.compare and len(outcomes) == len(VARIANTS):
         summary.extra["verdict"] = verdict(outcomes)
     cut = "; ".join(f"{o.planner} {o.cut_short}" for o in outcomes if o.cut_short)
-    title = (f"foresight demo: {summary.human_class} reach, scene {scene.name}, robot at {cfg.robot_speed:g} of its "
-             f"velocity limits, {cfg.steps} steps of {cfg.period_s:g} s" + (f": the {cut}" if cut else ""))
+    title = figure_title(cfg, summary, scene.name, cut)
     against = ("the prediction planner's final prediction" if summary.scored_against == "final prediction"
                else f"the run's {summary.scored_against}")
     summary.extra["outcome_lines"] = outcome_lines(outcomes, against)
@@ -261,6 +260,18 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     if figure is not None:
         summary.extra["figure"] = str(figure)
     return status, summary
+
+
+def figure_title(cfg: DemoConfig, summary: Summary, scene: str, cut: str = "") -> str:
+    """The run's PNG title: the human's reach, the scene, the robot's pace and the run's length.
+
+    A real-time run's length is its wall time and its plans (the planner replans as each prediction comes: 100
+    plans in 10 s, where the title said "20 steps of 0.5 s"); ``cut``: how a planner's run was cut short.
+    """
+    length = (f"{cfg.steps} steps of {cfg.period_s:g} s" if cfg.mode == "lockstep" else
+              f"{cfg.steps * cfg.period_s:g} s in real time, {len(summary.chosen_goal_per_step)} plans")
+    return (f"foresight demo: {summary.human_class} reach, scene {scene}, robot at {cfg.robot_speed:g} of its velocity "
+            f"limits, {length}" + (f": the {cut}" if cut else ""))
 
 
 def _picture(draw: Callable[[Path], Path], png: Path, out: Callable[[str], None]) -> Path | None:

@@ -59,11 +59,24 @@ def _seconds(o: Outcome) -> np.ndarray:
     return o.stamps - o.stamps[0] if len(o.stamps) else o.stamps
 
 
-def _step_points(o: Outcome, steps: int, period_s: float) -> np.ndarray:
-    """The end-effector position at the start of each replanning step (``(S, 3)``)."""
+def _unit_words(outcomes: list[Outcome]) -> str:
+    """What the goal lane's marks are: ``replanning step`` (lock-step) or ``plan`` (a real-time run's)."""
+    unit = outcomes[0].unit if outcomes else "step"
+    return "replanning step" if unit == "step" else unit
+
+
+def _step_points(o: Outcome, period_s: float) -> np.ndarray:
+    """The end-effector position when each plan of ``o.chosen_goal_per_step`` was made (``(S, 3)``).
+
+    At the plans' own times (``o.plan_t_s``) where the run has them: a real-time planner replans as soon as a
+    new prediction comes, several times a period (its marks, one a period apart, piled up at the path's end);
+    else one every ``period_s``.
+    """
+    steps = len(o.chosen_goal_per_step)
     if len(o.stamps) == 0:
         return np.zeros((0, 3))
-    idx = np.searchsorted(_seconds(o), np.arange(steps) * period_s, side="left").clip(0, len(o.stamps) - 1)
+    at = o.plan_t_s if o.plan_t_s is not None and len(o.plan_t_s) == steps else np.arange(steps) * period_s
+    idx = np.searchsorted(_seconds(o), at, side="left").clip(0, len(o.stamps) - 1)
     return o.ee_path[idx]
 
 
@@ -129,7 +142,7 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
         if len(o.ee_path):
             top.plot(o.ee_path[:, 0], o.ee_path[:, 1], color=col, lw=2.2, zorder=6,
                      label=f"robot hand, {o.planner} (contact {o.contact_s:.1f} s)")
-            marks = _step_points(o, len(o.chosen_goal_per_step), period_s)
+            marks = _step_points(o, period_s)
             top.scatter(marks[:, 0], marks[:, 1], c=[_goal_color(g) for g in o.chosen_goal_per_step], s=22,
                         edgecolors=col, linewidths=0.8, zorder=7)
             # where the hand starts and ends (a review could not tell the path's direction)
@@ -142,7 +155,8 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
     top.set_aspect("equal")
     top.set_xlabel("x (m)")
     top.set_ylabel("y (m)")
-    top.set_title("top view: robot hand paths (dots: replanning steps, in the chosen cup's colour)", fontsize=10)
+    top.set_title(f"top view: robot hand paths (dots: the hand at each {_unit_words(outcomes)}, in the chosen "
+                  "cup's colour)", fontsize=10)
     if any(len(o.ee_path) for o in outcomes):  # the start and end marks, in each planner's colour
         top.scatter([], [], marker="o", s=70, facecolors="white", edgecolors="k", linewidths=1.8,
                     label="robot hand's start")
@@ -157,8 +171,9 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
         clear.legend(fontsize=8)
     goals.set_yticks(range(len(outcomes)), [o.planner for o in outcomes])
     goals.xaxis.set_major_locator(MaxNLocator(nbins=min(max(steps, 1), 20), integer=True))  # 30 plans: unreadable
-    goals.set_xlabel("replanning step")
-    goals.set_title("goal chosen at each step (square colour = cup)", fontsize=10)
+    goals.set_xlabel(_unit_words(outcomes) + ("" if _unit_words(outcomes) == "replanning step" else
+                                              " (a real-time planner replans as each prediction comes)"))
+    goals.set_title(f"goal chosen at each {_unit_words(outcomes)} (square colour = cup)", fontsize=10)
     goals.set_ylim(-0.6, len(outcomes) - 0.4)
     if title:
         fig.suptitle(title, fontsize=11)

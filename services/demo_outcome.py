@@ -41,6 +41,10 @@ class Outcome:
         clearance: ``(N,)`` robot-human clearance at each executed state (m).
         mcap_path: The run's log.
         cut_short: How the run was cut short (``interrupted after 9 of 20 steps``), "" when it ran to its end.
+        unit: What ``switch_step``, ``reached_step`` and ``chosen_goal_per_step`` count: lock-step's steps or a
+            real-time run's plans.
+        plan_t_s: ``(S,)`` seconds into the run each plan of ``chosen_goal_per_step`` was made (the run's summary;
+            None: one a replanning period apart, as in lock-step).
     """
 
     planner: str
@@ -56,7 +60,8 @@ class Outcome:
     clearance: np.ndarray = field(repr=False)
     mcap_path: str | None = None
     cut_short: str = ""
-    unit: str = "step"  # what switch_step and reached_step count (a real-time run's: its plans)
+    unit: str = "step"
+    plan_t_s: np.ndarray | None = field(default=None, repr=False)
 
     def to_json(self) -> dict[str, Any]:
         """The scalar fields (the arrays stay out of ``--json``)."""
@@ -96,7 +101,8 @@ def measure_run(planner: str, states: list[RobotState], poses: list[HumanPose], 
           if len(q) else np.zeros((0, 3)))
     return Outcome(planner, float(cost), contact.time_in_contact, contact.time_near, contact.min_clearance,
                    summary.switch_step, summary.reached_step, list(summary.chosen_goal_per_step), t, ee, clearance,
-                   summary.mcap_path, str(summary.extra.get("cut_short", "")), summary.unit)
+                   summary.mcap_path, str(summary.extra.get("cut_short", "")), summary.unit,
+                   np.array([float(s["t_s"]) for s in summary.steps], dtype=np.float64))
 
 
 def _kept_further(main: Outcome, other: Outcome) -> bool:

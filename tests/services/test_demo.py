@@ -338,3 +338,18 @@ def test_the_demos_help_loads_neither_torch_nor_matplotlib() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
                          cwd=Path(__file__).resolve().parents[2]).stdout
     assert "usage: foresight demo" in out and out.strip().splitlines()[-1] == "[]", out[-500:]
+
+
+def test_the_figure_title_gives_a_real_time_runs_wall_time_and_plans() -> None:
+    """A real-time run's PNG said "20 steps of 0.5 s" over a lane of 100 plans."""
+    import types
+
+    from services.demo import DemoConfig, figure_title
+
+    summary = types.SimpleNamespace(human_class="blue_cup", chosen_goal_per_step=["red_cup"] * 97)
+    lock = figure_title(DemoConfig(mode="lockstep"), summary, "pr2_two_cups_side")
+    real = figure_title(DemoConfig(mode="realtime"), summary, "pr2_two_cups_side", "prediction interrupted")
+    assert lock.endswith(f"{DemoConfig().steps} steps of {DemoConfig().period_s:g} s")
+    wall = DemoConfig().steps * DemoConfig().period_s
+    assert f"{wall:g} s in real time, 97 plans: the prediction interrupted" in real
+    assert "steps of" not in real

@@ -47,7 +47,48 @@ def test_step_marks_follow_the_runs_own_clock_in_real_time() -> None:
     ee = np.c_[np.arange(n), np.zeros(n), np.zeros(n)].astype(float)
     for t0 in (0.0, time.time()):
         o = Outcome("p", 0.0, 0.0, 0.0, 1.0, None, None, ["red_cup"] * 3, t0 + np.arange(n) * 0.1, ee, np.zeros(n))
-        assert _step_points(o, 3, 0.5)[:, 0].tolist() == [0.0, 5.0, 10.0]
+        assert _step_points(o, 0.5)[:, 0].tolist() == [0.0, 5.0, 10.0]
+
+
+def test_plan_marks_sit_where_each_plan_was_made() -> None:
+    """A real-time planner replans as each prediction comes (100 plans in 10 s): the marks, one a period apart,
+    put plans 20-99 at the path's end."""
+    from services.demo_figure import _step_points
+
+    n = 100  # states 0.1 s apart, the hand at x = 0.1 t
+    ee = np.c_[np.arange(n) * 0.01, np.zeros(n), np.zeros(n)]
+    plans = np.array([0.0, 0.05, 0.15, 0.25, 1.95, 8.95])  # between states: the next one
+    o = Outcome("p", 0.0, 0.0, 0.0, 1.0, None, None, ["red_cup"] * 6, 100.0 + np.arange(n) * 0.1, ee, np.zeros(n),
+                unit="plan", plan_t_s=plans)
+    assert np.allclose(_step_points(o, 0.5)[:, 0], [0.0, 0.01, 0.02, 0.03, 0.2, 0.9])
+
+
+def test_a_real_time_figure_counts_plans(tmp_path: Path) -> None:
+    """Its goal lane and top view say "plan", not "replanning step"."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from services import demo_figure
+
+    seen: dict[str, str] = {}
+    real_save = demo_figure.save_figure
+
+    def keep(fig: object, out: Path) -> Path:
+        seen.update({ax.get_title(): ax.get_xlabel() for ax in fig.axes})  # type: ignore[attr-defined]
+        return real_save(fig, out)
+
+    o = _outcome("prediction", ["red_cup"] * 4)
+    o.unit, o.plan_t_s = "plan", np.array([0.0, 0.1, 0.2, 0.3])
+    demo_figure.save_figure = keep
+    try:
+        demo_figure.draw_outcomes([o], load_scene("pr2_two_cups_side"), None, [], tmp_path / "rt.png", 0.5)
+    finally:
+        demo_figure.save_figure = real_save
+        plt.close("all")
+    assert seen["goal chosen at each plan (square colour = cup)"].startswith("plan (")
+    assert any(t.startswith("top view") and "each plan," in t for t in seen)
 
 
 def test_an_interrupted_run_draws_only_the_poses_it_saw() -> None:

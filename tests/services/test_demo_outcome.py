@@ -87,7 +87,7 @@ def test_measure_run_scores_contact_and_interference() -> None:
     states = [RobotState(stamp=0.5 * i, tick=i, joint_names=robot.joint_names, goal=0, reached=False, holding=False,
                          reason="", q=q0, qd=np.zeros(len(q0))) for i in (2, 0, 1)]  # any order
     summary = types.SimpleNamespace(extra={}, switch_step=None, reached_step=None, chosen_goal_per_step=["red_cup"] * 3,
-                                    mcap_path=None, unit="step")
+                                    mcap_path=None, unit="step", steps=[])
     # no human, empty prediction: nothing measured against
     empty = OccupancyGrid.from_dense(np.zeros(scene.grid.dims), scene.grid.origin, scene.grid.resolution, stamp=0.0,
                                      tick=0, tick_last=True, demo_id=0, index=0, method="prediction")
