@@ -229,7 +229,8 @@ class PlannerServiceConfig:
 
     mode: str = opt("realtime", help="replan on a wall-clock period or on every ClockTick (lock-step: no lookahead)",
                     choices=("realtime", "lockstep"))
-    period_s: float = opt(0.5, help="real-time: longest time between two replanning steps (s)")
+    period_s: float = opt(0.5, help="real-time: longest time between two published plans (s; trigger 'period': between "
+                       "two step starts)")
     trigger: str = opt("event", help="real-time: 'event' starts a step as soon as a new prediction arrives or the "
                        "robot leaves its plan (period_s as the upper bound); 'period' replans on period_s only",
                        choices=TRIGGERS)

@@ -8,7 +8,13 @@ the planning time: a prediction that lands just after a step started waits a who
 * the robot has left the plan it is executing (farther than the planner's ``off_path_tol`` from
   tau_best: it was held, or the executor clamped it),
 
-and in any case once ``period_s`` has passed since the last step started. A step that is running is
+and in any case, so that a plan is published at least once every ``period_s``, once ``period_s`` less the
+recent steps' planning time (``lead_s``, at most half the period) has passed since the last step started. The
+period is the executor's heartbeat: its ``stale_limit_s`` (0.5 s, as the period) holds the robot when the newest
+plan is older. Started a whole period after the last start, a step's plan came ``period_s`` plus the change in
+planning time after the last one, and the robot stopped for a state whenever that change was positive (a
+real-time demo after the human's reach: 3 holds of 20 ms in 7 s, ``plan is 0.50 s old (limit 0.50 s)``). A
+step that is running is
 never interrupted (its result is published with the inputs it used); the *anytime* option
 (``anytime_min_iterations``) lets it stop STOMP early, after at least that many iterations, when a
 newer prediction is already waiting, so the next step starts from fresher input. ``trigger = "period"``
@@ -32,7 +38,8 @@ class ReplanTrigger:
     """Decides when the next replanning step starts.
 
     Args:
-        period_s: Longest time between two step starts (s, > 0); the only trigger in ``period`` mode.
+        period_s: Longest time between two published plans (s, > 0; :meth:`lead`); the only trigger in ``period``
+            mode (between two step starts).
         mode: One of :data:`TRIGGERS`.
 
     Attributes:
@@ -52,7 +59,8 @@ class ReplanTrigger:
         self.last_input: Hashable | None = None
         self.counts: dict[str, int] = {"first": 0, "occupancy": 0, "departure": 0, "period": 0}
 
-    def reason(self, now: float, occupancy: Hashable | None, departed: bool = False) -> str | None:
+    def reason(self, now: float, occupancy: Hashable | None, departed: bool = False, lead_s: float = 0.0
+               ) -> str | None:
         """Why a step should start at ``now``, or None to wait.
 
         Args:
@@ -60,6 +68,7 @@ class ReplanTrigger:
             occupancy: Identity of the newest occupancy received (e.g. ``(demo_id, index, stamp)``; None:
                 none yet).
             departed: Whether the robot has left the plan it executes.
+            lead_s: The recent steps' planning time (s): the period's step starts that much early (:meth:`lead`).
 
         Returns:
             ``"first"``, ``"occupancy"``, ``"departure"``, ``"period"`` or None.
@@ -71,9 +80,20 @@ class ReplanTrigger:
                 return "occupancy"
             if departed:
                 return "departure"
-        if now - self.last_start >= self.period_s - 1e-9:
+        if now - self.last_start >= self.period_s - self.lead(lead_s) - 1e-9:
             return "period"
         return None
+
+    def lead(self, lead_s: float) -> float:
+        """How much earlier than a period after the last start the period's step starts (event mode; s).
+
+        ``lead_s`` (the recent planning time) clipped to ``[0, period_s / 2]``: the plan lands within the period
+        of the last one; a planner slower than half its period replans every half period, not back to back. 0 in
+        ``period`` mode, the paper's fixed period.
+        """
+        if self.mode != "event" or not lead_s > 0:
+            return 0.0
+        return min(float(lead_s), 0.5 * self.period_s)
 
     def start(self, now: float, occupancy: Hashable | None, reason: str) -> None:
         """Record that a step starts at ``now`` planning against ``occupancy``, for ``reason``."""
@@ -81,11 +101,11 @@ class ReplanTrigger:
         self.last_input = occupancy
         self.counts[reason] = self.counts.get(reason, 0) + 1
 
-    def wait_s(self, now: float) -> float:
+    def wait_s(self, now: float, lead_s: float = 0.0) -> float:
         """Seconds until the period forces the next step (0 when due, and before the first step)."""
         if self.last_start is None:
             return 0.0
-        return max(0.0, self.last_start + self.period_s - now)
+        return max(0.0, self.last_start + self.period_s - self.lead(lead_s) - now)
 
     def newer_than_planned(self, occupancy: Hashable | None) -> bool:
         """Whether ``occupancy`` is not the one the running step plans against (the anytime test)."""

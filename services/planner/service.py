@@ -223,7 +223,8 @@ class PlannerService:
         presence = Presence(session, self.keys, "planner", stop_with=self.config.stop_with, stop=stop)
         trigger = self.trigger = ReplanTrigger(self.config.period_s, self.config.trigger)
         tol = self.planner.config.off_path_tol
-        recent: deque[float] = deque(maxlen=5)  # the last steps' planning times (s): the event mode's lookahead
+        recent: deque[float] = deque(maxlen=5)  # the last steps' planning times (s): the event mode's lookahead and
+        # the period's lead
 
         def newer_waiting() -> bool:  # anytime: a prediction newer than the one being planned against
             return trigger.newer_than_planned(occupancy_identity(occupancy.latest))
@@ -244,9 +245,10 @@ class PlannerService:
                     dist = self.planner.departure(robot.q)  # once, as fast as it fails, until the next state
                     departed = dist is not None and dist > tol
                 now = time.monotonic()
-                reason = trigger.reason(now, ident, departed)
+                lead = max(recent, default=0.0)  # the period's step starts early by this: its plan lands in time
+                reason = trigger.reason(now, ident, departed, lead)
                 if reason is None:
-                    wake.wait(trigger.wait_s(now))
+                    wake.wait(trigger.wait_s(now, lead))
                     continue
                 trigger.start(now, ident, reason)
                 lookahead = None  # period mode: the configured lookahead (the demo sets it to the period)

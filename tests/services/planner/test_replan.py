@@ -36,3 +36,19 @@ def test_bad_settings_are_named(period: float, mode: str) -> None:
     with pytest.raises(ValueError, match="period_s|trigger"):
         ReplanTrigger(period, mode)
 
+
+
+def test_the_periods_plan_lands_within_the_period_of_the_last_one() -> None:
+    """The executor holds the robot once the newest plan is older than its stale limit (0.5 s, the period): a step
+    started a whole period after the last one published its plan late whenever it planned longer than the last."""
+    t = ReplanTrigger(period_s=0.5, mode="event")
+    t.start(0.0, None, "first")  # published at 0.04 (planned 40 ms)
+    assert t.reason(0.45, None, lead_s=0.04) is None
+    assert t.reason(0.46, None, lead_s=0.04) == "period"  # published by 0.46 + 0.07 = 0.53 < 0.04 + 0.5
+    assert t.wait_s(0.3, lead_s=0.04) == pytest.approx(0.16)
+    assert t.lead(2.0) == 0.25  # a planner slower than half its period replans every half period
+    assert t.reason(0.25, None, lead_s=2.0) == "period" and t.reason(0.2, None, lead_s=2.0) is None
+    paper = ReplanTrigger(period_s=0.5, mode="period")  # the paper's fixed period: step starts a period apart
+    paper.start(0.0, None, "first")
+    assert paper.reason(0.46, None, lead_s=0.04) is None and paper.reason(0.5, None, lead_s=0.04) == "period"
+    assert paper.wait_s(0.3, lead_s=0.04) == pytest.approx(0.2)
