@@ -101,8 +101,9 @@ class DemoConfig:
                              "measured that prediction keeps the robot off the human (docs/experiments.md)")
     period_s: float = opt(0.5, help="replanning period (simulated s per step in lock-step, wall s in real time; 0.5: "
                           "the experiments', the paper's 50 STOMP iterations)")
-    finish: bool = opt(True, help="lockstep: after the last step, the robot executes the rest of its last plan "
-                       "(the executor's --finish-path), so that the run ends at the goal")
+    finish: bool = opt(True, help="after the last step the robot goes on to its goal: lockstep, it executes the rest "
+                       "of its last plan (the executor's --finish-path); realtime, it goes on replanning until it is "
+                       "there, at most as long again as the run (--finish-s)")
     rate_hz: float = opt(30.0, help="real time: poses per second (keypoint frames with --human keypoints)")
     human: str = opt("replayer", choices=("replayer", "keypoints"), help="how the human comes in: replayer, the "
                      "demonstration's posture features; keypoints, the same demonstration as body keypoints (the "
@@ -268,8 +269,10 @@ def figure_title(cfg: DemoConfig, summary: Summary, scene: str, cut: str = "") -
     A real-time run's length is its wall time and its plans (the planner replans as each prediction comes: 100
     plans in 10 s, where the title said "20 steps of 0.5 s"); ``cut``: how a planner's run was cut short.
     """
+    wall, reached = cfg.steps * cfg.period_s, summary.reached_t_s
+    more = f", then on to its goal at {reached:.1f} s" if reached is not None and reached > wall else ""  # finish_s
     length = (f"{cfg.steps} steps of {cfg.period_s:g} s" if cfg.mode == "lockstep" else
-              f"{cfg.steps * cfg.period_s:g} s in real time, {len(summary.chosen_goal_per_step)} plans")
+              f"{wall:g} s in real time{more}, {len(summary.chosen_goal_per_step)} plans")
     return (f"foresight demo: {summary.human_class} reach, scene {scene}, robot at {cfg.robot_speed:g} of its velocity "
             f"limits, {length}" + (f": the {cut}" if cut else ""))
 
@@ -302,10 +305,17 @@ def _closing_lines(cfg: DemoConfig, summary: Summary) -> list[str]:
                      "separation.stop_m (docs/executor.md: it waits for the person to step back; --config with "
                      "[executor.separation] stop_m = 0 turns it off)")
     elif cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra:
-        lines.append(f"note: a real-time run ends after its {cfg.steps} steps of {cfg.period_s:g} s "
-                     f"({cfg.steps * cfg.period_s:g} s), and the robot, at {cfg.robot_speed:g} of its velocity limits, "
-                     f"had not arrived: --steps {2 * cfg.steps} gives it twice as long (a lock-step run executes the "
-                     "rest of its last plan after its last step)")
+        length = cfg.steps * cfg.period_s
+        lines.append(f"note: a real-time run lasts its {cfg.steps} steps of {cfg.period_s:g} s ({length:g} s)"
+                     + (f" and goes on until the robot arrives, at most {length:g} s more" if cfg.finish else "")
+                     + f"; the robot, at {cfg.robot_speed:g} of its velocity limits, had not arrived: "
+                     + (f"--steps {2 * cfg.steps} gives it twice as long" if cfg.finish else
+                        "--finish lets it go on to its goal"))
+    elif (cfg.mode == "realtime" and summary.reached and summary.reached_t_s is not None
+          and summary.reached_t_s > cfg.steps * cfg.period_s):
+        lines.append(f"note: the robot arrived {summary.reached_t_s - cfg.steps * cfg.period_s:.1f} s after the run's "
+                     f"{cfg.steps * cfg.period_s:g} s: the run goes on until it is there (--no-finish ends it at "
+                     f"{cfg.steps * cfg.period_s:g} s)")
     lines += extra.get("outcome_lines", [])
     if cfg.compare:
         lines.append("MCAP logs: " + ", ".join(str(r["mcap_path"]) for r in extra.get("comparison", [])))

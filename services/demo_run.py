@@ -83,8 +83,9 @@ def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> 
 def _run_length(cfg: DemoConfig) -> str:
     if cfg.mode == "lockstep":
         return f"lockstep mode, {cfg.steps} steps of {cfg.period_s:g} s (simulated time)"
-    return (f"realtime mode, {cfg.steps * cfg.period_s:g} s of wall time ({cfg.steps} periods of {cfg.period_s:g} s); "
-            "the planner replans as soon as it is idle and a new prediction has come, at least once a period: one "
+    return (f"realtime mode, {cfg.steps * cfg.period_s:g} s of wall time ({cfg.steps} periods of {cfg.period_s:g} s)"
+            + (f" and on until the robot arrives, at most {cfg.steps * cfg.period_s:g} s more" if cfg.finish else "")
+            + "; the planner replans as soon as it is idle and a new prediction has come, at least once a period: one "
             "row per plan")
 
 
@@ -194,6 +195,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     # run, and what came later made the summary's rows and final prediction differ from the log's
     recording = threading.Event()
     recording.set()
+    run_s = cfg.steps * cfg.period_s * (2 if cfg.finish else 1)  # the longest a real-time run lasts (finish_s)
 
     def on_state(msg: RobotState) -> None:
         if not recording.is_set():
@@ -210,7 +212,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
             if run_start[0] is None:
                 run_start[0] = msg.stamp
             t0 = run_start[0]
-            if realtime and msg.stamp - t0 >= cfg.steps * cfg.period_s:
+            if realtime and msg.stamp - t0 >= run_s:
                 return  # planned after the executor's run ended: never executed, not part of the run
             recorder.on_message(msg)
             if not header_printed[0]:

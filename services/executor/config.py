@@ -104,6 +104,9 @@ class ExecutorConfig:
                                     "empty: 1 each)")
     finish_path: bool = opt(False, help="lockstep: after the last step, execute the rest of the last plan without "
                             "replanning, at the same pace (the paper authors' protocol)")
+    finish_s: float = opt(0.0, help="realtime: after the run's steps x step_period_s, go on (adopting plans as "
+                          "before) until the robot reaches its goal, at most this many seconds more (lock-step's "
+                          "finish_path in real time; 0: the run ends at its length)")
     lockstep_timeout_s: float = opt(30.0, help="lockstep: longest wait (wall s) for the plan of a tick before "
                                     "going on without it")
     wait_for: list[str] = opt(default_factory=lambda: ["replayer", "predictor", "planner"],
@@ -149,6 +152,8 @@ class ExecutorConfig:
             raise ConfigError(f"executor.steps: must be >= 0, got {self.steps}")
         if self.velocity_scale > 1.0:
             raise ConfigError(f"executor.velocity_scale: must be <= 1, got {self.velocity_scale}")
+        if not (self.finish_s >= 0 and math.isfinite(self.finish_s)):
+            raise ConfigError(f"executor.finish_s: must be >= 0 s, got {self.finish_s}")
         if not (self.path_per_step >= 0 and math.isfinite(self.path_per_step)):
             raise ConfigError(f"executor.path_per_step: must be >= 0, got {self.path_per_step}")
         if not all(w > 0 and math.isfinite(w) for w in self.path_weights):

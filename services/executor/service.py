@@ -12,9 +12,9 @@ decided once per step, the substeps and the tick) are :class:`shared.lockstep.Lo
 loop publishes the step's ``substeps`` RobotState messages and ClockTick n, then waits (at most
 ``lockstep_timeout_s``) for the plan of tick n in its :class:`shared.lockstep.PlanInbox`.
 
-Real-time mode: after the same wait for the ``wait_for`` services, the arm follows the newest plan
-from the moment it arrives; RobotState goes out at ``state_rate_hz`` of wall time; freshness is
-measured from the arrival time; no clock ticks.
+Real-time mode (:mod:`services.executor.realtime`): after the same wait for the ``wait_for`` services, the arm
+follows the newest plan from the moment it arrives; RobotState goes out at ``state_rate_hz`` of wall time;
+freshness is measured from the arrival time; no clock ticks.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ import numpy as np
 
 from shared.config import ZenohConfig
 from shared.foxglove.scene import SceneBuilder
-from shared.lockstep import FIRST_PLAN, Adoption, LockstepMaster, PlanInbox, StepClock
+from shared.lockstep import FIRST_PLAN, LockstepMaster, PlanInbox, StepClock
 from shared.protocol import (
     DemoMarker,
     Expectations,
@@ -58,6 +58,7 @@ from shared.transport import Presence, RejectCounter, TypedPublisher, describe, 
 from .core import ArmLimits, ExecutorConfig, ExecutorCore, ExecutorError, reason_kind
 from .models import HumanBody, PlaceInScene, RobotModel, load_models, start_configuration
 from .peers import PeerWatch
+from .realtime import run_realtime
 from .result import ExecutorResult
 from .separation import separation_guard
 
@@ -233,7 +234,7 @@ class ExecutorService:
                 if cfg.mode == "lockstep":
                     self._run_lockstep(state_pub, clock_pub, presence)
                 else:
-                    self._run_realtime(state_pub, presence)
+                    run_realtime(self, state_pub, presence)
                 if self.mcap is not None:
                     time.sleep(LINGER_S)  # let the last messages of the run reach the logger
             finally:
@@ -289,14 +290,16 @@ class ExecutorService:
         self.core = Ros2Arm(self.limits, q0, self.config, link, guard=self.guard)
         return link
 
-    def _publish_state(self, pub: TypedPublisher[Any], state: RobotState) -> None:
+    def publish_state(self, pub: TypedPublisher[Any], state: RobotState) -> None:
+        """Publish ``state``, flush the log when due, and keep it for the result's ``times`` and ``q``."""
         pub.put(state)
         if self.mcap is not None:
             self._write(self.mcap.flush_if_due)  # a full disk costs the robot nothing
         self._times.append(state.stamp)
         self._qs.append(state.q)
 
-    def _wait_for_peers(self, presence: Presence) -> None:
+    def wait_for_peers(self, presence: Presence) -> None:
+        """Wait (at most ``startup_timeout_s``) for the ``wait_for`` services' liveliness tokens."""
         cfg = self.config
         presence.wait_for(cfg.wait_for, cfg.startup_timeout_s, self.stop)
 
@@ -304,8 +307,8 @@ class ExecutorService:
                       presence: Presence) -> None:
         cfg, r = self.config, self.result
         master = LockstepMaster(self.core, StepClock(cfg.step_period_s, cfg.substeps))
-        self._wait_for_peers(presence)
-        self._publish_state(state_pub, master.initial_state())
+        self.wait_for_peers(presence)
+        self.publish_state(state_pub, master.initial_state())
         n, last_kind = 0, None
         while (cfg.steps == 0 or n < cfg.steps) and not self.stop.is_set():
             step = master.step(n, self.inbox.latest())
@@ -317,7 +320,7 @@ class ExecutorService:
                     log.info("executor: resuming at step %d", n)
                 last_kind = reason_kind(step.reason)
             for state in step.states:
-                self._publish_state(state_pub, state)
+                self.publish_state(state_pub, state)
             r.goal_per_step.append(step.goal)
             r.steps = n + 1
             if step.reached and r.note_reached(step.goal, n):
@@ -352,49 +355,8 @@ class ExecutorService:
             if n == start:  # a bounded tail: the plan's length at the pace, 20 steps more for a lagging joint
                 bound = n + 1 + math.ceil(core.remaining / per_step) + 20
             for state in step.states:
-                self._publish_state(state_pub, state)
+                self.publish_state(state_pub, state)
             if step.reached and r.note_reached(step.goal, n):
                 log.info("executor: goal %d reached during step %d (the rest of the path)", step.goal, n)
             n += 1
 
-    def _run_realtime(self, state_pub: TypedPublisher[Any], presence: Presence) -> None:
-        cfg, core = self.config, self.core
-        self._wait_for_peers(presence)  # the run's clock starts once the planner (and the rest) are there
-        period = cfg.step_period_s
-        h_nom = 1.0 / cfg.state_rate_hz
-        end = cfg.steps * period if cfg.steps else float("inf")
-        t0 = time.monotonic()
-        adoption = Adoption()
-        next_wake = t0
-        last_kind = None
-        while not self.stop.is_set() and core.t < end:
-            next_wake += h_nom
-            delay = next_wake - time.monotonic()
-            if delay > 0:
-                self.stop.wait(delay)
-            elapsed = time.monotonic() - t0
-            received = self.inbox.latest()
-            plan = adoption.realtime(received)
-            if plan is not None:
-                core.adopt(plan)  # starts now; counts as received now
-            if received.occupancy_time is not None:
-                core.note_occupancy(received.occupancy_time - t0)
-            h = max(elapsed - core.t, 1e-6)
-            core.step(h)
-            if core.holding:
-                self.result.held_steps += 1
-            if reason_kind(core.reason) != last_kind:  # each change once, not every state (the ages change)
-                if core.reason:
-                    log.info("executor: holding at t=%.2f s: %s", core.t, core.reason)
-                elif last_kind is not None:
-                    log.info("executor: resuming at t=%.2f s", core.t)
-                last_kind = reason_kind(core.reason)
-            self._publish_state(state_pub, core.state(-1, time.time()))
-            step = int(core.t // period)
-            while len(self.result.goal_per_step) < step:
-                self.result.goal_per_step.append(core.goal)
-            self.result.steps = step
-            if core.reached and self.result.note_reached(core.goal, step):
-                log.info("executor: goal %d reached at t=%.2f s", core.goal, core.t)
-                if cfg.stop_on_goal:
-                    break

@@ -50,8 +50,9 @@ def test_clients_see_every_scene_channel_of_a_secure_realtime_run(tmp_path: Path
     init_security_dir(sec, ROLES)
     router, live, view = free_port(), free_port(), free_port()
     demo = subprocess.Popen(
-        [sys.executable, "-m", "tools", "demo", "--mode", "realtime", "--steps", "16", "--library", str(lib),
-         "--components", "4", "--models-dir", str(tmp_path / "models"), "--run-dir", str(tmp_path / "run"),
+        [sys.executable, "-m", "tools", "demo", "--mode", "realtime", "--steps", "16", "--no-finish",
+         "--library", str(lib), "--components", "4", "--models-dir", str(tmp_path / "models"),
+         "--run-dir", str(tmp_path / "run"),
          "--security", str(sec), "--port", str(router), "--live", str(live), "--timeout", "300"],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, stdin=subprocess.DEVNULL)
     viewer = subprocess.Popen(

@@ -296,8 +296,15 @@ def test_a_real_time_run_that_ends_before_the_goal_says_why_and_what_to_do() -> 
                       reached=False, reached_step=None, human_class="blue_cup", recognised_class="blue_cup",
                       extra={"run_dir": "runs/demo/x"})
     cfg = dataclasses.replace(DemoConfig(), mode="realtime", steps=20, period_s=0.5, robot_speed=0.1)
-    note = [ln for ln in _closing_lines(cfg, summary) if ln.startswith("note: a real-time run ends")]
-    assert len(note) == 1 and "(10 s)" in note[0] and "--steps 40" in note[0]
+    note = [ln for ln in _closing_lines(cfg, summary) if ln.startswith("note: a real-time run lasts")]
+    assert len(note) == 1 and "(10 s) and goes on until the robot arrives, at most 10 s more" in note[0]
+    assert "--steps 40" in note[0]
+    note = [ln for ln in _closing_lines(dataclasses.replace(cfg, finish=False), summary) if ln.startswith("note: ")]
+    assert len(note) == 1 and "goes on" not in note[0] and "--finish lets it go on to its goal" in note[0]
+    late = dataclasses.replace(summary, reached=True, reached_t_s=14.6)  # it went on after its 10 s: said so
+    note = [ln for ln in _closing_lines(cfg, late) if ln.startswith("note: ")]
+    assert note == ["note: the robot arrived 4.6 s after the run's 10 s: the run goes on until it is there "
+                    "(--no-finish ends it at 10 s)"]
     for quiet in (dataclasses.replace(cfg, mode="lockstep"), cfg):  # lock-step finishes its plan; reached: nothing
         if quiet is cfg:
             summary = dataclasses.replace(summary, reached=True)
@@ -346,10 +353,13 @@ def test_the_figure_title_gives_a_real_time_runs_wall_time_and_plans() -> None:
 
     from services.demo import DemoConfig, figure_title
 
-    summary = types.SimpleNamespace(human_class="blue_cup", chosen_goal_per_step=["red_cup"] * 97)
+    summary = types.SimpleNamespace(human_class="blue_cup", chosen_goal_per_step=["red_cup"] * 97, reached_t_s=None)
     lock = figure_title(DemoConfig(mode="lockstep"), summary, "pr2_two_cups_side")
     real = figure_title(DemoConfig(mode="realtime"), summary, "pr2_two_cups_side", "prediction interrupted")
     assert lock.endswith(f"{DemoConfig().steps} steps of {DemoConfig().period_s:g} s")
     wall = DemoConfig().steps * DemoConfig().period_s
     assert f"{wall:g} s in real time, 97 plans: the prediction interrupted" in real
     assert "steps of" not in real
+    summary.reached_t_s = 14.62  # it went on after its 10 s (finish_s)
+    assert f"{wall:g} s in real time, then on to its goal at 14.6 s, 97 plans" in figure_title(
+        DemoConfig(mode="realtime"), summary, "pr2_two_cups_side")

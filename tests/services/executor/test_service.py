@@ -451,3 +451,29 @@ def test_a_lockstep_run_that_went_on_without_its_inputs_exits_1(monkeypatch, cap
         monkeypatch.setattr(executor_main, "ExecutorService", Ran)
         assert executor_main.main(argv) == status
         assert "mcap: runs/x.mcap" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("finish_s", [0.0, 8.0])
+def test_a_realtime_run_with_finish_s_goes_on_to_its_goal(zenoh_hub, pr2, finish_s) -> None:
+    """A real-time run ended at its length, the robot short of its goal (the demo's, at 0.1 of its velocity limits);
+    with finish_s it goes on until the goal is reached, and ends there."""
+    exec_z = zenoh_hub()
+    cfg = ExecutorConfig(mode="realtime", steps=2, step_period_s=0.2, state_rate_hz=50.0, velocity_scale=0.1,
+                         finish_s=finish_s, mcap="none", wait_for=["predictor", "planner"])
+    fake = FakeSystem(zenoh_hub(), waypoints=20)
+    service = ExecutorService(cfg, exec_z, robot=pr2, human=(None, None), scene=SCENE)
+    with fake.running(realtime_hz=10.0):
+        t = threading.Thread(target=service.run)
+        t.start()
+        t.join(timeout=30)
+        service.stop.set()
+        t.join(timeout=10)
+    assert not t.is_alive()
+    r = service.result
+    ran_s = r.times[-1] - r.times[0]  # the states' wall-clock stamps
+    assert r.steps == 2
+    if finish_s == 0:
+        assert not r.reached and r.finish_steps == 0 and ran_s < 0.5
+    else:
+        assert r.reached and r.finish_steps > 0 and r.reached_step >= 2
+        assert 0.4 < ran_s < 0.4 + finish_s  # it ended at the goal, before finish_s ran out
