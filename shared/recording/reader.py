@@ -80,8 +80,9 @@ def open_records(path: str | Path) -> Iterator[StreamReader]:
     if p.is_dir():
         logs = sorted(p.rglob("*.mcap"))
         listed = ", ".join(str(f) for f in logs[:6]) + (f" and {len(logs) - 6} more" if len(logs) > 6 else "")
-        raise UserError(f"log file {str(p)!r} is a directory" + (f"; the logs under it: {listed}" if logs else
-                                                                   ", with no .mcap file under it"))
+        none = (", with no .mcap file under it (yet: runs/demo/latest names a demo run from its start, before its "
+                "executor writes the log)")
+        raise UserError(f"log file {str(p)!r} is a directory" + (f"; the logs under it: {listed}" if logs else none))
     if not p.exists():
         raise UserError(f"log file {str(p)!r} not found")
     if not p.is_file():  # a pipe (process substitution) cannot be read twice or sought: the readers need both
