@@ -172,7 +172,7 @@ def start_configuration(robot: Any) -> np.ndarray:
 def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene | None = None,
               progress: bool = True) -> dict[str, Any]:
     """Time replanning steps and FK for each K; returns the report dict (see module docstring)."""
-    from tqdm import tqdm
+    from shared.progress import progress as progress_bar
 
     scene = scene or load_scene()
     base = Planner(scene, dataclasses.replace(config, compile=False))  # the robot, the cost and the IK goals, once
@@ -187,7 +187,7 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
                            "iterations": config.stomp.iterations, "threads": torch.get_num_threads(),
                            "device": config.device, "dtype": config.dtype, "steps": steps,
                            "load_avg_1min": os.getloadavg()[0]}
-    for k in tqdm(ks, desc="bench planner", unit="K", disable=not progress, file=sys.stderr):
+    for k in progress_bar(ks, desc="bench planner", unit="K", enabled=progress):
         t0 = time.perf_counter()
         planner = k_goal_planner(scene, config, k, base)
         out["construct_s"].append(round(time.perf_counter() - t0, 2))

@@ -12,11 +12,11 @@ from collections.abc import MutableMapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from tqdm import tqdm
 
 from shared.feature_sets import FeatureMapping
 from shared.human import HumanModel
 from shared.library import Demonstration
+from shared.progress import progress as progress_bar
 from shared.runtime import UserError
 from shared.scene import Scene
 
@@ -71,7 +71,7 @@ def timed_class_volumes(mapping: FeatureMapping, scene: Scene, grid, cfg: TrainC
     human = HumanModel()
     n_bins = -(-max(d.n_samples for ds in by_class for d in ds) // cfg.time_bin)
     parts = [timed_volume(_sweeps(ds, mapping, scene, grid, cfg, cache, human), grid, cfg.time_bin, n_bins)
-             for ds in tqdm(by_class, desc="timed volumes", unit="class", disable=not progress)]
+             for ds in progress_bar(by_class, desc="timed volumes", unit="class", enabled=progress)]
     support = np.unique(np.concatenate([p[0] for p in parts]))
     values = np.zeros((len(parts), n_bins, len(support)), np.float32)
     for m, (sup, val) in enumerate(parts):
@@ -91,7 +91,7 @@ def class_volumes(bank: MixtureBank, lengths: list[int], encoder: FeatureEncoder
     common = _volume_key_parts(scene, grid, cfg)
     cols = encoder.posture_columns()
     out = []
-    for m in tqdm(range(len(lengths)), desc=f"{cfg.volume} volumes", unit="class", disable=not progress):
+    for m in progress_bar(range(len(lengths)), desc=f"{cfg.volume} volumes", unit="class", enabled=progress):
         w, mu, cov = bank.weights_[m], bank.means_[m], bank.covariances_[m]
         if cfg.volume == "demos":
             out.append(demos_volume(_sweeps(by_class[m], mapping, scene, grid, cfg, cache, human), grid))

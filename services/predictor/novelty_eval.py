@@ -23,12 +23,12 @@ from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
-from tqdm import tqdm
 
 from shared import strict_json
 from shared.arguments import ArgumentParser
 from shared.atomic_file import ready_to_write
 from shared.library import MotionLibrary, load_library
+from shared.progress import progress as progress_bar
 from shared.runtime import UserError, cli_errors
 
 from .calibration import DEFAULT_FOLDS
@@ -162,7 +162,7 @@ def run_novelty(library: MotionLibrary, gmm: GMMConfig, folds: int = DEFAULT_FOL
     fit = partial(class_fit, gmm=gmm, cache=cache)
     result = NoveltyResult(library.source, window, quantile)
     names = list(library.class_names)
-    for c in tqdm(range(library.n_classes), desc="novelty (class left out)", unit="class", disable=not progress):
+    for c in progress_bar(range(library.n_classes), desc="novelty (class left out)", unit="class", enabled=progress):
         known = [m for m in range(library.n_classes) if m != c]
         with threadpool_limits(1):
             minima = heldout_minima([feats[m] for m in known], fit, folds, window)

@@ -19,13 +19,13 @@ from typing import Any
 import numpy as np
 from joblib import Parallel, delayed
 from sklearn.mixture import GaussianMixture
-from tqdm import tqdm
 
 from shared import strict_json
 from shared.arguments import ArgumentParser
 from shared.atomic_file import ready_to_write
 from shared.feature_sets import describe_features
 from shared.library import MotionLibrary, load_library
+from shared.progress import progress as progress_bar
 from shared.runtime import UserError, cli_errors
 
 from .features import VARIANTS, FeatureEncoder
@@ -136,8 +136,8 @@ def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAUL
     bank = MixtureBank.from_sklearn(full)
     jobs = (delayed(_score_demo)(i, feats, labels, bank, fit, fractions) for i in range(len(demos)))
     it = Parallel(n_jobs=n_jobs, return_as="generator")(jobs)
-    cum = np.array(list(tqdm(it, total=len(demos), desc=f"leave-one-out ({features})", unit="demo",
-                             disable=not progress)))                   # (N, F, M)
+    cum = np.array(list(progress_bar(it, total=len(demos), desc=f"leave-one-out ({features})", unit="demo",
+                                     enabled=progress)))                   # (N, F, M)
     correct = np.argmax(cum, axis=2) == labels[:, None]
     label = name or f"Foresight, {features} features, {cfg.n_components or 'BIC'} Gaussians per class"
     return RecognitionResult(label, list(fractions), correct.mean(axis=0).tolist(), correct, labels, cum)

@@ -26,11 +26,11 @@ from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
-from tqdm import tqdm
 
 from shared.arguments import ArgumentParser
 from shared.atomic_file import ready_to_write
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
+from shared.progress import progress as progress_bar
 from shared.runtime import UserError, cli_errors, setup_logging
 from shared.scene import SCENE_HELP, Scene, load_scene
 
@@ -179,7 +179,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
         return class_fit(data, cfg.gmm, cache)
 
     feats = [[encoder.batch(d.features) for d in ds] for ds in by_class]
-    mixtures = [fit(np.vstack(f)) for f in tqdm(feats, desc="GMM per class", unit="class", disable=not progress)]
+    mixtures = [fit(np.vstack(f)) for f in progress_bar(feats, desc="GMM per class", unit="class", enabled=progress)]
     if cfg.temperature is None:
         with threadpool_limits(1):  # many small fits: one BLAS thread each is several times faster
             choice = choose_temperature(feats, fit, folds=cfg.folds)
