@@ -36,8 +36,8 @@ VARIANTS: dict[str, list[str]] = {
 
 def _run(out: Path, variant: str, demo_args: list[str]) -> dict:
     """One demo run; returns its JSON summary."""
-    cmd = [sys.executable, "-m", "tools", "demo", "--mode", "realtime", "--json", "--run-dir", str(out),
-           "--port", str(free_port()), *VARIANTS[variant], *demo_args]
+    cmd = [sys.executable, "-m", "tools", "demo", "--mode", "realtime", "--no-finish", "--json", "--run-dir", str(out),
+           "--port", str(free_port()), *VARIANTS[variant], *demo_args]  # --no-finish: the run's 10 s, as measured
     out.mkdir(parents=True, exist_ok=True)
     with (out / "demo.log").open("w") as err:
         proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=err, text=True, stdin=subprocess.DEVNULL,

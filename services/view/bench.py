@@ -64,7 +64,7 @@ SLOW = "view-slow"
 def _run(out: Path, variant: str, demo_args: list[str]) -> tuple[dict, dict[str, int], float]:
     """One demo run; returns ``(its JSON summary, messages the client received per topic, the view's peak MB)``."""
     router, port = free_port(), free_port()
-    cmd = [sys.executable, "-m", "tools", "demo", "--mode", "realtime", "--json", "--run-dir", str(out),
+    cmd = [sys.executable, "-m", "tools", "demo", "--mode", "realtime", "--no-finish", "--json", "--run-dir", str(out),
            "--port", str(router), *(["--live", str(port)] if variant == "live" else []), *demo_args]
     counts: dict[str, int] = {}
     done = threading.Event()
