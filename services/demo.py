@@ -270,7 +270,8 @@ def figure_title(cfg: DemoConfig, summary: Summary, scene: str, cut: str = "") -
     plans in 10 s, where the title said "20 steps of 0.5 s"); ``cut``: how a planner's run was cut short.
     """
     wall, reached = cfg.steps * cfg.period_s, summary.reached_t_s
-    more = f", then on to its goal at {reached:.1f} s" if reached is not None and reached > wall else ""  # finish_s
+    more = (f", then on to its goal at {reached:.1f} s" if cfg.finish and reached is not None and reached > wall
+            else "")  # finish_s
     length = (f"{cfg.steps} steps of {cfg.period_s:g} s" if cfg.mode == "lockstep" else
               f"{wall:g} s in real time{more}, {len(summary.chosen_goal_per_step)} plans")
     return (f"foresight demo: {summary.human_class} reach, scene {scene}, robot at {cfg.robot_speed:g} of its velocity "
@@ -311,7 +312,7 @@ def _closing_lines(cfg: DemoConfig, summary: Summary) -> list[str]:
                      + f"; the robot, at {cfg.robot_speed:g} of its velocity limits, had not arrived: "
                      + (f"--steps {2 * cfg.steps} gives it twice as long" if cfg.finish else
                         "--finish lets it go on to its goal"))
-    elif (cfg.mode == "realtime" and summary.reached and summary.reached_t_s is not None
+    elif (cfg.mode == "realtime" and cfg.finish and summary.reached and summary.reached_t_s is not None
           and summary.reached_t_s > cfg.steps * cfg.period_s):
         lines.append(f"note: the robot arrived {summary.reached_t_s - cfg.steps * cfg.period_s:.1f} s after the run's "
                      f"{cfg.steps * cfg.period_s:g} s: the run goes on until it is there (--no-finish ends it at "

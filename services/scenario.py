@@ -322,6 +322,10 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     ordered = [by_tick[t] for t in keys]
     states = sorted(states, key=lambda s: s.stamp)
     realtime = bool(ordered) and all(p.tick < 0 for p in ordered)
+    if realtime and states:  # a plan is stamped with the state it starts from: one from the run's last state (the
+        # goal reached, the run over) or later was never executed (a review: "reached during plan 89" of 88 adopted)
+        kept = [(k, p) for k, p in zip(keys, ordered, strict=True) if p.stamp < states[-1].stamp]
+        keys, ordered = [k for k, _ in kept], [p for _, p in kept]
     if t0 is None:
         t0 = (states[0].stamp if states else ordered[0].stamp) if realtime else 0.0
     steps = [step_entry(p, t0, k) for k, p in zip(keys, ordered, strict=True)]  # ticks, or the plans' order
@@ -355,7 +359,7 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
         if first.tick >= 0:  # lock-step: the step during which it was reached
             reached_step = first.tick
         else:  # real time: the step whose plan was the newest when it was reached
-            before = [s for s in steps if s["t_s"] <= reached_t + 1e-9]
+            before = [s for s in steps if s["t_s"] < reached_t]  # one made from the reached state came after it
             reached_step = before[-1]["step"] if before else None
     guarded = [i for i in range(1, len(states)) if is_separation_hold(states[i].reason)]
     separation_held = float(sum(states[i].stamp - states[i - 1].stamp for i in guarded))

@@ -23,7 +23,9 @@ class ExecutorResult:
             closed in on the person within ``separation.stop_m``).
         lockstep_timeouts: Lock-step waits for a tick's plan or prediction that ran out (the step went on without
             it: a run whose numbers depend on timing; the experiments refuse such a run).
-        finish_steps: Steps after the last one that executed the rest of the last plan (``finish_path``).
+        finish_steps: Steps after the last one that executed the rest of the last plan (``finish_path``), or, in
+            real time, periods after the run's length on the way to the goal (``finish_s``; ``goal_per_step`` has
+            them too).
         plans: Plans adopted; ``plans_rejected``: plans with the wrong joints.
         rejects: Payloads refused (decoding, values, order), per key; ``reject_reasons`` per
             ``"key reason"``.

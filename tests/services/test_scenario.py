@@ -122,6 +122,13 @@ def test_realtime_summary_counts_time_from_the_run_start_and_names_the_step_of_t
     assert s.lines()[0].startswith("plan  t (s)")  # (it said 'step 99' of a 40-step run: its 99th plan)
     assert s.to_json()["reached_t_s"] == pytest.approx(0.66)
     assert all(str(int(t0)) not in ln for ln in s.lines())  # no raw epoch anywhere
+    # a plan is stamped with the state it starts from: the one made from the reached state came after it, and one
+    # made from the run's last state (a run that ends at its goal) was never executed (a review: the summary said
+    # "reached during plan 89" of a run whose executor adopted 88)
+    at_goal = [*plans[:3], _plan(-1, 0, [1.0, 2.0], stamp=states[33].stamp, step=3),
+               _plan(-1, 0, [1.0, 2.0], stamp=states[-1].stamp, step=4)]
+    s = summarise(at_goal, states, None, {}, PointRobot(), "red_cup", None)
+    assert len(s.steps) == 4 and s.reached_step == 2
 
 
 def test_a_real_time_summary_says_how_long_the_separation_guard_held_the_robot():

@@ -46,7 +46,7 @@ def test_the_periods_plan_lands_within_the_period_of_the_last_one() -> None:
     assert t.reason(0.45, None, lead_s=0.04) is None
     assert t.reason(0.46, None, lead_s=0.04) == "period"  # published by 0.46 + 0.07 = 0.53 < 0.04 + 0.5
     assert t.wait_s(0.3, lead_s=0.04) == pytest.approx(0.16)
-    assert t.lead(2.0) == 0.25  # a planner slower than half its period replans every half period
+    assert t.lead(2.0) == 0.25  # a planner slower than half its period starts a step half a period after the last
     assert t.reason(0.25, None, lead_s=2.0) == "period" and t.reason(0.2, None, lead_s=2.0) is None
     paper = ReplanTrigger(period_s=0.5, mode="period")  # the paper's fixed period: step starts a period apart
     paper.start(0.0, None, "first")
