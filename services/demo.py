@@ -209,7 +209,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     (with ``--compare``), ``figure`` (the PNG) and ``run_dir``.
     """
     from services import demo_run
-    from services.demo_figure import draw_outcomes
+    from services.demo_figure import draw_outcomes, figure_title
     from services.demo_outcome import measure_run, outcome_lines, verdict
     from shared.robot import PR2
 
@@ -261,21 +261,6 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     if figure is not None:
         summary.extra["figure"] = str(figure)
     return status, summary
-
-
-def figure_title(cfg: DemoConfig, summary: Summary, scene: str, cut: str = "") -> str:
-    """The run's PNG title: the human's reach, the scene, the robot's pace and the run's length.
-
-    A real-time run's length is its wall time and its plans (the planner replans as each prediction comes: 100
-    plans in 10 s, where the title said "20 steps of 0.5 s"); ``cut``: how a planner's run was cut short.
-    """
-    wall, reached = cfg.steps * cfg.period_s, summary.reached_t_s
-    more = (f", then on to its goal at {reached:.1f} s" if cfg.finish and reached is not None and reached > wall
-            else "")  # finish_s
-    length = (f"{cfg.steps} steps of {cfg.period_s:g} s" if cfg.mode == "lockstep" else
-              f"{wall:g} s in real time{more}, {len(summary.chosen_goal_per_step)} plans")
-    return (f"foresight demo: {summary.human_class} reach, scene {scene}, robot at {cfg.robot_speed:g} of its velocity "
-            f"limits, {length}" + (f": the {cut}" if cut else ""))
 
 
 def _picture(draw: Callable[[Path], Path], png: Path, out: Callable[[str], None]) -> Path | None:

@@ -6,12 +6,15 @@ One PNG, three panels:
   probable voxel of each column), the human's hand path and body at the end, and each planner's
   executed end-effector path with a dot per replanning step coloured by the goal it chose;
 * the clearance between the robot and the real human over time, per planner (below 0: contact);
-* the goal each planner chose at every replanning step.
+* the goal each planner chose at every replanning step;
+
+titled by :func:`figure_title` (the reach, the scene, the robot's pace, the run's length).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +22,10 @@ from services.demo_outcome import Outcome
 from services.experiments.plots import save_figure
 from shared.protocol import HumanPose, OccupancyGrid
 from shared.scene import Scene
+
+if TYPE_CHECKING:
+    from services.demo import DemoConfig
+    from services.scenario import Summary
 
 __all__ = ["draw_outcomes", "poses_of_the_run"]
 
@@ -178,3 +185,18 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
     if title:
         fig.suptitle(title, fontsize=11)
     return save_figure(fig, out)
+
+
+def figure_title(cfg: DemoConfig, summary: Summary, scene: str, cut: str = "") -> str:
+    """The run's PNG title: the human's reach, the scene, the robot's pace and the run's length.
+
+    A real-time run's length is its wall time and its plans (the planner replans as each prediction comes: 100
+    plans in 10 s, where the title said "20 steps of 0.5 s"); ``cut``: how a planner's run was cut short.
+    """
+    wall, reached = cfg.steps * cfg.period_s, summary.reached_t_s
+    more = (f", then on to its goal at {reached:.1f} s" if cfg.finish and reached is not None and reached > wall
+            else "")  # finish_s
+    length = (f"{cfg.steps} steps of {cfg.period_s:g} s" if cfg.mode == "lockstep" else
+              f"{wall:g} s in real time{more}, {len(summary.chosen_goal_per_step)} plans")
+    return (f"foresight demo: {summary.human_class} reach, scene {scene}, robot at {cfg.robot_speed:g} of its velocity "
+            f"limits, {length}" + (f": the {cut}" if cut else ""))

@@ -299,20 +299,21 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     if status and mcap.is_file():  # cut short: the summary is of what the log holds, as foresight log table's is
         recorder = recorder_from_log(mcap, keys) or recorder
     plans, states, final, posteriors = recorder.snapshot()
+    from shared.robot import PR2
+
+    summary = summarise(plans, states, final, posteriors, PR2.from_scene(scene), demo.class_name,
+                        str(mcap) if mcap.is_file() else None, t0=run_start[0]) if plans else None
+    n = len(summary.steps) if summary is not None else 0  # the plans of the run (not one made after its last state)
     if status:  # interrupted, a dead service, the executor's own failure, a timeout: what the log holds
-        done = f"{len(plans)} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{len(plans)} plans"
+        done = f"{n} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{n} plans"
         out(f"foresight demo: {'interrupted' if status == 130 else 'stopped'} after {done}; "
             f"{_log_state(mcap, keys.plan, received)}")
     elif stop.is_set():  # a signal while the services stopped, after the run's end: it ended whole
         out("foresight demo: interrupted while stopping the services, after the run had ended: nothing was lost")
-    if not plans:
+    if summary is None:
         if status != 130:
             out("foresight demo: no plan was received; see the service logs in " + str(run_dir))
         return status or 1, None
-    from shared.robot import PR2
-
-    summary = summarise(plans, states, final, posteriors, PR2.from_scene(scene), demo.class_name,
-                        str(mcap) if mcap.is_file() else None, t0=run_start[0])
     summary.extra["mode"] = cfg.mode
     summary.extra["method"] = cfg.method
     summary.extra["human_cost"] = cfg.human_cost

@@ -353,7 +353,8 @@ def test_the_figure_title_gives_a_real_time_runs_wall_time_and_plans() -> None:
     """A real-time run's PNG said "20 steps of 0.5 s" over a lane of 100 plans."""
     import types
 
-    from services.demo import DemoConfig, figure_title
+    from services.demo import DemoConfig
+    from services.demo_figure import figure_title
 
     summary = types.SimpleNamespace(human_class="blue_cup", chosen_goal_per_step=["red_cup"] * 97, reached_t_s=None)
     lock = figure_title(DemoConfig(mode="lockstep"), summary, "pr2_two_cups_side")
