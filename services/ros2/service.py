@@ -208,13 +208,18 @@ class Ros2Service:
         by the executor in a review run, the rest taken for fresh measurements). While another node publishes
         there the gateway publishes no joint states, and says so when that starts and ends. The same for
         ``/clock``: beside a ROS 2 robot in lock-step the executor publishes the simulated time itself, at every
-        state period, and two clocks would take turns.
+        state period, and two clocks would take turns. Two gateways (the same node name, on two machines, say) each
+        saw the other's publisher and both went quiet: between gateways the one with the smaller session id
+        publishes, the other defers to it.
         """
         ep = parse_endpoint_token(key)
         if ep is None or ep.kind != "MP" or ep.zid == self._zid:
             return
         role = next((r for r in self._others if ep.topic == self.config.topic(r) and self.config.enabled(r)), None)
         if role is None:
+            return
+        gateway = ep.node == self.config.node  # another gateway (the same node name): each saw the other's publisher
+        if gateway and ep.zid > self._zid:  # and both went quiet; the one with the smaller session id publishes
             return
         node = f"{ep.namespace.rstrip('/')}/{ep.node}"
         with self._lock:
@@ -229,7 +234,10 @@ class Ros2Service:
         what = ("(a robot's driver): the executor's RobotState is not echoed there (run the gateway with "
                 "--no-joint-states beside a ROS 2 robot)" if role == "joint_states" else
                 "(a simulator, the executor's ROS 2 robot link): the gateway publishes no simulated time there")
-        if started:  # the joint states: a setting to change; the clock: as it should be beside a ROS 2 robot
+        if started and gateway:
+            log.info("ros2: node %s (session %s), another gateway, publishes %s too: the one with the smaller session "
+                     "id publishes it, not this one", node, ep.zid, topic)
+        elif started:  # the joint states: a setting to change; the clock: as it should be beside a ROS 2 robot
             log.log(logging.WARNING if role == "joint_states" else logging.INFO, "ros2: node %s publishes %s %s", node,
                     topic, what)
         elif ended:

@@ -271,3 +271,38 @@ def test_clock_samples_leave_in_the_order_their_times_were_taken() -> None:
     service.on_state(_state(1.1, tick=2))
     first.join(timeout=10)
     assert sent == [0.0, 1.0, 1.1]
+
+
+def test_of_two_gateways_one_publishes_the_clock(zenoh_hub: Callable[[], ZenohConfig],
+                                                 wait_until: Callable[..., bool]) -> None:
+    """Two gateways on one network (one per machine) each saw the other's /clock publisher, took it for a simulator
+    and both stopped: a lock-step run's ROS 2 nodes saw no time at all. The one with the smaller session id
+    publishes; real sessions on loopback, a ROS 2 subscriber counting what /clock carries."""
+    hub = zenoh_hub()
+    keys = Keys(hub.prefix)
+    stop = threading.Event()
+    gateways = [Ros2Service(Ros2ServiceConfig(), zenoh_hub()) for _ in range(2)]
+    clocks: list[bytes] = []
+    with open_session(hub) as ros, open_session(zenoh_hub()) as foresight:
+        sub = ros.declare_subscriber(gateways[0].mapping.key("clock"), lambda s: clocks.append(s.payload.to_bytes()))
+        threads = [threading.Thread(target=g.run, args=(stop,), daemon=True) for g in gateways]
+        for t in threads:
+            t.start()
+        try:  # each sees the other's publisher: the one with the larger session id defers
+            assert wait_until(lambda: all(g._zid for g in gateways) and any(g.publishes("clock") for g in gateways),
+                              30.0)
+            time.sleep(0.5)
+            tick_pub = TypedPublisher(foresight, keys.clock)
+            for i in range(4):
+                tick_pub.put(ClockTick(stamp=0.5 * i, tick=i, period=0.5))
+            assert wait_until(lambda: len(clocks) >= 4, 20.0)
+            time.sleep(0.5)
+        finally:
+            stop.set()
+            for t in threads:
+                t.join(10.0)
+            sub.undeclare()
+    first, second = sorted(gateways, key=lambda g: g._zid)
+    assert first.publishes("clock") is None and second.publishes("clock") is not None
+    assert first.stats.sent["clock"] == 4 and second.stats.sent["clock"] == 0
+    assert [gateways[0].mapping.clock_in(c) for c in clocks] == [0.0, 0.5, 1.0, 1.5]
