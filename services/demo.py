@@ -137,6 +137,19 @@ class DemoConfig:
     log_level: str = opt("WARNING", choices=LOG_LEVELS, help="log level of the demo (DEBUG: the services' logs too, "
                          "e.g. the planner's line per plan; FORESIGHT_<SERVICE>_LOG_LEVEL sets one service's)")
 
+    @property
+    def run_s(self) -> float:
+        """The run's length, ``steps x period_s`` (simulated s in lock-step, wall s in real time)."""
+        return self.steps * self.period_s
+
+    @property
+    def finish_s(self) -> float:
+        """How long a real-time run with ``finish`` may go on to its goal: the run's length again; else 0.
+
+        The executor's ``finish_s``; the demo's rows, notes and title follow it.
+        """
+        return self.run_s if self.finish and self.mode == "realtime" else 0.0
+
     def validate(self) -> None:
         """Check value ranges."""
         if self.steps < 1:
@@ -291,17 +304,15 @@ def _closing_lines(cfg: DemoConfig, summary: Summary) -> list[str]:
                      "separation.stop_m (docs/executor.md: it waits for the person to step back; --config with "
                      "[executor.separation] stop_m = 0 turns it off)")
     elif cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra:
-        length = cfg.steps * cfg.period_s
-        lines.append(f"note: a real-time run lasts its {cfg.steps} steps of {cfg.period_s:g} s ({length:g} s)"
-                     + (f" and goes on until the robot arrives, at most {length:g} s more" if cfg.finish else "")
+        lines.append(f"note: a real-time run lasts its {cfg.steps} steps of {cfg.period_s:g} s ({cfg.run_s:g} s)"
+                     + (f" and goes on until the robot arrives, at most {cfg.finish_s:g} s more" if cfg.finish else "")
                      + f"; the robot, at {cfg.robot_speed:g} of its velocity limits, had not arrived: "
                      + (f"--steps {2 * cfg.steps} gives it twice as long" if cfg.finish else
                         "--finish lets it go on to its goal"))
     elif (cfg.mode == "realtime" and cfg.finish and summary.reached and summary.reached_t_s is not None
-          and summary.reached_t_s > cfg.steps * cfg.period_s):
-        lines.append(f"note: the robot arrived {summary.reached_t_s - cfg.steps * cfg.period_s:.1f} s after the run's "
-                     f"{cfg.steps * cfg.period_s:g} s: the run goes on until it is there (--no-finish ends it at "
-                     f"{cfg.steps * cfg.period_s:g} s)")
+          and summary.reached_t_s > cfg.run_s):
+        lines.append(f"note: the robot arrived {summary.reached_t_s - cfg.run_s:.1f} s after the run's {cfg.run_s:g} "
+                     f"s: the run goes on until it is there (--no-finish ends it at {cfg.run_s:g} s)")
     lines += extra.get("outcome_lines", [])
     if cfg.compare:
         lines.append("MCAP logs: " + ", ".join(str(r["mcap_path"]) for r in extra.get("comparison", [])))

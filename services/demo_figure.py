@@ -144,6 +144,7 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
             top.plot([a[0], b[0]], [a[1], b[1]], color="#f0b7a0", lw=max(2.0, 120 * float(r)), alpha=0.7,
                      solid_capstyle="round", zorder=2, label="human's body at the run's end" if i == 0 else None)
     steps = max((len(o.chosen_goal_per_step) for o in outcomes), default=0)
+    unit = _unit_words(outcomes)
     for k, o in enumerate(outcomes):
         col = _PLANNER_COLORS[k % len(_PLANNER_COLORS)]
         if len(o.ee_path):
@@ -162,8 +163,8 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
     top.set_aspect("equal")
     top.set_xlabel("x (m)")
     top.set_ylabel("y (m)")
-    top.set_title(f"top view: robot hand paths (dots: the hand at each {_unit_words(outcomes)}, in the chosen "
-                  "cup's colour)", fontsize=10)
+    top.set_title(f"top view: robot hand paths (dots: the hand at each {unit}, in the chosen cup's colour)",
+                  fontsize=10)
     if any(len(o.ee_path) for o in outcomes):  # the start and end marks, in each planner's colour
         top.scatter([], [], marker="o", s=70, facecolors="white", edgecolors="k", linewidths=1.8,
                     label="robot hand's start")
@@ -178,9 +179,9 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
         clear.legend(fontsize=8)
     goals.set_yticks(range(len(outcomes)), [o.planner for o in outcomes])
     goals.xaxis.set_major_locator(MaxNLocator(nbins=min(max(steps, 1), 20), integer=True))  # 30 plans: unreadable
-    goals.set_xlabel(_unit_words(outcomes) + ("" if _unit_words(outcomes) == "replanning step" else
-                                              " (a real-time planner replans as each prediction comes)"))
-    goals.set_title(f"goal chosen at each {_unit_words(outcomes)} (square colour = cup)", fontsize=10)
+    goals.set_xlabel(unit + ("" if unit == "replanning step" else " (a real-time planner replans as each prediction "
+                             "comes)"))
+    goals.set_title(f"goal chosen at each {unit} (square colour = cup)", fontsize=10)
     goals.set_ylim(-0.6, len(outcomes) - 0.4)
     if title:
         fig.suptitle(title, fontsize=11)
@@ -193,9 +194,9 @@ def figure_title(cfg: DemoConfig, summary: Summary, scene: str, cut: str = "") -
     A real-time run's length is its wall time and its plans (the planner replans as each prediction comes: 100
     plans in 10 s, where the title said "20 steps of 0.5 s"); ``cut``: how a planner's run was cut short.
     """
-    wall, reached = cfg.steps * cfg.period_s, summary.reached_t_s
-    more = (f", then on to its goal at {reached:.1f} s" if cfg.finish and reached is not None and reached > wall
-            else "")  # finish_s
+    wall, reached = cfg.run_s, summary.reached_t_s
+    more = (f", then on to its goal at {reached:.1f} s" if cfg.finish_s and reached is not None and reached > wall
+            else "")
     length = (f"{cfg.steps} steps of {cfg.period_s:g} s" if cfg.mode == "lockstep" else
               f"{wall:g} s in real time{more}, {len(summary.chosen_goal_per_step)} plans")
     return (f"foresight demo: {summary.human_class} reach, scene {scene}, robot at {cfg.robot_speed:g} of its velocity "

@@ -83,8 +83,8 @@ def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> 
 def _run_length(cfg: DemoConfig) -> str:
     if cfg.mode == "lockstep":
         return f"lockstep mode, {cfg.steps} steps of {cfg.period_s:g} s (simulated time)"
-    return (f"realtime mode, {cfg.steps * cfg.period_s:g} s of wall time ({cfg.steps} periods of {cfg.period_s:g} s)"
-            + (f" and on until the robot arrives, at most {cfg.steps * cfg.period_s:g} s more" if cfg.finish else "")
+    return (f"realtime mode, {cfg.run_s:g} s of wall time ({cfg.steps} periods of {cfg.period_s:g} s)"
+            + (f" and on until the robot arrives, at most {cfg.finish_s:g} s more" if cfg.finish_s else "")
             + "; the planner replans as soon as it is idle and a new prediction has come, at least once a period: one "
             "row per plan")
 
@@ -195,7 +195,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     # run, and what came later made the summary's rows and final prediction differ from the log's
     recording = threading.Event()
     recording.set()
-    run_s = cfg.steps * cfg.period_s * (2 if cfg.finish else 1)  # the longest a real-time run lasts (finish_s)
+    run_s = cfg.run_s + cfg.finish_s  # the longest a real-time run lasts
 
     def on_state(msg: RobotState) -> None:
         if not recording.is_set():

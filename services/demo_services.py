@@ -87,7 +87,7 @@ def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_
                        if cfg.human == "keypoints" else []),  # its tracker plays a file: the file's end is no fault
                      *([] if cfg.robot == "sim" else ["--robot", "ros2"]),
                      *(["--finish-path"] if lockstep and cfg.finish else []),
-                     *(["--finish-s", f"{cfg.steps * cfg.period_s:g}"] if not lockstep and cfg.finish else []),
+                     *(["--finish-s", f"{cfg.finish_s:g}"] if cfg.finish_s else []),
                      *(["--live-port", str(cfg.live)] if cfg.live else []),
                      *(["--mcap", str(mcap)] if mcap is not None else []), *scene],
     }

@@ -14,11 +14,9 @@ period is the executor's heartbeat: its ``stale_limit_s`` (0.5 s by default, the
 when the newest plan is older. Started a whole period after the last start, a step's plan came ``period_s`` plus
 the change in planning time after the last one, and the robot stopped for a state whenever that change was
 positive (a real-time demo after the human's reach: 3 holds of 20 ms in 7 s, ``plan is 0.50 s old (limit
-0.50 s)``). A
-step that is running is
-never interrupted (its result is published with the inputs it used); the *anytime* option
-(``anytime_min_iterations``) lets it stop STOMP early, after at least that many iterations, when a
-newer prediction is already waiting, so the next step starts from fresher input. ``trigger = "period"``
+0.50 s)``). A step that is running is never interrupted (its result is published with the inputs it used);
+the *anytime* option (``anytime_min_iterations``) lets it stop STOMP early, after at least that many iterations,
+when a newer prediction is already waiting, so the next step starts from fresher input. ``trigger = "period"``
 is the paper's fixed period.
 
 Pure: no Zenoh, no clock of its own (times are passed in), unit-tested in
