@@ -80,6 +80,13 @@ def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> 
     return text
 
 
+def _unexecuted(k: int) -> str:
+    """Why the last ``k`` rows of a real-time run's table are not in its summary."""
+    rows, them = ("row above was a plan", "it") if k == 1 else (f"{k} rows above were plans", "them")
+    return (f"the last {rows} made from the run's last state (the goal reached, or the run over), never executed: "
+            f"the summary leaves {them} out")
+
+
 def _run_length(cfg: DemoConfig) -> str:
     if cfg.mode == "lockstep":
         return f"lockstep mode, {cfg.steps} steps of {cfg.period_s:g} s (simulated time)"
@@ -304,6 +311,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     summary = summarise(plans, states, final, posteriors, PR2.from_scene(scene), demo.class_name,
                         str(mcap) if mcap.is_file() else None, t0=run_start[0]) if plans else None
     n = len(summary.steps) if summary is not None else 0  # the plans of the run (not one made after its last state)
+    if realtime and not status and n < received:  # the rows are printed as plans come, before the run's last state
+        out(f"foresight demo: {_unexecuted(received - n)}")
     if status:  # interrupted, a dead service, the executor's own failure, a timeout: what the log holds
         done = f"{n} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{n} plans"
         out(f"foresight demo: {'interrupted' if status == 130 else 'stopped'} after {done}; "
