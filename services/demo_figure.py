@@ -163,14 +163,14 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
     top.set_aspect("equal")
     top.set_xlabel("x (m)")
     top.set_ylabel("y (m)")
-    top.set_title(f"top view: robot hand paths (dots: the hand at each {unit}, in the chosen cup's colour)",
+    top.set_title(f"top view: robot hand paths\n(dots: the hand at each {unit}, in the chosen cup's colour)",
                   fontsize=10)
     if any(len(o.ee_path) for o in outcomes):  # the start and end marks, in each planner's colour
         top.scatter([], [], marker="o", s=70, facecolors="white", edgecolors="k", linewidths=1.8,
                     label="robot hand's start")
         top.scatter([], [], marker="X", s=80, color="k", label="robot hand's end")
-    if top.get_legend_handles_labels()[0]:
-        top.legend(loc="best", fontsize=8)
+    if top.get_legend_handles_labels()[0]:  # under the view: inside, "best" still lay on the paths and the cups
+        top.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8, frameon=False)
     clear.axhline(0.0, color="k", lw=0.8)
     clear.set_ylabel("robot-human clearance (m)")
     clear.set_xlabel("t (s)")

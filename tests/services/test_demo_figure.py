@@ -100,3 +100,36 @@ def test_an_interrupted_run_draws_only_the_poses_it_saw() -> None:
     run = _outcome("prediction", ["red_cup"] * 3)  # its states end at 2.0 s
     assert [p.index for p in poses_of_the_run(poses, [run])] == list(range(21))
     assert poses_of_the_run(poses, []) == poses  # no state: every pose
+
+
+def test_the_top_views_legend_lies_off_the_paths(tmp_path: Path) -> None:
+    """Placed "best" inside the view, the legend lay on the robot's path and the cups (a real-time run's PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from services import demo_figure
+
+    figs: list = []
+    real_save = demo_figure.save_figure
+
+    def keep(fig: object, out: Path) -> Path:
+        figs.append(fig)
+        return real_save(fig, out)
+
+    demo_figure.save_figure = keep
+    try:
+        three = [_outcome(n, ["red_cup"] * 4) for n in ("prediction", "current occupancy", "no human cost")]
+        demo_figure.draw_outcomes(three, load_scene("pr2_two_cups_side"), None, [], tmp_path / "legend.png", 0.5)
+        (fig,) = figs
+        top = next(ax for ax in fig.axes if ax.get_title().startswith("top view"))
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        renderer = FigureCanvasAgg(fig).get_renderer()  # closed once written: a canvas again, the layout as written
+        legend = top.get_legend().get_window_extent(renderer)
+        assert legend.height > 0 and not legend.overlaps(top.get_window_extent(renderer))
+        assert not any(legend.overlaps(ax.get_window_extent(renderer)) for ax in fig.axes if ax is not top)
+    finally:
+        demo_figure.save_figure = real_save
+        plt.close("all")
