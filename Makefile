@@ -20,7 +20,8 @@ TORCH_VERSION ?= 2.13.0
 TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 # `make test` runs the tests in this many worker processes (pytest-xdist): one per CPU this process may use (its
 # affinity and its cgroup's quota: tools/cpus.py), at most 4 (each worker imports torch; the suite's own
-# multi-process tests add to it). TEST_WORKERS=0: one process.
+# multi-process tests add to it). TEST_WORKERS=0: one process. The 15 slowest tests are listed at the end: CI keeps
+# the suite under 15 minutes on 2 cores.
 TEST_WORKERS ?= $(shell $(PYTHON) tools/cpus.py --max 4 2>/dev/null || echo 2)
 
 .PHONY: demo test setup lint clean compose-check
@@ -29,7 +30,7 @@ demo: $(STAMP)
 	@$(VENV)/bin/foresight demo $(DEMO_ARGS)
 
 test: $(STAMP)
-	$(PY) -m pytest -q -n $(TEST_WORKERS)
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --durations=15
 
 # `docker compose up` for real: build the image, run the stack, check its log, compare with foresight demo, down
 # (needs a running Docker engine; says in one line why not). COMPOSE_ARGS: --twice, --secure, --no-demo.
