@@ -122,7 +122,9 @@ def verdict(outcomes: list[Outcome]) -> str:
     """Whether the first (the prediction planner) interfered and came near the human less than every other, in words.
 
     Against each baseline, contact decides; where the contact ties (neither touched the human, say), the
-    time within 5 cm and the smallest clearance tell them apart, and the verdict says so.
+    time within 5 cm and the smallest clearance tell them apart, and the verdict says so. The interference must
+    be lower, or tie (neither path entered the predicted volume: 0 against 0, as a real-time run's final
+    prediction, the reach over, can give), which the verdict says too.
     """
     main, others = outcomes[0], outcomes[1:]
     if not others:
@@ -131,7 +133,8 @@ def verdict(outcomes: list[Outcome]) -> str:
         return (f"none: the {' and '.join(f'{o.planner} run was {o.cut_short}' for o in cut)}, so its numbers are "
                 "of a part of the run; let --compare run to its end for a verdict")
     names = " and ".join(o.planner for o in others)
-    less_interference = all(main.interference < o.interference for o in others)
+    level = [o.planner for o in others if math.isclose(main.interference, o.interference, rel_tol=1e-9, abs_tol=1e-9)]
+    less_interference = all(main.interference < o.interference or o.planner in level for o in others)
     further = all(_kept_further(main, o) for o in others)
 
     def against(values: list[str]) -> str:
@@ -149,6 +152,9 @@ def verdict(outcomes: list[Outcome]) -> str:
                "touched the human as long as the prediction planner")
         body += (f" ({' and '.join(ties)} {tie}: there the time within 5 cm and the closest approach tell them "
                  "apart)")
+    if level:  # "not the lowest" of a 0.00 against 0.00 said the prediction planner did worse (a real-time run)
+        body += (f" ({' and '.join(level)} interfered with the predicted motion as little: the nearness to the real "
+                 "human tells them apart)")
     if less_interference and further:
         return f"shown, against {names}: {body}"
     missed = [what for what, ok in (("its interference was not the lowest", less_interference),

@@ -169,3 +169,18 @@ def test_compare_stops_after_a_planner_whose_teardown_was_interrupted(tmp_path, 
     assert calls == ["prediction"] and status == 130
     assert "foresight demo: interrupted: the comparison stops after prediction" in said
     assert summary is not None and "verdict" not in summary.extra
+
+
+def test_an_interference_tie_is_no_loss_and_the_verdict_says_so() -> None:
+    """A real-time --compare: 0.000 against 0.000 (neither path entered the final prediction's volume), the
+    prediction planner 11 cm from the person and never within 5 cm, the baselines 4 and 3 cm: "not shown (its
+    interference was not the lowest)"."""
+    runs = [_outcome("prediction", 0.0, 0.0, 0.0, 0.107), _outcome("current occupancy", 0.0, 0.0, 0.68, 0.040),
+            _outcome("no human cost", 24.13, 0.0, 1.14, 0.032)]
+    text = verdict(runs)
+    assert text.startswith("shown, against current occupancy and no human cost"), text
+    assert "(current occupancy interfered with the predicted motion as little: the nearness" in text
+    nearer = [_outcome("prediction", 0.0, 0.0, 0.9, 0.02), *runs[1:]]  # a tie, and nearer: still not shown
+    assert verdict(nearer).startswith("not shown in this run (it did not stay further from the human)")
+    higher = [_outcome("prediction", 0.5, 0.0, 0.0, 0.107), *runs[1:]]  # more than 0.0 is no tie
+    assert verdict(higher).startswith("not shown in this run (its interference was not the lowest)")
