@@ -63,30 +63,32 @@ def test_plan_marks_sit_where_each_plan_was_made() -> None:
     assert np.allclose(_step_points(o, 0.5)[:, 0], [0.0, 0.01, 0.02, 0.03, 0.2, 0.9])
 
 
-def test_a_real_time_figure_counts_plans(tmp_path: Path) -> None:
-    """Its goal lane and top view say "plan", not "replanning step"."""
+def _drawn(outcomes: list[Outcome], out: Path, monkeypatch) -> object:
+    """The matplotlib figure ``draw_outcomes`` writes (closed once written; its axes and layout as written)."""
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from services import demo_figure
 
-    seen: dict[str, str] = {}
+    figs: list = []
     real_save = demo_figure.save_figure
 
-    def keep(fig: object, out: Path) -> Path:
-        seen.update({ax.get_title(): ax.get_xlabel() for ax in fig.axes})  # type: ignore[attr-defined]
-        return real_save(fig, out)
+    def keep(fig: object, path: Path) -> Path:
+        figs.append(fig)
+        return real_save(fig, path)
 
+    monkeypatch.setattr(demo_figure, "save_figure", keep)
+    demo_figure.draw_outcomes(outcomes, load_scene("pr2_two_cups_side"), None, [], out, 0.5)
+    (fig,) = figs
+    return fig
+
+
+def test_a_real_time_figure_counts_plans(tmp_path: Path, monkeypatch) -> None:
+    """Its goal lane and top view say "plan", not "replanning step"."""
     o = _outcome("prediction", ["red_cup"] * 4)
     o.unit, o.plan_t_s = "plan", np.array([0.0, 0.1, 0.2, 0.3])
-    demo_figure.save_figure = keep
-    try:
-        demo_figure.draw_outcomes([o], load_scene("pr2_two_cups_side"), None, [], tmp_path / "rt.png", 0.5)
-    finally:
-        demo_figure.save_figure = real_save
-        plt.close("all")
+    fig = _drawn([o], tmp_path / "rt.png", monkeypatch)
+    seen = {ax.get_title(): ax.get_xlabel() for ax in fig.axes}  # type: ignore[attr-defined]
     assert seen["goal chosen at each plan (square colour = cup)"].startswith("plan (")
     assert any(t.startswith("top view") and "each plan," in t for t in seen)
 
@@ -102,34 +104,15 @@ def test_an_interrupted_run_draws_only_the_poses_it_saw() -> None:
     assert poses_of_the_run(poses, []) == poses  # no state: every pose
 
 
-def test_the_top_views_legend_lies_off_the_paths(tmp_path: Path) -> None:
+def test_the_top_views_legend_lies_off_the_paths(tmp_path: Path, monkeypatch) -> None:
     """Placed "best" inside the view, the legend lay on the robot's path and the cups (a real-time run's PNG)."""
-    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from services import demo_figure
-
-    figs: list = []
-    real_save = demo_figure.save_figure
-
-    def keep(fig: object, out: Path) -> Path:
-        figs.append(fig)
-        return real_save(fig, out)
-
-    demo_figure.save_figure = keep
-    try:
-        three = [_outcome(n, ["red_cup"] * 4) for n in ("prediction", "current occupancy", "no human cost")]
-        demo_figure.draw_outcomes(three, load_scene("pr2_two_cups_side"), None, [], tmp_path / "legend.png", 0.5)
-        (fig,) = figs
-        top = next(ax for ax in fig.axes if ax.get_title().startswith("top view"))
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-        renderer = FigureCanvasAgg(fig).get_renderer()  # closed once written: a canvas again, the layout as written
-        legend = top.get_legend().get_window_extent(renderer)
-        assert legend.height > 0 and not legend.overlaps(top.get_window_extent(renderer))
-        assert not any(legend.overlaps(ax.get_window_extent(renderer)) for ax in fig.axes if ax is not top)
-    finally:
-        demo_figure.save_figure = real_save
-        plt.close("all")
+    three = [_outcome(n, ["red_cup"] * 4) for n in ("prediction", "current occupancy", "no human cost")]
+    fig = _drawn(three, tmp_path / "legend.png", monkeypatch)
+    top = next(ax for ax in fig.axes if ax.get_title().startswith("top view"))  # type: ignore[attr-defined]
+    renderer = FigureCanvasAgg(fig).get_renderer()  # closed once written: a canvas again, the layout as written
+    legend = top.get_legend().get_window_extent(renderer)
+    assert legend.height > 0 and not legend.overlaps(top.get_window_extent(renderer))
+    assert not any(legend.overlaps(ax.get_window_extent(renderer)) for ax in fig.axes  # type: ignore[attr-defined]
+                   if ax is not top)
