@@ -14,6 +14,8 @@ __all__ = ["BENCHES", "main"]
 BENCHES: dict[str, tuple[str, str]] = {
     "predictor": ("services.predictor.bench", "one pose -> encoded occupancy message (64^3 grid)"),
     "planner": ("services.planner.bench", "one replanning step (STOMP over all goals)"),
+    "body": ("services.planner.body_bench", "the planner's body term: the person at rest after a reach, plans with the "
+             "term and without; clearance, chosen goal, step time"),
     "faults": ("tools.faults", "kill -9 each service of a moving robot's run: hold and resume latency, MCAP recovery"),
     "tracker": ("services.tracker.bench", "the live tracker's core on a library's reaches: lag, error, refusals, "
                 "time per frame"),

@@ -21,7 +21,12 @@ from shared.clearance import body_clearance
 from shared.protocol import HumanPose, OccupancyGrid, RobotState
 from shared.scene import Scene
 
-__all__ = ["Outcome", "measure_run", "verdict", "outcome_lines"]
+__all__ = ["Outcome", "measure_run", "verdict", "outcome_lines", "INTERFERENCE_EQUAL"]
+
+INTERFERENCE_EQUAL = 0.005
+"""Interferences nearer than this are a tie: the verdict prints them to two decimals, and a real-time run's 0.001 /
+0.001 / 0.000 (occupancy-seconds) read "its interference was not the lowest: interference with the predicted motion
+0.00 against 0.00, 0.00"."""
 
 
 @dataclass
@@ -123,8 +128,8 @@ def verdict(outcomes: list[Outcome]) -> str:
 
     Against each baseline, contact decides; where the contact ties (neither touched the human, say), the
     time within 5 cm and the smallest clearance tell them apart, and the verdict says so. The interference must
-    be lower, or tie (neither path entered the predicted volume: 0 against 0, as a real-time run's final
-    prediction, the reach over, can give), which the verdict says too.
+    be lower, or tie (within :data:`INTERFERENCE_EQUAL`: neither path entered the predicted volume, as a real-time
+    run's final prediction, the reach over, can give), which the verdict says too.
     """
     main, others = outcomes[0], outcomes[1:]
     if not others:
@@ -133,7 +138,7 @@ def verdict(outcomes: list[Outcome]) -> str:
         return (f"none: the {' and '.join(f'{o.planner} run was {o.cut_short}' for o in cut)}, so its numbers are "
                 "of a part of the run; let --compare run to its end for a verdict")
     names = " and ".join(o.planner for o in others)
-    level = [o.planner for o in others if math.isclose(main.interference, o.interference, rel_tol=1e-9, abs_tol=1e-9)]
+    level = [o.planner for o in others if abs(main.interference - o.interference) < INTERFERENCE_EQUAL]
     less_interference = all(main.interference < o.interference or o.planner in level for o in others)
     further = all(_kept_further(main, o) for o in others)
 

@@ -16,8 +16,8 @@ from services.view.config import DEFAULT_PORT
 if TYPE_CHECKING:
     from services.demo import DemoConfig
 
-__all__ = ["SERVICES_IN_ORDER", "KEYPOINTS_FILE", "KEYPOINT_REST_S", "RUN", "MODULES", "services_in_order",
-           "service_args", "service_options"]
+__all__ = ["SERVICES_IN_ORDER", "KEYPOINTS_FILE", "KEYPOINT_REST_S", "RUN", "NO_HUMAN_COST", "MODULES",
+           "services_in_order", "service_args", "service_options"]
 
 
 SERVICES_IN_ORDER = ("predictor", "planner", "replayer", "executor")
@@ -65,6 +65,11 @@ RUN = "predictor,planner,executor"
 no human."""
 
 
+NO_HUMAN_COST = ("--cost.w-human", "0", "--cost.body-clearance", "0")
+"""The planner's flags of the paper's basic STOMP (``--human-cost false``): no cost for the person at all, neither the
+predicted occupancy nor, in real time, the body as last seen (``services.planner.body``)."""
+
+
 def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_per_tick: int,
                     mcap: Path | None) -> dict[str, list[str]]:
     """Each service's own options (flags, no Zenoh ones) for this demo's scenario; ``mcap`` None: the default."""
@@ -74,7 +79,7 @@ def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_
         "predictor": ["--model", str(model), "--method", cfg.method, *scene],
         "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
                     "--velocity-scale", str(cfg.robot_speed), *(["--goals", cfg.goals] if cfg.goals else []),
-                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else ["--cost.w-human", "0"]), *scene],
+                    "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else NO_HUMAN_COST), *scene],
         "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
                      "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", RUN])],
         "tracker": ["--from-file", str(Path(replay_library).parent / KEYPOINTS_FILE), "--rate-hz", str(cfg.rate_hz),

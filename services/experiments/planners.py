@@ -81,7 +81,7 @@ def build_planner(scene: Scene, goals: list[str], human_cost: bool, timing: Timi
         protocol: The experiment's protocol: its STOMP settings, cost composition and goal choice
             (:mod:`services.experiments.protocol`); ``timing.iterations`` overrides its iterations.
     """
-    cost = CostConfig()
+    cost = CostConfig(body_clearance=0.0)  # lock-step: the paper's planners, no separation guard to keep clear of
     if not human_cost or w_human is not None:
         cost = dataclasses.replace(cost, w_human=w_human if human_cost else 0.0)
     p = protocol

@@ -121,6 +121,9 @@ class CostConfig:
     human_point_radius: float = 0.7  # offset of the extra points, as a fraction of the sphere radius
     human_interp: str = "trilinear"  # "trilinear" or "nearest" (the voxel containing the point)
     torso_table_step: float = 0.002  # lift step (m) of the tabulated costs of torso-carried spheres; 0: off
+    body_clearance: float = 0.10  # real time: arm spheres nearer the person's body as last seen pay (m; 0: off)
+    # (services.planner.body): the obstacle hinge, linear within its inner half; the default is the executor's
+    # separation stop_m (0.05, where the guard holds the robot) plus the obstacle margin `clearance` (0.05)
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the first bad value."""
@@ -136,7 +139,8 @@ class CostConfig:
                   ("human_points", self.human_points in (1, 7)),
                   ("human_point_radius", 0 <= self.human_point_radius <= 1),
                   ("human_interp", self.human_interp in ("trilinear", "nearest")),
-                  ("torso_table_step", finite(self.torso_table_step) and self.torso_table_step >= 0)]
+                  ("torso_table_step", finite(self.torso_table_step) and self.torso_table_step >= 0),
+                  ("body_clearance", finite(self.body_clearance) and self.body_clearance >= 0)]
         for name, ok in checks:
             if not ok:
                 raise ValueError(f"costs.{name}: bad value {getattr(self, name)!r}")
@@ -253,9 +257,12 @@ class PlannerServiceConfig:
         """The planner's config for this mode.
 
         In lock-step mode the executor's last RobotState of a tick already is the configuration the plan
-        starts from, so there is no lookahead; in real time the plan starts ``lookahead_s`` ahead.
+        starts from, so there is no lookahead; in real time the plan starts ``lookahead_s`` ahead. The body term
+        (``cost.body_clearance``, :mod:`services.planner.body`) is real time's: a lock-step run measures the paper's
+        planners, and there is no separation guard to keep clear of.
         """
         if self.mode == "lockstep":
-            return dataclasses.replace(self.planner, lookahead_s=0.0)
+            return dataclasses.replace(self.planner, lookahead_s=0.0,
+                                       cost=dataclasses.replace(self.planner.cost, body_clearance=0.0))
         return self.planner
 

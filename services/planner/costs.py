@@ -9,6 +9,9 @@
   sampled on the robot: the sphere centres (and optionally 6 more points per sphere at
   ``human_point_radius`` x radius along the world axes, averaged per sphere), read from the voxel grid
   trilinearly (smooth, default) or from the containing voxel (``human_interp = "nearest"``, as in the paper).
+* **body** (real time, folded into the obstacle term): the same hinge on each arm-carried sphere's clearance to the
+  person's body as last seen, below ``body_clearance``, linear within its inner half (:mod:`services.planner.body`,
+  :meth:`StateCost.set_body`).
 * **smoothness**: the sum of squared accelerations (finite differences) of a trajectory
   (:func:`acceleration_cost`, per waypoint).
 
@@ -34,6 +37,7 @@ import torch.nn.functional as F
 from shared.robot import PR2
 from shared.scene import Scene
 
+from .body import BodyCapsules, body_clearances
 from .config import CostConfig
 from .sdf import GridLookupError, SignedDistanceField, VoxelTables
 
@@ -180,6 +184,8 @@ class StateCost:
         radii: ``(S',)`` their radii.
         has_self: Whether the arm-vs-body self-collision term is on.
         occupancy: :class:`OccupancyTables`, replaced by :meth:`set_occupancy`.
+        body: The person's body as last seen (:class:`~services.planner.body.BodyCapsules`), set by
+            :meth:`set_body`; None: no body term.
     """
 
     terms = ("obstacle", "human")
@@ -222,6 +228,7 @@ class StateCost:
             obstacle = self._obstacle_spheres(self._tab_centers, self._tab_rel)  # (n,)
             self._lift = LiftTables(lo, (hi - lo) / (n - 1), n, torch.stack([obstacle[:-1], obstacle[1:]]))
         self.occupancy = self._tables(None)
+        self.body: BodyCapsules | None = None
 
     def _tables(self, voxels: VoxelTables | None) -> OccupancyTables:
         """The :class:`OccupancyTables` of ``voxels`` (the lift tables' human rows evaluated on it)."""
@@ -285,6 +292,33 @@ class StateCost:
             raise CostInputError(str(exc)) from None
         self.occupancy = self._tables(voxels)
 
+    def set_body(self, ends: Any, radii: Any) -> None:
+        """Set the person's body for the body term (``config.body_clearance`` > 0; real time).
+
+        Args:
+            ends: ``(C, 2, 3)`` capsule end points in the scene frame (m); None clears the body.
+            radii: ``(C,)`` capsule radii (m).
+
+        Raises:
+            CostInputError: Wrong shapes or a value that is not finite.
+        """
+        if ends is None:
+            self.body = None
+            return
+        try:
+            self.body = BodyCapsules.build(ends, radii, self.device, self.dtype)
+        except ValueError as exc:
+            raise CostInputError(str(exc)) from None
+
+    def _body_term(self, arm: torch.Tensor) -> torch.Tensor | None:
+        """The body hinge of the arm-carried spheres ``arm`` ``(..., A, 3)`` (None: no body, or the term off)."""
+        eps = self.config.body_clearance
+        if self.body is None or eps <= 0:
+            return None
+        radii = self.robot.sphere_radii[self.robot.arm_carried_slice]
+        gap = body_clearances(arm.movedim(-1, 0).movedim(-1, 1), radii, self.body)  # (A, ...)
+        return hinge_sum(eps - gap, eps / 2, 0)
+
     def obstacle(self, centers: torch.Tensor) -> torch.Tensor:
         """Unweighted obstacle term, every sphere evaluated directly: ``centers`` ``(..., S, 3)`` -> ``(...)``."""
         cost = self._obstacle_spheres(centers[..., self.spheres, :], slice(None))
@@ -307,7 +341,8 @@ class StateCost:
 
         Spheres carried by the arm joints are evaluated at their centres; spheres carried by the torso
         alone come from the lift tables (``torso_table_step``; equal to :meth:`obstacle` / :meth:`human`
-        up to the linear interpolation in the lift).
+        up to the linear interpolation in the lift). With a body set, the obstacle term includes the body term
+        of the arm-carried spheres.
 
         Args:
             q: ``(K, R, T, D)`` configurations (any leading shape works).
@@ -317,6 +352,7 @@ class StateCost:
         """
         centers = self.robot.sphere_centers(q)
         tables = self.occupancy
+        body = self._body_term(centers[..., self.robot.arm_carried_slice, :])
         if tables.lift is None:
             obstacle, human = self.obstacle(centers), self.human(centers)
         else:
@@ -329,6 +365,8 @@ class StateCost:
                 human = torch.zeros_like(obstacle)
             else:
                 human = self._human_spheres(arm, self._arm_rel, tables.voxels) + tab_human
+        if body is not None:
+            obstacle = obstacle + body
         return torch.stack([self.config.w_obstacle * obstacle, self.config.w_human * human], dim=-1)
 
     def collision_free(self, q: torch.Tensor, margin: float = 0.0) -> torch.Tensor:

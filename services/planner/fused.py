@@ -21,6 +21,8 @@ as FLOPs), and can be ``torch.compile``-d:
 * **Self-collision**: the body spheres are rigid in the base frame up to the torso lift ``l``, so
   ``|x - c_b - l v_b|^2`` is one ``(B_body, 7) x (7, A x B)`` matmul of features
   ``[x, l (x . v), 1, l, l^2]`` plus ``|x|^2`` (exact, every arm/body pair, as the reference).
+* **Body** (real time): the arm-carried spheres' :func:`~services.planner.body.body_clearances`, hinged into the
+  obstacle term; with no body set the capsules lie ``FAR_M`` away (the term exactly 0, the compiled shapes kept).
 * time weights (``costs.waypoint_times``) and accelerations on ``(N, T, D)``; the hinge and the accelerations are
   ``costs.hinge_sum`` and ``costs.acceleration_cost``, as in the reference.
 
@@ -40,9 +42,11 @@ from typing import Any
 
 import torch
 
+from shared.human import HumanModel
 from shared.robot import PR2
 from shared.scene import Grid
 
+from .body import BodyCapsules, body_clearances
 from .compiling import compile_every_shape
 from .costs import StateCost, acceleration_cost, hinge_sum, waypoint_times
 from .sdf import VoxelTables
@@ -136,7 +140,8 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
             sdf_strides: torch.Tensor, sdf_offs: torch.Tensor, sdf_lo: torch.Tensor, sdf_hi: torch.Tensor,
             occ_packed: torch.Tensor, occ_first: torch.Tensor, occ_umax: torch.Tensor, occ_cmax: torch.Tensor,
             occ_strides: torch.Tensor, occ_offs: torch.Tensor, tab: torch.Tensor, psi: torch.Tensor, v: torch.Tensor,
-            r_arm: torch.Tensor, inv_vmax: torch.Tensor, *, s: dict[str, Any]) -> torch.Tensor:
+            r_arm: torch.Tensor, inv_vmax: torch.Tensor, body_ends: torch.Tensor, body_radii: torch.Tensor,
+            r_carried: torch.Tensor, *, s: dict[str, Any]) -> torch.Tensor:
     """Fused per-waypoint cost terms (tensor arguments are constants prepared by :class:`FusedCost`).
 
     Args:
@@ -152,6 +157,8 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
         psi: ``(B_body, 7)`` self-collision coefficients; v: ``(3, 1)`` world torso axis.
         r_arm: ``(A, 1)`` radii of the arm-group spheres.
         inv_vmax: ``(D,)`` 1 / scaled velocity limits.
+        body_ends, body_radii: ``(C, 2, 3)``, ``(C,)`` the person's capsules (read with ``s["body"]``).
+        r_carried: ``(S,)`` radii of the arm-carried spheres.
         s: Static scalars (inverse resolutions, margins, weights, slices, flags).
 
     Returns:
@@ -209,6 +216,9 @@ def _kernel(q: torch.Tensor, a0: torch.Tensor, a123t: torch.Tensor, wt: torch.Te
         d2 = torch.addmm((x * x).sum(0, keepdim=True), psi[:, :7], phi)  # (B_body, A * B)
         dist = (d2.clamp(min=1e-12).sqrt() - psi[:, 7:8]).amin(0).view(-1, b)  # (A, B)
         obstacle = obstacle + hinge_sum(s["self_eps"] - (dist - r_arm), s["self_eps"], 0)
+    if s["body"]:  # the person's body as last seen (services.planner.body)
+        gap = body_clearances(p, r_carried, BodyCapsules(body_ends, body_radii))  # (S, B)
+        obstacle = obstacle + hinge_sum(s["body_eps"] - gap, s["body_eps"] / 2, 0)
     state = torch.stack([s["w_obstacle"] * obstacle, s["w_human"] * human]).view(2, n, t)
     if s["integrate"]:
         dt = waypoint_times(q, inv_vmax)[None].repeat(2, 1, 1)  # (2, N, T)
@@ -295,7 +305,9 @@ class FusedCost:
                             a0=robot.arm_slice.start - arm.start, a1=robot.arm_slice.stop - arm.start,
                             self_eps=max(float(cfg.self_clearance), 1e-6), w_obstacle=float(cfg.w_obstacle),
                             w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate),
-                            dwell=float(dwell))
+                            dwell=float(dwell), body=cfg.body_clearance > 0, body_eps=float(cfg.body_clearance))
+        self._r_carried = r_arm_c.contiguous()
+        self._far = BodyCapsules.far(len(HumanModel.SEGMENT_NAMES), dev, dt)  # the body while none is set
         if grid is None:
             zeros, first, inv_res = torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0
         else:  # the zero-padded shape and geometry of a real occupancy on `grid` (see VoxelTables.from_grid)
@@ -324,13 +336,14 @@ class FusedCost:
         tables = self.cost.occupancy  # rebuilt by StateCost.set_occupancy, once per grid
         occ = tables.voxels if tables.voxels is not None else self._no_occupancy
         assert tables.lift is not None
+        body = self.cost.body if self.cost.body is not None else self._far
         s = dict(self._static, occ_inv=occ.inv_res)
         fn, flat = self._fn, self._flat
         if eager:
             fn, s["pointwise"] = _kernel, False
         return fn(q3, c["a0"], c["a123t"], c["wt"], c["sph_link"], c["sph_local"], c["obs_thr"],
                   *_cell_args(self._sdf, flat), c["sdf_lo"], c["sdf_hi"], *_cell_args(occ, flat), tables.lift.values,
-                  c["psi"], c["v"], c["r_arm"], c["inv_vmax"], s=s)
+                  c["psi"], c["v"], c["r_arm"], c["inv_vmax"], body.ends, body.radii, self._r_carried, s=s)
 
     def terms(self, q: torch.Tensor) -> torch.Tensor:
         """Per-waypoint terms.

@@ -17,7 +17,8 @@ plan, ``period_s`` being the longest gap (:mod:`services.planner.replan`); the p
 planning time (at most ``lookahead_s``) ahead along the previous tau_best, where the robot will be when
 it arrives. With ``trigger = "period"`` it plans every ``period_s``, ``lookahead_s`` ahead. Each Plan
 carries the inputs it used: ``stamp`` is the RobotState's stamp, ``occupancy_tick``/``occupancy_index``
-the prediction's.
+the prediction's. With ``cost.body_clearance`` > 0 it also follows the person's poses: each step keeps clear of the
+body of the newest (:mod:`services.planner.body`), as the executor's separation guard will.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from shared.protocol import (
     DemoMarker,
     Expectations,
     GridSpec,
+    HumanPose,
     Keys,
     OccupancyGrid,
     Plan,
@@ -57,6 +59,7 @@ from shared.transport import (
     subscribe,
 )
 
+from .body import PersonBody
 from .config import PlannerServiceConfig
 from .core import Planner, PlannerError, PlanResult
 from .replan import ReplanTrigger
@@ -124,6 +127,7 @@ class PlannerService:
         self._empty = np.zeros(self.scene.grid.dims, dtype=np.float32)
         self.trigger: ReplanTrigger | None = None  # real-time mode: when steps start (and why, counted)
         self.summary = PeriodicSummary(log, "planner: plans")  # each plan at DEBUG, a summary at INFO
+        self._body_poses = 0  # real time: the person's poses seen when the cost's body was last set
 
     def _plan(self, q: np.ndarray, occupancy: OccupancyGrid | None, tick: int, stamp: float,
               pub: TypedPublisher[Plan], interrupt: Callable[[], bool] | None = None,
@@ -220,6 +224,7 @@ class PlannerService:
                 log.info("planner: demonstration %d starts", msg.demo_id)
 
         demo_sub = subscribe(session, self.keys.demo, DemoMarker, on_demo, self.rejects, self.receipt)
+        person = self._follow_person(session)
         presence = Presence(session, self.keys, "planner", stop_with=self.config.stop_with, stop=stop)
         trigger = self.trigger = ReplanTrigger(self.config.period_s, self.config.trigger)
         tol = self.planner.config.off_path_tol
@@ -256,6 +261,8 @@ class PlannerService:
                     lookahead = 0.0  # ('departure'), every other step
                 elif trigger.mode == "event" and recent:  # the plan is executed about one planning time from now
                     lookahead = min(self.planner.config.lookahead_s, float(np.median(recent)))
+                if person is not None:
+                    self._note_body(person[0])
                 result = self._plan(robot.q, occ, -1, robot.stamp, pub, interrupt=newer_waiting,
                                     lookahead_s=lookahead)
                 if result is not None:
@@ -268,6 +275,37 @@ class PlannerService:
             for s in (occupancy, state):
                 s.undeclare()
             demo_sub.undeclare()
+            if person is not None:
+                person[1].undeclare()
+
+    def _follow_person(self, session: object) -> tuple[PersonBody, object] | None:
+        """Real time with a body term: follow the person's poses; ``(the body, its subscription)`` or None.
+
+        Every pose is noted (each demonstration is placed from its first); None when the cost has no body term.
+        """
+        cost = self.planner.cost
+        if not (hasattr(cost, "set_body") and cost.config.body_clearance > 0):  # the toy costs of tests have none
+            return None
+        person = PersonBody(self.scene)
+
+        def on_pose(msg: HumanPose) -> None:
+            person.note_pose(msg.demo_id, msg.index, msg.features, msg.stamp)
+
+        return person, subscribe(session, self.keys.pose, HumanPose, on_pose, self.rejects, self.receipt)
+
+    def _note_body(self, person: PersonBody) -> None:
+        """Hand the newest pose's body to the cost, once per pose (a bad one is logged, the last good one kept)."""
+        seen = person.poses_
+        if seen == self._body_poses:
+            return
+        capsules = person.capsules()
+        if capsules is None:
+            return
+        try:
+            self.planner.cost.set_body(*capsules)
+        except ValueError as exc:
+            log.error("planner: the person's pose at %.3f s gives no body to keep clear of: %s", person.stamp_, exc)
+        self._body_poses = seen
 
 
 def occupancy_identity(msg: OccupancyGrid | None) -> tuple[int, int, int, float] | None:

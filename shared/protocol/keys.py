@@ -19,7 +19,7 @@ SENSOR = "sensor"
 
 ROUTES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "keypoints": ((SENSOR,), ("tracker", "executor")),
-    "pose": (HUMAN_SOURCES, ("predictor", "executor")),
+    "pose": (HUMAN_SOURCES, ("predictor", "planner", "executor")),
     "demo": (HUMAN_SOURCES, ("predictor", "planner", "executor")),
     "posterior": (("predictor",), ("executor",)),
     "occupancy": (("predictor",), ("planner", "executor")),

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from services.demo import main
+from services.demo import DemoConfig, main
 from services.scenario import table_header
 from shared.library import save_library
 from shared.synthetic import generate_library
@@ -136,7 +136,6 @@ def test_demo_prepare_writes_the_inputs_and_the_services_config(tmp_path: Path, 
 
 
 def test_demo_live_takes_a_port_or_foxgloves_default(capsys: pytest.CaptureFixture[str]) -> None:
-    from services.demo import DemoConfig
     from services.demo_services import service_options
 
     with pytest.raises(SystemExit):
@@ -368,3 +367,23 @@ def test_the_figure_title_gives_a_real_time_runs_wall_time_and_plans() -> None:
         DemoConfig(mode="realtime"), summary, "pr2_two_cups_side")
     summary.reached_t_s = wall + 0.01  # --no-finish: the last state, overslept
     assert "then on" not in figure_title(DemoConfig(mode="realtime", finish=False), summary, "pr2_two_cups_side")
+
+
+@pytest.mark.parametrize("human_cost", [True, False])
+def test_no_human_cost_is_a_planner_that_ignores_the_person_entirely(human_cost: bool) -> None:
+    """``--human-cost false`` (the paper's basic STOMP, ``--compare``'s third planner): neither the predicted occupancy
+    nor, in real time, the body as last seen (``services.planner.body``) costs anything."""
+    import argparse
+
+    from services.demo_services import service_options
+    from services.planner.config import CostConfig, PlannerServiceConfig
+    from shared.config import add_config_arguments, resolve_config
+
+    flags = service_options(DemoConfig(mode="realtime", human_cost=human_cost), Path("m.npz"), Path("h.npz"), 3,
+                            None)["planner"]
+    parser = argparse.ArgumentParser()
+    add_config_arguments(parser, "planner", PlannerServiceConfig)
+    cfg, _ = resolve_config("planner", PlannerServiceConfig, parser.parse_args(flags), env={})
+    cost = cfg.planner_config().cost
+    assert (cost.w_human, cost.body_clearance) == ((CostConfig.w_human, CostConfig.body_clearance) if human_cost
+                                                   else (0.0, 0.0))

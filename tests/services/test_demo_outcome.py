@@ -184,3 +184,16 @@ def test_an_interference_tie_is_no_loss_and_the_verdict_says_so() -> None:
     assert verdict(nearer).startswith("not shown in this run (it did not stay further from the human)")
     higher = [_outcome("prediction", 0.5, 0.0, 0.0, 0.107), *runs[1:]]  # more than 0.0 is no tie
     assert verdict(higher).startswith("not shown in this run (its interference was not the lowest)")
+
+
+def test_interferences_the_verdict_prints_alike_are_a_tie() -> None:
+    """A real-time --compare printed 0.001 / 0.001 / 0.000 and "not shown in this run (its interference was not the
+    lowest): interference with the predicted motion 0.00 against 0.00, 0.00"; the prediction planner 10 cm from the
+    person, never within 5 cm, the baselines 7 and 4 cm, the last 0.5 s within 5 cm."""
+    runs = [_outcome("prediction", 0.0011, 0.0, 0.0, 0.099), _outcome("current occupancy", 0.0009, 0.0, 0.0, 0.072),
+            _outcome("no human cost", 0.0002, 0.0, 0.54, 0.043)]
+    text = verdict(runs)
+    assert text.startswith("shown, against current occupancy and no human cost"), text
+    assert "(current occupancy and no human cost interfered with the predicted motion as little" in text
+    more = [_outcome("prediction", 0.0102, 0.0, 0.0, 0.099), *runs[1:]]  # 0.01 against 0.00: no tie
+    assert verdict(more).startswith("not shown in this run (its interference was not the lowest)")

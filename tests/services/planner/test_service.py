@@ -1,4 +1,5 @@
-"""The planner service's real-time loop on a loopback session: a step that fails is not restarted at once."""
+"""The planner service's real-time loop on a loopback session: a step that fails is not restarted at once, a held
+robot's plans start where it is, the person's newest pose is the body the plans keep clear of."""
 
 from __future__ import annotations
 
@@ -12,8 +13,10 @@ from services.planner.core import Planner, PlannerConfig
 from services.planner.service import PlannerService, PlannerServiceConfig
 from services.planner.stomp import StompConfig
 from shared.config import ZenohConfig
-from shared.protocol import Keys, OccupancyGrid, Plan, RobotState
+from shared.human import HumanModel, StreamPlacement
+from shared.protocol import HumanPose, Keys, OccupancyGrid, Plan, RobotState
 from shared.protocol.limits import JOINT_LIMIT_TOL
+from shared.synthetic import generate_library
 from shared.transport import TypedPublisher, open_session, subscribe
 
 
@@ -96,3 +99,45 @@ def test_a_held_robot_gets_plans_that_start_where_it_is(scene, zenoh_hub: Callab
     assert not thread.is_alive()
     starts = [float(np.linalg.norm(p.trajectories[p.chosen, 0] - q0)) for p in plans]
     assert max(starts) < 1e-3, starts
+
+
+def test_a_real_time_planner_keeps_clear_of_the_person_s_newest_pose(scene, zenoh_hub: Callable[[], ZenohConfig],
+                                                                     wait_until: Callable[..., bool]) -> None:
+    """The cost's body (``services.planner.body``) is the newest pose's, placed from its demonstration's first."""
+    planner = Planner(scene, PlannerConfig(compile=False, stomp=StompConfig(iterations=3)))
+    hub = zenoh_hub()
+    keys = Keys(hub.prefix)
+    service = PlannerService(PlannerServiceConfig(mode="realtime", trigger="event", period_s=0.2), zenoh_hub(),
+                             planner=planner, scene=scene)
+    names, q0 = list(planner.robot.joint_names), planner.robot.q_start.double().numpy()
+    features = generate_library(seed=0).demos[0].features.astype(np.float64)
+    stop = threading.Event()
+    thread = threading.Thread(target=service.run, args=(stop,), daemon=True)
+    with open_session(hub) as session:
+        thread.start()
+        try:
+            states, poses = TypedPublisher(session, keys.robot_state), TypedPublisher(session, keys.pose)
+
+            def state() -> None:
+                states.put(RobotState(stamp=time.time(), tick=-1, joint_names=names, goal=-1, reached=False,
+                                      holding=False, reason="", q=q0, qd=np.zeros(len(q0))))
+
+            assert wait_until(lambda: (state(), service.stats.plans)[1] >= 1, 60.0)
+            assert planner.cost.body is None  # no pose yet
+            for i in (0, 20):
+                poses.put(HumanPose(stamp=time.time(), tick=-1, tick_last=True, demo_id=4, index=i,
+                                    features=features[i]))
+            placement = StreamPlacement(scene)
+            placement.place(4, 0, features[0])
+            want, _ = HumanModel().capsules(placement.place(4, 20, features[20]))
+
+            def placed() -> bool:
+                state()
+                body = planner.cost.body
+                return body is not None and np.allclose(body.ends.double().numpy(), want, atol=1e-5)
+
+            assert wait_until(placed, 20.0)
+        finally:
+            stop.set()
+            thread.join(10.0)
+    assert not thread.is_alive()

@@ -78,7 +78,8 @@ def test_wildcard_subscriptions_only_where_every_matched_key_is_consumed() -> No
     assert "cell/human/*" in subscription_exprs(KEYS, "predictor")  # poses and markers, one ordered stream
     assert "cell/**" in subscription_exprs(KEYS, "executor")  # its log
     assert "cell/**" not in subscription_exprs(KEYS, "planner")
-    assert "cell/human/*" not in subscription_exprs(KEYS, "planner")  # it does not consume poses
+    assert "cell/human/*" in subscription_exprs(KEYS, "planner")  # poses (real time: its body term), markers
+    assert "cell/human/*" not in subscription_exprs(KEYS, "replayer")  # it consumes neither
 
 
 @pytest.mark.parametrize(("main", "argv", "what"), [

@@ -9,12 +9,15 @@ import pytest
 
 from services.processes import free_port
 from shared.config import ConfigError, ZenohConfig
-from shared.protocol import HumanPose, Keys, RobotState
+from shared.protocol import ClassPosterior, Keys, RobotState
 from shared.security.acl import ROLES
 from shared.security.certificates import init_security_dir
 from shared.security.guard import denied, forget, remember
 from shared.security.tls import insecure_listen_warning, secure_endpoints
 from shared.transport import TypedPublisher, open_session, subscribe
+
+PREDICTION_ALL = f"{Keys().prefix}/prediction/*"
+"""The posterior and the occupancy: the planner consumes the occupancy only."""
 
 
 def test_denied_names_role_key_and_reason() -> None:
@@ -25,22 +28,24 @@ def test_denied_names_role_key_and_reason() -> None:
         assert denied(session, keys.plan, "put") == ""
         assert denied(session, keys.pose, "put") == ("role planner may not put foresight/human/pose (its owners: "
                                                      "replayer, tracker): every peer drops it")
-        assert denied(session, keys.robot_state, "subscribe") == ""
-        assert "may not subscribe to foresight/human/pose" in denied(session, keys.pose, "subscribe")
+        assert denied(session, keys.robot_state, "subscribe") == "" and denied(session, keys.pose, "subscribe") == ""
+        assert "may not subscribe to foresight/prediction/posterior" in denied(session, keys.posterior, "subscribe")
     finally:
         forget(session)
     assert denied(session, keys.pose, "put") == ""
 
 
 def test_a_wildcard_subscription_that_also_matches_keys_the_role_does_not_consume_is_named() -> None:
-    """Zenoh refuses such a subscription whole: a planner's foresight/human/* lost the markers it consumes too, and
-    an executor run under another role's certificate its whole log, with no word (a security review)."""
+    """Zenoh refuses such a subscription whole: the planner's foresight/human/* lost the markers it consumes too (when
+    it did not consume poses), and an executor run under another role's certificate its whole log, with no word (a
+    security review). The planner consumes the occupancy, not the posterior."""
     session, keys = object(), Keys()
     remember(session, "planner", keys)
     try:
-        why = denied(session, keys.human_all, "subscribe")
-        assert why.startswith(f"role planner may not subscribe to {keys.human_all}: it also matches "
-                              f"{keys.pose}") and "refuses the whole expression" in why
+        why = denied(session, PREDICTION_ALL, "subscribe")
+        assert why.startswith(f"role planner may not subscribe to {PREDICTION_ALL}: it also matches "
+                              f"{keys.posterior}") and "refuses the whole expression" in why
+        assert denied(session, keys.human_all, "subscribe") == ""  # poses (real time's body term) and markers
         assert "foresight/**" in denied(session, f"{keys.prefix}/**", "subscribe")
     finally:
         forget(session)
@@ -83,13 +88,13 @@ def test_a_secure_service_logs_what_it_may_not_do(tmp_path: Path, caplog: pytest
         TypedPublisher(session, keys.plan)
         TypedPublisher(session, keys.pose)
         sub = subscribe(session, keys.robot_state, RobotState, lambda m: None)
-        sub2 = subscribe(session, keys.pose, HumanPose, lambda m: None)
+        sub2 = subscribe(session, keys.posterior, ClassPosterior, lambda m: None)
         sub.undeclare()
         sub2.undeclare()
     lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("access control:")]
     assert lines == ["access control: role planner may not put foresight/human/pose (its owners: replayer, "
                      "tracker): every peer drops it", "access control: role planner may not subscribe to "
-                     "foresight/human/pose: it will receive nothing"]
+                     "foresight/prediction/posterior: it will receive nothing"]
 
 
 def test_a_presence_token_the_role_may_not_declare_is_said(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
@@ -114,8 +119,9 @@ def test_a_presence_token_the_role_may_not_declare_is_said(tmp_path: Path, caplo
 
 def test_a_secure_session_says_its_refused_wildcard_subscription(tmp_path: Path,
                                                                   caplog: pytest.LogCaptureFixture) -> None:
-    """A real planner-role session subscribing in order to foresight/human/*: Zenoh refuses it whole, and it says so."""
-    from shared.protocol import DemoMarker
+    """A real planner-role session subscribing in order to foresight/prediction/* (the posterior is not its): Zenoh
+    refuses it whole, and it says so."""
+    from shared.protocol import OccupancyGrid
     from shared.transport import subscribe_ordered
 
     init_security_dir(tmp_path, ROLES)
@@ -123,8 +129,9 @@ def test_a_secure_session_says_its_refused_wildcard_subscription(tmp_path: Path,
                       role="planner")
     keys = Keys()
     with caplog.at_level(logging.WARNING, logger="shared.transport"), open_session(cfg) as session:
-        sub = subscribe_ordered(session, keys.human_all, {keys.pose: HumanPose, keys.demo: DemoMarker},
-                                lambda m: None)
+        sub = subscribe_ordered(session, PREDICTION_ALL, {keys.posterior: ClassPosterior,
+                                                         keys.occupancy: OccupancyGrid}, lambda m: None)
         sub.undeclare()
     lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("access control:")]
-    assert any(f"may not subscribe to {keys.human_all}: it also matches {keys.pose}" in line for line in lines), lines
+    assert any(f"may not subscribe to {PREDICTION_ALL}: it also matches {keys.posterior}" in line
+               for line in lines), lines
