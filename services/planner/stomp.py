@@ -75,6 +75,17 @@ _COMPILED: dict[str, Callable[..., tuple[torch.Tensor, ...]]] = {}
 _STEPS: dict[str, Callable[..., tuple[torch.Tensor, ...]]] = {"rollouts": rollouts, "advance": advance}
 
 
+def _dense(t: torch.Tensor) -> torch.Tensor:
+    """``t`` with the strides of a new tensor of its shape (a copy).
+
+    Dynamo guards every stride, those of size-1 axes too, and ``contiguous()`` leaves a view whose only uneven
+    stride is a size-1 axis's as it is: with one goal (K = 1) the start sliced from the 40-waypoint path had
+    another stride than the warm-up's, and the first real step compiled STOMP's steps again (0.4-0.6 s of a
+    real-time run's first plan).
+    """
+    return t.clone(memory_format=torch.contiguous_format)
+
+
 def _compiled(name: str) -> Callable[..., tuple[torch.Tensor, ...]]:
     """``torch.compile`` of :func:`rollouts` or :func:`advance`, made once per process.
 
@@ -195,8 +206,8 @@ class Stomp:
         if seeds is None:
             seeds = [c.seed + i for i in range(k)]
         noise = self.sample_noise(k, seeds)  # (I, K, R, N, D); raises on a wrong number of seeds
-        start, goal = q0[:, :1].contiguous(), q0[:, -1:].contiguous()  # (K, 1, D)
-        theta = q0[:, 1:-1].contiguous()  # (K, N, D) the free waypoints (contiguous: one compiled layout)
+        start, goal = _dense(q0[:, :1]), _dense(q0[:, -1:])  # (K, 1, D)
+        theta = _dense(q0[:, 1:-1])  # (K, N, D) the free waypoints (one compiled layout)
         best_theta = theta.clone()  # never the same tensor as theta: one compiled graph (dynamo guards aliasing)
         best_cost = torch.full((k,), math.inf, device=self.device, dtype=self.dtype)
         history = []
@@ -213,7 +224,7 @@ class Stomp:
             cost = self._cost(cost_fn, q, k, q.shape[1])
             # 2-4. keep the best, probabilities per waypoint, smoothed update within the limits; and 1. of the next
             # iteration (after the last, its noise again: rollouts nobody costs)
-            nxt = noise[min(it + 1, c.iterations - 1), :, :fresh].contiguous()
+            nxt = _dense(noise[min(it + 1, c.iterations - 1), :, :fresh])
             theta, total, best_cost, best_theta, *kept, q, eps = self._step(
                 "advance", theta, eps, cost, *kept, c.reuse, best_cost, best_theta, self.lower, self.upper, self.M,
                 to_go, c.sensitivity, nxt, start, goal)
@@ -243,8 +254,8 @@ class Stomp:
             return
         c, n = self.config, self.config.waypoints - 2
         fresh = c.rollouts - c.reuse
-        theta = ((self.lower + self.upper) / 2).expand(k, n, self.dof).contiguous()
-        start, goal = theta[:, :1].contiguous(), theta[:, :1].clone()
+        theta = _dense(((self.lower + self.upper) / 2).expand(k, n, self.dof))
+        start, goal = _dense(theta[:, :1]), _dense(theta[:, :1])
         # distinct tensors as in optimize: dynamo guards aliasing between arguments (an aliased call is another graph)
         q, eps = self._first_rollouts(theta, torch.zeros(k, c.rollouts, n, self.dof, device=self.device,
                                                          dtype=self.dtype), start, goal)
@@ -257,7 +268,7 @@ class Stomp:
             "advance", theta, eps, cost, None, None, c.reuse, best, theta.clone(), self.lower, self.upper, self.M,
             to_go, c.sensitivity, nxt, start, goal)
         if c.reuse:
-            self._step("advance", theta, eps, cost[:, :fresh + 1].contiguous(), kept_q, kept_cost, c.reuse, best,
+            self._step("advance", theta, eps, _dense(cost[:, :fresh + 1]), kept_q, kept_cost, c.reuse, best,
                        best_theta, self.lower, self.upper, self.M, to_go, c.sensitivity, nxt.clone(), start, goal)
 
     def _first_rollouts(self, theta: torch.Tensor, noise: torch.Tensor, start: torch.Tensor,
@@ -268,9 +279,9 @@ class Stomp:
         two shapes (R - reuse and reuse), so that no third graph is compiled for R.
         """
         fresh = self.config.rollouts - self.config.reuse
-        q, eps = self._step("rollouts", theta, noise[:, :fresh].contiguous(), start, goal, self.lower, self.upper)
+        q, eps = self._step("rollouts", theta, _dense(noise[:, :fresh]), start, goal, self.lower, self.upper)
         if self.config.reuse:
-            q2, eps2 = self._step("rollouts", theta, noise[:, fresh:].contiguous(), start, goal, self.lower,
+            q2, eps2 = self._step("rollouts", theta, _dense(noise[:, fresh:]), start, goal, self.lower,
                                   self.upper)
             q, eps = torch.cat([q, q2[:, 1:]], 1), torch.cat([eps, eps2], 1)
         return q, eps

@@ -229,3 +229,18 @@ def test_reused_rollouts_are_the_previous_iterations_best_with_their_costs() -> 
 def test_reuse_must_leave_new_rollouts() -> None:
     with pytest.raises(StompError, match="stomp.reuse"):
         Stomp(StompConfig(rollouts=4, reuse=4), (-torch.ones(2), torch.ones(2)))
+
+
+def test_one_goal_s_first_step_compiles_nothing_the_warm_up_did_not(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With one goal (K = 1) the start sliced from the path kept the path's stride on its size-1 axis, another than
+    the warm-up's, and the first real step compiled STOMP's steps again: 0.4-0.6 s of a real-time run's first plan
+    (the demo plans for one cup)."""
+    target = _bump_target()
+    stomp = Stomp(StompConfig(iterations=3, compile=True, rollouts=10, reuse=5),
+                  (-torch.ones(3) * 2, torch.ones(3) * 2))
+    stomp.warm_up(1)
+    if not stomp.compiled:
+        pytest.skip("torch.compile is not available here (no C++ compiler): STOMP fell back to eager")
+    monkeypatch.setattr(torch._dynamo.config, "error_on_recompile", True)  # a recompile fails the step: eager after it
+    stomp.optimize(init_straight_lines(target[0], target[-1:], T), lambda q: ((q - target) ** 2).sum(-1))
+    assert stomp.compiled
