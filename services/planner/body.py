@@ -94,6 +94,9 @@ def body_clearances(centres: torch.Tensor, radii: torch.Tensor, body: BodyCapsul
 class PersonBody:
     """The newest pose's body, placed in the scene: what the planner service hands the planner (no Zenoh).
 
+    The person stays where last seen until the next pose, as for the separation guard: a tracker's ``lost`` marker
+    says where they are is unknown, and the last place seen is the nearest guess.
+
     Args:
         scene: The scene the person is placed in (``scene.human``, as the predictor and the guard place them).
         human: The human model (default: a new :class:`HumanModel`).
