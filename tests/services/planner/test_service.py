@@ -3,9 +3,10 @@ robot's plans start where it is, the person's newest pose is the body the plans 
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -20,6 +21,35 @@ from shared.synthetic import generate_library
 from shared.transport import TypedPublisher, open_session, subscribe
 
 
+@contextlib.contextmanager
+def _serving(scene, zenoh_hub: Callable[[], ZenohConfig], period_s: float = 0.5,
+             **planner_options: object) -> Iterator[tuple[PlannerService, object, Keys, threading.Thread]]:
+    """A real-time planner service (3 STOMP iterations, eager), a session of the same hub and the service's thread.
+
+    Yields ``(service, session, keys, thread)``: the caller starts the thread (after subscribing what it must see);
+    the service is stopped and the thread joined (10 s at most) on the way out.
+    """
+    planner = Planner(scene, PlannerConfig(compile=False, stomp=StompConfig(iterations=3), **planner_options))
+    hub = zenoh_hub()
+    service = PlannerService(PlannerServiceConfig(mode="realtime", trigger="event", period_s=period_s), zenoh_hub(),
+                             planner=planner, scene=scene)
+    stop = threading.Event()
+    thread = threading.Thread(target=service.run, args=(stop,), daemon=True)
+    with open_session(hub) as session:
+        try:
+            yield service, session, Keys(hub.prefix), thread
+        finally:
+            stop.set()
+            if thread.ident is not None:  # started
+                thread.join(10.0)
+    assert not thread.is_alive()
+
+
+def _state(q: np.ndarray, names: list[str], holding: bool = False, reason: str = "") -> RobotState:
+    return RobotState(stamp=time.time(), tick=-1, joint_names=names, goal=-1, reached=False, holding=holding,
+                      reason=reason, q=q, qd=np.zeros(len(q)))
+
+
 def test_the_default_limit_tolerance_is_the_wire_s() -> None:
     assert PlannerConfig().limit_tol == JOINT_LIMIT_TOL  # a state the receipt accepts is one the planner plans from
 
@@ -28,38 +58,21 @@ def test_a_departure_step_that_fails_waits_for_the_next_state(scene, zenoh_hub: 
                                                               wait_until: Callable[..., bool]) -> None:
     """Off its path and refused by the planner (here: past a tighter limit tolerance than the wire's), the robot
     used to restart a failing 'departure' step as fast as it failed (about 750 a second, each logged)."""
-    config = PlannerConfig(compile=False, stomp=StompConfig(iterations=3), limit_tol=1e-3)
-    planner = Planner(scene, config)
-    hub = zenoh_hub()
-    service = PlannerService(PlannerServiceConfig(mode="realtime", trigger="event", period_s=0.5), zenoh_hub(),
-                             planner=planner, scene=scene)
-    names = list(planner.robot.joint_names)
-    q0 = planner.robot.q_start.double().numpy()
-    stop = threading.Event()
-    thread = threading.Thread(target=service.run, args=(stop,), daemon=True)
-    with open_session(hub) as session:
+    with _serving(scene, zenoh_hub, limit_tol=1e-3) as (service, session, keys, thread):
+        robot = service.planner.robot
+        names, q0 = list(robot.joint_names), robot.q_start.double().numpy()
         thread.start()
-        try:
-            pub = TypedPublisher(session, Keys(hub.prefix).robot_state)
-
-            def state(q: np.ndarray) -> None:
-                pub.put(RobotState(stamp=time.time(), tick=-1, joint_names=names, goal=-1, reached=False,
-                                   holding=False, reason="", q=q, qd=np.zeros(len(q))))
-
-            assert wait_until(lambda: (state(q0), service.stats.plans)[1] >= 1, 60.0)
-            bad = q0.copy()
-            bad[1] = planner.robot.upper[1].item() + 0.02  # within the wire's 0.05, beyond the planner's 1e-3
-            failures = service.stats.failures
-            state(bad)
-            assert wait_until(lambda: service.stats.failures > failures, 10.0)
-            time.sleep(1.5)
-            # once for the state, then at most once per period (0.5 s): not once per pass of the loop
-            assert 1 <= service.stats.failures - failures <= 1 + 4, service.stats.failures - failures
-            assert "outside the joint limits" in service.stats.last_error
-        finally:
-            stop.set()
-            thread.join(10.0)
-    assert not thread.is_alive()
+        pub = TypedPublisher(session, keys.robot_state)
+        assert wait_until(lambda: (pub.put(_state(q0, names)), service.stats.plans)[1] >= 1, 60.0)
+        bad = q0.copy()
+        bad[1] = robot.upper[1].item() + 0.02  # within the wire's 0.05, beyond the planner's 1e-3
+        failures = service.stats.failures
+        pub.put(_state(bad, names))
+        assert wait_until(lambda: service.stats.failures > failures, 10.0)
+        time.sleep(1.5)
+        # once for the state, then at most once per period (0.5 s): not once per pass of the loop
+        assert 1 <= service.stats.failures - failures <= 1 + 4, service.stats.failures - failures
+        assert "outside the joint limits" in service.stats.last_error
 
 
 def test_a_held_robot_gets_plans_that_start_where_it_is(scene, zenoh_hub: Callable[[], ZenohConfig],
@@ -67,22 +80,15 @@ def test_a_held_robot_gets_plans_that_start_where_it_is(scene, zenoh_hub: Callab
     """Held still, the robot got plans starting one lookahead ahead of it; the next step counted it as departed
     from that start and replanned from where it was, and so on: about half the plans (34 of 75) started away from
     it, and a third of the steps (20 'departure' steps) were spent correcting that."""
-    planner = Planner(scene, PlannerConfig(compile=False, stomp=StompConfig(iterations=3)))
-    hub = zenoh_hub()
-    keys = Keys(hub.prefix)
-    service = PlannerService(PlannerServiceConfig(mode="realtime", trigger="event", period_s=0.5), zenoh_hub(),
-                             planner=planner, scene=scene)
-    names, q0 = list(planner.robot.joint_names), planner.robot.q_start.double().numpy()
     plans: list[Plan] = []
-    stop = threading.Event()
-    thread = threading.Thread(target=service.run, args=(stop,), daemon=True)
-    with open_session(hub) as session:
+    with _serving(scene, zenoh_hub) as (service, session, keys, thread):
+        robot = service.planner.robot
+        names, q0 = list(robot.joint_names), robot.q_start.double().numpy()
         sub = subscribe(session, keys.plan, Plan, plans.append)
         thread.start()
         try:
             states, grids = TypedPublisher(session, keys.robot_state), TypedPublisher(session, keys.occupancy)
-            held = RobotState(stamp=time.time(), tick=-1, joint_names=names, goal=-1, reached=False, holding=True,
-                              reason="plan is 0.60 s old", q=q0, qd=np.zeros(len(q0)))
+            held = _state(q0, names, holding=True, reason="plan is 0.60 s old")
             assert wait_until(lambda: (states.put(held), service.stats.plans)[1] >= 1, 60.0)
             g = scene.grid
             for i in range(8):  # each new prediction is a step
@@ -93,10 +99,7 @@ def test_a_held_robot_gets_plans_that_start_where_it_is(scene, zenoh_hub: Callab
                 time.sleep(0.3)
             assert wait_until(lambda: len(plans) >= 6, 30.0)
         finally:
-            stop.set()
-            thread.join(10.0)
             sub.undeclare()
-    assert not thread.is_alive()
     starts = [float(np.linalg.norm(p.trajectories[p.chosen, 0] - q0)) for p in plans]
     assert max(starts) < 1e-3, starts
 
@@ -104,40 +107,22 @@ def test_a_held_robot_gets_plans_that_start_where_it_is(scene, zenoh_hub: Callab
 def test_a_real_time_planner_keeps_clear_of_the_person_s_newest_pose(scene, zenoh_hub: Callable[[], ZenohConfig],
                                                                      wait_until: Callable[..., bool]) -> None:
     """The cost's body (``services.planner.body``) is the newest pose's, placed from its demonstration's first."""
-    planner = Planner(scene, PlannerConfig(compile=False, stomp=StompConfig(iterations=3)))
-    hub = zenoh_hub()
-    keys = Keys(hub.prefix)
-    service = PlannerService(PlannerServiceConfig(mode="realtime", trigger="event", period_s=0.2), zenoh_hub(),
-                             planner=planner, scene=scene)
-    names, q0 = list(planner.robot.joint_names), planner.robot.q_start.double().numpy()
     features = generate_library(seed=0).demos[0].features.astype(np.float64)
-    stop = threading.Event()
-    thread = threading.Thread(target=service.run, args=(stop,), daemon=True)
-    with open_session(hub) as session:
+    placement = StreamPlacement(scene)
+    placement.place(4, 0, features[0])
+    want, _ = HumanModel().capsules(placement.place(4, 20, features[20]))
+    with _serving(scene, zenoh_hub, period_s=0.2) as (service, session, keys, thread):
+        robot, cost = service.planner.robot, service.planner.cost
+        names, q0 = list(robot.joint_names), robot.q_start.double().numpy()
         thread.start()
-        try:
-            states, poses = TypedPublisher(session, keys.robot_state), TypedPublisher(session, keys.pose)
+        states, poses = TypedPublisher(session, keys.robot_state), TypedPublisher(session, keys.pose)
+        assert wait_until(lambda: (states.put(_state(q0, names)), service.stats.plans)[1] >= 1, 60.0)
+        assert cost.body is None  # no pose yet
+        for i in (0, 20):
+            poses.put(HumanPose(stamp=time.time(), tick=-1, tick_last=True, demo_id=4, index=i, features=features[i]))
 
-            def state() -> None:
-                states.put(RobotState(stamp=time.time(), tick=-1, joint_names=names, goal=-1, reached=False,
-                                      holding=False, reason="", q=q0, qd=np.zeros(len(q0))))
+        def placed() -> bool:
+            states.put(_state(q0, names))
+            return cost.body is not None and np.allclose(cost.body.ends.double().numpy(), want, atol=1e-5)
 
-            assert wait_until(lambda: (state(), service.stats.plans)[1] >= 1, 60.0)
-            assert planner.cost.body is None  # no pose yet
-            for i in (0, 20):
-                poses.put(HumanPose(stamp=time.time(), tick=-1, tick_last=True, demo_id=4, index=i,
-                                    features=features[i]))
-            placement = StreamPlacement(scene)
-            placement.place(4, 0, features[0])
-            want, _ = HumanModel().capsules(placement.place(4, 20, features[20]))
-
-            def placed() -> bool:
-                state()
-                body = planner.cost.body
-                return body is not None and np.allclose(body.ends.double().numpy(), want, atol=1e-5)
-
-            assert wait_until(placed, 20.0)
-        finally:
-            stop.set()
-            thread.join(10.0)
-    assert not thread.is_alive()
+        assert wait_until(placed, 20.0)
