@@ -117,39 +117,82 @@ def _clearances(robot: PR2, traj: torch.Tensor, body: BodyCapsules) -> list[floa
     return body_clearances(arm, robot.sphere_radii[robot.arm_carried_slice], body).amin(0).tolist()
 
 
-def test_the_plan_keeps_the_guard_s_distance_from_a_hand_held_beside_its_way(scene) -> None:
-    """A hand held beside the plan made without it, within the guard's ``stop_m`` of its path: the next plans keep
-    more than ``stop_m`` from it all the way (as far as their start and goal allow).
+@pytest.fixture(scope="module")
+def hand_beside(scene):
+    """A goal whose plan, made without the body term, passes within the guard's ``stop_m`` of a hand held beside its
+    way (level with the path's middle), the path's ends clear of it.
 
-    Without the term the executor's guard held the robot there, and the planner proposed the same path at every step
-    again (docs/executor.md). Replanning as in real time, each step warm-started from the last."""
+    Returns ``(planner, its cost, the free path (T, D), the hand's capsule ends (1, 2, 3) and radius (1,))``; the
+    planner plans for that goal alone, its cost holds no body.
+    """
     robot = PR2.from_scene(scene)
     config = PlannerConfig(compile=False, stomp=StompConfig(iterations=50))
     base = Planner(scene, config, robot=robot)
-    empty = np.zeros(scene.grid.dims, dtype=np.float32)
     radius = np.array([0.05])  # the human model's hand
     for (k, name), side in itertools.product(enumerate(base.goals.names), (0.15, -0.15, 0.1, -0.1)):
         planner = Planner(scene, config, robot=robot, cost=base.cost,
                           goals=GoalSet.joint_space([name], base.goals.q[k:k + 1], robot))
-        base.cost.set_body(None, None)
-        free = planner.step(robot.q_start.numpy(), empty)
+        free = planner.step(robot.q_start.numpy(), _empty(scene))
         traj = torch.as_tensor(free.trajectories[free.chosen], dtype=robot.dtype)
         hand = robot.sphere_centers(traj)[:, robot.arm_carried_slice][:, -6:].mean(1).double().numpy()  # (T, 3)
         mid = len(traj) // 2
         across = np.cross(hand[mid + 1] - hand[mid - 1], [0.0, 0.0, 1.0])
-        held = hand[mid] + side * across / np.linalg.norm(across)  # level with the path's middle, beside it
+        held = hand[mid] + side * across / np.linalg.norm(across)
         ends = np.stack([held - [0.0, 0.0, 0.03], held + [0.0, 0.0, 0.03]])[None]  # (1, 2, 3)
-        body = BodyCapsules.build(ends, radius, "cpu", robot.dtype)
-        along = _clearances(robot, traj, body)
+        along = _clearances(robot, traj, BodyCapsules.build(ends, radius, "cpu", robot.dtype))
         if min(along) < STOP_M and min(along[0], along[-1]) > 0.07:  # held on the way, room at both ends
-            break
-    else:
-        pytest.fail("no goal of the scene passes within stop_m of a hand beside its way with its ends clear")
-    base.cost.set_body(ends, radius)
-    for _ in range(3):
-        kept = planner.step(robot.q_start.numpy(), empty)
+            return planner, base.cost, traj, ends, radius
+    pytest.fail("no goal of the scene passes within stop_m of a hand beside its way with its ends clear")
+
+
+def _empty(scene) -> np.ndarray:
+    """No predicted occupancy: the scene grid's zeros."""
+    return np.zeros(scene.grid.dims, dtype=np.float32)
+
+
+def test_the_plan_keeps_the_guard_s_distance_from_a_hand_held_beside_its_way(scene, hand_beside) -> None:
+    """A hand held beside the plan made without it, within the guard's ``stop_m`` of its path: the next plans keep
+    more than ``stop_m`` from it all the way (as far as their start and goal allow).
+
+    Without the term the executor's guard held the robot there, and the planner proposed the same path at every step
+    again (docs/executor.md). Replanning as in real time from the start, each step warm-started from the last."""
+    planner, cost, free, ends, radius = hand_beside
+    robot = planner.robot
+    planner.reset()
+    cost.set_body(ends, radius)
+    try:
+        for _ in range(3):
+            kept = planner.step(free[0].numpy(), _empty(scene))
+    finally:
+        cost.set_body(None, None)
     traj = torch.as_tensor(kept.trajectories[kept.chosen], dtype=robot.dtype)
-    assert min(_clearances(robot, traj, body)) > STOP_M
+    assert min(_clearances(robot, traj, BodyCapsules.build(ends, radius, "cpu", robot.dtype))) > STOP_M
+
+
+def test_a_robot_held_within_stop_m_gets_a_plan_the_guard_lets_it_follow(scene, hand_beside) -> None:
+    """The robot already within ``stop_m`` of the hand (where the plan made without the term took it): planned from
+    there, each step keeps or widens its clearance while within ``stop_m``, so the guard takes every step; the plan
+    made without the term closes in and would be held at once."""
+    planner, cost, free, ends, radius = hand_beside
+    robot = planner.robot
+    body = BodyCapsules.build(ends, radius, "cpu", robot.dtype)
+    along = _clearances(robot, free, body)
+    i = next(i for i, c in enumerate(along) if c < STOP_M)  # where the guard first stops it
+    held = free[i].numpy()
+
+    def closing_steps(with_term: bool) -> list[tuple[float, float]]:
+        """The plan's steps within stop_m that shrink its clearance (the guard refuses them)."""
+        planner.reset()
+        cost.set_body(*((ends, radius) if with_term else (None, None)))
+        try:
+            plan = planner.step(held, _empty(scene))
+        finally:
+            cost.set_body(None, None)
+        c = _clearances(robot, torch.as_tensor(plan.trajectories[plan.chosen], dtype=robot.dtype), body)
+        return [(a, b) for a, b in zip(c[:-1], c[1:], strict=True) if a < STOP_M and b < a - 1e-4]
+
+    assert closing_steps(with_term=False)  # the way on, past the hand: held
+    assert closing_steps(with_term=True) == []
 
 
 def test_the_person_s_body_is_placed_as_the_guard_places_it(scene) -> None:
