@@ -85,7 +85,7 @@ def test_the_fused_kernel_equals_the_reference_with_a_body(scene, pointwise: boo
                       grid=scene.grid, pointwise=pointwise, dwell=planner.config.goal_dwell_s)
     ends, radii = _capsules(scene)
     hand = robot.sphere_centers(robot.q_start)[robot.arm_carried_slice].double().numpy().mean(0)
-    ends = ends - ends[:, :, :].reshape(-1, 3).mean(0) + hand  # the body where the arm is
+    ends = ends - ends.reshape(-1, 3).mean(0) + hand  # the body where the arm is
     g = torch.Generator().manual_seed(3)
     q = (robot.q_start + 0.4 * torch.randn(4, 6, 40, 8, generator=g, dtype=torch.float64)).clamp(robot.lower,
                                                                                                 robot.upper)
