@@ -231,7 +231,7 @@ def test_reuse_must_leave_new_rollouts() -> None:
         Stomp(StompConfig(rollouts=4, reuse=4), (-torch.ones(2), torch.ones(2)))
 
 
-def test_one_goal_s_first_step_compiles_nothing_the_warm_up_did_not(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_one_goal_s_first_step_compiles_nothing_the_warm_up_did_not() -> None:
     """With one goal (K = 1) the start sliced from the path kept the path's stride on its size-1 axis, another than
     the warm-up's, and the first real step compiled STOMP's steps again: 0.4-0.6 s of a real-time run's first plan
     (the demo plans for one cup)."""
@@ -241,6 +241,7 @@ def test_one_goal_s_first_step_compiles_nothing_the_warm_up_did_not(monkeypatch:
     stomp.warm_up(1)
     if not stomp.compiled:
         pytest.skip("torch.compile is not available here (no C++ compiler): STOMP fell back to eager")
-    monkeypatch.setattr(torch._dynamo.config, "error_on_recompile", True)  # a recompile fails the step: eager after it
-    stomp.optimize(init_straight_lines(target[0], target[-1:], T), lambda q: ((q - target) ** 2).sum(-1))
+    # a recompile fails the step (then eager); dynamo's own patch (pytest's monkeypatch hid the option on undo)
+    with torch._dynamo.config.patch(error_on_recompile=True):
+        stomp.optimize(init_straight_lines(target[0], target[-1:], T), lambda q: ((q - target) ** 2).sum(-1))
     assert stomp.compiled
