@@ -294,7 +294,7 @@ class FusedCost:
                             sdf_hi=torch.as_tensor(sdf.grid.max, device=dev, dtype=dt).reshape(3, 1, 1),
                             psi=psi.to(dev, dt).contiguous(), v=axis.to(dev, dt).reshape(3, 1),
                             r_arm=robot.sphere_radii[robot.arm_slice][:, None].contiguous(),
-                            inv_vmax=(1.0 / vmax).to(dev, dt).contiguous())
+                            inv_vmax=(1.0 / vmax).to(dev, dt).contiguous(), r_carried=r_arm_c.contiguous())
         n_torso = int(moving.sum())
         contiguous = bool(moving[:n_torso].all()) and n_torso < len(moving)
         lift = cost.occupancy.lift
@@ -306,7 +306,6 @@ class FusedCost:
                             self_eps=max(float(cfg.self_clearance), 1e-6), w_obstacle=float(cfg.w_obstacle),
                             w_human=float(cfg.w_human), w_smooth=float(w_smooth), integrate=bool(integrate),
                             dwell=float(dwell), body=cfg.body_clearance > 0, body_eps=float(cfg.body_clearance))
-        self._r_carried = r_arm_c.contiguous()
         self._far = BodyCapsules.far(len(HumanModel.SEGMENT_NAMES), dev, dt)  # the body while none is set
         if grid is None:
             zeros, first, inv_res = torch.zeros(2, 2, 2, device=dev, dtype=dt), torch.zeros(3), 1.0
@@ -343,7 +342,7 @@ class FusedCost:
             fn, s["pointwise"] = _kernel, False
         return fn(q3, c["a0"], c["a123t"], c["wt"], c["sph_link"], c["sph_local"], c["obs_thr"],
                   *_cell_args(self._sdf, flat), c["sdf_lo"], c["sdf_hi"], *_cell_args(occ, flat), tables.lift.values,
-                  c["psi"], c["v"], c["r_arm"], c["inv_vmax"], body.ends, body.radii, self._r_carried, s=s)
+                  c["psi"], c["v"], c["r_arm"], c["inv_vmax"], body.ends, body.radii, c["r_carried"], s=s)
 
     def terms(self, q: torch.Tensor) -> torch.Tensor:
         """Per-waypoint terms.
