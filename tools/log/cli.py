@@ -30,7 +30,7 @@ from shared.runtime import UserError, cli_errors
 from ..png import check_png
 from .compress import compress_log
 from .info import format_info, info_dict
-from .latency import format_latencies, log_latencies
+from .latency import PlanSample, format_latencies, format_slowest, log_latencies, slowest_plans
 from .render import render_step
 from .steps import scene_of, step_views
 
@@ -137,17 +137,25 @@ def _main_snapshot(args: argparse.Namespace) -> int:
 
 
 def _main_latency(args: argparse.Namespace) -> int:
+    if args.slowest < 0:
+        raise UserError(f"--slowest: must be 0 or more plans, got {args.slowest}")
     try:
         read: list[LogFile] = []
-        stats = log_latencies(args.file, read)
+        samples: list[PlanSample] = []
+        stats = log_latencies(args.file, read, samples)
     except ValueError as exc:
         raise UserError(str(exc)) from exc
     _note_truncated(read[0])
+    slow = slowest_plans(samples, args.slowest)
     if args.json:  # strict JSON: a series without samples has null statistics, not NaN
-        print(strict_json.dumps({**{k: dataclasses.asdict(v) for k, v in stats.items()}, "complete": read[0].complete,
-                                 "error": read[0].error}))
+        extra = {"slowest": [dataclasses.asdict(s) | {"not_planning_ms": s.not_planning_ms} for s in slow]
+                 } if args.slowest else {}
+        print(strict_json.dumps({**{k: dataclasses.asdict(v) for k, v in stats.items()}, **extra,
+                                 "complete": read[0].complete, "error": read[0].error}))
     else:
         print(format_latencies(stats))
+        if args.slowest:
+            print(format_slowest(slow))
     return 0
 
 
@@ -172,6 +180,9 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
     pl = sub.add_parser("latency", help=SUBCOMMANDS["latency"])
     pl.add_argument("file", help="MCAP file")
     pl.add_argument("--json", action="store_true", help="print one JSON object")
+    pl.add_argument("--slowest", type=int, default=0, metavar="N",
+                    help="also list the N plans with the longest pose -> plan, each split into its planning time and "
+                    "the rest (the wait for the step before it, and travel): is a tail slow steps or late starts?")
     pc = sub.add_parser("compress", help=SUBCOMMANDS["compress"])
     pc.add_argument("file", help="MCAP file")
     pc.add_argument("out", help="the new MCAP file")

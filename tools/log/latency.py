@@ -31,7 +31,7 @@ from shared.runtime import UserError
 
 from .versions import check_readable
 
-__all__ = ["Stat", "run_latencies", "format_latencies"]
+__all__ = ["Stat", "PlanSample", "run_latencies", "format_latencies", "slowest_plans", "format_slowest"]
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,32 @@ class Stat:
         return cls(len(a), float(np.percentile(a, 50)), float(np.percentile(a, 99)), float(a.max()))
 
 
-def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat]:
+@dataclass(frozen=True)
+class PlanSample:
+    """One plan's share of the pose -> plan series: where a late plan's time went.
+
+    Attributes:
+        step: ``Plan.step``.
+        t_s: Seconds from the run's first pose to the plan's arrival.
+        pose_to_plan_ms: From its newest pose's arrival to the plan's.
+        occupancy_to_plan_ms: From its occupancy's arrival to the plan's (NaN: that occupancy is not in the log).
+        planning_ms: ``Plan.planning_ms``, the step as the planner timed it.
+    """
+
+    step: int
+    t_s: float
+    pose_to_plan_ms: float
+    occupancy_to_plan_ms: float
+    planning_ms: float
+
+    @property
+    def not_planning_ms(self) -> float:
+        """Occupancy -> plan less the planning: the wait for the step running when the occupancy came, and travel."""
+        return self.occupancy_to_plan_ms - self.planning_ms
+
+
+def run_latencies(messages: list[Any], topics: dict[str, str],
+                  samples: list[PlanSample] | None = None) -> dict[str, Stat]:
     """Latency statistics of a run.
 
     Args:
@@ -60,6 +85,7 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
         topics: Topic of each message type: keys ``"pose"``, ``"occupancy"``, ``"plan"`` and optionally
             ``"demo"`` (DemoMarker: plans after a demonstration's end do not count for pose -> plan) and
             ``"keypoints"`` (HumanKeypoints: the tracker's input).
+        samples: If given, one :class:`PlanSample` per plan of the pose -> plan series is appended.
 
     Returns:
         ``{"pose_to_occupancy", "pose_to_plan", "occupancy_to_plan", "replanning_period", "planning"}``, and with
@@ -77,6 +103,7 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
     kp_to_pose: list[float] = []
     kp_to_plan: list[float] = []
     current_demo = -1
+    first_pose: int | None = None
     streaming = True
     decoded, refused, relevant = 0, [], set(topics.values())
     for m in sorted(messages, key=lambda m: m.log_time):
@@ -89,6 +116,7 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
             elif m.topic == topics["pose"]:
                 pose = decode(m.data, HumanPose)
                 pose_time[(pose.demo_id, pose.index)] = m.log_time
+                first_pose = m.log_time if first_pose is None else first_pose
                 current_demo = pose.demo_id
                 t_frame = frame_time.get(pose.stamp)
                 if t_frame is not None:
@@ -109,6 +137,10 @@ def run_latencies(messages: list[Any], topics: dict[str, str]) -> dict[str, Stat
                     continue
                 if plan.occupancy_index >= 0 and key in pose_time:
                     pose_to_plan.append((m.log_time - pose_time[key]) / 1e6)
+                    if samples is not None:
+                        occ_ms = (m.log_time - occ_time[key]) / 1e6 if key in occ_time else float("nan")
+                        samples.append(PlanSample(plan.step, (m.log_time - (first_pose or 0)) / 1e9,
+                                                  pose_to_plan[-1], occ_ms, plan.planning_ms))
                 if plan.occupancy_index >= 0 and key in occ_time:
                     occ_to_plan.append((m.log_time - occ_time[key]) / 1e6)
                 if plan.occupancy_index >= 0 and key in pose_frame:
@@ -135,12 +167,32 @@ def format_latencies(stats: dict[str, Stat]) -> str:
     return "\n".join(lines)
 
 
-def log_latencies(path: str | Path, read: list[Any] | None = None) -> dict[str, Stat]:
+def slowest_plans(samples: list[PlanSample], n: int) -> list[PlanSample]:
+    """The ``n`` plans of ``samples`` with the longest pose -> plan, longest first (ties: the earlier first)."""
+    return sorted(samples, key=lambda s: (-s.pose_to_plan_ms, s.t_s))[:max(n, 0)]
+
+
+def format_slowest(slowest: list[PlanSample]) -> str:
+    """A table of :func:`slowest_plans`: each late plan's time split into the step and the rest."""
+    lines = ["slowest plans by pose -> plan (ms; not planning = occupancy -> plan less the step: the wait for the "
+             "step running when the occupancy came, and the messages' travel)",
+             f"{'plan':>6}{'t (s)':>8}{'pose -> plan':>14}{'occupancy -> plan':>19}{'planning':>10}"
+             f"{'not planning':>14}"]
+    for s in slowest:
+        occ = f"{s.occupancy_to_plan_ms:>19.1f}" if math.isfinite(s.occupancy_to_plan_ms) else f"{'-':>19}"
+        rest = f"{s.not_planning_ms:>14.1f}" if math.isfinite(s.not_planning_ms) else f"{'-':>14}"
+        lines.append(f"{s.step:>6}{s.t_s:>8.2f}{s.pose_to_plan_ms:>14.1f}{occ}{s.planning_ms:>10.1f}{rest}")
+    return "\n".join(lines)
+
+
+def log_latencies(path: str | Path, read: list[Any] | None = None,
+                  samples: list[PlanSample] | None = None) -> dict[str, Stat]:
     """:func:`run_latencies` of an MCAP log's Foresight channels.
 
     Args:
         path: The log.
         read: If given, the :class:`~shared.recording.reader.LogFile` read is appended (whether it was complete).
+        samples: If given, each plan's :class:`PlanSample` is appended (see :func:`run_latencies`).
 
     Raises:
         ValueError: The log lacks the HumanPose, OccupancyGrid or Plan channel.
@@ -162,6 +214,6 @@ def log_latencies(path: str | Path, read: list[Any] | None = None) -> dict[str, 
     if not {"pose", "occupancy", "plan"} <= set(topics):
         raise ValueError(f"{path}: needs HumanPose, OccupancyGrid and Plan channels, found {sorted(topics)}")
     try:
-        return run_latencies(lf.messages, topics)
+        return run_latencies(lf.messages, topics, samples)
     except UserError as exc:  # which log
         raise UserError(f"{path}: {exc}") from None

@@ -49,7 +49,7 @@ def test_latency_json_is_strict_json_when_a_series_is_empty(monkeypatch, capsys)
     from shared.recording.reader import LogFile
     from tools.log.latency import Stat
 
-    def latencies(path, read):
+    def latencies(path, read, samples=None):
         read.append(LogFile(str(path), 0, complete=True))
         return {"pose_to_plan": Stat.of([4.5]), "occupancy_to_plan": Stat.of([])}
 

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+import pytest
 
 from shared.protocol import HumanPose, OccupancyGrid, Plan, encode
 from tools.log.latency import Stat, format_latencies, run_latencies
@@ -100,3 +102,54 @@ def test_with_the_tracker_keypoints_to_pose_and_to_plan_follow_the_frame_each_po
     assert stats["keypoints_to_pose"] == Stat(3, 7.0, 7.0, 7.0)
     assert stats["keypoints_to_plan"] == Stat(1, 150.0 - 66, 150.0 - 66, 150.0 - 66)
     assert "keypoints_to_pose" not in run_latencies(msgs, {"pose": "p", "occupancy": "o", "plan": "x"})
+
+
+def test_the_slowest_plans_split_pose_to_plan_into_the_step_and_the_rest():
+    """`--slowest`: a tail of slow steps reads apart from a tail of steps that started late."""
+    from tools.log.latency import format_slowest, slowest_plans
+
+    ms = 1_000_000
+    msgs = []
+    for i in range(4):
+        t = (1000 + i * 100) * ms  # the run's first pose at 1 s of log time
+        msgs.append(Msg("p", t, encode(HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=2, index=i,
+                                                 features=np.zeros(12)))))
+        occ = OccupancyGrid.from_dense(np.zeros((2, 2, 2)), np.zeros(3), 0.1, stamp=0.0, tick=-1, tick_last=True,
+                                       demo_id=2, index=i, method="prediction")
+        msgs.append(Msg("o", t + 5 * ms, encode(occ)))
+
+    def plan(index: int, step: int, planning_ms: float) -> bytes:
+        return encode(dataclasses.replace(_plan(index), step=step, planning_ms=planning_ms))
+
+    # plan 1: a slow step (90 of its 95 ms); plan 2: a quick step that started late (10 of 85 ms); plan 3: on time
+    msgs += [Msg("x", 1100 * ms, plan(0, 1, 90.0)), Msg("x", 1190 * ms, plan(1, 2, 10.0)),
+             Msg("x", 1225 * ms, plan(2, 3, 20.0))]
+    samples = []
+    stats = run_latencies(msgs, {"pose": "p", "occupancy": "o", "plan": "x"}, samples)
+    assert stats["pose_to_plan"].count == len(samples) == 3
+    slow = slowest_plans(samples, 2)
+    assert [s.step for s in slow] == [1, 2]
+    assert np.isclose(slow[0].pose_to_plan_ms, 100.0) and np.isclose(slow[0].occupancy_to_plan_ms, 95.0)
+    assert np.isclose(slow[0].not_planning_ms, 5.0) and np.isclose(slow[1].not_planning_ms, 75.0)
+    assert np.isclose(slow[0].t_s, 0.1)  # seconds from the run's first pose
+    assert slowest_plans(samples, 0) == [] and len(slowest_plans(samples, 10)) == 3
+    table = format_slowest(slow).splitlines()
+    assert len(table) == 4 and table[2].split()[:2] == ["1", "0.10"] and table[3].split()[-1] == "75.0"
+
+
+def test_log_latency_slowest_on_a_written_log(run_log, capsys):
+    import json
+
+    from tools.log import cli
+
+    assert cli.main(["latency", str(run_log), "--slowest", "3", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [s["step"] for s in out["slowest"]] == [1]  # plan 0 was made from no occupancy (index -1)
+    assert out["slowest"][0]["planning_ms"] == 12.0 and "not_planning_ms" in out["slowest"][0]
+    assert cli.main(["latency", str(run_log), "--slowest", "3"]) == 0
+    assert "slowest plans by pose -> plan" in capsys.readouterr().out
+    assert cli.main(["latency", str(run_log)]) == 0 and "slowest" not in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(["latency", str(run_log), "--slowest", "-1"])
+    assert exit_.value.code == 2
+    assert "--slowest: must be 0 or more plans, got -1" in capsys.readouterr().err
