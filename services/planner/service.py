@@ -144,8 +144,8 @@ class PlannerService:
         self.stats.plans += 1
         self.stats.planning_ms.append(result.planning_ms)
         costs = ", ".join(f"{n}={c:.3g}" for n, c in zip(result.goal_names, result.cost_total, strict=True))
-        log.debug("planner: tick %d step %d chose %s (%s) in %.0f ms", tick, result.step,
-                  result.goal_names[result.chosen], costs, result.planning_ms)
+        log.debug("planner: tick %d step %d chose %s (%s) in %.0f ms, %d STOMP iterations", tick, result.step,
+                  result.goal_names[result.chosen], costs, result.planning_ms, result.iterations)
         self.summary.add(result.planning_ms, f"chose {result.goal_names[result.chosen]}"
                          + (" from off the path" if result.off_path else ""))  # each one logged at DEBUG by the core
         return result
