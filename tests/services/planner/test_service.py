@@ -4,11 +4,13 @@ robot's plans start where it is, the person's newest pose is the body the plans 
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
 
 import numpy as np
+import pytest
 
 from services.planner.core import Planner, PlannerConfig
 from services.planner.service import PlannerService, PlannerServiceConfig
@@ -76,10 +78,12 @@ def test_a_departure_step_that_fails_waits_for_the_next_state(scene, zenoh_hub: 
 
 
 def test_a_held_robot_gets_plans_that_start_where_it_is(scene, zenoh_hub: Callable[[], ZenohConfig],
-                                                        wait_until: Callable[..., bool]) -> None:
+                                                        wait_until: Callable[..., bool],
+                                                        caplog: pytest.LogCaptureFixture) -> None:
     """Held still, the robot got plans starting one lookahead ahead of it; the next step counted it as departed
     from that start and replanned from where it was, and so on: about half the plans (34 of 75) started away from
     it, and a third of the steps (20 'departure' steps) were spent correcting that."""
+    caplog.set_level(logging.DEBUG, logger="foresight.planner")
     plans: list[Plan] = []
     with _serving(scene, zenoh_hub) as (service, session, keys, thread):
         robot = service.planner.robot
@@ -102,6 +106,9 @@ def test_a_held_robot_gets_plans_that_start_where_it_is(scene, zenoh_hub: Callab
             sub.undeclare()
     starts = [float(np.linalg.norm(p.trajectories[p.chosen, 0] - q0)) for p in plans]
     assert max(starts) < 1e-3, starts
+    # each plan's debug line says how many STOMP iterations ran (a slow step: many, or a stalled few?)
+    lines = [r.getMessage() for r in caplog.records if r.name == "foresight.planner" and r.levelno == logging.DEBUG]
+    assert lines and all(m.endswith(", 3 STOMP iterations") for m in lines), lines
 
 
 def test_a_real_time_planner_keeps_clear_of_the_person_s_newest_pose(scene, zenoh_hub: Callable[[], ZenohConfig],
