@@ -31,6 +31,8 @@ BENCHES: dict[str, tuple[str, str]] = {
     "soak": ("tools.soak", "poses at 300 Hz for 60 s: predictor latency and drops, replanning period, RSS"),
     "codec": ("shared.protocol.bench", "encode and decode of each wire message against bare msgpack: what the "
               "checks cost"),
+    "host": ("tools.host_bench", "the same fixed work 300 times in one thread, nothing else of Foresight running: "
+             "does this machine stall a busy thread? (the floor under every real-time p99)"),
     "viz": ("shared.foxglove.bench",
             "one occupancy update of the Foxglove scene: SDK protobuf vs the JSON path it replaced"),
 }

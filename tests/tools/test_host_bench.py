@@ -1,0 +1,52 @@
+"""``foresight bench host``: the stall statistics, the timing loop, the steal share and the command."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from tools import host_bench
+
+
+def test_stall_stats_compare_the_slowest_runs_with_the_median():
+    s = host_bench.stall_stats([10.0] * 98 + [30.0, 50.0])
+    assert s["runs"] == 100 and s["p50_ms"] == 10.0 and s["max_ms"] == 50.0 and s["max_over_p50"] == 5.0
+    assert s["over_2x"] == 2 and math.isclose(s["p99_over_p50"], s["p99_ms"] / 10.0) and 10.0 < s["p99_ms"] < 50.0
+    assert host_bench.stall_stats([7.0])["p99_over_p50"] == 1.0
+
+
+@pytest.mark.parametrize("bad", [[], [1.0, float("nan")], [0.0, 1.0], [-1.0]])
+def test_stall_stats_refuse_what_is_no_duration(bad):
+    with pytest.raises(ValueError, match="durations must be finite and positive"):
+        host_bench.stall_stats(bad)
+
+
+def test_time_work_times_each_call_after_an_untimed_one():
+    ticks = iter([0.0, 0.010, 1.0, 1.030])
+    calls = []
+    ms = host_bench.time_work(lambda: calls.append(1), 2, clock=lambda: next(ticks))
+    assert len(calls) == 3 and [round(m, 6) for m in ms] == [10.0, 30.0]
+
+
+def test_steal_share_is_the_hosts_part_of_the_cpu_time_between_two_readings():
+    before = [100, 0, 50, 800, 0, 0, 0, 10, 0, 0]
+    after = [160, 0, 70, 810, 0, 0, 0, 20, 0, 0]  # 60 user, 20 system, 10 idle, 10 steal
+    assert host_bench.steal_share(before, after) == 0.1
+    assert host_bench.steal_share(None, after) is None and host_bench.steal_share(before[:5], after) is None
+    assert host_bench.steal_share(before, before) == 0.0
+
+
+def test_the_command_prints_both_workloads_and_refuses_a_bad_count(capsys):
+    argv = ["--repeats", "3", "--products", "1", "--loop", "10"]
+    assert host_bench.main([*argv, "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert r["repeats"] == 3 and r["torch"]["runs"] == 3 and r["python"]["runs"] == 3
+    assert r["steal_share"] is None or 0.0 <= r["steal_share"] <= 1.0
+    assert host_bench.main(argv) == 0
+    out = capsys.readouterr().out
+    assert "stall factor" in out and out.count("\n") >= 4
+    with pytest.raises(SystemExit) as exit_:
+        host_bench.main(["--repeats", "0"])
+    assert exit_.value.code == 2 and "--repeats: must be 1 or more, got 0" in capsys.readouterr().err
