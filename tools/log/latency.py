@@ -135,14 +135,14 @@ def run_latencies(messages: list[Any], topics: dict[str, str],
                 key = (current_demo, plan.occupancy_index)
                 if not streaming:
                     continue
+                occ_ms = (m.log_time - occ_time[key]) / 1e6 if key in occ_time else float("nan")
                 if plan.occupancy_index >= 0 and key in pose_time:
                     pose_to_plan.append((m.log_time - pose_time[key]) / 1e6)
                     if samples is not None:
-                        occ_ms = (m.log_time - occ_time[key]) / 1e6 if key in occ_time else float("nan")
                         samples.append(PlanSample(plan.step, (m.log_time - (first_pose or 0)) / 1e9,
                                                   pose_to_plan[-1], occ_ms, plan.planning_ms))
                 if plan.occupancy_index >= 0 and key in occ_time:
-                    occ_to_plan.append((m.log_time - occ_time[key]) / 1e6)
+                    occ_to_plan.append(occ_ms)
                 if plan.occupancy_index >= 0 and key in pose_frame:
                     kp_to_plan.append((m.log_time - pose_frame[key]) / 1e6)
         except ProtocolError as exc:
