@@ -118,7 +118,10 @@ def run_bench(repeats: int = 300, products: int = 60, loop: int = 300_000, threa
 
 def format_bench(r: dict[str, Any]) -> str:
     """The report as a table and a one-line reading of it."""
-    lines = [f"the same work {r['repeats']} times in one thread ({r['cpus']} CPUs, load {r['load_avg_1min']:.2f}):",
+    load = r.get("load_avg_1min")
+    cpus = "CPUs not known" if r.get("cpus") is None else f"{r['cpus']} CPUs"
+    lines = [f"the same work {r['repeats']} times in one thread ({cpus}, "
+             + ("load not known here" if load is None else f"load {load:.2f}") + "):",
              f"{'work':<8}{'p50 ms':>9}{'p99 ms':>9}{'max ms':>9}{'p99/p50':>9}{'max/p50':>9}{'> 2x p50':>10}"]
     for name in ("torch", "python"):
         s = r[name]

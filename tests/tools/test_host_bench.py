@@ -50,3 +50,13 @@ def test_the_command_prints_both_workloads_and_refuses_a_bad_count(capsys):
     with pytest.raises(SystemExit) as exit_:
         host_bench.main(["--repeats", "0"])
     assert exit_.value.code == 2 and "--repeats: must be 1 or more, got 0" in capsys.readouterr().err
+
+
+def test_the_table_reads_where_the_machine_gives_no_load_average():
+    stats = host_bench.stall_stats([10.0, 11.0, 30.0])
+    r = {"repeats": 3, "threads": 1, "cpus": None, "load_avg_1min": None, "torch": stats, "python": stats,
+         "steal_share": None}
+    text = host_bench.format_bench(r)
+    assert "(CPUs not known, load not known here)" in text
+    assert "steal (CPU time the host took): not available here" in text
+    assert "(2 CPUs, load 0.50)" in host_bench.format_bench({**r, "cpus": 2, "load_avg_1min": 0.5})
