@@ -30,7 +30,7 @@ from shared import strict_json
 from shared.arguments import ArgumentParser
 from shared.runtime import UserError, cli_errors
 
-__all__ = ["stall_stats", "time_work", "steal_share", "run_bench", "format_bench", "main"]
+__all__ = ["stall_stats", "time_work", "steal_share", "run_bench", "format_bench", "stall_line", "main"]
 
 
 def stall_stats(ms: list[float]) -> dict[str, Any]:
@@ -134,6 +134,19 @@ def format_bench(r: dict[str, Any]) -> str:
     lines.append(f"stall factor {worst:.2f}: a real-time step of median m ms will see about {worst:.1f} m at its p99 "
                  "on this machine however fast the code is" + (" (a quiet machine: under 1.5)" if worst < 1.5 else ""))
     return "\n".join(lines)
+
+
+def stall_line(repeats: int = 100, products: int = 60) -> str:
+    """One line for a real-time benchmark's end: this machine's stall factor, measured now (the torch work only).
+
+    A p99 of those benchmarks compares runs on one machine; this says how much of any p99 the machine alone puts
+    there (about 3 s of work at the defaults).
+    """
+    s = stall_stats(time_work(_torch_work(products, 1), repeats))
+    quiet = "a quiet machine" if s["p99_over_p50"] < 1.5 else "not a quiet machine"
+    return (f"this machine's stall factor, measured now ({repeats} runs of `foresight bench host`'s torch work): "
+            f"{s['p99_over_p50']:.2f} ({quiet}: under 1.5 is); a step of median m ms is about that times m at its "
+            "p99 whatever the code")
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench host") -> int:

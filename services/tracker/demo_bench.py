@@ -5,7 +5,9 @@ baseline), the same demonstration as body keypoints through ``foresight tracker 
 same with 2 cm of Gaussian noise per axis (``noisy``). The order rotates between rounds so that machine load falls
 on each alike. Each run's MCAP gives pose -> plan (p50, p99) and, with the tracker, keypoints -> pose and
 keypoints -> plan; printed per run, then the median p99 of each variant against ``replayer``. The target it
-documents: pose -> plan p99 with the tracker no more than 10 ms above the replayer's.
+documents: pose -> plan p99 with the tracker no more than 10 ms above the replayer's. The last line is this
+machine's stall factor, measured right after (``foresight bench host``): how much of any p99 the machine alone
+puts there.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from pathlib import Path
 
 from services.processes import free_port
 from shared.arguments import ArgumentParser
+from tools.host_bench import stall_line
 from tools.log.latency import log_latencies
 
 __all__ = ["main", "VARIANTS", "TARGET_MS"]
@@ -76,6 +79,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench human") -> 
         med = statistics.median(rows[variant])
         print(f"  {what}: {med:.1f} ms, {med - base:+.1f} ms (target <= +{TARGET_MS:g} ms: "
               f"{'met' if med - base <= TARGET_MS else 'missed'})")
+    print(stall_line())
     return 0
 
 

@@ -6,7 +6,8 @@ subscribed over Zenoh (``view``). In the last two a client of Foxglove's WebSock
 scene channel (what the Foxglove app does). The order rotates between rounds so that machine load falls on each
 alike. Each run's MCAP gives its pose -> plan latency (p50, p99); printed per run with the messages the client
 received, then the median p99 of each variant against ``none``. The target it documents: p99 with a client
-connected no more than 5 ms above without.
+connected no more than 5 ms above without. The last line is this machine's stall factor, measured right after
+(``foresight bench host``): how much of any p99 the machine alone puts there.
 
 ``--slow-client`` adds ``view-slow``: ``foresight view`` with a client that subscribes and then reads nothing (a
 stalled app, a dead network path). Each ``view`` run's row also gives the view process's peak memory (VmHWM), so
@@ -28,6 +29,7 @@ from pathlib import Path
 from services.processes import free_port
 from shared.arguments import ArgumentParser
 from shared.foxglove.client import FoxgloveClient
+from tools.host_bench import stall_line
 from tools.log.latency import log_latencies
 from tools.system import peak_rss_mb
 
@@ -138,6 +140,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench live") -> i
         read, stalled = statistics.median(peaks["view"]), statistics.median(peaks[SLOW])
         print(f"view's peak memory, median: {read:.0f} MB with a client reading, {stalled:.0f} MB with one that reads "
               f"nothing ({stalled / read:.2f}x)")
+    print(stall_line())
     return 0
 
 

@@ -60,3 +60,10 @@ def test_the_table_reads_where_the_machine_gives_no_load_average():
     assert "(CPUs not known, load not known here)" in text
     assert "steal (CPU time the host took): not available here" in text
     assert "(2 CPUs, load 0.50)" in host_bench.format_bench({**r, "cpus": 2, "load_avg_1min": 0.5})
+
+
+def test_stall_line_measures_the_machine_now_and_says_what_it_means():
+    line = host_bench.stall_line(repeats=5, products=1)
+    assert line.startswith("this machine's stall factor, measured now (5 runs of `foresight bench host`'s torch work")
+    factor = float(line.split("work): ", 1)[1].split(" ", 1)[0])
+    assert factor >= 1.0 and ("(a quiet machine" in line) == (factor < 1.5)
