@@ -11,7 +11,8 @@ over the features ``f`` (12), where ``p_j`` is the model's position of point ``j
 small per-feature weight (:attr:`FitConfig.prior`) that resolves what the points leave open: the pelvis yaw
 against the torso's own twist (the torso point is 4 cm in front of the pelvis), and a missing point's degrees
 of freedom, which then stay where they were. Features are kept within :attr:`FitConfig.bounds` (the ranges of
-the data the model was built from; ``shared.feature_sets.HERAKLES_RANGES`` by default). The Jacobian is by
+the data the model was built from; ``shared.feature_sets.HERAKLES_RANGES`` by default), the pelvis yaw a whole
+number of turns from its prior's, so that a person may turn round any number of times. The Jacobian is by
 central differences of the model, all frames and features in one call.
 """
 
@@ -31,6 +32,8 @@ POINT_NAMES: tuple[str, ...] = HumanModel.JOINT_NAMES
 
 REQUIRED = ("pelvis", "r_shoulder", "l_shoulder", "r_elbow", "r_wrist")
 """Points without which the 12 features are not determined (each frame must have them)."""
+
+_YAW = HERAKLES_NAMES.index("pelvis_yaw")
 
 
 def _default_prior() -> list[float]:
@@ -167,6 +170,11 @@ class KeypointFit:
         y = np.where(obs[..., None], y, 0.0)
         w = obs.astype(np.float64)
         f0 = initial_guess(y, obs) if prior is None else np.asarray(prior, dtype=np.float64).copy()
+        # the yaw is an angle: a prior that has turned past a bound (a person turning round, a track followed
+        # continuously) is fitted a whole number of turns back and returned as many turns on. Clipped at the bound
+        # instead, the rest of a turn went into the torso's twist (a 450 deg turn fitted torso_z 1.58 rad, a review)
+        turns = np.round(f0[:, _YAW] / (2 * np.pi))
+        f0[:, _YAW] -= 2 * np.pi * turns
         f = np.clip(f0, self.low, self.high)
         mu = np.full(len(f), self.config.damping)
         r = self._residuals(f, y, w, f0)
@@ -203,6 +211,7 @@ class KeypointFit:
                 break
         p = self.model.joint_positions(f)
         residual = np.where(obs, np.linalg.norm(p - y, axis=-1), np.nan)
+        f[:, _YAW] += 2 * np.pi * turns
         return FitResult(f, residual, steps)
 
     def fit_sequences(self, points: np.ndarray, observed: np.ndarray | None = None) -> FitResult:

@@ -289,6 +289,21 @@ def test_the_published_yaw_is_in_the_libraries_range_however_the_track_began(rea
     assert np.min(np.abs(got[:, None] - want[None, :]), axis=1).max() < 0.2  # the same angles, on one branch
 
 
+def test_a_person_turning_round_more_than_once_is_fitted_with_no_false_twist(reach) -> None:
+    """The fit kept the yaw within +-2 pi: past it, the rest of a turn went into the torso's twist (a 450 deg turn
+    fitted torso_z 1.58 rad, published yaw 0 for a true 1.57), and no frame was refused (a review)."""
+    yaw, twist = (list(HERAKLES_NAMES).index(n) for n in ("pelvis_yaw", "torso_z"))
+    turning = np.repeat(reach[:1], 300, 0)  # still 1 s, a 450 deg turn over 8 s, still 1 s
+    turning[:, yaw] = 2.5 * np.pi * np.clip((np.arange(300) / RATE - 1) / 8, 0, 1)
+    turning[:, twist] = 0.0
+    core = TrackerCore()
+    poses = [m for _, o in run(core, turning) for m in o.messages if isinstance(m, HumanPose)]
+    after = np.array([p.features for p in poses if p.stamp > 9.0])  # the person at rest once turned
+    assert len(after) >= 5 and not any(core.refused.values())
+    assert np.abs(after[:, twist]).max() < 0.05
+    assert np.abs(after[:, yaw] - np.pi / 2).max() < 0.05  # 450 deg on: facing 90 deg, in the libraries' range
+
+
 def test_another_body_in_view_ends_the_track_instead_of_being_glided_to(reach) -> None:
     """A person replaced by another 1 m to the side: once the time since the last accepted frame made 1 m look
     slower than the speed limit (0.2-0.3 s), the new body was accepted as the same person, bridged by poses

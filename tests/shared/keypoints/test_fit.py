@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from shared.feature_sets import HERAKLES_NAMES
 from shared.human import HumanModel
 from shared.keypoints import POINT_NAMES, REQUIRED, FitConfig, KeypointFit
 from shared.synthetic import generate_library
@@ -54,6 +55,26 @@ def test_a_converged_frame_is_not_computed_again_and_the_result_is_the_same(demo
     batched = fit.fit(points).features
     np.testing.assert_array_equal(batched, looped)
     assert sizes[0] == 4 and min(sizes) < 4  # the frames done early drop out of the batch
+
+
+def test_a_prior_turned_past_the_yaw_bound_is_followed_a_whole_turn_on(demos) -> None:
+    """A prior whose yaw had turned to the bound (+-2 pi, the data's range) was clipped there, and the rest of the
+    turn went into the torso's twist: a prior whole turns on gives the same fit, whole turns on."""
+    yaw, twist = (list(HERAKLES_NAMES).index(n) for n in ("pelvis_yaw", "torso_z"))
+    truth = demos[0, 10].copy()
+    truth[yaw], truth[twist] = 0.3, 0.1
+    points = MODEL.joint_positions(truth)[None]
+    prior = truth.copy()
+    prior[yaw] = -0.1  # the last frame's fit
+    inside = KeypointFit().fit(points, prior=prior[None]).features[0]
+    assert abs(inside[twist] - 0.1) < 0.05
+    for turns in (1, -2, 5):  # a person who had turned round so many times, the track followed continuously
+        on = prior.copy()
+        on[yaw] += 2 * np.pi * turns
+        got = KeypointFit().fit(points, prior=on[None]).features[0]
+        want = inside.copy()
+        want[yaw] += 2 * np.pi * turns
+        np.testing.assert_allclose(got, want, atol=1e-9)
 
 
 def test_a_missing_required_point_is_refused_and_an_optional_one_is_bridged_by_the_prior(demos) -> None:
