@@ -90,6 +90,9 @@ class TrackerServiceConfig:
         if unknown:  # every frame would be refused for its names
             raise ConfigError(f"tracker.ros2_points: {unknown} are not points of the layout {layout.name} (e.g. "
                               f"{', '.join(layout.source_names[:4])})")
+        if self.ros2_points and (lacking := layout.lacking(self.ros2_points)):  # every frame refused as missing
+            raise ConfigError(f"tracker.ros2_points: they cannot form the required {lacking} of the layout "
+                              f"{layout.name} (tracker.layout)")
         for name in ("stop_with", "wait_for"):
             check_services(getattr(self, name), f"tracker.{name}", [s for s in SERVICES if s != "tracker"])
         if self.wait_timeout < 0:

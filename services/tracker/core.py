@@ -117,6 +117,9 @@ class TrackerConfig:
                 raise ConfigError(f"tracker.{name}: must be a finite number > 0, got {v}")
         if not (self.beta >= 0 and math.isfinite(self.beta)):
             raise ConfigError(f"tracker.beta: must be a finite number >= 0, got {self.beta}")
+        if 1 / self.max_fit_hz >= self.max_gap_s:  # else every frame fitted comes a gap after the last one taken
+            raise ConfigError(f"tracker.max_fit_hz: {self.max_fit_hz:g} fits a frame every {1 / self.max_fit_hz:.3g} s "
+                              f"at most, not within max_gap_s = {self.max_gap_s:g} s: every frame would be a gap")
         if not (0 <= self.pre_s <= self.max_reach_s):  # inf: the buffer of recent poses never shrank
             raise ConfigError(f"tracker.pre_s: must be in [0, max_reach_s = {self.max_reach_s:g}] s, got {self.pre_s}")
 

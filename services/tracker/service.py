@@ -25,7 +25,6 @@ from shared.backlog import Backlog
 from shared.config import ConfigError, ZenohConfig
 from shared.human import HumanModel
 from shared.human_source import HumanPublisher
-from shared.keypoints.fit import REQUIRED
 from shared.keypoints.library import read_keypoint_csv
 from shared.keypoints.plausibility import units_problem
 from shared.protocol import (
@@ -116,7 +115,7 @@ class TrackerService:
                 raise ConfigError("tracker.from_file: the player connects to the router in zenoh.connect; none given")
             layout, names = self.core.layout, self.playback.names
             unknown = layout.unknown(names)
-            lacking = [p for p in REQUIRED if not set(layout.points.get(p, ())) <= set(names)]
+            lacking = layout.lacking(names)
             if unknown or lacking:  # every frame would be refused, and the run end as if it had played
                 raise ConfigError(f"tracker.from_file: {config.from_file} does not fit the layout {layout.name}: "
                                   + (f"points {unknown[:4]} are not the layout's" if unknown else

@@ -47,6 +47,10 @@ class Layout:
         known = {*self.source_names, *self.ignored}
         return [n for n in names if n not in known]
 
+    def lacking(self, names: list[str]) -> list[str]:
+        """The required points (:data:`~shared.keypoints.fit.REQUIRED`) that frames of ``names`` cannot form."""
+        return [p for p in REQUIRED if p not in self.points or not set(self.points[p]) <= set(names)]
+
     def describe(self, point: str, seen: set[str] | None = None) -> str:
         """Foresight's ``point`` in words, with the layout points it is the mean of where they are other names.
 

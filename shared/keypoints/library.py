@@ -117,7 +117,8 @@ def read_keypoint_csv(path: Path) -> list[KeypointDemo]:
 
     Raises:
         ValueError: A header without ``demo,frame`` and ``<point>_x/_y/_z`` triplets, a cell that is not a number,
-            frames not increasing within a demonstration (the message names the file and line).
+            a point with some of its three cells empty, frames not increasing within a demonstration (the message
+            names the file and line).
     """
     with path.open(newline="", encoding="utf-8-sig") as f:  # a byte-order mark is no part of the header
         rows = [row for row in csv.reader(f) if any(cell.strip() for cell in row)]  # blank lines: nothing
@@ -142,6 +143,9 @@ def read_keypoint_csv(path: Path) -> list[KeypointDemo]:
             raise ValueError(f"{path}:{line}: a coordinate is infinite")
         if len(values) != len(cols):
             raise ValueError(f"{path}:{line}: {len(values)} values, the header has {len(cols)}")
+        if partly := [n for i, n in enumerate(names) if 0 < np.isnan(values[3 * i:3 * i + 3]).sum() < 3]:
+            raise ValueError(f"{path}:{line}: point(s) {', '.join(partly)} partly empty (a point not seen has all "
+                             "three cells empty)")  # else read as not seen by one command and refused by another
         if demo in by_demo and demo != last_demo:
             raise ValueError(f"{path}:{line}: demo {demo} again after demo {last_demo} (a demonstration's rows "
                              "come together)")

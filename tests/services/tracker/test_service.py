@@ -345,6 +345,12 @@ def test_config_checks() -> None:
             TrackerServiceConfig(**{name: ["exector"]}).validate()
     with pytest.raises(ConfigError, match=r"^tracker.ros2_points: \['rwrist'\] are not points of the layout"):
         TrackerServiceConfig(ros2_points=["pelvis", "rwrist"]).validate()  # every frame would be refused
+    with pytest.raises(ConfigError, match=r"^tracker.ros2_points: they cannot form the required \['r_wrist'\]"):
+        TrackerServiceConfig(ros2_points=["pelvis", "r_shoulder", "l_shoulder", "r_elbow"]).validate()  # the same
+    TrackerServiceConfig(ros2_points=["pelvis", "r_shoulder", "l_shoulder", "r_elbow", "r_wrist"]).validate()
+    with pytest.raises(ConfigError, match=r"^tracker.max_fit_hz: 3 fits a frame every 0.333 s at most, not within "
+                       r"max_gap_s = 0.3 s: every frame would be a gap$"):  # 163 skipped, 17 refused, 0 poses
+        TrackerServiceConfig(tracker=dataclasses.replace(TrackerConfig(), max_fit_hz=3.0)).validate()
     with pytest.raises(Exception, match="max_residual_m"):
         TrackerServiceConfig(tracker=dataclasses.replace(TrackerConfig(), max_residual_m=0.0)).validate()
     with pytest.raises(Exception, match="rate_hz"):

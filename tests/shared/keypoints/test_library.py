@@ -60,6 +60,12 @@ def test_bad_csvs_are_named(tmp_path: Path) -> None:
     bad.write_text(f"{head}\n0,0,1,2,inf,1,2,3\n")
     with pytest.raises(ValueError, match="a.csv:2: a coordinate is infinite"):
         read_keypoint_csv(bad)
+    for cells in ("1,2,,1,2,3", "1,2,nan,1,2,3", ",,3,1,2,3"):  # read as not seen, then every frame refused on sending
+        bad.write_text(f"{head}\n0,0,{cells}\n")
+        with pytest.raises(ValueError, match=r"a.csv:2: point\(s\) pelvis partly empty"):
+            read_keypoint_csv(bad)
+    bad.write_text(f"{head}\n0,0,,,,1,2,3\n")  # a point not seen: all three empty
+    assert np.isnan(read_keypoint_csv(bad)[0].positions[0, 0]).all()
     bad.write_text("demo,frame,pelvis_x,pelvis_y,pelvis_z,pelvis_x,pelvis_y,pelvis_z\n0,0,1,2,3,4,5,6\n")
     with pytest.raises(ValueError, match="point.s. pelvis given twice"):  # the last stood for both
         read_keypoint_csv(bad)
