@@ -33,7 +33,7 @@ from .domain import check_domain_id, ros_domain_id
 from .wire import ROS_NAME, data_key
 
 __all__ = ["Ros2Config", "Ros2Mapping", "Topic", "TOPICS",
-           "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError", "seconds_in", "time_msg"]
+           "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError", "seconds_in", "time_msg", "check_node_name"]
 
 STORE = "ros2_jazzy"
 """The rosbags type store the message definitions and hashes come from (ROS 2 Jazzy)."""
@@ -70,6 +70,11 @@ KEYPOINTS_TYPE = "geometry_msgs/msg/PoseArray"
 """A body tracker's keypoints, as the tracker takes them from ROS 2 (:mod:`services.ros2.keypoints`)."""
 
 
+def check_node_name(name: str, option: str) -> None:
+    """Refuse a node name ROS 2 would refuse, naming ``option`` (``ros2.node``, ``simrobot.node``)."""
+    if not ROS_NAME.fullmatch(name):
+        raise ConfigError(f"{option}: a name of letters, digits and '_' not starting with a digit (ROS 2's rule), "
+                          f"got {name!r}")
 
 
 @dataclass
@@ -95,9 +100,7 @@ class Ros2Config:
         if not self.namespace.startswith("/") or not all(ROS_NAME.fullmatch(p) for p in parts):
             raise ConfigError(f"ros2.namespace: '/' or /name/... with names of letters, digits and '_' not "
                               f"starting with a digit (ROS 2's rule), got {self.namespace!r}")
-        if not ROS_NAME.fullmatch(self.node):
-            raise ConfigError(f"ros2.node: a name of letters, digits and '_' not starting with a digit (ROS 2's "
-                              f"rule), got {self.node!r}")
+        check_node_name(self.node, "ros2.node")
         if not 0.0 <= self.min_probability <= 1.0:
             raise ConfigError(f"ros2.min_probability: must be in [0, 1], got {self.min_probability}")
         if not self.frame_id.strip():

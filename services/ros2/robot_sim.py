@@ -29,8 +29,8 @@ from shared.scene import SCENE_HELP, load_scene
 from shared.transport import Presence, open_session
 
 from .controller import SimulatedController
-from .core import ROBOT_TYPES, Ros2Config, Ros2Mapping
-from .domain import ros_domain_id
+from .core import ROBOT_TYPES, Ros2Config, Ros2Mapping, check_node_name
+from .domain import check_domain_id, ros_domain_id
 from .node import Ros2Node
 
 __all__ = ["RobotSimConfig", "RobotSim"]
@@ -56,7 +56,8 @@ class RobotSimConfig:
 
     def validate(self) -> None:
         """Check ranges and names."""
-        Ros2Config(domain_id=self.domain_id, node=self.node).validate()
+        check_domain_id(self.domain_id, "simrobot.domain_id", "--domain-id")
+        check_node_name(self.node, "simrobot.node")
         if not self.rate_hz > 0:
             raise ConfigError(f"simrobot.rate_hz: must be > 0, got {self.rate_hz}")
         if self.stop_with:  # misspelt, it is never seen go, and the robot runs on without a word

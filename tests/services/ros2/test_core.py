@@ -165,7 +165,7 @@ def test_commands_and_clock_round_trip_and_bad_commands_are_named(mapping: Ros2M
 
 
 def test_bad_config_is_named() -> None:
-    for kwargs, text in (({"domain_id": 300}, "ros2.domain_id"), ({"namespace": "cell"}, "ros2.namespace"),
+    for kwargs, text in (({"domain_id": -2}, "ros2.domain_id"), ({"namespace": "cell"}, "ros2.namespace"),
                          ({"node": "a/b"}, "ros2.node"), ({"namespace": "/robot#1"}, "ros2.namespace"),
                          ({"namespace": "/cell//arm"}, "ros2.namespace"), ({"node": "arm*1"}, "ros2.node"),
                          ({"node": "1arm"}, "ros2.node"), ({"node": ""}, "ros2.node"),
