@@ -32,6 +32,21 @@ def _plan() -> Plan:
                 cost_total=np.array([2.0, 1.0]), valid=np.ones(2, bool))
 
 
+ROS2_HASHES = {  # as ROS 2 Jazzy itself prints them (`ros2 topic info --verbose`: "Topic type hash: RIHS01_..."),
+    # published in public logs of real systems; String's is rmw_zenoh's docs/design.md example
+    "sensor_msgs/msg/JointState": "a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e",
+    "trajectory_msgs/msg/JointTrajectory": "179b33eba59d676f6d967ac71fe35e7ca2f64b2f3928f4a018cec115e213796e",
+    "rosgraph_msgs/msg/Clock": "692f7a66e93a3c83e71765d033b60349ba68023a8c689a79e48078bcb5c58564",
+}
+
+
+def test_the_type_hashes_are_ros_2s_own(mapping: Ros2Mapping) -> None:
+    """The keys' hashes came from rosbags and were checked only against rosbags: a type store that computed them
+    differently (another distribution's definitions, a bug) would have put every key where no ROS 2 node listens."""
+    for msgtype, digest in ROS2_HASHES.items():
+        assert mapping.hashes[msgtype] == f"RIHS01_{digest}", msgtype
+
+
 def test_topics_keys_and_hashes(mapping: Ros2Mapping) -> None:
     assert mapping.config.topic("trajectory") == "/cell/foresight/joint_trajectory"
     assert mapping.config.topic("joint_states") == "/joint_states"  # absolute: not namespaced
