@@ -33,7 +33,8 @@ from .domain import check_domain_id, ros_domain_id
 from .wire import ROS_NAME, data_key
 
 __all__ = ["Ros2Config", "Ros2Mapping", "Topic", "TOPICS",
-           "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError", "seconds_in", "time_msg", "check_node_name"]
+           "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError", "seconds_in", "time_msg", "check_node_name",
+           "namespaced"]
 
 STORE = "ros2_jazzy"
 """The rosbags type store the message definitions and hashes come from (ROS 2 Jazzy)."""
@@ -68,6 +69,13 @@ ROBOT_TYPES = {"command": "trajectory_msgs/msg/JointTrajectory", "state": "senso
 
 KEYPOINTS_TYPE = "geometry_msgs/msg/PoseArray"
 """A body tracker's keypoints, as the tracker takes them from ROS 2 (:mod:`services.ros2.keypoints`)."""
+
+
+def namespaced(namespace: str, name: str) -> str:
+    """A topic's absolute name: ``name`` if absolute, else under ``namespace`` (``/cell`` + ``foresight/goal``)."""
+    if name.startswith("/"):
+        return name
+    return "/" + "/".join(p for p in (*namespace.split("/"), *name.split("/")) if p)
 
 
 def check_node_name(name: str, option: str) -> None:
@@ -118,10 +126,7 @@ class Ros2Config:
 
     def topic(self, role: str) -> str:
         """The absolute topic name of ``role``."""
-        name = TOPICS[role].name
-        if name.startswith("/"):
-            return name
-        return "/" + "/".join(p for p in (*self.namespace.split("/"), *name.split("/")) if p)
+        return namespaced(self.namespace, TOPICS[role].name)
 
 
 def _sec_nanosec(seconds: float) -> tuple[int, int]:

@@ -39,8 +39,8 @@ from shared.scene import SCENE_HELP, load_scene
 from shared.transport import Presence, open_session, subscribe
 
 from .core import TOPICS, Ros2Config, Ros2Mapping
+from .graph import GraphPeers
 from .node import Ros2Node, Ros2Publisher
-from .wire import parse_endpoint_token
 
 __all__ = ["Ros2ServiceConfig", "Ros2Service", "Ros2Stats"]
 
@@ -102,8 +102,7 @@ class Ros2Service:
         self._placement = StreamPlacement(self.scene)  # the human's, as the predictor places it
         self._last_viz: dict[str, float] = {}
         self._pending: dict[str, Callable[[], bytes]] = {}  # role -> the newest marker held back by the rate limit
-        self._others: dict[str, dict[str, str]] = {"joint_states": {}, "clock": {}}  # role -> graph token -> node,
-        # of other nodes publishing that role's topic (a robot's driver; a simulator's clock)
+        self._peers = GraphPeers(config)  # other nodes publishing the joint states or /clock (a robot's driver, ...)
         self._sim_time: float | None = None  # the lock-step run's simulated time (None: no ClockTick seen, real time)
         self._zid = ""
 
@@ -152,7 +151,8 @@ class Ros2Service:
     def publishes(self, role: str) -> str | None:
         """A node other than the gateway publishing ``role``'s topic (``joint_states`` or ``clock``), or None."""
         with self._lock:
-            return next(iter(self._others[role].values()), None)
+            ep = self._peers.left_to(role)
+        return None if ep is None else f"{ep.namespace.rstrip('/')}/{ep.node}"
 
     def on_state(self, state: RobotState) -> None:
         """The simulated robot's joints (not when another node publishes the joint states: :meth:`on_graph`).
@@ -208,40 +208,27 @@ class Ros2Service:
         by the executor in a review run, the rest taken for fresh measurements). While another node publishes
         there the gateway publishes no joint states, and says so when that starts and ends. The same for
         ``/clock``: beside a ROS 2 robot in lock-step the executor publishes the simulated time itself, at every
-        state period, and two clocks would take turns. Two gateways (the same node name, on two machines, say) each
-        saw the other's publisher and both went quiet: between gateways the one with the smaller session id
-        publishes, the other defers to it.
+        state period, and two clocks would take turns. Between two gateways the one with the smaller session id
+        publishes (:mod:`services.ros2.graph`).
         """
-        ep = parse_endpoint_token(key)
-        if ep is None or ep.kind != "MP" or ep.zid == self._zid:
-            return
-        role = next((r for r in self._others if ep.topic == self.config.topic(r) and self.config.enabled(r)), None)
-        if role is None:
-            return
-        gateway = ep.node == self.config.node  # another gateway (the same node name): each saw the other's publisher
-        if gateway and ep.zid > self._zid:  # and both went quiet; the one with the smaller session id publishes
-            return
-        node = f"{ep.namespace.rstrip('/')}/{ep.node}"
         with self._lock:
-            others = self._others[role]
-            before = bool(others)
-            if alive:
-                others[key] = node
+            changes = self._peers.update(key, alive)
+        for c in changes:
+            topic = self.config.topic(c.role)
+            if c.started and c.gateway:
+                log.info("ros2: node %s (session %s), another gateway, publishes %s too: the one with the smaller "
+                         "session id publishes it, not this one", c.node, c.zid, topic)
+            elif c.started:  # the joint states: a setting to change; the clock: as it should be beside a ROS 2 robot
+                what = ("(a robot's driver): the executor's RobotState is not echoed there (run the gateway with "
+                        "--no-joint-states beside a ROS 2 robot)" if c.role == "joint_states" else
+                        "(a simulator, the executor's ROS 2 robot link): the gateway publishes no simulated time there")
+                log.log(logging.WARNING if c.role == "joint_states" else logging.INFO, "ros2: node %s publishes %s %s",
+                        c.node, topic, what)
+            elif c.gateway:
+                log.info("ros2: node %s (session %s) is another gateway, with the larger session id: this one "
+                         "publishes %s", c.node, c.zid, topic)
             else:
-                others.pop(key, None)
-            started, ended = not before and bool(others), before and not others
-        topic = self.config.topic(role)
-        what = ("(a robot's driver): the executor's RobotState is not echoed there (run the gateway with "
-                "--no-joint-states beside a ROS 2 robot)" if role == "joint_states" else
-                "(a simulator, the executor's ROS 2 robot link): the gateway publishes no simulated time there")
-        if started and gateway:
-            log.info("ros2: node %s (session %s), another gateway, publishes %s too: the one with the smaller session "
-                     "id publishes it, not this one", node, ep.zid, topic)
-        elif started:  # the joint states: a setting to change; the clock: as it should be beside a ROS 2 robot
-            log.log(logging.WARNING if role == "joint_states" else logging.INFO, "ros2: node %s publishes %s %s", node,
-                    topic, what)
-        elif ended:
-            log.info("ros2: no other node publishes %s now; the gateway publishes it again", topic)
+                log.info("ros2: no other node publishes %s now; the gateway publishes it again", topic)
 
     def on_occupancy(self, grid: OccupancyGrid) -> None:
         """The predicted occupancy (rate-limited)."""
@@ -264,7 +251,7 @@ class Ros2Service:
         cfg = self.config
         with open_session(self.zenoh, stop, "ros2") as session:
             node = Ros2Node(session, cfg.domain_id, cfg.node_namespace, cfg.node, self.mapping.hashes, self.rejects)
-            zid = self._zid = node.zid
+            zid = self._zid = self._peers.zid = node.zid
 
             def on_token(sample: zenoh.Sample) -> None:
                 self.on_graph(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)

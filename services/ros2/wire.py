@@ -144,13 +144,18 @@ def endpoint_token(domain: int, zid: str, node_id: int, entity_id: int, kind: st
 
 @dataclass(frozen=True)
 class Endpoint:
-    """A publisher or subscription seen in the graph: its session ``zid``, ``kind`` (``MP``/``MS``), node, topic."""
+    """A publisher or subscription seen in the graph.
+
+    Its session ``zid``, ``kind`` (``MP``/``MS``), node, topic and its type's DDS name (``type_name``:
+    ``sensor_msgs::msg::dds_::JointState_``).
+    """
 
     zid: str
     kind: str
     namespace: str
     node: str
     topic: str
+    type_name: str = ""
 
 
 def parse_endpoint_token(key: str) -> Endpoint | None:
@@ -159,4 +164,4 @@ def parse_endpoint_token(key: str) -> Endpoint | None:
     if len(parts) != 13 or parts[0] != "@ros2_lv" or parts[5] not in ("MP", "MS"):
         return None
     namespace = "/" if parts[7] == "%" else parts[7].replace("%", "/")
-    return Endpoint(parts[2], parts[5], namespace, parts[8], parts[9].replace("%", "/"))
+    return Endpoint(parts[2], parts[5], namespace, parts[8], parts[9].replace("%", "/"), parts[10])

@@ -273,15 +273,17 @@ def test_clock_samples_leave_in_the_order_their_times_were_taken() -> None:
     assert sent == [0.0, 1.0, 1.1]
 
 
-def test_of_two_gateways_one_publishes_the_clock(zenoh_hub: Callable[[], ZenohConfig],
+@pytest.mark.parametrize("names", [("foresight", "foresight"), ("foresight_a", "foresight_b")])
+def test_of_two_gateways_one_publishes_the_clock(names: tuple[str, str], zenoh_hub: Callable[[], ZenohConfig],
                                                  wait_until: Callable[..., bool]) -> None:
     """Two gateways on one network (one per machine) each saw the other's /clock publisher, took it for a simulator
     and both stopped: a lock-step run's ROS 2 nodes saw no time at all. The one with the smaller session id
-    publishes; real sessions on loopback, a ROS 2 subscriber counting what /clock carries."""
+    publishes, whether they share a node name or not (named apart, both went quiet until 2026-11-29); real sessions
+    on loopback, a ROS 2 subscriber counting what /clock carries."""
     hub = zenoh_hub()
     keys = Keys(hub.prefix)
     stop = threading.Event()
-    gateways = [Ros2Service(Ros2ServiceConfig(), zenoh_hub()) for _ in range(2)]
+    gateways = [Ros2Service(Ros2ServiceConfig(node=name), zenoh_hub()) for name in names]
     clocks: list[bytes] = []
     with open_session(hub) as ros, open_session(zenoh_hub()) as foresight:
         sub = ros.declare_subscriber(gateways[0].mapping.key("clock"), lambda s: clocks.append(s.payload.to_bytes()))
