@@ -19,7 +19,7 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Schema
 from mcap.records import Message as McapMessage
 
-from shared.recording.reader import DAMAGED, log_path, open_records
+from shared.recording.reader import DAMAGED, log_path, open_records, summary_damage
 
 __all__ = ["SceneRecord", "SceneDecodeError", "SchemaDecoder", "read_scene", "scene_stamps"]
 
@@ -82,9 +82,10 @@ def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[Sce
     The scene is written off the receive path, so the file is not in log-time order. A complete log (its
     summary holds the chunk index) is read through the index in log-time order, a chunk at a time, so the
     first record comes at once and memory stays that of a few chunks (before, every scene message of the file
-    was held and sorted first: 300 MB for a 17-minute run). A log whose writer was killed has no summary: it is
-    read record by record, as :func:`shared.recording.reader.read_log` does, and what its complete chunks hold
-    is held and sorted.
+    was held and sorted first: 300 MB for a 17-minute run). A log whose writer was killed has no summary, and one
+    whose summary's CRC does not hold has none to trust (a flipped bit in a chunk index drew an earlier moment as
+    the last): it is read record by record, as :func:`shared.recording.reader.read_log` does, and what its
+    complete chunks hold is held and sorted.
 
     Raises:
         SceneDecodeError: A message does not decode under its channel's schema.
@@ -99,8 +100,8 @@ def read_scene(path: str | Path, topics: set[str] | None = None) -> Iterator[Sce
     decoder = SchemaDecoder()
     with log_path(path).open("rb") as f:
         indexed = make_reader(f, validate_crcs=True)
-        try:
-            summary = indexed.get_summary()
+        try:  # an index whose CRC does not hold is not followed: read in file order below (summary_damage)
+            summary = None if summary_damage(path) else indexed.get_summary()
         except DAMAGED:
             summary = None
         if summary is not None and summary.chunk_indexes:

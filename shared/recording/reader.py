@@ -12,6 +12,7 @@ import io
 import os
 import struct
 import typing
+import zlib
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -25,7 +26,7 @@ from mcap.stream_reader import StreamReader
 from shared.runtime import UserError
 
 __all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "iter_messages", "open_records", "log_path", "DAMAGED",
-           "MAGIC"]
+           "MAGIC", "summary_damage"]
 
 MAGIC = b"\x89MCAP0\r\n"
 """The first (and last) eight bytes of an MCAP file."""
@@ -37,6 +38,35 @@ DAMAGED = (McapError, struct.error, ValueError, EOFError, zstandard.ZstdError, R
 that does not decompress (zstandard's ``ZstdError``; lz4 raises ``RuntimeError``), and, as a backstop, a damaged
 length that asks for more memory than there is. Every reader of the logs reads through :func:`open_records`
 (``validate_crcs=True``, no read past the file's end) and stops at the first of these: what came before stands."""
+
+
+_FOOTER = struct.Struct("<BQQQI")
+"""The footer record: opcode 0x02, its length (20), summary start, summary offset start, summary CRC."""
+
+
+def summary_damage(path: str | Path) -> str:
+    """Why a finished log's summary section (its index) cannot be trusted; "" when it can or there is none.
+
+    The footer holds the CRC of the summary, which the readers did not check: with one bit of a chunk index flipped,
+    ``foresight log info`` said "complete" and ``foresight log snapshot`` drew an earlier moment than the log's last,
+    without a word (a review). A log without a footer (its writer killed) has no summary to check.
+    """
+    p = log_path(path)
+    size = p.stat().st_size
+    tail = _FOOTER.size + len(MAGIC)
+    if size < len(MAGIC) + tail:
+        return ""
+    with p.open("rb") as f:
+        f.seek(size - tail)
+        footer = f.read(tail)
+        opcode, length, start, _, crc = _FOOTER.unpack(footer[:_FOOTER.size])
+        if opcode != 0x02 or length != _FOOTER.size - 9 or footer[_FOOTER.size:] != MAGIC or not start or not crc:
+            return ""  # no footer, no summary, or a writer that left the CRC out (0: not computed)
+        if not len(MAGIC) <= start <= size - tail:
+            return f"its footer puts the summary at byte {start}, outside the file"
+        f.seek(start)
+        got = zlib.crc32(f.read(size - len(MAGIC) - 4 - start))  # up to the footer's CRC itself
+    return "" if got == crc else f"the summary, its index, fails its CRC: {got:#010x} where the footer says {crc:#010x}"
 
 
 class _Bounded:
@@ -127,8 +157,10 @@ class LogFile:
     """What :func:`read_log` found in an MCAP file.
 
     Attributes:
-        complete: True when the footer was read (the writer finished the file).
-        error: Why reading stopped early (truncated or damaged file), else "".
+        complete: True when the footer was read (the writer finished the file) and its summary is intact.
+        error: Why reading stopped early (truncated or damaged file), or why the summary is not to be trusted, else "".
+        summary_damaged: The footer was read and every record before it, but the summary's CRC does not hold
+            (:func:`summary_damage`): the messages are all here, the index is not to be used.
         messages: The kept messages in file order (see ``keep`` of :func:`read_log`).
     """
 
@@ -142,11 +174,14 @@ class LogFile:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     complete: bool = False
     error: str = ""
+    summary_damaged: bool = False
 
     @property
     def state(self) -> str:
-        """``"complete"``, or ``"TRUNCATED (<why reading stopped>)"``: how every tool names a log's state."""
-        return "complete" if self.complete else f"TRUNCATED ({self.error or 'no footer'})"
+        """How every tool names a log's state: ``complete``, ``DAMAGED (<its summary>)``, ``TRUNCATED (<why>)``."""
+        if self.complete:
+            return "complete"
+        return f"DAMAGED ({self.error})" if self.summary_damaged else f"TRUNCATED ({self.error or 'no footer'})"
 
     @property
     def message_count(self) -> int:
@@ -201,6 +236,8 @@ def read_log(path: str | Path, keep: Callable[[LogChannel], bool] | None = None)
                 elif isinstance(rec, Footer):
                     footer = True
             out.complete = footer  # and the closing magic after it: a copy cut within it is not complete
+            if footer and (damage := summary_damage(p)):
+                out.complete, out.summary_damaged, out.error = False, True, damage
         except DAMAGED as exc:
             out.error = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
     return out

@@ -101,7 +101,10 @@ def _main_render(args: argparse.Namespace, prog: str) -> int:
 
 def _note_truncated(lf: LogFile) -> None:
     """Say on stderr that a log is truncated: what the tools print of it stops where the file does."""
-    if not lf.complete:
+    if lf.summary_damaged:
+        print(f"foresight log: note: {lf.path} is {lf.state}: it was read in file order, not through its index",
+              file=sys.stderr)
+    elif not lf.complete:
         print(f"foresight log: note: {lf.path} is {lf.state}: what follows covers the run up to its last whole "
               "chunk only", file=sys.stderr)
 

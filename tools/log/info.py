@@ -56,17 +56,25 @@ def info_dict(lf: LogFile) -> dict[str, Any]:
     }
 
 
+def _state_words(lf: LogFile, d: dict) -> str:
+    """The file line's account of the log's state (``d``: :func:`info_dict`)."""
+    source = lf.metadata.get("foresight.compress", {})  # a whole copy of a log that was not
+    if lf.complete and source.get("source_complete") == "false":
+        return (f"complete; copied from a TRUNCATED log ({source.get('source_error', 'no footer')}): what the run "
+                "wrote after its last whole chunk is not here")
+    if lf.complete:
+        return "complete"
+    if lf.summary_damaged:
+        return f"{lf.state}: all {d['messages']} messages read in file order; its index is not to be trusted"
+    return (f"{lf.state}: recovered {d['messages']} messages"
+            + (f" and {d['rejected_records']} refused payloads" if d["rejected_records"] else "")
+            + f", {d['duration_s']:.2f} s, up to the last whole chunk")
+
+
 def format_info(lf: LogFile) -> str:
     """Human-readable summary: file state, time range, one line per channel, attachments, metadata."""
     d = info_dict(lf)
-    source = lf.metadata.get("foresight.compress", {})  # a whole copy of a log that was not
-    state = (f"complete; copied from a TRUNCATED log ({source.get('source_error', 'no footer')}): what the run wrote "
-             "after its last whole chunk is not here" if lf.complete and source.get("source_complete") == "false"
-             else "complete") if lf.complete else (
-        f"{lf.state}: recovered {d['messages']} messages"
-        + (f" and {d['rejected_records']} refused payloads" if d["rejected_records"] else "")
-        + f", {d['duration_s']:.2f} s, "
-        "up to the last whole chunk")
+    state = _state_words(lf, d)
     lines = [f"file:      {lf.path} ({lf.size / 1e6:.2f} MB, {state})",
              f"profile:   {lf.profile or '-'}   library: {lf.library or '-'}",
              f"time:      {d['start']} .. {d['end']} ({d['duration_s']:.2f} s)" if d["start"] else "time:      -",

@@ -29,6 +29,7 @@ import numpy as np
 from shared.protocol import DemoMarker, HumanKeypoints, HumanPose, OccupancyGrid, Plan, ProtocolError, decode
 from shared.runtime import UserError
 
+from .steps import run_topics
 from .versions import check_readable
 
 __all__ = ["Stat", "PlanSample", "run_latencies", "format_latencies", "slowest_plans", "format_slowest"]
@@ -205,12 +206,15 @@ def log_latencies(path: str | Path, read: list[Any] | None = None,
     if read is not None:
         read.append(lf)
     topics = {}
-    for ch in lf.channels.values():
-        for key, schema in (("pose", "foresight.HumanPose"), ("occupancy", "foresight.OccupancyGrid"),
-                            ("plan", "foresight.Plan"), ("demo", "foresight.DemoMarker"),
-                            ("keypoints", "foresight.HumanKeypoints")):
-            if ch.schema_name == schema and ch.message_encoding == "msgpack":
-                topics[key] = ch.topic
+    for key, schema in (("pose", "foresight.HumanPose"), ("occupancy", "foresight.OccupancyGrid"),
+                        ("plan", "foresight.Plan"), ("demo", "foresight.DemoMarker"),
+                        ("keypoints", "foresight.HumanKeypoints")):
+        found = sorted(run_topics(lf, schema))  # the run's own key: a stray one of the schema took its place
+        if len(found) > 1:
+            raise ValueError(f"{path}: {schema.removeprefix('foresight.')} on {len(found)} keys ({', '.join(found)}) "
+                             "and no run metadata to tell the run's own")
+        if found:
+            topics[key] = found[0]
     if not {"pose", "occupancy", "plan"} <= set(topics):
         raise ValueError(f"{path}: needs HumanPose, OccupancyGrid and Plan channels, found {sorted(topics)}")
     try:

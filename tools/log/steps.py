@@ -19,7 +19,7 @@ from shared.scene import Scene, load_scene, parse_scene
 
 from .versions import check_readable
 
-__all__ = ["StepView", "step_views", "step_title", "scene_of", "decode_all"]
+__all__ = ["StepView", "step_views", "step_title", "scene_of", "decode_all", "run_topics"]
 
 
 @dataclass
@@ -38,13 +38,21 @@ class StepView:
     t0: float = 0.0
 
 
-def decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
-    """``(log time ns, message)`` of every valid message of ``schema`` on its key (Foresight's msgpack channels)."""
+def run_topics(lf: LogFile, schema: str) -> set[str]:
+    """The topics of ``schema``'s messages (Foresight's msgpack channels): the run's own key where the log has it.
+
+    The executor logs any valid message under the prefix on a channel of its own, so a message of the type put on
+    another key (a test's, a stray publisher's) has a channel of the same schema; it is not the run's.
+    """
     topics = {c.topic for c in lf.channels.values() if c.schema_name == schema and c.message_encoding == "msgpack"}
     prefix = lf.metadata.get("foresight.run", {}).get("prefix")
     own = {f"foresight.{t.TYPE}": key for key, t in Keys(prefix).data_keys().items()}.get(schema) if prefix else None
-    if own in topics:  # the run's own key: a message of the type put on another key under the prefix is not the run's
-        topics = {own}
+    return {own} if own in topics else topics
+
+
+def decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
+    """``(log time ns, message)`` of every valid message of ``schema`` on its key (Foresight's msgpack channels)."""
+    topics = run_topics(lf, schema)
     out, refused = [], []
     for m in lf.messages:
         if m.topic in topics:

@@ -268,6 +268,38 @@ def test_a_complete_log_s_scene_is_read_in_time_order_through_its_index(tmp_path
     assert [(r.topic, r.log_time) for r in read_scene(cut)] == whole
 
 
+def test_a_log_whose_summary_fails_its_crc_is_said_damaged_and_read_in_file_order(tmp_path, pr2) -> None:
+    """The footer's summary CRC was not checked: one bit flipped in the last chunk index and `foresight log info`
+    said "complete", `foresight log snapshot` drew an earlier moment as the last, without a word (a review)."""
+    import struct
+
+    from shared.recording.reader import summary_damage
+
+    ticks = iter(range(10**6))
+    path = tmp_path / "a.mcap"
+    log = McapLog(path, KEYS, SceneBuilder(SCENE, pr2), chunk_size=4096,
+                  clock=lambda: 1_700_000_000_000_000_000 + 1_000_000 * next(ticks))
+    for _ in range(30):
+        for key, data in sample_messages(pr2):
+            log.on_sample(key, data)
+    log.close()
+    whole, intact = [(r.topic, r.log_time) for r in read_scene(path)], read_log(path)
+    assert summary_damage(path) == "" and intact.complete and intact.state == "complete"
+    data = bytearray(path.read_bytes())
+    at, end, last_index = struct.unpack_from("<Q", data, len(data) - 8 - 20)[0], len(data) - 8 - 29, None
+    while at < end:  # the summary's records: opcode, length, body
+        if data[at] == 0x08:  # a chunk index: message start and end times, then the chunk's start offset
+            last_index = at
+        at += 9 + struct.unpack_from("<Q", data, at + 1)[0]
+    data[last_index + 9 + 16] ^= 0x10
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    lf = read_log(damaged)
+    assert not lf.complete and lf.summary_damaged and lf.state.startswith("DAMAGED (the summary, its index, fails its")
+    assert lf.message_count == intact.message_count  # every message is there: only the index is not to be followed
+    assert [(r.topic, r.log_time) for r in read_scene(damaged)] == whole
+
+
 def test_a_complete_log_without_scene_channels_has_no_scene_records(tmp_path, pr2) -> None:
     """Read through its index, a log of raw messages only (an executor without the scene) gives no scene record."""
     path = tmp_path / "raw.mcap"

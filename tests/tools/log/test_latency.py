@@ -153,3 +153,36 @@ def test_log_latency_slowest_on_a_written_log(run_log, capsys):
         cli.main(["latency", str(run_log), "--slowest", "-1"])
     assert exit_.value.code == 2
     assert "--slowest: must be 0 or more plans, got -1" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("own_key_known", [True, False])
+def test_a_stray_message_on_another_key_does_not_take_the_runs_place(tmp_path, own_key_known):
+    """The channel of a schema was the last found: one HumanPose put on another key under the prefix (logged on a
+    channel of its own) emptied every pose series, with status 0 and no word (a review)."""
+    from itertools import count
+
+    from shared.protocol import Keys
+    from shared.recording.writer import McapLog
+    from tools.log.latency import log_latencies
+
+    keys, clock = Keys(), count(1_700_000_000_000_000_000, 1_000_000)  # 1 ms a message
+    path = tmp_path / "run.mcap"
+    log = McapLog(path, keys, None, clock=lambda: next(clock),
+                  run_metadata={"prefix": keys.prefix} if own_key_known else {})
+    for i in range(5):
+        pose = HumanPose(stamp=0.1 * i, tick=i, tick_last=True, demo_id=3, index=i, features=np.zeros(12))
+        log.on_sample(keys.pose, encode(pose))
+        log.on_sample(keys.occupancy, encode(OccupancyGrid.from_dense(
+            np.zeros((2, 2, 2)), np.zeros(3), 0.1, stamp=0.1 * i, tick=i, tick_last=True, demo_id=3, index=i,
+            method="prediction")))
+        log.on_sample(keys.plan, encode(_plan(i)))
+        if i == 1:
+            log.on_sample(f"{keys.prefix}/elsewhere/pose", encode(dataclasses.replace(pose, demo_id=7, index=0)))
+    log.close()
+    if own_key_known:  # the run's own key, from its metadata
+        stats = log_latencies(path)
+        assert stats["pose_to_plan"].count == 5 and stats["pose_to_occupancy"].count == 5
+    else:  # which is the run's cannot be told: said, not guessed
+        with pytest.raises(ValueError, match=rf"HumanPose on 2 keys \({keys.pose}, {keys.prefix}/elsewhere/pose|"
+                           rf"HumanPose on 2 keys \({keys.prefix}/elsewhere/pose, {keys.pose}"):
+            log_latencies(path)
