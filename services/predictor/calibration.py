@@ -25,10 +25,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from sklearn.mixture import GaussianMixture
 
-from .gmm import DEFAULT_TEMPERATURE, MixtureBank, posterior_from_log_likelihood
+from .gmm import DEFAULT_TEMPERATURE, GMMError, MixtureBank, posterior_from_log_likelihood
 from .volumes import digest
 
-__all__ = ["TEMPERATURE_GRID", "CV_FRACTIONS", "TemperatureChoice", "choose_temperature", "log_loss", "fold_mixtures"]
+__all__ = ["TEMPERATURE_GRID", "CV_FRACTIONS", "TemperatureChoice", "choose_temperature", "log_loss", "fold_mixtures",
+           "FoldFitError"]
 
 TEMPERATURE_GRID = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 150.0, 200.0, 300.0, 500.0, 1000.0)
 CV_FRACTIONS = tuple(round(0.1 * i, 1) for i in range(1, 11))
@@ -115,7 +116,38 @@ def fold_mixtures(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], Gau
     for k in range(folds):
         held = [[j for j in range(len(f)) if j % folds == k] for f in feats]
         if any(held):
-            yield held, [fit(np.vstack([f[j] for j in range(len(f)) if j % folds != k])) for f in feats]
+            yield held, [_fit_without(fit, f, held[m], m, k) for m, f in enumerate(feats)]
+
+
+def _fit_without(fit: Callable[[np.ndarray], GaussianMixture], demos: list[np.ndarray], held: list[int], m: int,
+                 fold: int) -> GaussianMixture:
+    """Class ``m``'s mixture without its demonstrations ``held``; a fit that fails says which class and fold.
+
+    The whole class had samples enough and a fold without one of its demonstrations did not: ``foresight train``
+    ended in a traceback saying only "cannot fit 20 Gaussians to 15 samples" (a review).
+    """
+    try:
+        return fit(np.vstack([d for j, d in enumerate(demos) if j not in held]))
+    except GMMError as exc:
+        raise FoldFitError(m, held, fold, str(exc)) from None
+
+
+class FoldFitError(GMMError):
+    """A class's mixture that cannot be fitted without one cross-validation fold's demonstrations.
+
+    Attributes:
+        class_index: The class (its index in the library); ``held``: the demonstrations left out; ``fold``.
+    """
+
+    def __init__(self, class_index: int, held: list[int], fold: int, why: str) -> None:
+        self.class_index, self.held, self.fold = class_index, held, fold
+        super().__init__(f"class #{class_index} without its demonstration(s) {held} (cross-validation fold {fold}, "
+                         f"for the temperature and the novelty threshold): {why}; fewer Gaussians (--components) or "
+                         "more demonstrations per class")
+
+    def naming(self, class_name: str) -> str:
+        """The message with the class's name for its index."""
+        return str(self).replace(f"class #{self.class_index} ", f"class {class_name} ", 1)
 
 
 def log_loss(cum: np.ndarray, labels: np.ndarray, temperature: float) -> float:

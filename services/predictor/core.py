@@ -261,7 +261,8 @@ class PredictorCore:
 
         Raises:
             PredictorError: If ``features`` is not 12 finite numbers, one is outside its plausible range
-                (``shared.feature_sets.HERAKLES_RANGES``, as on the wire), or ``index`` is negative.
+                (``shared.feature_sets.HERAKLES_RANGES``, as on the wire), or ``index`` is not a whole number after
+                the last observed one (a duplicate pose counted its evidence twice).
         """
         f = np.asarray(features, dtype=np.float64)
         if f.shape != (12,) or not np.all(np.isfinite(f)):
@@ -270,9 +271,13 @@ class PredictorCore:
         out = herakles_out_of_range(f)  # an absurd posture would make every class's evidence -inf for good
         if out:
             raise PredictorError(f"features: {out}; the posture is not observed")
+        if index is not None and (isinstance(index, bool) or not isinstance(index, (int, np.integer))):
+            raise PredictorError(f"index must be a whole number, got {index!r}")  # 2.7, "5", NaN: taken, or a crash
         t = self._count if index is None else int(index)
-        if t < 0:
-            raise PredictorError(f"index must be >= 0, got {t}")
+        if t < 0 or (self._last is not None and t <= self._last[1]):  # a repeat or a step back counted twice
+            raise PredictorError(f"index must be >= 0, got {t}" if t < 0 else f"index {t} is not after the last "
+                                 f"observed ({self._last[1]}): a demonstration's poses come in order; a new one "
+                                 "starts with a reset")
         if self._first is None:
             self._first = f.copy()
         x = self.encoder.step(f, t)
@@ -329,7 +334,7 @@ class PredictorCore:
 
         Raises:
             PredictorError: If ``features`` is not 12 finite numbers, one is outside its plausible range
-                (``shared.feature_sets.HERAKLES_RANGES``, as on the wire), or ``index`` is negative.
+                (``shared.feature_sets.HERAKLES_RANGES``, as on the wire), or ``index`` is not after the last one.
         """
         self.observe(features, index)
         return self.predict()

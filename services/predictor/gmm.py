@@ -19,12 +19,17 @@ from scipy.special import logsumexp
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.mixture import GaussianMixture
 
-__all__ = ["DEFAULT_TEMPERATURE", "GMMConfig", "fit_class_gmm", "MixtureBank", "posterior_from_log_likelihood"]
+__all__ = ["DEFAULT_TEMPERATURE", "GMMConfig", "GMMError", "fit_class_gmm", "MixtureBank",
+           "posterior_from_log_likelihood"]
 
 DEFAULT_TEMPERATURE = 150.0
 """Default posterior temperature tau (see :func:`posterior_from_log_likelihood`): the least mean log-loss
 of the true class under leave-one-out on the synthetic library (`foresight eval recognition`); on the
 paper's library it cuts the mean log-loss from 7.7 (tau = 1) to 1.16 (docs/prediction.md)."""
+
+
+class GMMError(ValueError):
+    """A class mixture that cannot be fitted to its data (too few samples, not finite); the text says why."""
 
 
 @dataclass(frozen=True)
@@ -84,17 +89,17 @@ def fit_class_gmm(data: np.ndarray, cfg: GMMConfig) -> GaussianMixture:
         The fitted ``GaussianMixture`` (``weights_``, ``means_``, ``covariances_``).
 
     Raises:
-        ValueError: If there are fewer samples than components or the data is not finite.
+        GMMError: If there are fewer samples than components or the data is not finite.
     """
     data = np.asarray(data, dtype=np.float64)
     if data.ndim != 2 or not np.all(np.isfinite(data)):
-        raise ValueError(f"GMM data must be a finite (N, D) array, got shape {data.shape}")
+        raise GMMError(f"GMM data must be a finite (N, D) array, got shape {data.shape}")
     ks = [cfg.n_components] if cfg.n_components > 0 else [k for k in cfg.bic_candidates if k < len(data)]
     if not ks:
-        raise ValueError(f"cannot choose the number of Gaussians by BIC among {tuple(cfg.bic_candidates)} with "
+        raise GMMError(f"cannot choose the number of Gaussians by BIC among {tuple(cfg.bic_candidates)} with "
                          f"{len(data)} samples: each needs more samples than Gaussians")
     if ks[0] > len(data):
-        raise ValueError(f"cannot fit {cfg.n_components} Gaussians to {len(data)} samples")
+        raise GMMError(f"cannot fit {cfg.n_components} Gaussians to {len(data)} samples")
     best, best_bic = None, np.inf
     for k in ks:
         gmm = _fit(data, k, cfg)

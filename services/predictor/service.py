@@ -127,8 +127,8 @@ class PredictorService:
                 log.info("predictor: demo %d lost by the tracker after %d poses", msg.demo_id, msg.n_samples)
             return []
         assert isinstance(msg, HumanPose)
-        if msg.demo_id != self.core.demo_id:
-            self._reset(msg.demo_id)
+        if msg.demo_id != self.core.demo_id or (msg.index == 0 and self.core.n_observed):
+            self._reset(msg.demo_id)  # index 0 again: the demonstration restarts (StreamPlacement places it anew too)
         try:
             posterior = self.core.observe(msg.features, msg.index)
         except PredictorError as exc:

@@ -34,7 +34,7 @@ from shared.progress import progress as progress_bar
 from shared.runtime import UserError, cli_errors, setup_logging
 from shared.scene import SCENE_HELP, Scene, load_scene
 
-from .calibration import DEFAULT_FOLDS, TemperatureChoice, choose_temperature
+from .calibration import DEFAULT_FOLDS, FoldFitError, TemperatureChoice, choose_temperature
 from .class_volumes import class_volumes, timed_class_volumes
 from .features import VARIANTS, FeatureEncoder
 from .fit_cache import cached, class_fit
@@ -180,13 +180,16 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
 
     feats = [[encoder.batch(d.features) for d in ds] for ds in by_class]
     mixtures = [fit(np.vstack(f)) for f in progress_bar(feats, desc="GMM per class", unit="class", enabled=progress)]
-    if cfg.temperature is None:
-        with threadpool_limits(1):  # many small fits: one BLAS thread each is several times faster
-            choice = choose_temperature(feats, fit, folds=cfg.folds)
-    else:
-        choice = TemperatureChoice(float(cfg.temperature), "given")
-    with threadpool_limits(1):  # the same folds: their fits are in the cache when the temperature was chosen
-        novelty = learn_novelty(feats, fit, cfg.folds, cfg.novelty_window, cfg.novelty_quantile)
+    try:
+        if cfg.temperature is None:
+            with threadpool_limits(1):  # many small fits: one BLAS thread each is several times faster
+                choice = choose_temperature(feats, fit, folds=cfg.folds)
+        else:
+            choice = TemperatureChoice(float(cfg.temperature), "given")
+        with threadpool_limits(1):  # the same folds: their fits are in the cache when the temperature was chosen
+            novelty = learn_novelty(feats, fit, cfg.folds, cfg.novelty_window, cfg.novelty_quantile)
+    except FoldFitError as exc:  # the whole class fitted; a fold without one of its demonstrations did not
+        raise UserError(f"library {library.source}: {exc.naming(library.class_names[exc.class_index])}") from None
     bank = MixtureBank.from_sklearn(mixtures)
     lengths = [int(np.median([d.n_samples for d in ds])) for ds in by_class]
     motions = regress_motions(bank, lengths, encoder)

@@ -30,7 +30,7 @@ _FITS: dict = {}  # the two models below share their class mixtures
 
 @pytest.fixture(scope="session")
 def small_model(small_library: MotionLibrary, scene: Scene) -> PredictionModel:
-    """The trainer's default volume (``spread``)."""
+    """The trainer's default volume (``demos``)."""
     return train_model(small_library, scene, SMALL, progress=False, fit_cache=_FITS)
 
 

@@ -42,6 +42,23 @@ def test_train_cli_bad_options_are_one_line_errors(tiny_library_path, tmp_path, 
         assert len(err) == 1 and "error" in err[0]
 
 
+def test_train_says_which_class_a_cross_validation_fold_cannot_fit(tmp_path, capsys) -> None:
+    """Each class had samples for its Gaussians, a fold without one of its demonstrations had not: a traceback ending
+    in "cannot fit 20 Gaussians to 15 samples", naming neither the class nor the fold (a review)."""
+    import dataclasses
+
+    lib = generate_library(n_classes=2, n_demos=2, seed=3)
+    path = tmp_path / "short.npz"
+    save_library(dataclasses.replace(lib, demos=[dataclasses.replace(d, features=d.features[:15]) for d in lib.demos]),
+                 path)
+    with pytest.raises(SystemExit) as exc:
+        train_main(["--library", str(path), "--out", str(tmp_path / "m.npz"), "--components", "20", "--quiet"])
+    assert exc.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert (f"class {lib.class_names[0]} without its demonstration(s) [0] (cross-validation fold 0" in line
+            and "cannot fit 20 Gaussians to 15 samples; fewer Gaussians (--components)" in line), line
+
+
 def test_train_refuses_an_out_it_cannot_write_before_it_trains(tiny_library_path, tmp_path, capsys,
                                                                monkeypatch) -> None:
     """A directory in the way was found after the whole training, named as a temporary file."""

@@ -156,6 +156,26 @@ def test_bad_input_rejected(small_model: PredictionModel, small_library, scene) 
         PredictorCore(small_model, scene, PredictorConfig(method="bogus"))
 
 
+
+def test_an_index_that_repeats_goes_back_or_is_no_whole_number_is_refused(small_model, small_library, scene) -> None:
+    """A repeated pose counted its evidence twice (the log-likelihoods moved from [519, 223, -226] to [537, 220,
+    -291]), an index going back was taken as well, and 2.7, True or "5" were coerced (a review)."""
+    demo = small_library.demos[0].features
+    core, twin = PredictorCore(small_model, scene), PredictorCore(small_model, scene)
+    core.reset(0)
+    twin.reset(0)
+    for i in range(10):
+        core.observe(demo[i], i)
+        twin.observe(demo[i], i)
+    for index, said in ((9, "index 9 is not after the last observed .9."), (5, "index 5 is not after"),
+                        (0, "index 0 is not after"), (-1, "index must be >= 0, got -1"),
+                        (10.0, "a whole number, got 10.0"), (True, "got True"), ("11", "got '11'"),
+                        (float("nan"), "got nan")):
+        with pytest.raises(PredictorError, match=said):
+            core.observe(demo[10], index)
+    np.testing.assert_array_equal(core.observe(demo[10], np.int64(12)), twin.observe(demo[10], 12))  # no trace left
+
+
 def test_temperature_from_model_and_config(small_model: PredictionModel, small_library, scene, tmp_path) -> None:
     from dataclasses import replace
 

@@ -186,6 +186,21 @@ def test_a_prediction_is_stamped_with_the_pose_it_was_made_from(zenoh_hub, small
     assert kinds == {"ClassPosterior": old, "OccupancyGrid": old}
 
 
+def test_a_demonstration_that_restarts_at_index_0_is_observed_afresh(zenoh_hub, small_model, small_library) -> None:
+    """Index 0 again under the same demo_id kept the evidence and the first pose of the first time (the planner,
+    executor and gateway place it anew: StreamPlacement), where a new demonstration begins (a review)."""
+    service = PredictorService(PredictorConfig(), zenoh_hub(), model=small_model)
+    fresh = PredictorService(PredictorConfig(), zenoh_hub(), model=small_model)
+    first, second = small_library.by_class(0)[0].features, small_library.by_class(1)[0].features
+    for i in range(20):
+        service.handle(_pose(3, i, first[i], tick=i))
+    for i in range(10):
+        post, _ = service.handle(_pose(3, i, second[i], tick=20 + i))
+        want, _ = fresh.handle(_pose(3, i, second[i], tick=i))
+        np.testing.assert_array_equal(post.posterior, want.posterior)
+    assert service.stats.resets == 2 and service.stats.rejected == 0
+
+
 def test_an_unfamiliar_motion_is_flagged_on_its_posterior_said_once_and_counted(zenoh_hub, two_class_model,
                                                                                  small_library, caplog) -> None:
     """A motion of a class the model never saw got posteriors like any other (one class near 1, no word)."""
