@@ -15,8 +15,9 @@ __all__ = ["main"]
 
 DESCRIPTION = """Plan the robot's motion to every goal (a grasp at each cup) at once with batched STOMP,
 around the predicted human occupancy, and publish the K candidates with the least-cost one chosen
-(Algorithm 1 of Mainprice & Berenson 2013). Real-time: one plan every --period-s; lock-step: one plan
-per ClockTick. Options come from the dataclass defaults < --config FILE ([planner], [planner.stomp],
+(Algorithm 1 of Mainprice & Berenson 2013). Real-time: a plan for each new prediction and whenever the
+robot leaves its plan, at least one every --period-s (--trigger period: one every --period-s only); lock-step:
+one plan per ClockTick. Options come from the dataclass defaults < --config FILE ([planner], [planner.stomp],
 [planner.cost], [zenoh]) < env FORESIGHT_PLANNER_<NAME>, FORESIGHT_PLANNER_STOMP_<NAME>,
 FORESIGHT_PLANNER_COST_<NAME>, FORESIGHT_ZENOH_<NAME> < flags (--<name>, --stomp.<name>, --cost.<name>)."""
 

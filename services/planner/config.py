@@ -211,7 +211,7 @@ class PlannerConfig:
                   ("anytime_min_iterations", self.anytime_min_iterations >= 0),
                   ("velocity_scale", 0 < self.velocity_scale <= 1), ("min_dt", MIN_DT_S <= self.min_dt <= MAX_DT_S),
                   ("off_path_tol", self.off_path_tol >= 0), ("limit_tol", self.limit_tol >= 0),
-                  ("goal_tol", self.goal_tol >= 0), ("goal_choice", self.goal_choice in ("total", "human"))]
+                  ("goal_tol", 0 <= self.goal_tol < math.inf), ("goal_choice", self.goal_choice in ("total", "human"))]
         for name, ok in checks:
             if not ok:
                 raise ConfigError(f"planner.{name}: bad value {getattr(self, name)!r}")
@@ -248,8 +248,9 @@ class PlannerServiceConfig:
     def validate(self) -> None:
         """Check the planner's settings and the service's own."""
         self.planner.validate()
-        if not self.period_s > 0:
-            raise ConfigError(f"planner.period_s: must be > 0, got {self.period_s}")
+        if not (self.period_s > 0 and math.isfinite(self.period_s)):  # inf: the loop's wait overflowed and it died
+            raise ConfigError(f"planner.period_s: must be a finite number > 0 (the executor holds the robot once its "
+                              f"plan is older than its stale_limit_s), got {self.period_s}")
         if not self.input_timeout_s > 0:
             raise ConfigError(f"planner.input_timeout_s: must be > 0, got {self.input_timeout_s}")
 

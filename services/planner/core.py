@@ -283,15 +283,15 @@ class Planner:
         return interpolate_path(tau, s_t), s_t
 
     def departure(self, q_current: Any) -> float | None:
-        """Distance (rad, the Euclidean norm of :func:`project_onto_path`) of ``q_current`` ``(D,)`` from tau_best.
+        """Distance (rad, the norm of :func:`project_onto_path`) of ``q_current`` ``(D,)`` from tau_best; None at first.
 
-        None before the first step. Beyond ``off_path_tol`` the robot has left the plan (the real-time
-        service replans at once, ``services.planner.replan``).
+        Beyond ``off_path_tol`` the robot has left the plan (the real-time service replans at once). Clamped into the
+        limits as a step's start is (unclamped, a state just past one left its own plan: 59 steps in 3 s, a review).
         """
         if self._prev is None or self._prev_best is None:
             return None
         q = torch.as_tensor(np.asarray(q_current, dtype=np.float64), device=self.device, dtype=self.dtype)
-        return float(project_onto_path(self._prev[self._prev_best], q)[1])
+        return float(project_onto_path(self._prev[self._prev_best], q.clamp(self.lower, self.upper))[1])
 
     def step(self, q_current: Any, occupancy: Any, grid: Grid | None = None,
              interrupt: Callable[[], bool] | None = None, lookahead_s: float | None = None) -> PlanResult:
@@ -326,9 +326,10 @@ class Planner:
         anytime = interrupt if c.anytime_min_iterations > 0 else None
         result = self.stomp.optimize(init, self.waypoint_cost, seeds=self._seeds(), interrupt=anytime,
                                      min_iterations=c.anytime_min_iterations)
-        # a reached goal holds still: STOMP would trade a tiny cost at the goal for a loop away and back
-        reached = (init[:, -1] - init[:, 0]).norm(dim=-1) <= c.goal_tol  # (Kv,)
-        trajs = torch.where(reached[:, None, None], init[:, -1:].expand_as(init), result.trajectories)  # (Kv, T, D)
+        # a reached goal holds still: q_t (waypoint 0, where the robot is), then the goal; STOMP would trade a tiny
+        reached = (init[:, -1] - init[:, 0]).norm(dim=-1) <= c.goal_tol  # cost at it for a loop away and back
+        trajs = torch.where(reached[:, None, None], torch.cat([init[:, :1], init[:, -1:].expand_as(init[:, 1:])], 1),
+                            result.trajectories)  # (Kv, T, D)
         terms = self.cost_terms(trajs)
         # a goal whose cost is not finite this step is invalid for it: chosen (goal_choice human took goal 0 for a
         # NaN) or published (the Plan is refused after the planner had adopted it), it would derail the next steps
@@ -336,7 +337,7 @@ class Planner:
         if not bool(valid.any()):
             raise PlannerError(f"no goal has a finite cost this step (total {terms['total'].tolist()}); the last plan "
                                "stands")
-        chosen_v = best(choice_key(terms, c.goal_choice), valid)
+        chosen_v = best(choice_key(terms, c.goal_choice, valid), valid)
         dts = self._dt(trajs)
         self._prev, self._prev_best, self._prev_dt = trajs, chosen_v, float(dts[chosen_v])
 

@@ -172,15 +172,18 @@ def best(total: torch.Tensor, valid: torch.Tensor) -> int:
     return int(torch.argmin(masked))
 
 
-def choice_key(terms: dict[str, torch.Tensor], goal_choice: str) -> torch.Tensor:
+def choice_key(terms: dict[str, torch.Tensor], goal_choice: str, valid: torch.Tensor | None = None) -> torch.Tensor:
     """``(K,)`` what the least-cost goal is chosen by (``PlannerConfig.goal_choice``).
 
-    ``total``: the total cost. ``human``: the least human-occupancy cost; among the goals tied on it (to float32
-    rounding; e.g. all 0 before the human is anywhere near) the least total cost, as the authors' path cost adds
-    0.002 x length. Goals that do not tie get inf.
+    ``total``: the total cost. ``human``: the least human-occupancy cost among the ``valid (K,)`` goals (default:
+    all); among the goals tied on it (to float32 rounding; e.g. all 0 before the human is anywhere near) the least
+    total cost, as the authors' path cost adds 0.002 x length. Goals that do not tie get inf. (An invalid goal with
+    the least human cost made every valid goal's key inf, and the first valid goal won whatever its cost.)
     """
     if goal_choice == "total":
         return terms["total"]
     h = torch.nan_to_num(terms["human"], nan=math.inf)  # one NaN made the minimum NaN, no goal tied: goal 0 won
+    if valid is not None:
+        h = torch.where(valid, h, h.new_tensor(math.inf))
     tied = h <= h.min() + 1e-6 * h.min().abs().clamp_min(1.0)  # float32: equal to rounding
     return torch.where(tied, terms["total"], h.new_tensor(math.inf))

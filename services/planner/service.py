@@ -28,7 +28,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -78,7 +78,6 @@ class PlannerStats:
     last_error: str = ""
     late_inputs: int = 0  # lock-step: ticks planned from an older state or prediction after the wait ran out
     last_late: str = ""
-    planning_ms: list[float] = field(default_factory=list)
 
 
 def plan_message(result: PlanResult, tick: int, stamp: float, occupancy: OccupancyGrid | None) -> Plan:
@@ -142,7 +141,6 @@ class PlannerService:
             log.error("planner: step at tick %d failed: %s", tick, exc)
             return None
         self.stats.plans += 1
-        self.stats.planning_ms.append(result.planning_ms)
         costs = ", ".join(f"{n}={c:.3g}" for n, c in zip(result.goal_names, result.cost_total, strict=True))
         log.debug("planner: tick %d step %d chose %s (%s) in %.0f ms, %d STOMP iterations", tick, result.step,
                   result.goal_names[result.chosen], costs, result.planning_ms, result.iterations)

@@ -119,6 +119,29 @@ def test_departure_lookahead_override_and_anytime_step(scene) -> None:
     assert second.iterations == 20 and np.allclose(second.start, tau[3], atol=1e-5)  # no lookahead: starts there
 
 
+def test_a_state_just_past_a_limit_has_not_departed_from_the_plan_made_from_it(scene) -> None:
+    """A state within limit_tol past the limits is planned from clamped; measured unclamped, the robot was off the
+    plan it had just been given, and the real-time loop replanned from that one state 59 times in 3 s (a review)."""
+    planner = toy_planner(scene, iterations=3)
+    past = [-0.5 - 0.04, -1.0 - 0.04]  # both joints 0.04 below their lower limits: 0.057 rad from the clamped start
+    res = planner.step(past, blob_grid(scene))
+    assert np.allclose(res.start, [-0.5, -1.0])
+    assert planner.departure(past) == pytest.approx(0.0, abs=1e-6)  # not over off_path_tol (0.05)
+    assert planner.departure([-0.5, -0.9]) > planner.config.off_path_tol  # a real departure still counts
+
+
+def test_a_reached_goal_holds_still_from_where_the_robot_is(scene) -> None:
+    """A reached goal's trajectory was the goal throughout: its waypoint 0, where the robot is to be, was up to
+    goal_tol away from q_t, and the executor takes waypoint 0 (a review: 0.14 rad with goal_tol 0.2)."""
+    planner = toy_planner(scene, goal_tol=0.2, iterations=3)
+    res = planner.step([0.9, -0.1], blob_grid(scene))  # 0.14 from goal a
+    a = res.trajectories[0]
+    assert np.allclose(a[0], [0.9, -0.1]) and np.allclose(a[1:], [1.0, -0.2])  # from q_t, then at the goal, still
+    assert np.allclose(res.trajectories[:, 0], res.start)  # every goal's trajectory starts at q_t
+    with pytest.raises(ConfigError, match="planner.goal_tol"):  # every goal 'reached': the robot never moved
+        PlannerConfig(goal_tol=float("inf")).validate()
+
+
 def test_bad_input_is_refused_and_the_planner_keeps_working(scene) -> None:
     planner = toy_planner(scene, iterations=5)
     occ = blob_grid(scene)
@@ -274,6 +297,9 @@ def test_config_resolves_and_names_bad_values() -> None:
         PlannerConfig(seed=-1).validate()
     with pytest.raises(ConfigError, match=r"^--stomp\.iterations: expected int"):
         resolve_config("planner", PlannerServiceConfig, parser.parse_args(["--stomp.iterations", "x"]), env={})
+    for period in (float("inf"), float("nan"), 0.0):  # inf: the real-time loop's wait overflowed and it died
+        with pytest.raises(ConfigError, match=r"^planner\.period_s: must be a finite number > 0"):
+            PlannerServiceConfig(period_s=period).validate()
 
 
 def test_bench_json_prints_one_object(capsys) -> None:

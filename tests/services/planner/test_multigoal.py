@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 
@@ -116,3 +118,8 @@ def test_choice_by_human_cost_breaks_ties_by_total() -> None:
     assert best(choice_key(terms, "human"), valid) == 1
     terms["human"] = torch.tensor([0.2, 0.1, float("nan")])  # one NaN made every key inf: goal 0 was chosen
     assert best(choice_key(terms, "human"), valid) == 1
+    # goal 0 invalid this step (its obstacle term inf) and of the least human cost: every valid key was inf, and the
+    # first valid goal (1) won over the cheaper goal 2 (a review)
+    terms = {"human": torch.tensor([0.001, 0.03, 0.0167]), "total": torch.tensor([math.inf, 0.5, 0.4])}
+    valid = torch.tensor([False, True, True])
+    assert best(choice_key(terms, "human", valid), valid) == 2
