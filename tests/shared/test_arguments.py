@@ -52,3 +52,19 @@ def test_an_option_given_to_the_parent_command_is_the_parents_mistake(capsys) ->
     """``foresight log --bogus info x.mcap`` was blamed on ``foresight log info``."""
     assert refusal(["eval", "--bogus", "all"], capsys) == (
         "tool eval: error: unrecognized arguments: --bogus (see tool eval --help)")
+
+
+def test_an_option_is_never_abbreviated_and_a_mistake_is_one_line(capsys) -> None:
+    """`--compar` ran `--compare`'s three runs (argparse takes a unique prefix), and a misspelt option printed the
+    command's whole usage (18 lines for `foresight demo`) before the line that said what was wrong (a review)."""
+    with pytest.raises(SystemExit) as exit_:
+        tool().parse_args(["eval", "interference", "--robot-spe", "0.5"])
+    assert exit_.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line == ("tool eval interference: error: unrecognized arguments: --robot-spe 0.5 (did you mean "
+                    "--robot-speed?)")
+    with pytest.raises(SystemExit):
+        tool().parse_args(["render", "--step", "x"])
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line == "tool render: error: argument --step: invalid int value: 'x'"
+    assert tool().parse_args(["eval", "interference", "--robot-speed", "0.5"]).robot_speed == 0.5
