@@ -45,7 +45,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from services.demo_dirs import RunDirectory
+from services.demo_dirs import MAIN_VARIANT, RunDirectory, variant_dir
 from services.demo_inputs import check_inputs
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
@@ -185,7 +185,7 @@ class DemoConfig:
             raise ConfigError(f"demo.live: must be a port 1..65535 (0: off), got {self.live}")
 
 
-VARIANTS = (("prediction", {"method": "prediction", "human_cost": True}),
+VARIANTS = ((MAIN_VARIANT, {"method": "prediction", "human_cost": True}),
             ("current occupancy", {"method": "current", "human_cost": True}),
             ("no human cost", {"method": "prediction", "human_cost": False}))
 """The planners ``--compare`` runs: the paper's method and its two baselines (Fig. 8/9, Table I)."""
@@ -239,7 +239,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
             if cfg.compare:
                 out(f"foresight demo: --- {name} ---")
             sub = dataclasses.replace(cfg, compare=False, **changes,
-                                      run_dir=root / name.replace(" ", "-") if cfg.compare else root)
+                                      run_dir=root / variant_dir(name) if cfg.compare else root)
             status, record = demo_run.run_once(sub, name, stop, out, started=run_dir.point_latest)
             if record is None:
                 if records:  # interrupted before this planner's first plan: what the earlier ones did still counts

@@ -13,7 +13,26 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
-__all__ = ["RunDirectory"]
+__all__ = ["RunDirectory", "variant_dir", "compare_log", "MAIN_VARIANT"]
+
+MAIN_VARIANT = "prediction"
+"""The planner a ``--compare`` run is about (the paper's method; ``services.demo.VARIANTS``' first)."""
+
+
+def variant_dir(name: str) -> str:
+    """A ``--compare`` planner's directory in its run's (``current occupancy`` -> ``current-occupancy``)."""
+    return name.replace(" ", "-")
+
+
+def compare_log(directory: Path) -> Path | None:
+    """The log a ``--compare`` run's directory stands for: its prediction run's; None for any other directory.
+
+    The README's ``foresight log table runs/demo/latest`` after ``--compare`` (three logs under it) said only that
+    the path is a directory (a new user's run).
+    """
+    logs = sorted(directory.rglob("*.mcap")) if directory.is_dir() else []
+    main = [f for f in logs if f.parent == directory / variant_dir(MAIN_VARIANT)]
+    return main[0] if len(logs) > 1 and len(main) == 1 and all(f.parent.parent == directory for f in logs) else None
 
 
 @dataclass

@@ -23,6 +23,7 @@ import math
 import sys
 from pathlib import Path
 
+from services.demo_dirs import compare_log
 from shared import strict_json
 from shared.arguments import ArgumentParser
 from shared.recording.reader import LogFile, log_path, read_log
@@ -203,6 +204,10 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
                     help="PNG path (default: FILE's stem + '-snapshot.png' next to it)")
     args = parser.parse_args(argv)
     with cli_errors(prog):
+        if args.cmd != "info" and (main_log := compare_log(Path(args.file))) is not None:
+            print(f"foresight log: note: {args.file} is a demo --compare run: its prediction run's log, {main_log} "
+                  "(the other planners': their own directories under it)", file=sys.stderr)
+            args.file = str(main_log)
         if args.cmd == "table":
             return _main_table(args)
         if args.cmd == "compress":

@@ -78,6 +78,26 @@ def test_info_of_a_directory_describes_every_log_under_it(run_log, tmp_path, cap
     assert main(["info", str(tmp_path / "empty")]) == 2  # none readable
 
 
+def test_the_other_commands_read_a_compare_runs_prediction_log_and_say_so(run_log, tmp_path, capsys) -> None:
+    """The README's `log table runs/demo/latest` (and latency, snapshot, render) after `demo --compare` said only that
+    the path is a directory of three logs (a new user's run)."""
+    import shutil
+
+    for name in ("prediction", "current-occupancy", "no-human-cost"):
+        (tmp_path / name).mkdir()
+        shutil.copy(run_log, tmp_path / name / f"{name}.mcap")
+    assert main(["table", str(tmp_path), "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["complete"]
+    main_log = tmp_path / "prediction" / "prediction.mcap"
+    assert f"{tmp_path} is a demo --compare run: its prediction run's log, {main_log}" in captured.err
+    assert main(["latency", str(tmp_path)]) == 0 and "prediction.mcap" in capsys.readouterr().err
+    shutil.rmtree(tmp_path / "prediction")  # two logs, neither the prediction run's: which one is not guessed
+    with pytest.raises(SystemExit):
+        main(["table", str(tmp_path)])
+    assert "is a directory; the logs under it" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("argv, message", [
     (["info", "/nonexistent.mcap"], "not found"),
     (["render", "{log}", "--step", "7", "--out", "x.png"], "no plan for step 7"),
