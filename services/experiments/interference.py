@@ -152,12 +152,17 @@ class InterferenceResult:
                    runs=[dataclasses.asdict(r) for r in self.runs])
         return out
 
+    def unit(self, short: bool = False) -> str:
+        """What the interference is measured in: per second (``product`` protocol) or along the path (``paper``)."""
+        if self.config.protocol == "product":
+            return "p-voxel s" if short else "probability-voxels x s"
+        return "p-voxel x C-space length" if short else "probability-voxels x configuration-space length"
+
     def lines(self) -> list[str]:
         """The Table I layout: one row per demonstration, mean (std) over seeds; then the real human."""
         names = self.names
         head = f"{'demo':>6}" + "".join(f"{VARIANTS[n].label:>22}" for n in names)
-        unit = "probability-voxels x s" if self.config.protocol == "product" else \
-            "probability-voxels x configuration-space length"
+        unit = self.unit()
         seeds = f"{self.config.seeds} seed{'s' * (self.config.seeds != 1)}"
         out = [f"interference with the final prediction ({unit}), {self.config.protocol} protocol, mean (std) of "
                f"{seeds}; {self.library}, scene {self.config.scene}, human: {self.human.name}", head]
