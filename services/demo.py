@@ -223,7 +223,7 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     """
     from services import demo_run
     from services.demo_figure import draw_outcomes, figure_title
-    from services.demo_outcome import measure_run, outcome_lines, verdict
+    from services.demo_outcome import cut_words, measure_run, outcome_lines, verdict
     from shared.robot import PR2
 
     _check_models_dir(cfg)
@@ -264,11 +264,12 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     summary.extra["comparison"] = [o.to_json() for o in outcomes]
     if cfg.compare and len(outcomes) == len(VARIANTS):
         summary.extra["verdict"] = verdict(outcomes)
-    cut = "; ".join(f"{o.planner} {o.cut_short}" for o in outcomes if o.cut_short)
+    planned = [name for name, _ in variants]
+    cut = cut_words(outcomes, planned)
     title = figure_title(cfg, summary, scene.name, cut)
     against = ("the prediction planner's final prediction" if summary.scored_against == "final prediction"
                else f"the run's {summary.scored_against}")
-    summary.extra["outcome_lines"] = outcome_lines(outcomes, against)
+    summary.extra["outcome_lines"] = outcome_lines(outcomes, against, planned)
     figure = _picture(lambda png: draw_outcomes(outcomes, scene, reference, records[0].poses, png, cfg.period_s,
                                                 title), root / "run.png", out)
     if figure is not None:

@@ -21,7 +21,7 @@ from shared.clearance import body_clearance
 from shared.protocol import HumanPose, OccupancyGrid, RobotState
 from shared.scene import Scene
 
-__all__ = ["Outcome", "measure_run", "verdict", "outcome_lines", "INTERFERENCE_EQUAL"]
+__all__ = ["Outcome", "measure_run", "verdict", "outcome_lines", "cut_words", "INTERFERENCE_EQUAL"]
 
 INTERFERENCE_EQUAL = 0.005
 """Interferences nearer than this are a tie: the verdict prints them to two decimals, and a real-time run's 0.001 /
@@ -169,8 +169,20 @@ def verdict(outcomes: list[Outcome]) -> str:
             "relative to the human")
 
 
-def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planner's final prediction") -> list[str]:
-    """The comparison table and its verdict; ``against``: what the interference is scored against."""
+def cut_words(outcomes: list[Outcome], planned: list[str]) -> str:
+    """What of the run is missing, for the picture's title: the planners cut short, and those not run at all."""
+    not_run = [name for name in planned if name not in {o.planner for o in outcomes}]
+    return "; ".join([f"{o.planner} {o.cut_short}" for o in outcomes if o.cut_short]
+                     + ([f"{' and '.join(not_run)} not run (interrupted)"] if not_run else []))
+
+
+def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planner's final prediction",
+                  planned: list[str] | None = None) -> list[str]:
+    """The comparison table and its verdict.
+
+    ``against``: what the interference is scored against; ``planned``: the planners the run was to compare
+    (``--compare``'s), when some did not run (interrupted).
+    """
     unit = outcomes[0].unit if outcomes else "step"
     out = ["", f"comparison (interference: the paper's Table I measure against {against}; contact: overlap with the "
            "real human's body):",
@@ -185,7 +197,10 @@ def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planne
                    f"{re:>14}")
     out += [f"  * {o.planner}: {o.cut_short}" for o in outcomes if o.cut_short]
     text = verdict(outcomes)
-    if text:
+    missing = [p for p in planned or [] if p not in {o.planner for o in outcomes}]
+    if missing:  # Ctrl-C between the planners: "one planner, run --compare" was said to a --compare run
+        out.append(f"not compared: the run was interrupted before {' and '.join(missing)} ran")
+    elif text:
         out.append(f"verdict: {text}")
     elif len(outcomes) == 1 and not outcomes[0].cut_short:  # one row says nothing of what prediction changes
         out.append("one planner, nothing to compare with: `foresight demo --compare` (make demo "

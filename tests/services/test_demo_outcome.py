@@ -80,6 +80,22 @@ def test_verdict_by_clearance_when_nobody_touched_says_so() -> None:
     assert "foresight demo --compare" in outcome_lines(runs[:1])[-1]
 
 
+
+def test_a_compare_run_interrupted_before_the_other_planners_says_so() -> None:
+    """Ctrl-C while the second planner's run started: the table held the first alone and advised running
+    `foresight demo --compare`, to a --compare run; the picture's title did not say (a new user's run)."""
+    from services.demo_outcome import cut_words
+
+    first = [_outcome("prediction", 0.01, 0.0, 0.0, 0.13)]
+    planned = ["prediction", "current occupancy", "no human cost"]
+    lines = outcome_lines(first, planned=planned)
+    assert lines[-1] == "not compared: the run was interrupted before current occupancy and no human cost ran"
+    assert "--compare" not in "".join(lines)
+    assert cut_words(first, planned) == "current occupancy and no human cost not run (interrupted)"
+    assert cut_words(first, ["prediction"]) == "" and "foresight demo --compare" in outcome_lines(first, planned=[
+        "prediction"])[-1]  # a single run: the advice stands
+
+
 def test_measure_run_scores_contact_and_interference() -> None:
     scene = load_scene("pr2_two_cups_side")
     robot = PR2.from_scene(scene, device="cpu", dtype=torch.float32)
