@@ -297,22 +297,22 @@ def _variant_name(cfg: DemoConfig) -> str:
 
 def _closing_lines(cfg: DemoConfig, summary: Summary) -> list[str]:
     """What the demo prints at the end: the run's summary (or the comparison), the picture, where everything is."""
-    extra = summary.extra
+    extra, robot = summary.extra, "the prediction planner's robot" if cfg.compare else "the robot"  # summary: its run
     lines = [] if cfg.compare else summary.lines(table=False)[:-1]  # the table was printed live; the log comes last
     if cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra and summary.separation_at_end:
-        lines.append(f"note: the robot had not arrived: the separation guard held it at the end "
+        lines.append(f"note: {robot} had not arrived: the separation guard held it at the end "
                      f"({summary.separation_held_s:.1f} s of the run in all), its path passing nearer the person than "
                      "separation.stop_m (docs/executor.md: it waits for the person to step back; --config with "
                      "[executor.separation] stop_m = 0 turns it off)")
     elif cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra:
         lines.append(f"note: a real-time run lasts its {cfg.steps} steps of {cfg.period_s:g} s ({cfg.run_s:g} s)"
                      + (f" and goes on until the robot arrives, at most {cfg.finish_s:g} s more" if cfg.finish else "")
-                     + f"; the robot, at {cfg.robot_speed:g} of its velocity limits, had not arrived: "
+                     + f"; {robot}, at {cfg.robot_speed:g} of its velocity limits, had not arrived: "
                      + (f"--steps {2 * cfg.steps} gives it twice as long" if cfg.finish else
                         "--finish lets it go on to its goal"))
     elif (cfg.mode == "realtime" and cfg.finish and summary.reached and summary.reached_t_s is not None
           and summary.reached_t_s > cfg.run_s):
-        lines.append(f"note: the robot arrived {summary.reached_t_s - cfg.run_s:.1f} s after the run's {cfg.run_s:g} "
+        lines.append(f"note: {robot} arrived {summary.reached_t_s - cfg.run_s:.1f} s after the run's {cfg.run_s:g} "
                      f"s: the run goes on until it is there (--no-finish ends it at {cfg.run_s:g} s)")
     lines += extra.get("outcome_lines", [])
     if cfg.compare:

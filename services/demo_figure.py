@@ -192,12 +192,14 @@ def figure_title(cfg: DemoConfig, summary: Summary, scene: str, cut: str = "") -
     """The run's PNG title: the human's reach, the scene, the robot's pace and the run's length.
 
     A real-time run's length is its wall time and its plans (the planner replans as each prediction comes: 100
-    plans in 10 s, where the title said "20 steps of 0.5 s"); ``cut``: how a planner's run was cut short.
+    plans in 10 s, where the title said "20 steps of 0.5 s"), the prediction planner's in a ``--compare`` run;
+    ``cut``: how a planner's run was cut short.
     """
     wall, reached = cfg.run_s, summary.reached_t_s
     more = (f", then on to its goal at {reached:.1f} s" if cfg.finish_s and reached is not None and reached > wall
             else "")
     length = (f"{cfg.steps} steps of {cfg.period_s:g} s" if cfg.mode == "lockstep" else
-              f"{wall:g} s in real time{more}, {len(summary.chosen_goal_per_step)} plans")
+              f"{wall:g} s in real time{more}, {len(summary.chosen_goal_per_step)} plans"
+              + (" (the prediction planner's)" if cfg.compare else ""))  # the others' are their own
     return (f"foresight demo: {summary.human_class} reach, scene {scene}, robot at {cfg.robot_speed:g} of its velocity "
             f"limits, {length}" + (f": the {cut}" if cut else ""))

@@ -304,6 +304,9 @@ def test_a_real_time_run_that_ends_before_the_goal_says_why_and_what_to_do() -> 
     note = [ln for ln in _closing_lines(cfg, late) if ln.startswith("note: ")]
     assert note == ["note: the robot arrived 4.6 s after the run's 10 s: the run goes on until it is there "
                     "(--no-finish ends it at 10 s)"]
+    note = [ln for ln in _closing_lines(dataclasses.replace(cfg, compare=True), late) if ln.startswith("note: ")]
+    assert note[0].startswith("note: the prediction planner's robot arrived 4.6 s")  # printed after the no-human-cost
+    # run's table, "the robot" read as that planner's, which never arrived (a new user's run)
     last = dataclasses.replace(late, reached_t_s=10.01)  # --no-finish: reached in the state the loop overslept into
     assert not [ln for ln in _closing_lines(dataclasses.replace(cfg, finish=False), last) if ln.startswith("note: ")]
     for quiet in (dataclasses.replace(cfg, mode="lockstep"), cfg):  # lock-step finishes its plan; reached: nothing
@@ -367,6 +370,9 @@ def test_the_figure_title_gives_a_real_time_runs_wall_time_and_plans() -> None:
         DemoConfig(mode="realtime"), summary, "pr2_two_cups_side")
     summary.reached_t_s = wall + 0.01  # --no-finish: the last state, overslept
     assert "then on" not in figure_title(DemoConfig(mode="realtime", finish=False), summary, "pr2_two_cups_side")
+    summary.reached_t_s = 14.62
+    assert "97 plans (the prediction planner's)" in figure_title(DemoConfig(mode="realtime", compare=True), summary,
+                                                                 "pr2_two_cups_side")
 
 
 @pytest.mark.parametrize("human_cost", [True, False])
