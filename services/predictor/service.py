@@ -212,10 +212,10 @@ class PredictorService:
                     continue
                 self.stats.published += isinstance(out, OccupancyGrid)
             self.stats.dropped = self.backlog.dropped
-            waiting = len(batch)
+            waiting = sum(isinstance(m, HumanPose) for m in batch)  # a start marker with its first pose is no backlog
             if waiting > 1 and streaming and now - self._behind_logged > 5.0:
                 self._behind_logged = now  # behind: said at most every 5 s
-                log.warning("predictor: %d messages were waiting; occupancy for the newest pose only "
+                log.warning("predictor: %d poses were waiting; occupancy for the newest pose only "
                             "(%d poses without their own grid so far, %d dropped from a full backlog)",
                             waiting, self.stats.coalesced, self.stats.dropped)
 

@@ -186,6 +186,36 @@ def test_a_prediction_is_stamped_with_the_pose_it_was_made_from(zenoh_hub, small
     assert kinds == {"ClassPosterior": old, "OccupancyGrid": old}
 
 
+def test_a_start_marker_with_its_first_pose_is_no_backlog_to_warn_of(zenoh_hub, small_model, small_library,
+                                                                      caplog) -> None:
+    """Every real-time demonstration began with "predictor: 2 messages were waiting; occupancy for the newest pose
+    only": its start marker and first pose, taken together (a new user's run of the README's one-service block)."""
+    import threading
+
+    service = PredictorService(PredictorConfig(), zenoh_hub(), model=small_model)
+    features = small_library.by_class(0)[0].features
+    stop = threading.Event()
+
+    def drained(*messages) -> list[str]:
+        for m in messages:
+            service.backlog.put(m)
+        worker = threading.Thread(target=service._drain, args=(stop,))
+        with caplog.at_level("WARNING", logger="foresight.predictor"):
+            worker.start()
+            time.sleep(0.5)
+            stop.set()
+            worker.join(10.0)
+        stop.clear()
+        said = [r.getMessage() for r in caplog.records if "were waiting" in r.getMessage()]
+        caplog.clear()
+        return said
+
+    start = DemoMarker(stamp=time.time(), tick=-1, demo_id=5, event="start", true_class=0, class_name="x", n_samples=0)
+    assert drained(start, _pose(5, 0, features[0])) == []
+    said = drained(_pose(5, 1, features[1]), _pose(5, 2, features[2]), _pose(5, 3, features[3]))
+    assert len(said) == 1 and said[0].startswith("predictor: 3 poses were waiting")
+
+
 def test_a_demonstration_that_restarts_at_index_0_is_observed_afresh(zenoh_hub, small_model, small_library) -> None:
     """Index 0 again under the same demo_id kept the evidence and the first pose of the first time (the planner,
     executor and gateway place it anew: StreamPlacement), where a new demonstration begins (a review)."""
