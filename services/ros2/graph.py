@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from .core import TOPICS, Ros2Config, namespaced
 from .wire import Endpoint, dds_type, parse_endpoint_token
 
-__all__ = ["GraphPeers", "PeerChange", "DEFERRED_ROLES"]
+__all__ = ["GraphPeers", "PeerChange", "DEFERRED_ROLES", "node_name"]
 
 DEFERRED_ROLES = ("joint_states", "clock")
 """The roles the gateway leaves to another node that publishes them."""
@@ -81,9 +81,10 @@ class GraphPeers:
             after = self.left_to(r)
             if (before[r] is None) != (after is None):
                 other = after or before[r]
-                changes.append(PeerChange(r, after is not None, _node(other), other.zid, self.is_gateway(other)))
+                changes.append(PeerChange(r, after is not None, node_name(other), other.zid, self.is_gateway(other)))
         return changes
 
 
-def _node(ep: Endpoint) -> str:
+def node_name(ep: Endpoint) -> str:
+    """The endpoint's node as ROS 2 writes it: ``/namespace/name`` (``/name`` in the root namespace)."""
     return f"{ep.namespace.rstrip('/')}/{ep.node}"

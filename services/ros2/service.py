@@ -39,7 +39,7 @@ from shared.scene import SCENE_HELP, load_scene
 from shared.transport import Presence, open_session, subscribe
 
 from .core import TOPICS, Ros2Config, Ros2Mapping
-from .graph import GraphPeers
+from .graph import GraphPeers, node_name
 from .node import Ros2Node, Ros2Publisher
 
 __all__ = ["Ros2ServiceConfig", "Ros2Service", "Ros2Stats"]
@@ -152,7 +152,7 @@ class Ros2Service:
         """A node other than the gateway publishing ``role``'s topic (``joint_states`` or ``clock``), or None."""
         with self._lock:
             ep = self._peers.left_to(role)
-        return None if ep is None else f"{ep.namespace.rstrip('/')}/{ep.node}"
+        return None if ep is None else node_name(ep)
 
     def on_state(self, state: RobotState) -> None:
         """The simulated robot's joints (not when another node publishes the joint states: :meth:`on_graph`).
@@ -224,7 +224,7 @@ class Ros2Service:
                         "(a simulator, the executor's ROS 2 robot link): the gateway publishes no simulated time there")
                 log.log(logging.WARNING if c.role == "joint_states" else logging.INFO, "ros2: node %s publishes %s %s",
                         c.node, topic, what)
-            elif c.gateway:
+            elif c.gateway and c.zid > self._zid:  # its Foresight topics came after its /clock: a gateway after all
                 log.info("ros2: node %s (session %s) is another gateway, with the larger session id: this one "
                          "publishes %s", c.node, c.zid, topic)
             else:
