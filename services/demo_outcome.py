@@ -169,11 +169,16 @@ def verdict(outcomes: list[Outcome]) -> str:
             "relative to the human")
 
 
+def not_run(outcomes: list[Outcome], planned: list[str]) -> list[str]:
+    """The planners of ``planned`` with no outcome (a ``--compare`` run interrupted before they ran)."""
+    return [name for name in planned if name not in {o.planner for o in outcomes}]
+
+
 def cut_words(outcomes: list[Outcome], planned: list[str]) -> str:
     """What of the run is missing, for the picture's title: the planners cut short, and those not run at all."""
-    not_run = [name for name in planned if name not in {o.planner for o in outcomes}]
+    missing = not_run(outcomes, planned)
     return "; ".join([f"{o.planner} {o.cut_short}" for o in outcomes if o.cut_short]
-                     + ([f"{' and '.join(not_run)} not run (interrupted)"] if not_run else []))
+                     + ([f"{' and '.join(missing)} not run (interrupted)"] if missing else []))
 
 
 def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planner's final prediction",
@@ -197,7 +202,7 @@ def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planne
                    f"{re:>14}")
     out += [f"  * {o.planner}: {o.cut_short}" for o in outcomes if o.cut_short]
     text = verdict(outcomes)
-    missing = [p for p in planned or [] if p not in {o.planner for o in outcomes}]
+    missing = not_run(outcomes, planned or [])
     if missing:  # Ctrl-C between the planners: "one planner, run --compare" was said to a --compare run
         out.append(f"not compared: the run was interrupted before {' and '.join(missing)} ran")
     elif text:

@@ -212,7 +212,7 @@ def log_latencies(path: str | Path, read: list[Any] | None = None,
         found = sorted(run_topics(lf, schema))  # the run's own key: a stray one of the schema took its place
         if len(found) > 1:
             raise ValueError(f"{path}: {schema.removeprefix('foresight.')} on {len(found)} keys ({', '.join(found)}) "
-                             "and no run metadata to tell the run's own")
+                             "and no run metadata naming the run's own among them")
         if found:
             topics[key] = found[0]
     if not {"pose", "occupancy", "plan"} <= set(topics):
