@@ -46,14 +46,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from services.demo_dirs import MAIN_VARIANT, RunDirectory, variant_dir
-from services.demo_inputs import check_inputs
+from services.demo_inputs import check_inputs, share_config_file
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
 from shared.arguments import ArgumentParser
 from shared.atomic_file import make_parent
 from shared.config import LOG_LEVELS, ConfigError, add_config_arguments, check_prefix, opt, resolve_config
-from shared.config_names import SECTIONS, section_class
-from shared.config_tree import ENV_PREFIX
 from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.runtime import cli_errors, help_text, setup_logging, stop_on_signals
 from shared.scene import SCENE_HELP, load_scene
@@ -340,23 +338,6 @@ def _bare_live(argv: list[str]) -> list[str]:
     return out
 
 
-def _share_config_file(path: str | None) -> None:
-    """Give the services the demo's config file, every section of it checked now.
-
-    ``--config FILE`` applied only its ``[demo]`` section (``FORESIGHT_CONFIG=FILE`` reached the services): the
-    services, which read ``FORESIGHT_CONFIG``, get the same file, and each section the file and the environment set
-    is resolved here, so that a misspelt option or a bad value is one error before anything starts.
-
-    Raises:
-        ConfigError: A section of the file or a variable of the environment that its command would refuse.
-    """
-    if path:
-        os.environ[f"{ENV_PREFIX}_CONFIG"] = str(Path(path).resolve())
-    for section in SECTIONS:
-        if section != "demo":
-            resolve_config(section, section_class(section), with_zenoh=False)
-
-
 LIVE_PORT = DEFAULT_PORT
 """``foresight demo --live``'s port without a number: the Foxglove app's default."""
 
@@ -372,7 +353,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
         check_inputs(cfg)  # a misspelt class, scene or library: said now, not after the imports below (8-10 s)
         # the services inherit the environment and the file: a misspelt name or bad value of any of them is an error
         # now, not later (each section's variables are checked as it is resolved)
-        _share_config_file(args.config)
+        share_config_file(args.config, cfg)
         setup_logging(cfg.log_level)
         stop = threading.Event()
         restore = stop_on_signals(stop, grace_s=STOP_GRACE_S)  # the services' own bounded stops come first

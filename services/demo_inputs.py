@@ -7,12 +7,16 @@ library's class names and, for a library file, the library: a second at most.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
+from dataclasses import MISSING
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from shared.config import ConfigError
-from shared.config_names import closest
+from services.demo_services import demo_set_options
+from shared.config import ConfigError, load_toml, resolve_config
+from shared.config_names import SECTIONS, closest, section_class
+from shared.config_tree import ENV_PREFIX, config_options, file_value
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library
 from shared.runtime import UserError
@@ -21,7 +25,7 @@ from shared.scene import Scene, load_scene
 if TYPE_CHECKING:
     from services.demo import DemoConfig
 
-__all__ = ["DEFAULT_HUMAN_CLASS", "human_label", "library_for", "check_goals", "check_inputs"]
+__all__ = ["DEFAULT_HUMAN_CLASS", "human_label", "library_for", "check_goals", "check_inputs", "share_config_file"]
 
 DEFAULT_HUMAN_CLASS = "red_cup"
 """The human reaches for the red cup (the paper's Fig. 8); the robot plans for both cups."""
@@ -100,3 +104,39 @@ def check_inputs(cfg: DemoConfig) -> None:
         lib = library_for(cfg, scene)
         names, source = list(lib.class_names), str(lib.source)
     human_label(names, cfg.human_class, source)
+
+
+_DEMO_ZENOH_FLAGS = {"prefix": "--prefix", "security_dir": "--security"}
+"""The demo's options of the ``[zenoh]`` options it sets (its router's endpoints are its own)."""
+
+
+def share_config_file(path: str | None, cfg: DemoConfig) -> None:
+    """Give the services the demo's config file, every section of it checked now.
+
+    ``--config FILE`` applied only its ``[demo]`` section (``FORESIGHT_CONFIG=FILE`` reached the services): the
+    services, which read ``FORESIGHT_CONFIG``, get the same file, and each section the file and the environment set
+    is resolved here, so that a misspelt option or a bad value is one error before anything starts. An option the
+    demo sets on a service's command line (:func:`services.demo_services.demo_set_options`) is an error where the
+    file or a variable sets it too: the flag would win, without a word.
+
+    Raises:
+        ConfigError: A section of the file or a variable of the environment that its command would refuse, or that
+            sets what the demo sets.
+    """
+    if path:
+        os.environ[f"{ENV_PREFIX}_CONFIG"] = str(Path(path).resolve())
+    for section in SECTIONS:
+        if section != "demo":
+            resolve_config(section, section_class(section), with_zenoh=False)
+    file = os.environ.get(f"{ENV_PREFIX}_CONFIG")
+    data = load_toml(file) if file else {}
+    own = {o.field: o.flag for o in config_options("demo", type(cfg))}  # a service's rate_hz: the demo's --rate-hz
+    clashes = [f"{where} (the demo's {hint[o.field]})" if o.field in hint else where
+               for section, options in demo_set_options(cfg).items() for o in options
+               for hint in ((_DEMO_ZENOH_FLAGS if section == "zenoh" else own),)
+               for where in ((f"{o.name} in {file}",) if file_value(data.get(section, {}), o) is not MISSING else ())
+               + ((f"${o.env}",) if o.env in os.environ else ())]
+    if clashes:
+        raise ConfigError(f"{'; '.join(clashes)}: foresight demo sets this on its services' command lines, from its "
+                          "own options (foresight demo --help), and a flag beats the file and the environment; set "
+                          "it with the demo's option, or run the services alone (README: running one service)")

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import tomli_w
 
 from services.demo_run import prepare_inputs
-from services.demo_services import service_options, services_in_order
+from services.demo_services import extra_services, service_options, services_in_order
 from shared.arguments import ArgumentParser
 from shared.config import add_config_arguments, resolve_config
 from shared.config_names import section_class
@@ -73,9 +73,8 @@ def prepare(cfg: DemoConfig, directory: Path, out: Callable[[str], None] = print
     scene = load_scene(cfg.scene or None)
     scenario, model, human = prepare_inputs(cfg, scene, Path(directory), out)
     options = service_options(cfg, model, human, scenario.samples_per_tick, mcap=None)
-    names = [*services_in_order(cfg), *(["ros2"] if cfg.ros2 else []),
-             *(["simrobot"] if cfg.robot == "ros2-sim" else []),
-             "view"]  # compose.yaml's optional live view (profile live) reads the scene from it
+    # compose.yaml's optional live view (profile live) reads the scene from "view"
+    names = [*services_in_order(cfg), *extra_services(cfg), "view"]
     tables = config_tables({name: options[name] for name in names})
     path = Path(directory) / CONFIG_NAME
     header = (f"# Written by `foresight demo --prepare {directory}`: the demo's scenario ({scenario.demo.class_name} "

@@ -23,6 +23,7 @@ from services.demo_services import (
     KEYPOINT_REST_S,
     KEYPOINTS_FILE,
     MODULES,
+    extra_services,
     service_args,
     services_in_order,
 )
@@ -240,9 +241,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     status = 0
     faults: list[str] = []
     # with --ros2 the ROS 2 gateway starts before the executor, so that it sees the whole run; so does the robot
-    extra = [*(["ros2"] if cfg.ros2 else []), *(["simrobot"] if cfg.robot == "ros2-sim" else [])]
     services = services_in_order(cfg)
-    order = (*services[:-1], *extra, services[-1])
+    order = (*services[:-1], *extra_services(cfg), services[-1])
     procs = {name: ServiceProcess(name, MODULES.get(name, f"services.{name}"), args[name], run_dir / f"{name}.log")
              for name in order}
     deadline = time.monotonic() + cfg.timeout

@@ -12,12 +12,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from services.view.config import DEFAULT_PORT
+from shared.config import ZenohConfig, load_toml
+from shared.config_names import section_class
+from shared.config_tree import ENV_PREFIX, Option, config_options
 
 if TYPE_CHECKING:
     from services.demo import DemoConfig
 
 __all__ = ["SERVICES_IN_ORDER", "KEYPOINTS_FILE", "KEYPOINT_REST_S", "RUN", "NO_HUMAN_COST", "MODULES",
-           "services_in_order", "service_args", "service_options"]
+           "services_in_order", "extra_services", "service_args", "service_options", "demo_set_options", "DEMO_ZENOH"]
 
 
 SERVICES_IN_ORDER = ("predictor", "planner", "replayer", "executor")
@@ -35,6 +38,32 @@ def services_in_order(cfg: DemoConfig) -> tuple[str, ...]:
     return tuple("tracker" if s == "replayer" and cfg.human == "keypoints" else s for s in SERVICES_IN_ORDER)
 
 
+def extra_services(cfg: DemoConfig) -> tuple[str, ...]:
+    """The services this demo runs besides its four: the ROS 2 gateway (``--ros2``) and its simulated robot."""
+    return (*(("ros2",) if cfg.ros2 else ()), *(("simrobot",) if cfg.robot == "ros2-sim" else ()))
+
+
+DEMO_ZENOH = ("mode", "listen", "connect", "prefix", "security_dir", "role")
+"""The ``[zenoh]`` options the demo decides for every service: its own router on loopback, its ``--prefix`` and
+``--security``."""
+
+
+def demo_set_options(cfg: DemoConfig) -> dict[str, list[Option]]:
+    """Each section's options this demo sets on its services' command lines, which a file or a variable cannot change.
+
+    The services read the demo's config file and the environment (``FORESIGHT_CONFIG``), and a flag beats both:
+    ``[replayer] rate_hz = 10`` in ``foresight demo --config FILE`` gave a replayer at the demo's 30 Hz, no word.
+    """
+    flags = service_options(cfg, Path("model"), Path("library"), 1, None)  # the flags' names do not hang on paths
+    out: dict[str, list[Option]] = {}
+    for name in (*services_in_order(cfg), *extra_services(cfg)):
+        given = {a for a in flags[name] if a.startswith("--")}
+        out[name] = [o for o in config_options(name, section_class(name))
+                     if o.flag in given or f"--no-{o.flag[2:]}" in given]
+    out["zenoh"] = [o for o in config_options("zenoh", ZenohConfig) if o.field in DEMO_ZENOH]
+    return out
+
+
 MODULES = {"simrobot": "services.ros2.robot_sim"}
 """Services whose module is not ``services.<name>``."""
 
@@ -49,12 +78,15 @@ def service_args(cfg: DemoConfig, endpoint: str, model: Path, replay_library: Pa
 
 
 def _log_level(service: str, demo_level: str) -> list[str]:
-    """A service's ``--log-level``: INFO into its log, DEBUG with the demo's; none where the user set its variable.
+    """A service's ``--log-level``: INFO into its log, DEBUG with the demo's; none where the user set its own.
 
     ``FORESIGHT_PLANNER_LOG_LEVEL=DEBUG foresight demo`` gave the planner's per-plan lines nowhere: a flag beats the
     variable, and the demo passed INFO to every service.
     """
     if os.environ.get(f"FORESIGHT_{service.upper()}_LOG_LEVEL"):
+        return []
+    path = os.environ.get(f"{ENV_PREFIX}_CONFIG")  # the demo's config file, given to the services: its level too
+    if path and "log_level" in load_toml(path).get(service, {}):
         return []
     return ["--log-level", "DEBUG" if demo_level.upper() == "DEBUG" else "INFO"]
 

@@ -46,6 +46,7 @@ from shared.config_tree import (
     config_options,
     config_tables,
     fields_of,
+    file_value,
     is_config,
     nested,
     opt,
@@ -105,6 +106,20 @@ def endpoint_host_port(endpoint: str) -> tuple[str, int]:
     return host.strip("[]"), int(port)
 
 
+_HOST_PORT = ("tcp", "tls", "udp", "quic", "ws")
+"""The endpoint protocols of a ``HOST:PORT`` address."""
+
+
+def _check_host_port(option: str, endpoint: str, lowest: int) -> None:
+    try:
+        host, port = endpoint_host_port(endpoint)
+    except ValueError:
+        host, port = "", -1
+    if not host or not lowest <= port <= 65535:
+        raise ConfigError(f"{option}: endpoint {endpoint!r} is not of the form proto/HOST:PORT (a port "
+                          f"{lowest}-65535)")
+
+
 def _picked_port(endpoint: str) -> bool:
     """Whether ``endpoint`` listens on a port picked at random (``:0``), which nothing can know to connect to."""
     try:
@@ -143,6 +158,8 @@ class ZenohConfig:
             for ep in getattr(self, name):
                 if "/" not in ep or not ep.split("/", 1)[1]:
                     raise ConfigError(f"zenoh.{name}: endpoint {ep!r} is not of the form proto/address")
+                if ep.split("/", 1)[0] in _HOST_PORT:  # tcp/127.0.0.1:abc was taken, and retried for ever
+                    _check_host_port(f"zenoh.{name}", ep, lowest=0 if name == "listen" else 1)
         if not self.connect and self.mode != "router" and not self.multicast_scouting:
             # an empty FORESIGHT_ZENOH_CONNECT ran a service nobody could find
             if self.mode == "client" or all(_picked_port(ep) for ep in self.listen):
@@ -272,13 +289,6 @@ def _check_tables(section: str, cls: type, data: dict[str, Any], source: str) ->
             raise ConfigError(f"{source}[{'.'.join(table)}]: unknown option(s) {', '.join(unknown)}{hint}")
 
 
-def _file_value(data: dict[str, Any], o: Option) -> Any:
-    values: Any = data
-    for step in o.table[1:]:
-        values = values.get(step, {})
-    return values.get(o.field, dataclasses.MISSING)
-
-
 def _apply(obj: Any, changes: dict[tuple[str, ...], Any]) -> Any:
     """``obj`` with the values of ``changes`` (attribute path -> value) set, nested configs replaced too."""
     direct = {path[0]: v for path, v in changes.items() if len(path) == 1}
@@ -322,10 +332,10 @@ def _resolve_section(section: str, cls: type[T], file_values: dict[str, Any],
         flag = (cli_names or {}).get(o.field, o.flag)
         if o.dest in cli:
             changes[o.attrs], given[o.name] = parse_value(flag, o.tp, cli[o.dest], o.choices), flag
-        elif o.env in env:
+        elif o.env in env and not (base_type(o.tp)[0] is Path and not env[o.env].strip()):  # PATH= : unset
             changes[o.attrs], given[o.name] = parse_value(o.env, o.tp, env[o.env], o.choices), o.env
         else:
-            raw = _file_value(file_values, o)
+            raw = file_value(file_values, o)
             if raw is not dataclasses.MISSING:
                 changes[o.attrs] = parse_value(f"{source}{o.name}", o.tp, raw, o.choices, typed=True)
                 given[o.name] = source.rstrip(": ") or "the config file"

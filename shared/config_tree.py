@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["ENV_PREFIX", "ConfigError", "opt", "nested", "parse_value", "base_type", "Option", "config_options",
-           "config_tables", "fields_of", "is_config"]
+           "config_tables", "fields_of", "is_config", "file_value"]
 
 ENV_PREFIX = "FORESIGHT"
 
@@ -320,3 +320,11 @@ def fields_of(cls: type) -> list[tuple[dataclasses.Field[Any], Any]]:
     """``(field, resolved annotation)`` of each field of the dataclass ``cls``."""
     hints = typing.get_type_hints(cls)
     return [(f, hints[f.name]) for f in dataclasses.fields(cls)]
+
+
+def file_value(data: dict[str, Any], o: Option) -> Any:
+    """``o``'s value in ``data``, its section's table of a config file; ``dataclasses.MISSING`` where it holds none."""
+    values: Any = data
+    for step in o.table[1:]:
+        values = values.get(step, {}) if isinstance(values, dict) else {}
+    return values.get(o.field, dataclasses.MISSING) if isinstance(values, dict) else dataclasses.MISSING

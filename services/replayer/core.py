@@ -118,10 +118,12 @@ def select_demos(lib: MotionLibrary, cfg: ReplayerConfig) -> list[Demonstration]
         LibraryError: If the held-out split is impossible.
         MappingError: If the library's features are not the ones ``HumanPose`` carries.
     """
-    require_mapping(lib.feature_names, "foresight replayer (HumanPose messages)",
-                    f"library {lib.source}", exact=LIVE_MAPPING)
+    # the file given, and what it holds: an npz's source was named alone ("synthetic:table_8 classes=8 ...")
+    named = f"{cfg.library} ({lib.source})" if cfg.library and str(cfg.library) != lib.source else lib.source
+    require_mapping(lib.feature_names, "foresight replayer (HumanPose messages)", f"library {named}",
+                    exact=LIVE_MAPPING)
     if not lib.demos:  # not the selection's fault: say so, not "no demonstration matches the selection"
-        raise ConfigError(f"replayer.library: {lib.source} holds no valid demonstration (see the warnings above)")
+        raise ConfigError(f"replayer.library: {named} holds no valid demonstration (see the warnings above)")
     bad = [c for c in cfg.classes if c >= lib.n_classes]
     if bad:
         raise ConfigError(f"replayer.classes: {bad} out of range, the library has {lib.n_classes} classes "

@@ -122,8 +122,11 @@ def _library(path: Path, data: dict[str, np.ndarray], where: str) -> MotionLibra
         raise LibraryError(f"{where}: feature_names must be unique names of at least one feature, got "
                            f"{len(feature_names)} names ({len(set(feature_names))} distinct)")
     names = [str(s) for s in data["class_names"].tolist()]
+    if data["features"].dtype.kind not in "fiu":  # complex parts were dropped with a warning, strings parsed
+        raise LibraryError(f"{where}: features must hold numbers, got {data['features'].dtype}")
     feats = np.asarray(data["features"], dtype=np.float64)
-    labels, indices, lengths = data["demo_label"], data["demo_index"], data["demo_length"]
+    # int64: a uint64 demo_length turned the offsets into floats ("slice indices must be integers")
+    labels, indices, lengths = (data[k].astype(np.int64) for k in ("demo_label", "demo_index", "demo_length"))
     sources = [str(s) for s in data["demo_source"].tolist()]
     n = len(labels)
     if feats.ndim != 2 or feats.shape[1] != len(feature_names):

@@ -14,6 +14,7 @@ from mcap.reader import make_reader
 
 from services.demo import DemoConfig, main
 from services.scenario import table_header
+from shared.config import ConfigError
 from shared.library import save_library
 from shared.synthetic import generate_library
 
@@ -259,13 +260,14 @@ def test_the_demos_config_file_reaches_its_services_and_is_checked_whole(tmp_pat
                                                                         capsys: pytest.CaptureFixture[str]) -> None:
     """``--config FILE`` applied its [demo] section only (FORESIGHT_CONFIG=FILE reached the services); a typo in
     another section, or a bad value in the environment, ran without a word."""
-    from services.demo import _share_config_file
+    from services.demo import DemoConfig
+    from services.demo_inputs import share_config_file
 
     monkeypatch.setenv("FORESIGHT_CONFIG", "")  # recorded as unset: whatever the demo sets, the test's end unsets
     monkeypatch.delenv("FORESIGHT_CONFIG")
     good = tmp_path / "good.toml"
     good.write_text("[planner.cost]\nw_human = 0\n")
-    _share_config_file(str(good))
+    share_config_file(str(good), DemoConfig())
     assert os.environ["FORESIGHT_CONFIG"] == str(good.resolve())  # what every service process inherits
     for text, named in (("[planner.stmp]\niterations = 10\n", "unknown table; did you mean [planner.stomp]?"),
                         ("[replayer]\nrate_hz = -1\n", "replayer.rate_hz")):
@@ -339,6 +341,48 @@ def test_the_services_log_at_debug_with_the_demos_debug_or_their_own_variable(mo
     monkeypatch.setenv("FORESIGHT_PLANNER_LOG_LEVEL", "DEBUG")
     got = levels()
     assert got.pop("planner") is None and set(got.values()) == {"INFO"}  # the variable decides the planner's
+
+
+def test_what_the_demo_sets_on_its_services_is_refused_from_their_file_or_variables(tmp_path: Path, monkeypatch,
+                                                                                     capsys) -> None:
+    """``[replayer] rate_hz = 10`` in the demo's config file gave a replayer at the demo's 30 Hz, and
+    ``FORESIGHT_ZENOH_CONNECT`` was overridden by the demo's router: a flag beats both, without a word."""
+    from services.demo import DemoConfig
+    from services.demo_inputs import share_config_file
+    from services.demo_services import demo_set_options
+
+    monkeypatch.setenv("FORESIGHT_CONFIG", "")  # recorded as unset: whatever the demo sets, the test's end unsets
+    monkeypatch.delenv("FORESIGHT_CONFIG")
+    sets = {section: {o.name for o in options} for section, options in demo_set_options(DemoConfig()).items()}
+    assert {"replayer.rate_hz", "planner.seed", "executor.steps", "zenoh.connect"} <= set().union(*sets.values())
+    assert "tracker" not in sets and "planner.cost.w_human" not in sets["planner"]  # not run / not set by default
+    assert "planner.cost.w_human" in {o.name for o in demo_set_options(DemoConfig(human_cost=False))["planner"]}
+    conf = tmp_path / "c.toml"
+    conf.write_text("[replayer]\nrate_hz = 10\n[planner]\nlog_level = 'DEBUG'\n[zenoh]\nconnect_timeout_s = 5\n")
+    with pytest.raises(ConfigError, match=re.escape(f"replayer.rate_hz in {conf} (the demo's --rate-hz): foresight "
+                                                    "demo sets this on its services' command lines")):
+        share_config_file(str(conf), DemoConfig())
+    conf.write_text("[planner]\nlog_level = 'DEBUG'\n[zenoh]\nconnect_timeout_s = 5\n")  # what it leaves alone
+    share_config_file(str(conf), DemoConfig())
+    monkeypatch.setenv("FORESIGHT_ZENOH_CONNECT", "tcp/127.0.0.1:7447")
+    monkeypatch.setenv("FORESIGHT_ZENOH_PREFIX", "lab")
+    with pytest.raises(SystemExit) as e:
+        main(["--run-dir", str(tmp_path / "run")])
+    assert e.value.code == 2 and "$FORESIGHT_ZENOH_CONNECT; $FORESIGHT_ZENOH_PREFIX (the demo's --prefix): " \
+        in capsys.readouterr().err and not (tmp_path / "run").exists()
+
+
+def test_a_services_log_level_in_the_demos_config_file_is_its_own(tmp_path: Path, monkeypatch) -> None:
+    """The file's ``[planner] log_level`` was beaten by the demo's ``--log-level INFO``, as the variable was."""
+    from services.demo import DemoConfig
+    from services.demo_services import service_args
+
+    conf = tmp_path / "c.toml"
+    conf.write_text("[planner]\nlog_level = 'DEBUG'\n")
+    monkeypatch.setenv("FORESIGHT_CONFIG", str(conf))
+    monkeypatch.delenv("FORESIGHT_PLANNER_LOG_LEVEL", raising=False)
+    args = service_args(DemoConfig(), "tcp/127.0.0.1:7447", Path("m.npz"), Path("h.npz"), 5, Path("r.mcap"))
+    assert "--log-level" not in args["planner"] and args["predictor"][-2:] == ["--log-level", "INFO"]
 
 
 def test_the_demos_help_loads_neither_torch_nor_matplotlib() -> None:

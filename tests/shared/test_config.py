@@ -333,6 +333,11 @@ def test_a_path_whose_home_cannot_be_found_and_a_directory_as_config_are_one_lin
 
 def test_an_empty_path_from_the_environment_is_unset_and_a_number_is_no_path(tmp_path):
     assert resolve_config("demo", DemoCfg, parse([]), env={"FORESIGHT_DEMO_LIBRARY": ""})[0].library is None
+    # unset: the file's path stands (the empty variable gave the default, the synthetic library, over the file's)
+    conf = write(tmp_path, "[demo]\nlibrary = 'mine.npz'\n")
+    for empty in ("", "  "):
+        got = resolve_config("demo", DemoCfg, parse(["--config", str(conf)]), env={"FORESIGHT_DEMO_LIBRARY": empty})
+        assert got[0].library == Path("mine.npz")
     with pytest.raises(ConfigError, match=r"demo\.library: expected Path, got 5"):
         resolve_config("demo", DemoCfg, parse(["--config", str(write(tmp_path, "[demo]\nlibrary = 5\n"))]), env={})
 
@@ -354,3 +359,21 @@ def test_an_endpoint_without_proto_or_port_is_refused(endpoint: str) -> None:
 
     with pytest.raises(ValueError):
         endpoint_host_port(endpoint)
+
+
+@pytest.mark.parametrize(("option", "endpoint"), [
+    ("connect", "tcp/127.0.0.1:abc"), ("connect", "tcp/127.0.0.1:99999"), ("connect", "tls/router"),
+    ("connect", "tcp/127.0.0.1:0"), ("connect", "tcp/:7447"), ("listen", "udp/127.0.0.1:-1")])
+def test_an_endpoint_without_a_host_and_port_is_refused_by_the_config(option: str, endpoint: str) -> None:
+    """``--connect tcp/127.0.0.1:abc`` was taken: the session retried for ever and the replayer played to no one."""
+    with pytest.raises(ConfigError, match=rf"zenoh\.{option}: endpoint '{re.escape(endpoint)}' is not of the form "
+                       r"proto/HOST:PORT \(a port [01]-65535\) \(set by FORESIGHT_ZENOH_"):
+        resolve_config("demo", DemoCfg, parse([]), env={f"FORESIGHT_ZENOH_{option.upper()}": endpoint})
+
+
+def test_endpoints_of_a_host_and_port_or_a_path_are_taken() -> None:
+    env = {"FORESIGHT_ZENOH_CONNECT": "tcp/[::1]:7447,tls/router:7447,unixsock-stream//tmp/z.sock",
+           "FORESIGHT_ZENOH_LISTEN": "tcp/127.0.0.1:0"}
+    zen = resolve_config("demo", DemoCfg, parse([]), env=env)[1]
+    assert zen.connect == ["tcp/[::1]:7447", "tls/router:7447", "unixsock-stream//tmp/z.sock"]
+    assert zen.listen == ["tcp/127.0.0.1:0"]

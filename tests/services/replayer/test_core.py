@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -107,6 +109,9 @@ def test_selection_errors(small_lib):
     empty = dataclasses.replace(small_lib, demos=[])  # every block refused on loading: no selection to blame
     with pytest.raises(ConfigError, match=r"^replayer.library: .* holds no valid demonstration \(see the warnings"):
         select_demos(empty, ReplayerConfig())
+    # the file given, then what it holds: an npz's own source alone ("synthetic:table_8 ...") named no file
+    with pytest.raises(ConfigError, match=rf"^replayer.library: /data/mine.npz \({re.escape(empty.source)}\) holds no"):
+        select_demos(empty, ReplayerConfig(library=Path("/data/mine.npz")))
 
 
 @pytest.mark.parametrize(("field", "value", "pattern"), [

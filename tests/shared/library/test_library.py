@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -302,6 +303,24 @@ def test_a_malformed_npz_is_a_library_error(tmp_path, key, value, match):
         np.savez(bad, **arrays)
     with pytest.raises(LibraryError, match=rf"library file '.*bad\.npz'.*{match}"):
         load_library(bad)
+
+
+def test_an_npz_of_other_number_kinds_is_read_or_refused_by_its_kind(tmp_path):
+    """Complex features (imaginary part 5) loaded as valid demonstrations with a ComplexWarning, strings were parsed
+    as numbers, and a uint64 demo_length turned the offsets into floats ("inconsistent (TypeError: slice ...")."""
+    make_lib(tmp_path / "csv")
+    lib = load_library(tmp_path / "csv")
+    save_library(lib, tmp_path / "l.npz")
+    with np.load(tmp_path / "l.npz", allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    for kind, features in (("complex128", arrays["features"] + 5j), ("<U32", arrays["features"].astype(str))):
+        np.savez(tmp_path / "bad.npz", **{**arrays, "features": features})
+        with pytest.raises(LibraryError, match=rf"bad\.npz'.*: features must hold numbers, got {re.escape(kind)}"):
+            load_library(tmp_path / "bad.npz")
+    unsigned = {k: arrays[k].astype(np.uint64) for k in ("demo_length", "demo_label", "demo_index")}
+    np.savez(tmp_path / "u.npz", **{**arrays, **unsigned})
+    back = load_library(tmp_path / "u.npz")
+    assert [d.features.tolist() for d in back.demos] == [d.features.tolist() for d in lib.demos]
 
 
 def test_a_bad_demonstration_in_an_npz_is_numbered_within_its_class(tmp_path):
