@@ -71,9 +71,14 @@ def check_host(host: str) -> str:
     address, not a name); a trailing dot (the DNS root) is dropped, since peers never match it.
     """
     try:
-        return str(ipaddress.ip_address(host))
+        address = ipaddress.ip_address(host)
     except ValueError:
         pass
+    else:
+        if getattr(address, "scope_id", None):  # fe80::1%eth0: the certificate would name fe80::1, no word said
+            raise ValueError(f"host {host!r}: a certificate names an address without its scope (give "
+                             f"{host.split('%')[0]!r}; the scope is the endpoint's)")
+        return str(address)
     if host.startswith("[") and "]" in host:
         raise ValueError(f"host {host!r}: write an IPv6 address without brackets or port "
                          f"({host[1:host.index(']')]!r})")
@@ -158,8 +163,8 @@ def issue(authority: Issued, role: str, hosts: Sequence[str] = (), days: int = 3
 
 
 def _write(path: Path, data: bytes, private: bool) -> None:
-    """Write ``data`` to ``path`` whole (a temporary file renamed), 0600 if ``private`` before a byte is written."""
-    with atomic_write(path, mode=0o600 if private else 0o644) as f:
+    """Write ``data`` to ``path`` whole and on disk (flushed, renamed), 0600 if ``private`` before a byte is written."""
+    with atomic_write(path, mode=0o600 if private else 0o644, fsync=True) as f:  # a crash: no empty ca.key
         f.write(data)
 
 
@@ -271,9 +276,10 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
         except (ValueError, TypeError) as exc:
             raise CertificateError(f"{ca_key}: not a PEM key readable without a password "
                                    f"({str(exc).splitlines()[0][:80]})") from None
-        ca = _load_cert(ca_crt)
+        ca = load_authority(ca_crt)  # one authority, a CA: a second one added would be handed out with it
         if not _same_key(ca, key):
             raise FileExistsError(f"security directory {d}: ca.key is not the key of ca.crt")
+        _validity(ca, "ca.crt (the authority)", dt.datetime.now(dt.UTC))
         left = ca.not_valid_after_utc - dt.datetime.now(dt.UTC)
         if dt.timedelta(days=days) > left:
             raise CertificateError(f"--days {days}: the authority (ca.crt) ends on {ca.not_valid_after_utc:%Y-%m-%d}, "
@@ -291,6 +297,11 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
         _write(d / f"{role}.key", issued.key_pem, private=True)
         written[f"{role}.crt"] = d / f"{role}.crt"
         written[f"{role}.key"] = d / f"{role}.key"
+    fd = os.open(d, os.O_RDONLY)  # the renames on disk too
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
     return written
 
 
@@ -316,7 +327,9 @@ def verify_role(directory: str | os.PathLike[str], role: str, now: dt.datetime |
     names = [a.value for a in cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)]
     if names != [role]:
         raise CertificateError(f"{cert_path.name}: common name {names} is not [{role!r}]")
-    _validity(cert, cert_path.name, now or dt.datetime.now(dt.UTC))
+    now = now or dt.datetime.now(dt.UTC)
+    _validity(ca, f"{ca_path.name} (the authority)", now)  # an expired one was blamed on the peer's certificate
+    _validity(cert, cert_path.name, now)
     try:
         key = serialization.load_pem_private_key(key_path.read_bytes(), password=None)
     except (ValueError, TypeError) as exc:  # TypeError: the key is encrypted (a session cannot ask for a password)

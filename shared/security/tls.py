@@ -85,6 +85,27 @@ def _canonical(host: str) -> str:
         return host.lower()
 
 
+def names_host(named: set[str], host: str) -> bool:
+    """Whether a certificate naming ``named`` (canonical, :func:`_canonical`) names ``host``, as a peer checks it.
+
+    A wildcard ``*.robot.lan`` names one label more (``a.robot.lan``, not ``robot.lan`` nor ``a.b.robot.lan``) and
+    never an address (RFC 6125, 6.4.3).
+    """
+    host = _canonical(host)
+    if host in named:
+        return True
+    label, _, rest = host.partition(".")
+    return bool(label and rest and f"*.{rest}" in named and not _is_address(host))
+
+
+def _is_address(host: str) -> bool:
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    return True
+
+
 def listen_warning(cfg: ZenohConfig) -> str:
     """The one warning a session's listen endpoints call for, or "".
 
@@ -96,8 +117,8 @@ def listen_warning(cfg: ZenohConfig) -> str:
     role = cfg.role or OBSERVER
     _, cert, _ = read_role(cfg.security_dir, role)
     named = {_canonical(h) for h in certificate_hosts(cert)}
-    unnamed = [ep for ep in cfg.listen if (host := _canonical(_host(ep))) not in ("0.0.0.0", "::", "")
-               and host not in named]
+    unnamed = [ep for ep in secure_endpoints(list(cfg.listen))
+               if (host := _canonical(_host(ep))) not in ("0.0.0.0", "::", "") and not names_host(named, host)]
     if not unnamed:
         return ""
     return (f"listening on {', '.join(unnamed)}, which {role}.crt does not name (it names {', '.join(sorted(named))}): "

@@ -113,6 +113,7 @@ def test_a_key_file_that_was_readable_is_replaced_private(tmp_path: Path) -> Non
     ("*", "a wildcard only as"),  # peers (rustls) never match these two
     ("192.168.1.300", "no IP address"),
     ("10.0.0", "no IP address"),
+    ("fe80::1%eth0", r"names an address without its scope \(give 'fe80::1'"),  # it named fe80::1, no word said
 ])
 def test_a_host_a_certificate_cannot_name_is_refused_before_anything_is_written(tmp_path: Path, host: str,
                                                                                  match: str, capsys) -> None:
@@ -261,6 +262,45 @@ def test_a_ca_file_others_may_write_or_holding_a_second_authority_is_refused(tmp
     (d / "ca.crt").write_bytes((d / "planner.crt").read_bytes())  # a role's certificate copied over it
     with pytest.raises(ValueError, match="ca.crt: not a certificate authority"):
         verify_role(d, "planner")
+
+
+def test_an_expired_authority_is_named_by_check_and_by_a_rotation(tmp_path: Path) -> None:
+    """An authority expired 9 days ago, its role certificates valid: `check` said ok, the handshake check blamed the
+    router's certificate, and `init` rotated under it ("ends on ..., in -9 days")."""
+    now = dt.datetime.now(dt.UTC)
+    authority = make_authority(days=10, now=now - dt.timedelta(days=19))
+    role = issue(authority, "planner", now=now, not_after=now + dt.timedelta(days=30))
+    d = tmp_path / "cell"
+    d.mkdir(mode=0o700)
+    for name, data in (("ca.crt", authority.cert_pem), ("ca.key", authority.key_pem), ("planner.crt", role.cert_pem),
+                       ("planner.key", role.key_pem)):
+        (d / name).write_bytes(data)
+        (d / name).chmod(0o600 if name.endswith(".key") else 0o644)
+    with pytest.raises(CertificateError, match=r"^ca.crt \(the authority\): expired at "):
+        verify_role(d, "planner")
+    with pytest.raises(CertificateError, match=r"^ca.crt \(the authority\): expired at .* issue new certificates"):
+        init_security_dir(d, ["planner"])
+    assert (d / "planner.crt").read_bytes() == role.cert_pem  # nothing rotated under it
+
+
+def test_a_second_authority_in_ca_crt_stops_a_rotation(tmp_path: Path) -> None:
+    """`init` reused a ca.crt with another CA appended (rc 0), and handed the tampered file out with the new ones."""
+    d = tmp_path / "cell"
+    init_security_dir(d, ["planner"])
+    (d / "ca.crt").write_bytes((d / "ca.crt").read_bytes() + make_authority().cert_pem)
+    before = (d / "planner.crt").read_bytes()
+    with pytest.raises(CertificateError, match="ca.crt: holds 2 certificates"):
+        init_security_dir(d, ["planner"])
+    assert (d / "planner.crt").read_bytes() == before
+
+
+def test_init_puts_its_files_on_disk(tmp_path: Path, monkeypatch) -> None:
+    """No file was flushed (18 files, 0 fsync calls): a crash soon after a first init could leave an empty ca.key."""
+    synced: list[int] = []
+    real = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: (synced.append(fd), real(fd))[1])
+    written = init_security_dir(tmp_path / "cell", ["planner", "executor"])
+    assert len(synced) == len(written) + 1  # each file, then the directory (the renames)
 
 
 def test_init_makes_its_directory_0700_whatever_the_umask(tmp_path: Path) -> None:

@@ -196,10 +196,25 @@ def test_a_session_listening_on_a_host_its_certificate_does_not_name_is_warned(d
 
     assert listen_warning(cfg("tcp/127.0.0.1:0", "tcp/localhost:7447", "tcp/0.0.0.0:7447", "tcp/[::]:7447")) == ""
     warning = listen_warning(cfg("tcp/127.0.0.1:0", "tcp/192.168.1.10:7447"))
-    assert warning.startswith("listening on tcp/192.168.1.10:7447, which router.crt does not name (it names "
-                              "127.0.0.1, localhost)") and "--hosts" in warning
+    assert warning.startswith("listening on tls/192.168.1.10:7447, which router.crt does not name (it names "
+                              "127.0.0.1, localhost)") and "--hosts" in warning  # tls/: what it listens on
     plain = ZenohConfig(mode="peer", listen=["tcp/192.168.1.10:7447"], connect=[], multicast_scouting=False)
     assert "without security" in listen_warning(plain)
+
+
+def test_a_wildcard_certificate_names_the_hosts_one_label_below_it(tmp_path: Path) -> None:
+    """Certificates made with --hosts '*.robot.lan' warned of listening on a.robot.lan, which every peer accepts."""
+    from shared.security.tls import names_host
+
+    init_security_dir(tmp_path / "cell", ["router"], hosts=["*.robot.lan"])
+
+    def warned(host: str) -> bool:
+        return bool(listen_warning(ZenohConfig(mode="peer", listen=[f"tcp/{host}:7447"], connect=[],
+                                               security_dir=str(tmp_path / "cell"), role="router")))
+
+    assert not warned("a.robot.lan") and not warned("A.Robot.LAN")
+    assert warned("robot.lan") and warned("a.b.robot.lan") and warned("a.robot.land")
+    assert names_host({"*.robot.lan"}, "a.robot.lan") and not names_host({"*.0.0.1"}, "127.0.0.1")  # no address
 
 
 def test_a_refused_link_is_named_by_one_handshake(dirs: dict[str, Path], tmp_path: Path) -> None:
