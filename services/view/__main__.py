@@ -18,7 +18,8 @@ DESCRIPTION = """Serve a running Foresight system live to the Foxglove app: the 
 predicted occupancy (coloured by probability), the candidate paths (the chosen one green), the class
 posterior and the costs, on ws://127.0.0.1:8765 (Foxglove: Open connection -> Foxglove WebSocket; open
 the layout docs/foresight.foxglove.json). It subscribes as the read-only observer when security is on.
-`foresight demo --live` starts it with the demo. docs/live-view.md has the walk-through.
+(`foresight demo --live` serves the same scene from its executor, at the executor's viz_rate_hz, not
+from this command.) docs/live-view.md has the walk-through.
 Options: defaults < --config FILE ([view], [zenoh]) < env FORESIGHT_VIEW_<NAME> / FORESIGHT_ZENOH_<NAME> < flags."""
 
 

@@ -31,7 +31,7 @@ from shared.protocol import (
 from shared.rejects import RejectCounter
 from shared.runtime import wait_for_stop
 from shared.scene import load_scene
-from shared.transport import open_session, subscribe
+from shared.transport import open_session, subscribe, subscribe_ordered
 
 from .config import ViewConfig
 from .core import ViewCore
@@ -85,8 +85,11 @@ class ViewService:
             k = self.keys
             subs = [subscribe(session, key, cls, self._on, self.rejects, self.receipt)
                     for key, cls in ((k.plan, Plan), (k.robot_state, RobotState), (k.occupancy, OccupancyGrid),
-                                     (k.posterior, ClassPosterior), (k.pose, HumanPose), (k.demo, DemoMarker),
-                                     (k.keypoints, HumanKeypoints))]
+                                     (k.posterior, ClassPosterior), (k.keypoints, HumanKeypoints))]
+            # poses and markers in one ordered stream: on two subscriptions (two Zenoh threads) a reach's end marker
+            # was often drawn before its last pose, which drew the body as still reaching (the predictor's way too)
+            subs.append(subscribe_ordered(session, k.human_all, {k.pose: HumanPose, k.demo: DemoMarker}, self._on,
+                                          self.rejects, self.receipt))
             log.info("view: serving %s to the Foxglove app (Open connection -> Foxglove WebSocket; layout: "
                      "docs/foresight.foxglove.json); prefix %r", server.url, self.zenoh.prefix)
             print(f"foresight view: watch live at {server.url}; drawing scene {self.scene.name} (--scene: the "
@@ -99,9 +102,10 @@ class ViewService:
                     s.undeclare()
         sent = {t: n for t, n in server.sent.items() if n}
         usage = resource.getrusage(resource.RUSAGE_SELF)
-        log.info("view: stopped; sent %s; rejected %s; CPU %.2f s (user %.2f, system %.2f)",
+        log.info("view: stopped; sent %s; rejected %s; %s; CPU %.2f s (user %.2f, system %.2f)",
                  ", ".join(f"{t} {n}" for t, n in sent.items()) or "nothing", self.rejects.summary(),
-                 usage.ru_utime + usage.ru_stime, usage.ru_utime, usage.ru_stime)
+                 f"drawing failed {self.failures} times (the first logged above)" if self.failures else
+                 "no drawing failed", usage.ru_utime + usage.ru_stime, usage.ru_utime, usage.ru_stime)
         return sent
 
 

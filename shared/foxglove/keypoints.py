@@ -24,13 +24,14 @@ from .scene import WORLD_FRAME
 __all__ = ["LIFETIME_S", "KEYPOINT_RGBA", "RADIUS_M", "keypoints_update"]
 
 LIFETIME_S = 0.5
-"""How long a frame's spheres stay without a newer frame (the view draws at most ``viz_rate_hz``, 5 a second)."""
+"""How long a frame's spheres stay without a newer frame, at least (drawn at most ``viz_rate_hz``: the executor's log 5
+a second, the view 10); at a slower rate, two drawing periods (:func:`keypoints_update`'s ``period_s``)."""
 KEYPOINT_RGBA = (0.95, 0.95, 0.35, 0.9)
 RADIUS_M = 0.03
 
 
-def keypoints_update(msg: HumanKeypoints, reference: np.ndarray | None, scene: Scene, stamp: float
-                     ) -> SceneUpdate | None:
+def keypoints_update(msg: HumanKeypoints, reference: np.ndarray | None, scene: Scene, stamp: float,
+                     period_s: float = 0.0) -> SceneUpdate | None:
     """The frame's seen points as spheres in the scene, or None (no placement yet, or no point seen).
 
     Args:
@@ -38,6 +39,8 @@ def keypoints_update(msg: HumanKeypoints, reference: np.ndarray | None, scene: S
         reference: ``(12,)`` the newest demonstration's first pose (:meth:`SceneBuilder.placement_reference`).
         scene: The scene the human is placed in.
         stamp: The entity's time (s).
+        period_s: The drawing period (the stream's ``viz_period_s``): the spheres live two of them if that is longer
+            than :data:`LIFETIME_S` (at ``--viz-rate-hz 1`` they blinked: half a second on, half off).
     """
     if reference is None:
         return None
@@ -46,5 +49,6 @@ def keypoints_update(msg: HumanKeypoints, reference: np.ndarray | None, scene: S
     if not len(seen):
         return None
     return SceneUpdate(entities=[SceneEntity(
-        timestamp=timestamp(stamp), frame_id=WORLD_FRAME, id="human/keypoints", lifetime=duration(LIFETIME_S),
+        timestamp=timestamp(stamp), frame_id=WORLD_FRAME, id="human/keypoints",
+        lifetime=duration(max(LIFETIME_S, 2 * period_s)),
         spheres=spheres(place_points(seen, reference, scene), RADIUS_M, KEYPOINT_RGBA))])

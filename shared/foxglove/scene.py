@@ -183,6 +183,7 @@ class SceneBuilder:
         return next(reversed(self._first_pose.values()), None)
 
     def _remember_first(self, pose: HumanPose) -> np.ndarray:
+        self._first_pose.pop(pose.demo_id, None)  # the newest last: ids restart with each replayer or tracker run
         self._first_pose[pose.demo_id] = first = pose.features.copy()
         while len(self._first_pose) > _KEEP_FIRST_POSES:  # a long session: keep the last few
             del self._first_pose[next(iter(self._first_pose))]

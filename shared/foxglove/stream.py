@@ -165,7 +165,8 @@ class SceneStream:
         elif isinstance(msg, DemoMarker):
             out.append(("/viz/human", b.human_ended(msg, stamp=t)))
         elif isinstance(msg, HumanKeypoints):
-            out.append(("/viz/keypoints", keypoints_update(msg, b.placement_reference(), b.scene, t)))
+            update = keypoints_update(msg, b.placement_reference(), b.scene, t, self.viz_period_s)
+            out.append(("/viz/keypoints", update))
         elif isinstance(msg, ClassPosterior):
             out.append(("/viz/posterior", posterior_chart(msg, t)))
         return [VizMessage(topic, _encode(obj), log_time) for topic, obj in out if obj is not None]

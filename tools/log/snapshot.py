@@ -32,7 +32,8 @@ class SceneState:
 
     Attributes:
         t_s: The moment, seconds from the first scene record.
-        entities: Topic -> entity id -> ``foxglove.SceneEntity`` (the latest of each id).
+        entities: Topic -> entity id -> ``foxglove.SceneEntity`` (the latest of each id, unless its lifetime ended
+            before the moment, as Foxglove removes it).
         voxels: ``(N, 3)`` occupancy cloud points (m, world frame).
         probability: ``(N,)`` their probabilities (1 if the cloud has none).
         rgba: ``(N, 4)`` their colours (uint8).
@@ -101,6 +102,7 @@ def scene_at(path: str | Path, at_s: float | None) -> SceneState:
     if at_s is None:  # a first pass for the last plan's time
         end = max((r.log_time for r in _records(p, {"/viz/plan"})), default=math.inf)
     state, t0, last, cloud = SceneState(), None, None, None
+    expiry: dict[tuple[str, str], int] = {}  # (topic, id) -> log time its lifetime ends (keypoints: 0.5 s)
     for r in _records(p):
         if t0 is None:
             t0, end = r.log_time, (end if at_s is None else r.log_time + round(at_s * 1e9))
@@ -118,6 +120,9 @@ def scene_at(path: str | Path, at_s: float | None) -> SceneState:
                 else:
                     by_id.pop(d.id, None)
             by_id.update({e.id: e for e in m.entities})  # type: ignore[attr-defined]
+            for e in m.entities:  # type: ignore[attr-defined]
+                life_ns = e.lifetime.ToNanoseconds() if e.HasField("lifetime") else 0
+                expiry[(r.topic, e.id)] = r.log_time + life_ns if life_ns > 0 else math.inf
         elif r.schema_name == "foxglove.FrameTransforms":
             state.frames.update({t.child_frame_id: _xyz(t.translation) for t in m.transforms})  # type: ignore[attr-defined]
         elif r.schema_name == "foxglove.PointCloud":
@@ -126,6 +131,9 @@ def scene_at(path: str | Path, at_s: float | None) -> SceneState:
         raise UserError(f"{p}: no scene channels (/viz/..., /tf) in the log, nothing to draw")
     if cloud is not None:
         _cloud(state, cloud)
+    for topic, by_id in state.entities.items():  # what Foxglove has removed by then (keypoints the tracker lost)
+        for gone in [i for i in by_id if expiry.get((topic, i), math.inf) < min(end, last)]:
+            del by_id[gone]
     state.t_s = (min(end, last) - t0) / 1e9
     return state
 

@@ -52,6 +52,15 @@ def test_keypoints_meet_the_body_of_the_poses_fitted_to_them_and_live_half_a_sec
     assert np.linalg.norm(centres[POINT_NAMES.index("pelvis")] - SCENE.human.pelvis_xyz) > 0.05  # it moved
 
 
+def test_keypoints_drawn_less_often_than_their_lifetime_live_two_drawing_periods(builder) -> None:
+    """At --viz-rate-hz 1 the spheres lived 0.5 s of each second: they blinked."""
+    for rate_hz, life_s in ((10.0, LIFETIME_S), (1.0, 2.0), (0.5, 4.0)):
+        stream = SceneStream(SceneBuilder(SCENE, builder.robot, builder.human, builder.place), 1.0 / rate_hz)
+        stream.due(HumanPose(stamp=1.0, tick=-1, tick_last=True, demo_id=3, index=0, features=FEATURES))
+        (entity,) = decoded(stream.draw(frame(FEATURES), T))["/viz/keypoints"].entities
+        assert entity.lifetime.ToNanoseconds() == round(life_s * 1e9), rate_hz
+
+
 def test_keypoints_are_throttled_like_the_body(builder) -> None:
     stream = SceneStream(builder, viz_period_s=0.2)
     msg = frame(FEATURES, stamp=10.0)

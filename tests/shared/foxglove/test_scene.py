@@ -205,6 +205,12 @@ def test_the_human_is_placed_from_its_first_pose_even_when_that_pose_is_not_draw
     for demo in range(10, 60):  # joined each demonstration after its first pose: one reference per demonstration
         viewed.human_body(at(demo, 5, float(demo), 0.0))  # was kept for ever
     assert len(viewed._first_pose) <= 4
+    # a restarted replayer numbers its reaches from 1 again: the newest reference is the one that places the human
+    fresh = default_builder(SCENE)
+    for demo in (1, 2, 3):
+        fresh.note_pose(at(demo, 0, float(demo), 0.0))
+    fresh.note_pose(at(1, 0, 4.0, 2.0))
+    assert fresh.placement_reference()[0] == pytest.approx(pose().features[0] + 2.0)  # demo 3's, 2 m off, was kept
 
 
 def test_a_joint_name_mismatch_is_said_once_per_name_list(builder, caplog) -> None:

@@ -109,6 +109,37 @@ def test_human_and_posterior_are_drawn(robot, tmp_path) -> None:
     assert out.read_bytes()[:8] == PNG
 
 
+def test_keypoints_are_gone_once_their_lifetime_ends_as_foxglove_shows_them(robot, tmp_path) -> None:
+    """A snapshot 3.9 s after the last keypoints still drew them (lifetime 0.5 s): Foxglove had removed them."""
+    from shared.foxglove.keypoints import LIFETIME_S
+    from shared.human import HumanModel, place_in_scene
+    from shared.keypoints.fit import POINT_NAMES
+    from shared.protocol import DemoMarker, HumanKeypoints, RobotState
+
+    scene = load_scene(None)
+    path = tmp_path / "kp.mcap"
+    now = [1_000_000_000]
+    log = McapLog(path, KEYS, SceneBuilder(scene, robot, HumanModel(), place_in_scene), clock=lambda: now[0],
+                  viz_thread=False)
+    feats = np.array([0.0, 0.0, 0.95, 0.0, 0.0, 0.0, 0.0, 0.2, 0.1, 0.3, 0.0, 0.5])
+    log.on_sample(KEYS.demo, encode(DemoMarker(stamp=0.0, tick=-1, demo_id=1, event="start", true_class=0,
+                                               class_name="blue_cup", n_samples=5)))
+    log.on_sample(KEYS.pose, encode(HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=1, index=0,
+                                              features=feats)))
+    log.on_sample(KEYS.keypoints, encode(HumanKeypoints(stamp=0.0, tick=-1, frame=0, frame_id="sensor",
+                                                        names=list(POINT_NAMES),
+                                                        positions=HumanModel().joint_positions(feats))))
+    for n in range(1, 31):  # 6 s of the robot, no keypoints: the sensor stopped
+        now[0] += 200_000_000
+        log.on_sample(KEYS.robot_state, encode(RobotState(stamp=0.2 * n, tick=-1, joint_names=robot.joint_names,
+                                                          goal=-1, reached=False, holding=True, reason="",
+                                                          q=robot.q_start.numpy().astype(np.float64), qd=np.zeros(8))))
+    log.close()
+    assert scene_at(path, LIFETIME_S / 2).entity("human/keypoints") is not None
+    assert scene_at(path, 5.0).entity("human/keypoints") is None
+    assert scene_at(path, 5.0).entity("human/body") is not None  # no lifetime: it stays
+
+
 @pytest.mark.parametrize("argv, message", [
     (["snapshot", "/nonexistent.mcap"], "not found"),
     (["snapshot", "{tmp}"], "is a directory"),  # it said 'not found'
