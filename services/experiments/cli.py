@@ -206,6 +206,9 @@ def _occupancy(args: argparse.Namespace, out) -> int:
 
     if args.per_class < 0 or args.components < 1 or args.n_jobs < 1:
         raise UserError("--per-class must be >= 0, --components and --n-jobs >= 1")
+    from services.predictor.train import check_resolution
+
+    check_resolution(args.resolution)
     ready_to_write(args.out, directory=True)  # before the work: a file in the way lost it all
     scene = load_scene(args.scene or None)
     lib = load_experiment_library(args.library, scene)
@@ -264,6 +267,13 @@ def _pace(args: argparse.Namespace, out) -> int:
     if args.iterations is not None and args.iterations < 1:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
     ready_to_write(args.plot)
+    from shared.library import load_library
+
+    from .heldout import SYNTHETIC
+
+    for library in libraries:  # each library read now: a missing one was said after the others' runs
+        if library != SYNTHETIC:
+            load_library(library)
     res = run_pace(PaceConfig(libraries=libraries, protocols=protocols, paces=paces, demos=args.demos,
                               seeds=args.seeds, components=args.components, volume=args.volume,
                               models_dir=args.models_dir,

@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import multiprocessing
 import os
+import shlex
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -90,6 +91,22 @@ def add_report_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=0, help="worker processes for the parts (default 0: one per "
                    "core plus one, since a lock-step run leaves its core idle while its messages travel; "
                    "docs/experiments.md, 'Run time')")
+
+
+def _command(args: argparse.Namespace, out: Path) -> str:
+    """The command line of this report: every option given a value other than its default.
+
+    ``--libraries``, ``--library``, ``--models-dir`` and ``--workers`` were left out of it.
+    """
+    parser = argparse.ArgumentParser()
+    add_report_arguments(parser)
+    words = ["foresight", "eval", "all", "--out", str(out)]
+    for dest, default in vars(parser.parse_args([])).items():  # the options of eval all, in their order
+        value = getattr(args, dest, default)
+        if dest != "out" and value != default:
+            flag = "--" + dest.replace("_", "-")
+            words += [flag] if value is True else [flag, str(value)]
+    return shlex.join(words)
 
 
 def report_workers(asked: int = 0) -> int:
@@ -207,9 +224,7 @@ def run_report(args: argparse.Namespace) -> int:
     iterations = (f"{timing.iterations} STOMP iterations" if timing.iterations else
                   "50 STOMP iterations in the product protocol (51 in the paper's)")
     md = [f"# Foresight: the paper's experiments ({'quick' if args.quick else 'full'} run)", "",
-          f"Command: `foresight eval all --out {out}{' --quick' if args.quick else ''}"
-          f"{'' if args.volume == DEFAULT_VOLUME else ' --volume ' + args.volume}"
-          f"{'' if protocols == PROTOCOLS else ' --protocols ' + ','.join(protocols)}`. Every run: "
+          f"Command: `{_command(args, out)}`. Every run: "
           f"{timing.steps} steps of {timing.period_s} s, "
           f"{iterations}, {plan.components} Gaussians per class; the product protocol's occupancy "
           f"volume `{args.volume}` (`foresight train --volume`; the paper protocol's is `paper`). Why the numbers "

@@ -45,7 +45,7 @@ from .novelty import DEFAULT_QUANTILE, DEFAULT_WINDOW, learn_novelty
 from .swept_volume import surface_spacing
 from .volumes import DEFAULT_VOLUME, VOLUMES
 
-__all__ = ["TrainConfig", "train_model", "regress_motions", "default_library", "cached", "main"]
+__all__ = ["TrainConfig", "check_resolution", "train_model", "regress_motions", "default_library", "cached", "main"]
 
 log = logging.getLogger("foresight.train")
 
@@ -127,6 +127,16 @@ def regress_motions(bank: MixtureBank, lengths: list[int], encoder: FeatureEncod
     return out
 
 
+def check_resolution(resolution: float | None) -> None:
+    """Raise a UserError for a voxel edge outside 0.005..0.5 m (None: the scene's).
+
+    ``eval occupancy`` sweeps the demonstrations before any training: -1 and 0.001 were a traceback and a 43 GiB
+    allocation there.
+    """
+    if resolution is not None and not (0.005 <= resolution <= 0.5):
+        raise UserError(f"--resolution must be between 0.005 and 0.5 m, got {resolution}")
+
+
 def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None = None,
                 demos: list[Demonstration] | None = None, progress: bool = True,
                 fit_cache: MutableMapping[str, Any] | None = None) -> PredictionModel:
@@ -163,8 +173,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
     demos = list(library.demos) if demos is None else demos
     encoder = FeatureEncoder(cfg.features, cfg.time_scale, feature_names=library.feature_names,
                              source=f"library {library.source}")
-    if cfg.resolution is not None and not (0.005 <= cfg.resolution <= 0.5):
-        raise UserError(f"--resolution must be between 0.005 and 0.5 m, got {cfg.resolution}")
+    check_resolution(cfg.resolution)
     if not (cfg.spacing > 0 and np.isfinite(cfg.spacing)):
         raise UserError(f"surface sample spacing must be a finite number > 0 m, got {cfg.spacing}")
     grid = scene.grid if cfg.resolution is None else scene.grid.with_resolution(cfg.resolution)

@@ -38,6 +38,7 @@ def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path, capsys):
     lib = data["libraries"]["synthetic"]
     assert set(lib) >= {"recognition", "interference", "switch", "prediction_ms"}
     assert len(lib["interference"]["basic"]) == 1
+    assert f"Command: `foresight eval all --out {out} --quick --models-dir {tmp_path / 'models'}`" in text
     assert "paper:" in text  # every section compares with the paper's numbers
     assert "The paper's library is not in this report: " in text  # a --quick run said nothing of leaving it out
     # each part's run time, in the data and in the timing block
@@ -61,6 +62,21 @@ def test_the_report_says_why_the_papers_library_is_left_out(monkeypatch, tmp_pat
 
 def _refuse(word: str) -> None:
     raise AssertionError(f"report.json holds {word}, which strict JSON parsers refuse")
+
+
+def test_the_reports_command_line_has_every_option_given() -> None:
+    """It left out --libraries, --library, --models-dir and --workers: the report could not be run again from it."""
+    import argparse
+
+    from services.experiments.report import _command, add_report_arguments
+
+    parser = argparse.ArgumentParser()
+    add_report_arguments(parser)
+    args = parser.parse_args(["--libraries", "synthetic,/data/lib", "--models-dir", "/m d", "--workers", "3",
+                              "--library", "/p", "--protocols", "paper"])
+    assert _command(args, Path("r")) == ("foresight eval all --out r --libraries synthetic,/data/lib --library /p "
+                                         "--models-dir '/m d' --protocols paper --workers 3")
+    assert _command(parser.parse_args(["--quick"]), Path("r")) == "foresight eval all --out r --quick"
 
 
 def test_report_workers_default_to_one_per_core_plus_one(monkeypatch):

@@ -70,4 +70,8 @@ def test_no_verdict_rests_on_a_ratio_or_a_switch_that_is_not_there():
     assert "leaves the human's cup 6 steps earlier" not in switch_verdict(never)
     once = switch({"prediction": [4, 4, 4], "current": [0, 0, 0]})
     assert "prediction leaves at step 4, current never goes there" in switch_verdict(once)
+    # a median at the run's length (20 steps: None, never left) is no step: "prediction leaves at step 20" was said
+    stays = switch({"prediction": [None, None, 3], "current": [0, 0, 0]})
+    assert "prediction never leaves it (ends going for it), current never goes there" in switch_verdict(stays)
+    assert "leaves at step 20" not in switch_verdict(stays)
     assert switch({"prediction": [1, 2, 3], "current": [9, 9, 9]}).to_json()["earlier_by"] == 7
