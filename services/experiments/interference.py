@@ -40,7 +40,7 @@ from .protocol import AUTHORS_TRIALS, TABLE1_SCENE, authors_trial, move3d_path_w
 from .reuse import first_differing_state, same_human, same_robot, with_human
 from .scoring import RunScore, score_run
 
-__all__ = ["TABLE1_SCENE", "InterferenceConfig", "InterferenceResult", "ratio_text", "run_interference"]
+__all__ = ["TABLE1_SCENE", "InterferenceConfig", "InterferenceResult", "draw_demos", "ratio_text", "run_interference"]
 
 
 PAPER_TABLE1 = {"basic": [24.41, 21.47, 27.52, 24.44, 25.13], "least_penetration": [0.41, 0.49, 0.60, 0.41, 0.74]}
@@ -63,6 +63,8 @@ class InterferenceConfig:
     volume: str | None = None  # None: the trainer's default
     variants: tuple[str, ...] = tuple(VARIANTS)  # the planners run (``eval volumes``: least_penetration only)
     selection_seed: int = 0
+    draw: int = 0  # the demonstrations are the first ``demos`` of the seed's draw of this many (0: of ``demos``):
+    # the pace sweep's are Table I's first, so that its point at Table I's pace is Table I's on those
     protocol: str = "product"
     trials: str = "auto"  # authors: the authors' human motions; cup: the class nearest the human's cup; auto: the
     # authors' with the paper protocol on the paper's library, else cup
@@ -70,6 +72,17 @@ class InterferenceConfig:
     basic_once: bool = True  # basic STOMP planned once per seed, checked on the first (services.experiments.reuse)
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
+
+
+def draw_demos(pool: int, n: int, seed: int, draw: int = 0) -> list[int]:
+    """The held-out demonstrations of a class of ``pool``: the first ``n`` of ``seed``'s draw of ``max(n, draw)``.
+
+    A draw of 3 was not the first 3 of a draw of 5 (seed 0: [12, 15, 19] against [6, 7, 11, 14, 17]): the pace
+    sweep at Table I's pace ran other demonstrations than Table I, and said no planner touched the human where
+    Table I's basic STOMP did (on #6). Sorted indices into the pool, at most ``pool - 1`` drawn.
+    """
+    drawn = np.random.default_rng(seed).choice(pool, size=max(n, min(draw, pool - 1)), replace=False)
+    return sorted(drawn[:n].tolist())
 
 
 def ratio_text(ratio: float | None) -> str:
@@ -259,8 +272,7 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
         demos = [pool[i] for i in trial[1][:cfg.demos] if i < len(pool)]
         how = "the authors' motions"
     else:
-        rng = np.random.default_rng(cfg.selection_seed)
-        picked = sorted(rng.choice(len(pool), size=human.held_out(len(pool), cfg.demos), replace=False).tolist())
+        picked = draw_demos(len(pool), human.held_out(len(pool), cfg.demos), cfg.selection_seed, cfg.draw)
         demos = [pool[i] for i in picked]
         how = f"drawn with seed {cfg.selection_seed}"
     progress(f"interference ({prot.name} protocol): {lib.source}, scene {scene.name}; robot -> {cfg.robot_cup}; "

@@ -42,6 +42,7 @@ class PaceConfig:
     protocols: tuple[str, ...] = ("product", "paper")
     paces: dict[str, tuple[float, ...]] = field(default_factory=lambda: dict(DEFAULT_PACES))
     demos: int = 5
+    draw: int = InterferenceConfig.demos  # the demonstrations: the first ``demos`` of Table I's draw of this many
     seeds: int = 2
     timing: Timing = Timing()
     components: int | None = None
@@ -153,7 +154,7 @@ def run_pace(cfg: PaceConfig, progress: Callable[[str], None] = print, compile: 
                 timing = dataclasses.replace(cfg.timing, robot_speed=min(1.0, pace)) if prot == "product" \
                     else cfg.timing
                 icfg = InterferenceConfig(library=library, scene=protocol(prot).table1_scene, demos=cfg.demos,
-                                          seeds=cfg.seeds, timing=timing,
+                                          draw=cfg.draw, seeds=cfg.seeds, timing=timing,
                                           components=cfg.components, variants=PLANNERS, protocol=prot,
                                           volume=cfg.volume if prot == "product" else None,
                                           path_per_step=pace if prot == "paper" else None,
@@ -168,47 +169,61 @@ def run_pace(cfg: PaceConfig, progress: Callable[[str], None] = print, compile: 
 
 
 def plot_pace(res: PaceResult, path: Path) -> Path:
-    """Ratio, contact and reached step against the pace: one column per protocol, one line per library."""
+    """Ratio, contact and reached step against the pace: one column per protocol, one colour per library.
+
+    Each library keeps its colour in every row (basic STOMP dashed, least penetration solid): the ratio row's orange
+    was the synthetic library, the rows below's the paper's least penetration. The ticks are the paces run (a log
+    axis over a small range wrote its labels over each other), and a ratio the log axis cannot show (0 or inf) is
+    named on the axes rather than dropped.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     protocols = list(res.config.protocols)
     fig, axes = plt.subplots(3, len(protocols), figsize=(5.5 * len(protocols), 9), squeeze=False, sharex="col")
     units = {"product": "robot speed (fraction of the PR2's velocity limits)",
              "paper": "path length per step (configuration space)"}
+    libraries = sorted({p.library for p in res.points})
     for col, prot in enumerate(protocols):
         loggable = False  # a ratio the log axis can show (a sweep of ratios 0 or inf only crashed the plot)
-        for lib in sorted({p.library for p in res.points}):
+        off: list[str] = []
+        for i, lib in enumerate(libraries):
+            colour = f"C{i}"
             pts = sorted((p for p in res.points if p.protocol == prot and p.library == lib), key=lambda p: p.pace)
             x = [p.pace for p in pts]
             ratios = [p.ratio if 0 < p.ratio < math.inf else np.nan for p in pts]
-            axes[0, col].plot(x, ratios, "o-", label=lib)  # 0 (basic never touched) or inf: off the log axis
+            axes[0, col].plot(x, ratios, "o-", color=colour, label=lib)  # 0 (basic never touched) or inf: named
+            off += [f"{lib} {p.pace:g}: {ratio_text(p.ratio)}" for p in pts if not 0 < p.ratio < math.inf]
             loggable |= any(r > 0 for r in ratios if not np.isnan(r))
             for name, style in (("basic", "--"), ("least_penetration", "-")):
-                axes[1, col].plot(x, [p.planners[name]["contact_s"] for p in pts], "o" + style,
-                                  label=f"{lib}, {name.replace('_', ' ')}")
+                label = f"{lib}, {name.replace('_', ' ')}"
+                axes[1, col].plot(x, [p.planners[name]["contact_s"] for p in pts], "o" + style, color=colour,
+                                  label=label)
                 axes[2, col].plot(x, [np.nan if p.planners[name]["reached_step"] is None
                                       else p.planners[name]["reached_step"] for p in pts], "o" + style,
-                                  label=f"{lib}, {name.replace('_', ' ')}")
+                                  color=colour, label=label)
+        paces = sorted({p.pace for p in res.points if p.protocol == prot})
         for row, ylabel in enumerate(("basic / least penetration (Table I)", "contact with the real human (s)",
                                       "step the goal is reached (median)")):
             ax = axes[row, col]
             ax.set_xscale("log")
             ax.axvline(OPERATING_POINT[prot], color="gray", ls=":",
                        label="the authors' pace" if prot == "paper" else "the product's default")
+            if paces:
+                ax.set_xticks(paces, [f"{p:g}" for p in paces])
+                ax.xaxis.set_minor_formatter(NullFormatter())
             ax.set_ylabel(ylabel)
             ax.legend(fontsize=7)
         if loggable:
             axes[0, col].set_yscale("log")
-        else:
-            axes[0, col].text(0.5, 0.5, "no ratio between 0 and infinity", ha="center",
+        if off:
+            axes[0, col].text(0.02, 0.02, "not on the log axis: " + "; ".join(off), fontsize=7, wrap=True,
                               transform=axes[0, col].transAxes)
         axes[0, col].set_title(f"{prot} protocol")
         axes[-1, col].set_xlabel(units[prot])
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    from .plots import save_figure
+
+    return save_figure(fig, path)

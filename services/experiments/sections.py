@@ -289,7 +289,7 @@ def library_part(spec: str, part: str, plan: ReportPlan, out: Path, models_dir: 
         if what == "pace":
             say(f"Table I across the robot's pace ({prot} protocol)")
             pace = run_pace(PaceConfig(libraries=(spec,), protocols=(prot,), paces=plan.paces or dict(DEFAULT_PACES),
-                                       demos=plan.pace_demos, seeds=plan.pace_seeds,
+                                       demos=plan.pace_demos, draw=plan.table1_demos, seeds=plan.pace_seeds,
                                        timing=Timing(iterations=plan.iterations), components=plan.components,
                                        volume=volume, models_dir=models_dir, work_dir=out / "work" / prot),
                             say, compile=plan.compile)

@@ -183,10 +183,10 @@ class SwitchResult:
                 r = by.get((d, m))
                 cells.append("-" if r is None else f"{r.settle_step} / {r.final_goal} / {r.reached_step}")
             out.append(f"{'#' + str(d):>6}" + "".join(f"{c:>40}" for c in cells))
-        out.append("median settle step: " + ", ".join(f"{m} {self.median_settle(m):g}" for m in METHODS)
-                   + "  (the paper: prediction 4, current 13)")
+        out.append("median settle step: " + ", ".join(f"{m} {self.median_settle(m):g}" for m in METHODS))
         out.append(f"median step from which the robot never again goes for {self.config.human_cup} (never = "
-                   f"{self.config.timing.steps}): " + ", ".join(f"{m} {self.median_away(m):g}" for m in METHODS))
+                   f"{self.config.timing.steps}): " + ", ".join(f"{m} {self.median_away(m):g}" for m in METHODS)
+                   + "  (the paper: prediction 4, current 13)")
         n = len(self.settle("prediction"))
         out.append(f"runs ending at the human's cup ({self.config.human_cup}): "
                    + ", ".join(f"{m} {self.conflicts(m)} of {n}" for m in METHODS))
@@ -273,9 +273,14 @@ def plot_switch(result: SwitchResult, path: str | Path) -> Path:
             for k, name in enumerate(runs[0].goal_names):
                 ax.plot(np.arange(n), np.median(stack[:, :, k], axis=0), color=_colour(name), lw=2.2,
                         label=f"{name} (median of {len(runs)})")
-            settle = result.median_settle(method)
-            if not math.isnan(settle):
-                ax.axvline(settle, color="k", ls="--", lw=1, label=f"median settle step {settle:g}")
+            # the verdict's measure (the paper's 4 against 13): the step it leaves the human's cup, not the settle
+            away, steps = result.median_away(method), result.config.timing.steps
+            if 0 < away < steps:
+                ax.axvline(away, color="k", ls="--", lw=1, label=f"median step it leaves {result.config.human_cup}: "
+                           f"{away:g}")
+            elif not math.isnan(away):
+                ax.plot([], [], " ", label=f"median run: {'never goes for' if away <= 0 else 'never leaves'} "
+                        f"{result.config.human_cup}")
         ax.set_ylabel("prediction cost (goal choice)" if paper else "integral cost")
         ax.set_title(f"{'current occupancy only' if method == 'current' else 'predicted occupancy'}, Foresight "
                      f"({result.config.protocol} protocol)")

@@ -46,6 +46,7 @@ def test_the_product_protocol_sweeps_with_the_volume_asked_for_and_the_report_pa
 
     def fake_interference(cfg, progress=None, compile=True):
         asked.append((cfg.protocol, cfg.volume))
+        assert cfg.draw == 5  # Table I's first demonstrations
         return types.SimpleNamespace(ratio=lambda: float("nan"))
 
     monkeypatch.setattr(pace, "run_interference", fake_interference)
@@ -54,9 +55,10 @@ def test_the_product_protocol_sweeps_with_the_volume_asked_for_and_the_report_pa
                              volume="spread"), progress=lambda _: None)
     assert asked == [("product", "spread"), ("paper", None)]  # the paper protocol keeps its own volume
     seen = []
-    monkeypatch.setattr(sections, "run_pace", lambda cfg, say, compile: seen.append(cfg.volume) or PaceResult(cfg))
+    monkeypatch.setattr(sections, "run_pace",
+                        lambda cfg, say, compile: seen.append((cfg.volume, cfg.draw)) or PaceResult(cfg))
     sections.library_part("synthetic", "product:pace", QUICK, tmp_path, tmp_path / "models", volume="spread")
-    assert seen == ["spread"]
+    assert seen == [("spread", QUICK.table1_demos)]  # the report's Table I's draw
 
 
 def test_a_sweep_without_a_finite_positive_ratio_is_drawn(tmp_path):
@@ -69,3 +71,51 @@ def test_a_sweep_without_a_finite_positive_ratio_is_drawn(tmp_path):
                    [nan, point(0.3, 1.0, 0.0)]):
         png = plot_pace(result(*points), tmp_path / f"pace{len(points)}.png")
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_pace_sweeps_demonstrations_are_table_is_first() -> None:
+    """A draw of 3 was no part of Table I's draw of 5 (seed 0: [12, 15, 19] against [6, 7, 11, 14, 17]): the sweep
+    at Table I's pace said no planner touched the human where Table I's basic STOMP did, on #6."""
+    from services.experiments.interference import draw_demos
+    from services.experiments.report import FULL
+
+    table1 = draw_demos(25, 5, 0)
+    assert table1 == [6, 7, 11, 14, 17]  # Table I's own draw is what it was
+    pace = draw_demos(25, 3, 0, draw=5)
+    assert set(pace) < set(table1) and len(pace) == 3
+    assert PaceConfig().draw == 5 and FULL.table1_demos == 5  # the report's sweep draws as its Table I does
+    for seed in range(20):  # any pool and count: the first of the larger draw, never past the pool
+        assert set(draw_demos(9, 2, seed, draw=20)) <= set(draw_demos(9, 8, seed)) and len(draw_demos(9, 2, seed)) == 2
+
+
+def test_the_pace_picture_keeps_a_colour_per_library_readable_ticks_and_names_what_it_cannot_draw(
+        tmp_path, monkeypatch) -> None:
+    """Orange was the synthetic library in the ratio row and the paper's least penetration below; the paper
+    column's log ticks ran into each other; ratios 0 / 0 and inf were dropped without a word."""
+    import matplotlib.colors as mcolors
+
+    from services.experiments import plots
+    from services.experiments.pace import plot_pace
+
+    pts = []
+    for lib in ("synthetic", "paper-library"):
+        for pace, ratio in ((0.0125, float("inf")), (0.025, 3.0), (0.05, float("nan"))):
+            pts.append(dataclasses.replace(point(pace, 1.0, 0.0), protocol="paper", library=lib, ratio=ratio))
+    res = PaceResult(PaceConfig(protocols=("paper",)), pts)
+    figures = []
+    monkeypatch.setattr(plots, "save_figure", lambda fig, path: figures.append(fig) or path)
+    plot_pace(res, tmp_path / "pace.png")
+    ratio_ax, contact_ax, reached_ax = figures[0].axes
+    for ax in (ratio_ax, contact_ax, reached_ax):
+        colours = {}
+        for line in ax.get_lines():
+            lib = line.get_label().split(",")[0]
+            if lib in ("synthetic", "paper-library"):
+                colours.setdefault(lib, set()).add(mcolors.to_hex(line.get_color()))
+        assert all(len(c) == 1 for c in colours.values()) and len(set().union(*colours.values())) == 2
+    assert [t.get_text() for t in reached_ax.get_xticklabels()] == ["0.0125", "0.025", "0.05"]
+    note = " ".join(t.get_text() for t in ratio_ax.texts)
+    assert "synthetic 0.0125: inf" in note and "paper-library 0.05: n/a (0 / 0)" in note
+    import matplotlib.pyplot as plt
+
+    plt.close(figures[0])

@@ -30,3 +30,26 @@ def test_table_i_picture_says_its_protocols_unit_and_hides_nothing(protocol, uni
     import matplotlib.pyplot as plt  # plot_interference chose the Agg backend
 
     plt.close(figures[0])
+
+
+def test_fig9_marks_the_step_the_verdict_times_not_the_settle_step(tmp_path, monkeypatch) -> None:
+    """The dashed line was the median settle step (current at 7, the mean of 14 and 0) while the verdict timed the
+    step each planner leaves the human's cup (17 against 6)."""
+    from services.experiments.switch import SwitchConfig, SwitchResult, SwitchRun, plot_switch
+
+    res = SwitchResult(SwitchConfig(), "synthetic", CupClass("red_cup", 1, "red_cup", 0.0))
+    costs = tuple((1.0, 2.0) for _ in range(20))
+    for method, settles, aways in (("current", (14, 0), (17, 17)), ("prediction", (5, 5), (6, 6))):
+        for demo, (settle, away) in enumerate(zip(settles, aways, strict=True)):
+            res.runs.append(SwitchRun(demo, method, ("red_cup",) * away + ("blue_cup",) * (20 - away),
+                                      ("blue_cup", "red_cup"), costs, costs, settle, away, "blue_cup", None, 0.1, 0.0,
+                                      30.0))
+    figures = []
+    monkeypatch.setattr(plots, "save_figure", lambda fig, path: figures.append(fig) or path)
+    plot_switch(res, tmp_path / "f.png")
+    current, prediction = (ax.get_legend_handles_labels()[1] for ax in figures[0].axes)
+    assert "median step it leaves red_cup: 17" in current and "median step it leaves red_cup: 6" in prediction
+    assert not any("settle" in label for label in (*current, *prediction))
+    import matplotlib.pyplot as plt
+
+    plt.close(figures[0])
