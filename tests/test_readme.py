@@ -130,6 +130,7 @@ def stop(proc: subprocess.Popen[bytes], timeout: float = 20.0) -> int:
     return proc.returncode
 
 
+@pytest.mark.slow
 def test_running_one_service_lines_yield_a_plan(tmp_path) -> None:
     steps = [parse(ln) for ln in section_lines()]
     run = Run(tmp_path, free_port())

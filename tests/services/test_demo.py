@@ -19,6 +19,7 @@ from shared.library import save_library
 from shared.synthetic import generate_library
 
 
+@pytest.mark.slow
 def test_demo_multiprocess_json(tmp_path: Path) -> None:
     lib = tmp_path / "lib.npz"
     save_library(generate_library(8, 6, seed=3), lib)

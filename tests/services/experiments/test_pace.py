@@ -31,7 +31,9 @@ def test_touching_longer_and_never_touching_are_named():
     assert res.verdict("product", "synthetic").endswith("at 0.1")
     assert res.verdict("product", "synthetic").startswith("least penetration")
     none = result(point(0.1, 0.0, 0.0))
-    assert none.verdict("product", "synthetic").startswith("neither planner touches the human at any pace")
+    # of its sample: Table I at the same pace (5 x 10 runs) touched the human where the sweep's 3 x 1 did not
+    assert none.verdict("product", "synthetic").startswith("neither planner touches the human at any pace in these "
+                                                           "5 x 2 runs per pace")
     assert none.to_json()["verdicts"] == {"product, synthetic": none.verdict("product", "synthetic")}
 
 

@@ -18,6 +18,7 @@ from shared.runtime import UserError
 from tests.shared.library.test_report import broken_library
 
 
+@pytest.mark.slow
 def test_quick_report_runs_and_writes_its_report_and_pngs(tmp_path, capsys):
     out = tmp_path / "report"
     assert main(["all", "--quick", "--out", str(out), "--models-dir", str(tmp_path / "models")]) == 0
