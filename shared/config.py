@@ -52,6 +52,7 @@ from shared.config_tree import (
     opt,
     parse_value,
 )
+from shared.data_files import relative_to_cwd
 from shared.security.acl import OBSERVER, ROLES
 
 __all__ = [
@@ -186,7 +187,7 @@ def load_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
     if p.is_dir():
         raise ConfigError(f"config file {str(p)!r} is a directory, not a TOML file")
     if not p.is_file():
-        raise ConfigError(f"config file {str(p)!r} not found")
+        raise ConfigError(f"config file {str(p)!r} not found{relative_to_cwd(p)}")
     try:
         with p.open("rb") as f:
             return tomllib.load(f)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -9,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["read_toml", "finite_vector"]
+__all__ = ["read_toml", "finite_vector", "relative_to_cwd"]
 
 
 def read_toml(spec: str | Path | None, folder: str, default: str, what: str,
@@ -36,12 +37,21 @@ def read_toml(spec: str | Path | None, folder: str, default: str, what: str,
     else:
         p = Path(spec)
         if not p.is_file():
-            raise error(f"{what} {str(p)!r} not found")
+            raise error(f"{what} {str(p)!r} not found{relative_to_cwd(p)}")
         text, source = p.read_text(), str(p)
     try:
         return tomllib.loads(text), source
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{what} {source!r}: {exc}") from None
+
+
+def relative_to_cwd(path: str | os.PathLike[str]) -> str:
+    """`` (relative to the working directory DIR)`` for a relative path, else "": for a "not found" message.
+
+    A relative path in a config file is read from the command's working directory, not the file's: a service
+    started elsewhere (a systemd unit, another shell) said only "library 'small.npz' not found".
+    """
+    return "" if Path(path).is_absolute() else f" (relative to the working directory {os.getcwd()})"
 
 
 def finite_vector(where: str, raw: Any, n: int, error: type[Exception]) -> np.ndarray:

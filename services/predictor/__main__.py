@@ -7,6 +7,7 @@ import threading
 from collections.abc import Callable
 
 from shared.config import ZenohConfig
+from shared.data_files import relative_to_cwd
 from shared.runtime import UserError, service_main
 
 from .core import PredictorConfig
@@ -23,7 +24,8 @@ Needs a model file from `foresight train`. Options come from the dataclass defau
 
 def _make(cfg: PredictorConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
     if not cfg.model.is_file():
-        raise UserError(f"model file {str(cfg.model)!r} not found; run `foresight train --out {cfg.model}` first")
+        raise UserError(f"model file {str(cfg.model)!r} not found{relative_to_cwd(cfg.model)}; run `foresight train "
+                        f"--out {cfg.model}` first")
     service = PredictorService(cfg, zcfg)
     return lambda: service.run(stop)
 

@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from shared.atomic_file import atomic_write, unreadable
+from shared.data_files import relative_to_cwd
 from shared.feature_sets import HERAKLES_NAMES, MAPPINGS, count_features, mapping_for
 from shared.npz_reading import NPZ_LOCK
 from shared.scene import Grid, Scene
@@ -230,7 +231,8 @@ class PredictionModel:
             raise ModelError(f"model file {str(p)!r} is a directory; give the model file itself (foresight train "
                              "--out FILE writes one)")
         if not p.is_file():
-            raise ModelError(f"model file {str(p)!r} not found; run `foresight train --out {p}` first")
+            raise ModelError(f"model file {str(p)!r} not found{relative_to_cwd(p)}; run `foresight train --out {p}` "
+                             "first")
         if why := unreadable(p):
             raise ModelError(f"model file {str(p)!r}: {why}; run as its owner or chmod a+r it")
         try:

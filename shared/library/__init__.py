@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from shared.data_files import relative_to_cwd
 from shared.protocol.limits import MAX_CLASSES, MAX_STRING_CHARS
 
 from .motions import (
@@ -134,4 +135,4 @@ def _read(p: Path) -> MotionLibrary:
             raise LibraryError(f"library {str(p)!r} is a single CSV file; pass the directory holding the "
                                "class files")
         raise LibraryError(f"library {str(p)!r} is neither a directory of CSV files nor a .npz file")
-    raise LibraryError(f"library {str(p)!r} not found")
+    raise LibraryError(f"library {str(p)!r} not found{relative_to_cwd(p)}")

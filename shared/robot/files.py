@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from shared.data_files import relative_to_cwd
+
 __all__ = ["RobotModelError", "read_robot_file", "load_spheres"]
 
 
@@ -41,7 +43,7 @@ def read_robot_file(path: str | Path | None, default: str) -> tuple[str, str]:
         return res.read_text(), f"shared/data/robot/{default}"
     p = Path(path)
     if not p.is_file():
-        raise RobotModelError(f"robot file {str(p)!r} not found")
+        raise RobotModelError(f"robot file {str(p)!r} not found{relative_to_cwd(p)}")
     return p.read_text(), str(p)
 
 

@@ -454,3 +454,21 @@ def test_odd_class_numbers_are_said_with_the_classes_they_became(tmp_path):
                for ln in lines), lines
     assert any("compound_1.csv missing: the classes are numbered in their files' order (class 2 is compound_2)" in ln
                for ln in lines), lines
+
+
+def test_a_relative_path_not_found_names_the_directory_it_was_read_from(tmp_path, monkeypatch):
+    """A config file's library = 'small.npz' is read from the working directory, not the file's: a service started
+    elsewhere said only "library 'small.npz' not found"."""
+    from services.predictor.model import ModelError, PredictionModel
+    from shared.config import ConfigError, load_toml
+
+    monkeypatch.chdir(tmp_path)
+    where = re.escape(f"not found (relative to the working directory {tmp_path})")
+    with pytest.raises(LibraryError, match=rf"^library 'small.npz' {where}$"):
+        load_library("small.npz")
+    with pytest.raises(ConfigError, match=rf"^config file 'c.toml' {where}$"):
+        load_toml("c.toml")
+    with pytest.raises(ModelError, match=rf"^model file 'm.npz' {where}; run"):
+        PredictionModel.load("m.npz")
+    with pytest.raises(LibraryError, match=r"^library '/nowhere/small.npz' not found$"):  # absolute: said as given
+        load_library("/nowhere/small.npz")
