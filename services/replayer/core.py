@@ -65,6 +65,9 @@ class ReplayerConfig:
             raise ConfigError(f"replayer.seed: must be >= 0, got {self.seed}")
         for name in ("wait_for", "stop_with"):
             check_services(getattr(self, name), f"replayer.{name}", PEERS)
+        if self.mode == "lockstep" and self.wait_for:  # it was taken and ignored without a word
+            raise ConfigError(f"replayer.wait_for: real time only, got {','.join(self.wait_for)} in lock-step, where "
+                              "the executor's clock paces the replayer (the executor's wait_for waits for everyone)")
         if self.samples_per_tick < 1:
             raise ConfigError(f"replayer.samples_per_tick: must be >= 1, got {self.samples_per_tick}")
         for name in ("heldout", "max_demos"):

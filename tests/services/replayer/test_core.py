@@ -115,12 +115,20 @@ def test_selection_errors(small_lib):
 
 
 @pytest.mark.parametrize(("field", "value", "pattern"), [
-    ("rate_hz", 0.0, "rate_hz"), ("samples_per_tick", 0, "samples_per_tick"), ("heldout", -1, "heldout"),
+    ("rate_hz", 0.0, "rate_hz"), ("samples_per_tick", 0, "samples_per_tick"),
+    ("heldout", -1, "heldout"),
     ("max_demos", -2, "max_demos"), ("classes", [-1], "classes"), ("wait_timeout", -1.0, "wait_timeout"),
 ])
 def test_config_validation(field, value, pattern):
     with pytest.raises(ConfigError, match=pattern):
         dataclasses.replace(ReplayerConfig(), **{field: value}).validate()
+
+
+def test_waiting_for_services_is_real_time_only() -> None:
+    """``--mode lockstep --wait-for predictor`` was taken and ignored without a word."""
+    ReplayerConfig(wait_for=["predictor"]).validate()
+    with pytest.raises(ConfigError, match="replayer.wait_for: real time only, got predictor,planner in lock-step"):
+        ReplayerConfig(mode="lockstep", wait_for=["predictor", "planner"]).validate()
 
 
 def test_load_replay_library(small_lib, tmp_path):
