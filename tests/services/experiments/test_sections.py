@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from services.experiments.report import FULL, QUICK
 from services.experiments.sections import PROTOCOL_PARTS, part_names, part_weight
 
@@ -25,3 +27,15 @@ def test_part_weight_counts_planned_goal_steps_longest_first() -> None:
     assert order == ["paper:switch", "product:switch", "paper:table1", "product:table1", "paper:pace",
                      "product:pace", "recognition"]
     assert part_weight("product:pace", QUICK) == 1 * 1 * 1 * 2  # --quick: one pace per protocol
+
+
+def test_recognition_is_compared_with_the_paper_where_the_paper_read_it() -> None:
+    """The paper's 50 % at 43 % executed was compared with the rate at 40 %, the nearest grid point."""
+    import types
+
+    from services.experiments.sections import _between, _rate_at
+
+    res = types.SimpleNamespace(fractions=[0.2, 0.4, 0.5, 0.6], rates=[0.1, 0.4, 0.7, 0.8])
+    assert _rate_at(res, 0.43) == pytest.approx(0.49) and _rate_at(res, 0.6) == 0.8
+    assert _between(res.fractions, 0.43) == " (interpolated, 40%-50%)" and _between(res.fractions, 0.6) == ""
+    assert _rate_at(res, 1.0) == 0.8 and _between(res.fractions, 1.0) == " (the nearest measured)"
