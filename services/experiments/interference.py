@@ -36,7 +36,15 @@ from .heldout import (
     samples_per_tick,
 )
 from .planners import VARIANTS, Timing, build_planner
-from .protocol import AUTHORS_TRIALS, TABLE1_SCENE, authors_trial, move3d_path_weights, protocol, run_pacing
+from .protocol import (
+    AUTHORS_TRIALS,
+    TABLE1_SCENE,
+    authors_trial,
+    move3d_path_weights,
+    protocol,
+    run_pacing,
+    settings_run,
+)
 from .reuse import first_differing_state, same_human, same_robot, with_human
 from .scoring import RunScore, score_run
 
@@ -160,8 +168,8 @@ class InterferenceResult:
                    human_class=self.human.name,
                    human_class_distance_m=self.human.distance, demos=self.demos, seeds=self.config.seeds,
                    robot_cup=self.config.robot_cup, human_cup=self.human.cup,
-                   timing=dataclasses.asdict(self.config.timing), w_human=self.config.w_human,
-                   volume=self.config.volume, basic_runs_borrowed=self.borrowed,
+                   w_human=self.config.w_human, basic_runs_borrowed=self.borrowed,
+                   **settings_run(self.config.protocol, self.config.timing, self.config.volume),
                    runs=[dataclasses.asdict(r) for r in self.runs])
         return out
 

@@ -40,7 +40,7 @@ import numpy as np
 from shared.runtime import UserError
 
 __all__ = ["PROTOCOLS", "Protocol", "PAPER", "PRODUCT", "protocol", "move3d_path_weights", "AUTHORS_TRIALS", "TRIALS",
-           "authors_trial", "run_pacing"]
+           "authors_trial", "run_pacing", "settings_run"]
 
 PROTOCOLS = ("product", "paper")
 
@@ -203,3 +203,20 @@ def move3d_path_weights(robot: object) -> np.ndarray:
             reach[j] = reach[j + 1]
     prismatic = np.array([n.endswith("torso_lift_joint") for n in robot.joint_names])
     return np.where(prismatic, 1.0, reach)
+
+
+def settings_run(name: str, timing: Any, volume: str | None) -> dict[str, Any]:
+    """``timing`` (a :class:`~services.experiments.planners.Timing`) and ``volume`` as protocol ``name`` runs them.
+
+    An option left unset (None) is the protocol's, else the planner's or the trainer's default: the paper
+    protocol's JSON said ``"volume": null`` and ``"iterations": null`` where ``paper`` and 51 ran.
+    """
+    import dataclasses
+
+    from services.planner.config import StompConfig
+    from services.predictor.volumes import DEFAULT_VOLUME
+
+    prot = protocol(name)
+    times = dataclasses.asdict(timing)
+    times["iterations"] = times["iterations"] or prot.iterations or StompConfig().iterations
+    return {"timing": times, "volume": volume or prot.volume or DEFAULT_VOLUME}

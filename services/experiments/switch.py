@@ -39,7 +39,7 @@ from .heldout import (
 )
 from .measures import contact_summary, postures_at
 from .planners import Timing, build_planner
-from .protocol import SWITCH_SCENE, authors_trial, move3d_path_weights, protocol, run_pacing
+from .protocol import SWITCH_SCENE, authors_trial, move3d_path_weights, protocol, run_pacing, settings_run
 
 __all__ = ["SWITCH_SCENE", "SwitchConfig", "SwitchRun", "SwitchResult", "settle_step", "away_step", "run_switch",
            "plot_switch"]
@@ -166,8 +166,8 @@ class SwitchResult:
         out["earlier_by"] = self.median_away("current") - self.median_away("prediction")
         out.update(protocol=self.config.protocol, library=self.library, scene=self.config.scene,
                    human_class=self.human.name,
-                   human_class_distance_m=self.human.distance, timing=dataclasses.asdict(self.config.timing),
-                   w_human=self.config.w_human, volume=self.config.volume,
+                   human_class_distance_m=self.human.distance, w_human=self.config.w_human,
+                   **settings_run(self.config.protocol, self.config.timing, self.config.volume),
                    runs=[dataclasses.asdict(r) for r in self.runs])
         return out
 

@@ -24,3 +24,16 @@ def test_the_authors_comparison_puts_sample_standard_deviations_side_by_side() -
     assert rows[0]["authors"]["std"] == pytest.approx(np.std(TABLE1_RUNS["basic"][0], ddof=1))
     # Table I's (std) is the same sample deviation (it was the population one, 5 % smaller with 10 seeds)
     assert res.per_demo("basic") == ([pytest.approx(7 / 3)], [pytest.approx(np.std([1.0, 2.0, 4.0], ddof=1))])
+
+
+@pytest.mark.parametrize(("protocol", "volume", "iterations"), [("paper", "paper", 51), ("product", None, 50)])
+def test_the_json_says_the_volume_and_iterations_that_ran(protocol, volume, iterations) -> None:
+    """The paper protocol's JSON said "volume": null and "iterations": null where `paper` and 51 ran."""
+    from services.predictor.volumes import DEFAULT_VOLUME
+
+    res = InterferenceResult(InterferenceConfig(protocol=protocol, seeds=1), "synthetic",
+                             CupClass("blue_cup", 0, "blue_cup", 0.0), [0])
+    for name in ("basic", "least_penetration", "current"):
+        res.runs.append(RunScore(0, 0, name, 1.0, 0.0, 0.0, 0.1, 0.0, 0.0, 5, ("red_cup",), 30.0))
+    data = res.to_json()
+    assert data["volume"] == (volume or DEFAULT_VOLUME) and data["timing"]["iterations"] == iterations

@@ -17,3 +17,12 @@ def test_the_reached_step_is_the_final_goals() -> None:
     assert final_reached(r, ["blue_cup", "red_cup"], chosen) == 19
     assert final_reached(r, ["blue_cup", "red_cup"], chosen[:10]) == 10  # ended going for blue
     assert final_reached(None, ["blue_cup"], chosen) is None and final_reached(r, ["blue_cup"], []) is None
+
+
+def test_the_switch_json_says_the_volume_and_iterations_that_ran() -> None:
+    """Its JSON said "volume": null and "iterations": null where the paper protocol ran `paper` and 51."""
+    from services.experiments.heldout import CupClass
+    from services.experiments.switch import SwitchConfig, SwitchResult
+
+    data = SwitchResult(SwitchConfig(protocol="paper"), "synthetic", CupClass("red_cup", 1, "red_cup", 0.0)).to_json()
+    assert data["volume"] == "paper" and data["timing"]["iterations"] == 51
