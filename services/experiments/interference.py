@@ -188,8 +188,9 @@ class InterferenceResult:
         out = [f"interference with the final prediction ({unit}), {self.config.protocol} protocol, mean (std) of "
                f"{seeds}; {self.library}, scene {self.config.scene}, human: {self.human.name}", head]
         stats = {n: self.per_demo(n) for n in names}
+        spread = (lambda x: f"({x:5.3f})") if self.config.seeds > 1 else (lambda x: "(  n/a)")  # one seed: no std
         for i, d in enumerate(self.demos):
-            cells = "".join(f"{stats[n][0][i]:>14.3f} ({stats[n][1][i]:5.3f})" for n in names)
+            cells = "".join(f"{stats[n][0][i]:>14.3f} {spread(stats[n][1][i])}" for n in names)
             out.append(f"{'#' + str(d):>6}" + cells)
         out.append(f"{'mean':>6}" + "".join(f"{np.mean(stats[n][0]):>22.3f}" for n in names))
         paper = np.mean(PAPER_TABLE1["basic"]) / np.mean(PAPER_TABLE1["least_penetration"])

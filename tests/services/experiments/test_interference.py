@@ -37,3 +37,17 @@ def test_the_json_says_the_volume_and_iterations_that_ran(protocol, volume, iter
         res.runs.append(RunScore(0, 0, name, 1.0, 0.0, 0.0, 0.1, 0.0, 0.0, 5, ("red_cup",), 30.0))
     data = res.to_json()
     assert data["volume"] == (volume or DEFAULT_VOLUME) and data["timing"]["iterations"] == iterations
+
+
+def test_one_seed_has_no_standard_deviation_to_print() -> None:
+    """With one seed the table printed "(0.000)", a spread of runs that were not run."""
+    def table(seeds: int) -> list[str]:
+        res = InterferenceResult(InterferenceConfig(seeds=seeds), "synthetic", CupClass("blue_cup", 0, "blue_cup",
+                                                                                         0.0), [0])
+        for seed in range(seeds):
+            for name in ("basic", "least_penetration", "current"):
+                res.runs.append(RunScore(0, seed, name, 1.0 + seed, 0.0, 0.0, 0.1, 0.0, 0.0, 5, ("red_cup",), 30.0))
+        return [ln for ln in res.lines() if ln.strip().startswith("#0")]
+
+    assert "(  n/a)" in table(1)[0] and "(0.000)" not in table(1)[0]
+    assert "(0.707)" in table(2)[0]
