@@ -148,9 +148,13 @@ def authors_trial(trials: str, prot: Protocol, scene: str, class_names: list[str
         raise ValueError(f"trials must be one of {', '.join(TRIALS)}, got {trials!r}")
     trial = AUTHORS_TRIALS.get(scene)
     usable = trial is not None and trial[0] in class_names
-    if trials == "authors" and not usable:
-        raise UserError(f"--trials authors: the authors ran no motion of this library in scene {scene} "
-                         f"(they ran {', '.join(f'{k}: {v[0]}' for k, v in AUTHORS_TRIALS.items())})")
+    if trials == "authors" and trial is None:
+        raise UserError(f"--trials authors: the authors ran no trial in scene {scene} (they ran "
+                        f"{', '.join(f'{k}: {v[0]}' for k, v in AUTHORS_TRIALS.items())})")
+    if trials == "authors" and not usable:  # the scene is theirs, the library is not: it said "in this scene"
+        raise UserError(f"--trials authors: this library has no class {trial[0]!r}, the one the authors ran in "
+                        f"scene {scene} (their motions are of the paper's library, "
+                        "../shared/data/paper-library)")
     if trials == "authors" or (trials == "auto" and prot.authors_trials and usable):
         return trial
     return None

@@ -39,8 +39,12 @@ def test_authors_trials_on_the_paper_library_only():
     assert authors_trial("auto", PRODUCT, "pr2_two_cups_facing", PAPER_CLASSES) is None
     assert authors_trial("auto", PAPER, "pr2_two_cups_facing", ["blue_cup", "red_cup"]) is None  # synthetic
     assert authors_trial("cup", PAPER, "pr2_two_cups_facing", PAPER_CLASSES) is None
-    with pytest.raises(UserError, match="authors ran no motion"):
+    with pytest.raises(UserError, match="authors ran no trial in scene pr2_two_cups "):
         authors_trial("authors", PAPER, "pr2_two_cups", PAPER_CLASSES)
+    # their scene, another library: it said "ran no motion ... in scene X (they ran X: compound_1 ...)"
+    with pytest.raises(UserError, match="this library has no class 'compound_1', the one the authors ran in scene "
+                                        "pr2_two_cups_side_parallel"):
+        authors_trial("authors", PAPER, "pr2_two_cups_side_parallel", ["blue_cup", "red_cup"])
 
 
 def test_move3d_weights_are_the_bodies_reach_and_1_for_the_torso():
