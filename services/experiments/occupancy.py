@@ -240,6 +240,9 @@ def run_occupancy(library: MotionLibrary, scene: Scene, config: OccupancyConfig 
         raise UserError(f"library {library.source}: its features have no mapping to the human model")
     if min(library.counts()) < 2:
         raise UserError(f"library {library.source}: leave-one-out needs >= 2 demonstrations per class")
+    held = _held_out(library, c.per_class)
+    if not 0 <= c.example < len(held):  # --example 999 drew the last one without a word
+        raise UserError(f"--example {c.example}: the held-out demonstrations are 0..{len(held) - 1}")
     t0 = time.perf_counter()
     gmm = GMMConfig(n_components=c.components)
     cfg = TrainConfig(gmm=gmm, resolution=c.resolution)
@@ -257,8 +260,7 @@ def run_occupancy(library: MotionLibrary, scene: Scene, config: OccupancyConfig 
             model = train_model(library, scene, replace(cfg, volume=v), progress=False, fit_cache=cache)
             cfg = replace(cfg, temperature=model.temperature)
     tau = float(cfg.temperature or 0)
-    held = _held_out(library, c.per_class)
-    ex = held[min(max(c.example, 0), len(held) - 1)]
+    ex = held[c.example]
     progress(f"{len(held)} held-out demonstrations x {len(c.methods)} volume methods on {c.n_jobs} workers ...")
     chunks = [held[i::c.n_jobs] for i in range(c.n_jobs)]
     parts = Parallel(n_jobs=c.n_jobs)(delayed(_evaluate)(library, scene, cfg, c.methods, ch, cache,

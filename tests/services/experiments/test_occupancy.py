@@ -70,3 +70,7 @@ def test_eval_occupancy_cli(library, tmp_path, capsys) -> None:
         main(["occupancy", "--library", str(path), "--methods", "bogus"])
     assert exc.value.code == 2
     assert "--methods: bogus" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # it drew the last one without a word, after the sweep and training
+        main(["occupancy", "--library", str(path), "--per-class", "1", "--example", "2", "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert "--example 2: the held-out demonstrations are 0..1" in capsys.readouterr().err
