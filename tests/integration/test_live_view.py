@@ -13,6 +13,8 @@ import sys
 import threading
 from pathlib import Path
 
+import pytest
+
 from services.processes import free_port
 from shared.foxglove.client import FoxgloveClient, Received
 from shared.foxglove.decode import SchemaDecoder
@@ -45,6 +47,7 @@ def check(got: list[Received], channels: dict[str, dict]) -> None:
         decoder.decode(r.topic, ch["schemaName"], ch["schemaEncoding"], schema, r.data)
 
 
+@pytest.mark.slow
 def test_clients_see_every_scene_channel_of_a_secure_realtime_run(tmp_path: Path) -> None:
     lib = tmp_path / "lib.npz"
     save_library(generate_library(8, 6, seed=3), lib)

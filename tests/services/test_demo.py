@@ -85,6 +85,7 @@ def test_demo_bad_input_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert "demo.goals: 'green_cup' not a cup of scene pr2_two_cups_side (its cups: blue_cup, red_cup)" in err
 
 
+@pytest.mark.slow
 def test_demo_drives_the_simulated_ros2_robot(tmp_path: Path) -> None:
     """``--robot ros2-sim``: the executor drives `foresight simrobot` (a process) over rmw_zenoh, lock-step."""
     lib = tmp_path / "lib.npz"
