@@ -80,10 +80,13 @@ def library_for(cfg: DemoConfig, scene: Scene) -> MotionLibrary:
 def check_goals(cfg: DemoConfig, scene: Scene) -> None:
     """Raise ConfigError for a goal of ``cfg.goals`` that is not a cup of ``scene``."""
     cups = [c.name for c in scene.cups]
-    unknown = [g for g in cfg.goals.split(",") if g.strip() and g.strip() not in cups]
+    goals = [g.strip() for g in cfg.goals.split(",") if g.strip()]
+    unknown = [g for g in goals if g not in cups]
     if unknown:
         raise ConfigError(f"demo.goals: {', '.join(map(repr, unknown))} not a cup of scene {scene.name} "
                           f"(its cups: {', '.join(cups)})")
+    if len(set(goals)) != len(goals):  # the planner refuses it, after the demo's start-up
+        raise ConfigError(f"demo.goals: each cup once, got {','.join(goals)}")
 
 
 def check_inputs(cfg: DemoConfig) -> None:

@@ -218,6 +218,8 @@ class PlannerConfig:
         if self.stomp.waypoints > MAX_WAYPOINTS:  # a plan carries every waypoint of every goal
             raise ConfigError(f"planner.stomp.waypoints: at most {MAX_WAYPOINTS} (a plan's limit, docs/protocol.md), "
                               f"got {self.stomp.waypoints}")
+        if len(set(self.goals)) != len(self.goals) or not all(self.goals):  # a plan names each goal once
+            raise ConfigError(f"planner.goals: each cup once, got {','.join(self.goals)}")
         check_device(self.device, "planner.device")
 
     def stomp_config(self, joint_noise_scale: Sequence[float] | None = None) -> StompConfig:

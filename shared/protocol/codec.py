@@ -130,7 +130,11 @@ def encode(msg: Message) -> bytes:
             out[f.name] = value.item()
         else:
             out[f.name] = value
-    data = msgpack.packb(out, use_bin_type=True)
+    try:
+        data = msgpack.packb(out, use_bin_type=True)
+    except (OverflowError, UnicodeEncodeError, ValueError, TypeError) as exc:  # 2**70, a lone surrogate
+        raise ProtocolError(f"{msg.TYPE}: cannot be encoded ({type(exc).__name__}: {str(exc)[:120]})",
+                            "malformed") from None
     decode(data, type(msg))  # one validation path for both directions
     return data
 
@@ -169,6 +173,8 @@ def _decode_array(t: str, f: _Field, raw: Any, dims: dict[str, int]) -> np.ndarr
     if len(data) != n * dtype.itemsize:
         raise _err(t, name, f"data has {len(data)} bytes, shape {tuple(shape)} of {dtype.name} needs "
                    f"{n * dtype.itemsize}", "shape")
+    if dtype.kind == "b" and any(b > 1 for b in bytes(data)):  # numpy keeps byte 200 as True, sent on unchanged
+        raise _err(t, name, "a bool is the byte 0 or 1", "malformed")
     arr = np.frombuffer(data, dtype=dtype).reshape(shape).astype(want, copy=True)
     if spec.finite and want.kind == "f" and not np.isfinite(arr).all():
         raise _err(t, name, "contains NaN or infinity", "non-finite")
@@ -249,8 +255,8 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     fields, known = _layout(cls, version)
     unknown = raw.keys() - known
     if unknown:
-        raise ProtocolError(f"{t}: unknown field(s) {', '.join(repr(k[:40]) for k in sorted(unknown)[:5])}",
-                            "malformed")
+        names = sorted(unknown, key=repr)  # str and bytes keys: sorting them together was a TypeError
+        raise ProtocolError(f"{t}: unknown field(s) {', '.join(repr(k[:40]) for k in names[:5])}", "malformed")
     kwargs: dict[str, Any] = {}
     dims: dict[str, int] = {}
     for f in fields:

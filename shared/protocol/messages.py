@@ -22,6 +22,12 @@ __all__ = ["N_FEATURES", "DEMO_EVENTS", "AT_REST", "HumanKeypoints", "HumanPose"
 N_FEATURES = 12
 
 
+def _distinct(message: str, field: str, names: list[str]) -> None:
+    """Refuse repeated or empty names: every receiver keys on them (joints, classes, goals, keypoints)."""
+    if len(set(names)) != len(names) or not all(names):
+        raise _err(message, field, "must be distinct and non-empty")
+
+
 @dataclass
 class HumanKeypoints(Message):
     """One frame of a body tracker: 3D positions of named body points (the tracker's input).
@@ -46,8 +52,7 @@ class HumanKeypoints(Message):
         n = self.positions.shape[0]
         if len(self.names) != n or n == 0:
             raise _err(self.TYPE, "names", f"has {len(self.names)} names for {n} points (at least one point)")
-        if len(set(self.names)) != len(self.names) or not all(self.names):
-            raise _err(self.TYPE, "names", "must be distinct and non-empty")
+        _distinct(self.TYPE, "names", self.names)
         if self.frame < 0:
             raise _err(self.TYPE, "frame", f"must be >= 0, got {self.frame}")
         partial = np.isnan(self.positions).any(axis=1) & ~np.isnan(self.positions).all(axis=1)
@@ -151,6 +156,7 @@ class ClassPosterior(Message):
         if len(self.class_names) != self.posterior.shape[0]:
             raise _err(self.TYPE, "class_names", f"has {len(self.class_names)} names for "
                        f"{self.posterior.shape[0]} classes")
+        _distinct(self.TYPE, "class_names", self.class_names)  # a chart by name merged ["a", "a"] into one
         if np.any(self.posterior < 0) or abs(float(self.posterior.sum()) - 1.0) > 1e-6:
             raise _err(self.TYPE, "posterior", "must be non-negative and sum to 1")
         if np.any(np.isnan(self.log_likelihood)) or np.any(self.log_likelihood == np.inf):
@@ -192,6 +198,10 @@ class OccupancyGrid(Message):
             raise _err(self.TYPE, "indices", f"{self.indices.size} voxels sent for a grid of {n}")
         if self.indices.size and int(self.indices.max()) >= n:
             raise _err(self.TYPE, "indices", f"index {int(self.indices.max())} outside a grid of {n} voxels")
+        if np.any(np.diff(self.indices.astype(np.int64)) <= 0):  # [1, 1]: the voxel drawn twice, the last value kept
+            raise _err(self.TYPE, "indices", "must be strictly increasing (each voxel once)")
+        if np.any(self.values == 0):
+            raise _err(self.TYPE, "values", "only voxels of non-zero probability are sent")
 
     def cells(self) -> int:
         """``nx * ny * nz``, after checking the declared dims against the limits (nothing allocated).
@@ -233,6 +243,10 @@ class OccupancyGrid(Message):
         n = self.cells()
         if self.indices.size and int(self.indices.max()) >= n:
             raise _err(self.TYPE, "indices", f"index {int(self.indices.max())} outside a grid of {n} voxels")
+        if np.any(np.diff(self.indices.astype(np.int64)) <= 0):  # [1, 1]: the voxel drawn twice, the last value kept
+            raise _err(self.TYPE, "indices", "must be strictly increasing (each voxel once)")
+        if np.any(self.values == 0):
+            raise _err(self.TYPE, "values", "only voxels of non-zero probability are sent")
         out = np.zeros(n, dtype=dtype)
         out[self.indices.astype(np.int64)] = self.values.astype(dtype) / dtype(255.0)
         return out.reshape(tuple(int(d) for d in self.dims))
@@ -276,6 +290,8 @@ class Plan(Message):
             raise _err(self.TYPE, "goal_names", f"has {len(self.goal_names)} names for {k} trajectories")
         if len(self.joint_names) != d:
             raise _err(self.TYPE, "joint_names", f"has {len(self.joint_names)} names for {d} joints")
+        _distinct(self.TYPE, "goal_names", self.goal_names)
+        _distinct(self.TYPE, "joint_names", self.joint_names)  # the ROS 2 gateway sent on what its parsers refuse
         if not (0 <= self.chosen < k) or not bool(self.valid[self.chosen]):
             raise _err(self.TYPE, "chosen", f"{self.chosen} is not a valid goal index")
         for name in ("cost_smoothness", "cost_obstacle", "cost_human", "cost_total"):
@@ -309,6 +325,7 @@ class RobotState(Message):
         """Validate this message's invariants (see the class docstring)."""
         if len(self.joint_names) != self.q.shape[0]:
             raise _err(self.TYPE, "joint_names", f"has {len(self.joint_names)} names for {self.q.shape[0]} joints")
+        _distinct(self.TYPE, "joint_names", self.joint_names)
 
 
 @dataclass

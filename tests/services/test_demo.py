@@ -83,6 +83,9 @@ def test_demo_bad_input_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[s
         main(["--goals", "red_cup,green_cup", "--run-dir", str(tmp_path)])
     err = capsys.readouterr().err
     assert "demo.goals: 'green_cup' not a cup of scene pr2_two_cups_side (its cups: blue_cup, red_cup)" in err
+    with pytest.raises(SystemExit):  # the planner refused it, after the demo's start-up
+        main(["--goals", "red_cup,red_cup", "--run-dir", str(tmp_path)])
+    assert "demo.goals: each cup once, got red_cup,red_cup" in capsys.readouterr().err
 
 
 @pytest.mark.slow

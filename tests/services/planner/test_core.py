@@ -140,6 +140,8 @@ def test_a_reached_goal_holds_still_from_where_the_robot_is(scene) -> None:
     assert np.allclose(res.trajectories[:, 0], res.start)  # every goal's trajectory starts at q_t
     with pytest.raises(ConfigError, match="planner.goal_tol"):  # every goal 'reached': the robot never moved
         PlannerConfig(goal_tol=float("inf")).validate()
+    with pytest.raises(ConfigError, match="planner.goals: each cup once, got red_cup,red_cup"):  # a plan of goals
+        PlannerConfig(goals=["red_cup", "red_cup"]).validate()  # ["red_cup", "red_cup"], which receivers refuse
 
 
 def test_bad_input_is_refused_and_the_planner_keeps_working(scene) -> None:
