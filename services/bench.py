@@ -41,7 +41,8 @@ BENCHES: dict[str, tuple[str, str]] = {
 def main(argv: list[str] | None = None, prog: str = "foresight bench") -> int:
     """Run ``foresight bench NAME ARGS...``; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    usage = "\n".join(f"  {k:<10} {desc}" for k, (_, desc) in BENCHES.items())
+    width = max(map(len, BENCHES))  # 'tracker-live' ran into its text at a fixed 10
+    usage = "\n".join(f"  {k:<{width}}  {desc}" for k, (_, desc) in BENCHES.items())
     if not argv or argv[0] in ("-h", "--help"):
         print(f"usage: {prog} {{{','.join(BENCHES)}}} [ARGS...]\n\nbenchmarks:\n{usage}\n\n"
               f"Run '{prog} NAME --help' for a benchmark's options.")

@@ -14,9 +14,25 @@ import difflib
 import sys
 import typing
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
-__all__ = ["ArgumentParser"]
+__all__ = ["ArgumentParser", "DefaultsHelpFormatter", "path_arg"]
+
+
+class DefaultsHelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """The description as written, each option's default after its help (``bench faults`` and ``soak``: none)."""
+
+
+def path_arg(text: str) -> Path:
+    """A path given on the command line; an empty one is refused (it was the current directory).
+
+    ``foresight security init ''`` wrote the authority's key into the working directory, ``log render --all --out ''``
+    its PNGs, ``eval all --out ''`` its run.
+    """
+    if not text.strip():
+        raise argparse.ArgumentTypeError("empty; give a path (an empty one would be the current directory)")
+    return Path(text)
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -30,6 +46,12 @@ class ArgumentParser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
+
+    def add_argument(self, *args: Any, **kwargs: Any) -> argparse.Action:
+        """As argparse's; a ``type=Path`` argument refuses an empty path (:func:`path_arg`)."""
+        if kwargs.get("type") is Path:
+            kwargs["type"] = path_arg
+        return super().add_argument(*args, **kwargs)
 
     def error(self, message: str) -> typing.NoReturn:
         """Exit with status 2 after one line: ``<prog>: error: <message>`` (``--help`` gives the usage)."""

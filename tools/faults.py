@@ -14,7 +14,6 @@ the release check and the MCAP recovery; ``--json`` prints one object.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
 import time
@@ -22,9 +21,9 @@ from pathlib import Path
 from typing import Any
 
 from shared import strict_json
-from shared.arguments import ArgumentParser
+from shared.arguments import ArgumentParser, DefaultsHelpFormatter
 from shared.recording.reader import read_log
-from shared.runtime import cli_errors, interruptible, setup_logging
+from shared.runtime import cli_errors, help_text, interruptible, setup_logging
 
 from .system import PROCESSES, ProcessSystem, SystemSpec, Watcher, positive_number
 
@@ -145,7 +144,7 @@ def _line(r: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench faults") -> int:
     """Run the fault injection; returns 0 when it ran (the numbers are the result)."""
-    p = ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = ArgumentParser(prog=prog, description=help_text(__doc__), formatter_class=DefaultsHelpFormatter)
     p.add_argument("--victims", default="predictor,planner,replayer,router",
                    help=f"what to kill, in order (comma-separated, of {', '.join(PROCESSES)})")
     p.add_argument("--down-s", type=positive_number(inclusive=True), default=3.0, help="seconds each victim stays dead")

@@ -67,13 +67,16 @@ def _parser() -> argparse.ArgumentParser:
         subs = subcommands(name)
         sub_width = max(map(len, subs), default=0)
         lines += [f"  {'':<{width}}    {sub:<{sub_width}}  {text}" for sub, text in subs.items()]
-    return ArgumentParser(
+    parser = ArgumentParser(
         prog="foresight",
         description="Foresight: plan robot motion around the early-predicted workspace occupancy of a human.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="commands:\n" + "\n".join(lines) + "\n\nRun 'foresight COMMAND --help' for the options of a command.",
-        usage="foresight [-h] [--version] COMMAND [ARGS...]",
+        usage="foresight [-h] [-V] COMMAND [ARGS...]",
     )
+    # listed (the usage named --version, the options did not): _dispatch answers it before any parsing
+    parser.add_argument("-V", "--version", action="store_true", help="print the version and exit")
+    return parser
 
 
 def version() -> str:

@@ -16,11 +16,11 @@ records every pose, occupancy grid, plan and robot state. It prints:
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -29,8 +29,8 @@ import numpy as np
 from services.executor.core import reason_kind
 from services.replayer.core import MAX_RATE_HZ, MIN_RATE_HZ
 from shared import strict_json
-from shared.arguments import ArgumentParser
-from shared.runtime import cli_errors, interruptible, setup_logging
+from shared.arguments import ArgumentParser, DefaultsHelpFormatter
+from shared.runtime import cli_errors, help_text, interruptible, setup_logging
 
 from .faults import demo_model
 from .system import ProcessSystem, SystemSpec, Watcher, positive_number
@@ -91,12 +91,18 @@ def summarise(watcher: Watcher, t0: float, t1: float) -> dict[str, Any]:
     }
 
 
-def soak(system: ProcessSystem, watcher: Watcher, duration_s: float, timeout: float = 240.0) -> dict[str, Any]:
-    """Wait for the robot to move, then measure ``duration_s`` seconds; RSS at both ends."""
+def soak(system: ProcessSystem, watcher: Watcher, duration_s: float, timeout: float = 240.0,
+         progress: Callable[[str], None] = lambda _line: None) -> dict[str, Any]:
+    """Wait for the robot to move, then measure ``duration_s`` seconds (a line every 10 s); RSS at both ends."""
+    progress(f"soak: waiting for the robot to move (at most {timeout:g} s)")
     system.wait_moving(watcher, timeout)
     t0 = time.monotonic()
     rss0 = system.rss()
-    time.sleep(duration_s)
+    progress(f"soak: the robot moves; measuring {duration_s:g} s")
+    while (left := t0 + duration_s - time.monotonic()) > 0:  # it slept the whole window without a word
+        time.sleep(min(10.0, left))
+        if time.monotonic() < t0 + duration_s:
+            progress(f"soak: {time.monotonic() - t0:.0f} / {duration_s:g} s, {len(watcher.poses)} poses seen")
     t1 = time.monotonic()
     rss1 = system.rss()
     out = summarise(watcher, t0, t1)
@@ -115,7 +121,7 @@ def _fmt(d: dict[str, float | None], scale: float = 1e3, unit: str = "ms") -> st
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> int:
     """Run the soak; returns 0 when every process was still running at the end."""
-    p = ArgumentParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = ArgumentParser(prog=prog, description=help_text(__doc__), formatter_class=DefaultsHelpFormatter)
     p.add_argument("--rate-hz", type=positive_number(MIN_RATE_HZ, MAX_RATE_HZ, inclusive=True), default=300.0,
                    help="poses per second")
     p.add_argument("--duration-s", type=positive_number(), default=60.0, help="measured window")
@@ -133,7 +139,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> i
                 system.start_router()  # before the watcher: opened first, it warned the router was unreachable
             with interruptible(threading.Event()), Watcher(system.endpoint, poses=True) as watcher:
                 system.start_services()
-                r = soak(system, watcher, args.duration_s, args.timeout)
+                r = soak(system, watcher, args.duration_s, args.timeout,
+                         progress=lambda line: print(line, file=sys.stderr, flush=True))
         finally:
             r_exit = system.close()
     r["exit"] = r_exit

@@ -19,6 +19,7 @@ from shared.arguments import ArgumentParser
 from shared.atomic_file import ready_to_write
 from shared.runtime import UserError, cli_errors, help_text, setup_logging
 from shared.scene import SCENE_HELP
+from tools.png import check_png
 
 from .commands import EXPERIMENTS
 from .planners import Timing
@@ -266,6 +267,7 @@ def _pace(args: argparse.Namespace, out) -> int:
         libraries = (*dict.fromkeys((*libraries, args.library)),)
     if args.iterations is not None and args.iterations < 1:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
+    check_png(str(args.plot), "--plot")  # x.jpg ran the whole sweep; 'fig9' was written fig9.png, said fig9
     ready_to_write(args.plot)
     from shared.library import load_library
 
@@ -324,6 +326,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
         if args.what == "switch" and (args.demos < 0 or args.seed < 0):
             raise UserError(f"--demos must be >= 0 (0: all) and --seed >= 0, got {args.demos} and {args.seed}")
         if args.what == "switch":
+            check_png(str(args.plot), "--plot")
             ready_to_write(args.plot)
         if args.what == "interference":
             from .interference import InterferenceConfig, run_interference

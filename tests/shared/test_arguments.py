@@ -68,3 +68,19 @@ def test_an_option_is_never_abbreviated_and_a_mistake_is_one_line(capsys) -> Non
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert line == "tool render: error: argument --step: invalid int value: 'x'"
     assert tool().parse_args(["eval", "interference", "--robot-speed", "0.5"]).robot_speed == 0.5
+
+
+@pytest.mark.parametrize("argv", [["security", "init", ""], ["eval", "all", "--quick", "--out", " "],
+                                  ["eval", "pace", "--plot", ""], ["log", "render", "x.mcap", "--all", "--out", ""]])
+def test_an_empty_path_on_the_command_line_is_refused(argv, tmp_path, monkeypatch, capsys) -> None:
+    """It was the working directory: `security init ''` wrote the authority's key there, `log render --all --out ''`
+    its PNGs, `eval all --out ''` started its run (a review)."""
+    from tools.foresight import main
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert ": error: argument " in line and "empty; give a path (an empty one would be the current directory)" in line
+    assert not list(tmp_path.iterdir())  # nothing written

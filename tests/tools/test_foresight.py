@@ -45,6 +45,9 @@ def test_help_has_no_rest_markup(argv, capsys) -> None:
 def test_version(capsys) -> None:
     assert cli_main(["--version"]) == 0
     assert re.fullmatch(r"foresight \S+.* \(Python 3\.\d+\.\d+\)\n", capsys.readouterr().out)
+    assert cli_main(["-V"]) == 0 and capsys.readouterr().out.startswith("foresight ")
+    assert cli_main(["--help"]) == 0  # the usage named --version; the options listed -h alone
+    assert "-V, --version" in capsys.readouterr().out
 
 
 def test_no_command_is_an_error_with_the_help_on_stderr(capsys) -> None:

@@ -59,3 +59,28 @@ def test_a_bench_stopped_by_sigterm_closes_the_processes_it_started(bench, signa
     end = signalled(["-c", SIGTERMED.format(bench=bench)], [(signal.SIGTERM, 0.0)], ready="started", timeout=30)
     assert end.stdout.strip() == "closed" and end.returncode == 130, end.stderr
     assert "foresight: interrupted" in end.stderr
+
+
+def test_the_soak_says_what_it_waits_for_and_how_far_the_window_is(monkeypatch):
+    """It slept through the whole window (60 s by default) without a line; its help showed no default."""
+    from tools import soak as soak_module
+
+    clock = [0.0]
+    monkeypatch.setattr(soak_module.time, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(soak_module.time, "sleep", lambda s: clock.__setitem__(0, clock[0] + s))
+    system = NS(wait_moving=lambda watcher, timeout: None, rss=dict, procs={})
+    watcher = NS(poses=[], occupancy=[], plans=[], states=[], snapshot=lambda xs: list(xs))
+    lines: list[str] = []
+    soak_module.soak(system, watcher, 25.0, 240.0, progress=lines.append)
+    assert lines == ["soak: waiting for the robot to move (at most 240 s)", "soak: the robot moves; measuring 25 s",
+                     "soak: 10 / 25 s, 0 poses seen", "soak: 20 / 25 s, 0 poses seen"]
+
+
+def test_the_soak_and_faults_help_show_their_defaults(capsys):
+    from tools import faults, soak
+
+    for module in (soak, faults):
+        with pytest.raises(SystemExit):
+            module.main(["--help"])
+        out = capsys.readouterr().out
+        assert "(default: " in out and "``" not in out and ":mod:" not in out, module.__name__

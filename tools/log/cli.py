@@ -48,6 +48,8 @@ SUBCOMMANDS: dict[str, str] = {
 }
 """The sub-commands of ``foresight log`` with one line each (``foresight --help`` lists them)."""
 
+_FILE_HELP = "MCAP file, or a run's directory (its log; a demo --compare run's: the prediction run's)"
+
 
 def _main_info(args: argparse.Namespace) -> int:
     """One log's summary; a directory's: every log under it (``--json``: a list), as after ``demo --compare``."""
@@ -65,14 +67,17 @@ def _main_info(args: argparse.Namespace) -> int:
             shown.append(info_dict(lf) if args.json else format_info(lf))
         except UserError as exc:
             failed += 1
-            shown.append({"file": str(f), "unreadable": str(exc)} if args.json else f"file: {f}: {exc}")
+            said = str(exc) if str(exc).startswith(str(f)) else f"{f}: {exc}"  # the path once, not "f: f: ..."
+            shown.append({"file": str(f), "unreadable": str(exc)} if args.json else f"file: {said}")
     print(strict_json.dumps(shown, indent=2) if args.json else "\n\n".join(str(x) for x in shown))
-    return 2 if failed == len(logs) else 0
+    return 2 if failed == len(logs) else 1 if failed else 0  # one unreadable of several: not a success either
 
 
 def _main_render(args: argparse.Namespace, prog: str) -> int:
     if not args.all:
-        check_png(args.out, "--out")  # matplotlib would write NAME.png where we print NAME
+        check_png(str(args.out), "--out")  # matplotlib would write NAME.png where we print NAME
+    elif args.out.exists() and not args.out.is_dir():  # it failed with "File exists" after reading the log
+        raise UserError(f"--out {args.out}: a file; with --all, --out is the directory of the steps' PNGs")
     wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.RobotState"}
     lf = read_log(args.file, keep=lambda ch: ch.schema_name in wanted and ch.message_encoding == "msgpack")
     views = step_views(lf)
@@ -128,7 +133,7 @@ def _main_snapshot(args: argparse.Namespace) -> int:
 
     file = log_path(args.file)  # a run's directory: its log (the picture beside it, named for it)
     if args.out is not None:
-        check_png(args.out, "--out")
+        check_png(str(args.out), "--out")
     out = Path(args.out) if args.out is not None else file.with_name(f"{file.stem}-snapshot.png")
     state = scene_at(file, args.at)
     if args.at is not None and args.at > state.t_s + 1e-6:  # it drew the end without a word
@@ -177,33 +182,33 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
     pi.add_argument("file", help="MCAP file, or a directory: every log under it (a demo --compare run's)")
     pi.add_argument("--json", action="store_true", help="print one JSON object")
     pr = sub.add_parser("render", help=SUBCOMMANDS["render"])
-    pr.add_argument("file", help="MCAP file")
+    pr.add_argument("file", help=_FILE_HELP)
     pr.add_argument("--step", type=int, default=None, help="replanning step (Plan.step) to draw")
     pr.add_argument("--all", action="store_true", help="draw every step; --out is then a directory")
-    pr.add_argument("--out", required=True, help="PNG path (or directory with --all)")
+    pr.add_argument("--out", required=True, type=Path, help="PNG path (or directory with --all)")
     pr.add_argument("--min-probability", type=float, default=0.05, help="hide voxels below this probability")
     pl = sub.add_parser("latency", help=SUBCOMMANDS["latency"])
-    pl.add_argument("file", help="MCAP file")
+    pl.add_argument("file", help=_FILE_HELP)
     pl.add_argument("--json", action="store_true", help="print one JSON object")
     pl.add_argument("--slowest", type=int, default=0, metavar="N",
                     help="also list the N plans with the longest pose -> plan, each split into its planning time and "
                     "the rest (the wait for the step before it, and travel): is a tail slow steps or late starts?")
     pc = sub.add_parser("compress", help=SUBCOMMANDS["compress"])
-    pc.add_argument("file", help="MCAP file")
-    pc.add_argument("out", help="the new MCAP file")
+    pc.add_argument("file", help=_FILE_HELP)
+    pc.add_argument("out", type=Path, help="the new MCAP file")
     pc.add_argument("--compression", default="zstd", choices=("zstd", "lz4", "none"), help="chunk compression")
     pt = sub.add_parser("table", help=SUBCOMMANDS["table"])
-    pt.add_argument("file", help="MCAP file")
+    pt.add_argument("file", help=_FILE_HELP)
     pt.add_argument("--json", action="store_true", help="print one JSON object (the demo's --json keys)")
     ps = sub.add_parser("snapshot", help=SUBCOMMANDS["snapshot"])
-    ps.add_argument("file", help="MCAP file")
+    ps.add_argument("file", help=_FILE_HELP)
     ps.add_argument("--at", type=float, default=None, metavar="SECONDS",
                     help="seconds of recording (log time, wall clock) from the first scene record; a lock-step run "
                          "records its simulated steps faster than they are simulated (default: the last plan)")
-    ps.add_argument("--out", default=None, metavar="PNG",
+    ps.add_argument("--out", default=None, metavar="PNG", type=Path,
                     help="PNG path (default: FILE's stem + '-snapshot.png' next to it)")
     args = parser.parse_args(argv)
-    with cli_errors(prog):
+    with cli_errors(f"{prog} {args.cmd}"):  # 'foresight log render: error: ...', not 'foresight log
         if args.cmd != "info" and (main_log := compare_log(Path(args.file))) is not None:
             print(f"foresight log: note: {args.file} is a demo --compare run: its prediction run's log, {main_log} "
                   "(the other planners': their own directories under it)", file=sys.stderr)

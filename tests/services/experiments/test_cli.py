@@ -61,13 +61,15 @@ def test_an_output_path_a_file_is_in_the_way_of_is_refused_before_the_work(tmp_p
     (["occupancy", "--resolution", "-1"], "--resolution must be between 0.005 and 0.5 m, got -1.0"),
     (["occupancy", "--resolution", "0.001"], "--resolution must be between 0.005 and 0.5 m, got 0.001"),
     (["pace", "--libraries", "synthetic,{tmp}/none"], "{tmp}/none"),
+    (["switch", "--plot", "{tmp}/fig9.jpg"], "--plot"),  # it ran the experiment, then matplotlib refused jpg
+    (["pace", "--plot", "{tmp}/pace"], "--plot"),  # written pace.png, said pace
 ])
 def test_bad_inputs_are_refused_before_any_work(tmp_path, capsys, argv, message) -> None:
     """-1 was a joblib traceback and 0.001 a 43 GiB allocation after the demonstrations' sweep; a missing library
     of `eval pace` was said after the other libraries' runs."""
     with pytest.raises(SystemExit) as stop:
         main([*(a.format(tmp=tmp_path) for a in argv), "--out" if argv[0] == "occupancy" else "--work-dir",
-              str(tmp_path / "work"), *(["--models-dir", str(tmp_path / "models")] if argv[0] == "pace" else [])])
+              str(tmp_path / "work"), *(["--models-dir", str(tmp_path / "models")] if argv[0] != "occupancy" else [])])
     err = capsys.readouterr().err.strip().splitlines()
     assert stop.value.code == 2 and len(err) == 1 and message.format(tmp=tmp_path) in err[0], err
     assert not (tmp_path / "models").exists() and not (tmp_path / "work").exists()

@@ -70,10 +70,12 @@ def test_info_of_a_directory_describes_every_log_under_it(run_log, tmp_path, cap
         main(["info", str(tmp_path / "empty")])
     assert "no .mcap file under it" in capsys.readouterr().err
     (tmp_path / "empty" / "broken.mcap").write_bytes(b"")  # one unreadable log: named, the others still described
-    assert main(["info", str(tmp_path)]) == 0
+    assert main(["info", str(tmp_path)]) == 1  # not a success (it was 0)
     out = capsys.readouterr().out
     assert out.count("complete") == 2 and "broken.mcap: " in out and "not an MCAP file (empty)" in out
-    assert main(["info", str(tmp_path), "--json"]) == 0
+    broken = str(tmp_path / "empty" / "broken.mcap")
+    assert f"file: {broken}: not an MCAP" in out and f"{broken}: {broken}" not in out  # the path once
+    assert main(["info", str(tmp_path), "--json"]) == 1
     assert [("unreadable" in d) for d in json.loads(capsys.readouterr().out)] == [False, True, False]
     assert main(["info", str(tmp_path / "empty")]) == 2  # none readable
 
@@ -105,6 +107,10 @@ def test_the_other_commands_read_a_compare_runs_prediction_log_and_say_so(run_lo
     (["render", "{log}", "--step", "1", "--out", "{tmp}/step1"], "ending in .png"),  # it wrote step1.png, said step1
     (["info", "{bad}"], "not an MCAP file"),
     (["info", "{odd}"], "metadata 'foresight.rejects' holds {'k': 'many'}, not counts"),  # was a traceback
+    (["render", "{log}", "--all", "--out", ""], "argument --out: empty"),  # its PNGs went into the working directory
+    (["render", "{log}", "--all", "--out", "{bad}"], "a file; with --all, --out is the directory"),  # 'File exists'
+    (["snapshot", "{log}", "--out", " "], "argument --out: empty"),
+    (["compress", "{log}", ""], "argument out: empty"),
 ])
 def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
     from mcap.writer import Writer
@@ -122,7 +128,7 @@ def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
         main(argv)
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and message in err[0]
+    assert len(err) == 1 and message in err[0] and err[0].startswith(f"foresight log {argv[0]}: error: ")
     assert not list(tmp_path.glob("step1*"))
 
 

@@ -47,7 +47,7 @@ def test_a_damaged_chunk_is_reported_not_raised(run_log: Path, tmp_path: Path, c
     except SystemExit as stop:  # a one-line error, status 2
         rc = stop.code
         err = capsys.readouterr().err.strip().splitlines()
-        assert rc == 2 and len(err) == 1 and err[0].startswith("foresight log: error:"), err
+        assert rc == 2 and len(err) == 1 and err[0].startswith(f"foresight log {command}: error:"), err
     assert rc in (0, 2)
 
 
