@@ -152,7 +152,9 @@ class VoxelTables:
         u = torch.minimum(u, self.u_max)
         if mode == "nearest":
             # floor(u + 1/2), not round: round-half-even put points on a face in the upper voxel at some faces and
-            # the lower at others; a face's point belongs to the voxel above it, as Grid.index's [i, i + 1) has it
+            # the lower at others. u is taken from the first voxel's centre, so a point exactly on a face can still
+            # land on the other side of it from Grid.index's [i, i + 1) by rounding (17-25 of 139 face points in
+            # a review): a point on a face is at both voxels' edge, and either value is the field there
             idx = (torch.floor(u + 0.5) * self.voxel_strides).sum(-1).long()
             return self.volume.view(-1).index_select(0, idx).reshape(lead)
         i0 = torch.minimum(u.floor(), self.cell_max)
