@@ -356,7 +356,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
         share_config_file(args.config, cfg)
         setup_logging(cfg.log_level)
         stop = threading.Event()
-        restore = stop_on_signals(stop, grace_s=STOP_GRACE_S)  # the services' own bounded stops come first
+        restore = stop_on_signals(stop, grace_s=STOP_GRACE_S, prog=prog)  # the services' own bounded stops come first
         progress = (lambda line: print(line, file=sys.stderr, flush=True)) if cfg.json else \
             (lambda line: print(line, flush=True))
         if cfg.prepare is not None:

@@ -8,6 +8,7 @@ runs/demo/latest`` found nothing after an early Ctrl-C), and a run no service wr
 
 from __future__ import annotations
 
+import itertools
 import shutil
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -52,12 +53,15 @@ class RunDirectory:
         """A new directory under ``root`` named for the time (UTC), ``mode`` and ``compare``."""
         stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
         name = f"{stamp}-{mode}{'-compare' if compare else ''}"
-        run, n = root / name, 1
-        while run.exists():  # two runs within a second
-            n += 1
-            run = root / f"{name}-{n}"
-        run.mkdir(parents=True)
-        return cls(run)
+        root.mkdir(parents=True, exist_ok=True)
+        for n in itertools.count(1):  # two runs within a second: made, not checked then made (two demos raced)
+            run = root / (name if n == 1 else f"{name}-{n}")
+            try:
+                run.mkdir()
+            except FileExistsError:
+                continue
+            return cls(run)
+        raise AssertionError("unreachable")  # pragma: no cover
 
     @property
     def latest(self) -> Path:

@@ -45,7 +45,7 @@ from services.supervisor import Supervisor, describe_exit
 from shared.config import ZenohConfig
 from shared.library import MotionLibrary, save_library
 from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyGrid, Plan, RobotState
-from shared.runtime import interruptible
+from shared.runtime import UserError, interruptible
 from shared.scene import Scene, load_scene
 from shared.security import secure_endpoints
 from shared.transport import Presence, open_session, subscribe
@@ -66,7 +66,7 @@ def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> 
     it has stopped).
     """
     if not mcap.is_file():
-        return "no log was written (the executor had not started)"
+        return "no log was written (the executor ended before it opened one, or had not started)"
     from shared.recording.reader import read_log
 
     lf = read_log(mcap)
@@ -253,6 +253,9 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 subscribe(session, keys.posterior, ClassPosterior, on_other),
                 subscribe(session, keys.pose, HumanPose, on_other)]
         presence = Presence(session, keys, "demo")
+        supervisor: Supervisor | None = None
+        executor: ServiceProcess | None = None
+        reported: set[str] = set()  # services whose end was said in a line: not again as a warning
         try:
             out(f"foresight demo: starting {', '.join(order)}")
             for name in order:
@@ -266,7 +269,14 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                             if cfg.mode == "lockstep" else ""))
                 elif name != "executor":
                     began = time.monotonic()  # each service said as it comes up: the start-up is silent otherwise
-                    if procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout), stop=stop):
+                    try:
+                        up = procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout), stop=stop)
+                    except UserError as exc:  # died at start: this run ends (status 1, as an executor's failure),
+                        out(f"foresight demo: {exc}")  # and --compare keeps the runs before it (it ended them all,
+                        status = 1  # status 2, the code of bad input)
+                        reported.add(name)
+                        break
+                    if up:
                         out(f"foresight demo: {name} up ({time.monotonic() - began:.1f} s)")
             executor = procs["executor"]
             supervisor = Supervisor(procs, out, restart=cfg.restart, fatal=cfg.mode == "lockstep",
@@ -281,7 +291,9 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                     status = 1
                     break
                 stop.wait(0.1)
-            if stop.is_set():
+            if stop.is_set() and executor.returncode == 0 and status == 0:  # it had finished: the run is whole
+                pass  # (a Ctrl-C just after the last step said "interrupted after 20 of 20 steps", status 130)
+            elif stop.is_set():
                 out("foresight demo: interrupted; stopping the services (the executor first: it closes the log)")
                 status = 130
             elif executor.returncode not in (0, None):
@@ -293,11 +305,14 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
             if faults:
                 out("foresight demo: faults during the run: " + ", ".join(faults))
         finally:
+            said = reported | ({name for name, _ in supervisor.faults} if supervisor is not None else set())
+            if status == 1 and executor is not None and executor.returncode not in (0, None):
+                said.add("executor")  # reported above, one line: not again as a warning
             for name in reversed(order):
                 code = procs[name].stop(timeout=10.0)
                 if name == "executor":  # its log is closed: what the others still send is not the run's
                     recording.clear()
-                if code not in (0, None, -15):
+                if code not in (0, None, -15) and name not in said:
                     log.warning("%s exited with status %s", name, code)
             presence.close()
             for s in subs:

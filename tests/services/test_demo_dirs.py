@@ -28,3 +28,15 @@ def test_a_run_nothing_was_written_into_is_removed_and_a_first_run_leaves_no_lin
     run.point_latest()
     run.end_without_log()
     assert not run.path.exists() and not (tmp_path / "latest").is_symlink()  # nothing to hand back to: no link
+
+
+def test_two_demos_started_in_the_same_second_get_a_directory_each(tmp_path, monkeypatch) -> None:
+    """The name was checked, then made: two demos between the two steps both took it, and one failed ('File
+    exists', status 2) in 5 of 5 of a review's trials. The race is played here by a check that always says free."""
+    from pathlib import Path
+
+    first = RunDirectory.create(tmp_path, "lockstep", False)
+    monkeypatch.setattr(Path, "exists", lambda self: False)  # the other demo made it after this one looked
+    second = RunDirectory.create(tmp_path, "lockstep", False)
+    third = RunDirectory.create(tmp_path, "lockstep", False)
+    assert len({first.path, second.path, third.path}) == 3 and all(p.path.is_dir() for p in (first, second, third))
