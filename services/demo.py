@@ -263,11 +263,11 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     if cfg.compare and len(outcomes) == len(VARIANTS):
         summary.extra["verdict"] = verdict(outcomes)
     planned = [name for name, _ in variants]
-    cut = cut_words(outcomes, planned)
+    cut = cut_words(outcomes, planned, failed=status not in (0, 130))
     title = figure_title(cfg, summary, scene.name, cut)
     against = ("the prediction planner's final prediction" if summary.scored_against == "final prediction"
                else f"the run's {summary.scored_against}")
-    summary.extra["outcome_lines"] = outcome_lines(outcomes, against, planned)
+    summary.extra["outcome_lines"] = outcome_lines(outcomes, against, planned, failed=status not in (0, 130))
     figure = _picture(lambda png: draw_outcomes(outcomes, scene, reference, records[0].poses, png, cfg.period_s,
                                                 title), root / "run.png", out)
     if figure is not None:

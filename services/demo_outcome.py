@@ -174,19 +174,23 @@ def not_run(outcomes: list[Outcome], planned: list[str]) -> list[str]:
     return [name for name in planned if name not in {o.planner for o in outcomes}]
 
 
-def cut_words(outcomes: list[Outcome], planned: list[str]) -> str:
-    """What of the run is missing, for the picture's title: the planners cut short, and those not run at all."""
+def cut_words(outcomes: list[Outcome], planned: list[str], failed: bool = False) -> str:
+    """What of the run is missing, for the picture's title: the planners cut short, and those not run at all.
+
+    ``failed``: a service of one failed (a crash at start was called an interruption); else the run was interrupted.
+    """
     missing = not_run(outcomes, planned)
     return "; ".join([f"{o.planner} {o.cut_short}" for o in outcomes if o.cut_short]
-                     + ([f"{' and '.join(missing)} not run (interrupted)"] if missing else []))
+                     + ([f"{' and '.join(missing)} not run ({'a service failed' if failed else 'interrupted'})"]
+                        if missing else []))
 
 
 def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planner's final prediction",
-                  planned: list[str] | None = None) -> list[str]:
+                  planned: list[str] | None = None, failed: bool = False) -> list[str]:
     """The comparison table and its verdict.
 
     ``against``: what the interference is scored against; ``planned``: the planners the run was to compare
-    (``--compare``'s), when some did not run (interrupted).
+    (``--compare``'s), when some did not run (interrupted, or ``failed``: a service of one failed).
     """
     unit = outcomes[0].unit if outcomes else "step"
     out = ["", f"comparison (interference: the paper's Table I measure against {against}; contact: overlap with the "
@@ -204,7 +208,9 @@ def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planne
     text = verdict(outcomes)
     missing = not_run(outcomes, planned or [])
     if missing:  # Ctrl-C between the planners: "one planner, run --compare" was said to a --compare run
-        out.append(f"not compared: the run was interrupted before {' and '.join(missing)} ran")
+        names = " and ".join(missing)  # a crash at start was called an interruption
+        out.append(f"not compared: {names} did not run to an outcome (a service failed: see the lines above)"
+                   if failed else f"not compared: the run was interrupted before {names} ran")
     elif text:
         out.append(f"verdict: {text}")
     elif len(outcomes) == 1 and not outcomes[0].cut_short:  # one row says nothing of what prediction changes

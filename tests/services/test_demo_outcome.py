@@ -94,6 +94,11 @@ def test_a_compare_run_interrupted_before_the_other_planners_says_so() -> None:
     assert cut_words(first, planned) == "current occupancy and no human cost not run (interrupted)"
     assert cut_words(first, ["prediction"]) == "" and "foresight demo --compare" in outcome_lines(first, planned=[
         "prediction"])[-1]  # a single run: the advice stands
+    # a service of the second planner's run died at start: that was called an interruption
+    assert outcome_lines(first, planned=planned, failed=True)[-1] == (
+        "not compared: current occupancy and no human cost did not run to an outcome (a service failed: see the lines "
+        "above)")
+    assert cut_words(first, planned, failed=True) == "current occupancy and no human cost not run (a service failed)"
 
 
 def test_measure_run_scores_contact_and_interference() -> None:
