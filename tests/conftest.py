@@ -124,15 +124,6 @@ COLLECTED = pytest.StashKey[int]()
 """How many tests this session collected (after -k/-m deselection); see :func:`whole_suite`."""
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The tests marked ``slow`` first, each group in its collected order (the same order in every xdist worker).
-
-    The workers take tests in this order: a two-minute test taken last kept one worker busy while the other had
-    nothing left (the longest first, the rest fills the gaps).
-    """
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
-
-
 def pytest_collection_finish(session: pytest.Session) -> None:
     session.config.stash[COLLECTED] = len(session.items)
 
