@@ -243,10 +243,6 @@ class OccupancyGrid(Message):
         n = self.cells()
         if self.indices.size and int(self.indices.max()) >= n:
             raise _err(self.TYPE, "indices", f"index {int(self.indices.max())} outside a grid of {n} voxels")
-        if np.any(np.diff(self.indices.astype(np.int64)) <= 0):  # [1, 1]: the voxel drawn twice, the last value kept
-            raise _err(self.TYPE, "indices", "must be strictly increasing (each voxel once)")
-        if np.any(self.values == 0):
-            raise _err(self.TYPE, "values", "only voxels of non-zero probability are sent")
         out = np.zeros(n, dtype=dtype)
         out[self.indices.astype(np.int64)] = self.values.astype(dtype) / dtype(255.0)
         return out.reshape(tuple(int(d) for d in self.dims))
