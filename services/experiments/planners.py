@@ -85,7 +85,7 @@ def build_planner(scene: Scene, goals: list[str], human_cost: bool, timing: Timi
     if not human_cost or w_human is not None:
         cost = dataclasses.replace(cost, w_human=w_human if human_cost else 0.0)
     p = protocol
-    stomp = StompConfig(iterations=timing.iterations or p.iterations or StompConfig.iterations)
+    stomp = StompConfig(iterations=p.stomp_iterations(timing.iterations))
     reuse = timing.reuse if timing.reuse is not None else p.reuse
     if reuse is not None:
         stomp = dataclasses.replace(stomp, reuse=reuse)

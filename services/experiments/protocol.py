@@ -102,6 +102,12 @@ class Protocol:
         """The path length per step in ``scene`` (0: the robot follows its plan in time)."""
         return dict(self.path_per_step).get(scene, 0.0)
 
+    def stomp_iterations(self, asked: int | None) -> int:
+        """STOMP's iterations per step: ``asked`` (``Timing.iterations``), else this protocol's, else the planner's."""
+        from services.planner.config import StompConfig
+
+        return asked or self.iterations or StompConfig.iterations
+
 
 PRODUCT = Protocol("product")
 
@@ -217,10 +223,9 @@ def settings_run(name: str, timing: Any, volume: str | None) -> dict[str, Any]:
     """
     import dataclasses
 
-    from services.planner.config import StompConfig
     from services.predictor.volumes import DEFAULT_VOLUME
 
     prot = protocol(name)
     times = dataclasses.asdict(timing)
-    times["iterations"] = times["iterations"] or prot.iterations or StompConfig().iterations
+    times["iterations"] = prot.stomp_iterations(times["iterations"])  # as build_planner sets it
     return {"timing": times, "volume": volume or prot.volume or DEFAULT_VOLUME}
