@@ -56,22 +56,24 @@ class RobotLink(Protocol):
 
 
 def command_points(reference: Reference, progress: float, q: np.ndarray, config: ExecutorConfig,
-                   velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                   limits: ArmLimits) -> tuple[np.ndarray, np.ndarray]:
     """The rest of ``reference`` from ``progress`` on, timed at the executor's pace, for a trajectory controller.
 
     Args:
         reference: The adopted plan's chosen trajectory.
         progress: How far the executor's pace has got along it: seconds, or configuration-space length with
             ``config.path_per_step``.
-        q: ``(D,)`` the robot's present configuration (where the controller starts from: :func:`present`, not its
-            last report).
+        q: ``(D,)`` the robot's present configuration in its own joint values, a continuous joint possibly
+            unwrapped (where the controller starts from: :func:`present`, not its last report).
         config: ``path_per_step``, ``step_period_s``, ``velocity_scale``.
-        velocity: ``(D,)`` the joint velocity limits.
+        limits: The joint velocity limits, and which joints are continuous.
 
     Returns:
-        ``positions`` ``(N, D)``: the waypoints still ahead (at least the last one); ``times`` ``(N,)``: their
-        ``time_from_start``, each segment at least as long as the slowest joint needs at ``velocity_scale`` of its
-        limit, and :data:`MIN_SEGMENT_S`.
+        ``positions`` ``(N, D)``: the waypoints still ahead (at least the last one), in the robot's own joint values
+        (continuous joints turning the short way from ``q``: :meth:`ArmLimits.unwrap_from`); ``times`` ``(N,)``:
+        their ``time_from_start``, each segment at least as long as the slowest joint needs at ``velocity_scale``
+        of its limit, and :data:`MIN_SEGMENT_S`. The segments are timed on the unwrapped positions: a wrist roll
+        at +pi read as -pi was timed as a turn of 2 pi the long way round (9x slower than needed).
     """
     if config.path_per_step > 0:
         ahead = reference.cumulative > progress + 1e-12
@@ -80,9 +82,10 @@ def command_points(reference: Reference, progress: float, q: np.ndarray, config:
         ahead = reference.dt * np.arange(len(reference.waypoints)) > progress + 1e-12
         nominal = reference.dt * np.arange(len(reference.waypoints)) - progress
     ahead[-1] = True
-    positions, nominal = reference.waypoints[ahead], np.maximum(nominal[ahead], 0.0)
-    start = np.vstack([q[None], positions[:-1]])
-    slowest = np.max(np.abs(positions - start) / (velocity * config.velocity_scale), axis=-1)  # (N,)
+    positions = limits.unwrap_from(q, reference.waypoints[ahead])
+    nominal = np.maximum(nominal[ahead], 0.0)
+    start = np.vstack([np.asarray(q, dtype=np.float64)[None], positions[:-1]])
+    slowest = np.max(np.abs(positions - start) / (limits.velocity * config.velocity_scale), axis=-1)  # (N,)
     segments = np.maximum(np.maximum(np.diff(nominal, prepend=0.0), slowest), MIN_SEGMENT_S)
     return positions.copy(), np.cumsum(segments)
 
@@ -158,9 +161,8 @@ class Ros2Arm(ExecutorCore):
                 # where the arm is, not its report: read at the end of the last step, h ago in real time (in lock-step
                 # the arm moves only with the next /clock)
                 since = h if self.config.mode == "realtime" else 0.0
-                now = self.limits.clamp(self.limits.wrap(present(self._measured, self.limits, since)))
-                positions, times = command_points(self.reference, self.tau, now, self.config, self.limits.velocity)
-                self.link.send(self.limits.unwrap_from(self._measured.q, positions), times)
+                now = present(self._measured, self.limits, since)  # the robot's own values, bounded ones clamped
+                self.link.send(*command_points(self.reference, self.tau, now, self.config, self.limits))
                 self._commanded = self.plan
                 self.sent_plans += 1
         elif self._commanded is not None:  # hold where it is, once per hold (nothing was sent before a plan)

@@ -32,9 +32,8 @@ from shared.protocol import ClassPosterior, HumanPose, OccupancyGrid, Plan, Robo
 from .domain import check_domain_id, ros_domain_id
 from .wire import ROS_NAME, data_key
 
-__all__ = ["Ros2Config", "Ros2Mapping", "Topic", "TOPICS",
-           "ROBOT_TYPES", "KEYPOINTS_TYPE", "Ros2InputError", "seconds_in", "time_msg", "check_node_name",
-           "namespaced"]
+__all__ = ["Ros2Config", "Ros2Mapping", "Topic", "TOPICS", "ROBOT_TYPES", "CLOCK_TOPIC", "command_topic",
+           "KEYPOINTS_TYPE", "Ros2InputError", "seconds_in", "time_msg", "check_node_name", "namespaced"]
 
 STORE = "ros2_jazzy"
 """The rosbags type store the message definitions and hashes come from (ROS 2 Jazzy)."""
@@ -66,6 +65,15 @@ TOPICS = {
 ROBOT_TYPES = {"command": "trajectory_msgs/msg/JointTrajectory", "state": "sensor_msgs/msg/JointState",
                "clock": "rosgraph_msgs/msg/Clock"}
 """What the executor exchanges with a ROS 2 robot (``robot = "ros2"``): plans out, joint states in, /clock out."""
+
+CLOCK_TOPIC = TOPICS["clock"].name
+"""The simulated time's topic, the one every ROS 2 node reads with ``use_sim_time``."""
+
+
+def command_topic(controller: str) -> str:
+    """A ``joint_trajectory_controller``'s command topic: ``/<controller>/joint_trajectory``."""
+    return f"/{controller}/joint_trajectory"
+
 
 KEYPOINTS_TYPE = "geometry_msgs/msg/PoseArray"
 """A body tracker's keypoints, as the tracker takes them from ROS 2 (:mod:`services.ros2.keypoints`)."""
@@ -311,14 +319,15 @@ class Ros2Mapping:
             raise Ros2InputError(f"{msgtype}: cannot be decoded ({type(exc).__name__}: {exc})") from None
 
     def joint_state_in(self, payload: bytes, joint_names: list[str]) -> tuple[float, np.ndarray, np.ndarray] | None:
-        """A robot's ``JointState`` as ``(stamp s, q, qd)`` in ``joint_names``' order (qd zero when not sent).
+        """A robot's ``JointState`` as ``(stamp s, q, qd)`` in ``joint_names``' order (qd zero where not sent or NaN).
 
         None for a state of none of ``joint_names``: another driver's joints on the same topic (a gripper's), as
         common on real robots; not an error.
 
         Raises:
             Ros2InputError: Not a JointState, some but not all joints of ``joint_names``, one of them repeated,
-                lengths that disagree, NaN, a stamp's nanosec outside [0, 1e9).
+                lengths that disagree, a NaN or infinite position, a stamp's nanosec outside [0, 1e9). A non-finite
+                velocity is a velocity not measured (joint_state_broadcaster's NaN): 0.
         """
         msg = self.decode(payload, "sensor_msgs/msg/JointState")
         names = list(msg.name)
@@ -335,9 +344,12 @@ class Ros2Mapping:
             raise Ros2InputError(f"JointState: joints {repeated} repeated (which value holds?)")
         order = [names.index(n) for n in joint_names]
         q, qd = pos[order], (vel[order] if len(vel) else np.zeros(len(order)))
-        if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
-            bad = [n for n, v, w in zip(joint_names, q, qd, strict=True) if not (np.isfinite(v) and np.isfinite(w))]
-            raise Ros2InputError(f"JointState: non-finite position or velocity of {bad}")
+        if not np.all(np.isfinite(q)):
+            bad = [n for n, v in zip(joint_names, q, strict=True) if not np.isfinite(v)]
+            raise Ros2InputError(f"JointState: non-finite position of {bad}")
+        # a velocity not measured: ros2_controllers' joint_state_broadcaster sends NaN for a joint without a velocity
+        # interface (position-only arms, mock hardware), as it sends every joint's velocity; read as not moving
+        qd = np.where(np.isfinite(qd), qd, 0.0)
         return seconds_in(msg.header.stamp, "JointState: header.stamp"), q, qd
 
     def trajectory_in(self, payload: bytes, joint_names: list[str]) -> tuple[list[int], np.ndarray, np.ndarray]:

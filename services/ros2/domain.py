@@ -32,8 +32,9 @@ def ros_domain_id(env: Mapping[str, str] | None = None) -> int:
     A shell set up for ROS 2 runs Foresight's nodes on the domain its ``ros2`` commands use; a
     ``FORESIGHT_*_DOMAIN_ID`` variable, the config file or ``--domain-id`` still take precedence. rcl reads the
     variable as C's ``strtoul(s, &end, 0)``: ``010`` is domain 8 (octal), ``0x10`` 16, ``10`` 10; read as decimal,
-    ``010`` put Foresight on domain 10 and the nodes of domain 8 never saw it. A value that is not such a number
-    (or is negative, or past :data:`DOMAIN_ID_MAX`) gives :data:`UNREADABLE_DOMAIN`, refused by
+    ``010`` put Foresight on domain 10 and the nodes of domain 8 never saw it. A value that is not wholly such a
+    number (or is negative, or past :data:`DOMAIN_ID_MAX`) gives :data:`UNREADABLE_DOMAIN` -- stricter than rcl,
+    which takes the number ``5abc`` or ``+5`` starts with (domain 5), refusing only a 0 with text after it -- refused by
     :func:`check_domain_id` where a command speaks ROS 2 and no option overrides it; an option table's default must
     not fail (``--help`` would).
     """
@@ -63,6 +64,6 @@ def check_domain_id(value: int, option: str, flag: str) -> None:
     raw = os.environ.get("ROS_DOMAIN_ID", "").strip()
     if value == UNREADABLE_DOMAIN and raw and ros_domain_id() == UNREADABLE_DOMAIN:
         raise ConfigError(f"ROS_DOMAIN_ID={raw!r}: not a ROS 2 domain id (a whole number 0..{DOMAIN_ID_MAX}: decimal, "
-                          f"0x hexadecimal or 0 octal, as ROS 2 reads it), and {option} takes it; set it right, unset "
-                          f"it, or give {flag} N")
+                          f"0x hexadecimal or 0 octal, as ROS 2 reads it, and nothing after it), and {option} "
+                          f"takes it; set it right, unset it, or give {flag} N")
     raise ConfigError(f"{option}: must be 0..{DOMAIN_ID_MAX}, got {value}")

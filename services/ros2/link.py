@@ -28,7 +28,7 @@ from services.executor.config import ExecutorConfig, ExecutorError
 from shared.rejects import RejectCounter
 
 from .arm import Measured
-from .core import ROBOT_TYPES, Ros2Config, Ros2InputError, Ros2Mapping
+from .core import CLOCK_TOPIC, ROBOT_TYPES, Ros2Config, Ros2InputError, Ros2Mapping, command_topic
 from .node import Ros2Node
 
 __all__ = ["Ros2RobotLink", "NODE_NAME", "Ros2Log"]
@@ -38,7 +38,6 @@ log = logging.getLogger("foresight.executor")
 NODE_NAME = "foresight_executor"
 """The executor's ROS 2 node name when it drives a ROS 2 robot."""
 
-CLOCK_TOPIC = "/clock"
 STAMP_TOLERANCE_S = 1e-6
 """A lock-step joint state answers ``/clock`` = t when its stamp is within this of t (Time has ns resolution)."""
 
@@ -66,7 +65,7 @@ class Ros2RobotLink:
         self.record = record or (lambda topic, msgtype, data: None)
         self.lockstep = config.mode == "lockstep"
         self.mapping = Ros2Mapping(Ros2Config(domain_id=config.ros2_domain_id))
-        self.command_topic = f"/{config.ros2_controller}/joint_trajectory"
+        self.command_topic = command_topic(config.ros2_controller)
         self.node = Ros2Node(session, config.ros2_domain_id, "/", NODE_NAME, self.mapping.hashes, rejects)
         self._command = self.node.publisher(self.command_topic, ROBOT_TYPES["command"])
         self._clock = self.node.publisher(CLOCK_TOPIC, ROBOT_TYPES["clock"]) if self.lockstep else None

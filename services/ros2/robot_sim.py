@@ -29,7 +29,7 @@ from shared.scene import SCENE_HELP, load_scene
 from shared.transport import Presence, open_session
 
 from .controller import SimulatedController
-from .core import ROBOT_TYPES, Ros2Config, Ros2Mapping, check_node_name
+from .core import CLOCK_TOPIC, ROBOT_TYPES, Ros2Config, Ros2Mapping, check_node_name, command_topic
 from .domain import check_domain_id, ros_domain_id
 from .node import Ros2Node
 
@@ -121,13 +121,13 @@ class RobotSim:
         with open_session(self.zenoh, stop, "simrobot") as session:
             node = Ros2Node(session, cfg.domain_id, "/", cfg.node, self.mapping.hashes, self.rejects, ordered=True)
             self._pub = node.publisher(cfg.joint_states, ROBOT_TYPES["state"])
-            node.subscription(f"/{cfg.controller}/joint_trajectory", ROBOT_TYPES["command"], self.on_command)
+            node.subscription(command_topic(cfg.controller), ROBOT_TYPES["command"], self.on_command)
             if cfg.sim_time:
-                node.subscription("/clock", ROBOT_TYPES["clock"], self.on_clock)
+                node.subscription(CLOCK_TOPIC, ROBOT_TYPES["clock"], self.on_clock)
             presence = Presence(session, Keys(self.zenoh.prefix), "simrobot", stop_with=[cfg.stop_with] if
                                 cfg.stop_with else [], stop=stop)
             log.info("simrobot: node /%s on domain %d: %s in, %s out, %s", cfg.node, cfg.domain_id,
-                     f"/{cfg.controller}/joint_trajectory", cfg.joint_states,
+                     command_topic(cfg.controller), cfg.joint_states,
                      "following /clock" if cfg.sim_time else f"{cfg.rate_hz:g} Hz on the wall clock")
             try:
                 self._t0 = time.monotonic()

@@ -93,16 +93,30 @@ def test_stale_joint_states_hold_the_robot() -> None:
 def test_command_points_keep_the_pace_within_the_velocity_limits() -> None:
     ref = Reference(np.array([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0], [1.2, 0.0]]), dt=0.1)
     cfg = ExecutorConfig(velocity_scale=0.5)  # joint 0 at most 0.5 rad/s
-    positions, times = command_points(ref, 0.15, np.array([0.15, 0.0]), cfg, LIMITS.velocity)
+    positions, times = command_points(ref, 0.15, np.array([0.15, 0.0]), cfg, LIMITS)
     np.testing.assert_allclose(positions, [[0.2, 0.0], [1.2, 0.0]])
     np.testing.assert_allclose(times, [0.1, 0.1 + 2.0])  # 0.05 rad: 0.1 s at 0.5 rad/s; 1 rad: 2 s, not 0.1
     # the paper authors' pace: 0.1 of path length per 0.5 s step
     cfg = ExecutorConfig(path_per_step=0.1, step_period_s=0.5)
-    positions, times = command_points(ref, 0.1, np.array([0.1, 0.0]), cfg, LIMITS.velocity)
+    positions, times = command_points(ref, 0.1, np.array([0.1, 0.0]), cfg, LIMITS)
     np.testing.assert_allclose(times[:1], [0.5]) and np.testing.assert_allclose(times[-1], 0.5 + 5.0)
     # past the end: the goal, at least MIN_SEGMENT_S away
-    positions, times = command_points(ref, 5.0, np.array([1.2, 0.0]), ExecutorConfig(), LIMITS.velocity)
+    positions, times = command_points(ref, 5.0, np.array([1.2, 0.0]), ExecutorConfig(), LIMITS)
     assert positions.tolist() == [[1.2, 0.0]] and times.tolist() == [MIN_SEGMENT_S]
+
+
+def test_a_continuous_joint_at_pi_is_commanded_and_timed_the_short_way() -> None:
+    """The robot reports its wrist roll at +pi (+1e-4), read by the planner as -pi; the plan stays just below +pi.
+    The segments were timed on the wrapped reading, a 2 pi turn: 3.48 s where 0.1 s is the pace."""
+    limits = ArmLimits(("a", "roll"), np.array([-1.0, -np.pi]), np.array([1.0, np.pi]), np.array([1.0, 3.6]), ("roll",))
+    ref = Reference(np.array([[0.0, 3.12], [0.02, 3.13], [0.04, 3.14]]), dt=0.1)
+    positions, times = command_points(ref, 0.0, np.array([0.0, np.pi + 1e-4]), ExecutorConfig(velocity_scale=0.5),
+                                      limits)
+    np.testing.assert_allclose(positions[:, 1], [3.13, 3.14])  # the robot's own values, no turn round
+    np.testing.assert_allclose(times, [0.1, 0.2])  # the executor's pace: 0.1 s per waypoint
+    # unwrapped far from [-pi, pi): the command stays beside the robot's reading
+    positions, _ = command_points(ref, 0.0, np.array([0.0, 3 * np.pi]), ExecutorConfig(), limits)
+    np.testing.assert_allclose(positions[:, 1], [3.13 + 2 * np.pi, 3.14 + 2 * np.pi])
 
 
 def test_a_hold_is_where_the_arm_is_now_within_the_limits_and_the_velocity_scale() -> None:

@@ -51,3 +51,16 @@ def test_roles_the_gateway_does_not_publish_are_no_ones_business() -> None:
     driver = endpoint_token(0, "a1", 1, 2, "MP", "/", "robot_driver", "/joint_states", "sensor_msgs/msg/JointState",
                             "RIHS01_x", "q")
     assert peers.update(driver) == [] and peers.left_to("joint_states") is None
+
+
+def test_a_real_ros_2_nodes_token_is_read() -> None:
+    """A token as rmw_zenoh writes it for ros2_controllers' joint_state_broadcaster (its real QoS field, a 128-bit
+    session id), not one made by :func:`endpoint_token`: the tests above would pass with a parser of only our own."""
+    token = ("@ros2_lv/0/1f2e3d4c5b6a79881f2e3d4c5b6a7988/0/11/MP/%/%/joint_state_broadcaster/%joint_states/"
+             "sensor_msgs::msg::dds_::JointState_/RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e/"
+             "::,1:,:,:,,")
+    peers = GraphPeers(Ros2Config(domain_id=0), zid="b2")
+    change = PeerChange("joint_states", True, "/joint_state_broadcaster", "1f2e3d4c5b6a79881f2e3d4c5b6a7988", False)
+    assert peers.update(token) == [change]
+    assert peers.left_to("joint_states").topic == "/joint_states"
+    assert peers.update(token, alive=False)[0].started is False
