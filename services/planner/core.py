@@ -371,7 +371,7 @@ def goals_per_call(k: int, limit: int) -> int:
     """Goals whose rollouts share one fused-cost call (``PlannerConfig.cost_chunk_goals``).
 
     On a CPU a call over a few goals keeps the compiled kernel's intermediates in cache (K = 16: 315 -> 269 ms
-    per step, docs/planner.md). Chunks are never padded: the largest divisor of ``k`` in
+    per step, docs/planner.md). Goals are never split across calls: the largest divisor of ``k`` in
     ``[ceil(limit / 2), limit]``; without one (K = 5, 7, 11, ...: 1-goal calls measured 13-15 % slower) one call.
 
     Args:

@@ -314,6 +314,8 @@ class FusedCost:
             zeros = torch.zeros(*[int(n) + 2 for n in grid.dims], device=dev, dtype=dt)
             first, inv_res = torch.as_tensor(grid.origin, dtype=torch.float64) - res / 2, 1.0 / res
         self._no_occupancy = VoxelTables.build(zeros, first, inv_res)  # read while no occupancy is set
+        self._geometry = self._occupancy_geometry(self._no_occupancy) if grid is not None else None
+        self.eager_geometries: set[tuple[tuple[int, ...], float]] = set()  # occupancy geometries costed eagerly
         self.pointwise = pointwise
         self._set_mode(bool(compile))
         self.batch: int | None = None  # the compiled batch size N (trajectories per call), set by warm_up
@@ -330,6 +332,11 @@ class FusedCost:
         self._static.update(pointwise=compiled if self.pointwise is None else self.pointwise)
         self._flat = compiled  # compiled: 8 gathers from the volume itself (8x smaller than the packed cells)
 
+    @staticmethod
+    def _occupancy_geometry(tables: VoxelTables) -> tuple[tuple[int, ...], float]:
+        """What a compiled kernel is specialised on: the occupancy volume's shape and its resolution."""
+        return tuple(tables.volume.shape), float(tables.inv_res)
+
     def _run(self, q3: torch.Tensor, eager: bool = False) -> torch.Tensor:
         c = self._consts
         tables = self.cost.occupancy  # rebuilt by StateCost.set_occupancy, once per grid
@@ -337,6 +344,18 @@ class FusedCost:
         assert tables.lift is not None
         body = self.cost.body if self.cost.body is not None else self._far
         s = dict(self._static, occ_inv=occ.inv_res)
+        if self.compiled and not eager and self._geometry is not None:
+            # an occupancy on another grid than the scene's (a model trained at another --resolution): compiling for
+            # it stalled one step for 33 s on 2 CPUs (the robot held); the same kernel runs eagerly instead
+            geometry = self._occupancy_geometry(occ)
+            if geometry != self._geometry:
+                eager = True
+                if geometry not in self.eager_geometries:
+                    self.eager_geometries.add(geometry)
+                    log.warning("occupancy grid %s at %.3g m is not the scene grid %s at %.3g m the planner's cost "
+                                "was compiled for: costed eagerly (about 3x slower per call; train the model at "
+                                "the scene grid's resolution to avoid it)", "x".join(map(str, geometry[0])),
+                                1.0 / geometry[1], "x".join(map(str, self._geometry[0])), 1.0 / self._geometry[1])
         fn, flat = self._fn, self._flat
         if eager:
             fn, s["pointwise"] = _kernel, False

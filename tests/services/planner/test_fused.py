@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from services.planner import fused as fused_module
 from services.planner.bench import bench_goals, blob_occupancy
 from services.planner.core import GoalSet, Planner, PlannerConfig
 from services.planner.costs import CostConfig, StateCost, hinge_sum
@@ -126,6 +127,38 @@ def test_chunked_batches_equal_one_call(planner, scene) -> None:
     f.batch = 12  # 3 trajectories: the small-batch path
     assert torch.allclose(f(q[:, :1]), whole[:, :1], atol=1e-6)
     planner.cost.set_occupancy(None, grid.origin, grid.resolution)
+
+
+def test_an_occupancy_on_another_grid_is_costed_eagerly_not_recompiled(planner, scene, caplog) -> None:
+    """A model trained at another resolution than the scene grid's: the compiled kernel, specialised on the scene
+    grid's shape and resolution, recompiled for it (33 s on 2 CPUs, one step; the robot held). It runs eagerly."""
+    grid = scene.grid
+    calls = []
+
+    def compiled(*args, s):  # stands in for the torch.compile-d kernel: counts its calls, computes eagerly
+        calls.append(1)
+        return fused_module._kernel(*args, s=dict(s, pointwise=False))
+
+    f = FusedCost(planner.robot, planner.cost, planner.w_smooth, _vmax(planner), True, grid=grid)
+    f.compiled, f.batch, f._fn = True, 3, compiled
+    q = _batch(planner.robot, (3, 40), 7)
+    try:
+        planner.cost.set_occupancy(blob_occupancy(scene), grid.origin, grid.resolution)
+        f(q)
+        assert len(calls) == 1  # the scene grid: the compiled kernel
+        coarse = blob_occupancy(scene)[::2, ::2, ::2]  # the same bounds at twice the voxel edge
+        planner.cost.set_occupancy(coarse, grid.origin, 2 * grid.resolution)
+        reference = FusedCost(planner.robot, planner.cost, planner.w_smooth, _vmax(planner), True, grid=grid)(q)
+        with caplog.at_level("WARNING", logger="foresight.planner"):
+            out, again = f(q), f(q)
+        assert len(calls) == 1 and torch.equal(out, reference) and torch.equal(again, reference)
+        warned = [r.getMessage() for r in caplog.records if "costed eagerly" in r.getMessage()]
+        assert len(warned) == 1 and f"at {2 * grid.resolution:.3g} m is not the scene grid" in warned[0], warned
+        planner.cost.set_occupancy(blob_occupancy(scene), grid.origin, grid.resolution)
+        f(q)
+        assert len(calls) == 2  # back on the scene grid: compiled again
+    finally:
+        planner.cost.set_occupancy(None, grid.origin, grid.resolution)
 
 
 def test_compiled_kernel_equals_reference(planner, scene) -> None:
