@@ -36,6 +36,7 @@ from .multigoal import best, choice_key, init_straight_lines, interpolate_path, 
 from .protocols import PlannerCost, PlannerGoals, PlannerRobot
 from .result import PlanResult
 from .stomp import Stomp
+from .validity import invalid_reason, publishable
 
 __all__ = ["PlannerConfig", "PlannerError", "PlannerInputError", "GoalSet", "PlanResult", "Planner", "goals_per_call"]
 
@@ -331,12 +332,12 @@ class Planner:
         trajs = torch.where(reached[:, None, None], torch.cat([init[:, :1], init[:, -1:].expand_as(init[:, 1:])], 1),
                             result.trajectories)  # (Kv, T, D)
         terms = self.cost_terms(trajs)
-        # a goal whose cost is not finite this step is invalid for it: chosen (goal_choice human took goal 0 for a
-        # NaN) or published (the Plan is refused after the planner had adopted it), it would derail the next steps
-        valid = torch.stack([torch.isfinite(terms[n]) for n in ("smoothness", "obstacle", "human", "total")]).all(0)
-        if not bool(valid.any()):
-            raise PlannerError(f"no goal has a finite cost this step (total {terms['total'].tolist()}); the last plan "
-                               "stands")
+        try:  # a goal whose cost is not finite (chosen or published, it would derail the next steps) or whose path
+            valid, depth = publishable(self.cost, trajs, terms)  # goes into the scene or the robot: invalid this step
+        except PlannerError:
+            if bool(torch.isfinite(trajs).all()):
+                self._prev = trajs  # the next step's STOMP goes on from them, out of the collision
+            raise
         chosen_v = best(choice_key(terms, c.goal_choice, valid), valid)
         dts = self._dt(trajs)
         self._prev, self._prev_best, self._prev_dt = trajs, chosen_v, float(dts[chosen_v])
@@ -352,9 +353,8 @@ class Planner:
         out_valid[ok] = True
         reasons = list(self.goals.reasons) or [""] * k
         for i in sorted(set(self.valid_index) - set(ok)):
-            reasons[i] = "its cost is not finite this step"
-            log.warning("planner: goal %s: cost not finite at step %d; invalid for it", self.goals.names[i],
-                        self.step_index)
+            reasons[i] = invalid_reason(depth[self.valid_index.index(i)])
+            log.warning("planner: goal %s, step %d: %s", self.goals.names[i], self.step_index, reasons[i])
         result_step = self.step_index
         self.step_index += 1
         return PlanResult(

@@ -1,0 +1,96 @@
+"""Whether an optimised path may be published: it must not pass through the static scene or the robot itself.
+
+STOMP's obstacle term is a cost, not a constraint: a step cut short (the anytime minimum of iterations in real
+time) or a goal behind an obstacle can end with waypoints inside the table, and such a path was published as
+valid (a review: 3 of 12 goals under the table after 10 iterations, up to 2.8 cm deep), with
+``goal_choice = "human"`` even chosen over a free one. :func:`path_penetration` checks each path densely
+(every waypoint and ``substeps - 1`` configurations between two) against the scene's signed distance field and the
+arm/body self-collision spheres, as the goals' IK solutions are checked (:meth:`StateCost.collision_free`).
+
+The robot's start is where it is: a path is refused only where it goes deeper than its own start (a real robot's
+reading a millimetre inside a modelled table would otherwise refuse every plan and leave the robot where it is).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from .costs import StateCost
+from .inputs import PlannerError
+
+__all__ = ["path_penetration", "publishable", "invalid_reason", "SUBSTEPS", "TOLERANCE_M"]
+
+SUBSTEPS = 4
+"""Configurations checked per waypoint segment (linear in joint space): a segment moves a sphere ~5 cm at most."""
+
+TOLERANCE_M = 1e-3
+"""Penetration below this is rounding (the signed distance field's trilinear error is up to 1.5 voxels off the
+analytic surface, docs/robot.md, but the same field scores the path, so only a real overlap reaches it)."""
+
+
+def path_penetration(cost: object, paths: torch.Tensor, substeps: int = SUBSTEPS) -> torch.Tensor:
+    """How far each path goes into the static scene or the robot itself beyond its start (m; 0: free).
+
+    Args:
+        cost: The planner's state cost (its scene field, spheres and self-collision groups); a cost of another kind
+            (:class:`services.planner.protocols.PlannerCost`, a test's toy cost) models no collision: all 0.
+        paths: ``(K, T, D)`` trajectories, waypoint 0 the start.
+        substeps: Configurations per segment (``substeps - 1`` between two waypoints, plus the next waypoint).
+
+    Returns:
+        ``(K,)`` the deepest penetration after the start minus the start's own (m), 0 where that is below
+        :data:`TOLERANCE_M`.
+    """
+    k, t, d = paths.shape
+    if t < 2 or not isinstance(cost, StateCost):
+        return paths.new_zeros(k)
+    frac = torch.arange(1, substeps + 1, device=paths.device, dtype=paths.dtype) / substeps  # (S,)
+    seg = paths[:, :-1, None] + frac[:, None] * (paths[:, 1:, None] - paths[:, :-1, None])  # (K, T-1, S, D)
+    q = torch.cat([paths[:, :1], seg.reshape(k, -1, d)], 1)  # (K, 1 + (T-1) S, D)
+    centers = cost.robot.sphere_centers(q)
+    depth = (cost.radii - cost.sdf(centers[..., cost.spheres, :])).amax(-1).clamp(min=0)  # (K, N)
+    if cost.has_self:
+        overlap = (-cost.robot.self_collision_distance(centers)).flatten(-2).amax(-1).clamp(min=0)
+        depth = torch.maximum(depth, overlap)
+    beyond = (depth[:, 1:].amax(-1) - depth[:, 0]).clamp(min=0)
+    return torch.where(beyond < TOLERANCE_M, torch.zeros_like(beyond), beyond)
+
+
+def publishable(cost: object, paths: torch.Tensor, terms: dict[str, torch.Tensor]) -> tuple[torch.Tensor,
+                                                                                              list[float]]:
+    """The goals whose path may be published this step: finite costs and free of collision.
+
+    A goal whose cost is not finite would be chosen (``goal_choice = "human"`` took goal 0 for a NaN) or published
+    (the Plan refused after the planner had adopted it); one whose path collides would be executed.
+
+    Args:
+        cost: The planner's state cost.
+        paths: ``(K, T, D)`` this step's optimised trajectories.
+        terms: ``smoothness``, ``obstacle``, ``human``, ``total``: ``(K,)`` their costs.
+
+    Returns:
+        ``(K,)`` bool, and each path's penetration (m, :func:`path_penetration`; NaN for a non-finite path).
+
+    Raises:
+        PlannerError: No goal may be published; the last plan stands.
+    """
+    finite = torch.stack([torch.isfinite(terms[n]) for n in ("smoothness", "obstacle", "human", "total")]).all(0)
+    if not bool(finite.any()):
+        raise PlannerError(f"no goal has a finite cost this step (total {terms['total'].tolist()}); the last plan "
+                           "stands")
+    depth = path_penetration(cost, paths).tolist()
+    free = finite & torch.tensor([p == 0 for p in depth], device=finite.device)
+    if not bool(free.any()):
+        least = min((p for p, f in zip(depth, finite.tolist(), strict=True) if f), default=math.nan)
+        raise PlannerError(f"every path passes into the scene or the robot this step (the least by {least * 100:.1f} "
+                           "cm); the last plan stands")
+    return free, depth
+
+
+def invalid_reason(depth: float) -> str:
+    """Why a goal the planner could reach is invalid this step, from its path's penetration (m)."""
+    if depth > 0:
+        return f"its path passes {depth * 100:.1f} cm into the scene or the robot this step"
+    return "its cost is not finite this step"
