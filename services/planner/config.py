@@ -205,7 +205,8 @@ class PlannerConfig:
             self.cost.validate()
         except ValueError as exc:
             raise ConfigError(f"planner.cost.{str(exc).removeprefix('costs.')}") from None
-        checks = [("seed", self.seed >= 0), ("threads", self.threads >= 0), ("lookahead_s", self.lookahead_s >= 0),
+        checks = [("seed", self.seed >= 0), ("threads", self.threads >= 0),
+                  ("lookahead_s", 0 <= self.lookahead_s < math.inf),
                   ("goal_dwell_s", math.isfinite(self.goal_dwell_s) and self.goal_dwell_s >= 0),
                   ("cost_chunk_goals", self.cost_chunk_goals >= 0),
                   ("anytime_min_iterations", self.anytime_min_iterations >= 0),

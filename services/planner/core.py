@@ -31,7 +31,7 @@ from shared.scene import Grid, Scene
 from .config import PlannerConfig
 from .costs import acceleration_cost, path_dt, waypoint_times
 from .fused import FusedCost, supports
-from .inputs import PlannerError, PlannerInputError, check_configuration, check_occupancy
+from .inputs import PlannerError, PlannerInputError, check_configuration, check_lookahead, check_occupancy
 from .multigoal import best, choice_key, init_straight_lines, interpolate_path, project_onto_path, reconnect_previous
 from .protocols import PlannerCost, PlannerGoals, PlannerRobot
 from .result import PlanResult
@@ -113,8 +113,8 @@ class Planner:
         if goals is None:
             goals = _default_goals(scene, robot, cost, c)
         if not bool(goals.valid.any()):
-            raise PlannerError("no reachable goal: " + "; ".join(f"{n}: {r}" for n, r in
-                                                                 zip(goals.names, goals.reasons, strict=False)))
+            raise PlannerError("no reachable goal: " + ("; ".join(f"{n}: {r}" for n, r in zip(
+                goals.names, goals.reasons, strict=False)) or f"the scene has no cups ({scene.name}) to plan for"))
         self.goals: PlannerGoals = goals
         for name, reason in zip(goals.names, goals.reasons, strict=False):
             if reason:
@@ -279,7 +279,7 @@ class Planner:
         if float(dist) > self.config.off_path_tol:
             log.debug("robot %.3f from tau_best: reconnecting every goal from its configuration", float(dist))
             return q_current, None
-        ahead = self.config.lookahead_s if lookahead_s is None else lookahead_s
+        ahead = check_lookahead(self.config.lookahead_s if lookahead_s is None else lookahead_s)
         s_t = (s_cur + ahead / self._prev_dt).clamp(max=tau.shape[0] - 1)
         return interpolate_path(tau, s_t), s_t
 

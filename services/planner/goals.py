@@ -35,7 +35,6 @@ from .grasps import GraspConfig, grasp_candidates
 
 __all__ = ["IKGoals", "cup_goals", "pose_goals", "joint_goals", "plot_scene", "main"]
 
-log = logging.getLogger("foresight.planner.goals")
 
 
 @dataclass
@@ -166,9 +165,6 @@ def pose_goals(names: Sequence[str], candidates: Sequence[Sequence[tuple[str, np
     if bool(valid.any()):
         c = cost.clearance(q_out).double().cpu().numpy()
         clear = np.where(valid.cpu().numpy(), c, np.nan)
-    for g, n in enumerate(names):
-        if not bool(valid[g]):
-            log.warning("goal %s dropped: %s", n, reasons[g])
     return IKGoals(list(names), q_out, valid, reasons, poses, labels, clear)
 
 

@@ -15,7 +15,7 @@ import numpy as np
 from shared.protocol import OccupancyGrid
 from shared.scene import Grid
 
-__all__ = ["PlannerError", "PlannerInputError", "check_configuration", "check_occupancy"]
+__all__ = ["PlannerError", "PlannerInputError", "check_configuration", "check_lookahead", "check_occupancy"]
 
 
 class PlannerError(ValueError):
@@ -58,6 +58,21 @@ def check_configuration(q: Any, lower: np.ndarray, upper: np.ndarray, limit_tol:
         what = ", ".join(f"{names[i]}={arr[i]:.4f} not in [{lower[i]:.4f}, {upper[i]:.4f}]" for i in bad)
         raise PlannerInputError(f"robot configuration outside the joint limits: {what}")
     return np.clip(arr, lower, upper)
+
+
+def check_lookahead(lookahead_s: Any) -> float:
+    """A step's lookahead (s), finite and >= 0.
+
+    NaN raised an IndexError that stopped the service; inf started the plan at the goal, 2 rad from a robot that had
+    not moved (a review).
+
+    Raises:
+        PlannerInputError: Not such a number.
+    """
+    value = float(lookahead_s)
+    if not 0 <= value < math.inf:
+        raise PlannerInputError(f"lookahead_s must be finite and >= 0, got {lookahead_s!r}")
+    return value
 
 
 def check_occupancy(occupancy: Any, grid: Grid) -> tuple[np.ndarray, np.ndarray, float]:

@@ -115,6 +115,9 @@ def test_departure_lookahead_override_and_anytime_step(scene) -> None:
     tau = first.trajectories[first.chosen]
     assert planner.departure(tau[3]) == pytest.approx(0.0, abs=1e-5)
     assert planner.departure([0.0, 0.25]) > planner.config.off_path_tol
+    for bad in (float("nan"), float("inf"), -0.1):  # NaN: an IndexError stopped the service; inf: began at the goal
+        with pytest.raises(PlannerInputError, match=r"lookahead_s must be finite and >= 0, got"):
+            planner.step(tau[3], occ, lookahead_s=bad)
     second = planner.step(tau[3], occ, lookahead_s=0.0, interrupt=lambda: False)
     assert second.iterations == 20 and np.allclose(second.start, tau[3], atol=1e-5)  # no lookahead: starts there
 
@@ -283,6 +286,8 @@ def test_config_resolves_and_names_bad_values() -> None:
     p = cfg.planner
     assert (p.stomp.rollouts, p.goals, p.cost.w_smooth, cfg.mode) == (24, ["red_cup", "blue_cup"], 50.0, "lockstep")
     assert p.stomp_config().rollouts == 24 and cfg.planner_config().lookahead_s == 0.0 and p.lookahead_s == 0.5
+    with pytest.raises(ConfigError, match=r"planner\.lookahead_s: bad value inf"):
+        PlannerConfig(lookahead_s=float("inf")).validate()
     with pytest.raises(ConfigError, match=r"planner\.stomp\.rollouts must be in \[2, 1024\], got 1"):
         PlannerConfig(stomp=StompConfig(rollouts=1)).validate()
     with pytest.raises(ConfigError, match=r"planner\.stomp\.rollouts must be in \[2, 1024\]"):  # 10^12: torch
@@ -505,3 +510,15 @@ def test_a_goal_whose_cost_is_not_finite_is_invalid_for_the_step_and_none_leaves
     with pytest.raises(PlannerError, match="no goal has a finite cost this step"):
         planner.step(res.start, occ)
     assert planner.step_index == step  # the last plan stands
+
+
+def test_a_scene_without_cups_says_so_and_a_dropped_goal_is_warned_once(scene, caplog) -> None:
+    """The planner said ``no reachable goal: `` and nothing after it; each dropped goal was warned twice."""
+    empty = dataclasses.replace(scene, cups=())
+    with pytest.raises(PlannerError, match=rf"no reachable goal: the scene has no cups \({scene.name}\) to plan for"):
+        Planner(empty, PlannerConfig(compile=False))
+    far = dataclasses.replace(scene.cups[0], position=np.asarray(scene.cups[0].position) + np.array([0.0, 0.0, 5.0]))
+    with caplog.at_level(logging.WARNING):
+        Planner(dataclasses.replace(scene, cups=(far, *scene.cups[1:])), PlannerConfig(compile=False))
+    dropped = [r.getMessage() for r in caplog.records if "dropped" in r.getMessage()]
+    assert len(dropped) == 1 and dropped[0].startswith(f"goal {far.name} dropped: "), dropped

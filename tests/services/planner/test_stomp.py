@@ -45,6 +45,14 @@ def test_matrices_follow_the_paper() -> None:
     assert torch.linalg.eigvalsh(st.R.double()).min() > 0
     cov = st.noise_chol.double() @ st.noise_chol.double().T
     assert float(cov.max()) == pytest.approx(1.0, abs=1e-4)
+    # against R = A^T A built here from the acceleration itself (the noise was only compared with its own factor)
+    eye = torch.eye(n, dtype=torch.float64)
+    cols = [torch.cat([torch.zeros(2, dtype=torch.float64), e, torch.zeros(2, dtype=torch.float64)]) for e in eye]
+    a_ref = torch.stack([(c[2:] - 2 * c[1:-1] + c[:-2])[: n + 2] for c in cols], 1)  # (N + 2, N)
+    r_inv = torch.linalg.inv(a_ref.T @ a_ref)
+    assert torch.allclose(st.R.double(), a_ref.T @ a_ref, atol=1e-5)
+    assert torch.allclose(cov, r_inv / r_inv.max(), atol=1e-4)  # eps ~ N(0, R^-1), scaled to unit maximum
+    assert torch.allclose(st.M.double(), r_inv / r_inv.max(0, keepdim=True).values / n, atol=1e-6)
 
 
 def test_converges_to_the_minimum_of_a_quadratic_bowl() -> None:
