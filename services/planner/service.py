@@ -121,7 +121,7 @@ class PlannerService:
         # what arrives is checked against this planner's robot and scene grid (shared.protocol.receipt); a grid
         # finer than half the scene grid's resolution (8x its voxels) is refused: its lookup tables are the cost
         self.receipt = Receipt(Expectations(clock=config.mode, robot=RobotSpec.from_robot(self.planner.robot),
-                                            grid=GridSpec.from_grid(self.scene.grid, self.scene.grid.resolution / 2)))
+                                            grid=GridSpec.planning(self.scene.grid)))
         self.stats = PlannerStats()
         self._empty = np.zeros(self.scene.grid.dims, dtype=np.float32)
         self.trigger: ReplanTrigger | None = None  # real-time mode: when steps start (and why, counted)

@@ -52,6 +52,7 @@ from shared.atomic_file import atomic_write, unreadable
 from shared.data_files import relative_to_cwd
 from shared.feature_sets import HERAKLES_NAMES, MAPPINGS, count_features, mapping_for
 from shared.npz_reading import NPZ_LOCK
+from shared.protocol.validation import GridSpec
 from shared.scene import Grid, Scene
 
 from .features import FeatureEncoder
@@ -183,6 +184,20 @@ class PredictionModel:
             raise ModelError(f"model: its swept volumes were computed for the human of scene {self.scene_name!r} at "
                              f"{np.round(self.human_pelvis, 3).tolist()}, scene {scene.name!r} places the human at "
                              f"{np.round(pelvis, 3).tolist()}; retrain with `foresight train --scene ...`")
+
+    def check_planner_grid(self, scene: Scene) -> None:
+        """Raise :class:`ModelError` if the planner of ``scene`` would refuse the occupancy on the model's grid.
+
+        The planner takes the scene grid's bounds, no finer than half its resolution (``GridSpec.planning``).
+        Before, a predictor service with a model on another grid started, and the planner refused every occupancy
+        it published. (An experiment scoring occupancy offline may use any grid: only the service checks.)
+        """
+        wrong = GridSpec.planning(scene.grid).mismatch(self.grid.min, self.grid.dims, self.grid.resolution)
+        if wrong is not None:
+            raise ModelError(f"model: its grid ({wrong[0]}: {wrong[1]}) is not one the planner of scene {scene.name!r} "
+                             f"takes (its grid {scene.grid.min.tolist()}..{scene.grid.max.tolist()} at "
+                             f"{scene.grid.resolution:g} m, no finer than half that); retrain with `foresight train "
+                             "--scene ...`")
 
     # ---- file --------------------------------------------------------------------------------
     def save(self, path: str | Path) -> None:

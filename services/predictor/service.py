@@ -67,6 +67,7 @@ class PredictorService:
         self.model = model if model is not None else PredictionModel.load(config.model)
         self.scene = load_scene(config.scene or None)
         self.core = PredictorCore(self.model, self.scene, config)
+        self.model.check_planner_grid(self.scene)  # what it publishes, the planner must take
         self.keys = Keys(zenoh_config.prefix)
         self.rejects = RejectCounter("predictor")
         # values and per-sender order of what arrives; stamps by the message's tick (either mode)

@@ -85,6 +85,32 @@ class GridSpec:
         """From a ``shared.scene.Grid`` (``min``, ``max``); ``finest``: ``min_resolution``."""
         return cls(np.asarray(grid.min, dtype=np.float64), np.asarray(grid.max, dtype=np.float64), finest)
 
+    @classmethod
+    def planning(cls, grid: Any) -> GridSpec:
+        """What the planner takes on the scene grid ``grid``: its bounds, no finer than half its resolution.
+
+        8x the scene grid's voxels at most: the planner's lookup tables are the cost. The predictor checks its model's
+        grid against it at start.
+        """
+        return cls.from_grid(grid, float(grid.resolution) / 2)
+
+    def mismatch(self, origin: Any, dims: Any, resolution: float) -> tuple[str, str] | None:
+        """Why a grid at ``origin`` ``(3,)`` of ``dims`` ``(3,)`` voxels of ``resolution`` m does not fit this one.
+
+        Returns:
+            ``(field, reason)``, or None when it fits.
+        """
+        origin = np.asarray(origin, dtype=np.float64)
+        if resolution < self.min_resolution - 1e-9:
+            return "resolution", f"{resolution:g} m is finer than the {self.min_resolution:g} m this receiver takes"
+        if not np.allclose(origin, self.lower, rtol=0.0, atol=1e-6):
+            return "origin", f"{origin.tolist()} is not the scene grid's {self.lower.tolist()}"
+        want = self.dims_at(resolution)
+        if tuple(int(d) for d in dims) != want:
+            return "dims", (f"{[int(d) for d in dims]} at {resolution:g} m do not cover the scene grid "
+                            f"{self.lower.tolist()}..{self.upper.tolist()} (expected {list(want)})")
+        return None
+
     def dims_at(self, resolution: float) -> tuple[int, ...]:
         """The voxel counts of these bounds at ``resolution`` (as ``shared.scene.Grid.dims``)."""
         n = np.ceil((self.upper - self.lower) / resolution - 1e-9).astype(int)
@@ -235,17 +261,9 @@ def _occupancy(msg: OccupancyGrid, exp: Expectations) -> None:
     if float(np.max(np.abs(msg.origin))) > L.MAX_COORDINATE_M:
         raise _err(t, "origin", f"{msg.origin.tolist()} beyond {L.MAX_COORDINATE_M:g} m", "out-of-range")
     # occupancy in [0, 1] holds by construction: values are uint8 q, p = q / 255
-    if exp.grid is not None:
-        g = exp.grid
-        if msg.resolution < g.min_resolution - 1e-9:
-            raise _err(t, "resolution", f"{msg.resolution:g} m is finer than the {g.min_resolution:g} m this receiver "
-                       "takes", "mismatch")
-        if not np.allclose(msg.origin, g.lower, rtol=0.0, atol=1e-6):
-            raise _err(t, "origin", f"{msg.origin.tolist()} is not the scene grid's {g.lower.tolist()}", "mismatch")
-        want = g.dims_at(msg.resolution)
-        if tuple(int(d) for d in msg.dims) != want:
-            raise _err(t, "dims", f"{msg.dims.tolist()} at {msg.resolution:g} m do not cover the scene grid "
-                       f"{g.lower.tolist()}..{g.upper.tolist()} (expected {list(want)})", "mismatch")
+    wrong = exp.grid.mismatch(msg.origin, msg.dims, msg.resolution) if exp.grid is not None else None
+    if wrong is not None:
+        raise _err(t, wrong[0], wrong[1], "mismatch")
 
 
 def _plan(msg: Plan, exp: Expectations) -> None:

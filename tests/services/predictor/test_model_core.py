@@ -157,6 +157,23 @@ def test_bad_input_rejected(small_model: PredictionModel, small_library, scene) 
 
 
 
+def test_a_model_whose_grid_the_planner_would_refuse_is_named(small_model: PredictionModel,
+                                                                         scene) -> None:
+    """A scene whose grid differs from the model's: the predictor started, and the planner refused every grid it
+    published (``OccupancyGrid.origin: [-1.0, ...] is not the scene grid's [-1.2, ...]``)."""
+    from shared.scene import Grid
+
+    g = scene.grid
+    shifted = dataclasses.replace(scene, grid=Grid(g.min - np.array([0.2, 0.0, 0.0]), g.max, g.resolution))
+    with pytest.raises(ModelError, match=r"model: its grid \(origin: .* is not the scene grid's .*\) is not one the "
+                                         r"planner of scene 'pr2_two_cups' takes"):
+        small_model.check_planner_grid(shifted)
+    coarse = dataclasses.replace(scene, grid=Grid(g.min, g.max, 0.25))  # the model's 0.1 m: finer than 0.125
+    with pytest.raises(ModelError, match=r"resolution: 0.1 m is finer than the 0.125 m this receiver takes"):
+        small_model.check_planner_grid(coarse)
+    small_model.check_planner_grid(scene)  # the model's 0.1 m on the scene's bounds: taken
+
+
 def test_an_index_that_repeats_goes_back_or_is_no_whole_number_is_refused(small_model, small_library, scene) -> None:
     """A repeated pose counted its evidence twice (the log-likelihoods moved from [519, 223, -226] to [537, 220,
     -291]), an index going back was taken as well, and 2.7, True or "5" were coerced (a review)."""
