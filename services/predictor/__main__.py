@@ -23,10 +23,10 @@ Needs a model file from `foresight train`. Options come from the dataclass defau
 
 
 def _make(cfg: PredictorConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable[[], object]:
-    if not cfg.model.is_file():
+    if not cfg.model.exists():
         raise UserError(f"model file {str(cfg.model)!r} not found{relative_to_cwd(cfg.model)}; run `foresight train "
                         f"--out {cfg.model}` first")
-    service = PredictorService(cfg, zcfg)
+    service = PredictorService(cfg, zcfg)  # a directory or an unreadable file: the model's own error names it
     return lambda: service.run(stop)
 
 

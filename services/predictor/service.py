@@ -78,6 +78,7 @@ class PredictorService:
         self._lock = threading.Lock()
         self._behind_logged = -1e9
         self._unfamiliar_in_demo = 0  # poses of the current demonstration found unfamiliar (said once it is over)
+        self._ungridded: HumanPose | None = None  # the last real-time pose taken, while it has no grid of its own
         self._post_pub: TypedPublisher[ClassPosterior] | None = None
         self._occ_pub: TypedPublisher[OccupancyGrid] | None = None
 
@@ -96,7 +97,11 @@ class PredictorService:
         out: list[ClassPosterior | OccupancyGrid] = []
         with self._lock:
             for msg, grid in zip(batch, occupancy_due(batch), strict=True):
-                out.extend(self._process(msg, grid, now))
+                try:
+                    out.extend(self._process(msg, grid, now))
+                except Exception as exc:  # a fault of this service: the outputs of the messages before it stand
+                    log.exception("predictor: processing a %s failed", getattr(msg, "TYPE", type(msg).__name__))
+                    self.rejects.reject(self.keys.pose, f"{type(exc).__name__}: {exc}", reason="handler")
         return out
 
     def flush(self, now: float) -> list[OccupancyGrid]:
@@ -117,6 +122,7 @@ class PredictorService:
         self._say_unfamiliar()
         self.core.reset(demo_id)
         self.pacer.forget()  # a grid owed to the old demonstration is void
+        self._ungridded = None
         self.stats.resets += 1
 
     def _process(self, msg: Message, grid: bool, now: float | None) -> list[ClassPosterior | OccupancyGrid]:
@@ -126,6 +132,8 @@ class PredictorService:
                 log.info("predictor: demo %d start (%s)", msg.demo_id, msg.class_name)
             elif msg.event == "lost":  # its last grid stands; the executor holds the robot until a demonstration starts
                 log.info("predictor: demo %d lost by the tracker after %d poses", msg.demo_id, msg.n_samples)
+            if msg.event in ("end", "lost") and msg.demo_id == self.core.demo_id:
+                self._say_unfamiliar()  # at its end, not at the next start (a live person's may be minutes later)
             return []
         assert isinstance(msg, HumanPose)
         if msg.demo_id != self.core.demo_id or (msg.index == 0 and self.core.n_observed):
@@ -135,6 +143,9 @@ class PredictorService:
         except PredictorError as exc:
             self.rejects.reject(self.keys.pose, exc)
             self.stats.rejected += 1
+            if grid and msg.tick < 0 and self._ungridded is not None:  # it was to carry the run's grid: the last
+                self.pacer.skipped(self._ungridded)  # pose taken is owed one (flush), as the newest pose always is
+                self._ungridded = None
             return []
         self.stats.poses += 1
         if not self.core.familiar:
@@ -159,6 +170,7 @@ class PredictorService:
                 self.pacer.sent(now)
         else:
             self.stats.coalesced += 1
+        self._ungridded = msg if realtime and not grid else None
         return out
 
     def _unfamiliar(self, pose: HumanPose, posterior: np.ndarray) -> None:

@@ -38,7 +38,7 @@ from .calibration import DEFAULT_FOLDS, FoldFitError, TemperatureChoice, choose_
 from .class_volumes import class_volumes, timed_class_volumes
 from .features import VARIANTS, FeatureEncoder
 from .fit_cache import cached, class_fit
-from .gmm import GMMConfig, MixtureBank
+from .gmm import GMMConfig, GMMError, MixtureBank
 from .gmr import gmr
 from .model import PredictionModel, TimedVolumes, quantised
 from .novelty import DEFAULT_QUANTILE, DEFAULT_WINDOW, learn_novelty
@@ -188,7 +188,15 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
         return class_fit(data, cfg.gmm, cache)
 
     feats = [[encoder.batch(d.features) for d in ds] for ds in by_class]
-    mixtures = [fit(np.vstack(f)) for f in progress_bar(feats, desc="GMM per class", unit="class", enabled=progress)]
+
+    def fit_class(m: int) -> Any:
+        try:
+            return fit(np.vstack(feats[m]))
+        except GMMError as exc:  # "cannot fit 150 Gaussians to 100 samples": of which class, it did not say
+            raise GMMError(f"class {library.class_names[m]} ({len(feats[m])} demonstration(s)): {exc}") from None
+
+    mixtures = [fit_class(m) for m in progress_bar(range(len(feats)), desc="GMM per class", unit="class",
+                                                   enabled=progress)]
     try:
         if cfg.temperature is None:
             with threadpool_limits(1):  # many small fits: one BLAS thread each is several times faster

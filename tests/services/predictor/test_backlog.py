@@ -149,3 +149,42 @@ def test_real_time_grids_are_spaced_and_the_last_pose_still_gets_one(small_model
     lock = PredictorService(PredictorConfig(grid_interval_s=0.02), _NO_ZENOH, model=small_model)
     outs = lock.handle_batch([_pose(5, i, demo.features[i], tick=0) for i in range(10)], now=0.0)
     assert sum(isinstance(m, OccupancyGrid) for m in outs) == 10
+
+
+def test_a_refused_pose_at_a_batchs_end_leaves_the_last_pose_taken_owed_its_grid(small_model, small_library):
+    """The batch's last pose carries the run's grid; refused, no grid was made for the pose before it, and the
+    planner kept an older one until the next valid pose (for good if the stream stopped there): a review."""
+    demo = small_library.by_class(0)[0]
+    svc = PredictorService(PredictorConfig(grid_interval_s=0.0), _NO_ZENOH, model=small_model)
+    svc.handle_batch([_pose(3, 0, demo.features[0])], now=0.0)
+    bad = demo.features[2].copy()
+    bad[4] = 50.0  # far outside its plausible range: refused
+    out = svc.handle_batch([_pose(3, 1, demo.features[1]), _pose(3, 2, bad)], now=1.0)
+    assert [type(m).__name__ for m in out] == ["ClassPosterior"] and svc.stats.rejected == 1
+    flushed = svc.flush(1.0)
+    assert [(type(m).__name__, m.index) for m in flushed] == [("OccupancyGrid", 1)]
+    every = PredictorService(PredictorConfig(grid_interval_s=0.0), _NO_ZENOH, model=small_model)
+    for i in range(2):
+        expected = every.handle(_pose(3, i, demo.features[i]))[1]
+    np.testing.assert_array_equal(flushed[0].values, expected.values)
+    assert svc.stats.coalesced == 0 and svc.flush(2.0) == []  # it got its grid: nothing more is owed
+
+
+def test_a_fault_mid_batch_keeps_the_outputs_before_it(small_model, small_library, monkeypatch):
+    """A fault of the service (not of the input) at the third of four lock-step poses: the first two's posteriors
+    and grids were dropped with the batch, though the model's evidence had taken them."""
+    demo = small_library.by_class(0)[0]
+    svc = PredictorService(PredictorConfig(), _NO_ZENOH, model=small_model)
+    observe = svc.core.observe
+
+    def faulty(features, index=None):
+        if index == 2:
+            raise RuntimeError("a bug")
+        return observe(features, index)
+
+    monkeypatch.setattr(svc.core, "observe", faulty)
+    out = svc.handle_batch([_pose(5, i, demo.features[i], tick=i) for i in range(4)], now=0.0)
+    assert [(type(m).__name__, m.index) for m in out] == [("ClassPosterior", 0), ("OccupancyGrid", 0),
+                                                          ("ClassPosterior", 1), ("OccupancyGrid", 1),
+                                                          ("ClassPosterior", 3), ("OccupancyGrid", 3)]
+    assert svc.rejects.by_reason == {(svc.keys.pose, "handler"): 1}

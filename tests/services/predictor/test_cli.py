@@ -59,6 +59,21 @@ def test_train_says_which_class_a_cross_validation_fold_cannot_fit(tmp_path, cap
             and "cannot fit 20 Gaussians to 15 samples; fewer Gaussians (--components)" in line), line
 
 
+def test_train_says_which_class_it_cannot_fit(tmp_path, capsys) -> None:
+    """A class with fewer samples than Gaussians: "cannot fit 30 Gaussians to 24 samples", of no class named."""
+    import dataclasses
+
+    lib = generate_library(n_classes=2, n_demos=2, seed=3)
+    path = tmp_path / "short.npz"
+    demos = [dataclasses.replace(d, features=d.features[:12]) if d.label == 1 else d for d in lib.demos]
+    save_library(dataclasses.replace(lib, demos=demos), path)
+    with pytest.raises(SystemExit) as exc:
+        train_main(["--library", str(path), "--out", str(tmp_path / "m.npz"), "--components", "30", "--quiet"])
+    assert exc.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert f"class {lib.class_names[1]} (2 demonstration(s)): cannot fit 30 Gaussians to 24 samples" in line, line
+
+
 def test_train_refuses_an_out_it_cannot_write_before_it_trains(tiny_library_path, tmp_path, capsys,
                                                                monkeypatch) -> None:
     """A directory in the way was found after the whole training, named as a temporary file."""

@@ -34,6 +34,33 @@ def test_gmr_single_gaussian_is_linear_regression() -> None:
     assert np.allclose(mean, [[-1.0 + 2.0 / 4.0 * 2.0]])
 
 
+@pytest.mark.parametrize("in_dims", [1, 2])
+def test_gmr_equals_direct_gaussian_conditioning(in_dims: int) -> None:
+    """Mean and covariance against each component conditioned by hand, mixed by the law of total covariance: the
+    between-component term of the covariance could be dropped and the tests above still passed (a review)."""
+    from scipy.stats import multivariate_normal
+
+    rng = np.random.default_rng(3)
+    k, d = 3, 5
+    weights = np.array([0.5, 0.3, 0.2])
+    means = rng.normal(0.0, 1.0, (k, d))
+    roots = rng.normal(0.0, 0.6, (k, d, d))
+    covs = roots @ roots.transpose(0, 2, 1) + 0.1 * np.eye(d)
+    x = rng.normal(0.0, 1.0, (7, in_dims))
+    mean, cov = gmr(weights, means, covs, x[:, 0] if in_dims == 1 else x, in_dims=in_dims, return_covariance=True)
+    i, o = slice(0, in_dims), slice(in_dims, d)
+    for n, xn in enumerate(x):
+        h = np.array([w * multivariate_normal(m[i], c[i, i]).pdf(xn) for w, m, c in zip(weights, means, covs,
+                                                                                             strict=True)])
+        h /= h.sum()
+        mu = np.array([m[o] + c[o, i] @ np.linalg.solve(c[i, i], xn - m[i]) for m, c in zip(means, covs, strict=True)])
+        sig = np.array([c[o, o] - c[o, i] @ np.linalg.solve(c[i, i], c[i, o]) for c in covs])
+        want_mean = h @ mu
+        want_cov = np.einsum("k,kab->ab", h, sig + np.einsum("ka,kb->kab", mu, mu)) - np.outer(want_mean, want_mean)
+        np.testing.assert_allclose(mean[n], want_mean, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(cov[n], want_cov, rtol=1e-8, atol=1e-12)
+
+
 def test_bank_matches_sklearn_and_posterior_sums_to_one() -> None:
     rng = np.random.default_rng(1)
     mixtures = [GaussianMixture(k, covariance_type="full", random_state=0).fit(rng.normal(i, 1.0 + i, (300, 4)))

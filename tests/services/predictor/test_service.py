@@ -113,6 +113,10 @@ def test_cli_missing_model_is_one_line_error(tmp_path, capsys) -> None:
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "foresight train" in err[0]
+    with pytest.raises(SystemExit) as exc:  # a directory: it said "not found", hiding the model's own reason
+        predictor_main(["--model", str(tmp_path), "--zenoh-mode", "peer", "--listen", "tcp/127.0.0.1:0"])
+    assert exc.value.code == 2
+    assert f"model file '{tmp_path}' is a directory; give the model file itself" in capsys.readouterr().err
 
 
 def test_a_fault_in_processing_or_publishing_is_logged_counted_and_the_worker_goes_on(
@@ -251,3 +255,19 @@ def test_an_unfamiliar_motion_is_flagged_on_its_posterior_said_once_and_counted(
     assert all("unlike every class" in w and "least unlikely" in w for w in warned)
     said = [r.getMessage() for r in caplog.records if "poses unfamiliar" in r.getMessage()]
     assert len(said) == len(set(unfamiliar))
+
+
+def test_a_demonstrations_unfamiliar_count_is_said_at_its_end(zenoh_hub, two_class_model, small_library,
+                                                              caplog) -> None:
+    """The count was said only at the next start or at shutdown: for a live person, maybe minutes later."""
+    service = PredictorService(PredictorConfig(), zenoh_hub(), model=two_class_model)
+    demo = small_library.by_class(2)[0]  # a class the model never saw
+    with caplog.at_level("INFO", logger="foresight.predictor"):
+        for i, f in enumerate(demo.features):
+            service.handle(_pose(7, i, f, tick=i))
+        assert service.stats.unfamiliar > 0
+        assert not [r for r in caplog.records if "poses unfamiliar" in r.getMessage()]
+        service.handle(DemoMarker(stamp=0.0, tick=0, demo_id=7, event="end", true_class=2, class_name="x",
+                                  n_samples=demo.n_samples))
+    said = [r.getMessage() for r in caplog.records if "poses unfamiliar" in r.getMessage()]
+    assert said == [f"predictor: demo 7: {service.stats.unfamiliar} of {demo.n_samples} poses unfamiliar"]
