@@ -1,0 +1,62 @@
+"""The real-time loop's stepping: a stall of the loop is walked along the path, judged for staleness as it goes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.executor.core import ExecutorConfig, ExecutorCore
+from services.executor.realtime import advance
+from services.executor.reference import Reference
+from tests.services.executor.test_core import LIMITS, make_plan
+
+
+def _l_shaped_core(stale_limit_s: float, guard=None) -> tuple[ExecutorCore, Reference]:
+    """An arm on an L: j0 first (0 -> 0.4), then j1 (0 -> 0.8), 0.1 s per waypoint, well within the limits."""
+    leg = np.linspace(0.0, 1.0, 11)[1:]
+    path = np.vstack([np.zeros(3), np.c_[0.4 * leg, 0 * leg, 0 * leg], np.c_[0.4 + 0 * leg, 0.8 * leg, 0 * leg]])
+    plan = make_plan(np.zeros(3), [np.zeros(3)], t=2)
+    plan.trajectories = path[None].astype(np.float32)
+    core = ExecutorCore(LIMITS, np.zeros(3), ExecutorConfig(stale_limit_s=stale_limit_s, require_occupancy=False),
+                        guard=guard)
+    core.adopt(plan)
+    return core, Reference(path, plan.dt)
+
+
+def test_a_stall_is_walked_along_the_path_and_the_guard_asked_on_it() -> None:
+    """The separation guard judges each move: one move of the whole gap was a chord through the L's corner."""
+    asked: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def guard(q: np.ndarray, q_next: np.ndarray) -> str:
+        asked.append((q.copy(), q_next.copy()))
+        return ""
+
+    core, ref = _l_shaped_core(10.0, guard)
+    advance(core, 1.6, 0.04)  # the loop was away 1.6 s: the reference's point at 1.6 s, reached along the L
+    np.testing.assert_allclose(core.q, ref.at(1.6), atol=1e-9)
+    assert abs(core.t - 1.6) < 1e-9 and len(asked) == 40
+    on_l = [bool(np.isclose(b[1], 0.0) or np.isclose(a[0], 0.4)) for a, b in asked]  # each move along one leg
+    assert all(on_l)
+    asked.clear()
+    one, _ = _l_shaped_core(10.0, guard)
+    one.step(1.6)  # the old loop: one move from the start to 1.6 s on, across the corner
+    (a, b), = asked
+    assert np.allclose(a, 0.0) and np.allclose(b, ref.at(1.6))  # j0 and j1 at once: off the path between
+
+
+def test_a_stall_longer_than_the_stale_limit_holds_once_the_plan_is_stale() -> None:
+    core, ref = _l_shaped_core(stale_limit_s=0.5)
+    advance(core, 2.0, 0.04)  # a 2 s stall on a plan adopted at its start: it moved 0.5 s of it, then held
+    assert core.holding and core.reason.startswith("plan is ")
+    np.testing.assert_allclose(core.q, ref.at(0.52), atol=1e-9)  # the step starting at 0.48 s, the last not stale
+    assert abs(core.t - 2.0) < 1e-9
+
+
+def test_the_guard_is_not_asked_while_the_arm_is_at_rest() -> None:
+    """At the goal the arm stays where it is: the guard ran its forward kinematics on every state anyway (50 of 50)."""
+    calls: list[int] = []
+    core, ref = _l_shaped_core(100.0, lambda q, q_next: calls.append(1) or "")
+    advance(core, 2.2, 0.04)  # along the L (2 s) to the goal: the guard asked on each move
+    moving = len(calls)
+    assert 50 <= moving <= 55 and core.reached and np.allclose(core.q, ref.at(2.0))
+    advance(core, 1.0, 0.04)  # at the goal: nothing to ask
+    assert len(calls) == moving
