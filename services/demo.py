@@ -360,10 +360,12 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
         progress = (lambda line: print(line, file=sys.stderr, flush=True)) if cfg.json else \
             (lambda line: print(line, flush=True))
         if cfg.prepare is not None:
-            from services.demo_prepare import prepare
+            from services.demo_prepare import prepare_or_stop
 
-            prepare(cfg, cfg.prepare, progress)
-            return 0
+            try:
+                return prepare_or_stop(cfg, cfg.prepare, stop, progress)
+            finally:
+                restore()
         try:
             status, summary = run_demo(cfg, stop, out=progress)
         finally:

@@ -11,24 +11,25 @@ says where its router is.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import tomli_w
 
-from services.demo_run import prepare_inputs
 from services.demo_services import extra_services, service_options, services_in_order
 from shared.arguments import ArgumentParser
 from shared.config import add_config_arguments, resolve_config
 from shared.config_names import section_class
 from shared.config_tree import config_options
+from shared.runtime import interruptible
 from shared.scene import load_scene
 
 if TYPE_CHECKING:
     from services.demo import DemoConfig
 
-__all__ = ["prepare", "config_tables"]
+__all__ = ["prepare", "prepare_or_stop", "config_tables"]
 
 CONFIG_NAME = "foresight.toml"
 
@@ -70,6 +71,8 @@ def config_tables(options: dict[str, list[str]]) -> dict[str, dict[str, Any]]:
 
 def prepare(cfg: DemoConfig, directory: Path, out: Callable[[str], None] = print) -> Path:
     """Write the scenario's inputs and ``directory/foresight.toml``; returns the config file's path."""
+    from services.demo_run import prepare_inputs  # torch and the trainer (seconds): imported once a signal can cut it
+
     scene = load_scene(cfg.scene or None)
     scenario, model, human = prepare_inputs(cfg, scene, Path(directory), out)
     options = service_options(cfg, model, human, scenario.samples_per_tick, mcap=None)
@@ -86,3 +89,26 @@ def prepare(cfg: DemoConfig, directory: Path, out: Callable[[str], None] = print
     out(f"foresight demo: services' config {path}; run each of {', '.join(names)} as "
         f"`foresight SERVICE --config {path} --connect tcp/ROUTER:7447` (the executor last, or with its wait_for)")
     return path
+
+
+def prepare_or_stop(cfg: DemoConfig, directory: Path, stop: threading.Event, out: Callable[[str], None] = print
+                    ) -> int:
+    """:func:`prepare`, cut short by SIGINT/SIGTERM; returns 0, or 130 when a signal stopped it (said in one line).
+
+    The signal takes effect at once, while training too: compose's ``prepare`` ignored it, and ``docker compose down``
+    waited out its 20 s grace and then killed it. A model cut short is not cached (written whole or not at all), and
+    the config file, written last and whole, is not written: the services that wait for ``prepare`` do not start.
+    """
+    done = False
+    try:
+        with interruptible(stop):
+            if not stop.is_set():  # a signal before this point (the demo's imports) stops it before any work
+                prepare(cfg, directory, out)
+                done = True
+    except KeyboardInterrupt:
+        pass
+    if done:  # a signal after the work is done leaves it done
+        return 0
+    out(f"foresight demo: interrupted while preparing {directory}: its config file was not written and a model cut "
+        "short is not cached; run it again to prepare it")
+    return 130

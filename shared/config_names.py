@@ -50,6 +50,8 @@ OTHER_VARIABLES: dict[str, str] = {
     f"{ENV_PREFIX}_SECURITY_DIR": "compose.secure.yaml: the directory of `foresight security init` (default "
                                   "./security)",
     f"{ENV_PREFIX}_CA_BUNDLE": "tools/compose_check.sh: extra CA certificates the build trusts (a proxy's)",
+    f"{ENV_PREFIX}_ROUTER_ADDR": "compose.yaml: the host address the router's port 7447 is published on (default "
+                                 "127.0.0.1; another machine's cell: the host's own address, docs/security.md)",
 }
 """``FORESIGHT_*`` variables that are not options of a section, with what each is."""
 

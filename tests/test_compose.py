@@ -1,15 +1,13 @@
 """compose.yaml and Dockerfile: schema-valid compose file, configuration that the services understand,
 no multicast scouting, a stack that starts in any order, runs the scenario of `foresight demo` (its prepared
-config file) and ends with its executor, and the Dockerfile installing what the Makefile installs (the run
-itself: tests/test_compose_run.py, where a Docker engine answers)."""
+config file) and ends with its executor, and the Dockerfile installing what the Makefile installs (each container's
+command and the addresses they share, the secure variant: tests/test_compose_commands.py; the run itself:
+tests/test_compose_run.py, where a Docker engine answers)."""
 
 from __future__ import annotations
 
-import contextlib
 import importlib
-import io
 import re
-import shlex
 import shutil
 import subprocess
 import sys
@@ -20,7 +18,6 @@ import pytest
 from ruamel.yaml import YAML  # comes with check-jsonschema (dev extra), which this test needs anyway
 
 from shared.config import ConfigError, ZenohConfig, config_options, parse_value, resolve_config
-from tools.foresight import COMMANDS
 
 REPO = Path(__file__).resolve().parents[1]
 COMPOSE = REPO / "compose.yaml"
@@ -40,19 +37,19 @@ def compose() -> dict:
     return YAML(typ="safe").load(COMPOSE.read_text())
 
 
-def _check(path: Path) -> subprocess.CompletedProcess[str]:
+def schema_check(path: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run([CHECK, "--builtin-schema", "vendor.compose-spec", str(path)], capture_output=True,
                           text=True, timeout=120)
 
 
 def test_compose_file_is_valid_against_the_compose_spec(tmp_path) -> None:
-    ok = _check(COMPOSE)
+    ok = schema_check(COMPOSE)
     assert ok.returncode == 0, ok.stdout + ok.stderr
     # the validator does catch mistakes
     bad = tmp_path / "compose.yaml"
     bad.write_text(COMPOSE.read_text().replace("condition: service_completed_successfully",
                                                "condition: when_it_feels_like_it", 1))
-    res = _check(bad)
+    res = schema_check(bad)
     assert res.returncode != 0 and "when_it_feels_like_it" in res.stdout + res.stderr
 
 
@@ -63,8 +60,8 @@ def test_services_router_volumes_and_dependencies() -> None:
     # the router comes from the project image (Docker Hub may be out of reach): `foresight router`
     assert services["router"]["command"][:2] == ["foresight", "router"]
     assert "--no-multicast-scouting" in services["router"]["command"]
-    assert "tcp/0.0.0.0:7447" in services["router"]["command"]
-    assert "7447" in " ".join(services["router"]["healthcheck"]["test"])
+    assert "tcp/0.0.0.0:7447" in services["router"]["command"]  # its port published, checked, connected to: see
+    # tests/test_compose_commands.py
     for name, svc in services.items():
         for dep in svc.get("depends_on", {}):
             assert dep in services, f"{name} depends on unknown service {dep}"
@@ -114,6 +111,10 @@ def test_the_stack_starts_in_any_order() -> None:
 
 @pytest.fixture(scope="module")
 def prepared(tmp_path_factory) -> tuple[Path, dict[str, list[str]]]:
+    return prepared_file(tmp_path_factory.mktemp("prepared"))
+
+
+def prepared_file(directory: Path) -> tuple[Path, dict[str, list[str]]]:
     """The config file `foresight demo --prepare` writes for the demo's defaults, and the flags the demo passes."""
     import tomli_w
 
@@ -122,8 +123,8 @@ def prepared(tmp_path_factory) -> tuple[Path, dict[str, list[str]]]:
     from services.demo_services import service_options
 
     options = service_options(DemoConfig(), Path("models/demo-x.npz"), Path("models/compose/human.npz"), 5, None)
-    path = tmp_path_factory.mktemp("prepared") / "foresight.toml"
-    path.write_text(tomli_w.dumps(config_tables({name: options[name] for name in FORESIGHT_SERVICES})))
+    path = directory / "foresight.toml"
+    path.write_text(tomli_w.dumps(config_tables({name: options[name] for name in (*FORESIGHT_SERVICES, "view")})))
     return path, options
 
 
@@ -207,33 +208,6 @@ def test_every_service_is_a_zenoh_client_of_the_router_without_scouting() -> Non
         z.validate()
 
 
-def _foresight_invocations():
-    for name, svc in compose()["services"].items():
-        cmd = svc.get("command")
-        if not cmd or name == "router":
-            continue
-        text = cmd[-1] if cmd[0] == "sh" else shlex.join(cmd)
-        for part in re.split(r"&&|\|\||;|\{|\}", text):
-            tokens = shlex.split(part)
-            if tokens and tokens[0] == "foresight":
-                yield name, tokens[1:]
-
-
-@pytest.mark.parametrize("service, args", list(_foresight_invocations()))
-def test_commands_and_flags_exist(service, args) -> None:
-    command = args[0]
-    if command not in COMMANDS:
-        pytest.skip(f"foresight {command} is not registered yet")
-    module = importlib.import_module(COMMANDS[command][0])
-    sub = [args[1]] if len(args) > 1 and not args[1].startswith("-") else []
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), pytest.raises(SystemExit) as exc:
-        module.main([*sub, "--help"], prog=f"foresight {command}")
-    assert exc.value.code == 0
-    for flag in (a for a in args[1:] if a.startswith("--")):
-        assert flag in out.getvalue(), f"{service}: foresight {command} {' '.join(sub)} has no {flag}"
-
-
 def test_dockerfile_installs_what_the_makefile_installs() -> None:
     docker = (REPO / "Dockerfile").read_text()
     make = (REPO / "Makefile").read_text()
@@ -263,47 +237,6 @@ def test_dockerfile_installs_what_the_makefile_installs() -> None:
     ignored = (REPO / ".dockerignore").read_text().split()
     assert {".venv", ".git", "models", "runs"} <= set(ignored)
     assert not {"shared", "services", "tools"} & set(ignored)
-
-
-SECURE = REPO / "compose.secure.yaml"
-
-
-def test_the_secure_variant_is_valid_and_gives_each_service_only_its_own_role() -> None:
-    """compose.secure.yaml: schema-valid; every Zenoh session on TLS with its role's certificate (read-only),
-    the router `foresight router --security` (its access control from the same generator)."""
-    ok = _check(SECURE)
-    assert ok.returncode == 0, ok.stdout + ok.stderr
-    secure = YAML(typ="safe").load(SECURE.read_text())["services"]
-    base = compose()["services"]
-    zenoh_services = [name for name, svc in base.items() if name != "prepare"]
-    assert sorted(secure) == sorted(zenoh_services)
-    for name, svc in secure.items():
-        mounts = [v.rsplit(":", 2) for v in svc["volumes"]]  # SOURCE:TARGET:ro (the source has a ${...:-...})
-        assert all(m[-1] == "ro" for m in mounts), name
-        files = sorted(Path(m[0]).name for m in mounts)
-        role = "observer" if name == "view" else name  # the live view reads, as displays do
-        assert files == sorted(["ca.crt", f"{role}.crt", f"{role}.key"]), name  # its own role, nothing else
-        assert {Path(m[1]).parent for m in mounts} == {Path("/run/foresight/security")}
-        if name == "router":
-            cmd = svc["command"]
-            assert cmd[:2] == ["foresight", "router"] and cmd[cmd.index("--security") + 1] == "/run/foresight/security"
-            assert cmd[cmd.index("--listen") + 1].startswith("tls/")
-            continue
-        env = svc["environment"]
-        assert env["FORESIGHT_ZENOH_CONNECT"].startswith("tls/router:")
-        assert env["FORESIGHT_ZENOH_SECURITY_DIR"] == "/run/foresight/security"
-        # the variables name real options of the [zenoh] section
-        names = {o.env for o in config_options("zenoh", ZenohConfig)}
-        assert set(env) <= names
-
-
-def test_the_secure_router_command_parses() -> None:
-    from tools.router import main as router_main
-
-    cmd = YAML(typ="safe").load(SECURE.read_text())["services"]["router"]["command"]
-    with pytest.raises(SystemExit) as exc:
-        router_main([*cmd[2:], "--help"])
-    assert exc.value.code == 0
 
 
 def _strip_ms(table: str, tmp_path: Path) -> str:

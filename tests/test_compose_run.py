@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -51,3 +52,41 @@ def test_compose_up_runs_the_stack_for_real() -> None:
         pytest.skip(proc.stdout.strip().splitlines()[-1])
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
     assert "complete; down: nothing left running" in proc.stdout and "compose check: passed" in proc.stdout
+
+
+def test_the_secure_checks_certificates_are_outside_every_mounted_directory(tmp_path: Path) -> None:
+    """`--secure` made the CA and every role's key in runs/compose-check/security, and runs/ is mounted into every
+    container: each could read ca.key and every other role's key. They are now made outside the clone (only each
+    role's own files are mounted, by compose.secure.yaml), removed at the end, and an earlier check's are removed."""
+    foresight = Path(sys.executable).parent / "foresight"
+    if not foresight.is_file():
+        pytest.skip(f"no foresight command at {foresight} (make setup)")
+    clone = tmp_path / "clone"  # the script works in the clone it is in: a copy, so that runs/ here stays as it is
+    (clone / "tools").mkdir(parents=True)
+    shutil.copy(CHECK, clone / "tools" / CHECK.name)
+    stale = clone / "runs" / "compose-check" / "security"
+    stale.mkdir(parents=True)
+    (stale / "ca.key").write_text("an earlier check's")
+    record = tmp_path / "at-up.txt"
+    bin_dir = tmp_path / "bin"  # a docker whose engine answers and builds; `compose up` notes the certificates, fails
+    bin_dir.mkdir()
+    (bin_dir / "docker").write_text(
+        '#!/bin/sh\ncase "$1" in\n'
+        '  compose) case " $* " in *" up "*) { echo "$FORESIGHT_SECURITY_DIR"; ls "$FORESIGHT_SECURITY_DIR"; } '
+        f'> "{record}"; exit 1 ;; esac ;;\n'
+        "  image) echo 2000000000 ;;\nesac\nexit 0\n")
+    (bin_dir / "docker").chmod(0o755)
+    env = {"PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}", "HOME": str(tmp_path), "TMPDIR": str(tmp_path),
+           "FORESIGHT": str(foresight), "FORESIGHT_WHEELHOUSE_DIR": str(tmp_path / "none")}
+    proc = subprocess.run(["bash", str(clone / "tools" / CHECK.name), "--secure", "--no-demo"], env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1 and "compose check: FAILED: up (see" in proc.stdout, proc.stdout + proc.stderr
+    assert "removed runs/compose-check/security: an earlier check's certificates" in proc.stdout
+    assert not stale.exists()
+    where, *files = record.read_text().split()
+    security = Path(where)
+    assert {"ca.crt", "ca.key", "router.crt", "router.key", "planner.key"} <= set(files)  # all made, for `up`
+    for mounted in ("runs", "models"):  # compose.yaml mounts these two of the clone into every container
+        assert not security.is_relative_to(clone / mounted), security
+    assert not security.is_relative_to(clone)
+    assert not security.exists() and not security.parent.exists(), "the check's certificates were left behind"

@@ -7,7 +7,9 @@
 #   tools/compose_check.sh [--twice] [--no-demo] [--secure]
 #     --twice    run the stack a second time after `down` (it must reuse the trained model)
 #     --no-demo  skip the comparison with a `foresight demo` run on the host
-#     --secure   with compose.secure.yaml: mutual TLS and access control, certificates made in runs/compose-check
+#     --secure   with compose.secure.yaml: mutual TLS and access control, with certificates made for the check in a
+#                temporary directory outside the clone, removed at the end (runs/ and models/ are mounted into every
+#                container: a CA key there was every container's to read)
 #
 # Environment: FORESIGHT_BASE_IMAGE (default python:3.11-slim, else a debootstrap image), FORESIGHT_WHEELHOUSE_DIR
 # (default: pip's find-links directory, if local), FORESIGHT_CA_BUNDLE (default: pip's / requests' CA bundle),
@@ -43,10 +45,24 @@ docker compose version >/dev/null 2>&1 || cannot "no compose v2 plugin (\`docker
 [ -x "$FORESIGHT" ] || cannot "no foresight command on the host to check the log with ($FORESIGHT: make setup)"
 mkdir -p models runs "$OUT"
 compose() { docker compose -p "$PROJECT" "${FILES[@]}" "$@"; }
+STACK_UP=0 SECURITY=""
+on_exit() {  # whatever happens, nothing is left running and the check's certificates are gone
+  if [ "$STACK_UP" = 1 ]; then compose down --remove-orphans >/dev/null 2>&1 || true; fi
+  if [ -n "$SECURITY" ]; then rm -rf "$SECURITY"; fi
+}
+trap on_exit EXIT
+if [ -d "$OUT/security" ]; then  # where an earlier check made them: in runs/, which every container mounts
+  rm -rf "$OUT/security"
+  say "removed $OUT/security: an earlier check's certificates, which every container could read (runs/ is mounted)"
+fi
 if [ ${#FILES[@]} -gt 2 ]; then  # the secure variant: a CA and one certificate per role, the router's for `router`
-  export FORESIGHT_SECURITY_DIR=$PWD/$OUT/security
-  [ -f "$FORESIGHT_SECURITY_DIR/ca.crt" ] || "$FORESIGHT" security init "$FORESIGHT_SECURITY_DIR" --hosts router >/dev/null
-  say "secure variant: mutual TLS and access control, certificates in $FORESIGHT_SECURITY_DIR"
+  # outside the clone, so that no container mounts more than compose.secure.yaml gives it: its role's files
+  SECURITY=$(mktemp -d "${TMPDIR:-/tmp}/foresight-check-security.XXXXXX")
+  export FORESIGHT_SECURITY_DIR=$SECURITY/security
+  "$FORESIGHT" security init "$FORESIGHT_SECURITY_DIR" --hosts router >/dev/null
+  # the containers run as the owner of runs/, and each key is readable by its maker only
+  if [ "$(id -u)" = 0 ]; then chown -R "$(stat -c %u:%g runs)" "$SECURITY"; fi
+  say "secure variant: mutual TLS and access control, certificates in $FORESIGHT_SECURITY_DIR (removed at the end)"
 fi
 
 # 1. the base image: the default one if it is here or can be pulled, else one made with debootstrap
@@ -90,7 +106,7 @@ run_stack() {  # $1: label; sets MCAP, UP_S (up -> executor done), FIRST_PLAN_S 
   local label=$1 t0 code
   compose down --remove-orphans >/dev/null 2>&1 || true
   t0=$(now)
-  trap 'compose down --remove-orphans >/dev/null 2>&1' EXIT  # whatever happens next, nothing is left running
+  STACK_UP=1  # whatever happens next, nothing is left running (on_exit)
   FORESIGHT_BASE_IMAGE=$BASE FORESIGHT_WHEELHOUSE=$WHEELHOUSE compose up -d --no-build > "$OUT/up-$label.log" 2>&1 \
     || { compose logs --no-color > "$OUT/compose-$label.log" 2>&1; compose down >/dev/null 2>&1; fail "up (see $OUT/up-$label.log, $OUT/compose-$label.log)"; }
   timeout 900 docker compose -p "$PROJECT" "${FILES[@]}" wait executor > /dev/null 2>&1 || true
@@ -102,7 +118,7 @@ run_stack() {  # $1: label; sets MCAP, UP_S (up -> executor done), FIRST_PLAN_S 
     | "$PY" -c "import sys, datetime as d; a, b = (d.datetime.fromisoformat(x[:26].rstrip('Z')) for x in sys.stdin.read().split()); print(f'{(b - a).total_seconds():.1f}')" \
     2>/dev/null || echo "?")
   compose down --remove-orphans > "$OUT/down-$label.log" 2>&1 || fail "down (see $OUT/down-$label.log)"
-  trap - EXIT
+  STACK_UP=0
   left=$(docker ps -q --filter "label=com.docker.compose.project=$PROJECT")
   [ -z "$left" ] || fail "containers still running after down: $left"
   [ "$code" = 0 ] || fail "executor exited with '$code' (see $OUT/compose-$label.log)"

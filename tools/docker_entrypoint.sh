@@ -10,6 +10,16 @@
 # directory whose owner it is, for tests). Every refusal is one line naming what was wrong.
 set -eu
 say() { echo "foresight-entrypoint: $*" >&2; }
+# chown -R of the compile cache, a volume the other containers share: the planner compiling in one of them adds and
+# removes files meanwhile, and a file gone mid-walk is no error (under set -e it ended the container, 3 starts in 20
+# of a review); any other failure is one warning and the command runs regardless (the cache is only a cache)
+own_cache() {
+  errors=$(LC_ALL=C chown -R -h "$uid:$gid" "$1" 2>&1 >/dev/null) && return 0
+  first=$(printf '%s\n' "$errors" | while IFS= read -r line; do
+    case $line in *": No such file or directory" | "") ;; *) echo "$line"; break ;; esac
+  done)
+  if [ -n "$first" ]; then say "warning: $1 is not wholly $uid:$gid's, kernels may be compiled again: $first"; fi
+}
 if [ "$(id -u)" = 0 ]; then
   runs=${FORESIGHT_RUNS_DIR:-/app/runs}
   if [ -n "${FORESIGHT_RUN_AS:-}" ]; then
@@ -34,7 +44,7 @@ if [ "$(id -u)" = 0 ]; then
     HOME=/tmp/foresight-home-$uid  # the image's /home/foresight is uid 1000's
     mkdir -p "$HOME" && chown -h "$uid:$gid" "$HOME"
     cache=${TORCHINDUCTOR_CACHE_DIR:-}  # a volume kept from one up to the next, perhaps filled by another user
-    if [ -n "$cache" ] && [ -d "$cache" ]; then chown -R -h "$uid:$gid" "$cache"; fi
+    if [ -n "$cache" ] && [ -d "$cache" ]; then own_cache "$cache"; fi
     export HOME USER="$uid"
     exec setpriv --reuid="$uid" --regid="$gid" --clear-groups -- "$@"
   fi
