@@ -49,7 +49,7 @@ from shared.scene import Grid
 from .body import BodyCapsules, body_clearances
 from .compiling import compile_every_shape
 from .costs import StateCost, acceleration_cost, hinge_sum, waypoint_times
-from .sdf import VoxelTables
+from .sdf import VoxelTables, crop_volume
 
 __all__ = ["FusedCost", "supports"]
 
@@ -77,27 +77,6 @@ def _cell_args(t: VoxelTables, flat: bool) -> tuple[torch.Tensor, ...]:
     if flat:
         return t.volume.view(-1), t.first, t.u_max, t.cell_max, t.voxel_strides, t.corner_offsets
     return t.cells, t.first, t.u_max, t.cell_max, t.cell_strides, t.corner_offsets
-
-
-def _crop(volume: torch.Tensor, first: torch.Tensor, res: float,
-          keep: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, bool]:
-    """Crop ``volume`` to the voxels where ``keep`` holds, plus one layer on every side.
-
-    Returns:
-        ``(cropped volume, centre of its voxel 0, whether the crop is strictly inside the volume)``.
-    """
-    dims = volume.shape
-    if not bool(keep.any()):
-        lo, hi = [0, 0, 0], [min(1, n - 1) for n in dims]
-        inside = False
-    else:
-        idx = torch.nonzero(keep)
-        lo = [max(int(v) - 1, 0) for v in idx.min(0).values]
-        hi = [min(int(v) + 1, n - 1) for v, n in zip(idx.max(0).values, dims, strict=True)]
-        inside = all(a_ > 0 for a_ in lo) and all(b_ < n - 1 for b_, n in zip(hi, dims, strict=True))
-    hi = [max(h, a_ + 1) for a_, h in zip(lo, hi, strict=True)]  # at least 2 voxels per axis
-    sub = volume[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].contiguous()
-    return sub, first + res * torch.tensor(lo, dtype=first.dtype, device=first.device), inside
 
 
 def _trilinear(p: torch.Tensor, inv_res: float, packed: torch.Tensor, first: torch.Tensor, u_max: torch.Tensor,
@@ -267,7 +246,7 @@ class FusedCost:
         field = sdf.tables
         vol = field.volume
         cap = cfg.clearance + float(r_arm_c.max())
-        sub, first, inside = _crop(vol, field.first, 1.0 / field.inv_res, vol < cap)
+        sub, first, inside = crop_volume(vol, field.first, 1.0 / field.inv_res, vol < cap)
         self._sdf = VoxelTables.build(sub, first, field.inv_res)
         # body spheres: centre(l) = c0 + l v (torso-carried) or c0 (fixed base)
         lo = robot.lower.clone()

@@ -20,7 +20,7 @@ from scipy.ndimage import distance_transform_edt
 
 from shared.scene import Grid, Scene
 
-__all__ = ["SignedDistanceField", "VoxelTables", "rasterize_obstacles", "grid_lookup", "GridLookupError"]
+__all__ = ["SignedDistanceField", "VoxelTables", "rasterize_obstacles", "grid_lookup", "GridLookupError", "crop_volume"]
 
 
 class GridLookupError(ValueError):
@@ -232,3 +232,27 @@ class SignedDistanceField:
         d = self.tables.lookup(points)
         out = torch.clamp(self._lo - points, min=0) + torch.clamp(points - self._hi, min=0)
         return d + torch.sqrt((out * out).sum(-1))  # (vector_norm over a size-3 axis is slow on CPU)
+
+
+def crop_volume(volume: torch.Tensor, first: torch.Tensor, res: float,
+                keep: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, bool]:
+    """Crop ``volume`` ``(nx, ny, nz)`` to the voxels where ``keep`` holds, plus one layer on every side.
+
+    ``first``: ``(3,)`` the centre of its voxel 0; ``res``: its voxel edge (the fused cost keeps the part of the
+    static field where some sphere can pay).
+
+    Returns:
+        ``(cropped volume, centre of its voxel 0, whether the crop is strictly inside the volume)``.
+    """
+    dims = volume.shape
+    if not bool(keep.any()):
+        lo, hi = [0, 0, 0], [min(1, n - 1) for n in dims]
+        inside = False
+    else:
+        idx = torch.nonzero(keep)
+        lo = [max(int(v) - 1, 0) for v in idx.min(0).values]
+        hi = [min(int(v) + 1, n - 1) for v, n in zip(idx.max(0).values, dims, strict=True)]
+        inside = all(a_ > 0 for a_ in lo) and all(b_ < n - 1 for b_, n in zip(hi, dims, strict=True))
+    hi = [max(h, a_ + 1) for a_, h in zip(lo, hi, strict=True)]  # at least 2 voxels per axis
+    sub = volume[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].contiguous()
+    return sub, first + res * torch.tensor(lo, dtype=first.dtype, device=first.device), inside

@@ -188,7 +188,8 @@ def _build(body: str) -> str:
     head, tail = BUILDING.split("def make(cfg, zcfg, stop):\n")
     tail = tail[tail.index("\nsys.exit"):]
     return (head.replace("from shared.runtime import service_main",
-                         "from shared import runtime\nruntime.SHUTDOWN_GRACE_S = 1.0\n"
+                         "from shared import runtime, stopping\n"
+                         "runtime.SHUTDOWN_GRACE_S = stopping.SHUTDOWN_GRACE_S = 1.0\n"
                          "from shared.runtime import service_main")
             + SIGNAL_ANOTHER_THREAD + "def make(cfg, zcfg, stop):\n" + body + tail)
 
@@ -221,6 +222,39 @@ def test_a_service_stuck_in_a_call_exits_after_the_grace_when_another_thread_got
     assert "foresight planner: did not stop within 1 s of SIGTERM" in end.stderr, end.stderr[-2000:]
 
 
+NATIVE_BUILD = ("    import hashlib\n"
+                '    print("building", flush=True)\n'
+                "    for _ in range(400):  # native calls of ~0.25 s each: Python's handler runs only between them\n"
+                "        hashlib.pbkdf2_hmac('sha256', b'x', b'y', 300_000)\n"
+                '    return lambda: print("served", flush=True)\n')
+
+
+def test_a_build_in_native_calls_is_ended_after_the_grace_and_a_second_signal_ends_it_at_once(signalled) -> None:
+    """While a service was built, the build's own handler replaced the shutdown watchdog: a build in a long native
+    call ignored a second SIGTERM and ended only when the call did (a review: 13 s, status 0)."""
+    once = signalled(["-c", _build(NATIVE_BUILD)], [(signal.SIGTERM, 0.0)], ready="building", timeout=60)
+    assert once.returncode in (0, 3), once.stderr[-2000:]  # cut between two calls, or by the watchdog after 1 s
+    assert "served" not in once.stdout
+    twice = signalled(["-c", _build(NATIVE_BUILD.replace("300_000", "30_000_000"))],
+                      [(signal.SIGTERM, 0.0), (signal.SIGTERM, 0.5)], ready="building", timeout=60)
+    assert twice.returncode == 3, twice.stderr[-2000:]  # one native call of ~25 s: the second signal ends it
+    assert "foresight planner: second SIGTERM while starting; exiting with status 3" in twice.stderr, twice.stderr
+
+
+def test_a_thread_left_running_after_the_service_stopped_does_not_hold_the_exit(signalled) -> None:
+    """After a signal, run() returned but a non-daemon thread it had started kept the process alive (a review: 25 s):
+    the shutdown watchdog had ended with the run."""
+    code = _build("    def run():\n"
+                  "        threading.Thread(target=time.sleep, args=(600,)).start()  # a worker, not a daemon\n"
+                  '        print("serving", flush=True)\n'
+                  "        runtime.wait_for_stop(stop)\n"
+                  "    return run\n").replace("import signal, threading, time", "import signal, threading, time\n"
+                                             "from shared import runtime", 1)
+    end = signalled(["-c", code], [(signal.SIGTERM, 0.0)], ready="serving", timeout=30)
+    assert end.returncode == 3, end.stderr[-2000:]
+    assert "foresight planner: did not exit within 1 s of its stop" in end.stderr, end.stderr[-2000:]
+
+
 def test_debug_is_foresights_own_and_other_libraries_stay_at_info() -> None:
     """`--log-level DEBUG` set the root logger: 292 of a demo's 294 DEBUG lines were matplotlib's font search, and a
     planner's per-plan lines came with filelock's every lock."""
@@ -241,7 +275,8 @@ def test_a_worker_left_by_a_stopped_build_does_not_hold_the_exit_past_the_grace(
     """A build stopped by a signal returned 0, but a non-daemon thread it had started kept the interpreter waiting as
     long as it ran (a review's script: 25 s), where the shutdown watchdog used to force the exit after the grace."""
     code = BUILDING_WITH_A_WORKER.replace("from shared.runtime import service_main",
-                                          "from shared import runtime\nruntime.SHUTDOWN_GRACE_S = 1.0\n"
+                                          "from shared import runtime, stopping\n"
+                                          "runtime.SHUTDOWN_GRACE_S = stopping.SHUTDOWN_GRACE_S = 1.0\n"
                                           "from shared.runtime import service_main")
     end = signalled(["-c", code], [(signal.SIGTERM, 0.0)], ready="building")
     assert end.returncode == 3, end.stderr[-2000:]
