@@ -123,7 +123,10 @@ class Presence:
         if peer != self.service:
             log.info("%s: peer %s %s", self.service, peer, "appeared" if up else "disappeared")
         if self._on_change is not None:
-            self._on_change(peer, up)
+            try:
+                self._on_change(peer, up)
+            except Exception:  # the service's reaction failed: the departure below must still be acted on
+                log.exception("%s: reacting to peer %s %s failed", self.service, peer, "appearing" if up else "leaving")
         if ended and self._stop is not None:
             # lost with the link (the router went: the link is already down when the deletions come), or withdrawn
             # (the peer ended; a link lost after that, the peer's own in peer mode, changes nothing)

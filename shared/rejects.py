@@ -37,20 +37,23 @@ class RejectCounter:
         self._traced: set[str] = set()
         self._lock = threading.Lock()
 
-    def reject(self, key: str, error: Exception | str, reason: str | None = None) -> None:
+    def reject(self, key: str, error: Exception | str, reason: str | None = None, said: bool = False) -> None:
         """Record one rejected message on ``key``.
 
         Args:
             key: The key expression it arrived on.
             error: Why (an exception's text names the field and the value).
             reason: The category (default: ``error.reason`` when it has one, else ``"malformed"``).
+            said: The caller has just logged this one itself (its traceback): counted, its line starts the period.
         """
         why = reason or getattr(error, "reason", None) or "malformed"
         with self._lock:
             new_reason = (key, why) not in self._by_reason
             self._by_reason[(key, why)] = self._by_reason.get((key, why), 0) + 1
             now = self._clock()
-            if not new_reason and now - self._last_log.get(key, -float("inf")) < self.log_period_s:
+            if said or (not new_reason and now - self._last_log.get(key, -float("inf")) < self.log_period_s):
+                if said:
+                    self._last_log[key] = now
                 return
             self._last_log[key] = now
             counts = {r: n for (k, r), n in self._by_reason.items() if k == key}
@@ -61,10 +64,11 @@ class RejectCounter:
                     detail)
 
     def unexpected(self, key: str, error: Exception, what: str) -> None:
-        """Record a message refused by a bug of this process, not by the wire contract.
+        """Record a message refused by a bug of this process, not by the wire contract (reason ``handler``).
 
         Its traceback is logged the first time on each key (a peer repeating the message cannot flood the
-        log with tracebacks), then it is counted and rate-limited like any :meth:`reject`.
+        log with tracebacks), then it is counted and rate-limited like any :meth:`reject`. (It was filed as
+        ``malformed``, blaming the sender, and said twice the first time.)
 
         Args:
             key: The key expression it arrived on.
@@ -77,7 +81,7 @@ class RejectCounter:
         if first:
             log.error("%s: %s on %s failed unexpectedly (this traceback once per key; later ones are counted)",
                       self.service, what, key, exc_info=error)
-        self.reject(key, error)
+        self.reject(key, error, reason="handler", said=first)
 
     @property
     def counts(self) -> dict[str, int]:

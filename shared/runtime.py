@@ -20,6 +20,7 @@ from shared.stopping import (
     SHUTDOWN_GRACE_S,
     SIGNAL_ECHO_S,
     STOP_POLL_S,
+    StoppedWhileStarting,
     exit_within,
     interruptible,
     stop_on_signals,
@@ -201,7 +202,11 @@ def service_main(argv: list[str] | None, prog: str, *, section: str, config_cls:
                 return 0
             logging.getLogger("foresight").debug("%d start-up objects frozen out of the garbage collector",
                                                  freeze_startup_heap())
-            status = run()
+            try:
+                status = run()
+            except StoppedWhileStarting as exc:  # docker compose down while the router restarted: no bad input
+                logging.getLogger("foresight").info("%s: %s", prog, exc)
+                status = 0
             if stop.is_set():  # a thread the service left behind must not hold the exit unbounded
                 exit_within(SHUTDOWN_GRACE_S, prog, "of its stop")
         finally:

@@ -19,8 +19,12 @@ from contextlib import contextmanager
 
 from shared.signal_relay import interrupt_main_thread, relaying, watch_signals
 
-__all__ = ["stop_on_signals", "interruptible", "wait_for_stop", "exit_within", "SHUTDOWN_GRACE_S", "SIGNAL_ECHO_S",
-           "STOP_POLL_S", "FORCED_EXIT"]
+__all__ = ["StoppedWhileStarting", "stop_on_signals", "interruptible", "wait_for_stop", "exit_within",
+           "SHUTDOWN_GRACE_S", "SIGNAL_ECHO_S", "STOP_POLL_S", "FORCED_EXIT"]
+
+class StoppedWhileStarting(Exception):  # noqa: N818 (a stop, not an error)
+    """A stop (a signal) came while the service was still starting, e.g. waiting for its router: it ends with 0."""
+
 
 SHUTDOWN_GRACE_S = 10.0
 """Seconds a process may take to stop after SIGINT/SIGTERM before it exits anyway (:func:`stop_on_signals`)."""

@@ -29,9 +29,11 @@ from shared.rejects import RejectCounter
 from shared.security import OBSERVER
 from shared.security.guard import denied, forget, remember
 from shared.security.tls import listen_warning, security_settings
+from shared.stopping import StoppedWhileStarting
 
-__all__ = ["TransportError", "MAX_MESSAGE_BYTES", "zenoh_config", "open_session", "open_with_retry", "TypedPublisher",
-           "subscribe", "subscribe_ordered", "LatestSubscriber", "RejectCounter", "sender_of", "Presence", "describe"]
+__all__ = ["TransportError", "StoppedWhileConnecting", "MAX_MESSAGE_BYTES", "zenoh_config", "open_session",
+           "open_with_retry", "TypedPublisher", "subscribe", "subscribe_ordered", "LatestSubscriber", "RejectCounter",
+           "sender_of", "Presence", "describe"]
 
 log = logging.getLogger(__name__)
 M = TypeVar("M", bound=Message)
@@ -64,6 +66,10 @@ class TransportError(ValueError):
     """A Zenoh session could not be opened (e.g. the listen port is taken); the message says where."""
 
 
+class StoppedWhileConnecting(TransportError, StoppedWhileStarting):
+    """A client was stopped (SIGTERM, ``docker compose down``) while it still waited for its router: no error."""
+
+
 RETRY_FIRST_S = 0.25
 """First pause before a client retries to reach its router; it doubles up to :data:`RETRY_MAX_S`."""
 RETRY_MAX_S = 4.0
@@ -90,7 +96,7 @@ def open_with_retry(cfg: ZenohConfig, sleep: Callable[[float], None] | None = No
 
     Raises:
         TransportError: If the session cannot be opened (one line: mode, endpoints, Zenoh's reason;
-            for a client: after the retries, or when ``stop`` is set).
+            for a client: after the retries); :class:`StoppedWhileConnecting` when ``stop`` is set meanwhile.
     """
     stop = stop or threading.Event()
     sleep = sleep or stop.wait
@@ -103,10 +109,11 @@ def open_with_retry(cfg: ZenohConfig, sleep: Callable[[float], None] | None = No
         except TransportError as exc:
             left = deadline - time.monotonic()
             if cfg.mode != "client" or not cfg.connect or left <= 0 or stop.is_set():
+                if attempt > 1 and stop.is_set():
+                    raise StoppedWhileConnecting(f"stopped while waiting for the router {connect_names(cfg)}") from None
                 if attempt > 1:
-                    why = ("stopped" if stop.is_set() else
-                           f"gave up after {attempt} attempts in {cfg.connect_timeout_s:g} s")
-                    raise TransportError(f"{exc} ({why}){tls_hint(cfg)}") from None
+                    raise TransportError(f"{exc} (gave up after {attempt} attempts in {cfg.connect_timeout_s:g} s)"
+                                         f"{tls_hint(cfg)}") from None
                 raise
             pause = min(delay, left)
             log.warning("zenoh: router %s not reachable yet (attempt %d); retrying in %.2g s, at most %g s in all%s",
@@ -198,7 +205,8 @@ def subscribe(session: zenoh.Session, key: str, cls: type[M], callback: Callable
 
     Malformed payloads (and, with ``receipt``, messages whose values or order it refuses) are
     counted and logged by ``rejects`` and never reach ``callback``; an exception raised by
-    ``callback`` itself is logged and does not stop the subscription.
+    ``callback`` itself is counted there too (reason ``handler``, its traceback once per key) and does not stop
+    the subscription.
 
     Args:
         session: Open Zenoh session.
@@ -236,8 +244,10 @@ def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str,
         key = str(sample.key_expr)
         try:
             cls = types.get(key)
-            if cls is None:
-                raise ProtocolError(f"message: unexpected key {key}", "wrong-type")
+            if cls is None:  # counted under the expression: a flood of new keys is one counter, rate-limited
+                (rejects or default_rejects).reject(key_expr, ProtocolError(f"message: unexpected key {key}",
+                                                                            "wrong-type"))
+                return
             payload = sample.payload.to_bytes()
             msg = (receipt.accept(key, payload, cls, sender_of(sample)) if receipt is not None
                    else decode(payload, cls))
@@ -249,8 +259,8 @@ def subscribe_ordered(session: zenoh.Session, key_expr: str, types: Mapping[str,
             return
         try:
             callback(msg)
-        except Exception:  # a bug in one handler must not kill the subscription
-            log.exception("handler for %s failed", key)
+        except Exception as exc:  # a bug in one handler must not kill the subscription: its traceback once, counted
+            (rejects or default_rejects).unexpected(key, exc, "handling a message")
 
     for key in dict.fromkeys((key_expr, *types)):  # the expression itself too: one refused is refused whole
         refused = denied(session, key, "subscribe")
