@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import queue
 import shutil
 import threading
 import time
@@ -86,6 +87,34 @@ def _unexecuted(k: int) -> str:
     rows, them = ("row above was a plan", "it") if k == 1 else (f"{k} rows above were plans", "them")
     return (f"the last {rows} made from the run's last state (the goal reached, or the run over), never executed: "
             f"the summary leaves {them} out")
+
+
+class _Lines:
+    """Lines printed by a thread of their own, in the order given (a context manager: its exit prints the rest).
+
+    The table's rows are printed from a Zenoh callback: a terminal that does not read (``foresight demo | less``
+    left unscrolled) blocked that callback, and with it every service's publisher (they block on congestion): the
+    whole run froze. Now only this thread waits for the terminal.
+    """
+
+    def __init__(self, out: Callable[[str], None]) -> None:
+        self._queue: queue.SimpleQueue[str | None] = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._print, args=(out,), name="demo-lines", daemon=True)
+
+    def __call__(self, line: str) -> None:
+        self._queue.put(line)
+
+    def _print(self, out: Callable[[str], None]) -> None:
+        while (line := self._queue.get()) is not None:
+            out(line)
+
+    def __enter__(self) -> _Lines:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._queue.put(None)
+        self._thread.join()
 
 
 def _run_length(cfg: DemoConfig) -> str:
@@ -246,7 +275,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     procs = {name: ServiceProcess(name, MODULES.get(name, f"services.{name}"), args[name], run_dir / f"{name}.log")
              for name in order}
     deadline = time.monotonic() + cfg.timeout
-    with open_session(hub) as session:
+    direct = out
+    with _Lines(direct) as out, open_session(hub) as session:  # the rows are printed on a thread of their own
         subs = [subscribe(session, keys.plan, Plan, on_plan),
                 subscribe(session, keys.robot_state, RobotState, on_state),
                 subscribe(session, keys.occupancy, OccupancyGrid, on_other),
@@ -317,6 +347,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
             presence.close()
             for s in subs:
                 s.undeclare()
+    out = direct
     received = len(recorder.snapshot()[0])
     if status and mcap.is_file():  # cut short: the summary is of what the log holds, as foresight log table's is
         recorder = recorder_from_log(mcap, keys) or recorder

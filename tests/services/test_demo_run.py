@@ -22,3 +22,21 @@ def test_a_ctrl_c_before_the_run_is_prepared_prepares_nothing(monkeypatch, tmp_p
     assert (status, record) == (130, None)
     assert said == ["foresight demo: interrupted before the run was prepared; no service had started, nothing was "
                     "recorded"]
+
+
+def test_the_rows_never_wait_for_the_terminal_and_keep_their_order() -> None:
+    """The table's rows were printed from a Zenoh callback: `foresight demo | less` left unscrolled blocked it, and
+    with it the services' publishers (they block on congestion). The caller must come back at once, whatever the
+    terminal does, and every line must come out, in order, by the end."""
+    gate, printed = threading.Event(), []
+
+    def terminal(line: str) -> None:  # a terminal nobody reads, until the gate opens
+        gate.wait(30)
+        printed.append(line)
+
+    with demo_run._Lines(terminal) as say:
+        for i in range(200):
+            say(f"row {i}")  # returns although the terminal reads nothing: else this test would hang here
+        assert printed == []
+        gate.set()
+    assert printed == [f"row {i}" for i in range(200)]
