@@ -217,6 +217,7 @@ class Summary:
     left_goal: dict[str, Any] | None = None  # not reached: a goal it reached earlier and left ({goal, reached_t_s,
     # left_t_s}: the robot turned to another, or was sent back later)
     unit: str = "step"  # what the rows and the steps named count: lock-step's ticks, or a real-time run's plans
+    scored: bool = True  # False: no occupancy grid to score the interference against (the cost is 0 by default)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (keys steps, chosen_goal_per_step, switch_step, interference_cost, mcap_path, ...)."""
@@ -226,7 +227,8 @@ class Summary:
                "recognised_class": self.recognised_class, "goal_names": self.goal_names,
                "reached_t_s": self.reached_t_s, "recognised_p": self.recognised_p,
                "recognised_index": self.recognised_index, "separation_held_s": self.separation_held_s,
-               "separation_at_end": self.separation_at_end, "left_goal": self.left_goal, "unit": self.unit}
+               "separation_at_end": self.separation_at_end, "left_goal": self.left_goal, "unit": self.unit,
+               "interference_scored": self.scored}
         out.update(self.extra)
         return out
 
@@ -266,8 +268,11 @@ class Summary:
         at = (f" (p {self.recognised_p:.2f}, after pose {self.recognised_index})"  # an interrupted run's belief
               if self.recognised_p is not None else "")                        # differed from its last row's
         out.append(f"human class: {self.human_class}; recognised at the end: {self.recognised_class}{at}")
-        out.append(f"interference cost of the executed trajectory ({self.scored_against}): "
-                   f"{self.interference_cost:.4f}")
+        if self.scored:
+            out.append(f"interference cost of the executed trajectory ({self.scored_against}): "
+                       f"{self.interference_cost:.4f}")
+        else:  # it printed "(final prediction): 0.0000" for a log with no grid at all (a review)
+            out.append("interference cost of the executed trajectory: not scored (no occupancy prediction was logged)")
         out.append(f"MCAP log: {self.mcap_path}")
         return out
 
@@ -306,7 +311,7 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     Args:
         plans: Plans in arrival order (one per step; duplicates of a tick: the last wins).
         states: Executed robot states.
-        final_occupancy: The last occupancy prediction (None: interference cost 0).
+        final_occupancy: The last occupancy prediction (None: interference cost 0, not scored).
         posteriors: ClassPosterior by tick.
         robot: Robot model (sphere centres) for the interference cost.
         human_class: The true class of the observed demonstration.
@@ -377,4 +382,4 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
                    reached_t_s=reached_t, scored_against=final_label(final_occupancy), recognised_p=recognised_p,
                    recognised_index=recognised_index, separation_held_s=separation_held, left_goal=left,
                    separation_at_end=bool(states) and is_separation_hold(states[-1].reason),
-                   unit="plan" if realtime else "step")
+                   unit="plan" if realtime else "step", scored=final_occupancy is not None)

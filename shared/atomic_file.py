@@ -3,7 +3,8 @@
 A reader (or a crash, a full disk, Ctrl-C) never sees half a file: the target is either the old file
 or the new one. Used for every output a later run reads back (libraries, certificates, compressed
 logs, cached fits). Beside it, the checks made before the work: a path that can be written
-(:func:`ready_to_write`), a file that cannot be read (:func:`unreadable`).
+(:func:`ready_to_write`), one that may be replaced (:func:`replaceable`: a regular file or a link, never a device
+or a pipe), a file that cannot be read (:func:`unreadable`).
 """
 
 from __future__ import annotations
@@ -11,12 +12,16 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["atomic_write", "make_parent", "ready_to_write", "unreadable"]
+__all__ = ["atomic_write", "make_parent", "not_a_file", "ready_to_write", "replaceable", "unreadable"]
+
+_KINDS = {stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device", stat.S_IFIFO: "a named pipe (FIFO)",
+          stat.S_IFSOCK: "a socket", stat.S_IFDIR: "a directory"}
 
 
 def make_parent(path: str | os.PathLike[str]) -> Path:
@@ -56,19 +61,57 @@ def ready_to_write(path: str | os.PathLike[str], directory: bool = False) -> Pat
     return p
 
 
+def not_a_file(path: str | os.PathLike[str], follow: bool = False) -> str:
+    """What is at ``path``, in words, when it is no regular file (``"a named pipe (FIFO)"``); else ``""``.
+
+    Args:
+        path: The path.
+        follow: Look at a symbolic link's target (a file opened through the link); else a link counts as a file
+            (it is replaced itself, see :func:`replaceable`).
+    """
+    try:
+        mode = os.stat(path).st_mode if follow else os.lstat(path).st_mode
+    except FileNotFoundError:
+        return ""
+    if stat.S_ISREG(mode) or (not follow and stat.S_ISLNK(mode)):
+        return ""
+    return _KINDS.get(stat.S_IFMT(mode), "not a regular file")
+
+
+def replaceable(path: str | os.PathLike[str]) -> None:
+    """Refuse to replace ``path`` when something other than a regular file or a symbolic link is there.
+
+    A rename onto a device or a pipe replaced it with a regular file: ``foresight log compress X /dev/null`` run as
+    root left the machine without its ``/dev/null`` (a review). A symbolic link is replaced itself, whatever it points
+    to (its target, a file or a device, is left alone): the new file never lands outside the directory named.
+
+    Raises:
+        IsADirectoryError: A directory is there (named).
+        FileExistsError: A device, a named pipe or a socket is there (named, with its kind).
+    """
+    kind = not_a_file(path)
+    if kind == _KINDS[stat.S_IFDIR]:
+        raise IsADirectoryError(errno.EISDIR, "a directory is in the way (a file is to be written there)", str(path))
+    if kind:
+        raise FileExistsError(errno.EEXIST, f"{kind} is there, not a regular file: left alone; give a file's path",
+                              str(path))
+
+
 @contextlib.contextmanager
 def atomic_write(path: str | os.PathLike[str], mode: int = 0o644, fsync: bool = False) -> Iterator[BinaryIO]:
     """Yield a binary file that takes ``path``'s name only when the ``with`` block ends without an error.
 
     Args:
         path: The target (its parent directories are created); an existing file is replaced, never written
-            into, whatever its permissions.
+            into, whatever its permissions; a symbolic link is replaced itself (its target left alone); a device,
+            a pipe, a socket or a directory there is refused (:func:`replaceable`), before the block runs.
         mode: Permissions of the new file, set before a byte is written (0o600 for a private key).
         fsync: Flush the file to disk before the rename (a crash then leaves the old file or the whole new one).
 
     On an error (or Ctrl-C) in the block the temporary file is removed and ``path`` is left as it was.
     """
     p = make_parent(path)
+    replaceable(p)
     fd, name = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)  # a new file: never one planted
     tmp = Path(name)
     try:
@@ -78,6 +121,7 @@ def atomic_write(path: str | os.PathLike[str], mode: int = 0o644, fsync: bool = 
             if fsync:
                 f.flush()
                 os.fsync(f.fileno())
+        replaceable(p)  # again: one made while the block ran (a pipe, a device node) is not replaced either
         os.replace(tmp, p)
     except BaseException:
         tmp.unlink(missing_ok=True)

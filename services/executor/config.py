@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 from services.ros2.domain import UNREADABLE_DOMAIN, check_domain_id, ros_domain_id
 from services.ros2.wire import ROS_NAME, topic_problem
+from shared.atomic_file import make_parent
 from shared.config import LOG_LEVELS, ConfigError, nested, opt
 from shared.config_names import check_services
 from shared.devices import check_device
@@ -178,13 +180,24 @@ class ExecutorConfig:
         return max(1, round(self.step_period_s * self.state_rate_hz))
 
     def mcap_path(self, now: str) -> Path | None:
-        """The MCAP path to write (``now``: a UTC timestamp for the default name), or None for 'none'."""
+        """The MCAP path to write (``now``: a UTC timestamp for the default name), or None for 'none'.
+
+        The default name is claimed: created, empty, only if no file has it (``O_EXCL``), else ``-2``, ``-3``... A
+        check for the name followed by the open let two executors started within the same second both take it, and
+        the second was refused by the first one's lock instead of taking ``-2``.
+
+        Raises:
+            OSError: ``runs`` cannot be made or written (named).
+        """
         if self.mcap.lower() == "none":
             return None
         if self.mcap:
             return Path(self.mcap)
-        path, n = Path("runs") / f"{now}.mcap", 1
-        while path.exists():  # a run started within the same second: its log is kept
-            n += 1
-            path = Path("runs") / f"{now}-{n}.mcap"
-        return path
+        n = 1
+        while True:
+            path = make_parent(Path("runs") / (f"{now}.mcap" if n == 1 else f"{now}-{n}.mcap"))
+            try:
+                os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+                return path
+            except FileExistsError:  # a run started within the same second: its log is kept
+                n += 1

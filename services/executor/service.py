@@ -29,6 +29,7 @@ from collections.abc import Callable
 from contextlib import ExitStack
 from datetime import UTC, datetime
 from functools import partial
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -202,10 +203,10 @@ class ExecutorService:
         """Run until ``steps`` are done, the goal is reached (``stop_on_goal``) or ``stop`` is set."""
         cfg = self.config
         now = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
-        path = cfg.mcap_path(now)
+        path: Path | None = None
         # the log and the live server close on every way out, the log first (it drains into the server)
         with open_session(self.zenoh, self.stop, "executor") as session, ExitStack() as closing:
-            if path is not None:
+            if cfg.mcap.lower() != "none":
                 builder = SceneBuilder(self.scene, self.robot, *self.human)
                 text = self.scene.text()
                 meta = {f.name: str(getattr(cfg, f.name)) for f in dataclasses.fields(cfg)}
@@ -215,6 +216,7 @@ class ExecutorService:
                 live = self._live_server(builder)
                 if live is not None:
                     closing.callback(live.close)
+                path = cfg.mcap_path(now)  # the default name claimed (an empty file) once nothing else can fail first
                 self.mcap = McapLog(path, self.keys, builder, viz_period_s=1.0 / cfg.viz_rate_hz,
                                     viz_thread=cfg.mode != "lockstep", compression=cfg.mcap_compression,
                                     scene_text=text, run_metadata=meta, on_viz=live.log if live else None)
@@ -278,7 +280,7 @@ class ExecutorService:
         from services.ros2.arm import Ros2Arm
         from services.ros2.link import Ros2RobotLink
 
-        record = self.mcap.write_ros2 if self.mcap is not None else None
+        record = self._record_ros2 if self.mcap is not None else None
         link = Ros2RobotLink(session, self.config, list(self.limits.joint_names), self.stop, self.rejects, record)
         try:
             q0 = link.initial(self.config.startup_timeout_s)
@@ -289,6 +291,16 @@ class ExecutorService:
             raise
         self.core = Ros2Arm(self.limits, q0, self.config, link, guard=self.guard)
         return link
+
+    def _record_ros2(self, topic: str, msgtype: str, data: bytes) -> None:
+        """Log a ROS 2 message the link sent or received, guarded as every write is (:meth:`_write`).
+
+        Passed to the link bare, a log the disk had ended raised from ``send`` after the command had gone out (the run
+        ended without a hold) and from the joint-state callback before the state was taken (it was dropped).
+        """
+        mcap = self.mcap
+        if mcap is not None:
+            self._write(lambda: mcap.write_ros2(topic, msgtype, data))
 
     def publish_state(self, pub: TypedPublisher[Any], state: RobotState) -> None:
         """Publish ``state``, flush the log when due, and keep it for the result's ``times`` and ``q``."""

@@ -17,6 +17,8 @@ import logging
 import os
 from pathlib import Path
 
+from shared.atomic_file import not_a_file
+
 __all__ = ["DirectFile", "MAX_HELD_BYTES"]
 
 log = logging.getLogger("foresight.recording")
@@ -40,11 +42,17 @@ class DirectFile:
         """Create or empty ``path`` for writing, holding an exclusive lock on it while open.
 
         Raises:
-            OSError: The OS refuses the path, or another process is writing the file (its lock): that log is left
-                alone (before, the second writer emptied it and the first one's messages were lost without a word).
+            OSError: The OS refuses the path, it is no regular file (a device, a pipe: named, left alone), or
+                another process is writing the file (its lock): that log is left alone (before, the second writer
+                emptied it and the first one's messages were lost without a word).
         """
         self._path = path
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o644)
+        if kind := not_a_file(path, follow=True):  # a pipe would block the open; a device fails in ftruncate
+            raise OSError(errno.EINVAL, f"{kind} is there, not a regular file: give a file's path for the log",
+                          str(path))
+        # non-blocking: a pipe made since the check fails here instead of waiting for a reader
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK, 0o644)
+        fcntl.fcntl(self._fd, fcntl.F_SETFL, fcntl.fcntl(self._fd, fcntl.F_GETFL) & ~os.O_NONBLOCK)
         try:
             fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -54,13 +62,13 @@ class DirectFile:
         except OSError as exc:
             if exc.errno not in NO_LOCKS:
                 os.close(self._fd)
-                raise
+                raise OSError(exc.errno, f"cannot lock the log ({exc.strerror})", str(path)) from None
             log.warning("mcap log %s: this file system takes no lock (%s): written without one", path, exc.strerror)
         try:
             os.ftruncate(self._fd, 0)
-        except OSError:
+        except OSError as exc:  # its errno alone ("Invalid argument") named neither the file nor the step
             os.close(self._fd)
-            raise
+            raise OSError(exc.errno, f"cannot empty the file for the log ({exc.strerror})", str(path)) from None
         self._pos = 0
         self._held = bytearray()
         self._failed: OSError | None = None

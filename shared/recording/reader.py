@@ -8,6 +8,7 @@ False and ``LogFile.error`` says why reading stopped). The records it understand
 
 from __future__ import annotations
 
+import fcntl
 import io
 import os
 import struct
@@ -26,7 +27,7 @@ from mcap.stream_reader import StreamReader
 from shared.runtime import UserError
 
 __all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "iter_messages", "open_records", "log_path", "DAMAGED",
-           "MAGIC", "summary_damage"]
+           "MAGIC", "summary_damage", "being_written"]
 
 MAGIC = b"\x89MCAP0\r\n"
 """The first (and last) eight bytes of an MCAP file."""
@@ -67,6 +68,28 @@ def summary_damage(path: str | Path) -> str:
         f.seek(start)
         got = zlib.crc32(f.read(size - len(MAGIC) - 4 - start))  # up to the footer's CRC itself
     return "" if got == crc else f"the summary, its index, fails its CRC: {got:#010x} where the footer says {crc:#010x}"
+
+
+def being_written(path: str | Path) -> bool:
+    """Whether a writer holds the log's lock now: a run is still writing it (its end is not a kill's).
+
+    The writer (:class:`shared.recording.direct_file.DirectFile`) holds an exclusive ``flock`` while the file is open;
+    a shared one is asked for without waiting and let go at once. Read before, a live log said TRUNCATED and
+    ``foresight log compress`` of it NOT IDENTICAL (a review). False where the file system takes no lock.
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:  # no locks on this file system: nothing to tell by
+        return False
+    finally:
+        os.close(fd)  # and the lock with it
+    return False
 
 
 class _Bounded:
@@ -161,6 +184,8 @@ class LogFile:
         error: Why reading stopped early (truncated or damaged file), or why the summary is not to be trusted, else "".
         summary_damaged: The footer was read and every record before it, but the summary's CRC does not hold
             (:func:`summary_damage`): the messages are all here, the index is not to be used.
+        being_written: A run held the file's lock when it was read (:func:`being_written`): it ends at the last
+            whole chunk so far, not where a killed writer left it.
         messages: The kept messages in file order (see ``keep`` of :func:`read_log`).
     """
 
@@ -175,12 +200,19 @@ class LogFile:
     complete: bool = False
     error: str = ""
     summary_damaged: bool = False
+    being_written: bool = False
 
     @property
     def state(self) -> str:
-        """How every tool names a log's state: ``complete``, ``DAMAGED (<its summary>)``, ``TRUNCATED (<why>)``."""
+        """How every tool names a log's state.
+
+        ``complete``, ``STILL BEING WRITTEN (...)`` (a run holds it), ``DAMAGED (<its summary>)`` or
+        ``TRUNCATED (<why>)``.
+        """
         if self.complete:
             return "complete"
+        if self.being_written:
+            return "STILL BEING WRITTEN (a run holds its lock: read up to its last whole chunk so far)"
         return f"DAMAGED ({self.error})" if self.summary_damaged else f"TRUNCATED ({self.error or 'no footer'})"
 
     @property
@@ -207,7 +239,7 @@ def read_log(path: str | Path, keep: Callable[[LogChannel], bool] | None = None)
     schemas: dict[int, Schema] = {}
     footer = False
     with open_records(p) as reader:
-        out = LogFile(str(p), p.stat().st_size)
+        out = LogFile(str(p), p.stat().st_size, being_written=being_written(log_path(p)))
         try:
             for rec in reader.records:
                 if isinstance(rec, Header):

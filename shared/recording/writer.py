@@ -38,11 +38,11 @@ import threading
 import time
 import typing
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 from mcap.writer import CompressionType, Writer
 
+from shared.atomic_file import make_parent
 from shared.foxglove.scene import SceneBuilder
 from shared.foxglove.stream import SceneStream, VizMessage
 from shared.protocol import MESSAGE_TYPES, Keys, Message, ProtocolError, decode
@@ -55,6 +55,9 @@ __all__ = ["McapLog", "COMPRESSION"]
 
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 """Chunk compressions by name (the ``mcap`` library compresses with ``zstandard`` and ``lz4``)."""
+
+MAX_NS = 2 ** 64 - 1
+"""The latest time an MCAP record holds (uint64 nanoseconds: the year 2554)."""
 
 log = logging.getLogger(__name__)
 
@@ -93,8 +96,7 @@ class McapLog:
             raise ValueError(f"MCAP compression must be one of {', '.join(COMPRESSION)}, got {compression!r}")
         if not 0 <= flush_period_s <= threading.TIMEOUT_MAX:
             raise ValueError(f"MCAP flush period must be a finite number of seconds >= 0, got {flush_period_s}")
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.path = make_parent(path)  # a file where a directory is needed: named (mkdir said "File exists")
         self.keys = keys
         self._stream = SceneStream(builder, viz_period_s) if builder is not None else None
         self._on_viz = on_viz
@@ -153,8 +155,14 @@ class McapLog:
         if (failed := self._file.failed) is not None:  # the file has ended: the writer would only grow its index
             raise OSError(failed.errno, f"{self.path}: the log has ended ({failed.strerror}); message on {topic} "
                           "not written")
+        # checked before the writer takes it: a field that does not pack failed half-way through the record, and the
+        # open chunk then held a broken message (a stamp of 1e11 s: the file read as complete, with garbage in it)
+        for name, t in (("log", log_time), ("publish", publish_time)):
+            if not (isinstance(t, int) and 0 <= t <= MAX_NS):
+                raise ValueError(f"{self.path}: message on {topic} not written: its {name} time {t!r} ns is not an "
+                                 f"MCAP time (an integer 0 .. {MAX_NS}, until the year 2554)")
         self._writer.add_message(channel_id=channel, log_time=log_time, data=data, publish_time=publish_time,
-                                 sequence=self.counts.get(topic, 0))
+                                 sequence=self.counts.get(topic, 0) & 0xFFFFFFFF)  # uint32: it wraps
         self.counts[topic] = self.counts.get(topic, 0) + 1
         self.flush_if_due()
 
@@ -221,7 +229,7 @@ class McapLog:
         """Log a payload already decoded (and so validated) as ``msg`` on ``key``'s channel."""
         log_time = self._clock() if log_time is None else log_time
         stamp = float(getattr(msg, "stamp", -1.0))
-        publish = int(stamp * 1e9) if stamp >= 0 else log_time
+        publish = int(min(stamp * 1e9, 2.0 ** 64)) if stamp >= 0 else log_time  # past MCAP's times: refused by _add
         with self._lock:
             if self._closed:
                 return
@@ -319,9 +327,10 @@ class McapLog:
                 return
             self._closed = True  # first: a close that fails (a full disk) is not repeated over what it half-wrote
             try:
-                if self._viz is not None:  # unfinished: still queued when the worker's close timed out
-                    self._writer.add_metadata("foresight.viz", {"dropped": str(self._viz.dropped),
-                                                                "unfinished": str(self._viz.pending),
+                if self._stream is not None:  # lock-step's too (built in the callback: none dropped, none left)
+                    pending = self._viz.pending if self._viz is not None else 0  # queued past the worker's close
+                    self._writer.add_metadata("foresight.viz", {"dropped": str(self.viz_dropped),
+                                                                "unfinished": str(pending),
                                                                 "errors": str(self.viz_errors)})
                 self._writer.add_metadata("foresight.rejects", {k: str(v) for k, v in sorted(self.rejects.items())})
                 self._writer.add_metadata("foresight.rejects.reasons",

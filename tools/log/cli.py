@@ -26,6 +26,7 @@ from pathlib import Path
 from services.demo_dirs import compare_log
 from shared import strict_json
 from shared.arguments import ArgumentParser
+from shared.atomic_file import ready_to_write
 from shared.recording.reader import LogFile, log_path, read_log
 from shared.runtime import UserError, cli_errors
 
@@ -76,6 +77,7 @@ def _main_info(args: argparse.Namespace) -> int:
 def _main_render(args: argparse.Namespace, prog: str) -> int:
     if not args.all:
         check_png(str(args.out), "--out")  # matplotlib would write NAME.png where we print NAME
+        ready_to_write(args.out)  # before the log is read: a file in the way of its directory, named
     elif args.out.exists() and not args.out.is_dir():  # it failed with "File exists" after reading the log
         raise UserError(f"--out {args.out}: a file; with --all, --out is the directory of the steps' PNGs")
     wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.RobotState"}
@@ -135,6 +137,7 @@ def _main_snapshot(args: argparse.Namespace) -> int:
     if args.out is not None:
         check_png(str(args.out), "--out")
     out = Path(args.out) if args.out is not None else file.with_name(f"{file.stem}-snapshot.png")
+    ready_to_write(out)  # before the scene is read: a file in the way of its directory, named
     state = scene_at(file, args.at)
     if args.at is not None and args.at > state.t_s + 1e-6:  # it drew the end without a word
         print(f"foresight log: note: --at {args.at:g} s is past the end of the scene ({state.t_s:.3f} s of "

@@ -3,7 +3,8 @@
 Every record that carries data is copied in file order - schemas, channels, messages (topic, log and
 publish time, payload byte for byte), attachments and metadata - into a new file whose chunks are
 compressed with zstd (default), lz4 or not at all; then both files are read back and compared
-message for message. A truncated input is copied up to its last complete chunk (and said so).
+message for message. A truncated input is copied up to its last complete chunk (and said so); so is a log still
+being written (a run holds its lock), whose copy is compared with the messages it had when copied.
 Logs written before the executor compressed its chunks (issue 24) shrink about 12x this way.
 """
 
@@ -22,7 +23,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
 from shared.atomic_file import atomic_write
-from shared.recording.reader import DAMAGED, iter_messages, log_path, open_records, read_log
+from shared.recording.reader import DAMAGED, being_written, iter_messages, log_path, open_records, read_log
 from shared.recording.writer import COMPRESSION
 from shared.runtime import UserError
 
@@ -31,6 +32,9 @@ __all__ = ["CompressResult", "compress_log", "same_messages", "SOURCE_METADATA"]
 SOURCE_METADATA = "foresight.compress"
 """Metadata record of a copy made from a truncated or damaged log: ``source``, ``source_complete`` = "false" and
 ``source_error`` (``foresight log info`` shows it: the copy is whole, what it was copied from was not)."""
+
+STILL_WRITTEN = "still being written when copied: up to its last whole chunk then"
+"""``source_error`` of a copy of a log a run was still writing."""
 
 
 @dataclass
@@ -43,6 +47,7 @@ class CompressResult:
     input_complete: bool
     identical: bool
     input_error: str = ""
+    being_written: bool = False
 
     def line(self, src: Path, dst: Path) -> str:
         """One line for the user."""
@@ -51,6 +56,10 @@ class CompressResult:
                                                 "up to its last complete chunk, and the copy says so)")
         same = "identical" if self.identical else "NOT IDENTICAL"
         size = f"{ratio:.1f}x smaller" if ratio >= 1 else f"{1 / ratio:.1f}x larger"
+        if self.being_written:
+            return (f"{src} is still being written (a run holds its lock): {self.messages} messages copied so far, up "
+                    f"to its last whole chunk, -> {dst} ({self.size_out / 1e6:.2f} MB), compared {same} with the "
+                    f"log's first {self.messages}; the copy says so: compress the log again once its run has ended")
         return (f"{src} ({self.size_in / 1e6:.2f} MB) -> {dst} ({self.size_out / 1e6:.2f} MB, {size}); "
                 f"{self.messages} messages read back {same}{state}")
 
@@ -70,14 +79,16 @@ def compress_log(src: str | Path, dst: str | Path, compression: str = "zstd",
     if dst.exists() and src.exists() and os.path.samefile(src, dst):  # a hard link too: writing it empties the input
         raise UserError("the output must be another file than the input")
     with open_records(src) as reader:  # the input checked (an MCAP file) before the output is touched
+        live = being_written(src)  # then read up to its size now: the comparison is with what the copy had
         # written beside dst and renamed onto it: a failure (a full disk, Ctrl-C) leaves an existing dst as it was
         with atomic_write(dst) as f_out:
-            messages, complete, error = _copy(reader, f_out, compression, chunk_size, src)
-    return CompressResult(src.stat().st_size, dst.stat().st_size, messages, complete, same_messages(src, dst), error)
+            messages, complete, error = _copy(reader, f_out, compression, chunk_size, src, live)
+    return CompressResult(src.stat().st_size, dst.stat().st_size, messages, complete,
+                          same_messages(src, dst, prefix=live), error, live)
 
 
-def _copy(reader: StreamReader, f_out: typing.BinaryIO, compression: str, chunk_size: int,
-          src: Path) -> tuple[int, bool, str]:
+def _copy(reader: StreamReader, f_out: typing.BinaryIO, compression: str, chunk_size: int, src: Path,
+          live: bool = False) -> tuple[int, bool, str]:
     """Copy ``reader``'s records into a new MCAP on ``f_out``; returns (messages, input complete, why it ended)."""
     writer = Writer(typing.cast(io.BufferedWriter, f_out), chunk_size=chunk_size, compression=COMPRESSION[compression],
                     enable_data_crcs=True)
@@ -111,6 +122,8 @@ def _copy(reader: StreamReader, f_out: typing.BinaryIO, compression: str, chunk_
         error = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
     if not started:
         raise UserError(f"{src}: not an MCAP file (no header)")
+    if live and not footer:  # its end is where the run had got to, not damage
+        error = STILL_WRITTEN
     if error or not footer:
         writer.add_metadata(SOURCE_METADATA, {"source": str(src), "source_complete": "false",
                                               "source_error": error or "no footer"})
@@ -118,20 +131,32 @@ def _copy(reader: StreamReader, f_out: typing.BinaryIO, compression: str, chunk_
     return messages, footer and not error, error
 
 
-def same_messages(a: str | Path, b: str | Path) -> bool:
+def same_messages(a: str | Path, b: str | Path, prefix: bool = False) -> bool:
     """Whether two logs hold the same messages (topic, encoding, times, payload) in the same order.
 
     The messages are compared one at a time (memory: a chunk of each), not read into two lists first: that held
     both logs' payloads, 6 GB for an hour of a real-time run.
+
+    Args:
+        a: The original.
+        b: The copy.
+        prefix: ``a`` is still being written (it grew since ``b`` was copied from it): ``b``'s messages are compared
+            with ``a``'s first ones, and its channels, attachments and metadata are to be found in ``a``.
     """
     la, lb = read_log(a), read_log(b)  # channels, attachments and metadata; counts only
 
     def metadata(lf: typing.Any) -> dict[str, dict[str, str]]:  # a copy's note on its source is no difference
         return {k: v for k, v in lf.metadata.items() if k != SOURCE_METADATA}
 
-    if (la.attachments != lb.attachments or metadata(la) != metadata(lb)
-            or sorted((c.topic, c.message_encoding, c.schema_name) for c in la.channels.values())
-            != sorted((c.topic, c.message_encoding, c.schema_name) for c in lb.channels.values())):
-        return False
+    def channels(lf: typing.Any) -> list[tuple[str, str, str]]:
+        return sorted((c.topic, c.message_encoding, c.schema_name) for c in lf.channels.values())
+
     end = object()
+    if prefix:
+        ma, ia = metadata(la), iter_messages(a)
+        return (all(la.attachments.get(k) == v for k, v in lb.attachments.items())
+                and all(ma.get(k) == v for k, v in metadata(lb).items()) and set(channels(lb)) <= set(channels(la))
+                and all(next(ia, end) == y for y in iter_messages(b)))
+    if la.attachments != lb.attachments or metadata(la) != metadata(lb) or channels(la) != channels(lb):
+        return False
     return all(x == y for x, y in itertools.zip_longest(iter_messages(a), iter_messages(b), fillvalue=end))

@@ -13,7 +13,6 @@ from typing import Any
 
 from shared.recording.reader import LogFile
 from shared.recording.schemas import REJECTED_TOPIC
-from shared.runtime import UserError
 
 __all__ = ["info_dict", "format_info"]
 
@@ -24,23 +23,38 @@ def _fmt_time(ns: int | None) -> str:
     return datetime.fromtimestamp(ns / 1e9, UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3] + "Z"
 
 
-def _counts(lf: LogFile, name: str) -> dict[str, int]:
-    """A metadata record of counts; one that is not (another tool's record of that name) is named, not a crash."""
-    try:
-        return {k: int(v) for k, v in lf.metadata.get(name, {}).items()}
-    except ValueError:
-        raise UserError(f"metadata {name!r} holds {lf.metadata[name]!r}, not counts (not a Foresight "
-                        "log, or a damaged one)") from None
+def _counts(lf: LogFile, name: str, warnings: list[str]) -> dict[str, int]:
+    """A metadata record of counts; entries that are not (another tool's record of that name) are left out, named.
+
+    One such entry made ``info`` refuse the whole file (a review): the rest of the log is still worth showing.
+    """
+    counts, bad = {}, {}
+    for k, v in lf.metadata.get(name, {}).items():
+        try:
+            counts[k] = int(v)
+        except ValueError:
+            bad[k] = v
+    if bad:
+        warnings.append(f"metadata {name!r}: {len(bad)} entr{'y' if len(bad) == 1 else 'ies'} not counts, left out "
+                        f"(not a Foresight log, or a damaged one): {_shown(bad)}")
+    return counts
+
+
+def _shown(entries: dict[str, str], limit: int = 200) -> str:
+    text = repr(entries)
+    return text if len(text) <= limit else text[:limit] + "...}"
 
 
 def info_dict(lf: LogFile) -> dict[str, Any]:
     """The summary :func:`format_info` prints, as a JSON-ready dict."""
     firsts = [c.first_time for c in lf.channels.values() if c.first_time is not None]
     lasts = [c.last_time for c in lf.channels.values() if c.last_time is not None]
-    rejects, reasons = _counts(lf, "foresight.rejects"), _counts(lf, "foresight.rejects.reasons")
+    warnings: list[str] = []
+    rejects, reasons = _counts(lf, "foresight.rejects", warnings), _counts(lf, "foresight.rejects.reasons", warnings)
     refused = sum(c.count for c in lf.channels.values() if c.topic == REJECTED_TOPIC)
     return {
         "path": lf.path, "size_bytes": lf.size, "complete": lf.complete, "error": lf.error,
+        "being_written": lf.being_written,
         "profile": lf.profile, "library": lf.library,
         "start": _fmt_time(min(firsts)) if firsts else None, "end": _fmt_time(max(lasts)) if lasts else None,
         "duration_s": (max(lasts) - min(firsts)) / 1e9 if firsts else 0.0,
@@ -53,12 +67,16 @@ def info_dict(lf: LogFile) -> dict[str, Any]:
         "metadata": lf.metadata,
         "rejected": rejects,
         "rejected_reasons": reasons,
+        "warnings": warnings,
     }
 
 
 def _state_words(lf: LogFile, d: dict) -> str:
     """The file line's account of the log's state (``d``: :func:`info_dict`)."""
     source = lf.metadata.get("foresight.compress", {})  # a whole copy of a log that was not
+    if lf.complete and source.get("source_error", "").startswith("still being written"):  # compress.STILL_WRITTEN
+        return ("complete; copied from a log still being written, up to its last whole chunk then: what the run wrote "
+                "after that is not here")
     if lf.complete and source.get("source_complete") == "false":
         return (f"complete; copied from a TRUNCATED log ({source.get('source_error', 'no footer')}): what the run "
                 "wrote after its last whole chunk is not here")
@@ -66,6 +84,8 @@ def _state_words(lf: LogFile, d: dict) -> str:
         return "complete"
     if lf.summary_damaged:
         return f"{lf.state}: all {d['messages']} messages read in file order; its index is not to be trusted"
+    if lf.being_written:  # not a killed run's end: the run goes on
+        return f"{lf.state}: {d['messages']} messages, {d['duration_s']:.2f} s"
     return (f"{lf.state}: recovered {d['messages']} messages"
             + (f" and {d['rejected_records']} refused payloads" if d["rejected_records"] else "")
             + f", {d['duration_s']:.2f} s, up to the last whole chunk")
@@ -101,7 +121,8 @@ def format_info(lf: LogFile) -> str:
     elif not lf.complete:
         lines += ["rejected:  (counts are written when the file is closed)"]
     viz = lf.metadata.get("foresight.viz")
-    if viz:  # real-time logs: Foxglove updates built on the executor's background thread
+    if viz:  # the scene updates: dropped when the executor's background thread fell behind (real time)
         lines += ["foxglove:  " + ", ".join(f"{k} {v}" for k, v in viz.items()) + " (updates; the raw messages are all "
                   "there)"]
+    lines += [f"warning:   {w}" for w in d["warnings"]]
     return "\n".join(lines)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from shared.atomic_file import make_parent
 from shared.foxglove.scene import ArmModel
 from shared.scene import Scene
 
@@ -201,8 +202,7 @@ def render_step(view: StepView, scene: Scene, out: str | Path, robot: ArmModel |
     ax2.legend(loc="upper left", fontsize=8, framealpha=0.85)
     fig.suptitle(step_title(view), fontsize=11)
     fig.tight_layout()
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    out = make_parent(out)  # a file in the way named (mkdir said "File exists")
     fig.savefig(out, dpi=dpi)
     plt.close(fig)
     return out

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from shared.atomic_file import make_parent
 from shared.foxglove.decode import SceneDecodeError, SceneRecord, read_scene
 from shared.recording.reader import DAMAGED
 from shared.runtime import UserError
@@ -260,8 +261,7 @@ def draw_snapshot(state: SceneState, out_png: str | Path, title: str | None = No
     bb = ax2.get_window_extent()  # the top view's scale in points per metre (equal aspect)
     for line, thickness in limbs:
         line.set_linewidth(thickness * min(bb.width / (hi - lo)[0], bb.height / (hi - lo)[1]) * 72 / fig.dpi)
-    out = Path(out_png)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    out = make_parent(out_png)  # a file in the way named (mkdir said "File exists")
     fig.savefig(out, dpi=dpi)
     plt.close(fig)
     return out

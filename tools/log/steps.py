@@ -50,8 +50,19 @@ def run_topics(lf: LogFile, schema: str) -> set[str]:
     return {own} if own in topics else topics
 
 
-def decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
-    """``(log time ns, message)`` of every valid message of ``schema`` on its key (Foresight's msgpack channels)."""
+def decode_all(lf: LogFile, schema: str, cls: type, required: bool = False) -> list[tuple[int, Any]]:
+    """``(log time ns, message)`` of every valid message of ``schema`` on its key (Foresight's msgpack channels).
+
+    Args:
+        lf: The log, read with these channels kept.
+        schema: The channels' schema name (``foresight.Plan``).
+        cls: The message type.
+        required: What the tool is made of (the plans): some logged and none decodable is an error naming the first
+            fault; the tools said "no plans logged" and "no Plan messages in the log" (a review).
+
+    Raises:
+        UserError: Every message is of a schema version this build does not read, or ``required`` and none decode.
+    """
     topics = run_topics(lf, schema)
     out, refused = [], []
     for m in lf.messages:
@@ -60,10 +71,13 @@ def decode_all(lf: LogFile, schema: str, cls: type) -> list[tuple[int, Any]]:
                 out.append((m.log_time, decode(m.data, cls)))
             except ProtocolError as exc:  # only valid payloads are on these channels; be tolerant anyway
                 refused.append(exc)
+    name = schema.removeprefix("foresight.")
     try:
-        check_readable(len(out), refused, f"{schema.removeprefix('foresight.')} message(s)")
+        check_readable(len(out), refused, f"{name} message(s)")
     except UserError as exc:
         raise UserError(f"{lf.path}: {exc}") from None
+    if required and refused and not out:
+        raise UserError(f"{lf.path}: {len(refused)} {name} message(s), none decodable (first error: {refused[0]})")
     return out
 
 
@@ -77,7 +91,7 @@ def _latest_before(items: list[tuple[int, Any]], t: int, pred: Callable[[Any], b
 
 def step_views(lf: LogFile) -> dict[int, StepView]:
     """One :class:`StepView` per replanning step (``Plan.step``) in the log (the last plan of a step wins)."""
-    plans = decode_all(lf, "foresight.Plan", Plan)
+    plans = decode_all(lf, "foresight.Plan", Plan, required=True)
     occs = decode_all(lf, "foresight.OccupancyGrid", OccupancyGrid)
     poses = decode_all(lf, "foresight.HumanPose", HumanPose)
     states = decode_all(lf, "foresight.RobotState", RobotState)

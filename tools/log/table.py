@@ -29,7 +29,7 @@ def run_summary(lf: LogFile) -> Summary:
 
     recorder = RunRecorder()  # the demo's own rules: the newest grid, posteriors by tick or arrival (run_log.py)
     for cls in (Plan, RobotState, OccupancyGrid, ClassPosterior):
-        for _, msg in decode_all(lf, f"foresight.{cls.TYPE}", cls):
+        for _, msg in decode_all(lf, f"foresight.{cls.TYPE}", cls, required=cls is Plan):
             recorder.on_message(msg)
     plans, states, final, posteriors = recorder.snapshot()
     robot = PR2.from_scene(scene_of(lf), device="cpu", dtype=torch.float32)

@@ -404,13 +404,26 @@ def test_the_human_source_ending_its_stream_is_not_reported_as_gone(pr2, caplog)
 
 
 def test_the_default_log_name_of_a_run_started_in_the_same_second_is_its_own(tmp_path, monkeypatch) -> None:
+    """Each claim takes a name no other has: the name was checked, then opened later, and two executors started
+    within the same second both took it (the second refused by the first one's lock instead of taking -2)."""
     monkeypatch.chdir(tmp_path)
     config = ExecutorConfig()
-    first = config.mcap_path("20261127T120000Z")
-    first.parent.mkdir()
-    first.write_bytes(b"the first run's log")
-    assert (first.name, config.mcap_path("20261127T120000Z").name) == ("20261127T120000Z.mcap",
-                                                                      "20261127T120000Z-2.mcap")
+    first, second = config.mcap_path("20261127T120000Z"), config.mcap_path("20261127T120000Z")
+    assert (first.name, second.name) == ("20261127T120000Z.mcap", "20261127T120000Z-2.mcap")
+    assert first.read_bytes() == second.read_bytes() == b""  # claimed: on the disk before either log is opened
+    barrier = threading.Barrier(8)
+
+    def claim(names: list) -> None:
+        barrier.wait()
+        names.append(config.mcap_path("20261127T120001Z").name)
+
+    names: list[str] = []
+    threads = [threading.Thread(target=claim, args=(names,)) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sorted(names) == sorted(["20261127T120001Z.mcap"] + [f"20261127T120001Z-{n}.mcap" for n in range(2, 9)])
 
 
 def test_a_service_gone_mid_lockstep_run_is_said_and_the_run_says_it_went_on_without_it(pr2, caplog) -> None:
@@ -477,3 +490,34 @@ def test_a_realtime_run_with_finish_s_goes_on_to_its_goal(zenoh_hub, pr2, finish
     else:
         assert r.reached and r.finish_steps > 0 and r.reached_step >= 2
         assert 0.4 < ran_s < 0.4 + finish_s  # it ended at the goal, before finish_s ran out
+
+
+def test_a_ros2_robot_s_messages_go_to_the_log_through_its_guard(tmp_path, pr2, monkeypatch) -> None:
+    """The link's recorder was the log's write_ros2 itself: once a full disk had ended the file, sending a command
+    raised after it had gone out (the run stopped without a hold) and joint states were dropped (a review)."""
+    import services.ros2.link as link_module
+    from shared.config import ZenohConfig
+    from shared.recording.writer import McapLog
+
+    found: dict[str, object] = {}
+
+    class FoundRobot:  # the link once the robot answered, at its start
+        def __init__(self, *args: object) -> None:
+            found["record"] = args[-1]
+
+        def initial(self, timeout_s: float) -> np.ndarray:
+            return pr2.q_start.numpy().astype(np.float64)
+
+    monkeypatch.setattr(link_module, "Ros2RobotLink", FoundRobot)
+    cfg = ExecutorConfig(mode="realtime", robot="ros2", mcap=str(tmp_path / "run.mcap"))
+    service = ExecutorService(cfg, ZenohConfig(multicast_scouting=False), robot=pr2, human=(None, None), scene=SCENE)
+    service.mcap = McapLog(tmp_path / "run.mcap", service.keys, None)
+    service._connect_robot(None)
+    record = found["record"]
+    clock = ("/clock", "rosgraph_msgs/msg/Clock", bytes([0, 1, 0, 0]) + bytes(8))
+    record(*clock)  # type: ignore[operator]
+    service.mcap._file._failed = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))  # past what it holds: ended
+    record(*clock)  # type: ignore[operator]
+    assert service.result.log_write_failures == 1 and service.mcap.counts == {"/clock": 1}
+    service._write(service.mcap.close)  # fails as a full disk's close does: counted, the file closed
+    assert service.mcap.closed

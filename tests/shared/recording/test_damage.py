@@ -194,3 +194,57 @@ def test_a_file_system_that_takes_no_lock_still_gets_its_log_and_no_descriptor_l
     with pytest.raises(OSError, match="Input/output error"):
         McapLog(tmp_path / "other.mcap", KEYS, None)
     assert len(os.listdir("/proc/self/fd")) == fds
+
+
+def test_a_time_mcap_cannot_hold_is_refused_before_the_record_is_begun(tmp_path, pr2) -> None:
+    """A stamp of 1e11 s (1e20 ns, past uint64) failed half-way through its record: the file read as complete, with
+    messages missing and a garbage one in their place (a review)."""
+    from shared.protocol import ClockTick, encode
+
+    path = tmp_path / "run.mcap"
+    log = McapLog(path, KEYS, None)
+    sent = sample_messages(pr2)
+    for key, payload in sent[:3]:
+        log.on_sample(key, payload)
+    for stamp in (1e11, 1e300):
+        with pytest.raises(ValueError, match=r"message on foresight/x/tick not written: its publish time .* is not an "
+                                             r"MCAP time"):
+            log.on_sample("foresight/x/tick", encode(ClockTick(stamp=stamp, tick=5, period=0.1)))
+    with pytest.raises(ValueError, match="its log time -1 ns is not an MCAP time"):
+        log.write_ros2("/clock", "rosgraph_msgs/msg/Clock", b"\x00\x01\x00\x00" + bytes(8), log_time=-1)
+    with pytest.raises(ValueError, match=f"its log time {2 ** 64} ns"):
+        log.write_rejected({"key": "k"}, log_time=2 ** 64)
+    for key, payload in sent[3:]:
+        log.on_sample(key, payload)
+    log.close()
+    lf = read_log(path, keep=lambda ch: True)
+    assert lf.complete and [(m.topic, m.data) for m in lf.messages] == [(k, p) for k, p in sent]
+    assert sum(c.count for c in lf.channels.values()) == len(sent)
+
+
+def test_a_pipe_or_a_file_in_the_way_is_named_and_left_alone(tmp_path, monkeypatch) -> None:
+    """A FIFO given as the log blocked the open (a device failed with "[Errno 22] Invalid argument", naming nothing);
+    a file where a directory is needed said "text.mcap: File exists"."""
+    fifo = tmp_path / "pipe.mcap"
+    os.mkfifo(fifo)
+    reader = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # a reader: a writer's open of the pipe cannot hang the test
+    try:
+        with pytest.raises(OSError) as exc:
+            McapLog(fifo, KEYS, None)
+    finally:
+        os.close(reader)
+    assert exc.value.filename == str(fifo) and "a named pipe (FIFO) is there, not a regular file" in str(exc.value)
+    (tmp_path / "text.mcap").write_text("notes")
+    with pytest.raises(NotADirectoryError) as exc:
+        McapLog(tmp_path / "text.mcap" / "sub.mcap", KEYS, None)
+    assert exc.value.filename == str(tmp_path / "text.mcap") and "a file is in the way" in str(exc.value)
+
+    def refused(fd: int, length: int) -> None:  # what a character device answers (not one of /dev here)
+        raise OSError(errno.EINVAL, os.strerror(errno.EINVAL))
+
+    monkeypatch.setattr(direct_file.os, "ftruncate", refused)
+    fds = len(os.listdir("/proc/self/fd"))
+    with pytest.raises(OSError) as exc:
+        McapLog(tmp_path / "dev.mcap", KEYS, None)
+    assert exc.value.filename == str(tmp_path / "dev.mcap") and "cannot empty the file" in str(exc.value)
+    assert len(os.listdir("/proc/self/fd")) == fds

@@ -308,3 +308,15 @@ def test_a_complete_log_without_scene_channels_has_no_scene_records(tmp_path, pr
         log.on_sample(key, data)
     log.close()
     assert read_log(path).complete and list(read_scene(path)) == []
+
+
+def test_a_lock_step_log_has_its_scene_update_counts_too(tmp_path, pr2) -> None:
+    """docs/executor.md lists foresight.viz as written on close; only the background thread's logs had it."""
+    path = tmp_path / "lockstep.mcap"
+    log = McapLog(path, KEYS, SceneBuilder(SCENE, pr2), viz_thread=False)
+    for key, data in sample_messages(pr2):
+        log.on_sample(key, data)
+    log.close()
+    assert read_log(path).metadata["foresight.viz"] == {"dropped": "0", "unfinished": "0", "errors": "0"}
+    McapLog(tmp_path / "raw.mcap", KEYS, None).close()  # no scene channels: no counts of their updates
+    assert "foresight.viz" not in read_log(tmp_path / "raw.mcap").metadata

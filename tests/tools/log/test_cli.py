@@ -106,30 +106,41 @@ def test_the_other_commands_read_a_compare_runs_prediction_log_and_say_so(run_lo
     (["render", "{log}", "--out", "x.png"], "--step N or --all"),
     (["render", "{log}", "--step", "1", "--out", "{tmp}/step1"], "ending in .png"),  # it wrote step1.png, said step1
     (["info", "{bad}"], "not an MCAP file"),
-    (["info", "{odd}"], "metadata 'foresight.rejects' holds {'k': 'many'}, not counts"),  # was a traceback
     (["render", "{log}", "--all", "--out", ""], "argument --out: empty"),  # its PNGs went into the working directory
     (["render", "{log}", "--all", "--out", "{bad}"], "a file; with --all, --out is the directory"),  # 'File exists'
     (["snapshot", "{log}", "--out", " "], "argument --out: empty"),
     (["compress", "{log}", ""], "argument out: empty"),
 ])
 def test_errors_are_one_line(run_log, tmp_path, capsys, argv, message) -> None:
-    from mcap.writer import Writer
-
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(b"hello, this is not mcap at all")
-    odd = tmp_path / "odd.mcap"  # another tool's record under our metadata name
-    with odd.open("wb") as f:
-        writer = Writer(f)
-        writer.start(profile="other", library="other-tool")
-        writer.add_metadata("foresight.rejects", {"k": "many"})
-        writer.finish()
-    argv = [a.format(log=run_log, bad=bad, odd=odd, tmp=tmp_path) for a in argv]
+    argv = [a.format(log=run_log, bad=bad, tmp=tmp_path) for a in argv]
     with pytest.raises(SystemExit) as exc:
         main(argv)
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0] and err[0].startswith(f"foresight log {argv[0]}: error: ")
     assert not list(tmp_path.glob("step1*"))
+
+
+def test_a_metadata_record_of_counts_that_is_not_is_a_warning_and_the_rest_is_shown(tmp_path, capsys) -> None:
+    """Another tool's record under our metadata name made `info` refuse the whole file (a traceback, then one line)."""
+    from mcap.writer import Writer
+
+    odd = tmp_path / "odd.mcap"
+    with odd.open("wb") as f:
+        writer = Writer(f)
+        writer.start(profile="other", library="other-tool")
+        writer.add_metadata("foresight.rejects", {"k": "many", "foresight/planner/plan": "3"})
+        writer.finish()
+    assert main(["info", str(odd)]) == 0
+    out = capsys.readouterr().out
+    assert "profile:   other   library: other-tool" in out and "rejected:  foresight/planner/plan: 3" in out
+    assert "warning:   metadata 'foresight.rejects': 1 entry not counts, left out (not a Foresight log, or a damaged " \
+           "one): {'k': 'many'}" in out
+    assert main(["info", str(odd), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["rejected"] == {"foresight/planner/plan": 3} and len(d["warnings"]) == 1
 
 
 def test_the_demos_interrupt_line_says_which_plans_the_log_has(run_log) -> None:
@@ -145,3 +156,39 @@ def test_the_demos_interrupt_line_says_which_plans_the_log_has(run_log) -> None:
     data = run_log.read_bytes()
     cut.write_bytes(data[: len(data) - 200])
     assert _log_state(cut, KEYS.plan, 3).endswith("2 plans (the last 1 are not in it: it ends before them)")
+
+
+@pytest.mark.parametrize("command", [["table"], ["render", "--all", "--out", "{tmp}/steps"]])
+def test_plans_that_none_decode_are_named_not_said_missing(tmp_path, capsys, command) -> None:
+    """Every Plan payload undecodable: 'table' said "no plans logged" and 'render' "no Plan messages in the log"."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "plans.mcap"
+    with path.open("wb") as f:
+        writer = Writer(f)
+        writer.start(profile="foresight", library="test")
+        channel = writer.register_channel(KEYS.plan, "msgpack", writer.register_schema("foresight.Plan", "jsonschema",
+                                                                                      b"{}"))
+        for i in range(3):
+            writer.add_message(channel, i, b"\x80", i)  # an empty map: no field of a Plan
+        writer.finish()
+    with pytest.raises(SystemExit) as exc:
+        main([command[0], str(path), *(a.format(tmp=tmp_path) for a in command[1:])])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and len(err) == 1
+    assert f"{path}: 3 Plan message(s), none decodable (first error: " in err[0], err[0]
+
+
+@pytest.mark.parametrize("argv", [["render", "{log}", "--step", "1", "--out", "{text}/x.png"],
+                                  ["render", "{log}", "--all", "--out", "{text}/steps"],
+                                  ["snapshot", "{log}", "--out", "{text}/x.png"]])
+def test_a_file_in_the_way_of_the_output_s_directory_is_named(run_log, tmp_path, capsys, argv) -> None:
+    """mkdir's own words: 'foresight log render: error: text.mcap: File exists' (a review)."""
+    text = tmp_path / "text.mcap"
+    text.write_text("notes")
+    with pytest.raises(SystemExit) as exc:
+        main([a.format(log=run_log, text=text) for a in argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and len(err) == 1
+    assert err[0] == f"foresight log {argv[0]}: error: {text}: a file is in the way (a directory is needed there)"
+    assert text.read_text() == "notes"

@@ -79,3 +79,64 @@ def test_cli_and_bad_input(run_log: Path, tmp_path: Path, capsys: pytest.Capture
     with pytest.raises(SystemExit) as e:
         main(["compress", str(tmp_path / "text.mcap"), str(tmp_path / "o3.mcap")])
     assert e.value.code == 2 and "not an MCAP file" in capsys.readouterr().err
+
+
+def test_a_pipe_as_the_output_is_refused_in_one_line_and_left_alone(run_log: Path, tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """`compress X /dev/null` as root replaced the device with a regular file (a FIFO stands in for it here)."""
+    import os
+    import stat
+
+    fifo = tmp_path / "pipe.mcap"
+    os.mkfifo(fifo)
+    with pytest.raises(SystemExit) as e:
+        main(["compress", str(run_log), str(fifo)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1 and f"{fifo}: a named pipe (FIFO) is there, not a regular file" in err[0]
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode) and sorted(p.name for p in tmp_path.iterdir()) == ["pipe.mcap"]
+
+
+def test_a_log_still_being_written_is_copied_so_far_and_compared_with_what_it_had(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run's log read while the run goes on grew between the copy and the comparison: "NOT IDENTICAL", exit 1,
+    though the copy was right, and `info` said TRUNCATED (a review)."""
+    import tools.log.compress as compress
+    from shared.protocol import ClockTick, Keys, encode
+    from shared.recording.writer import McapLog
+    from tools.log.info import format_info
+
+    keys = Keys()
+    src, dst = tmp_path / "live.mcap", tmp_path / "copy.mcap"
+    live = McapLog(src, keys, None, chunk_size=1024, flush_period_s=60.0)
+    ticks = iter(range(10 ** 6))
+
+    def more(n: int) -> None:
+        for _ in range(n):
+            i = next(ticks)
+            live.on_sample(keys.clock, encode(ClockTick(stamp=0.1 * i, tick=i, period=0.1)))
+        live.flush()
+
+    copy = compress._copy
+
+    def copy_while_the_run_goes_on(*args, **kwargs):
+        out = copy(*args, **kwargs)
+        more(30)  # the run's next messages, written before the comparison reads the log again
+        return out
+
+    try:
+        more(40)
+        lf = read_log(src)
+        assert lf.being_written and not lf.complete and "STILL BEING WRITTEN" in format_info(lf)
+        assert "TRUNCATED" not in format_info(lf) and f"{lf.message_count} messages, " in format_info(lf)
+        monkeypatch.setattr(compress, "_copy", copy_while_the_run_goes_on)
+        assert main(["compress", str(src), str(dst)]) == 0
+        out = capsys.readouterr().out
+        copied = read_log(dst)
+        assert copied.complete and copied.message_count == lf.message_count == 40
+        assert "still being written (a run holds its lock): 40 messages copied so far" in out
+        assert "compared identical with the log's first 40" in out and "NOT IDENTICAL" not in out
+        assert copied.metadata["foresight.compress"]["source_error"].startswith("still being written")
+        assert "complete; copied from a log still being written" in format_info(copied)
+    finally:
+        live.close()
+    assert not read_log(src).being_written and read_log(src).complete

@@ -64,3 +64,26 @@ def test_the_final_grid_is_chosen_as_the_demo_chooses_it(tmp_path, robot) -> Non
     assert summary.scored_against == "final prediction"
     recorder = recorder_from_log(path, keys)
     assert recorder is not None and recorder.snapshot()[2].tick == 1
+
+
+def test_a_log_without_occupancy_grids_says_its_interference_is_not_scored(run_log, tmp_path, capsys) -> None:
+    """It printed "interference cost ... (final prediction): 0.0000" with no prediction in the log (a review)."""
+    from shared.protocol import Keys
+    from shared.recording.reader import read_log
+    from shared.recording.writer import McapLog
+
+    keys = Keys()
+    path = tmp_path / "no_occupancy.mcap"
+    log = McapLog(path, keys)
+    for m in read_log(run_log, keep=lambda ch: ch.message_encoding == "msgpack").messages:
+        if m.topic != keys.occupancy:
+            log.on_sample(m.topic, m.data)
+    log.close()
+    assert main(["table", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "interference cost of the executed trajectory: not scored (no occupancy prediction was logged)" in out
+    assert "0.0000" not in out
+    assert main(["table", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["interference_scored"] is False
+    assert main(["table", str(run_log), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["interference_scored"] is True
