@@ -76,17 +76,20 @@ class Ros2RobotLink:
 
     def _on_state(self, payload: bytes) -> None:
         state = self.mapping.joint_state_in(payload, self.joint_names)  # Ros2InputError: refused, counted
-        self.record(self.config.ros2_joint_states, ROBOT_TYPES["state"], payload)
-        if state is None:  # another driver's joints (a gripper's) on the same topic
-            return
-        stamp, q, qd = state
-        with self._cond:
-            if self._latest is not None and stamp < self._latest[0]:
-                raise Ros2InputError(f"JointState: stamped {stamp:.3f} s, older than the last one "
-                                     f"({self._latest[0]:.3f} s): two publishers on {self.config.ros2_joint_states}?")
-            self._latest = (stamp, q, qd, time.monotonic())
-            self.received += 1
-            self._cond.notify_all()
+        try:
+            if state is None:  # another driver's joints (a gripper's) on the same topic
+                return
+            stamp, q, qd = state
+            with self._cond:
+                if self._latest is not None and stamp < self._latest[0]:
+                    raise Ros2InputError(f"JointState: stamped {stamp:.3f} s, older than the last one "
+                                         f"({self._latest[0]:.3f} s): two publishers on "
+                                         f"{self.config.ros2_joint_states}?")
+                self._latest = (stamp, q, qd, time.monotonic())
+                self.received += 1
+                self._cond.notify_all()
+        finally:  # logged after the state is taken: a recorder that fails cannot cost the arm its state
+            self.record(self.config.ros2_joint_states, ROBOT_TYPES["state"], payload)
 
     def _wait(self, ready: Callable[[], bool], timeout: float, poke: Callable[[], None] | None = None) -> bool:
         end = time.monotonic() + timeout

@@ -110,3 +110,22 @@ def test_no_robot_is_one_clear_error(zenoh_hub: Callable[[], ZenohConfig]) -> No
                 link.initial(0.5)
         finally:
             link.close()
+
+
+def test_a_joint_state_is_taken_even_when_its_recording_fails(zenoh_hub: Callable[[], ZenohConfig]) -> None:
+    """The state was recorded before it was taken: a recorder that raised (a log the disk had ended) cost the arm
+    every joint state."""
+    mapping = Ros2Mapping(Ros2Config())
+    names = list(JOINT_NAMES)
+
+    def failing(topic: str, msgtype: str, data: bytes) -> None:
+        raise OSError(28, "No space left on device")
+
+    with open_session(zenoh_hub()) as session:
+        link = Ros2RobotLink(session, ExecutorConfig(mode="realtime", robot="ros2"), names, threading.Event(),
+                             RejectCounter("executor"), record=failing)
+        q = np.linspace(0.1, 0.8, len(names))
+        with pytest.raises(OSError):
+            link._on_state(mapping.joint_state_of(names, q, np.zeros(len(names)), 2.0))
+        np.testing.assert_allclose(link.measure(0.0).q, q)
+        assert link.received == 1
