@@ -102,6 +102,20 @@ NO_HUMAN_COST = ("--cost.w-human", "0", "--cost.body-clearance", "0")
 predicted occupancy nor, in real time, the body as last seen (``services.planner.body``)."""
 
 
+def _lockstep_stale_limit(cfg: DemoConfig) -> list[str]:
+    """The executor's ``--stale-limit-s`` for a lock-step period above its default limit (else none).
+
+    Every plan is a period old when adopted: ``--period-s 0.6`` held the robot at every step.
+    """
+    import dataclasses
+
+    from services.executor.config import ExecutorConfig, lockstep_stale_limit
+
+    default = next(f.default for f in dataclasses.fields(ExecutorConfig) if f.name == "stale_limit_s")
+    limit = lockstep_stale_limit(cfg.period_s, float(default))  # type: ignore[arg-type]
+    return ["--stale-limit-s", f"{limit:g}"] if cfg.mode == "lockstep" and limit != default else []
+
+
 def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_per_tick: int,
                     mcap: Path | None) -> dict[str, list[str]]:
     """Each service's own options (flags, no Zenoh ones) for this demo's scenario; ``mcap`` None: the default."""
@@ -120,6 +134,7 @@ def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_
         "simrobot": [*scene, "--sim-time" if lockstep else "--no-sim-time"],
         "view": ["--port", str(cfg.live or DEFAULT_PORT), *scene],
         "executor": ["--mode", cfg.mode, "--steps", str(cfg.steps), "--step-period-s", str(cfg.period_s),
+                     *_lockstep_stale_limit(cfg),
                      *(["--wait-for", "tracker,predictor,planner", "--recorded-sources", "replayer,tracker"]
                        if cfg.human == "keypoints" else []),  # its tracker plays a file: the file's end is no fault
                      *([] if cfg.robot == "sim" else ["--robot", "ros2"]),

@@ -18,7 +18,7 @@ from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.scene import SCENE_HELP
 
 __all__ = ["ExecutorConfig", "ExecutorError", "SeparationConfig", "SEPARATION_REASON", "is_separation_hold", "ROBOTS",
-           "check_robot_names"]
+           "lockstep_stale_limit", "check_robot_names"]
 
 ROBOTS = ("sim", "ros2")
 """What the executor drives: its own simulated arm, or a ROS 2 robot's joint_trajectory_controller."""
@@ -45,6 +45,15 @@ class ExecutorError(ValueError):
 SEPARATION_REASON = ("the person is {clearance:.2f} m from the robot (separation stop_m {stop_m:.2f} m): no move "
                      "closer; it moves again when its next step keeps its distance")
 """The hold reason of the separation guard (``RobotState.reason``)."""
+
+
+def lockstep_stale_limit(period_s: float, limit_s: float = 0.0) -> float:
+    """The stale limit a lock-step run of ``period_s`` needs: ``limit_s``, at least 1.5 periods when above 0.5 s.
+
+    A plan of tick n-1 is a period old when step n adopts it: a limit below the period held every step. 1.5 periods
+    makes a plan stale once one is missing, as the default 0.5 s does at the default 0.5 s period.
+    """
+    return max(limit_s, 1.5 * period_s) if period_s > limit_s else limit_s
 
 
 def is_separation_hold(reason: str) -> bool:
@@ -152,6 +161,12 @@ class ExecutorConfig:
                               f"tick's period, docs/protocol.md), got {self.step_period_s}")
         if self.steps < 0:
             raise ConfigError(f"executor.steps: must be >= 0, got {self.steps}")
+        if self.mode == "lockstep" and self.stale_limit_s < self.step_period_s:
+            # a plan of tick n-1 is adopted at step n, a period old: every step held, the robot never moved
+            raise ConfigError(f"executor.stale_limit_s: {self.stale_limit_s:g} s is below the lock-step period "
+                              f"{self.step_period_s:g} s: every plan is a period old when adopted and the robot would "
+                              f"hold at every step; give at least {lockstep_stale_limit(self.step_period_s):g} "
+                              "(1.5 periods: stale once a plan is missing)")
         if self.velocity_scale > 1.0:
             raise ConfigError(f"executor.velocity_scale: must be <= 1, got {self.velocity_scale}")
         if not (self.finish_s >= 0 and math.isfinite(self.finish_s)):

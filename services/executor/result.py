@@ -51,6 +51,20 @@ class ExecutorResult:
     times: np.ndarray = field(default_factory=lambda: np.zeros(0))
     q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
+    def final_goal(self) -> str:
+        """The run's last goal and whether it was reached, in words: ``goal 1 reached during step 12``.
+
+        The closing line put the first reach of any goal beside the last goal: "goal 1 reached during step 9" where
+        only goal 0 had been (a review). Now ``goal 1 not reached (goal 0 was, during step 9)``.
+        """
+        if not self.goal_per_step:
+            return "goal none"
+        final = self.goal_per_step[-1]
+        if final in self.reached_steps:
+            return f"goal {final} reached during step {self.reached_steps[final]}"
+        others = ", ".join(f"goal {g} was, during step {n}" for g, n in sorted(self.reached_steps.items()))
+        return f"goal {final} not reached" + (f" ({others})" if others else "")
+
     def note_reached(self, goal: int, step: int) -> bool:
         """Goal ``goal`` is reached during ``step``; True the first time any goal is (the run's ``reached_step``)."""
         self.reached_steps.setdefault(goal, step)

@@ -257,10 +257,8 @@ class ExecutorService:
                         self.config.lockstep_timeout_s)
         held = "steps" if self.config.mode == "lockstep" else "state samples"  # what ExecutorResult.held_steps counts
         held += f" ({r.separation_holds} by the separation guard)" * bool(r.separation_holds)
-        reached = "not reached" if not r.reached else f"reached during step {r.reached_step}" * (r.reached_step >= 0)
-        log.info("executor: done after %d steps, goal %s %s, %d plans adopted, held during %d %s, %d rejected: %s",
-                 r.steps, r.goal_per_step[-1] if r.goal_per_step else "none", reached or "reached", r.plans,
-                 r.held_steps, held, sum(r.rejects.values()), self.rejects.summary())
+        log.info("executor: done after %d steps, %s, %d plans adopted, held during %d %s, %d rejected: %s", r.steps,
+                 r.final_goal(), r.plans, r.held_steps, held, sum(r.rejects.values()), self.rejects.summary())
         return r
 
     def _live_server(self, builder: SceneBuilder) -> LiveServer | None:

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from services.executor.config import lockstep_stale_limit
 from services.executor.core import ExecutorConfig
 from services.executor.service import ExecutorResult, ExecutorService, load_models
 from services.planner.core import Planner
@@ -330,8 +331,7 @@ def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None
                             mcap=str(mcap) if mcap else "none", scene=scene_ref,
                             lockstep_timeout_s=min(60.0, spec.timeout_s), path_per_step=spec.path_per_step,
                             path_weights=list(spec.path_weights), finish_path=spec.finish_path)
-    if spec.period_s > ex_cfg.stale_limit_s:  # a plan starts a period after its tick: every step held (--period-s 0.6)
-        ex_cfg = replace(ex_cfg, stale_limit_s=1.5 * spec.period_s)  # stale once a plan is missing, as at 0.5 s
+    ex_cfg = replace(ex_cfg, stale_limit_s=lockstep_stale_limit(spec.period_s, ex_cfg.stale_limit_s))
     executor = ExecutorService(ex_cfg, peer, stop=ex_stop, robot=robot, human=human, scene=spec.scene)
     threads = [ServiceThread("predictor", predictor.run), ServiceThread("planner", planner_svc.run),
                ServiceThread("replayer", replayer.run),

@@ -3,6 +3,8 @@ stale data and resumes, never leaves the joint limits."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -399,3 +401,24 @@ def test_the_hold_before_a_live_persons_first_reach_says_why() -> None:
     core.note_peer("tracker", True)
     core.step(0.02)
     assert core.holding and "the tracker publishes poses once it has seen the person at rest" in core.reason
+
+
+def test_a_lock_step_stale_limit_below_the_period_is_refused_and_the_demo_passes_one_that_fits() -> None:
+    """A plan of tick n-1 is adopted at step n, a period old: with the period above the limit (`foresight demo
+    --period-s 0.6`) every step held and the robot never moved (a review)."""
+    import dataclasses
+
+    from services.demo import DemoConfig
+    from services.demo_services import service_options
+    from services.executor.config import lockstep_stale_limit
+
+    with pytest.raises(ConfigError, match=r"executor\.stale_limit_s: 0\.5 s is below the lock-step period 0\.6 s: .* "
+                                          r"give at least 0\.9"):
+        ExecutorConfig(mode="lockstep", step_period_s=0.6).validate()
+    ExecutorConfig(mode="realtime", step_period_s=0.6).validate()  # real time adopts a plan as it arrives
+    ExecutorConfig(mode="lockstep", step_period_s=0.5).validate()  # the defaults
+    assert lockstep_stale_limit(0.5, 0.5) == 0.5 and lockstep_stale_limit(0.6, 0.5) == pytest.approx(0.9)
+    opts = service_options(dataclasses.replace(DemoConfig(), period_s=0.6), Path("m.npz"), Path("l.npz"), 1, None)
+    flags = opts["executor"]
+    assert flags[flags.index("--stale-limit-s") + 1] == "0.9"
+    assert "--stale-limit-s" not in service_options(DemoConfig(), Path("m.npz"), Path("l.npz"), 1, None)["executor"]
