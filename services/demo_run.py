@@ -46,7 +46,7 @@ from services.supervisor import Supervisor, describe_exit
 from shared.config import ZenohConfig
 from shared.library import MotionLibrary, save_library
 from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyGrid, Plan, RobotState
-from shared.runtime import UserError, interruptible
+from shared.runtime import SHUTDOWN_GRACE_S, UserError, interruptible
 from shared.scene import Scene, load_scene
 from shared.security import secure_endpoints
 from shared.transport import Presence, open_session, subscribe
@@ -339,7 +339,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
             if status == 1 and executor is not None and executor.returncode not in (0, None):
                 said.add("executor")  # reported above, one line: not again as a warning
             for name in reversed(order):
-                code = procs[name].stop(timeout=10.0)
+                code = procs[name].stop(timeout=SHUTDOWN_GRACE_S + 2.0)  # past its own grace: its stack dump is kept
                 if name == "executor":  # its log is closed: what the others still send is not the run's
                     recording.clear()
                 if code not in (0, None, -15) and name not in said:
