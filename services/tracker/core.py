@@ -213,6 +213,7 @@ class TrackerCore:
             return TrackerOutput()
         if self._raw is not None and 0 < stamp - self._raw[0] < 0.9 / self.config.max_fit_hz:
             self.skipped += 1  # (0.9: a 120 Hz sensor's every other frame is 1 / 60 s after the last, not 0.99 of it)
+            self._frame_no = frame  # a frame skipped is no frame the sensor dropped (_bridge)
             return TrackerOutput()
         points = self.layout.to_model(list(names), np.asarray(positions, dtype=np.float64))
         observed = np.all(np.isfinite(points), axis=-1)
@@ -362,10 +363,10 @@ class TrackerCore:
     def _bridge(self, stamp: float, f: np.ndarray, dropped: int | None = None) -> list[Message]:
         """Frames interpolated between the last smoothed one and this, across frames left unfitted or a gap.
 
-        Frames left unfitted to catch up (:mod:`.catch_up`): one at each of their stamps. A gap: at the sensor's
-        period, only while it is known (three intervals at least, the last three of them within half of it either
-        way: a backlog flushed after a stall, arrival-stamped a few ms apart, is no sensor's period), and never more
-        than ``dropped`` frames where the sensor numbers its frames.
+        Frames left unfitted to catch up (:mod:`.catch_up`): one at each of their stamps. A gap: the frames the
+        sensor's numbers say it lost (``dropped``), else at the sensor's period while the last three intervals are each
+        a whole number of periods (a backlog flushed after a stall, arrival-stamped a few ms apart, is no sensor's
+        period; a frame lost in every 4th is): :meth:`.rate.FrameRate.missed`.
         """
         unfitted, self._unfitted = self._unfitted, []
         if self._out is not None and (between := sorted({t for t in unfitted if self._out[0] < t < stamp})):
@@ -374,13 +375,10 @@ class TrackerCore:
             t0, f0 = self._out
             self.bridged += len(between)
             return [m for t in between for m in self._frame(t, f0 + (t - t0) / (stamp - t0) * (f - f0))]
-        period = self.rate.period
-        if self._out is None or period is None or not self.rate.steady():
+        if self._out is None:
             return []
         t0, f0 = self._out
-        n = int(round((stamp - t0) / period)) - 1
-        if dropped is not None:
-            n = min(n, dropped)
+        n = self.rate.missed(stamp - t0, dropped)
         msgs: list[Message] = []
         for k in range(1, n + 1):
             a = k / (n + 1)

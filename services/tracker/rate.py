@@ -4,7 +4,9 @@ The period is the median of the recent intervals, leaving out those under half o
 :data:`MIN_PERIOD_S`: frames that came in a burst (a link flushing after a stall) would otherwise shrink it, and a
 gap bridged at that period would be filled with invented frames. A burst ends when its backlog is flushed; a sensor
 that went faster (30 -> 120 Hz mid-track) goes on, and once a window of such short intervals in a row agree (within
-25 % of their median) they are the period.
+25 % of their median) they are the period. A gap between two frames taken is bridged (:meth:`FrameRate.missed`) with
+the frames the sensor's numbers say it lost, or, while the recent intervals are each a whole number of periods, with
+as many as the gap holds periods less one.
 
 The tracker keeps two: the rate of the frames it fits (the poses are made from them: bridging, resampling) and
 the rate of every frame the sensor sends (what the user is told: a sensor at 120 Hz whose frames are fitted at 60,
@@ -17,10 +19,14 @@ from collections import deque
 
 import numpy as np
 
-__all__ = ["FrameRate", "MIN_PERIOD_S"]
+__all__ = ["FrameRate", "MIN_PERIOD_S", "WHOLE_TOLERANCE"]
 
 MIN_PERIOD_S = 1.0 / 500
 """The shortest frame interval taken for the sensor's period (500 Hz): shorter ones are frames of a burst."""
+
+WHOLE_TOLERANCE = 0.25
+"""How far (in periods) an interval of two or more periods may be from a whole number of them and still be the
+sensor's: frames lost between two taken ones (:meth:`FrameRate.regular`)."""
 
 
 class FrameRate:
@@ -53,16 +59,44 @@ class FrameRate:
         """Frames a second, once a whole window of intervals is known; None before."""
         return 1.0 / float(np.median(self._dts)) if len(self._dts) == self.window else None
 
-    def steady(self) -> bool:
-        """Whether the last three intervals before the newest agree with the period (within half of it either way).
+    def regular(self, dt: float) -> bool:
+        """Whether an interval of ``dt`` s is the sensor's: a period, or a whole number of them (frames lost between).
 
-        After a stall a backlog flushed a few ms apart is no sensor's period: a gap is bridged only while this holds.
+        One period within half of it either way (a sensor's jitter), two or more within :data:`WHOLE_TOLERANCE` of a
+        whole number of them.
         """
         period = self.period
         if period is None:
             return False
+        k = round(dt / period)
+        return 0.5 * period <= dt <= 1.5 * period or (k >= 2 and abs(dt - k * period) <= WHOLE_TOLERANCE * period)
+
+    def steady(self) -> bool:
+        """Whether the last three intervals before the newest are the sensor's (:meth:`regular`).
+
+        After a stall a backlog flushed a few ms apart is no sensor's period: a gap is bridged at it only while this
+        holds. A sensor that loses frames regularly is steady: a 30 Hz one losing the wrist in every 4th frame
+        (intervals of one and two periods) had no gap bridged, and its poses' time ran at 22.5 a second.
+        """
         last = list(self._dts)[-4:-1] if len(self._dts) > 3 else list(self._dts)[:3]
-        return all(0.5 * period <= dt <= 1.5 * period for dt in last)
+        return self.period is not None and all(self.regular(dt) for dt in last)
+
+    def missed(self, gap: float, dropped: int | None = None) -> int:
+        """Frames missing in ``gap`` s between two frames taken, to be bridged: 0 while the period is not known.
+
+        ``dropped``: the frames between, by the sensor's frame numbers (None: it numbers none). Those are bridged
+        when the gap is as long as they make it (each within half a period of one): the sensor says what it lost.
+        Otherwise the gap in periods, less one, while :meth:`steady` (never more than ``dropped``).
+        """
+        period = self.period
+        if period is None:
+            return 0
+        if dropped is not None and dropped > 0 and 0.5 * period <= gap / (dropped + 1) <= 1.5 * period:
+            return dropped
+        if not self.steady():
+            return 0
+        n = max(0, round(gap / period) - 1)
+        return n if dropped is None else min(n, max(dropped, 0))
 
     def reset(self) -> None:
         """Forget the intervals (the next frames may come from a sensor restarted at another rate)."""

@@ -26,7 +26,7 @@ from shared.config import ConfigError, ZenohConfig
 from shared.human import HumanModel
 from shared.human_source import HumanPublisher
 from shared.keypoints.library import read_keypoint_csv
-from shared.keypoints.plausibility import units_problem
+from shared.keypoints.plausibility import recording_problem
 from shared.protocol import (
     AT_REST,
     SENSOR,
@@ -108,11 +108,6 @@ class TrackerService:
                 self.playback = Playback(recorded, config.playback)
             except ValueError as exc:
                 raise ConfigError(f"tracker.from_file: {exc}") from None
-            for demo in recorded:  # else every frame is refused on receipt, and the run ends as if it had played
-                if problem := units_problem(demo.names, demo.positions):
-                    raise ConfigError(f"tracker.from_file: {config.from_file} demo {demo.demo}: {problem}")
-            if not zenoh_config.connect:
-                raise ConfigError("tracker.from_file: the player connects to the router in zenoh.connect; none given")
             layout, names = self.core.layout, self.playback.names
             unknown = layout.unknown(names)
             lacking = layout.lacking(names)
@@ -120,6 +115,11 @@ class TrackerService:
                 raise ConfigError(f"tracker.from_file: {config.from_file} does not fit the layout {layout.name}: "
                                   + (f"points {unknown[:4]} are not the layout's" if unknown else
                                      f"it cannot form the required {lacking}") + " (tracker.layout)")
+            for demo in recorded:  # else every frame is refused (on receipt, upright, missing), and the run ends 0
+                if problem := recording_problem(layout, demo.names, demo.positions):  # as library from-keypoints
+                    raise ConfigError(f"tracker.from_file: {config.from_file} demo {demo.demo}: {problem}")
+            if not zenoh_config.connect:
+                raise ConfigError("tracker.from_file: the player connects to the router in zenoh.connect; none given")
 
     # -- frames ------------------------------------------------------------------------------------------------
 
@@ -195,9 +195,17 @@ class TrackerService:
 
     def _on_pose_array(self, mapping: Any, names: list[str], payload: bytes) -> None:
         """A ROS 2 ``PoseArray``: as a ``HumanKeypoints`` frame, checked like one off Foresight's key."""
+        from services.ros2.core import KEYPOINTS_TYPE, Ros2InputError
         from services.ros2.keypoints import keypoints_in
 
-        stamp, frame_id, positions = keypoints_in(mapping, payload, len(names))  # Ros2InputError: counted
+        try:
+            stamp, frame_id, positions = keypoints_in(mapping, payload, len(names))  # Ros2InputError: counted
+        except Ros2InputError as exc:
+            if len(mapping.decode(payload, KEYPOINTS_TYPE).poses) == len(names):  # (not the CDR: raises again)
+                raise
+            # another count of poses: a driver in its own order, which the default (the layout's table) is no one's
+            raise Ros2InputError(f"{exc}: pose i is --ros2-points[i], now {','.join(names)}; set it to the driver's "
+                                 "names in its pose order") from None
         msg = HumanKeypoints(stamp=stamp or time.time(), tick=-1, frame=self._ros2_frame, frame_id=frame_id,
                              names=names, positions=positions)
         self._ros2_frame += 1

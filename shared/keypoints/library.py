@@ -6,8 +6,8 @@ demonstrations one after another; a missing point is an absent column or an empt
 absent row. Points are named as a layout names them (:mod:`shared.keypoints.layouts`; Foresight's own names
 by default). :func:`write_keypoint_library` makes one from a motion library (the human model's joint
 positions, optionally with noise, dropped frames and missing points); :func:`fit_keypoint_library` turns one
-into a motion library (:class:`shared.keypoints.KeypointFit`, frame by frame, gaps bridged by interpolating the
-fitted features).
+into a motion library (:class:`shared.keypoints.KeypointFit`, frame by frame, gaps and a sensor's glitches bridged by
+interpolating the fitted features).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from shared.library import Demonstration, LibraryIssue, MotionLibrary
 
 from .fit import POINT_NAMES, REQUIRED, FitConfig, KeypointFit
 from .layouts import load_layout
-from .plausibility import MAX_TILT_DEG, torso_tilt_deg, units_problem
+from .plausibility import MAX_KEYPOINT_M, far_frames, recording_problem
 
 __all__ = ["write_keypoint_library", "read_keypoint_csv", "fit_keypoint_library", "KeypointDemo", "FitReport",
            "CLASS_ORDER_FILE"]
@@ -44,18 +44,21 @@ class KeypointDemo:
 
 @dataclass
 class FitReport:
-    """What :func:`fit_keypoint_library` measured: every observed point's fit residual, frames bridged."""
+    """What :func:`fit_keypoint_library` measured: every observed point's fit residual, frames bridged and refused."""
 
-    residual_m: np.ndarray  # (N,) over every observed point of every fitted frame
-    frames: int
-    bridged: int
+    residual_m: np.ndarray  # (N,) over every observed point of every frame taken
+    frames: int             # frames taken
+    bridged: int            # frames interpolated: absent, a required point missing, or refused
+    refused: int = 0        # of them, a sensor's glitches: a coordinate beyond MAX_KEYPOINT_M, or a fit over the limit
+    max_residual_m: float = 0.08
 
     def line(self) -> str:
-        """One line: median and p99 residual, frames fitted and bridged."""
+        """One line: median and p99 residual, frames fitted, bridged and refused."""
         r = self.residual_m
         return (f"fit residual median {np.median(r) * 1e3:.2f} mm, p99 {np.percentile(r, 99) * 1e3:.2f} mm over "
-                f"{len(r)} points of {self.frames} frames; {self.bridged} frames bridged (dropped, or a required "
-                "point missing)")
+                f"{len(r)} points of {self.frames} frames; {self.bridged} frames bridged (dropped, a required "
+                f"point missing, or refused: {self.refused} with a coordinate beyond {MAX_KEYPOINT_M:g} m or a fit "
+                f"residual over {self.max_residual_m * 100:g} cm rms, a sensor's glitches)")
 
 
 def write_keypoint_library(lib: MotionLibrary, out: Path, noise_m: float = 0.0, drop: float = 0.0,
@@ -187,14 +190,19 @@ def fit_keypoint_library(directory: Path, layout: str = "foresight", config: Fit
                          max_residual_m: float = 0.08) -> tuple[MotionLibrary, FitReport]:
     """Fit the 12 features to every demonstration of a keypoint library; returns the motion library and a report.
 
-    Frames are fitted in order, each warm-started from the one before (all demonstrations at once); frames that
-    are absent or lack a required point get the features interpolated between their neighbours. A demonstration
-    whose median fit residual exceeds ``max_residual_m`` (the live tracker's default limit per frame) is left out,
-    as a :class:`~shared.library.LibraryIssue` of the library: its points do not fit the model.
+    Frames are fitted in order, each warm-started from the last one taken (all demonstrations at once), as the live
+    tracker fits them. Frames that are absent, lack a required point, hold a coordinate beyond
+    :data:`~shared.protocol.limits.MAX_KEYPOINT_M` (the wire refuses such a live frame) or whose fit's rms residual
+    exceeds ``max_residual_m`` (the live tracker's limit per frame) get the features interpolated between their
+    neighbours: such a frame is a sensor's glitch, and never the next frame's start
+    (:meth:`~shared.keypoints.KeypointFit.fit_sequences`). A demonstration whose median fit residual exceeds
+    ``max_residual_m``, or without a frame within it, is left out as a :class:`~shared.library.LibraryIssue` of the
+    library: its points do not fit the model.
 
     Raises:
-        ValueError: No CSV in ``directory``, a malformed one, a demonstration that is not in metres or whose up is
-            not z (:mod:`shared.keypoints.plausibility`), or none left.
+        ValueError: No CSV in ``directory``, a malformed one, a demonstration that is not in metres, whose up is
+            not z, or without a frame with every required point
+            (:func:`~shared.keypoints.plausibility.recording_problem`), or a class left with none.
     """
     files = _class_files(Path(directory))
     lay = load_layout(layout)
@@ -203,57 +211,57 @@ def fit_keypoint_library(directory: Path, layout: str = "foresight", config: Fit
         for kd in read_keypoint_csv(path):
             if unknown := lay.unknown(kd.names):  # a typo would be a point never observed, without a word
                 raise ValueError(f"{path}: point(s) {', '.join(unknown)} are not layout {lay.name}'s")
-            if problem := units_problem(kd.names, kd.positions):
+            if problem := recording_problem(lay, kd.names, kd.positions):  # as tracker --from refuses to play it
                 raise ValueError(f"{path} demo {kd.demo}: {problem}")
-            model = lay.to_model(kd.names, kd.positions)
-            tilt = torso_tilt_deg(model)
-            if np.isfinite(tilt).any() and np.nanmedian(tilt) > MAX_TILT_DEG:  # the tracker's rule, per demonstration
-                raise ValueError(f"{path} demo {kd.demo}: the torso (pelvis to the shoulders' midpoint) leans "
-                                 f"{np.nanmedian(tilt):.0f} deg from the vertical (z) in the median frame, more than "
-                                 f"{MAX_TILT_DEG:g}: is z the keypoints' up? They must be in the library's frame")
-            demos.append((label, path.stem, kd, model))
+            demos.append((label, path.stem, kd, lay.to_model(kd.names, kd.positions)))
     if not demos:
         raise ValueError(f"keypoint library {directory}: no demonstration in any of its {len(files)} CSV files")
     required = [POINT_NAMES.index(p) for p in REQUIRED]
-    usable = [np.all(np.isfinite(pts[:, required]).all(-1), axis=-1) for *_, pts in demos]
-    for (_, name, kd, pts), ok in zip(demos, usable, strict=True):
-        if not ok.any():
-            lacking = [p for p, j in zip(REQUIRED, required, strict=True) if not np.isfinite(pts[:, j]).all(-1).any()]
-            raise ValueError(f"keypoint library {directory}: {name}.csv demo {kd.demo} has no frame with every "
-                             f"required point ({', '.join(REQUIRED)}; never given: {', '.join(lacking) or 'none'}; "
-                             f"layout {lay.name})")
+    given = [np.all(np.isfinite(pts[:, required]).all(-1), axis=-1) for *_, pts in demos]
+    far = [g & far_frames(kd.positions) for (_, _, kd, _), g in zip(demos, given, strict=True)]
+    usable = [g & ~w for g, w in zip(given, far, strict=True)]
     longest = max(int(u.sum()) for u in usable)
-    batch = np.zeros((len(demos), longest, len(POINT_NAMES), 3))
+    batch = np.zeros((len(demos), max(longest, 1), len(POINT_NAMES), 3))
     for i, ((*_, pts), ok) in enumerate(zip(demos, usable, strict=True)):
-        kept = pts[ok]
+        kept = pts[ok] if ok.any() else pts[given[i]][:1]  # every frame far off: fitted, not taken (below)
         batch[i, :len(kept)] = kept
         batch[i, len(kept):] = kept[-1]  # padding: the last frame again (its fits are not used)
-    result = KeypointFit(config).fit_sequences(batch)
-    out, residuals, bridged, fitted = [], [], 0, 0
+    result = KeypointFit(config).fit_sequences(batch, max_residual_m=max_residual_m)
+    assert result.refused is not None
+    out, residuals, bridged, fitted, refused = [], [], 0, 0, 0
     issues: list[LibraryIssue] = []
     counts: dict[int, int] = {}
     for i, ((label, name, kd, _), ok) in enumerate(zip(demos, usable, strict=True)):
         n = int(ok.sum())
-        frames = kd.frames[ok]
-        span = np.arange(kd.frames[0], kd.frames[-1] + 1)
-        feats = np.stack([np.interp(span, frames, result.features[i, :n, k]) for k in range(12)], axis=-1)
-        bridged += len(span) - n
-        fitted += n
+        taken = ~result.refused[i, :n]
         r = result.residual_m[i, :n]
+        rms = np.sqrt(np.nanmean(r ** 2, axis=-1))
         r = r[np.isfinite(r)]
         if r.size and float(np.median(r)) > max_residual_m:
             issues.append(LibraryIssue(name, kd.demo, f"demo {kd.demo}: fit residual median {np.median(r) * 100:.1f} "
                                        f"cm > {max_residual_m * 100:g} cm: its points do not fit the model (another "
                                        "layout? --layout)"))
             continue
-        residuals.append(r)
+        if not taken.any():
+            why = (f"a coordinate beyond {MAX_KEYPOINT_M:g} m in every frame with the required points" if not n else
+                   f"no frame fits the model within {max_residual_m * 100:g} cm rms (best: {rms.min() * 100:.1f} cm)")
+            issues.append(LibraryIssue(name, kd.demo, f"demo {kd.demo}: {why}"))
+            continue
+        frames = kd.frames[ok][taken]
+        span = np.arange(kd.frames[0], kd.frames[-1] + 1)
+        feats = np.stack([np.interp(span, frames, result.features[i, :n][taken, k]) for k in range(12)], axis=-1)
+        bridged += len(span) - len(frames)
+        refused += int(far[i].sum()) + int((~taken).sum())
+        fitted += len(frames)
+        kept_r = result.residual_m[i, :n][taken]
+        residuals.append(kept_r[np.isfinite(kept_r)])
         index = counts[label] = counts.get(label, -1) + 1
         out.append(Demonstration(label, name, index, feats, f"{name}.csv#demo {kd.demo}"))
-    given = {label for label, *_ in demos}
-    empty = [f"{p.stem} ({'none fits the model' if label in given else 'none given'})"
+    given_labels = {label for label, *_ in demos}
+    empty = [f"{p.stem} ({'none fits the model' if label in given_labels else 'none given'})"
              for label, p in enumerate(files) if label not in counts]
     if empty:  # training would refuse the library, far from here
         raise ValueError(f"keypoint library {directory}: no demonstration of {', '.join(empty)}"
                          + (f"; {'; '.join(map(str, issues[:3]))}" if issues else ""))
     lib = MotionLibrary([p.stem for p in files], out, issues, f"keypoints:{directory} (layout {lay.name})")
-    return lib, FitReport(np.concatenate(residuals), fitted, bridged)
+    return lib, FitReport(np.concatenate(residuals), fitted, bridged, refused, max_residual_m)

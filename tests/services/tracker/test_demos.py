@@ -290,3 +290,19 @@ def test_a_body_that_moves_first_is_lost_and_its_reach_starts_as_it_would_have(r
     starts = [[m.stamp for m in ms if isinstance(m, DemoMarker) and m.event == "start" and m.class_name == LIVE_CLASS]
               for ms in (msgs, still)]
     assert ("lost", 0, AT_REST) in _markers(msgs) and starts[0] == starts[1] and len(starts[0]) == 1
+
+
+def test_a_person_turning_slowly_is_lost_at_about_25_deg_and_not_said_at_rest_until_they_stop(reach) -> None:
+    """A review: turning in place at 10 deg/s, the person was said at rest one frame after the turn lost them, still
+    turning: the body's points spread 1 cm rms over a second, under the 2 cm of a body at rest. The model's
+    shoulders are 24 cm from its turning axis, so 10 cm is a turn of 2 asin(0.10 / 0.48) = 24 deg (docs: 33 deg)."""
+    core = TrackerCore()
+    turning = np.repeat(reach[:1], 180, 0)
+    turning[:, PELVIS_YAW] += np.radians(10.0) * np.arange(1, 181) / RATE  # 10 deg/s for 6 s
+    msgs = _feed(core, np.concatenate([np.repeat(reach[:1], 60, 0), turning, np.repeat(turning[-1:], 60, 0)]))
+    assert _markers(msgs) == [("start", 0, AT_REST), ("end", 0, AT_REST), ("lost", 0, AT_REST),
+                              ("start", 1, AT_REST), ("end", 1, AT_REST)]
+    lost, again = (next(m for m in msgs if isinstance(m, DemoMarker) and m.event == e and m.demo_id == d)
+                   for e, d in (("lost", 0), ("start", 1)))
+    assert 23.0 <= (lost.stamp - 59 / RATE) * 10.0 <= 27.0  # degrees turned when lost (the smoothing lags one)
+    assert again.stamp >= 240 / RATE - 1e-9  # said at rest once the turn has stopped, not while it goes on

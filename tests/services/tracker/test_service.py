@@ -308,6 +308,23 @@ def test_ros2_pose_array_input(zenoh_hub) -> None:
     assert service.rejects.counts == {"/body/keypoints": 1}
 
 
+def test_a_pose_array_of_another_count_is_refused_naming_the_order_expected_and_how_to_set_it() -> None:
+    """The default order is the layout table's, which no driver publishes (a COCO one sends its 17 by index): every
+    sample was refused on its count, the line naming neither the order taken nor how to give the driver's."""
+    cfg = TrackerServiceConfig(input="ros2", tracker=dataclasses.replace(TrackerConfig(), layout="coco17"))
+    service = TrackerService(cfg, ZenohConfig())
+    mapping = Ros2Mapping(Ros2Config())
+    names = service.core.layout.table_names
+    with pytest.raises(ValueError) as info:
+        service._on_pose_array(mapping, names, keypoints_out(mapping, np.zeros((17, 3)), time.time(), "recorder"))
+    text = str(info.value)
+    assert text.startswith(f"PoseArray: 17 poses, the tracker's point order has {len(names)} ([tracker] ros2_points): ")
+    assert f"pose i is --ros2-points[i], now {','.join(names)}; set it to the driver's names in its pose order" in text
+    assert len(text) <= 300  # what the reject counter's line shows of it
+    service._on_pose_array(mapping, names, keypoints_out(mapping, np.zeros((len(names), 3)), time.time(), "recorder"))
+    assert len(service.backlog) == 1  # the count of its order: taken
+
+
 def test_cli_refuses_a_recording_that_is_not_one(tmp_path: Path, capsys) -> None:
     bad = tmp_path / "reach.csv"
     bad.write_text("time,x,y\n0,1,2\n")
@@ -455,6 +472,31 @@ def test_a_recording_in_millimetres_is_refused_before_it_plays(tmp_path: Path, c
     assert info.value.code == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "tracker.from_file" in line and "demo 0: coordinates beyond 20 m" in line and "millimetres?" in line
+
+
+@pytest.mark.parametrize("fault", ["on its side", "no wrist"])
+def test_a_recording_on_its_side_or_without_a_required_point_is_refused_before_it_plays(tmp_path: Path, capsys,
+                                                                                        fault: str) -> None:
+    """Both played, every frame refused (upright; missing), exit 0, where library from-keypoints refused them."""
+    lib = generate_library(2, 1, seed=4)
+    write_keypoint_library(MotionLibrary(lib.class_names, lib.demos[:1], [], "test"), tmp_path / "kp")
+    recording = tmp_path / "kp" / f"{lib.demos[0].class_name}.csv"
+    rows = [r.split(",") for r in recording.read_text().splitlines()]
+    for row in rows[1:]:
+        if fault == "on its side":  # z forward, y down: a camera's frame
+            for i in range(2, len(row), 3):
+                row[i + 1], row[i + 2] = f"{-float(row[i + 2]):.5f}", row[i + 1]
+        else:  # the wrist's column is there, never a value in it
+            at = rows[0].index("r_wrist_x")
+            row[at:at + 3] = ["", "", ""]
+    recording.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    with pytest.raises(SystemExit) as info:
+        tracker_main(["--from", str(recording), "--connect", "tcp/127.0.0.1:9"], prog="foresight tracker")
+    assert info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "tracker.from_file" in line and f"{recording} demo 0: " in line
+    assert ("leans" in line and "is z the keypoints' up?" in line if fault == "on its side" else
+            "no frame with every required point" in line and "never given: r_wrist;" in line)
 
 
 def test_a_backlog_standing_for_too_long_is_thinned_to_catch_up_and_said_once(caplog) -> None:

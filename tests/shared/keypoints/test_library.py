@@ -40,6 +40,35 @@ def test_clean_round_trip_and_noisy_with_gaps(small, tmp_path: Path) -> None:
         assert np.median(err) < 0.03
 
 
+def _glitch(directory: Path, frame: int, column: str, value: float) -> None:
+    """Set ``column`` of frame ``frame`` of every demonstration in ``directory`` to ``value`` (a sensor's glitch)."""
+    for path in directory.glob("*.csv"):
+        rows = [r.split(",") for r in path.read_text().splitlines()]
+        for row in rows[1:]:
+            if row[1] == str(frame):
+                row[rows[0].index(column)] = str(value)
+        path.write_text("\n".join(",".join(r) for r in rows) + "\n")
+
+
+@pytest.mark.parametrize(("column", "value"), [("r_wrist_x", 15.0), ("r_hand_x", 15.0), ("r_hand_x", 1500.0)])
+def test_a_sensors_glitch_is_bridged_and_never_the_next_frames_start(small, tmp_path: Path, column: str,
+                                                                     value: float) -> None:
+    """A review: one frame per demonstration with a point 15-25 m off left 1-3 of 8 demonstrations over 5 cm off in
+    every later frame (kept, 'issues 0'), and one at 1500 m failed a class and refused the library."""
+    model = HumanModel()
+    write_keypoint_library(small, tmp_path / "lib")
+    _glitch(tmp_path / "lib", 30, column, value)
+    lib, report = fit_keypoint_library(tmp_path / "lib")
+    assert len(lib.demos) == len(small.demos) and not lib.issues
+    for got, want in zip(lib.demos, small.demos, strict=True):
+        err = np.linalg.norm(model.joint_positions(got.features) - model.joint_positions(want.features), axis=-1)
+        assert err.max() < 0.02 and np.median(err[31:]) < 1e-3
+    assert report.refused == report.bridged == len(small.demos)  # the glitch's frames, interpolated
+    n = len(small.demos)
+    assert f"{n} frames bridged (dropped, a required point missing, or refused: {n} with a coordinate beyond 20 m or " \
+           "a fit residual over 8 cm rms" in report.line()
+
+
 def test_bad_csvs_are_named(tmp_path: Path) -> None:
     bad = tmp_path / "a.csv"
     bad.write_text("frame,demo,pelvis_x\n")
@@ -212,3 +241,34 @@ def test_a_class_none_of_whose_demonstrations_fits_is_refused_by_name(small, tmp
                                          r"block 0: demo 0: fit residual median"):
         fit_keypoint_library(tmp_path / "lib")
 
+
+
+def test_a_demonstration_none_of_whose_frames_fits_is_left_out_as_an_issue(small, tmp_path: Path) -> None:
+    """Every frame over the limit, though most points fit (one off in every frame): nothing to interpolate."""
+    write_keypoint_library(small, tmp_path / "lib")
+    path = sorted((tmp_path / "lib").glob("*.csv"))[0]
+    rows = [r.split(",") for r in path.read_text().splitlines()]
+    at = rows[0].index("r_hand_z")
+    for row in rows[1:]:
+        if row[0] == "1":
+            row[at] = f"{float(row[at]) + 0.5:.5f}"  # the hand half a metre above the wrist's reach
+    path.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    lib, _ = fit_keypoint_library(tmp_path / "lib")
+    (issue,) = lib.issues
+    assert issue.block == 1 and issue.reason.startswith("demo 1: no frame fits the model within 8 cm rms (best: ")
+
+
+def test_a_demonstration_whose_only_whole_frames_are_glitches_is_left_out_as_an_issue(small, tmp_path: Path) -> None:
+    write_keypoint_library(small, tmp_path / "lib")
+    path = sorted((tmp_path / "lib").glob("*.csv"))[0]
+    rows = [r.split(",") for r in path.read_text().splitlines()]
+    wrist, head = rows[0].index("r_wrist_x"), rows[0].index("head_x")
+    for row in rows[1:]:
+        if row[0] == "1" and row[1] != "5":
+            row[wrist:wrist + 3] = ["", "", ""]  # the wrist seen in frame 5 alone ...
+        elif row[0] == "1":
+            row[head] = "25.0"  # ... and that frame a glitch
+    path.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    lib, _ = fit_keypoint_library(tmp_path / "lib")
+    (issue,) = lib.issues
+    assert issue.reason == "demo 1: a coordinate beyond 20 m in every frame with the required points"
