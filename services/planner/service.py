@@ -15,7 +15,8 @@ subscriptions, so a slow planner never works through stale grids). With ``trigge
 a step starts as soon as the planner is idle and a new prediction has arrived or the robot has left its
 plan, ``period_s`` being the longest gap (:mod:`services.planner.replan`); the plan starts one recent
 planning time (at most ``lookahead_s``) ahead along the previous tau_best, where the robot will be when
-it arrives. With ``trigger = "period"`` it plans every ``period_s``, ``lookahead_s`` ahead. Each Plan
+it arrives. With ``trigger = "period"`` it plans every ``period_s``, as far ahead (the executor adopts a plan as it
+arrives in either mode). A robot off its plan is planned for from where its velocity takes it over that time. Each Plan
 carries the inputs it used: ``stamp`` is the RobotState's stamp, ``occupancy_tick``/``occupancy_index``
 the prediction's. With ``cost.body_clearance`` > 0 it also follows the person's poses: each step keeps clear of the
 body of the newest (:mod:`services.planner.body`), as the executor's separation guard will.
@@ -127,6 +128,22 @@ class PlannerService:
         self.trigger: ReplanTrigger | None = None  # real-time mode: when steps start (and why, counted)
         self.summary = PeriodicSummary(log, "planner: plans")  # each plan at DEBUG, a summary at INFO
         self._body_poses = 0  # real time: the person's poses seen when the cost's body was last set
+
+    def _start_of(self, robot: RobotState, lookahead: float | None) -> tuple[np.ndarray, float | None]:
+        """Real time: the configuration a step plans from, and the lookahead the planner then applies.
+
+        On its plan, the robot is where the planner looks ``lookahead`` ahead along it. Off it (a lagging arm, a plan
+        it could not follow), the step planned from where the robot was at its state's stamp: the plan landed one
+        planning time later behind the robot, which was driven back to it, and the next step was off that plan
+        again (32 of 66 plans from off the path, alternating; a review). Off the path, the start is where the robot
+        will be: its state moved on by its velocity over the lookahead, within the joint limits.
+        """
+        ahead = self.planner.config.lookahead_s if lookahead is None else lookahead
+        dist = self.planner.departure(robot.q)
+        if robot.holding or ahead <= 0 or dist is None or dist <= self.planner.config.off_path_tol:
+            return robot.q, lookahead
+        lower, upper = (np.asarray(b.cpu(), dtype=np.float64) for b in (self.planner.lower, self.planner.upper))
+        return np.clip(robot.q + robot.qd * ahead, lower, upper), 0.0
 
     def _plan(self, q: np.ndarray, occupancy: OccupancyGrid | None, tick: int, stamp: float,
               pub: TypedPublisher[Plan], interrupt: Callable[[], bool] | None = None,
@@ -254,14 +271,15 @@ class PlannerService:
                     wake.wait(trigger.wait_s(now, lead))
                     continue
                 trigger.start(now, ident, reason)
-                lookahead = None  # period mode: the configured lookahead (the demo sets it to the period)
+                lookahead = None  # before any plan: the configured lookahead
                 if robot.holding:  # held, it stays where it is: a plan starting ahead of it was left at once
                     lookahead = 0.0  # ('departure'), every other step
-                elif trigger.mode == "event" and recent:  # the plan is executed about one planning time from now
-                    lookahead = min(self.planner.config.lookahead_s, float(np.median(recent)))
+                elif recent:  # the executor adopts a plan as it arrives, in either trigger mode: about one planning
+                    lookahead = min(self.planner.config.lookahead_s, float(np.median(recent)))  # time from now
+                q_start, lookahead = self._start_of(robot, lookahead)
                 if person is not None:
                     self._note_body(person[0])
-                result = self._plan(robot.q, occ, -1, robot.stamp, pub, interrupt=newer_waiting,
+                result = self._plan(q_start, occ, -1, robot.stamp, pub, interrupt=newer_waiting,
                                     lookahead_s=lookahead)
                 if result is not None:
                     recent.append(result.planning_ms / 1e3)
