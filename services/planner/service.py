@@ -25,6 +25,7 @@ body of the newest (:mod:`services.planner.body`), as the executor's separation 
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections import deque
@@ -128,6 +129,7 @@ class PlannerService:
         self.trigger: ReplanTrigger | None = None  # real-time mode: when steps start (and why, counted)
         self.summary = PeriodicSummary(log, "planner: plans")  # each plan at DEBUG, a summary at INFO
         self._body_poses = 0  # real time: the person's poses seen when the cost's body was last set
+        self._failure_said, self._failures_said = -math.inf, 0  # when a failed step was last logged, and the count
 
     def _start_of(self, robot: RobotState, lookahead: float | None) -> tuple[np.ndarray, float | None]:
         """Real time: the configuration a step plans from, and the lookahead the planner then applies.
@@ -155,7 +157,12 @@ class PlannerService:
         except (PlannerError, ValueError) as exc:  # bad input or no plan: log, keep serving
             self.stats.failures += 1
             self.stats.last_error = str(exc)
-            log.error("planner: step at tick %d failed: %s", tick, exc)
+            now = time.monotonic()  # a failure that persists repeats at the state rate in real time: a line a second
+            if now - self._failure_said >= 1.0:
+                more = self.stats.failures - self._failures_said - 1
+                log.error("planner: step at tick %d failed: %s%s", tick, exc,
+                          f" ({more} more failed steps since the last such line)" if more else "")
+                self._failure_said, self._failures_said = now, self.stats.failures
             return None
         self.stats.plans += 1
         costs = ", ".join(f"{n}={c:.3g}" for n, c in zip(result.goal_names, result.cost_total, strict=True))

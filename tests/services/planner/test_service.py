@@ -162,3 +162,26 @@ def test_a_robot_off_its_plan_is_planned_for_from_where_its_velocity_takes_it(sc
     upper = planner.upper.double().numpy()
     at_limit = dataclasses.replace(off, q=np.minimum(off.q, upper), qd=np.full(len(q0), 50.0))
     assert np.all(service._start_of(at_limit, 0.04)[0] <= upper)  # within the joint limits
+
+
+def test_a_failing_step_is_logged_a_line_a_second_with_the_count(scene, zenoh_hub: Callable[[], ZenohConfig],
+                                                                 caplog: pytest.LogCaptureFixture,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """A failure that persists (a robot state the planner refuses, every path into the table) repeated its error line
+    at the state rate in real time, 50 a second."""
+    from services.planner import service as planner_service
+
+    planner = Planner(scene, PlannerConfig(compile=False, stomp=StompConfig(iterations=3)))
+    service = PlannerService(PlannerServiceConfig(mode="realtime"), zenoh_hub(), planner=planner, scene=scene)
+    now = [100.0]
+    monkeypatch.setattr(planner_service.time, "monotonic", lambda: now[0])
+    bad = np.full(len(planner.robot.joint_names), np.nan)
+    with caplog.at_level(logging.ERROR, logger="foresight.planner"):
+        for i in range(50):
+            now[0] = 100.0 + i * 0.02  # one second of states at 50 Hz
+            assert service._plan(bad, None, -1, 0.0, pub=None) is None
+        now[0] = 101.5
+        service._plan(bad, None, -1, 0.0, pub=None)
+    lines = [r.getMessage() for r in caplog.records if "failed" in r.getMessage()]
+    assert len(lines) == 2 and service.stats.failures == 51, lines
+    assert lines[1].endswith("(49 more failed steps since the last such line)"), lines[1]
