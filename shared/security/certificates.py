@@ -13,6 +13,7 @@ listens as well as the router). Keys are ECDSA P-256; certificates are valid for
 from __future__ import annotations
 
 import datetime as dt
+import errno
 import ipaddress
 import os
 import re
@@ -262,6 +263,9 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
     d = Path(directory)
     d.mkdir(mode=0o700, parents=True, exist_ok=True)  # 0700 whatever the umask (002 made it 775, then refused)
     check_directory(d)
+    if not os.access(d, os.W_OK | os.X_OK):  # one Docker made, root's: the error named a temporary file of ours
+        raise PermissionError(errno.EACCES, f"cannot write into it (owned by uid {d.stat().st_uid}; "
+                              "chown it or remove it)", str(d))
     ca_crt, ca_key = d / "ca.crt", d / "ca.key"
     if not force and ca_crt.is_file() != ca_key.is_file():
         have, lacks = (ca_crt, ca_key) if ca_crt.is_file() else (ca_key, ca_crt)

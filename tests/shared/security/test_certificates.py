@@ -329,3 +329,19 @@ def test_a_key_this_user_cannot_read_names_its_owner_and_this_user(tmp_path: Pat
     with pytest.raises(CertificateError, match=r"router\.key: this process \(uid \d+\) cannot read it \(owner uid "
                                                r"\d+, mode (600|0)\).*containers run as the owner of runs/"):
         verify_role(tmp_path, "router")
+
+
+def test_a_directory_this_user_cannot_write_is_named_before_any_file(tmp_path: Path, monkeypatch) -> None:
+    """A `security/` directory Docker had made, root's: `security init` failed naming a temporary file of its own
+    ('.ca.crt.XXXX.tmp: Permission denied'), not the directory (a review)."""
+    import shared.security.certificates as certificates
+
+    d = tmp_path / "security"
+    d.mkdir(mode=0o700)
+    if os.getuid() == 0:  # root writes everywhere: the check is made to see what another user would
+        monkeypatch.setattr(certificates.os, "access", lambda path, mode: Path(path) != d)
+    else:
+        d.chmod(0o500)
+    with pytest.raises(PermissionError, match=r"cannot write into it \(owned by uid \d+; chown it or remove it\)") as e:
+        init_security_dir(d, ["router"])
+    assert e.value.filename == str(d) and not list(d.iterdir())
