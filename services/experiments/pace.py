@@ -216,6 +216,9 @@ def plot_pace(res: PaceResult, path: Path) -> Path:
             if paces:
                 ax.set_xticks(paces, [f"{p:g}" for p in paces])
                 ax.xaxis.set_minor_formatter(NullFormatter())
+                lo, hi = min(*paces, OPERATING_POINT[prot]), max(*paces, OPERATING_POINT[prot])
+                if hi < 1.5 * lo:  # one pace (--quick) at the operating point: the log axis shrank to nothing
+                    ax.set_xlim(lo / 2, hi * 2)  # and its point was drawn nowhere (a review)
             ax.set_ylabel(ylabel)
             ax.legend(fontsize=7)
         if loggable:

@@ -75,7 +75,7 @@ QUICK = ReportPlan(components=4, recognition_demos=4, table1_demos=1, table1_see
 def add_report_arguments(p: argparse.ArgumentParser) -> None:
     """The options of ``foresight eval all``."""
     p.add_argument("--out", type=Path, default=Path("runs/report"), help="report directory (default: runs/report)")
-    p.add_argument("--quick", action="store_true", help="the small variant (about 2 minutes; see above)")
+    p.add_argument("--quick", action="store_true", help="the small variant (about 4 minutes on 2 cores; see above)")
     p.add_argument("--libraries", default="", help="comma-separated libraries ('synthetic' or paths); default: "
                    "synthetic and the paper's library when it is at ../shared/data/paper-library (--quick: "
                    "synthetic only)")

@@ -75,6 +75,8 @@ def _main_info(args: argparse.Namespace) -> int:
 
 
 def _main_render(args: argparse.Namespace, prog: str) -> int:
+    if args.all and args.step is not None:  # --step was ignored without a word, and every step drawn
+        raise UserError("give --step N or --all, not both")
     if not args.all:
         check_png(str(args.out), "--out")  # matplotlib would write NAME.png where we print NAME
         ready_to_write(args.out)  # before the log is read: a file in the way of its directory, named

@@ -121,3 +121,18 @@ def test_the_pace_picture_keeps_a_colour_per_library_readable_ticks_and_names_wh
     import matplotlib.pyplot as plt
 
     plt.close(figures[0])
+
+
+def test_a_sweep_of_one_pace_at_the_operating_point_is_drawn_where_it_can_be_seen(tmp_path, monkeypatch) -> None:
+    """`eval all --quick` sweeps each protocol at its own pace only: the log axis shrank to (0.2499..., 0.25) and the
+    product column showed no point at all (a review)."""
+    from services.experiments import plots
+    from services.experiments.pace import OPERATING_POINT, plot_pace
+
+    pace = OPERATING_POINT["product"]
+    figures = []
+    monkeypatch.setattr(plots, "save_figure", lambda fig, path: figures.append(fig) or path)
+    plot_pace(result(point(pace, 1.0, 0.0)), tmp_path / "pace.png")
+    for ax in figures[0].axes:
+        lo, hi = ax.get_xlim()
+        assert lo <= pace / 1.9 and hi >= pace * 1.9, (lo, hi)

@@ -50,6 +50,9 @@ def test_render_writes_pngs(run_log, tmp_path, capsys) -> None:
     assert img.shape[0] > 500 and img.shape[1] > 1000
     assert main(["render", str(run_log), "--all", "--out", str(tmp_path / "all")]) == 0
     assert sorted(p.name for p in (tmp_path / "all").iterdir()) == ["step_000.png", "step_001.png"]
+    with pytest.raises(SystemExit):  # --step was ignored without a word beside --all, and every step drawn
+        main(["render", str(run_log), "--step", "1", "--all", "--out", str(tmp_path / "both")])
+    assert "give --step N or --all, not both" in capsys.readouterr().err and not (tmp_path / "both").exists()
 
 
 def test_info_of_a_directory_describes_every_log_under_it(run_log, tmp_path, capsys) -> None:
