@@ -106,7 +106,7 @@ def build_planner(scene: Scene, goals: list[str], human_cost: bool, timing: Timi
     extra = {} if p.goal_dwell_s is None else {"goal_dwell_s": p.goal_dwell_s}
     cfg = PlannerConfig(goals=list(goals), stomp=stomp, velocity_scale=timing.robot_speed, lookahead_s=0.0, cost=cost,
                         compile=compile, device=device, integrate_costs=p.integrate_costs, goal_choice=p.goal_choice,
-                        **extra)
+                        free_paths=p.free_paths, **extra)
     from services.planner.core import Planner
 
     return Planner(scene, cfg, robot=robot)

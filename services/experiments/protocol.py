@@ -72,6 +72,8 @@ class Protocol:
         finish_path: Execute the rest of the best path after the last step.
         rollouts, reuse, waypoints, iterations, noise_std, uniform_noise: STOMP (None: the planner's default).
         integrate_costs, goal_dwell_s, goal_choice: The planner's cost composition and goal choice.
+        free_paths: A goal whose path collides is invalid while another's is free (``PlannerConfig.free_paths``;
+            the authors' goal choice has no such check: off in theirs).
         volume: The held-out models' occupancy volume (None: the trainer's default).
         evidence, temperature: The predictor's posterior (``PredictorConfig``).
         measure: Table I's integral: ``time`` (seconds) or ``path`` (configuration-space length, every 0.005).
@@ -91,6 +93,7 @@ class Protocol:
     integrate_costs: bool = True
     goal_dwell_s: float | None = None
     goal_choice: str = "total"
+    free_paths: bool = True
     volume: str | None = None
     evidence: str = "sum"
     temperature: float = 0.0
@@ -117,8 +120,8 @@ PAPER = Protocol(
                    ("pr2_two_cups_facing", 17 * 0.005)),
     finish_path=True, rollouts=10, reuse=5, waypoints=101, iterations=51,
     noise_std=0.002 * math.sqrt(_R_INV_MAX_99), uniform_noise=True,  # 0.002 x N(0, R^-1): 0.146 at the middle
-    integrate_costs=False, goal_dwell_s=0.0, goal_choice="human", volume="paper", evidence="mean", temperature=1.0,
-    measure="path", authors_trials=True, table1_scene="pr2_two_cups_side_parallel")
+    integrate_costs=False, goal_dwell_s=0.0, goal_choice="human", free_paths=False, volume="paper", evidence="mean",
+    temperature=1.0, measure="path", authors_trials=True, table1_scene="pr2_two_cups_side_parallel")
 
 
 def protocol(name: str) -> Protocol:

@@ -171,6 +171,8 @@ class PlannerConfig:
     goal_choice: str = opt("total", help="the cost term that picks the goal each step: 'total' (the product), or "
                            "'human' (the least human-occupancy cost, the paper authors' choice)",
                            choices=("total", "human"))
+    free_paths: bool = opt(True, help="a goal whose path passes into the scene or the robot is invalid for the step "
+                           "while another goal's is free (services/planner/validity.py; the paper's protocol: off)")
     integrate_costs: bool = opt(True, help="weight obstacle/human costs by each waypoint's time at the velocity "
                                 "limits (else sum them per waypoint)")
     goal_dwell_s: float = opt(1.0, help="with integrate_costs: seconds the robot is charged for the predicted "

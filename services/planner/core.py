@@ -332,12 +332,8 @@ class Planner:
         trajs = torch.where(reached[:, None, None], torch.cat([init[:, :1], init[:, -1:].expand_as(init[:, 1:])], 1),
                             result.trajectories)  # (Kv, T, D)
         terms = self.cost_terms(trajs)
-        try:  # a goal whose cost is not finite (chosen or published, it would derail the next steps) or whose path
-            valid, depth = publishable(self.cost, trajs, terms)  # goes into the scene or the robot: invalid this step
-        except PlannerError:
-            if bool(torch.isfinite(trajs).all()):
-                self._prev = trajs  # the next step's STOMP goes on from them, out of the collision
-            raise
+        # a goal whose cost is not finite (chosen or published, it would derail the next steps), or whose path goes
+        valid, depth = publishable(self.cost if c.free_paths else None, trajs, terms)  # into the scene or the robot
         chosen_v = best(choice_key(terms, c.goal_choice, valid), valid)
         dts = self._dt(trajs)
         self._prev, self._prev_best, self._prev_dt = trajs, chosen_v, float(dts[chosen_v])

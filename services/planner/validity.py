@@ -1,11 +1,17 @@
-"""Whether an optimised path may be published: it must not pass through the static scene or the robot itself.
+"""Which optimised paths may be published: those that do not pass through the static scene or the robot itself.
 
 STOMP's obstacle term is a cost, not a constraint: a step cut short (the anytime minimum of iterations in real
 time) or a goal behind an obstacle can end with waypoints inside the table, and such a path was published as
 valid (a review: 3 of 12 goals under the table after 10 iterations, up to 2.8 cm deep), with
 ``goal_choice = "human"`` even chosen over a free one. :func:`path_penetration` checks each path densely
 (every waypoint and ``substeps - 1`` configurations between two) against the scene's signed distance field and the
-arm/body self-collision spheres, as the goals' IK solutions are checked (:meth:`StateCost.collision_free`).
+arm/body self-collision spheres, as the goals' IK solutions are checked (:meth:`StateCost.collision_free`); a goal
+whose path collides is invalid for the step while another goal's path is free.
+
+When no path is free, they are published as optimised, with a warning, as before: the paper's side scene's first
+step leaves every path 2.8-4.5 cm in the table (its straight lines cross it by 1.6 and 6.9 cm), and refusing it left the
+executor without a first plan, the experiments without a run. The executor follows a plan only until the next
+one, whose optimisation goes on from it; a plan that stays inside the scene is then what the warning says.
 
 The robot's start is where it is: a path is refused only where it goes deeper than its own start (a real robot's
 reading a millimetre inside a modelled table would otherwise refuse every plan and leave the robot where it is).
@@ -13,12 +19,16 @@ reading a millimetre inside a modelled table would otherwise refuse every plan a
 
 from __future__ import annotations
 
+import logging
 import math
+import time
 
 import torch
 
 from .costs import StateCost
 from .inputs import PlannerError
+
+log = logging.getLogger("foresight.planner")
 
 __all__ = ["path_penetration", "publishable", "invalid_reason", "SUBSTEPS", "TOLERANCE_M"]
 
@@ -71,10 +81,11 @@ def publishable(cost: object, paths: torch.Tensor, terms: dict[str, torch.Tensor
         terms: ``smoothness``, ``obstacle``, ``human``, ``total``: ``(K,)`` their costs.
 
     Returns:
-        ``(K,)`` bool, and each path's penetration (m, :func:`path_penetration`; NaN for a non-finite path).
+        ``(K,)`` bool, and each path's penetration (m, :func:`path_penetration`; NaN for a non-finite path). When
+        no finite path is free, every finite one (penetration reported 0: none is set apart), with a warning.
 
     Raises:
-        PlannerError: No goal may be published; the last plan stands.
+        PlannerError: No goal has a finite cost; the last plan stands.
     """
     finite = torch.stack([torch.isfinite(terms[n]) for n in ("smoothness", "obstacle", "human", "total")]).all(0)
     if not bool(finite.any()):
@@ -82,11 +93,19 @@ def publishable(cost: object, paths: torch.Tensor, terms: dict[str, torch.Tensor
                            "stands")
     depth = path_penetration(cost, paths).tolist()
     free = finite & torch.tensor([p == 0 for p in depth], device=finite.device)
-    if not bool(free.any()):
+    if not bool(free.any()):  # none free: published as STOMP left them, said (see the module's docstring)
         least = min((p for p, f in zip(depth, finite.tolist(), strict=True) if f), default=math.nan)
-        raise PlannerError(f"every path passes into the scene or the robot this step (the least by {least * 100:.1f} "
-                           "cm); the last plan stands")
+        now = time.monotonic()
+        if now - _said[0] >= 1.0:
+            log.warning("planner: every path passes into the scene or the robot this step (the least by %.1f cm); "
+                        "published as optimised, the next steps go on from them", least * 100)
+            _said[0] = now
+        return finite, [0.0 if f else p for p, f in zip(depth, finite.tolist(), strict=True)]
     return free, depth
+
+
+_said = [-math.inf]
+"""When the last warning of a step whose every path collides was logged (a line a second at most)."""
 
 
 def invalid_reason(depth: float) -> str:

@@ -12,7 +12,7 @@ import pytest
 from services.processes import free_port
 from shared.config import ZenohConfig
 from shared.connectivity import FIRST_REPORT_S, MAX_REPORT_S, ConnectionWatch
-from shared.transport import TransportError, open_session, open_with_retry
+from shared.transport import StoppedWhileConnecting, TransportError, open_session, open_with_retry
 
 
 class FakeClock:
@@ -119,7 +119,7 @@ def test_client_retries_end_when_the_service_is_stopped():
     timer = threading.Timer(0.5, stop.set)
     timer.start()
     try:
-        with pytest.raises(TransportError, match=r"\(stopped\)$"):
+        with pytest.raises(StoppedWhileConnecting, match=rf"^stopped while waiting for the router {endpoint}$"):
             open_with_retry(client, stop=stop)
     finally:
         timer.cancel()

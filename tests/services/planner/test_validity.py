@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import logging
+import re
+
 import numpy as np
 import pytest
 import torch
@@ -57,14 +60,19 @@ def test_a_start_inside_the_scene_refuses_only_a_deeper_path(robot, cost) -> Non
     assert float(path_penetration(cost, dense[None])[0]) > 0  # from outside, into it
 
 
-def test_only_free_paths_are_published_and_none_free_raises(robot, cost) -> None:
+def test_only_free_paths_are_published_and_with_none_free_every_finite_one_is(robot, cost, caplog) -> None:
     paths = torch.stack([_line(robot, UNDER_TABLE), _line(robot, robot.q_start.tolist())])  # into the table; still
     terms = {n: torch.ones(2, dtype=paths.dtype) for n in ("smoothness", "obstacle", "human", "total")}
     free, depth = publishable(cost, paths, terms)
     assert free.tolist() == [False, True] and depth[0] > 0.01 and depth[1] == 0.0
-    terms["total"] = torch.tensor([1.0, float("nan")], dtype=paths.dtype)
-    with pytest.raises(PlannerError, match=r"every path passes into the scene or the robot this step \(the least by "
-                                           r"\d+\.\d cm\); the last plan stands"):
+    terms["total"] = torch.tensor([1.0, float("nan")], dtype=paths.dtype)  # the free one's cost not finite
+    with caplog.at_level(logging.WARNING, logger="foresight.planner"):
+        free, depth = publishable(cost, paths, terms)
+    assert free.tolist() == [True, False] and depth[0] == 0.0  # none free: the finite ones, as optimised, and said
+    assert any(re.search(r"every path passes into the scene or the robot this step \(the least by \d+\.\d cm\); "
+                         "published as optimised", r.getMessage()) for r in caplog.records)
+    terms["total"] = torch.full((2,), float("nan"), dtype=paths.dtype)
+    with pytest.raises(PlannerError, match="no goal has a finite cost this step"):
         publishable(cost, paths, terms)
 
 
@@ -83,5 +91,17 @@ def test_the_planner_never_publishes_a_path_into_the_table(scene, robot, cost) -
     assert result.reasons[0].startswith("its path passes ") and "cm into the scene or the robot" in result.reasons[0]
     alone = Planner(scene, cfg, robot=robot, cost=cost, goals=GoalSet.joint_space(names[:1], np.array([UNDER_TABLE]),
                                                                                    robot))
-    with pytest.raises(PlannerError, match="every path passes into the scene"):
-        alone.step(robot.q_start.numpy(), np.zeros(scene.grid.dims, np.float32))
+    only = alone.step(robot.q_start.numpy(), np.zeros(scene.grid.dims, np.float32))  # the one goal: published, said
+    assert only.valid.tolist() == [True] and only.chosen == 0
+
+
+def test_the_paper_protocol_keeps_the_authors_goal_choice_without_the_check(scene, robot, cost) -> None:
+    """The authors' goal choice sets no colliding path aside: their protocol turns the product's check off."""
+    from services.experiments.protocol import PAPER, PRODUCT
+
+    assert PAPER.free_paths is False and PRODUCT.free_paths is True
+    cfg = PlannerConfig(compile=False, stomp=StompConfig(iterations=10), free_paths=False)
+    goals = GoalSet.joint_space(["under_table", "beside"], np.array([UNDER_TABLE, BESIDE]), robot)
+    result = Planner(scene, cfg, robot=robot, cost=cost, goals=goals).step(robot.q_start.numpy(),
+                                                                           np.zeros(scene.grid.dims, np.float32))
+    assert result.valid.tolist() == [True, True]
