@@ -8,10 +8,11 @@ valid (a review: 3 of 12 goals under the table after 10 iterations, up to 2.8 cm
 arm/body self-collision spheres, as the goals' IK solutions are checked (:meth:`StateCost.collision_free`); a goal
 whose path collides is invalid for the step while another goal's path is free.
 
-When no path is free, they are published as optimised, with a warning, as before: the paper's side scene's first
-step leaves every path 2.8-4.5 cm in the table (its straight lines cross it by 1.6 and 6.9 cm), and refusing it left the
-executor without a first plan, the experiments without a run. The executor follows a plan only until the next
-one, whose optimisation goes on from it; a plan that stays inside the scene is then what the warning says.
+When no path is free, they are published as optimised (as they were before this check), with a warning: the
+paper's side scene's first step leaves every path 2.8-4.5 cm in the table (its straight lines cross it by 1.6 and
+6.9 cm), and refusing them left the executor without a first plan, the experiments without a run. The executor
+follows a plan only until the next one, whose optimisation goes on from it; a plan that stays inside the scene is
+then what the warning says.
 
 The robot's start is where it is: a path is refused only where it goes deeper than its own start (a real robot's
 reading a millimetre inside a modelled table would otherwise refuse every plan and leave the robot where it is).
