@@ -59,12 +59,14 @@ __all__ = ["RunRecord", "run_once", "prepare_inputs"]
 log = logging.getLogger("foresight.demo")
 
 
-def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> str:
+def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0, summarised: int | None = None) -> str:
     """One phrase on the run's MCAP: complete (the executor finished it) or not, with its message count.
 
     With ``plan_topic``: its plans too, and how many of the ``received`` ones (the rows printed) came after the
     executor closed it, or how many it logged after the last row (the rows stop at Ctrl-C; the executor logs until
-    it has stopped).
+    it has stopped). ``summarised``: the plans the summary counts (real time: those made before the robot's last
+    state; the others were never executed, and `foresight log table` leaves them out as the summary does: it said
+    it printed every one, and printed 23 of 29; a review).
     """
     if not mcap.is_file():
         return "no log was written (the executor ended before it opened one, or had not started)"
@@ -76,9 +78,12 @@ def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0) -> 
         logged = sum(c.count for c in lf.channels.values() if c.topic == plan_topic)
         late = received - logged
         closed = "came after the executor closed it" if lf.complete else "are not in it: it ends before them"
+        counted = (f"; the summary and `foresight log table {mcap}` count the {summarised} made before the robot's "
+                   "last state, the others were never executed" if summarised is not None and summarised < logged
+                   else f": `foresight log table {mcap}` prints every one")
         text += f", {logged} plans" + (f" (the last {late} {closed})" if late > 0 else
-                                       f" ({-late} after the rows above, made while the executor stopped: `foresight "
-                                       f"log table {mcap}` prints every one)" if late < 0 else "")
+                                       f" ({-late} after the rows above, made while the executor stopped{counted})"
+                                       if late < 0 else "")
     return text
 
 
@@ -152,8 +157,8 @@ def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable
     scenario = choose_demonstration(lib, cfg.steps, cfg.seed, cfg.human_class)
     demo = scenario.demo
     out(f"foresight demo: library {lib.source}: {lib.n_classes} classes, {len(lib.demos)} demonstrations; "
-        f"the human performs {demo.class_name} #{demo.index} ({demo.n_samples} samples, "
-        f"{scenario.samples_per_tick} per step)")
+        f"the human performs {demo.class_name} #{demo.index} ({demo.n_samples} samples, "  # real time: its rate
+        + (f"{scenario.samples_per_tick} per step)" if cfg.mode == "lockstep" else f"played at {cfg.rate_hz:g} Hz)"))
     model = model_for(lib, scene, demo, cfg.models_dir, None if cfg.components < 0 else cfg.components,
                       on_train=lambda path: out(f"foresight demo: training the prediction model without the human's "
                                                 f"demonstration, once: about a minute on 2 cores (its progress below); "
@@ -362,7 +367,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     if status:  # interrupted, a dead service, the executor's own failure, a timeout: what the log holds
         done = f"{n} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{n} plans"
         out(f"foresight demo: {'interrupted' if status == 130 else 'stopped'} after {done}; "
-            f"{_log_state(mcap, keys.plan, received)}")
+            f"{_log_state(mcap, keys.plan, received, n)}")
     elif stop.is_set():  # a signal while the services stopped, after the run's end: it ended whole
         out("foresight demo: interrupted while stopping the services, after the run had ended: nothing was lost")
     if summary is None:
