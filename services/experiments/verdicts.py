@@ -47,6 +47,18 @@ def table1_verdict(res: InterferenceResult) -> str:
             f"measured: {cause}")
 
 
+def _runs(steps: list[int | None], median: float) -> str:
+    """The runs behind a median that no run had: `` (runs: never goes there, 5)``; else ``""``.
+
+    "leaves at step 2.5" was the median of a run that never went there and one that left at 5 (a review of
+    `eval all --quick`).
+    """
+    if any(s == median for s in steps) or len(steps) > 6:
+        return ""
+    words = ["never leaves" if s is None else "never goes there" if s == 0 else f"{s:g}" for s in steps]
+    return f" (runs: {', '.join(words)})"
+
+
 def switch_verdict(res: SwitchResult) -> str:
     """One line: whether the prediction planner leaves the human's cup >= 5 steps before the current one (4 vs 13)."""
     ap, ac = res.median_away("prediction"), res.median_away("current")
@@ -69,7 +81,7 @@ def switch_verdict(res: SwitchResult) -> str:
     else:
         # a median at the run's length is no step: it never left ("leaves at step 20" was said of 16 of 25 such runs)
         said = {m: ("never goes there" if a <= 0 else "never leaves it (ends going for it)" if a >= steps else
-                    f"leaves at step {a:g}") for m, a in (("prediction", ap), ("current", ac))}
+                    f"leaves at step {a:g}" + _runs(away[m], a)) for m, a in (("prediction", ap), ("current", ac))}
         why = f"prediction {said['prediction']}, current {said['current']} (medians)"
     return f"**not reproduced**: {why} ({ac - ap:+g} steps; paper: 4 against 13)"
 

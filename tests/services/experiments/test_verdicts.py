@@ -52,6 +52,9 @@ def test_switch_verdicts_say_median_and_count_the_runs():
     v = switch_verdict(switch({"prediction": [None, None, 3], "current": [None, None, 2]}))
     assert "in the median run neither planner leaves the human's cup (4 of 6 runs end going for it)" in v
     assert switch_verdict(switch({"prediction": [1, 2, 3], "current": [9, 9, 9]})).startswith("**reproduced**")
+    # a median no run had: "leaves at step 2.5" of a run that never went there and one that left at 5 (eval all --quick)
+    v = switch_verdict(switch({"prediction": [0, 5], "current": [0, 0]}))
+    assert "prediction leaves at step 2.5 (runs: never goes there, 5), current never goes there" in v, v
 
 
 def test_ratio_text():
