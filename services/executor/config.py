@@ -48,12 +48,12 @@ SEPARATION_REASON = ("the person is {clearance:.2f} m from the robot (separation
 
 
 def lockstep_stale_limit(period_s: float, limit_s: float = 0.0) -> float:
-    """The stale limit a lock-step run of ``period_s`` needs: ``limit_s``, at least 1.5 periods when above 0.5 s.
+    """The stale limit a lock-step run of ``period_s`` needs: ``limit_s``, or 1.5 periods when the period exceeds it.
 
     A plan of tick n-1 is a period old when step n adopts it: a limit below the period held every step. 1.5 periods
     makes a plan stale once one is missing, as the default 0.5 s does at the default 0.5 s period.
     """
-    return max(limit_s, 1.5 * period_s) if period_s > limit_s else limit_s
+    return 1.5 * period_s if period_s > limit_s else limit_s
 
 
 def is_separation_hold(reason: str) -> bool:
