@@ -27,7 +27,15 @@ from mcap.stream_reader import StreamReader
 from shared.runtime import UserError
 
 __all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "iter_messages", "open_records", "log_path", "DAMAGED",
-           "MAGIC", "summary_damage", "being_written"]
+           "MAGIC", "summary_damage", "being_written", "SOURCE_METADATA", "STILL_WRITTEN"]
+
+SOURCE_METADATA = "foresight.compress"
+"""Metadata record of a copy made from a truncated or damaged log (``foresight log compress``): ``source``,
+``source_complete`` = "false" and ``source_error`` (``foresight log info`` shows it: the copy is whole, what it was
+copied from was not)."""
+
+STILL_WRITTEN = "still being written when copied: up to its last whole chunk then"
+"""``source_error`` of a copy of a log a run was still writing."""
 
 MAGIC = b"\x89MCAP0\r\n"
 """The first (and last) eight bytes of an MCAP file."""

@@ -23,18 +23,21 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
 from shared.atomic_file import atomic_write
-from shared.recording.reader import DAMAGED, being_written, iter_messages, log_path, open_records, read_log
+from shared.recording.reader import (
+    DAMAGED,
+    SOURCE_METADATA,
+    STILL_WRITTEN,
+    being_written,
+    iter_messages,
+    log_path,
+    open_records,
+    read_log,
+)
 from shared.recording.writer import COMPRESSION
 from shared.runtime import UserError
 
 __all__ = ["CompressResult", "compress_log", "same_messages", "SOURCE_METADATA"]
 
-SOURCE_METADATA = "foresight.compress"
-"""Metadata record of a copy made from a truncated or damaged log: ``source``, ``source_complete`` = "false" and
-``source_error`` (``foresight log info`` shows it: the copy is whole, what it was copied from was not)."""
-
-STILL_WRITTEN = "still being written when copied: up to its last whole chunk then"
-"""``source_error`` of a copy of a log a run was still writing."""
 
 
 @dataclass

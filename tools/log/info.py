@@ -11,7 +11,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
-from shared.recording.reader import LogFile
+from shared.recording.reader import SOURCE_METADATA, STILL_WRITTEN, LogFile
 from shared.recording.schemas import REJECTED_TOPIC
 
 __all__ = ["info_dict", "format_info"]
@@ -73,8 +73,8 @@ def info_dict(lf: LogFile) -> dict[str, Any]:
 
 def _state_words(lf: LogFile, d: dict) -> str:
     """The file line's account of the log's state (``d``: :func:`info_dict`)."""
-    source = lf.metadata.get("foresight.compress", {})  # a whole copy of a log that was not
-    if lf.complete and source.get("source_error", "").startswith("still being written"):  # compress.STILL_WRITTEN
+    source = lf.metadata.get(SOURCE_METADATA, {})  # a whole copy of a log that was not
+    if lf.complete and source.get("source_error") == STILL_WRITTEN:
         return ("complete; copied from a log still being written, up to its last whole chunk then: what the run wrote "
                 "after that is not here")
     if lf.complete and source.get("source_complete") == "false":
