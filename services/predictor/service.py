@@ -100,8 +100,7 @@ class PredictorService:
                 try:
                     out.extend(self._process(msg, grid, now))
                 except Exception as exc:  # a fault of this service: the outputs of the messages before it stand
-                    log.exception("predictor: processing a %s failed", getattr(msg, "TYPE", type(msg).__name__))
-                    self.rejects.reject(self.keys.pose, f"{type(exc).__name__}: {exc}", reason="handler")
+                    self.rejects.unexpected(self.keys.pose, exc, f"processing a {getattr(msg, 'TYPE', 'message')}")
         return out
 
     def flush(self, now: float) -> list[OccupancyGrid]:
