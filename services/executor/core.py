@@ -1,21 +1,19 @@
 """The executor's pure simulation: a PR2 arm that follows the chosen trajectory of the latest plan.
 
-No Zenoh here (see :mod:`services.executor.service` for the loop around it). The simulation is a
-kinematic one: each step of ``h`` seconds the arm moves towards the plan's reference at the next
-instant, with its joint velocities scaled down uniformly (so the direction in joint space is kept)
-until every joint is within its velocity limit, and every commanded configuration clamped to the
-joint limits.
+No Zenoh here (see :mod:`services.executor.service` for the loop around it). The simulation is a kinematic one: each
+step of ``h`` seconds the arm moves towards the plan's reference at the next instant, with its joint velocities
+scaled down uniformly (so the direction in joint space is kept) until every joint is within its velocity limit, and
+every commanded configuration clamped to the joint limits.
 
-Timing follows the paper's Fig. 4: the robot executes the plan of replanning step n-1 during step n.
-The core keeps its own clock ``t`` (seconds of simulated time); the service decides when a plan is
-adopted (:meth:`ExecutorCore.adopt`) and at which time a message counts as received
-(:meth:`ExecutorCore.note_occupancy`). Safety: :meth:`ExecutorCore.stale_reason` says why the robot
-must hold (zero velocity) -- no plan yet, the latest plan or occupancy older than ``stale_limit_s``,
-or a service it depends on gone (:meth:`ExecutorCore.note_peer`) -- and the reference's own clock
-stops while the robot holds, so execution resumes where it stopped when fresh data arrives. A ``guard`` (real time:
-the separation guard, :mod:`services.executor.separation`) may refuse a step by saying why: the robot holds as well.
-:func:`reason_kind` tells a change of hold reason from the same reason with another age (what the
-service logs once).
+Timing follows the paper's Fig. 4: the robot executes the plan of replanning step n-1 during step n. The core keeps
+its own clock ``t`` (seconds of simulated time); the service decides when a plan is adopted
+(:meth:`ExecutorCore.adopt`) and at which time a message counts as received (:meth:`ExecutorCore.note_occupancy`).
+Safety: :meth:`ExecutorCore.stale_reason` says why the robot must hold (zero velocity) -- no plan yet, the latest
+plan or occupancy older than ``stale_limit_s``, or a service it depends on gone (:meth:`ExecutorCore.note_peer`) --
+and the reference's own clock stops while the robot holds, so execution resumes where it stopped when fresh data
+arrives. A ``guard`` (real time: the separation guard, :mod:`services.executor.separation`) may refuse a step by
+saying why: the robot holds as well. :func:`reason_kind` tells a change of hold reason from the same reason with
+another age (what the service logs once).
 """
 
 from __future__ import annotations
@@ -34,7 +32,6 @@ from .config import ExecutorConfig, ExecutorError
 from .reference import Reference
 
 __all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "reason_kind"]
-"""The service that streams the human's poses (its liveliness token holds the robot only mid-demonstration)."""
 
 
 def reason_kind(reason: str) -> str:
@@ -186,8 +183,7 @@ class ExecutorCore:
         self.seen: frozenset[str] = frozenset()  # services whose token was seen (replaced the same way)
         self.guard = guard  # (q, q_next) -> why not to step there (the separation guard, real time), or None
 
-    # ------------------------------------------------------------------------------------------
-    # inputs
+    # -- inputs ------------------------------------------------------------------------------
 
     def check_plan(self, plan: Plan) -> None:
         """Raise ExecutorError if ``plan`` does not fit this arm (joint names/order; a chosen path of 2+ waypoints)."""
@@ -202,6 +198,9 @@ class ExecutorCore:
     def adopt(self, plan: Plan, stamp: float | None = None) -> None:
         """Start executing ``plan``'s chosen trajectory now (at ``self.t``).
 
+        In real time the arm joins it where it is nearest (:meth:`Reference.nearest`): a late plan starts behind the
+        robot, which its first waypoint drove back (at the velocity limits) before it went on.
+
         Args:
             plan: A decoded (hence validated) plan.
             stamp: Time (core clock) the plan counts as received for the staleness check; default now.
@@ -214,6 +213,9 @@ class ExecutorCore:
         self.plan = plan
         self.reference = Reference(waypoints, plan.dt, self._path_weights)
         self.tau = 0.0
+        if self.config.mode == "realtime":  # lock-step: waypoint 0 is the arm's configuration, by the protocol
+            within, _ = self._pace(self.config.stale_limit_s, self.reference)
+            self.tau = self.reference.nearest(self.q, within, by_length=self.config.path_per_step > 0)
         self.goal = int(plan.chosen)
         self.fresh.plan = self.t if stamp is None else float(stamp)
         self.plans_adopted += 1
@@ -284,8 +286,7 @@ class ExecutorCore:
         self.gone = self.gone - {service} if alive else self.gone | {service}
         return False
 
-    # ------------------------------------------------------------------------------------------
-    # simulation
+    # -- simulation --------------------------------------------------------------------------
 
     def stale_reason(self, t: float | None = None) -> str:
         """Why the robot must hold at time ``t`` (default now), or ``""`` when it may move."""
@@ -299,8 +300,9 @@ class ExecutorCore:
         age = t - self.fresh.plan
         if age > limit + 1e-9:
             return f"plan is {age:.2f} s old (limit {limit:.2f} s)"
-        if self.config.require_occupancy and self.fresh.lost is not None:
-            return f"{self.fresh.lost}: holding until the person is seen again (at rest or reaching)"
+        lost = self.fresh.lost  # read once: a start marker (the transport's thread) may clear it between two reads
+        if self.config.require_occupancy and lost is not None:
+            return f"{lost}: holding until the person is seen again (at rest or reaching)"
         if self.config.require_occupancy and not (self.human_ended and self.fresh.occupancy is not None):
             if self.fresh.occupancy is None:  # a live tracker publishes poses once the person is seen
                 return "no occupancy prediction received yet" + (

@@ -1,8 +1,9 @@
 """The executor's real-time loop: the arm follows the newest plan from the moment it arrives, on the wall clock.
 
 After the wait for the ``wait_for`` services the run's clock starts; every ``1 / state_rate_hz`` s of wall time
-the core adopts the newest plan (it counts as received now), notes the newest prediction's arrival, advances
-by the wall time elapsed and publishes a RobotState. No clock ticks go out.
+the core adopts the newest plan (it counts as received now, and the arm joins it where it is nearest:
+:meth:`ExecutorCore.adopt`), notes the newest prediction's arrival, advances by the wall time elapsed and publishes
+a RobotState. No clock ticks go out.
 
 The run lasts ``steps x step_period_s`` seconds. With ``finish_s`` it may go on after that, adopting plans as
 before, until the robot reaches its goal, at most ``finish_s`` more seconds: the real-time counterpart of
@@ -73,7 +74,7 @@ def run_realtime(svc: ExecutorService, state_pub: TypedPublisher[Any], presence:
         received = svc.inbox.latest()
         plan = adoption.realtime(received)
         if plan is not None:
-            core.adopt(plan)  # starts now; counts as received now
+            core.adopt(plan)  # starts now, where it is nearest the arm; counts as received now
         if received.occupancy_time is not None:
             core.note_occupancy(received.occupancy_time - t0)
         advance(core, max(elapsed - core.t, 1e-6), 2 * h_nom)

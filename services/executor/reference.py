@@ -25,8 +25,9 @@ class Reference:
     def __init__(self, waypoints: np.ndarray, dt: float, weights: np.ndarray | None = None) -> None:
         self.waypoints = waypoints
         self.dt = float(dt)
+        self.weights = None if weights is None else np.asarray(weights, dtype=np.float64)
         self.duration = self.dt * (len(waypoints) - 1)
-        steps = np.diff(waypoints, axis=0) * (1.0 if weights is None else np.asarray(weights, dtype=np.float64))
+        steps = np.diff(waypoints, axis=0) * (1.0 if self.weights is None else self.weights)
         seg = np.linalg.norm(steps, axis=-1) if len(waypoints) > 1 else np.zeros(0)
         self.cumulative = np.concatenate([[0.0], np.cumsum(seg)])
         self.length = float(self.cumulative[-1])
@@ -58,3 +59,29 @@ class Reference:
         i = min(int(math.floor(x)), len(self.waypoints) - 2)  # tau just below duration may round to the last index
         a = x - i
         return (1.0 - a) * self.waypoints[i] + a * self.waypoints[i + 1]
+
+    def nearest(self, q: np.ndarray, within: float, by_length: bool = False) -> float:
+        """Where the point of the path nearest ``q`` ``(D,)`` lies: seconds from its start, or length (``by_length``).
+
+        A plan may reach a real-time executor later than the planner expected (waypoint 0 is where the robot was to be
+        a planning time on, or where it was at its state's stamp): the robot is already past its start, and the arm
+        joins the path there instead of being driven back to it. Only the segments that begin within ``within`` of
+        the start are searched (a path that comes back near itself later is not joined there), in the length's
+        weighted metric, and of the points as near as the nearest (to 1e-6) the first is taken: a plan that waits at
+        its start is not skipped.
+        """
+        w = self.waypoints
+        if len(w) < 2:
+            return 0.0
+        starts = self.cumulative[:-1] if by_length else self.dt * np.arange(len(w) - 1)
+        n = max(1, int(np.count_nonzero(starts < within)))
+        k = 1.0 if self.weights is None else self.weights
+        d = np.diff(w[:n + 1], axis=0) * k
+        r = (np.asarray(q, dtype=np.float64) - w[:n]) * k
+        dd = np.sum(d * d, axis=-1)
+        a = np.clip(np.sum(r * d, axis=-1) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)  # 0 on a segment of no length
+        dist = np.linalg.norm(r - a[:, None] * d, axis=-1)
+        i = int(np.argmax(dist <= dist.min() + 1e-6))
+        if by_length:
+            return float(self.cumulative[i] + a[i] * (self.cumulative[i + 1] - self.cumulative[i]))
+        return float((i + a[i]) * self.dt)

@@ -3,6 +3,7 @@ stale data and resumes, never leaves the joint limits."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -422,3 +423,25 @@ def test_a_lock_step_stale_limit_below_the_period_is_refused_and_the_demo_passes
     flags = opts["executor"]
     assert flags[flags.index("--stale-limit-s") + 1] == "0.9"
     assert "--stale-limit-s" not in service_options(DemoConfig(), Path("m.npz"), Path("l.npz"), 1, None)["executor"]
+
+
+def test_a_start_marker_between_the_loops_reads_of_a_lost_person_never_garbles_the_reason():
+    """The transport's thread writes the person's loss while the loop reads it: a start marker that came between the
+    check and the text read made the reason 'None: holding until the person is seen again' (published, logged)."""
+    limits = ArmLimits(("a",), np.array([-1.0]), np.array([1.0]), np.array([1.0]))
+    core = ExecutorCore(limits, np.zeros(1), ExecutorConfig(stale_limit_s=0.5))
+    core.adopt(_one_joint_plan())
+    core.note_occupancy()
+    core.note_demonstration("lost", demo_id=4, n_samples=40)
+
+    class StartOnRead(type(core.fresh)):  # the marker's callback runs right after the loop's first read of `lost`
+        def __getattribute__(self, name: str) -> object:
+            value = super().__getattribute__(name)
+            if name == "lost" and value is not None:
+                core.note_demonstration("start", demo_id=5)
+            return value
+
+    core.fresh = StartOnRead(**dataclasses.asdict(core.fresh))
+    reason = core.stale_reason()
+    assert reason.startswith("the tracker lost the person (demonstration 4"), reason  # the state it was read in
+    assert core.stale_reason() == ""  # the next state: seen again, the prediction fresh

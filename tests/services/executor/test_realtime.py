@@ -60,3 +60,34 @@ def test_the_guard_is_not_asked_while_the_arm_is_at_rest() -> None:
     assert 50 <= moving <= 55 and core.reached and np.allclose(core.q, ref.at(2.0))
     advance(core, 1.0, 0.04)  # at the goal: nothing to ask
     assert len(calls) == moving
+
+
+def _late_plan(mode: str, path_per_step: float = 0.0) -> tuple[ExecutorCore, float, list[float]]:
+    """An arm 0.5 s along a straight plan gets the same line to the goal from where it was 0.2 s before.
+
+    Returns the core, where j0 was when the late plan came, and j0's velocity at each of the next 8 states.
+    """
+    cfg = ExecutorConfig(mode=mode, stale_limit_s=10.0, require_occupancy=False, path_per_step=path_per_step)
+    core = ExecutorCore(LIMITS, np.zeros(3), cfg)
+    goal = np.array([0.8, 0.4, 0.0])
+    core.adopt(make_plan(np.zeros(3), [goal], t=21, dt=0.1))  # 2 s: j0 at 0.4 rad/s, within its 0.5
+    advance(core, 0.5, 0.02)
+    here = core.q.copy()
+    core.adopt(make_plan(here - 0.2 * core.qd, [goal], t=21, dt=0.1))  # waypoint 0: 0.08 rad behind on j0
+    velocities = []
+    for _ in range(8):
+        advance(core, 0.02, 0.04)
+        velocities.append(float(core.qd[0]))
+    return core, float(here[0]), velocities
+
+
+def test_a_plan_that_starts_behind_the_arm_is_joined_where_the_arm_is_not_driven_back_to() -> None:
+    """Real time: a plan late on its planner's lookahead begins where the robot was; from its first waypoint the arm
+    was driven back at its velocity limit (-0.5 rad/s on j0 for 0.16 s, 0.08 rad) before it went on."""
+    for path_per_step in (0.0, 0.05):
+        core, was, velocities = _late_plan("realtime", path_per_step)
+        assert min(velocities) > 0.0, velocities  # on along the path from where the arm is
+        assert core.q[0] > was
+    lockstep = ExecutorCore(LIMITS, np.full(3, 0.1), ExecutorConfig())
+    lockstep.adopt(make_plan(np.zeros(3), [np.full(3, 0.3)], t=21, dt=0.1))
+    assert lockstep.tau == 0.0  # lock-step: waypoint 0 is the arm's configuration by the protocol, runs unchanged
