@@ -48,7 +48,8 @@ from .protocol import (
 from .reuse import first_differing_state, same_human, same_robot, with_human
 from .scoring import RunScore, score_run
 
-__all__ = ["TABLE1_SCENE", "InterferenceConfig", "InterferenceResult", "draw_demos", "ratio_text", "run_interference"]
+__all__ = ["TABLE1_SCENE", "InterferenceConfig", "InterferenceResult", "current_as_basic", "draw_demos", "ratio_text",
+           "run_interference"]
 
 
 PAPER_TABLE1 = {"basic": [24.41, 21.47, 27.52, 24.44, 25.13], "least_penetration": [0.41, 0.49, 0.60, 0.41, 0.74]}
@@ -109,6 +110,8 @@ class InterferenceResult:
     human: CupClass
     demos: list[int]
     runs: list[RunScore] = field(default_factory=list)
+    current_as_basic: list[float] = field(default_factory=list)  # per run where current occupancy executed basic
+    # STOMP's path (:func:`current_as_basic`): the largest human cost its planner gave a chosen path in that run
 
     @property
     def borrowed(self) -> int:
@@ -161,6 +164,7 @@ class InterferenceResult:
             out[part] = {name: self.per_demo(name, part)[0] for name in self.names}
         out["ratio_basic_over_least_penetration"] = self.ratio()
         out["runs_with_more_contact_than_basic"] = self.contact_violations()
+        out["current_runs_as_basic"] = len(self.current_as_basic)
         out["authors_comparison"] = self.authors_comparison()
         out["reached"] = {n: int(sum(r.reached_step is not None for r in self.runs if r.planner == n))
                           for n in self.names}
@@ -215,6 +219,13 @@ class InterferenceResult:
         reached = self.to_json()["reached"]
         out.append("runs that reached the goal by their end: " + ", ".join(f"{VARIANTS[n].label} {reached[n]}"
                                                                             for n in names))
+        if self.current_as_basic:  # Table I's two equal columns, said why (docs/experiments.md)
+            top = max(self.current_as_basic)
+            cost = ("0 at every step: the human's present posture never lay on the path it chose" if top == 0
+                    else f"at most {top:.4f}")
+            n = len(self.current_as_basic)
+            out.append(f"current occupancy executed basic STOMP's path, state for state, in {n} of "
+                       f"{len(self.demos) * self.config.seeds} runs (its chosen paths' human cost: {cost})")
         if self.borrowed:
             out.append(f"basic STOMP ignores the human: its path was the same on every demonstration at seed 0 "
                        f"(compared to the bit), so at the other seeds it was planned on #{self.demos[0]} and scored "
@@ -337,10 +348,26 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
                          f"{scores[name].interference:8.3f}  min clearance {scores[name].min_clearance:+.3f} m  "
                          f"{reached}{how}")
             result.runs.extend(scores[name] for name in variants)
+            if (cost := current_as_basic(recs)) is not None:
+                result.current_as_basic.append(cost)
             if once and "basic" in recs and not borrow:
                 basic_of_seed.setdefault(seed, recs["basic"])
                 once = _basic_is_shared(recs, basic_of_seed[seed], demo.index, progress) if seed == 0 else once
     return result
+
+
+def current_as_basic(recs: dict[str, RunRecord]) -> float | None:
+    """Where current occupancy executed basic STOMP's path, the largest human cost its planner gave a chosen path.
+
+    Its planner costs the human's present posture only; where that posture never lies on the paths it weighs,
+    it plans what basic STOMP plans, and Table I's two columns are equal. None: either did not run, or their
+    executed configurations differ (:func:`~services.experiments.reuse.first_differing_state`).
+    """
+    if "current" not in recs or "basic" not in recs:
+        return None
+    if first_differing_state(recs["current"], recs["basic"]) is not None:
+        return None
+    return max((float(p.cost_human[p.chosen]) for p in recs["current"].plans), default=0.0)
 
 
 def _basic_is_shared(recs: dict[str, RunRecord], first: RunRecord, demo: int, progress: Callable[[str], None]) -> bool:

@@ -51,3 +51,24 @@ def test_one_seed_has_no_standard_deviation_to_print() -> None:
 
     assert "(  n/a)" in table(1)[0] and "(0.000)" not in table(1)[0]
     assert "(0.707)" in table(2)[0]
+
+
+def test_the_table_says_why_current_occupancy_equals_basic_stomp() -> None:
+    """``eval all --quick`` printed current occupancy = basic STOMP (15.656 both) without a word of why."""
+    def said(costs: list[float]) -> list[str]:
+        res = InterferenceResult(InterferenceConfig(seeds=2), "synthetic", CupClass("blue_cup", 0, "blue_cup", 0.0),
+                                 [0], current_as_basic=costs)
+        for seed in range(2):
+            for name in ("basic", "least_penetration", "current"):
+                res.runs.append(RunScore(0, seed, name, 1.0, 0.0, 0.0, 0.1, 0.0, 0.0, 5, ("red_cup",), 30.0))
+        assert res.to_json()["current_runs_as_basic"] == len(costs)
+        return [ln for ln in res.lines() if ln.startswith("current occupancy executed basic STOMP's path")]
+
+    assert said([0.0, 0.0]) == ["current occupancy executed basic STOMP's path, state for state, in 2 of 2 runs "
+                                "(its chosen paths' human cost: 0 at every step: the human's present posture never "
+                                "lay on the path it chose)"]
+    assert said([0.0]) == ["current occupancy executed basic STOMP's path, state for state, in 1 of 2 runs "
+                           "(its chosen paths' human cost: 0 at every step: the human's present posture never "
+                           "lay on the path it chose)"]
+    assert said([0.0, 0.25])[0].endswith("(its chosen paths' human cost: at most 0.2500)")
+    assert said([]) == []

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from services.experiments import interference
-from services.experiments.harness import RunSpec, run_lockstep
+from services.experiments.harness import RunRecord, RunSpec, run_lockstep
 from services.experiments.heldout import HeldOutModels, human_file, samples_per_tick
-from services.experiments.interference import InterferenceConfig, run_interference
+from services.experiments.interference import InterferenceConfig, current_as_basic, run_interference
 from services.experiments.planners import VARIANTS, Timing, build_planner
 from services.experiments.reuse import first_differing_state, same_human, same_robot, with_human
 from shared.library import save_library
@@ -64,6 +65,14 @@ def test_same_robot_ignores_the_planning_time_but_not_a_configuration(two_basic_
     moved = dataclasses.replace(b, states=states)
     assert not same_robot(a, moved) and first_differing_state(a, moved) == states[k].stamp
     assert not same_robot(a, dataclasses.replace(b, states=b.states[:-1]))
+
+
+def test_current_as_basic_gives_the_human_cost_of_a_run_that_executed_basic_stomps_path(two_basic_runs) -> None:
+    """Table I's current occupancy equal to basic STOMP (15.656 both, ``eval all --quick``) was printed unexplained."""
+    a, b, lp = two_basic_runs
+    assert current_as_basic({"basic": a, "current": b}) == max(float(p.cost_human[p.chosen]) for p in b.plans)
+    assert current_as_basic({"basic": a, "current": lp}) is None  # planned around the human: another path
+    assert current_as_basic({"basic": a, "least_penetration": lp}) is None  # no current run (``eval volumes``)
 
 
 def test_same_human_sees_one_pose_changed(two_basic_runs) -> None:
@@ -125,3 +134,28 @@ def test_a_basic_planner_whose_path_depends_on_the_human_is_run_on_every_demonst
     assert res.borrowed == 0
     assert any("differs from the first demonstration's" in s and "every run is made" in s for s in said)
     assert len(res.runs) == 2 * 2 * 2
+
+
+def test_table1_counts_the_runs_where_current_occupancy_executed_basic_stomps_path(tmp_path, small,
+                                                                                  monkeypatch) -> None:
+    # a "current" that costs nothing plans what basic STOMP plans: every run is counted, and the table says so
+    blind = dict(VARIANTS, current=dataclasses.replace(VARIANTS["current"], human_cost=False))
+    monkeypatch.setattr(interference, "VARIANTS", blind)
+    runs: dict[tuple[str, Path, int], RunRecord] = {}  # (variant, human file, seed) -> its record
+    real = interference.run_lockstep
+
+    def recorded(spec: RunSpec, planner) -> RunRecord:
+        rec = runs[(spec.method, spec.human, spec.seed)] = real(spec, planner)
+        return rec
+
+    monkeypatch.setattr(interference, "run_lockstep", recorded)
+    library, models_dir = small
+    res = run_interference(InterferenceConfig(library=str(library), demos=2, seeds=1, timing=TIMING, components=2,
+                                              variants=("basic", "current"), models_dir=models_dir,
+                                              work_dir=tmp_path / "work"), progress=lambda _: None, compile=False)
+    humans = sorted({h for _, h, _ in runs})
+    costs = [max(float(p.cost_human[p.chosen]) for p in runs[("current", h, 0)].plans) for h in humans]
+    assert len(humans) == 2 and res.current_as_basic == costs
+    assert res.to_json()["current_runs_as_basic"] == 2
+    assert any(ln.startswith("current occupancy executed basic STOMP's path, state for state, in 2 of 2 runs")
+               for ln in res.lines())
