@@ -208,9 +208,8 @@ class PredictorService:
                 outs = self.handle_batch(batch, now) if batch else []
                 if not streaming:
                     outs += self.flush(now)  # the stream paused: the newest pose gets its grid once due
-            except Exception as exc:  # a fault of this service, not of the input: said, counted, and it goes on
-                log.exception("predictor: processing %d message(s) failed", len(batch))
-                self.rejects.reject(self.keys.pose, f"{type(exc).__name__}: {exc}", reason="handler")
+            except Exception as exc:  # a fault of this service, not of the input: counted (traceback once), goes on
+                self.rejects.unexpected(self.keys.pose, exc, f"processing {len(batch)} message(s)")
                 outs = []
             for out in outs:
                 pub = self._post_pub if isinstance(out, ClassPosterior) else self._occ_pub
@@ -219,8 +218,7 @@ class PredictorService:
                 try:
                     pub.put(out)  # encodes: a message that breaks the wire contract is refused here
                 except Exception as exc:
-                    log.exception("predictor: publishing a %s failed", out.TYPE)
-                    self.rejects.reject(pub.key, f"{type(exc).__name__}: {exc}", reason="handler")
+                    self.rejects.unexpected(pub.key, exc, f"publishing a {out.TYPE}")
                     continue
                 self.stats.published += isinstance(out, OccupancyGrid)
             self.stats.dropped = self.backlog.dropped

@@ -5,7 +5,8 @@ bridges commonly publish when they give no message of their own, and every ROS 2
 The convention the tracker takes (docs/keypoints.md):
 
 * ``poses[i].position`` is the point named ``names[i]``, in the tracker's configured order (``[tracker]
-  ros2_points``; default: the layout's points in its table's order); the orientations are ignored;
+  ros2_points``; default: the layout's own order, :attr:`shared.keypoints.layouts.Layout.native_order`: COCO's
+  17 keypoints by id for ``coco17``, MediaPipe's 33 landmarks for ``mediapipe33``); the orientations are ignored;
 * a point the sensor lost is ``NaN`` in all three coordinates (a ``PoseArray`` cannot leave one out);
 * ``header.stamp`` is the frame's time, ``header.frame_id`` its coordinate frame (the tracker refuses another
   than its ``frame_id``); a zero stamp means "now" (the time the sample arrived).

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import itertools
-import logging
 import threading
 import time
 from collections.abc import Callable
@@ -23,8 +22,6 @@ from shared.rejects import RejectCounter
 from .wire import Attachment, AttachmentError, data_key, endpoint_token, node_token, qos_chunk
 
 __all__ = ["Ros2Node", "Ros2Publisher", "next_entity_id"]
-
-log = logging.getLogger("foresight.ros2")
 
 _IDS: dict[str, itertools.count] = {}
 _IDS_LOCK = threading.Lock()
@@ -109,7 +106,8 @@ class Ros2Node:
         """Call ``callback(payload)`` per sample of ``msgtype`` on ``topic`` with the type's hash and an attachment.
 
         The subscription's ``MS`` token is declared; the callback may raise ``ValueError`` to refuse a sample (any
-        other exception is logged with its traceback and counted as reason ``handler``; the node goes on).
+        other exception is counted as reason ``handler``, its traceback logged the first time on the topic; the node
+        goes on).
         With ``ordered``, all of a node's subscriptions share one Zenoh subscriber (on the domain's keys), so that
         its callbacks run one at a time in the order the samples arrived (Zenoh calls each subscriber's callback on
         a thread of its own: a command and the ``/clock`` after it could otherwise be handled the other way round).
@@ -144,9 +142,8 @@ class Ros2Node:
             callback(sample.payload.to_bytes())
         except ValueError as exc:  # Ros2InputError: not the type's CDR, or values the receiver refuses
             self.rejects.reject(topic, exc)
-        except Exception as exc:  # the receiver's fault, not the sample's: counted, and logged with its traceback
-            log.exception("%s: handling a %s sample failed", topic, msgtype)
-            self.rejects.reject(topic, f"{type(exc).__name__}: {exc}", reason="handler")
+        except Exception as exc:  # the receiver's fault, not the sample's: counted, its traceback once per topic
+            self.rejects.unexpected(topic, exc, f"handling a {msgtype} sample")
 
     def close(self) -> None:
         """Undeclare the subscriptions, publishers and tokens."""

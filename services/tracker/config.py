@@ -58,7 +58,8 @@ class TrackerServiceConfig:
     ros2_domain_id: int = opt(default_factory=lambda: ros_domain_id(), help="input ros2: the ROS 2 domain id "
                               "(default: $ROS_DOMAIN_ID, else 0)")
     ros2_points: list[str] = opt(default_factory=list, help="input ros2: the name of each pose of the PoseArray, in "
-                                 "order (comma-separated; empty: the layout's points in its table's order)")
+                                 "order (comma-separated; empty: the layout's own order, e.g. COCO's 17 keypoints "
+                                 "by id for coco17)")
     stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
                                "disappears after it was seen (comma-separated; how a compose run ends)")
     wait_for: list[str] = opt(default_factory=list, help="--from: wait for the liveliness tokens of these services "

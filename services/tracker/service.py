@@ -68,7 +68,7 @@ class TrackerStats:
     rests: int = 0  # the person seen at rest, published (services.tracker.demos)
     played: int = 0
     behind: int = 0  # frames left unfitted to catch up (catch_up), or dropped by a full backlog
-    failed: int = 0  # batches whose processing raised (logged with their traceback)
+    failed: int = 0  # batches whose processing raised (the first one's traceback logged)
     refused: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REASONS, 0))
 
 
@@ -203,9 +203,10 @@ class TrackerService:
         except Ros2InputError as exc:
             if len(mapping.decode(payload, KEYPOINTS_TYPE).poses) == len(names):  # (not the CDR: raises again)
                 raise
-            # another count of poses: a driver in its own order, which the default (the layout's table) is no one's
-            raise Ros2InputError(f"{exc}: pose i is --ros2-points[i], now {','.join(names)}; set it to the driver's "
-                                 "names in its pose order") from None
+            # another count of poses: a driver with more or fewer points than the order taken (the layout's own)
+            now = ",".join(names) if len(",".join(names)) <= 120 else f"{','.join(names[:5])},... ({len(names)})"
+            raise Ros2InputError(f"{exc}: pose i is --ros2-points[i], now {now}; set it to the driver's names in its "
+                                 "pose order") from None  # the reject line shows 300 characters: the advice in them
         msg = HumanKeypoints(stamp=stamp or time.time(), tick=-1, frame=self._ros2_frame, frame_id=frame_id,
                              names=names, positions=positions)
         self._ros2_frame += 1
@@ -242,9 +243,10 @@ class TrackerService:
     def _work_safely(self, batch: list[tuple[HumanKeypoints, bool]]) -> None:
         try:
             self.work(batch)
-        except Exception:  # a bug on one batch must not end the worker: every later frame would wait unfitted
-            self.stats.failed += 1
-            log.exception("tracker: a batch of %d frames failed (the tracker goes on with the next)", len(batch))
+        except Exception as exc:  # a bug on one batch must not end the worker: every later frame would wait unfitted
+            self.stats.failed += 1  # counted under reason handler, its traceback once (not one a batch, 30 a second)
+            key = self.config.ros2_topic if self.config.input == "ros2" else self.keys.keypoints
+            self.rejects.unexpected(key, exc, f"fitting a batch of {len(batch)} frames")
 
     # -- the loop ----------------------------------------------------------------------------------------------
 
@@ -313,7 +315,7 @@ class TrackerService:
         from services.ros2.node import Ros2Node
 
         mapping = Ros2Mapping(Ros2Config(domain_id=cfg.ros2_domain_id))
-        names = list(cfg.ros2_points) or self.core.layout.table_names
+        names = list(cfg.ros2_points) or self.core.layout.native_order  # the sensor's own: COCO's 17 by index
         node = Ros2Node(session, cfg.ros2_domain_id, "/", NODE_NAME, mapping.hashes, self.rejects)
         node.subscription(cfg.ros2_topic, KEYPOINTS_TYPE, lambda payload: self._on_pose_array(mapping, names, payload))
         log.info("tracker: ROS 2 node /%s takes %s, poses in the order %s", NODE_NAME, cfg.ros2_topic, names)

@@ -5,6 +5,8 @@ A layout is a small table (``shared/data/keypoints/<name>.toml``): each Foresigh
 mean of COCO's two hips. Foresight's own point names are the layout ``foresight`` (identity). Points a
 layout does not give are simply unobserved. The table's ``ignored`` list names the layout's other points (a
 sensor sends them; Foresight does not use them), so that a name that is neither is an error, not a silent miss.
+Its ``order`` lists every point in the sensor's own order (COCO's keypoint ids, MediaPipe's landmark indices):
+the order a ROS 2 ``PoseArray`` of that sensor is read in unless ``--ros2-points`` gives another.
 """
 
 from __future__ import annotations
@@ -31,6 +33,12 @@ class Layout:
     description: str
     points: dict[str, tuple[str, ...]]
     ignored: tuple[str, ...] = ()
+    order: tuple[str, ...] = ()  # the sensor's own order of every point (used and ignored); () where it has none
+
+    @property
+    def native_order(self) -> list[str]:
+        """The points in the order the sensor sends them: :attr:`order`, else (none is standard) the table's."""
+        return list(self.order) or self.table_names
 
     @property
     def source_names(self) -> list[str]:
@@ -89,11 +97,11 @@ def load_layout(name: str) -> Layout:
     """A shipped layout by name (:data:`LAYOUTS`).
 
     Raises:
-        ValueError: An unknown layout, or a table naming a point Foresight does not have or leaving out a required
-            one.
+        ValueError: An unknown layout, or a table naming a point Foresight does not have, leaving out a required
+            one, or whose ``order`` does not list each of its points once.
     """
     if name == "foresight":
-        return Layout("foresight", "Foresight's own point names", {p: (p,) for p in POINT_NAMES})
+        return Layout("foresight", "Foresight's own point names", {p: (p,) for p in POINT_NAMES}, (), POINT_NAMES)
     if name not in LAYOUTS:
         raise ValueError(f"keypoint layout {name!r}: unknown (layouts: {', '.join(LAYOUTS)})")
     data = tomllib.loads((resources.files("shared") / "data" / "keypoints" / f"{name}.toml").read_text())
@@ -104,4 +112,12 @@ def load_layout(name: str) -> Layout:
     missing = [p for p in REQUIRED if p not in points]
     if missing:
         raise ValueError(f"keypoint layout {name}: gives none of the required {missing}")
-    return Layout(data["name"], data.get("description", ""), points, tuple(data.get("ignored", ())))
+    layout = Layout(data["name"], data.get("description", ""), points, tuple(data.get("ignored", ())),
+                    tuple(data.get("order", ())))
+    every, order = {*layout.source_names, *layout.ignored}, layout.order
+    wrong = [f"{what} {names}" for what, names in (
+        ("missing", sorted(every - set(order))), ("not its points", sorted(set(order) - every)),
+        ("given twice", sorted({n for n in order if order.count(n) > 1}))) if names]
+    if order and wrong:  # a PoseArray read in it would put points in the wrong places
+        raise ValueError(f"keypoint layout {name}: order must list each of its points once ({'; '.join(wrong)})")
+    return layout

@@ -13,6 +13,7 @@ interpolating the fitted features).
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -92,21 +93,23 @@ def write_keypoint_library(lib: MotionLibrary, out: Path, noise_m: float = 0.0, 
     written = []
     for label, name in enumerate(lib.class_names):
         path = out / f"{name}.csv"
-        with path.open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(header)
-            for demo in (d for d in lib.demos if d.label == label):
-                pts = model.joint_positions(mapping.to_human(demo.features))  # (T, J, 3)
-                pts = pts + rng.normal(0.0, noise_m, pts.shape) if noise_m > 0 else pts
-                keep = rng.random(len(pts)) >= drop
-                keep[0] = True
-                blank = rng.random(len(pts)) < missing
-                which = rng.integers(0, len(POINT_NAMES), len(pts))
-                for t in np.flatnonzero(keep):
-                    row = [f"{v:.5f}" for v in pts[t].reshape(-1)]
-                    if blank[t]:
-                        row[3 * which[t]:3 * which[t] + 3] = ["", "", ""]
-                    w.writerow([demo.index, t, *row])
+        text = io.StringIO(newline="")
+        w = csv.writer(text)
+        w.writerow(header)
+        for demo in (d for d in lib.demos if d.label == label):
+            pts = model.joint_positions(mapping.to_human(demo.features))  # (T, J, 3)
+            pts = pts + rng.normal(0.0, noise_m, pts.shape) if noise_m > 0 else pts
+            keep = rng.random(len(pts)) >= drop
+            keep[0] = True
+            blank = rng.random(len(pts)) < missing
+            which = rng.integers(0, len(POINT_NAMES), len(pts))
+            for t in np.flatnonzero(keep):
+                row = [f"{v:.5f}" for v in pts[t].reshape(-1)]
+                if blank[t]:
+                    row[3 * which[t]:3 * which[t] + 3] = ["", "", ""]
+                w.writerow([demo.index, t, *row])
+        with atomic_write(path) as f:  # whole or not at all: Ctrl-C mid-class left the old CSV cut short
+            f.write(text.getvalue().encode("utf-8"))
         written.append(path)
     for stale in set(out.glob("*.csv")) - set(written):
         stale.unlink()

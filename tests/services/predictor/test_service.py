@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
 import time
 from collections.abc import Iterator
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -15,6 +17,7 @@ from services.predictor import service as predictor_service
 from services.predictor.__main__ import main as predictor_main
 from services.predictor.core import PredictorConfig
 from services.predictor.service import PredictorService
+from shared.config import ZenohConfig
 from shared.protocol import ClassPosterior, DemoMarker, HumanPose, Keys, OccupancyGrid, encode
 from shared.transport import Presence, TypedPublisher, open_session, subscribe
 
@@ -150,8 +153,44 @@ def test_a_fault_in_processing_or_publishing_is_logged_counted_and_the_worker_go
     assert [p.index for p in posts.items] == [0, 1, 2, 4, 5, 7, 8, 9]  # 6's posterior broke the wire contract
     assert service.rejects.by_reason == {(keys.pose, "handler"): 1, (keys.posterior, "handler"): 1}
     messages = [r.getMessage() for r in caplog.records if r.exc_info]
-    assert any("processing 1 message(s) failed" in m for m in messages)
-    assert any("publishing a ClassPosterior failed" in m for m in messages)
+    assert any(f"processing 1 message(s) on {keys.pose} failed unexpectedly" in m for m in messages)
+    assert any(f"publishing a ClassPosterior on {keys.posterior} failed unexpectedly" in m for m in messages)
+
+
+def test_a_fault_repeated_on_every_message_is_counted_each_time_with_one_traceback(
+        small_model, small_library, wait_until, caplog) -> None:
+    """The worker logged a traceback per failing batch and per failing publication: a fault on every pose of a
+    30 Hz stream was 30 tracebacks a second (a review). Now one per key; the rest counted."""
+    service = PredictorService(PredictorConfig(), ZenohConfig(prefix="fs"), model=small_model)
+    features = small_library.by_class(1)[0].features
+
+    def failing_handle(batch, now):
+        raise RuntimeError("a bug while processing")
+
+    class FailingPublisher:
+        key = "fs/occupancy"
+
+        def put(self, msg) -> None:
+            raise RuntimeError("a bug while publishing")
+
+    service.handle_batch = failing_handle
+    stop = threading.Event()
+    worker = threading.Thread(target=service._drain, args=(stop,), daemon=True)
+    with caplog.at_level(logging.WARNING):
+        worker.start()
+        try:
+            for i in range(100):  # one pose a batch: 100 faults
+                service.backlog.put(_pose(5, i, features[i % len(features)], tick=i))
+                assert wait_until(lambda n=i + 1: service.rejects.total == n, 10.0, 0.001), service.rejects.summary()
+            service.handle_batch = lambda batch, now: [SimpleNamespace(TYPE="OccupancyGrid")] * 100
+            service._occ_pub = FailingPublisher()  # type: ignore[assignment]
+            service.backlog.put(_pose(5, 100, features[0], tick=100))  # one batch, 100 outputs, each failing
+            assert wait_until(lambda: service.rejects.total == 200, 10.0), service.rejects.summary()
+        finally:
+            stop.set()
+            worker.join(10.0)
+    assert service.rejects.by_reason == {(service.keys.pose, "handler"): 100, ("fs/occupancy", "handler"): 100}
+    assert sum(1 for r in caplog.records if r.exc_info) == 2  # one per key
 
 
 def test_a_worker_still_busy_at_stop_is_said_and_what_it_computes_later_is_not_published(

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 
 from services.ros2.core import Ros2Config, Ros2Mapping
 from services.ros2.node import Ros2Node, next_entity_id
+from services.ros2.wire import Attachment, data_key
 from shared.config import ZenohConfig
 from shared.rejects import RejectCounter
 from shared.transport import open_session
@@ -67,8 +69,47 @@ def test_a_handler_that_fails_is_logged_counted_and_the_node_goes_on(
                 pub.put(b"fine")
                 assert wait_until(lambda: b"fine" in handled, 10.0)
             assert set(rejects.by_reason) == {("/chatter", "handler")}  # not refused as malformed or attachment
-            assert any("handling a std_msgs/msg/String sample failed" in r.getMessage() and r.exc_info
-                       for r in caplog.records)
+            assert any("handling a std_msgs/msg/String sample on /chatter failed unexpectedly" in r.getMessage()
+                       and r.exc_info for r in caplog.records)
         finally:
             node.close()
             talker.close()
+
+
+class _Sample:
+    """A Zenoh sample as the node's callback reads it: key, payload and rmw_zenoh's attachment."""
+
+    class _Bytes:
+        def __init__(self, data: bytes) -> None:
+            self.data = data
+
+        def to_bytes(self) -> bytes:
+            return self.data
+
+    def __init__(self, key: str, payload: bytes, seq: int) -> None:
+        self.key_expr = key
+        self.payload = self._Bytes(payload)
+        self.attachment = self._Bytes(Attachment(seq, time.time_ns(), bytes(16)).encode())
+
+
+def test_a_handler_failing_on_every_sample_is_counted_each_time_with_one_traceback(
+        zenoh_hub: Callable[[], ZenohConfig], caplog) -> None:
+    """Each failing sample logged its traceback: a publisher at 30 Hz, 30 tracebacks a second (a review)."""
+    mapping = Ros2Mapping(Ros2Config())
+    rejects = RejectCounter("test")
+
+    def handler(payload: bytes) -> None:
+        raise KeyError("a receiver's bug")
+
+    with open_session(zenoh_hub()) as session:
+        node = Ros2Node(session, 3, "/", "listener", mapping.hashes, rejects)
+        try:
+            node.subscription("/chatter", STRING, handler)
+            key = data_key(3, "/chatter", STRING, mapping.hashes[STRING])
+            with caplog.at_level(logging.WARNING):
+                for seq in range(1, 101):
+                    node._on_sample(_Sample(key, b"boom", seq))
+        finally:
+            node.close()
+    assert rejects.by_reason == {("/chatter", "handler"): 100}
+    assert sum(1 for r in caplog.records if r.exc_info) == 1

@@ -309,20 +309,62 @@ def test_ros2_pose_array_input(zenoh_hub) -> None:
 
 
 def test_a_pose_array_of_another_count_is_refused_naming_the_order_expected_and_how_to_set_it() -> None:
-    """The default order is the layout table's, which no driver publishes (a COCO one sends its 17 by index): every
+    """A driver sending another count than the order taken (a MediaPipe one, 33 landmarks, to the layout coco17): every
     sample was refused on its count, the line naming neither the order taken nor how to give the driver's."""
     cfg = TrackerServiceConfig(input="ros2", tracker=dataclasses.replace(TrackerConfig(), layout="coco17"))
     service = TrackerService(cfg, ZenohConfig())
     mapping = Ros2Mapping(Ros2Config())
-    names = service.core.layout.table_names
+    names = service.core.layout.native_order
     with pytest.raises(ValueError) as info:
-        service._on_pose_array(mapping, names, keypoints_out(mapping, np.zeros((17, 3)), time.time(), "recorder"))
+        service._on_pose_array(mapping, names, keypoints_out(mapping, np.zeros((33, 3)), time.time(), "recorder"))
     text = str(info.value)
-    assert text.startswith(f"PoseArray: 17 poses, the tracker's point order has {len(names)} ([tracker] ros2_points): ")
-    assert f"pose i is --ros2-points[i], now {','.join(names)}; set it to the driver's names in its pose order" in text
+    assert text.startswith(f"PoseArray: 33 poses, the tracker's point order has {len(names)} ([tracker] ros2_points): ")
+    assert (f"pose i is --ros2-points[i], now {','.join(names[:5])},... ({len(names)}); set it to the driver's names "
+            "in its pose order") in text
     assert len(text) <= 300  # what the reject counter's line shows of it
     service._on_pose_array(mapping, names, keypoints_out(mapping, np.zeros((len(names), 3)), time.time(), "recorder"))
     assert len(service.backlog) == 1  # the count of its order: taken
+    short = ["pelvis", "r_shoulder", "l_shoulder", "r_elbow", "r_wrist"]  # an order given: said whole when short
+    with pytest.raises(ValueError, match=r"now pelvis,r_shoulder,l_shoulder,r_elbow,r_wrist; set it"):
+        service._on_pose_array(mapping, short, keypoints_out(mapping, np.zeros((17, 3)), time.time(), "recorder"))
+
+
+def test_a_coco_driver_is_read_in_cocos_own_order_by_default(zenoh_hub) -> None:
+    """The default order was the layout table's (12 names), which no driver publishes: a COCO driver's every sample
+    (its 17 keypoints by id) was refused until its names were typed into --ros2-points."""
+    hub = zenoh_hub
+    tester = hub()
+    keys = Keys(tester.prefix)
+    mapping = Ros2Mapping(Ros2Config())
+    coco = ["nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder", "right_shoulder", "left_elbow",
+            "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip", "left_knee", "right_knee",
+            "left_ankle", "right_ankle"]  # COCO's keypoint ids 0..16
+    made_of = {"left_hip": "pelvis", "right_hip": "pelvis", "left_ear": "head", "right_ear": "head",
+               **{f"{s}_{p}": f"{s[0]}_{p}" for s in ("left", "right") for p in ("shoulder", "elbow", "wrist")}}
+    frames = _reach_frames()
+    sent = np.full((len(frames), len(coco), 3), np.nan)  # nose, eyes, legs: not seen
+    for i, name in enumerate(coco):
+        if name in made_of:
+            sent[:, i] = frames[:, NAMES.index(made_of[name])]
+    with open_session(tester) as session:
+        service, thread = _service(hub, session, keys, input="ros2", ros2_topic="/body/keypoints",
+                                   tracker=dataclasses.replace(TrackerConfig(), layout="coco17"))
+        try:
+            got = Collector(session, keys)
+            node = Ros2Node(session, 0, "/", "coco_driver", mapping.hashes, RejectCounter("driver"))
+            pub = node.publisher("/body/keypoints", KEYPOINTS_TYPE)
+            time.sleep(0.3)
+            for pos in sent:
+                pub.put(keypoints_out(mapping, pos, time.time(), "recorder"))
+                time.sleep(1 / 30)
+            assert got.wait(lambda items: any(isinstance(m, DemoMarker) and m.event == "end" for m in items)), \
+                service.rejects.summary()
+            assert _all_taken(service, len(frames))
+            node.close()
+        finally:
+            stats = thread.stop()
+    assert stats.reaches == 1 and stats.frames == len(frames)  # the right wrist's reach, read off COCO's points
+    assert service.rejects.total == 0 and not any(service.core.refused.values())
 
 
 def test_cli_refuses_a_recording_that_is_not_one(tmp_path: Path, capsys) -> None:
@@ -545,7 +587,24 @@ def test_a_batch_that_fails_is_logged_and_the_worker_goes_on(caplog, monkeypatch
     finally:
         stop.set()
         worker.join(5)
-    assert service.stats.failed == 1 and service.core.accepted == 1 and "a batch of 1 frames failed" in caplog.text
+    assert service.stats.failed == 1 and service.core.accepted == 1
+    assert f"fitting a batch of 1 frames on {service.keys.keypoints} failed unexpectedly" in caplog.text
+
+
+def test_a_batch_failing_every_time_is_counted_each_time_with_one_traceback(caplog, monkeypatch) -> None:
+    """Each failing batch logged its traceback: a bug on every frame of a 30 Hz sensor, 30 tracebacks a second."""
+    service = TrackerService(TrackerServiceConfig(input="ros2", ros2_topic="/body/keypoints"), ZenohConfig())
+
+    def fails(*args, **kwargs):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(service.core, "on_keypoints", fails)
+    still = _reach_frames()[0]
+    with caplog.at_level(logging.WARNING):
+        for i in range(100):
+            service._work_safely([(_kp(i, still), False)])
+    assert sum(1 for r in caplog.records if r.exc_info) == 1
+    assert service.stats.failed == 100 and service.rejects.by_reason == {("/body/keypoints", "handler"): 100}
 
 
 def test_frames_waiting_for_the_worker_are_no_silence() -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -35,3 +37,40 @@ def test_the_sensors_right_points_are_the_models_right_joints(layout: str, right
     for i, joint in enumerate(("shoulder", "elbow", "wrist")):
         np.testing.assert_array_equal(model[POINT_NAMES.index(f"r_{joint}")], pos[names.index(right.format(parts[i]))])
         np.testing.assert_array_equal(model[POINT_NAMES.index(f"l_{joint}")], pos[names.index(left.format(parts[i]))])
+
+
+def test_each_layout_reads_a_sensors_points_in_that_sensors_own_order() -> None:
+    """A ROS 2 PoseArray is read in the layout's native order unless --ros2-points says otherwise: the default was the
+    table's dozen names, an order no driver sends (a COCO driver's every sample was refused on its count)."""
+    coco = load_layout("coco17").native_order
+    assert len(coco) == 17 and coco[:5] == ["nose", "left_eye", "right_eye", "left_ear", "right_ear"]
+    assert coco[9:13] == ["left_wrist", "right_wrist", "left_hip", "right_hip"]  # COCO's ids 9..12
+    mediapipe = load_layout("mediapipe33").native_order
+    assert len(mediapipe) == 33 and mediapipe[11:17] == ["left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
+                                                         "left_wrist", "right_wrist"]  # PoseLandmark 11..16
+    assert mediapipe[23:25] == ["left_hip", "right_hip"] and mediapipe[-1] == "right_foot_index"
+    body25 = load_layout("body25").native_order
+    assert len(body25) == 25 and body25[:9] == ["Nose", "Neck", "RShoulder", "RElbow", "RWrist", "LShoulder",
+                                                 "LElbow", "LWrist", "MidHip"]
+    assert load_layout("foresight").native_order == list(POINT_NAMES)
+    gait = load_layout("plugin_gait")  # markers have no standard order: the table's
+    assert gait.order == () and gait.native_order == gait.table_names
+    for name in ("coco17", "mediapipe33", "body25"):
+        lay = load_layout(name)
+        assert sorted(lay.native_order) == sorted({*lay.source_names, *lay.ignored})  # each point once
+
+
+def test_a_layout_whose_order_leaves_out_or_repeats_a_point_is_refused(tmp_path, monkeypatch) -> None:
+    from shared.keypoints import layouts
+
+    table = tmp_path / "data" / "keypoints" / "coco17.toml"
+    table.parent.mkdir(parents=True)
+    shipped = (Path(layouts.__file__).parents[1] / "data" / "keypoints" / "coco17.toml").read_text()
+    monkeypatch.setattr(layouts.resources, "files", lambda package: tmp_path)
+    table.write_text(shipped.replace('order = ["nose", "left_eye", ', 'order = ["nose", "nose", '))
+    with pytest.raises(ValueError, match=r"^keypoint layout coco17: order must list each of its points once "
+                                         r"\(missing \['left_eye'\]; given twice \['nose'\]\)$"):
+        load_layout("coco17")
+    table.write_text(shipped.replace('order = ["nose", ', 'order = ["snout", '))
+    with pytest.raises(ValueError, match=r"\(missing \['nose'\]; not its points \['snout'\]\)$"):
+        load_layout("coco17")

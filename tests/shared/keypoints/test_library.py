@@ -272,3 +272,32 @@ def test_a_demonstration_whose_only_whole_frames_are_glitches_is_left_out_as_an_
     lib, _ = fit_keypoint_library(tmp_path / "lib")
     (issue,) = lib.issues
     assert issue.reason == "demo 1: a coordinate beyond 20 m in every frame with the required points"
+
+
+@pytest.mark.parametrize("where", ["while writing", "at the rename"])
+def test_a_library_written_again_and_interrupted_leaves_each_class_whole_and_no_temporary_file(
+        small, tmp_path: Path, monkeypatch, where: str) -> None:
+    """Ctrl-C while a class was written left its CSV cut short (opened for writing in place): a half library."""
+    import os
+
+    out = tmp_path / "kp"
+    write_keypoint_library(small, out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    calls, real_joints = [], HumanModel.joint_positions
+
+    def joints(self, *args, **kwargs):  # the first class's second demonstration: interrupted
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_joints(self, *args, **kwargs)
+
+    def replace(src, dst, *args, **kwargs):
+        raise KeyboardInterrupt
+
+    if where == "while writing":
+        monkeypatch.setattr(HumanModel, "joint_positions", joints)
+    else:
+        monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        write_keypoint_library(small, out, noise_m=0.01, seed=3)  # other numbers than the first
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
