@@ -12,7 +12,6 @@ import hashlib
 import json
 import logging
 import math
-import os
 import zipfile
 import zlib
 from collections.abc import Callable, MutableMapping, Sequence
@@ -144,10 +143,7 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
     skip = set(left)
     demos = [d for d in library.demos if (d.label, d.index) not in skip]
     model = train_model(library, scene, cfg, demos=demos, progress=progress, fit_cache=fit_cache)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # workers training the same model never share it
-    model.save(tmp)
-    tmp.replace(path)
+    model.save(path)  # atomic_write: a temporary name of its own per writer, removed if interrupted before the rename
     return path
 
 

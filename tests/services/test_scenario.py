@@ -4,6 +4,7 @@ tested in tests/services/experiments/test_measures.py)."""
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ import torch
 
 from services.run_log import RunRecorder
 from services.scenario import Summary, choose_demonstration, summarise, table_header
+from shared.atomic_file import atomic_write
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.synthetic import generate_library
@@ -264,3 +266,31 @@ def test_the_final_grid_of_a_real_time_stream_is_the_newest_demonstrations():
                                                 method="prediction"))
     final = rec.snapshot()[2]
     assert final is not None and (final.demo_id, final.index) == (1, 3)
+
+
+def test_a_model_save_interrupted_at_its_rename_leaves_no_temporary_file_and_the_old_model(tmp_path, monkeypatch):
+    """Ctrl-C between model_for's save and its rename left demo-*.PID.tmp.npz in the models directory."""
+    import services.predictor.train as train
+    from services.scenario import model_for
+    from shared.scene import load_scene
+
+    class Trained:
+        def save(self, path):  # as PredictionModel.save: written whole under a temporary name
+            with atomic_write(path) as f:
+                np.savez(f, means=np.arange(4.0))
+
+    monkeypatch.setattr(train, "train_model", lambda *a, **k: Trained())
+    lib = generate_library(2, 3, seed=1)
+    first = model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, progress=False)
+    first.write_bytes(b"damaged")  # trained again on the next call
+    real = os.replace
+
+    def interrupted(src, dst, *a, **k):
+        if os.fspath(dst) == os.fspath(first):
+            raise KeyboardInterrupt
+        return real(src, dst, *a, **k)
+
+    monkeypatch.setattr(os, "replace", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [first.name] and first.read_bytes() == b"damaged"
