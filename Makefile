@@ -26,8 +26,11 @@ TEST_WORKERS ?= $(shell $(PYTHON) tools/cpus.py --max 4 2>/dev/null || echo 2)
 
 .PHONY: demo test setup lint clean compose-check
 
+# Ctrl-C ends the demo in order and it exits 130 (interrupted, by the shell's convention): a normal end here, not
+# make's "Error 130"; any other status fails. `trap : INT` keeps the recipe's shell waiting for that orderly stop
+# (without it the shell died with the signal and make said "Interrupt").
 demo: $(STAMP)
-	@$(VENV)/bin/foresight demo $(DEMO_ARGS)
+	@trap : INT; $(VENV)/bin/foresight demo $(DEMO_ARGS) || { code=$$?; [ $$code -eq 130 ] || exit $$code; }
 
 test: $(STAMP)
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --durations=15

@@ -14,7 +14,7 @@ its cup each step too (the paper's Fig. 9).
 3. Be the Zenoh router on a free loopback port and start the replayer, predictor, planner and
    executor, each as ``python -m services.<name> --connect <router>`` in its own process group, with
    their logs and the MCAP in the run's own directory, ``runs/demo/<UTC time>-<mode>/``
-   (``runs/demo/latest`` points to the newest).
+   (``runs/demo/latest`` points to the newest with an MCAP log).
 4. Lock-step (default): the executor ticks ``--steps`` replanning steps; the human advances by a fixed
    number of samples per step (the paper's protocol); then the robot finishes its last plan.
    Real time: the replayer streams at ``--rate-hz``, the planner replans every ``--period-s``, the
@@ -28,8 +28,9 @@ its cup each step too (the paper's Fig. 9).
    the chosen goal per step).
 
 Ctrl-C (or SIGTERM) at any moment stops the services in order, the executor first, which finishes
-its MCAP; the demo then says after how many of its steps it stopped (plans, in real time) and that the log
-is complete. With ``--compare`` a run cut short is marked in the table and no verdict is given.
+its MCAP; the demo then says after how many of its steps it stopped (plans, in real time), that the log
+is complete, and where the run's files are; it exits with status 130 (``make demo`` takes that as its end).
+With ``--compare`` a run cut short is marked in the table and no verdict is given.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from services.demo_dirs import MAIN_VARIANT, RunDirectory, variant_dir
+from services.demo_dirs import MAIN_VARIANT, RunDirectory, log_state, variant_dir
 from services.demo_inputs import check_inputs, share_config_file
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
@@ -254,6 +255,8 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     finally:
         if not records and not run_dir.has_log():  # a bad option found late, Ctrl-C while training or starting
             run_dir.end_without_log()
+        if not records and status and (where := run_dir.whereabouts()):  # no summary will name the directory
+            out(f"foresight demo: {where}")
     robot = PR2.from_scene(scene)
     reference = records[0].final  # the final prediction of the paper's method
     outcomes = [measure_run(r.name, r.states, r.poses, reference, robot, scene, r.summary) for r in records]
@@ -293,8 +296,11 @@ def _variant_name(cfg: DemoConfig) -> str:
     return "prediction" if cfg.method == "prediction" else "current occupancy"
 
 
-def _closing_lines(cfg: DemoConfig, summary: Summary) -> list[str]:
-    """What the demo prints at the end: the run's summary (or the comparison), the picture, where everything is."""
+def _closing_lines(cfg: DemoConfig, summary: Summary, interrupted: bool = False) -> list[str]:
+    """What the demo prints at the end: the run's summary (or the comparison), the picture, where everything is.
+
+    ``interrupted``: the MCAP lines say each log's state (``complete``: the executor finalised it before stopping).
+    """
     extra, robot = summary.extra, "the prediction planner's robot" if cfg.compare else "the robot"  # summary: its run
     lines = [] if cfg.compare else summary.lines(table=False)[:-1]  # the table was printed live; the log comes last
     if cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra and summary.separation_at_end:
@@ -313,10 +319,14 @@ def _closing_lines(cfg: DemoConfig, summary: Summary) -> list[str]:
         lines.append(f"note: {robot} arrived {summary.reached_t_s - cfg.run_s:.1f} s after the run's {cfg.run_s:g} "
                      f"s: the run goes on until it is there (--no-finish ends it at {cfg.run_s:g} s)")
     lines += extra.get("outcome_lines", [])
+
+    def with_state(path: str | None) -> str:  # an interrupted run's log: whether the executor finalised it
+        return f"{path} ({log_state(path)})" if interrupted and path and Path(path).is_file() else str(path)
+
     if cfg.compare:
-        lines.append("MCAP logs: " + ", ".join(str(r["mcap_path"]) for r in extra.get("comparison", [])))
+        lines.append("MCAP logs: " + ", ".join(with_state(r["mcap_path"]) for r in extra.get("comparison", [])))
     else:
-        lines.append(f"MCAP log: {summary.mcap_path}")
+        lines.append(f"MCAP log: {with_state(summary.mcap_path)}")
     if "figure" in extra:
         lines.append(f"picture of the run: {extra['figure']}")
     lines.append(f"this run's logs: {extra.get('run_dir')}/ (each step: foresight log render "
@@ -374,7 +384,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
             if cfg.json:
                 print(strict_json.dumps(summary.to_json()))
             else:
-                for line in _closing_lines(cfg, summary):
+                for line in _closing_lines(cfg, summary, interrupted=status == 130):
                     print(line)
         return status
 

@@ -3,7 +3,8 @@
 Each run gets ``<UTC stamp>-<mode>[-compare]`` (``-2``, ``-3`` for runs within one second). ``latest`` points to a
 run once its services start, so that their logs can be followed during the run; a run interrupted before it wrote an
 MCAP log hands ``latest`` back to the run it pointed to before (the README's ``foresight log info
-runs/demo/latest`` found nothing after an early Ctrl-C), and a run no service wrote into is removed.
+runs/demo/latest`` found nothing after an early Ctrl-C), and a run no service wrote into is removed. Such a run's
+last line names its directory and what ``latest`` points to (:meth:`RunDirectory.whereabouts`).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
-__all__ = ["RunDirectory", "variant_dir", "compare_log", "MAIN_VARIANT"]
+__all__ = ["RunDirectory", "variant_dir", "compare_log", "log_state", "MAIN_VARIANT"]
 
 MAIN_VARIANT = "prediction"
 """The planner a ``--compare`` run is about (the paper's method; ``services.demo.VARIANTS``' first)."""
@@ -34,6 +35,17 @@ def compare_log(directory: Path) -> Path | None:
     logs = sorted(directory.rglob("*.mcap")) if directory.is_dir() else []
     main = [f for f in logs if f.parent == directory / variant_dir(MAIN_VARIANT)]
     return main[0] if len(logs) > 1 and len(main) == 1 and all(f.parent.parent == directory for f in logs) else None
+
+
+def log_state(mcap: str | Path) -> str:
+    """An MCAP log's state as every tool names it: ``complete`` (the executor finalised it), ``TRUNCATED (...)``."""
+    from shared.recording.reader import read_log  # the MCAP reader: only for a run that says it
+    from shared.runtime import UserError
+
+    try:
+        return read_log(mcap).state
+    except UserError as exc:  # not an MCAP at all (an empty file: the executor died as it opened it)
+        return f"unreadable: {exc}"
 
 
 @dataclass
@@ -101,3 +113,23 @@ class RunDirectory:
                 self.latest.symlink_to(self.previous_, target_is_directory=True)
         except OSError:
             pass
+
+    def whereabouts(self) -> str | None:
+        """Where a run that ended without a summary left its files and what ``latest`` points to; None: nothing kept.
+
+        After a Ctrl-C before the first plan nothing named the run's directory, and ``latest`` had gone back to the
+        run before: the interrupted run's service logs were to be found by their time (a new user's first hour).
+        """
+        if not self.path.is_dir():
+            return None
+        logs = sorted(self.path.rglob("*.mcap"))
+        kept = ("its services' logs and " + ", ".join(f"MCAP log {p.name} ({log_state(p)})" for p in logs) if logs
+                else "its services' logs, no MCAP log (the executor had not opened one)")
+        try:
+            target = self.latest.readlink().name if self.latest.is_symlink() else None
+        except OSError:
+            target = None
+        link = (f"{self.latest} points to it" if target == self.path.name else
+                f"{self.latest} still points to {target}, the run before (a run without an MCAP log hands it back)"
+                if target else f"no {self.latest} link")
+        return f"this run's files: {self.path}/: {kept}; {link}"

@@ -45,6 +45,7 @@ from services.scenario import (
 from services.supervisor import Supervisor, describe_exit
 from shared.config import ZenohConfig
 from shared.library import MotionLibrary, save_library
+from shared.progress import close_interrupted
 from shared.protocol import ClassPosterior, HumanPose, Keys, Message, OccupancyGrid, Plan, RobotState
 from shared.runtime import SHUTDOWN_GRACE_S, UserError, interruptible
 from shared.scene import Scene, load_scene
@@ -206,7 +207,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     try:
         with interruptible(stop):  # training checks no stop event: Ctrl-C cuts it short at once
             scenario, model, replay_lib = prepare_inputs(cfg, scene, run_dir, out)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        close_interrupted(exc)  # the training's progress bar ends before this line, not after it
         out("foresight demo: interrupted while preparing the run (a model cut short is not written); "
             "no service had started, nothing was recorded")
         return 130, None

@@ -10,12 +10,13 @@ did you mean ``--robot-speed``?) and the sibling commands that have the option i
 from __future__ import annotations
 
 import argparse
-import difflib
 import sys
 import typing
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+from shared.config_names import closest
 
 __all__ = ["ArgumentParser", "DefaultsHelpFormatter", "path_arg"]
 
@@ -99,9 +100,10 @@ class ArgumentParser(argparse.ArgumentParser):
             if not token.startswith("-") or token == "-":
                 continue
             name = token.split("=", 1)[0]
-            close = difflib.get_close_matches(name, mine, n=1, cutoff=0.6)
+            # the options' common "--" left out of the likeness (closest's prefix): --bogus was "close" to --ros2
+            close = closest(name, mine, prefix="--")
             if close:
-                hints.append(f"did you mean {close[0]}?")
+                hints.append(close.removeprefix("; "))
                 continue
             owners = [p.prog for p in (siblings or {}).values() if name in p.option_names()]
             if owners:

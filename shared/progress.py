@@ -10,12 +10,13 @@ reads as progress and stays short.
 from __future__ import annotations
 
 import sys
+import traceback
 from collections.abc import Iterable, Iterator
 from typing import IO, Any, TypeVar
 
 from tqdm import tqdm
 
-__all__ = ["LOG_INTERVAL_S", "progress"]
+__all__ = ["LOG_INTERVAL_S", "close_interrupted", "progress"]
 
 T = TypeVar("T")
 
@@ -55,3 +56,13 @@ def progress(items: Iterable[T], desc: str, unit: str, total: int | None = None,
     tty = bool(getattr(out, "isatty", lambda: False)())
     kw: dict[str, Any] = {"file": out} if tty else {"file": _Lines(out), "mininterval": LOG_INTERVAL_S, "ncols": 80}
     return iter(tqdm(items, desc=desc, unit=unit, total=total, disable=not enabled, **kw))
+
+
+def close_interrupted(exc: BaseException) -> None:
+    """Finish what the work ``exc`` cut short left open (its progress bars' lines), before the line that says so.
+
+    A progress bar is closed when the loop it counts is left, and the loop Ctrl-C broke out of is left only when the
+    traceback's frames go, after the "interrupted" line: a half bar was the last thing on the terminal (a new
+    user's ``foresight train``). Clearing the frames closes it now, with the count it had reached.
+    """
+    traceback.clear_frames(exc.__traceback__)

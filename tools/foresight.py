@@ -14,6 +14,7 @@ import importlib
 import sys
 
 from shared.arguments import ArgumentParser
+from shared.progress import close_interrupted
 
 __all__ = ["COMMANDS", "SUBCOMMANDS", "subcommands", "main"]
 
@@ -95,7 +96,8 @@ def main(argv: list[str] | None = None) -> int:
     """Dispatch ``foresight COMMAND ARGS...``; returns the process exit code (130 after Ctrl-C)."""
     try:
         return _dispatch(argv)
-    except KeyboardInterrupt:  # Ctrl-C before a command installed its own handler (while importing, ...)
+    except KeyboardInterrupt as exc:  # Ctrl-C before a command installed its own handler (while importing, ...)
+        close_interrupted(exc)
         print("foresight: interrupted", file=sys.stderr)
         return 130
 

@@ -270,8 +270,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
     parser.add_argument("--library", metavar="PATH", default=None,
                         help="motion library: a dir of compound_*.csv or a .npz (default: the synthetic library, "
                              "seed 0)")
-    parser.add_argument("--out", metavar="MODEL", default="models/model.npz", help="model file to write "
-                        "(default: models/model.npz)")
+    parser.add_argument("--out", metavar="MODEL", default="models/model.npz", help="model file to write; missing "
+                        "directories are created (default: models/model.npz)")
     parser.add_argument("--scene", metavar="NAME|PATH", default=None, help=f"{SCENE_HELP} (default: pr2_two_cups); "
                         "the synthetic library's cup classes reach for its cups")
     parser.add_argument("--components", type=int, default=20, help="Gaussians per class; 0 = choose by BIC "

@@ -442,3 +442,50 @@ def test_no_human_cost_is_a_planner_that_ignores_the_person_entirely(human_cost:
     cost = cfg.planner_config().cost
     assert (cost.w_human, cost.body_clearance) == ((CostConfig.w_human, CostConfig.body_clearance) if human_cost
                                                    else (0.0, 0.0))
+
+
+def test_a_run_interrupted_before_its_first_plan_ends_naming_its_directory(tmp_path: Path, monkeypatch) -> None:
+    """A new user's Ctrl-C as the services started: the run's directory kept its services' logs, `latest` went back
+    to the run before, and the demo's last line named neither."""
+    import threading
+
+    import services.demo as demo
+    import services.demo_run as demo_run
+    from services.demo_dirs import RunDirectory
+
+    root = tmp_path / "runs"
+    before = RunDirectory.create(root, "lockstep", False)
+    before.point_latest()
+    (before.path / "before.mcap").write_bytes(b"a log")
+
+    def run_once(cfg, name, stop, out, started=None):  # the services started, then the Ctrl-C; no MCAP yet
+        started()
+        (Path(cfg.run_dir) / "planner.log").write_text("started\n")
+        return 130, None
+
+    monkeypatch.setattr(demo_run, "run_once", run_once)
+    said: list[str] = []
+    assert demo.run_demo(DemoConfig(run_dir=root), threading.Event(), out=said.append) == (130, None)
+    (run,) = [p for p in root.iterdir() if p.name not in ("latest", before.path.name)]
+    assert said == [f"foresight demo: this run's files: {run}/: its services' logs, no MCAP log (the executor had not "
+                    f"opened one); {root / 'latest'} still points to {before.path.name}, the run before (a run "
+                    "without an MCAP log hands it back)"]
+    assert (root / "latest").resolve() == before.path.resolve()
+
+
+def test_an_interrupted_runs_closing_lines_say_whether_its_log_was_finalised(tmp_path: Path) -> None:
+    from services.demo import _closing_lines
+    from services.scenario import Summary
+    from shared.protocol import Keys
+    from shared.recording.writer import McapLog
+
+    mcap = tmp_path / "run.mcap"
+    with McapLog(mcap, Keys()):
+        pass
+    summary = Summary(steps=[], chosen_goal_per_step=[], switch_step=None, interference_cost=0.0, mcap_path=str(mcap),
+                      reached=False, reached_step=None, human_class="blue_cup", recognised_class="blue_cup",
+                      extra={"run_dir": str(tmp_path), "cut_short": "interrupted after 3 of 20 steps"})
+    assert f"MCAP log: {mcap} (complete)" in _closing_lines(DemoConfig(), summary, interrupted=True)
+    mcap.write_bytes(mcap.read_bytes()[:-30])
+    assert any(ln.startswith(f"MCAP log: {mcap} (TRUNCATED (") for ln in _closing_lines(DemoConfig(), summary, True))
+    assert f"MCAP log: {mcap}" in _closing_lines(DemoConfig(), summary)  # a whole run: its log was read already

@@ -40,3 +40,38 @@ def test_two_demos_started_in_the_same_second_get_a_directory_each(tmp_path, mon
     second = RunDirectory.create(tmp_path, "lockstep", False)
     third = RunDirectory.create(tmp_path, "lockstep", False)
     assert len({first.path, second.path, third.path}) == 3 and all(p.path.is_dir() for p in (first, second, third))
+
+
+def test_a_run_ended_before_its_first_plan_says_where_its_files_are_and_where_latest_points(tmp_path) -> None:
+    """A new user's Ctrl-C as the services started: `latest` went back to the run before, and nothing named the
+    directory the interrupted run's logs were in."""
+    from shared.protocol import Keys
+    from shared.recording.writer import McapLog
+
+    before = RunDirectory.create(tmp_path, "lockstep", False)
+    before.point_latest()
+    with McapLog(before.path / "before.mcap", Keys()):
+        pass
+    run = RunDirectory.create(tmp_path, "lockstep", False)
+    run.point_latest()
+    (run.path / "planner.log").write_text("started\n")
+    run.end_without_log()
+    assert run.whereabouts() == (f"this run's files: {run.path}/: its services' logs, no MCAP log (the executor had "
+                                 f"not opened one); {tmp_path / 'latest'} still points to {before.path.name}, the run "
+                                 "before (a run without an MCAP log hands it back)")
+    assert before.whereabouts() == (f"this run's files: {before.path}/: its services' logs and MCAP log before.mcap "
+                                    f"(complete); {tmp_path / 'latest'} points to it")
+    cut = before.path / "before.mcap"
+    cut.write_bytes(cut.read_bytes()[:-30])  # no footer: the executor did not finalise it
+    (before.path / "empty.mcap").write_bytes(b"")
+    said = before.whereabouts()
+    assert "before.mcap (TRUNCATED (" in said and "empty.mcap (unreadable: " in said, said
+    run.end_without_log()
+    (tmp_path / "latest").unlink()
+    assert run.whereabouts().endswith(f"; no {tmp_path / 'latest'} link")
+
+
+def test_a_run_nothing_was_kept_of_says_nothing(tmp_path) -> None:
+    run = RunDirectory.create(tmp_path, "lockstep", False)
+    run.end_without_log()
+    assert run.whereabouts() is None

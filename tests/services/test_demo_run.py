@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import threading
 from pathlib import Path
 
@@ -40,3 +41,24 @@ def test_the_rows_never_wait_for_the_terminal_and_keep_their_order() -> None:
         assert printed == []
         gate.set()
     assert printed == [f"row {i}" for i in range(200)]
+
+
+def test_a_ctrl_c_while_training_ends_its_progress_bar_before_saying_so(monkeypatch, tmp_path: Path, capsys) -> None:
+    """The training's bar was closed only when the loop Ctrl-C broke out of was collected: after the "interrupted
+    while preparing" line, a half bar was the last thing on the terminal (a new user's first `make demo`)."""
+    from shared.progress import progress
+
+    def fit(n: int) -> int:
+        if n == 2:
+            raise KeyboardInterrupt
+        return n
+
+    def training(*args: object) -> None:  # as train_model's loops: a comprehension's frame holds the bar (it stays)
+        [fit(n) for n in progress(range(4), desc="GMM per class", unit="class")]
+
+    monkeypatch.setattr(demo_run, "prepare_inputs", training)
+    say = lambda line: print(line, file=sys.stderr)  # noqa: E731 (the bar's stream: their order is seen)
+    status, _ = demo_run.run_once(DemoConfig(run_dir=str(tmp_path)), "prediction", threading.Event(), say)
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert status == 130 and lines[-1].startswith("foresight demo: interrupted while preparing the run"), lines
+    assert lines[-2].startswith("GMM per class:") and "| 2/4 [" in lines[-2], lines

@@ -84,3 +84,15 @@ def test_an_empty_path_on_the_command_line_is_refused(argv, tmp_path, monkeypatc
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert ": error: argument " in line and "empty; give a path (an empty one would be the current directory)" in line
     assert not list(tmp_path.iterdir())  # nothing written
+
+
+@pytest.mark.parametrize("argv, hint", [(["demo", "--bogus"], "(see foresight demo --help)"),
+                                        (["train", "--bogus"], "(see foresight train --help)"),
+                                        (["demo", "--stepz", "3"], "(did you mean --steps?)")])
+def test_a_hint_only_for_an_option_close_in_its_name_not_in_the_dashes_every_one_has(argv, hint, capsys) -> None:
+    """`foresight demo --bogus` said "did you mean --ros2?": the two share "--", "o" and "s"."""
+    from tools.foresight import main as cli_main
+
+    with pytest.raises(SystemExit):
+        cli_main(argv)
+    assert capsys.readouterr().err.strip().endswith(hint)

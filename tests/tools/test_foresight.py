@@ -81,3 +81,27 @@ def test_a_misspelt_command_gets_the_closest(capsys) -> None:
     assert "unknown command 'demoo' (did you mean demo? choose from demo, " in capsys.readouterr().err
     assert cli_main(["zzz"]) == 2
     assert "unknown command 'zzz' (choose from demo, " in capsys.readouterr().err
+
+
+def test_ctrl_c_finishes_the_progress_bar_before_the_interrupted_line(monkeypatch, tmp_path, capsys) -> None:
+    """A new user's Ctrl-C of `foresight train`: the bar was closed only when its loop was collected, after
+    "foresight: interrupted", and a half bar was the last thing on the terminal. It ends first, with its count."""
+    from services.predictor import train
+    from shared.library import save_library
+    from shared.synthetic import generate_library
+
+    library = tmp_path / "lib.npz"
+    save_library(generate_library(4, 3, seed=1), library)
+    fitted: list[int] = []
+
+    def fit(*args: object) -> int:  # the third class's fit is where the Ctrl-C lands
+        if len(fitted) == 2:
+            raise KeyboardInterrupt
+        fitted.append(1)
+        return 1
+
+    monkeypatch.setattr(train, "class_fit", fit)
+    assert cli_main(["train", "--library", str(library), "--out", str(tmp_path / "m.npz")]) == 130
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[-1] == "foresight: interrupted", lines
+    assert lines[-2].startswith("GMM per class:") and "| 2/4 [" in lines[-2], lines
