@@ -30,6 +30,7 @@ from shared.protocol import HUMAN_SOURCES, Plan, RobotState
 
 from .config import ExecutorConfig, ExecutorError
 from .reference import Reference
+from .splice import Takeover, take_over
 
 __all__ = ["ExecutorConfig", "ArmLimits", "ExecutorError", "ExecutorCore", "reason_kind"]
 
@@ -168,6 +169,7 @@ class ExecutorCore:
         self.plan: Plan | None = None
         self.reference: Reference | None = None
         self.tau = 0.0  # progress along the reference (stops while holding): seconds, or length with path_per_step
+        self.taken = ""  # how the last plan was taken over: "start" (lock-step), "joined", "spliced", "led in"
         weights = self.config.path_weights
         if weights and len(weights) != limits.dof:
             raise ExecutorError(f"path_weights: expected {limits.dof} values, got {len(weights)}")
@@ -198,8 +200,8 @@ class ExecutorCore:
     def adopt(self, plan: Plan, stamp: float | None = None) -> None:
         """Start executing ``plan``'s chosen trajectory now (at ``self.t``).
 
-        In real time the arm joins it where it is nearest (:meth:`Reference.nearest`): a late plan starts behind the
-        robot, which its first waypoint drove back (at the velocity limits) before it went on.
+        In real time the arm takes it over from the reference it follows (:func:`splice.take_over`: joins a late plan
+        where nearest, goes on to an early one's start, else is led in at its pace); ``goal`` is the new plan's at once.
 
         Args:
             plan: A decoded (hence validated) plan.
@@ -210,12 +212,10 @@ class ExecutorCore:
         """
         self.check_plan(plan)
         waypoints = self.limits.clamp(plan.trajectories[plan.chosen].astype(np.float64))
-        self.plan = plan
-        self.reference = Reference(waypoints, plan.dt, self._path_weights)
-        self.tau = 0.0
-        if self.config.mode == "realtime":  # lock-step: waypoint 0 is the arm's configuration, by the protocol
-            within, _ = self._pace(self.config.stale_limit_s, self.reference)
-            self.tau = self.reference.nearest(self.q, within, by_length=self.config.path_per_step > 0)
+        self.plan, new = plan, Reference(waypoints, plan.dt, self._path_weights)
+        taken = (take_over(new, self.q, self.reference, self.tau, self.config, self.limits.velocity)
+                 if self.config.mode == "realtime" else Takeover(new, 0.0, "start"))  # lock-step: w0 is q
+        self.reference, self.tau, self.taken = taken.reference, taken.progress, taken.how
         self.goal = int(plan.chosen)
         self.fresh.plan = self.t if stamp is None else float(stamp)
         self.plans_adopted += 1

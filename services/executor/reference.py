@@ -60,6 +60,47 @@ class Reference:
         a = x - i
         return (1.0 - a) * self.waypoints[i] + a * self.waypoints[i + 1]
 
+    def length_at(self, tau: float) -> float:
+        """The configuration-space length from the start to the point ``tau`` seconds on (held at the ends)."""
+        if tau <= 0.0 or len(self.waypoints) == 1:
+            return 0.0
+        if tau >= self.duration:
+            return self.length
+        x = tau / self.dt
+        i = min(int(math.floor(x)), len(self.waypoints) - 2)
+        return float(self.cumulative[i] + (x - i) * (self.cumulative[i + 1] - self.cumulative[i]))
+
+    def time_at_length(self, s: float) -> float:
+        """Seconds from the start to the first point ``s`` along the path (held at the ends: :meth:`at_length`)."""
+        if s <= 0.0:
+            return 0.0
+        if s >= self.length:
+            return self.duration
+        i = int(np.searchsorted(self.cumulative, s, side="right")) - 1
+        i = min(max(i, 0), len(self.waypoints) - 2)
+        span = self.cumulative[i + 1] - self.cumulative[i]
+        return float((i + ((s - self.cumulative[i]) / span if span > 0 else 0.0)) * self.dt)
+
+    def project(self, q: np.ndarray, start: float, end: float) -> float:
+        """Seconds from the start to the point of the path between ``start`` and ``end`` s nearest ``q`` ``(D,)``.
+
+        In the length's weighted metric; of the points as near as the nearest (to 1e-6) the first is taken. Both
+        bounds are held at the path's end.
+        """
+        end = min(end, self.duration)
+        start = min(start, end)
+        inner = self.dt * np.arange(len(self.waypoints))
+        ts = np.concatenate([[start], inner[(inner > start) & (inner < end)], [end]])
+        points = np.array([self.at(t) for t in ts])
+        k = 1.0 if self.weights is None else self.weights
+        d = np.diff(points, axis=0) * k
+        r = (np.asarray(q, dtype=np.float64) - points[:-1]) * k
+        dd = np.sum(d * d, axis=-1)
+        a = np.clip(np.sum(r * d, axis=-1) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+        dist = np.linalg.norm(r - a[:, None] * d, axis=-1)
+        i = int(np.argmax(dist <= dist.min() + 1e-6))
+        return float(ts[i] + a[i] * (ts[i + 1] - ts[i]))
+
     def nearest(self, q: np.ndarray, within: float, by_length: bool = False) -> float:
         """Where the point of the path nearest ``q`` ``(D,)`` lies: seconds from its start, or length (``by_length``).
 

@@ -1,12 +1,19 @@
-"""The real-time loop's stepping: a stall of the loop is walked along the path, judged for staleness as it goes."""
+"""The real-time loop's stepping: a stall of the loop is walked along the path, judged for staleness as it goes; each
+state is stamped with the wall time its configuration is for."""
 
 from __future__ import annotations
+
+import threading
+import time
 
 import numpy as np
 
 from services.executor.core import ExecutorConfig, ExecutorCore
-from services.executor.realtime import advance
+from services.executor.realtime import advance, run_realtime
 from services.executor.reference import Reference
+from services.executor.result import ExecutorResult
+from shared.lockstep import PlanInbox
+from shared.protocol import RobotState
 from tests.services.executor.test_core import LIMITS, make_plan
 
 
@@ -91,3 +98,42 @@ def test_a_plan_that_starts_behind_the_arm_is_joined_where_the_arm_is_not_driven
     lockstep = ExecutorCore(LIMITS, np.full(3, 0.1), ExecutorConfig())
     lockstep.adopt(make_plan(np.zeros(3), [np.full(3, 0.3)], t=21, dt=0.1))
     assert lockstep.tau == 0.0  # lock-step: waypoint 0 is the arm's configuration by the protocol, runs unchanged
+
+
+class _Loop:
+    """What :func:`run_realtime` uses of the service: ``core``, its config, an inbox with one plan, the states out."""
+
+    def __init__(self, core: ExecutorCore) -> None:
+        self.core, self.config, self.result = core, core.config, ExecutorResult()
+        self.stop, self.inbox, self.states = threading.Event(), PlanInbox(), []
+
+    def wait_for_peers(self, presence: object) -> None:
+        pass
+
+    def publish_state(self, pub: object, state: RobotState) -> None:
+        self.states.append(state)
+
+
+def test_a_state_is_stamped_with_the_wall_time_its_configuration_is_for() -> None:
+    """Stamped with the wall clock after the step, a state's stamp lagged its q by however long the step took (here a
+    guard taking 30 ms every other step): q differenced over the stamps was off its velocity (2.28 rad/s where qd was
+    about 0.2 in a review's run). Now the stamp is the run's start on the wall clock plus the core's time."""
+    calls = []
+
+    def slow_guard(q: np.ndarray, q_next: np.ndarray) -> str:
+        calls.append(1)
+        if len(calls) % 2:
+            time.sleep(0.03)
+        return ""
+
+    cfg = ExecutorConfig(mode="realtime", steps=2, step_period_s=0.2, stale_limit_s=10.0, require_occupancy=False)
+    svc = _Loop(ExecutorCore(LIMITS, np.zeros(3), cfg, guard=slow_guard))
+    svc.inbox.put_plan(make_plan(np.zeros(3), [np.array([0.4, 0.2, 0.0])], t=21, dt=0.1))  # 2 s: j0 at 0.2 rad/s
+    before = time.time()
+    run_realtime(svc, None, None)  # type: ignore[arg-type]
+    stamps = np.array([s.stamp for s in svc.states])
+    qs = np.array([s.q for s in svc.states])
+    assert len(stamps) >= 10 and before <= stamps[0] <= time.time()  # on the wall clock
+    v = np.diff(qs[:, 0]) / np.diff(stamps)
+    np.testing.assert_allclose(v, 0.2, rtol=1e-3)  # q over the stamps moves as the plan does
+    np.testing.assert_allclose(qs[-1, 0], 0.2 * (stamps[-1] - stamps[0]) + qs[0, 0], atol=1e-5)
