@@ -5,7 +5,9 @@
 Table I: penetration of the predicted occupancy integrated over time) and the clearance between the
 robot's spheres and the real human's body capsules at every executed state (contact = clearance <= 0).
 :func:`verdict` says in words whether ``--compare`` showed the paper's point: the prediction planner
-interferes less and touches the human less than both baselines.
+interferes less and touches the human less than both baselines. :func:`novelty_counts` counts the poses the
+predictor's novelty test called unlike every class (``ClassPosterior.familiar`` in the run's log): the summary's
+"recognised at the end" names the most probable class, which a motion no class explains has too.
 """
 
 from __future__ import annotations
@@ -18,10 +20,13 @@ import numpy as np
 
 from services.experiments.measures import contact_summary, interference, postures_at
 from shared.clearance import body_clearance
-from shared.protocol import HumanPose, OccupancyGrid, RobotState
+from shared.protocol import ClassPosterior, HumanPose, OccupancyGrid, ProtocolError, RobotState, decode
+from shared.recording.reader import read_log
+from shared.runtime import UserError
 from shared.scene import Scene
 
-__all__ = ["Outcome", "measure_run", "verdict", "outcome_lines", "cut_words", "INTERFERENCE_EQUAL"]
+__all__ = ["Outcome", "measure_run", "verdict", "outcome_lines", "cut_words", "novelty_counts", "novelty_lines",
+           "INTERFERENCE_EQUAL"]
 
 INTERFERENCE_EQUAL = 0.005
 """Interferences nearer than this are a tie: the verdict prints them to two decimals, and a real-time run's 0.001 /
@@ -50,6 +55,8 @@ class Outcome:
             real-time run's plans.
         plan_t_s: ``(S,)`` seconds into the run each plan of ``chosen_goal_per_step`` was made (the run's summary;
             None: one a replanning period apart, as in lock-step).
+        unfamiliar: Poses the predictor's novelty test called unlike every class (:func:`novelty_counts`).
+        judged: Poses whose class posterior the run's log holds (what ``unfamiliar`` is out of).
     """
 
     planner: str
@@ -67,6 +74,8 @@ class Outcome:
     cut_short: str = ""
     unit: str = "step"
     plan_t_s: np.ndarray | None = field(default=None, repr=False)
+    unfamiliar: int = 0
+    judged: int = 0
 
     def to_json(self) -> dict[str, Any]:
         """The scalar fields (the arrays stay out of ``--json``)."""
@@ -75,7 +84,7 @@ class Outcome:
                 "min_clearance_m": self.min_clearance_m if math.isfinite(self.min_clearance_m) else None,
                 "switch_step": self.switch_step, "reached_step": self.reached_step,
                 "chosen_goal_per_step": self.chosen_goal_per_step, "mcap_path": self.mcap_path,
-                "cut_short": self.cut_short}
+                "cut_short": self.cut_short, "unfamiliar_poses": self.unfamiliar, "poses_judged": self.judged}
 
 
 def measure_run(planner: str, states: list[RobotState], poses: list[HumanPose], reference: OccupancyGrid | None,
@@ -107,7 +116,41 @@ def measure_run(planner: str, states: list[RobotState], poses: list[HumanPose], 
     return Outcome(planner, float(cost), contact.time_in_contact, contact.time_near, contact.min_clearance,
                    summary.switch_step, summary.reached_step, list(summary.chosen_goal_per_step), t, ee, clearance,
                    summary.mcap_path, str(summary.extra.get("cut_short", "")), summary.unit,
-                   np.array([float(s["t_s"]) for s in summary.steps], dtype=np.float64))
+                   np.array([float(s["t_s"]) for s in summary.steps], dtype=np.float64),
+                   *novelty_counts(summary.mcap_path))
+
+
+def novelty_counts(mcap_path: str | None) -> tuple[int, int]:
+    """``(unfamiliar, judged)``: the class posteriors in a run's log that the predictor called unfamiliar, of all.
+
+    A log that is missing or not an MCAP file counts ``(0, 0)``; a message that does not decode is not counted.
+    """
+    if not mcap_path:
+        return 0, 0
+    try:
+        lf = read_log(mcap_path, keep=lambda ch: ch.schema_name == "foresight.ClassPosterior"
+                      and ch.message_encoding == "msgpack")
+    except (UserError, OSError):
+        return 0, 0
+    familiar = []
+    for m in lf.messages:
+        try:
+            familiar.append(decode(m.data, ClassPosterior).familiar)
+        except ProtocolError:
+            continue
+    return familiar.count(False), len(familiar)
+
+
+def novelty_lines(outcomes: list[Outcome]) -> list[str]:
+    """A line per run whose predictor called poses unlike every class (none when no pose was)."""
+    out = []
+    for o in (o for o in outcomes if o.unfamiliar):
+        run = f" ({o.planner} run)" if len(outcomes) > 1 else ""
+        out.append(f"novelty{run}: the predictor called {o.unfamiliar} of {o.judged} poses unlike every class (its "
+                   "novelty test): the class it names then is only the least unlikely. Its threshold is learnt from "
+                   "the library's features as recorded: a known reach seen through a noisy sensor (2 cm on body "
+                   "keypoints) falls below it at most poses (docs/prediction.md, 'Novelty')")
+    return out
 
 
 def _kept_further(main: Outcome, other: Outcome) -> bool:
@@ -193,7 +236,8 @@ def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planne
     (``--compare``'s), when some did not run (interrupted, or ``failed``: a service of one failed).
     """
     unit = outcomes[0].unit if outcomes else "step"
-    out = ["", f"comparison (interference: the paper's Table I measure against {against}; contact: overlap with the "
+    out = [*novelty_lines(outcomes), "",
+           f"comparison (interference: the paper's Table I measure against {against}; contact: overlap with the "
            "real human's body):",
            f"  {'planner':<20}{'interference':>13}{'contact s':>11}{'within 5 cm s':>15}{'min clearance m':>17}"
            f"{'switch ' + unit:>13}{'reached ' + unit:>14}"]
