@@ -19,7 +19,8 @@ it arrives. With ``trigger = "period"`` it plans every ``period_s``, as far ahea
 arrives in either mode). A robot off its plan is planned for from where its velocity takes it over that time. Each Plan
 carries the inputs it used: ``stamp`` is the RobotState's stamp, ``occupancy_tick``/``occupancy_index``
 the prediction's. With ``cost.body_clearance`` > 0 it also follows the person's poses: each step keeps clear of the
-body of the newest (:mod:`services.planner.body`), as the executor's separation guard will.
+body of the newest (:mod:`services.planner.body`), which the executor's separation guard measures too (the guard
+takes the nearest body of the last ``window_s``; the planner the newest alone, by design: see there).
 """
 
 from __future__ import annotations
@@ -130,6 +131,8 @@ class PlannerService:
         self.summary = PeriodicSummary(log, "planner: plans")  # each plan at DEBUG, a summary at INFO
         self._body_poses = 0  # real time: the person's poses seen when the cost's body was last set
         self._failure_said, self._failures_said = -math.inf, 0  # when a failed step was last logged, and the count
+        # the joint limits an off-path start is clipped into (_start_of), as numpy once: they are the planner's, fixed
+        self._limits = tuple(np.asarray(b.cpu(), dtype=np.float64) for b in (self.planner.lower, self.planner.upper))
 
     def _start_of(self, robot: RobotState, lookahead: float | None) -> tuple[np.ndarray, float | None]:
         """Real time: the configuration a step plans from, and the lookahead the planner then applies.
@@ -144,8 +147,7 @@ class PlannerService:
         dist = self.planner.departure(robot.q)
         if robot.holding or ahead <= 0 or dist is None or dist <= self.planner.config.off_path_tol:
             return robot.q, lookahead
-        lower, upper = (np.asarray(b.cpu(), dtype=np.float64) for b in (self.planner.lower, self.planner.upper))
-        return np.clip(robot.q + robot.qd * ahead, lower, upper), 0.0
+        return np.clip(robot.q + robot.qd * ahead, *self._limits), 0.0
 
     def _plan(self, q: np.ndarray, occupancy: OccupancyGrid | None, tick: int, stamp: float,
               pub: TypedPublisher[Plan], interrupt: Callable[[], bool] | None = None,
