@@ -333,9 +333,9 @@ class Planner:
                             result.trajectories)  # (Kv, T, D)
         terms = self.cost_terms(trajs)
         # a goal whose cost is not finite (chosen or published, it would derail the next steps), or whose path goes
-        valid, depth = publishable(self.cost if c.free_paths else None, trajs, terms)  # into the scene or the robot
-        chosen_v = best(choice_key(terms, c.goal_choice, valid), valid)
         dts = self._dt(trajs)
+        valid, depth = publishable(self.cost if c.free_paths else None, trajs, terms, dts)  # into the scene or robot
+        chosen_v = best(choice_key(terms, c.goal_choice, valid), valid)
         self._prev, self._prev_best, self._prev_dt = trajs, chosen_v, float(dts[chosen_v])
 
         k = len(self.goals.names)

@@ -12,7 +12,8 @@ When no path is free, they are published as optimised (as they were before this 
 paper's side scene's first step leaves every path 2.8-4.5 cm in the table (its straight lines cross it by 1.6 and
 6.9 cm), and refusing them left the executor without a first plan, the experiments without a run. The executor
 follows a plan only until the next one, whose optimisation goes on from it; a plan that stays inside the scene is
-then what the warning says.
+then what the warning says. The warning says where the least deep path first goes in (:func:`first_contact`): in
+real time's first plans, 2-6 s along paths each followed ~0.1 s before the next (docs/planner.md).
 
 The robot's start is where it is: a path is refused only where it goes deeper than its own start (a real robot's
 reading a millimetre inside a modelled table would otherwise refuse every plan and leave the robot where it is).
@@ -31,7 +32,7 @@ from .inputs import PlannerError
 
 log = logging.getLogger("foresight.planner")
 
-__all__ = ["path_penetration", "publishable", "invalid_reason", "SUBSTEPS", "TOLERANCE_M"]
+__all__ = ["path_penetration", "first_contact", "publishable", "invalid_reason", "SUBSTEPS", "TOLERANCE_M"]
 
 SUBSTEPS = 4
 """Configurations checked per waypoint segment (linear in joint space): a segment moves a sphere ~5 cm at most."""
@@ -54,9 +55,24 @@ def path_penetration(cost: object, paths: torch.Tensor, substeps: int = SUBSTEPS
         ``(K,)`` the deepest penetration after the start minus the start's own (m), 0 where that is below
         :data:`TOLERANCE_M`.
     """
-    k, t, d = paths.shape
+    k, t, _ = paths.shape
     if t < 2 or not isinstance(cost, StateCost):
         return paths.new_zeros(k)
+    beyond = _beyond_start(cost, paths, substeps).amax(-1)
+    return torch.where(beyond < TOLERANCE_M, torch.zeros_like(beyond), beyond)
+
+
+def first_contact(cost: object, path: torch.Tensor, substeps: int = SUBSTEPS) -> float:
+    """Where along ``path`` ``(T, D)`` it first goes deeper than its start (0-1 of its waypoints' span; nan: never)."""
+    if len(path) < 2 or not isinstance(cost, StateCost):
+        return math.nan
+    inside = torch.nonzero(_beyond_start(cost, path[None], substeps)[0] >= TOLERANCE_M).flatten()
+    return float(inside[0] + 1) / ((len(path) - 1) * substeps) if len(inside) else math.nan
+
+
+def _beyond_start(cost: StateCost, paths: torch.Tensor, substeps: int) -> torch.Tensor:
+    """``(K, (T-1) substeps)`` each dense configuration's penetration after the start, less the start's (m)."""
+    k, _, d = paths.shape
     frac = torch.arange(1, substeps + 1, device=paths.device, dtype=paths.dtype) / substeps  # (S,)
     seg = paths[:, :-1, None] + frac[:, None] * (paths[:, 1:, None] - paths[:, :-1, None])  # (K, T-1, S, D)
     q = torch.cat([paths[:, :1], seg.reshape(k, -1, d)], 1)  # (K, 1 + (T-1) S, D)
@@ -65,12 +81,11 @@ def path_penetration(cost: object, paths: torch.Tensor, substeps: int = SUBSTEPS
     if cost.has_self:
         overlap = (-cost.robot.self_collision_distance(centers)).flatten(-2).amax(-1).clamp(min=0)
         depth = torch.maximum(depth, overlap)
-    beyond = (depth[:, 1:].amax(-1) - depth[:, 0]).clamp(min=0)
-    return torch.where(beyond < TOLERANCE_M, torch.zeros_like(beyond), beyond)
+    return (depth[:, 1:] - depth[:, :1]).clamp(min=0)
 
 
-def publishable(cost: object, paths: torch.Tensor, terms: dict[str, torch.Tensor]) -> tuple[torch.Tensor,
-                                                                                              list[float]]:
+def publishable(cost: object, paths: torch.Tensor, terms: dict[str, torch.Tensor],
+                dts: torch.Tensor | None = None) -> tuple[torch.Tensor, list[float]]:
     """The goals whose path may be published this step: finite costs and free of collision.
 
     A goal whose cost is not finite would be chosen (``goal_choice = "human"`` took goal 0 for a NaN) or published
@@ -80,6 +95,7 @@ def publishable(cost: object, paths: torch.Tensor, terms: dict[str, torch.Tensor
         cost: The planner's state cost.
         paths: ``(K, T, D)`` this step's optimised trajectories.
         terms: ``smoothness``, ``obstacle``, ``human``, ``total``: ``(K,)`` their costs.
+        dts: ``(K,)`` each path's waypoint spacing (s), for the warning's times; None: the warning gives fractions.
 
     Returns:
         ``(K,)`` bool, and each path's penetration (m, :func:`path_penetration`; NaN for a non-finite path). When
@@ -95,11 +111,15 @@ def publishable(cost: object, paths: torch.Tensor, terms: dict[str, torch.Tensor
     depth = path_penetration(cost, paths).tolist()
     free = finite & torch.tensor([p == 0 for p in depth], device=finite.device)
     if not bool(free.any()):  # none free: published as STOMP left them, said (see the module's docstring)
-        least = min((p for p, f in zip(depth, finite.tolist(), strict=True) if f), default=math.nan)
+        least = min((i for i, f in enumerate(finite.tolist()) if f), key=lambda i: depth[i])
         now = time.monotonic()
-        if now - _said[0] >= 1.0:
-            log.warning("planner: every path passes into the scene or the robot this step (the least by %.1f cm); "
-                        "published as optimised, the next steps go on from them", least * 100)
+        if now - _said[0] >= 1.0:  # where it starts: beyond what the robot follows before the next plan, as a rule
+            at, n = first_contact(cost, paths[least]), paths.shape[1] - 1
+            where = (f"{at:.0%} of the way" if dts is None else
+                     f"{at * n * float(dts[least]):.2f} s into its {n * float(dts[least]):.2f} s")
+            log.warning("planner: every path passes into the scene or the robot this step (the least by %.1f cm, from "
+                        "%s); published as optimised: the robot follows a plan only until the next, which goes on "
+                        "from it", depth[least] * 100, where)
             _said[0] = now
         return finite, [0.0 if f else p for p, f in zip(depth, finite.tolist(), strict=True)]
     return free, depth

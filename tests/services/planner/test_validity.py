@@ -3,18 +3,20 @@
 from __future__ import annotations
 
 import logging
+import math
 import re
 
 import numpy as np
 import pytest
 import torch
 
+from services.planner import validity
 from services.planner.config import StompConfig
 from services.planner.core import GoalSet, Planner, PlannerConfig
 from services.planner.costs import StateCost
 from services.planner.inputs import PlannerError
 from services.planner.multigoal import resample_path
-from services.planner.validity import TOLERANCE_M, path_penetration, publishable
+from services.planner.validity import TOLERANCE_M, first_contact, path_penetration, publishable
 
 UNDER_TABLE = [0.237, -0.4594, 0.9945, -2.9553, -1.0481, 2.0756, -2.1326, 1.8017]
 """A free configuration with the gripper under the table's edge (tool at x 0.57, y -0.45, z 0.47 m), drawn at
@@ -69,11 +71,28 @@ def test_only_free_paths_are_published_and_with_none_free_every_finite_one_is(ro
     with caplog.at_level(logging.WARNING, logger="foresight.planner"):
         free, depth = publishable(cost, paths, terms)
     assert free.tolist() == [True, False] and depth[0] == 0.0  # none free: the finite ones, as optimised, and said
-    assert any(re.search(r"every path passes into the scene or the robot this step \(the least by \d+\.\d cm\); "
-                         "published as optimised", r.getMessage()) for r in caplog.records)
+    assert any(re.search(r"every path passes into the scene or the robot this step \(the least by \d+\.\d cm, from "
+                         r"\d+% of the way\); published as optimised", r.getMessage()) for r in caplog.records)
     terms["total"] = torch.full((2,), float("nan"), dtype=paths.dtype)
     with pytest.raises(PlannerError, match="no goal has a finite cost this step"):
         publishable(cost, paths, terms)
+
+
+def test_the_warning_says_where_along_the_path_it_first_goes_in(robot, cost, caplog, monkeypatch) -> None:
+    """Real time's first plans went 1-8.5 cm into the table 2-6 s along paths the robot follows for ~0.1 s before
+    the next plan: the warning said how deep, not where, which is what tells a user whether the robot goes there."""
+    line = _line(robot, UNDER_TABLE)  # 40 waypoints
+    dense = resample_path(line, 2000)
+    depth = (cost.radii - cost.sdf(robot.sphere_centers(dense)[..., cost.spheres, :])).amax(-1).clamp(min=0)
+    truth = int(torch.nonzero(depth - depth[0] >= TOLERANCE_M).flatten()[0]) / 1999
+    at = first_contact(cost, line)
+    assert 0.05 < at < 0.95 and at == pytest.approx(truth, abs=1 / 39)  # within a waypoint of the densest check
+    assert math.isnan(first_contact(cost, _line(robot, robot.q_start.tolist())))  # holding still: never
+    terms = {n: torch.ones(1, dtype=line.dtype) for n in ("smoothness", "obstacle", "human", "total")}
+    monkeypatch.setattr(validity, "_said", [-math.inf])  # a warning a second at most: the test's own
+    with caplog.at_level(logging.WARNING, logger="foresight.planner"):
+        publishable(cost, line[None], terms, torch.tensor([0.1], dtype=line.dtype))
+    assert f"from {at * 39 * 0.1:.2f} s into its 3.90 s)" in caplog.text
 
 
 def test_the_planner_never_publishes_a_path_into_the_table(scene, robot, cost) -> None:
