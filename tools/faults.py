@@ -101,7 +101,8 @@ def measure_kill(system: ProcessSystem, watcher: Watcher, victim: str, down_s: f
 def stale_releases(watcher: Watcher, limit: float, slack: float = SLACK_S) -> list[dict[str, Any]]:
     """States that were not holding although the newest plan or occupancy the watcher had seen was stale.
 
-    A state counts at its stamp (the executor's wall clock when it published it), the inputs at their
+    A state counts at its stamp (the wall time its ``q`` is for: the executor's run start on its wall clock plus its
+    own clock, which it judged staleness at; a state period or so before it published it), the inputs at their
     arrival at the watcher; ``slack`` allows for the two deliveries differing.
     """
     plans = [t for t, _ in watcher.snapshot(watcher.plans)]
@@ -110,7 +111,7 @@ def stale_releases(watcher: Watcher, limit: float, slack: float = SLACK_S) -> li
     for _, st in watcher.snapshot(watcher.states):
         if st.holding:
             continue
-        t = st.stamp - watcher.wall_offset  # when the executor published it (its wall clock, this machine's)
+        t = st.stamp - watcher.wall_offset  # when the executor judged it (its wall clock, on this machine's)
         last_plan = max((p for p in plans if p <= t), default=None)
         last_occ = max((o for o in occ if o <= t), default=None)
         ages = {"plan": None if last_plan is None else t - last_plan,
