@@ -38,9 +38,11 @@ class ServiceProcess:
 
     The process runs in its own process group, so a terminal's Ctrl-C (SIGINT to the foreground
     group) reaches only the parent, which stops its services once each, in its own order (the
-    executor first, which closes the MCAP). Should the parent die without stopping them, each service
-    sees it (:data:`shared.runtime.PARENT_ENV` names the parent's pid; :func:`shared.runtime.watch_parent`) and stops
-    by itself.
+    executor first, which closes the MCAP). It starts with SIGINT blocked: a Ctrl-C in the instant
+    it is forked, while still in the parent's group, is held, not fatal, and its service drops it
+    as it installs its handlers (:func:`shared.stopping.stop_on_signals`). Should the parent die
+    without stopping them, each service sees it (:data:`shared.runtime.PARENT_ENV` names the
+    parent's pid; :func:`shared.runtime.watch_parent`) and stops by itself.
 
     Args:
         name: Service name; also the liveliness token it declares (``<prefix>/alive/<name>``).
@@ -75,10 +77,17 @@ class ServiceProcess:
                           f"{self.proc.returncode}) ---\n".encode())
                 out.flush()
             self._log_from = out.tell()  # this run's output starts here (tail reads no earlier run's, nor the banner)
-            self.proc = subprocess.Popen(self.command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                         process_group=0,
-                                         env={**os.environ, "PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid()),
-                                              **self.env})
+            # the child leaves this process's group only once forked (Popen's setpgid, just before exec): a Ctrl-C to
+            # the group in between reached it too and killed it ("replayer exited with status -2" after Ctrl-C at
+            # "planner up"). Forked with SIGINT blocked, it holds that one and drops it (shared.stopping)
+            held = signal.pthread_sigmask(signal.SIG_BLOCK, [signal.SIGINT])
+            try:
+                self.proc = subprocess.Popen(self.command, stdout=out, stderr=subprocess.STDOUT,
+                                             stdin=subprocess.DEVNULL, process_group=0,
+                                             env={**os.environ, "PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid()),
+                                                  **self.env})
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, held)
         log.info("started %s (pid %d): %s", self.name, self.proc.pid, " ".join(self.command))
         return self
 

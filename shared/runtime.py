@@ -17,6 +17,7 @@ from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolv
 from shared.native_threads import limit_blas_threads
 from shared.stopping import (
     FORCED_EXIT,
+    PARENT_ENV,
     SHUTDOWN_GRACE_S,
     SIGNAL_ECHO_S,
     STOP_POLL_S,
@@ -33,8 +34,6 @@ __all__ = ["setup_logging", "fail", "stop_on_signals", "interruptible", "cli_err
 
 OWN_LOGGERS = ("foresight", "shared", "services", "tools")
 """The loggers of Foresight's code (its ``foresight.*`` names and its modules'), which ``--log-level`` sets."""
-PARENT_ENV = "FORESIGHT_PARENT_PID"
-"""Environment variable with the pid of the process that started this one (``foresight demo``, tests)."""
 
 
 class UserError(Exception):

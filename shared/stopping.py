@@ -20,7 +20,7 @@ from contextlib import contextmanager
 from shared.signal_relay import interrupt_main_thread, relaying, watch_signals
 
 __all__ = ["StoppedWhileStarting", "stop_on_signals", "interruptible", "wait_for_stop", "exit_within",
-           "SHUTDOWN_GRACE_S", "SIGNAL_ECHO_S", "STOP_POLL_S", "FORCED_EXIT"]
+           "SHUTDOWN_GRACE_S", "SIGNAL_ECHO_S", "STOP_POLL_S", "FORCED_EXIT", "PARENT_ENV"]
 
 class StoppedWhileStarting(Exception):  # noqa: N818 (a stop, not an error)
     """A stop (a signal) came while the service was still starting, e.g. waiting for its router: it ends with 0."""
@@ -35,6 +35,10 @@ RELAY_AFTER_S = 0.05
 """How long :func:`interruptible` lets the main thread run its handler itself before passing the signal on to it."""
 FORCED_EXIT = 3
 """Exit status of a process that did not stop within :data:`SHUTDOWN_GRACE_S` (or got a second signal)."""
+PARENT_ENV = "FORESIGHT_PARENT_PID"
+"""Environment variable with the pid of the process that started this one (``foresight demo``, tests)."""
+
+
 @contextmanager
 def interruptible(stop: threading.Event, grace_s: float | None = None, prog: str | None = None) -> Iterator[None]:
     """Within the block, SIGINT/SIGTERM set ``stop`` and interrupt the main thread at once (``KeyboardInterrupt``).
@@ -156,6 +160,7 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
     unwatch: Callable[[], None] | None = None
     for s in old:
         signal.signal(s, handler)
+    _drop_parents_interrupt()
     _unblock(old)  # before the relay thread starts (the first call in a process): it inherits the mask
     unwatch = watch_signals(on_signal)
 
@@ -208,6 +213,21 @@ def _unblock(signals: Iterable[int]) -> None:
     compose down``'s SIGTERM and Ctrl-C until it was killed.
     """
     signal.pthread_sigmask(signal.SIG_UNBLOCK, list(signals))
+
+
+def _drop_parents_interrupt() -> None:
+    """Drop the SIGINT held since start by a process that a Foresight parent started (:data:`PARENT_ENV`).
+
+    :class:`services.processes.ServiceProcess` forks its process with SIGINT blocked: until the fork has moved it
+    into a process group of its own, a terminal's Ctrl-C to the parent's group reaches it too, and killed it before
+    it had a handler ("replayer exited with status -2" after Ctrl-C of ``foresight demo``). That Ctrl-C is the
+    parent's, which stops its services itself, in its own order: obeyed here, the service would stop on its own, and
+    the parent's SIGTERM coming later would be a second signal (a forced exit).
+    """
+    if not os.environ.get(PARENT_ENV) or signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, []):
+        return
+    if signal.SIGINT in signal.sigpending():
+        signal.sigtimedwait([signal.SIGINT], 0)
 
 
 def _forced_exit(prog: str | None, why: str, stacks: bool = True) -> None:

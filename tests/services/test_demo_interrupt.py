@@ -38,6 +38,9 @@ def _row(step: int) -> str:
 MOMENTS = {
     "training done, services not started": ("foresight demo: prediction model", 0.0, signal.SIGINT, True),
     "services starting": ("foresight demo: router on", 0.3, signal.SIGINT, True),
+    # the replayer is being forked as the line comes: a Ctrl-C then killed it, 1 run in 10 ("replayer exited with
+    # status -2"); tests/services/test_processes.py hits that instant every time
+    "replayer starting": ("foresight demo: planner up", 0.0, signal.SIGINT, True),
     # `kill PID`, as a process manager stops it: SIGTERM to the demo alone
     "mid-run, SIGTERM to the demo alone": (_row(STEPS // 2), 0.0, signal.SIGTERM, False),
     "last step, shutting down": (_row(STEPS - 1), 0.0, signal.SIGINT, True),
@@ -103,6 +106,7 @@ def _check_run(run_dir: Path, lines: list[str], returncode: int) -> list[str]:
     text = "\n".join(lines)
     assert returncode in (0, 130), text[-3000:]
     assert "Traceback" not in text and "status 3" not in text, text[-3000:]
+    assert "exited with status" not in text and "was killed" not in text, text[-3000:]  # no service's end is a fault
     for log in run_dir.rglob("*.log"):
         body = log.read_text(errors="replace")
         assert "exiting with status 3" not in body and "Traceback" not in body, f"{log}:\n{body[-3000:]}"
@@ -128,7 +132,7 @@ def test_ctrl_c_at_any_moment_leaves_complete_logs(moment: str, demo_inputs: tup
         assert summary, "\n".join(lines)[-3000:]
         if mcaps:
             assert any("complete" in ln and mcaps[0] in ln for ln in lines)
-    if moment not in ("training done, services not started", "services starting"):
+    if moment not in ("training done, services not started", "services starting", "replayer starting"):
         assert mcaps, "\n".join(lines)[-3000:]  # the executor was running: its log exists
     assert stop_s < 60.0
 

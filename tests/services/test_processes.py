@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
 from services.processes import ServiceProcess
 from shared.runtime import UserError
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_service_process_reports_early_exit(tmp_path):
@@ -77,3 +84,42 @@ def test_the_tail_of_a_restarted_service_is_its_own_output(tmp_path):
     proc.start()
     proc.proc.wait(30)
     assert proc.tail(1) == "" and "started again" in (tmp_path / "planner.log").read_text()
+
+
+RAINED_ON = """
+import json, signal, sys
+from pathlib import Path
+from services.processes import ServiceProcess
+signal.signal(signal.SIGINT, lambda *a: None)  # the demo's: its Ctrl-C is its own, it stops its services itself
+print("ready", flush=True)
+codes = []
+for i in range(int(sys.argv[2])):
+    proc = ServiceProcess("quick", "quick", [], Path(sys.argv[1]) / "quick.log", env={"PYTHONPATH": sys.argv[1]})
+    codes.append(proc.start().proc.wait(30))
+print(json.dumps(codes), flush=True)
+"""
+
+
+def test_a_ctrl_c_to_the_parents_group_as_a_service_is_forked_does_not_kill_it(tmp_path):
+    """A service joins a process group of its own only once forked: a Ctrl-C to the demo's group in that instant
+    killed it before it had a handler, and the demo warned "replayer exited with status -2" (1 run in 10 with
+    Ctrl-C at "planner up", the replayer's start)."""
+    (tmp_path / "quick.py").write_text("")
+    starts = 40
+    parent = subprocess.Popen([sys.executable, "-c", RAINED_ON, str(tmp_path), str(starts)], cwd=REPO,
+                              stdout=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        assert parent.stdout is not None and parent.stdout.readline().startswith("ready")
+        deadline = time.monotonic() + 120
+        while parent.poll() is None and time.monotonic() < deadline:
+            try:
+                os.killpg(parent.pid, signal.SIGINT)  # Ctrl-C after Ctrl-C to the parent's group, as a terminal
+            except ProcessLookupError:
+                break
+            time.sleep(0.0003)
+        codes = json.loads(parent.communicate(timeout=30)[0])
+    finally:
+        if parent.poll() is None:
+            os.killpg(parent.pid, signal.SIGKILL)
+            parent.wait(timeout=10)
+    assert codes == [0] * starts

@@ -303,3 +303,43 @@ def test_a_signal_another_thread_received_still_ends_the_wait_for_stop(wait, sig
     Now the relay (:mod:`shared.signal_relay`) sets ``stop`` from a thread of its own: both end at once."""
     end = signalled(["-c", WAITING, wait], [(signal.SIGTERM, 0.0)], timeout=20)
     assert (end.returncode, end.stdout.strip()) == (0, "stopped"), end.stderr
+
+
+HELD = """
+import dataclasses, os, signal, sys, time
+from shared.runtime import PARENT_ENV, service_main
+
+@dataclasses.dataclass
+class Config:
+    log_level: str = "INFO"
+
+def make(cfg, zcfg, stop):
+    def run():
+        print("serving", flush=True)
+        time.sleep(0.5)  # past a first signal's echo: had the held Ctrl-C been obeyed, this were a second signal
+        os.kill(os.getpid(), signal.SIGTERM)  # the parent stopping its services
+        print("stopped" if stop.wait(30) else "running", flush=True)
+    return run
+
+signal.pthread_sigmask(signal.SIG_BLOCK, [signal.SIGINT])  # as services.processes.ServiceProcess forks it
+os.kill(os.getpid(), signal.SIGINT)  # a Ctrl-C to the parent's group as it was forked: held
+if sys.argv[1] == "parent":
+    os.environ[PARENT_ENV] = str(os.getppid())
+else:
+    os.environ.pop(PARENT_ENV, None)
+print("ready", flush=True)
+sys.exit(service_main(["--listen", "tcp/127.0.0.1:0"], "foresight replayer", section="replayer", config_cls=Config,
+                      description="", make=make))
+"""
+
+
+def test_a_ctrl_c_held_since_a_parent_forked_the_service_is_the_parents_and_dropped(signalled) -> None:
+    """The parent (``foresight demo``) got the same Ctrl-C and stops its services itself, in its own order, with
+    SIGTERM; the held one was obeyed as the handlers were installed: the service stopped while starting."""
+    end = signalled(["-c", HELD, "parent"], [], timeout=30)
+    assert (end.returncode, end.stdout.split()) == (0, ["serving", "stopped"]), end.stderr[-2000:]
+    assert "stopped while starting" not in end.stderr, end.stderr[-2000:]
+    # without a Foresight parent, a Ctrl-C held since start (a parent of another kind blocked it) is this one's
+    end = signalled(["-c", HELD, "none"], [], timeout=30)
+    assert end.returncode == 0 and "serving" not in end.stdout, end.stderr[-2000:]
+    assert "foresight replayer: stopped while starting" in end.stderr, end.stderr[-2000:]
