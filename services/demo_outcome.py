@@ -147,9 +147,10 @@ def novelty_lines(outcomes: list[Outcome]) -> list[str]:
     for o in (o for o in outcomes if o.unfamiliar):
         run = f" ({o.planner} run)" if len(outcomes) > 1 else ""
         out.append(f"novelty{run}: the predictor called {o.unfamiliar} of {o.judged} poses unlike every class (its "
-                   "novelty test): the class it names then is only the least unlikely. Its threshold is learnt from "
-                   "the library's features as recorded: a known reach seen through a noisy sensor (2 cm on body "
-                   "keypoints) falls below it at most poses (docs/prediction.md, 'Novelty')")
+                   "novelty test): the class it names then is only the least unlikely. Its threshold suits the sensor "
+                   "the model was calibrated for (foresight train --sensor-noise-m; the demo's: --keypoint-noise-m): "
+                   "a known reach seen through a noisier one falls below it at most poses (docs/prediction.md, "
+                   "'A noisy sensor')")
     return out
 
 

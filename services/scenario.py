@@ -95,7 +95,7 @@ def _damage(path: Path) -> str:
 def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Sequence[Demonstration],
               models_dir: Path, components: int | None = None, progress: bool = True,
               fit_cache: MutableMapping[str, Any] | None = None, volume: str | None = None,
-              on_train: Callable[[Path], None] | None = None) -> Path:
+              on_train: Callable[[Path], None] | None = None, sensor_noise_m: float = 0.0) -> Path:
     """The prediction model for a run: trained on ``library`` without ``held_out``, cached in ``models_dir``.
 
     The cache key covers the library's data, the held-out demonstrations, the scene and the training
@@ -113,6 +113,8 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
         volume: Volume method (``foresight train --volume``; None: the trainer's default).
         on_train: Called with the model's path before it is trained (not when it is cached): a caller says why
             the next minute passes.
+        sensor_noise_m: The keypoint noise the novelty threshold is calibrated for (``foresight train
+            --sensor-noise-m``; 0: the features as recorded). In the key: another noise is another model.
 
     Returns:
         Path of the model file (trained now if it was not cached).
@@ -127,6 +129,8 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
         cfg = replace(cfg, gmm=replace(cfg.gmm, n_components=components))
     if volume is not None:
         cfg = replace(cfg, volume=volume)
+    if sensor_noise_m:  # in repr(cfg), the key, only where set: the models cached before keep their keys
+        cfg = replace(cfg, sensor_noise_m=sensor_noise_m)
     out = [held_out] if isinstance(held_out, Demonstration) else list(held_out)
     left = sorted((d.label, d.index) for d in out)
     key = hashlib.sha256(json.dumps([_library_digest(library), left, repr(scene), repr(cfg),

@@ -32,6 +32,8 @@ Contents (M classes, K Gaussians at most per class, F posture features, D featur
 | ``temperature`` | float | posterior temperature tau (optional: files without it use 1, the paper's) |
 | ``novelty_threshold``, ``novelty_window``, ``novelty_quantile``, ``novelty_heldout`` | f8, i8, f8, i8 | the novelty
   test (:mod:`services.predictor.novelty`; optional: files without it call every motion familiar) |
+| ``novelty_sensor_noise_m`` | f8 | the keypoint noise the novelty test was calibrated for (written when not 0; files
+  without it: 0, the features as recorded) |
 
 Version 2 added ``volume_method``, ``volume_probabilities`` and the ``timed_*`` arrays; version 1 files
 (paper volumes) still load.
@@ -231,6 +233,8 @@ class PredictionModel:
             arrays["novelty_window"] = np.array(int(self.novelty.window), dtype=np.int64)
             arrays["novelty_quantile"] = np.array(float(self.novelty.quantile))
             arrays["novelty_heldout"] = np.array(int(self.novelty.heldout), dtype=np.int64)
+            if self.novelty.sensor_noise_m:  # absent at 0: a model calibrated as before is the same file
+                arrays["novelty_sensor_noise_m"] = np.array(float(self.novelty.sensor_noise_m))
         with atomic_write(p) as f:  # an interrupted save leaves no half model in the cache
             np.savez_compressed(f, **arrays)
 
@@ -356,8 +360,9 @@ class PredictionModel:
             raise ValueError(f"human_pelvis must be 4 finite numbers (x, y, z, yaw), got shape {pelvis.shape}")
         novelty = None
         if "novelty_threshold" in d:
+            noise = float(d["novelty_sensor_noise_m"]) if "novelty_sensor_noise_m" in d else 0.0
             novelty = NoveltyTest(float(d["novelty_threshold"]), int(d["novelty_window"]),
-                                  float(d["novelty_quantile"]), int(d["novelty_heldout"]))
+                                  float(d["novelty_quantile"]), int(d["novelty_heldout"]), noise)
         motions = d["motions"].astype(np.float64)
         lengths = d["motion_lengths"].astype(np.int64)
         if motions.shape[0] != m or motions.shape[2] != len(feature_names) or lengths.shape != (m,) \

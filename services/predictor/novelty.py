@@ -19,9 +19,12 @@ looked. The threshold is the ``quantile`` of those minima (the one at ``floor(q 
 the default 0.05, about one held-out demonstration of a known class in twenty is called unfamiliar at some moment
 of its motion, given enough of them; with 20 or fewer, none is (the least minimum: as quantile 0).
 
-Those demonstrations are the library's features as recorded: no sensor's noise is in the threshold. A known reach
-seen as body keypoints with 2 cm of noise, fitted back as the tracker does, falls below it at most frames
-(docs/prediction.md, 'A noisy sensor').
+By default those demonstrations are scored as recorded: no sensor's noise is in the threshold, and a known reach seen
+as body keypoints with 2 cm of noise, fitted back as the tracker does, falls below it at most frames. ``foresight
+train --sensor-noise-m SIGMA`` scores them as the tracker would give them (:func:`through_sensor`: the human model's
+keypoints with SIGMA of seeded noise per axis, fitted back and smoothed as the tracker does); the mixtures stay fitted
+to the features as recorded, and the test records the noise it was calibrated for (docs/prediction.md, 'A noisy
+sensor').
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ from .calibration import fold_mixtures
 from .gmm import MixtureBank
 
 __all__ = ["DEFAULT_WINDOW", "DEFAULT_QUANTILE", "MIN_FRAMES", "NoveltyTest", "familiarity", "least_familiarity",
-           "FamiliarityWindow", "heldout_minima", "learn_novelty", "threshold_at", "first_unfamiliar"]
+           "FamiliarityWindow", "heldout_minima", "learn_novelty", "threshold_at", "first_unfamiliar", "through_sensor"]
 
 DEFAULT_WINDOW = 10
 """Frames the familiarity looks back over (a third of a second at 30 Hz)."""
@@ -59,12 +62,15 @@ class NoveltyTest:
         window: Frames W of the familiarity's median.
         quantile: The share of held-out training demonstrations the threshold lets fall below it.
         heldout: How many held-out demonstrations it was learnt from.
+        sensor_noise_m: The keypoint noise per axis (m) the held-out demonstrations were scored under
+            (:func:`through_sensor`); 0: their features as recorded.
     """
 
     threshold: float
     window: int = DEFAULT_WINDOW
     quantile: float = DEFAULT_QUANTILE
     heldout: int = 0
+    sensor_noise_m: float = 0.0
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.threshold):
@@ -73,11 +79,16 @@ class NoveltyTest:
             raise ValueError(f"novelty window must be an integer in [1, 10000] frames, got {self.window!r}")
         if not (0.0 <= self.quantile < 1.0):
             raise ValueError(f"novelty quantile must be in [0, 1), got {self.quantile}")
+        if not (np.isfinite(self.sensor_noise_m) and 0.0 <= self.sensor_noise_m < 1.0):
+            raise ValueError(f"novelty sensor noise must be in [0, 1) m, got {self.sensor_noise_m}")
 
     def describe(self) -> str:
-        """One line for ``foresight train``'s output and the predictor's start line."""
+        """One line for ``foresight train``'s output and the predictor's start line, with the sensor it suits."""
+        sensor = (f"scored as body keypoints with {self.sensor_noise_m * 100:g} cm of noise per axis, fitted back as "
+                  "the tracker does" if self.sensor_noise_m else "scored as recorded: calibrated for no sensor's "
+                  "noise (foresight train --sensor-noise-m)")
         return (f"novelty threshold {self.threshold:.2f} nats/frame over {self.window} frames (the "
-                f"{self.quantile:g} quantile of {self.heldout} held-out demonstrations' least familiarity)")
+                f"{self.quantile:g} quantile of {self.heldout} held-out demonstrations' least familiarity; {sensor})")
 
 
 def familiarity(log_likelihood: np.ndarray, window: int = DEFAULT_WINDOW) -> np.ndarray:
@@ -132,7 +143,7 @@ class FamiliarityWindow:
 
 
 def heldout_minima(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], GaussianMixture], folds: int,
-                   window: int = DEFAULT_WINDOW) -> np.ndarray:
+                   window: int = DEFAULT_WINDOW, scored: list[list[np.ndarray]] | None = None) -> np.ndarray:
     """The least familiarity of every training demonstration, each scored with its fold held out.
 
     Args:
@@ -141,22 +152,26 @@ def heldout_minima(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], Ga
             cross-validation fitted the same folds).
         folds: Folds (:func:`~services.predictor.calibration.fold_mixtures`, the temperature's).
         window: Frames W of the familiarity.
+        scored: What each held-out demonstration is scored on, encoded as ``feats`` (e.g. through a sensor:
+            :func:`through_sensor`); None: ``feats`` themselves. The mixtures are fitted to ``feats``.
 
     Returns:
         ``(N,)`` one minimum per held-out demonstration (empty when a class has fewer than 2).
     """
     if min(len(f) for f in feats) < 2 or folds < 2:
         return np.empty(0)
+    seen = feats if scored is None else scored
     out = []
     for held, mixtures in fold_mixtures(feats, fit, folds):
         bank = MixtureBank.from_sklearn(mixtures)
         for m, js in enumerate(held):
-            out.extend(least_familiarity(familiarity(bank.log_likelihood(feats[m][j]), window)) for j in js)
+            out.extend(least_familiarity(familiarity(bank.log_likelihood(seen[m][j]), window)) for j in js)
     return np.array(out)
 
 
 def learn_novelty(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], GaussianMixture], folds: int,
-                  window: int = DEFAULT_WINDOW, quantile: float = DEFAULT_QUANTILE) -> NoveltyTest | None:
+                  window: int = DEFAULT_WINDOW, quantile: float = DEFAULT_QUANTILE,
+                  scored: list[list[np.ndarray]] | None = None, sensor_noise_m: float = 0.0) -> NoveltyTest | None:
     """The novelty test of a training set, or None when no demonstration can be held out.
 
     Args:
@@ -165,11 +180,58 @@ def learn_novelty(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray], Gau
         folds: Folds of the held-out scoring.
         window: Frames W of the familiarity.
         quantile: The threshold's quantile of the held-out minima (0: the least of them).
+        scored: The held-out demonstrations as scored (:func:`heldout_minima`); None: ``feats``.
+        sensor_noise_m: The sensor's noise ``scored`` went through, recorded in the test (0: none).
     """
-    minima = heldout_minima(feats, fit, folds, window)
+    minima = heldout_minima(feats, fit, folds, window, scored)
     if minima.size == 0:
         return None
-    return NoveltyTest(threshold_at(minima, quantile), window, quantile, int(minima.size))
+    return NoveltyTest(threshold_at(minima, quantile), window, quantile, int(minima.size), sensor_noise_m)
+
+
+def through_sensor(features: list[list[np.ndarray]], noise_m: float, seed: int = 0) -> list[list[np.ndarray]]:
+    """Demonstrations as the tracker gives a live person's: noisy body keypoints, fitted back and smoothed.
+
+    Per demonstration: the human model's joint positions, Gaussian noise of ``noise_m`` per axis (one generator
+    seeded with ``seed``, drawn demonstration by demonstration in the order given), the model fitted back frame by
+    frame, each frame warm-started from the last one taken (:meth:`~shared.keypoints.fit.KeypointFit.fit_sequences`,
+    the tracker's fit, refusing a frame over the tracker's ``max_residual_m``; a refused one is interpolated between
+    the frames taken, as the tracker bridges it), then One-Euro smoothed with the tracker's defaults, a pose every
+    ``1 / pose_rate_hz`` (:class:`services.tracker.core.TrackerConfig`). A person's ``[tracker]`` options are not
+    known here: the calibration is for the defaults.
+
+    Args:
+        features: Per class, each demonstration's ``(T, 12)`` features as recorded (the paper's 12, the set the live
+            pipeline streams).
+        noise_m: Standard deviation of the noise per axis (m); 0: clean keypoints, still fitted back.
+        seed: Seed of the noise.
+
+    Returns:
+        The same demonstrations' ``(T, 12)`` features as the tracker would publish them.
+    """
+    from services.tracker.core import TrackerConfig  # the tracker's fit, limits and smoothing: only when asked for
+    from services.tracker.filters import OneEuroFilter
+    from shared.human import HumanModel
+    from shared.keypoints.fit import KeypointFit
+
+    cfg, model, rng = TrackerConfig(), HumanModel(), np.random.default_rng(seed)
+    demos = [d for ds in features for d in ds]
+    pts = [model.joint_positions(np.asarray(d, dtype=np.float64)) for d in demos]
+    pts = [p + rng.normal(0.0, noise_m, p.shape) for p in pts] if noise_m > 0 else pts
+    longest = max(len(p) for p in pts)
+    batch = np.stack([np.concatenate([p, np.repeat(p[-1:], longest - len(p), 0)]) for p in pts])  # padding: unused
+    res = KeypointFit().fit_sequences(batch, max_residual_m=cfg.max_residual_m)
+    assert res.refused is not None
+    out: list[np.ndarray] = []
+    for i, d in enumerate(demos):
+        f, taken = res.features[i, :len(d)], ~res.refused[i, :len(d)]
+        if taken.any() and not taken.all():
+            t = np.arange(len(d))
+            f = np.stack([np.interp(t, t[taken], f[taken, k]) for k in range(f.shape[1])], axis=-1)
+        smooth = OneEuroFilter(cfg.min_cutoff_hz, cfg.beta)
+        out.append(np.array([smooth(x, t / cfg.pose_rate_hz) for t, x in enumerate(f)]))
+    sizes = np.cumsum([0, *(len(ds) for ds in features)])
+    return [out[a:b] for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
 
 
 def threshold_at(minima: np.ndarray, quantile: float) -> float:

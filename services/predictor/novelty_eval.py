@@ -10,6 +10,11 @@ posterior reports however unlike the motion is). The known classes' own held-out
 false alarms, about the quantile by construction) are counted from the same folds, and a last line gives both
 shares at other quantiles (the trade-off ``foresight train --novelty-quantile`` chooses on). ``--json`` prints
 one object; the PNG shows both.
+
+``--sensor-noise-m SIGMA`` puts every demonstration, known and left out, through the same sensor before it is
+scored (:func:`services.predictor.novelty.through_sensor`: body keypoints with SIGMA of noise per axis, seeded, fitted
+back as the tracker does), the threshold so calibrated as ``foresight train --sensor-noise-m`` calibrates it: what a
+noisy sensor leaves the test able to tell apart. The mixtures stay fitted to the features as recorded.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from threadpoolctl import threadpool_limits
 from shared import strict_json
 from shared.arguments import ArgumentParser
 from shared.atomic_file import ready_to_write
+from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import MotionLibrary, load_library
 from shared.progress import progress as progress_bar
 from shared.runtime import UserError, cli_errors
@@ -43,6 +49,7 @@ from .novelty import (
     heldout_minima,
     least_familiarity,
     threshold_at,
+    through_sensor,
 )
 from .train import DEFAULT_FEATURES, default_library
 
@@ -96,6 +103,7 @@ class NoveltyResult:
     window: int
     quantile: float
     classes: list[LeftOut] = field(default_factory=list)
+    sensor_noise_m: float = 0.0
 
     def detection(self, quantile: float | None = None) -> float:
         """Share of all left-out demonstrations flagged."""
@@ -110,8 +118,10 @@ class NoveltyResult:
     def lines(self) -> list[str]:
         """The table as text, and the trade-off across quantiles."""
         q = self.quantile
+        sensor = (f"; every demonstration as body keypoints with {self.sensor_noise_m * 100:g} cm of noise per axis, "
+                  "fitted back as the tracker does" if self.sensor_noise_m else "")
         out = [f"novelty, leave one class out: {self.library} (window {self.window} frames, threshold at the "
-               f"{q:g} quantile of the known classes' held-out demonstrations' least familiarity)",
+               f"{q:g} quantile of the known classes' held-out demonstrations' least familiarity{sensor})",
                f"{'left-out class':<24} {'demos':>5} {'threshold':>10} {'flagged':>8} {'first flag':>11}  "
                "taken for (most often)"]
         for c in self.classes:
@@ -129,7 +139,7 @@ class NoveltyResult:
     def to_json(self) -> dict[str, Any]:
         """One JSON object: the options, per left-out class its numbers, the totals and the trade-off."""
         q = self.quantile
-        return {"library": self.library, "window": self.window, "quantile": q,
+        return {"library": self.library, "window": self.window, "quantile": q, "sensor_noise_m": self.sensor_noise_m,
                 "detection": self.detection(), "false_alarms": self.false_alarms(),
                 "trade_off": [{"quantile": t, "detection": self.detection(t), "false_alarms": self.false_alarms(t)}
                               for t in TRADE_OFF],
@@ -142,7 +152,8 @@ class NoveltyResult:
 
 
 def run_novelty(library: MotionLibrary, gmm: GMMConfig, folds: int = DEFAULT_FOLDS, window: int = DEFAULT_WINDOW,
-                quantile: float = DEFAULT_QUANTILE, progress: bool = True) -> NoveltyResult:
+                quantile: float = DEFAULT_QUANTILE, progress: bool = True, sensor_noise_m: float = 0.0,
+                seed: int = 0) -> NoveltyResult:
     """Leave each class out in turn and play its demonstrations to the other classes' novelty test.
 
     Args:
@@ -152,23 +163,33 @@ def run_novelty(library: MotionLibrary, gmm: GMMConfig, folds: int = DEFAULT_FOL
         window: Frames of the familiarity.
         quantile: The threshold's quantile.
         progress: Show a tqdm bar.
+        sensor_noise_m: Every demonstration is scored as body keypoints with this noise per axis (m), fitted back
+            as the tracker does (the library must have the paper's 12 features); 0: as recorded.
+        seed: Seed of the sensor's noise.
     """
     if library.n_classes < 3 or min(library.counts()) < 2:
         raise UserError(f"library {library.source}: leaving a class out needs >= 3 classes of >= 2 demonstrations, "
                         f"got {library.counts()}")
     enc = FeatureEncoder(DEFAULT_FEATURES, feature_names=library.feature_names, source=f"library {library.source}")
     feats = [[enc.batch(d.features) for d in library.demos if d.label == m] for m in range(library.n_classes)]
+    scored = feats
+    if sensor_noise_m:
+        require_mapping(library.feature_names, "--sensor-noise-m (the tracker's fit of body keypoints)",
+                        f"library {library.source}", exact=LIVE_MAPPING)
+        scored = [[enc.batch(f) for f in ds] for ds in through_sensor(
+            [[d.features for d in library.demos if d.label == m] for m in range(library.n_classes)], sensor_noise_m,
+            seed)]
     cache: dict[str, Any] = {}  # a class's fold fits are the same whichever other class is left out
     fit = partial(class_fit, gmm=gmm, cache=cache)
-    result = NoveltyResult(library.source, window, quantile)
+    result = NoveltyResult(library.source, window, quantile, sensor_noise_m=sensor_noise_m)
     names = list(library.class_names)
     for c in progress_bar(range(library.n_classes), desc="novelty (class left out)", unit="class", enabled=progress):
         known = [m for m in range(library.n_classes) if m != c]
         with threadpool_limits(1):
-            minima = heldout_minima([feats[m] for m in known], fit, folds, window)
+            minima = heldout_minima([feats[m] for m in known], fit, folds, window, [scored[m] for m in known])
             bank = MixtureBank.from_sklearn([fit(np.vstack(feats[m])) for m in known])
         traces, taken = [], []
-        for x in feats[c]:
+        for x in scored[c]:
             ll = bank.log_likelihood(x)                                   # (T, M - 1)
             traces.append(familiarity(ll, window))
             taken.append(names[known[int(np.argmax(ll.sum(axis=0)))]])
@@ -203,8 +224,9 @@ def plot_novelty(result: NoveltyResult, path: str | Path) -> Path:
     ax2.set_ylim(0, 101)
     for ax in (ax1, ax2):
         ax.grid(alpha=0.3)
+    sensor = f", keypoints with {result.sensor_noise_m * 100:g} cm noise" if result.sensor_noise_m else ""
     fig.suptitle(f"novelty test, each class left out in turn: {Path(result.library.split(' ')[0]).name} "
-                 f"(window {result.window} frames, quantile {result.quantile:g})", fontsize=9)
+                 f"(window {result.window} frames, quantile {result.quantile:g}{sensor})", fontsize=9)
     fig.tight_layout()
     fig.savefig(p)
     plt.close(fig)
@@ -226,13 +248,19 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
     parser.add_argument("--quantile", type=float, default=DEFAULT_QUANTILE,
                         help=f"the threshold's quantile (foresight train --novelty-quantile; default: "
                              f"{DEFAULT_QUANTILE})")
+    parser.add_argument("--sensor-noise-m", type=float, default=0.0, metavar="SIGMA",
+                        help="score every demonstration as body keypoints with SIGMA of Gaussian noise per axis (m, "
+                             "seed 0), fitted back as the tracker does, the threshold calibrated so (foresight train "
+                             "--sensor-noise-m); default 0: as recorded")
     parser.add_argument("--plot", type=Path, default=Path("runs/plots/novelty.png"), help="the PNG")
     parser.add_argument("--json", action="store_true", help="print one JSON object (progress goes to stderr)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     with cli_errors(f"{prog} novelty"):
-        if args.folds < 2 or args.components < 1 or not 1 <= args.window <= 10_000 or not 0 <= args.quantile < 1:
-            raise UserError("--folds must be >= 2, --components >= 1, --window in [1, 10000], --quantile in [0, 1)")
+        if args.folds < 2 or args.components < 1 or not 1 <= args.window <= 10_000 or not 0 <= args.quantile < 1 \
+                or not 0 <= args.sensor_noise_m < 1:
+            raise UserError("--folds must be >= 2, --components >= 1, --window in [1, 10000], --quantile in [0, 1), "
+                            "--sensor-noise-m in [0, 1) m")
         ready_to_write(args.plot)
         lib = default_library() if args.library == "synthetic" else load_library(args.library)
         gmm = GMMConfig(n_components=args.components)
@@ -240,7 +268,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             gmm.validate()
         except ValueError as exc:
             raise UserError(str(exc)) from None
-        res = run_novelty(lib, gmm, args.folds, args.window, args.quantile, progress=not args.quiet)
+        res = run_novelty(lib, gmm, args.folds, args.window, args.quantile, progress=not args.quiet,
+                          sensor_noise_m=args.sensor_noise_m)
         png = plot_novelty(res, args.plot)
         if args.json:
             print(strict_json.dumps({**res.to_json(), "plot": str(png)}))

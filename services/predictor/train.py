@@ -5,7 +5,8 @@ demonstrations; the GMR-regressed motion (conditioned on time, :func:`services.p
 its occupancy volume ``p(x|C_m)`` in the scene (``--volume``, :mod:`services.predictor.volumes`:
 the paper's swept mean motion, the motion with its spread, the demonstrations swept, or those by
 time). The posterior temperature tau is chosen by cross-validation on the library
-(:mod:`services.predictor.calibration`) unless given.
+(:mod:`services.predictor.calibration`) unless given, and the novelty threshold learnt on held-out demonstrations
+(:mod:`services.predictor.novelty`), scored as recorded or, with ``--sensor-noise-m``, as the tracker gives them.
 Everything goes into one model file (:class:`services.predictor.model.PredictionModel`).
 
 The mixtures and motions work on any feature set the library declares; the swept volumes need a
@@ -20,7 +21,7 @@ import datetime
 import logging
 import sys
 from collections.abc import MutableMapping
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +30,7 @@ from threadpoolctl import threadpool_limits
 
 from shared.arguments import ArgumentParser
 from shared.atomic_file import ready_to_write
+from shared.feature_sets import LIVE_MAPPING, MappingError, require_mapping
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
 from shared.progress import progress as progress_bar
 from shared.runtime import UserError, cli_errors, setup_logging
@@ -41,7 +43,7 @@ from .fit_cache import cached, class_fit
 from .gmm import GMMConfig, GMMError, MixtureBank
 from .gmr import gmr
 from .model import PredictionModel, TimedVolumes, quantised
-from .novelty import DEFAULT_QUANTILE, DEFAULT_WINDOW, learn_novelty
+from .novelty import DEFAULT_QUANTILE, DEFAULT_WINDOW, learn_novelty, through_sensor
 from .swept_volume import surface_spacing
 from .volumes import DEFAULT_VOLUME, VOLUMES
 
@@ -72,6 +74,9 @@ class TrainConfig:
         novelty_quantile: The novelty threshold's quantile of the held-out demonstrations' least familiarity
             (:mod:`services.predictor.novelty`).
         novelty_window: Frames of the familiarity's median.
+        sensor_noise_m: The novelty threshold's held-out demonstrations are scored as body keypoints with this
+            noise per axis (m, seeded by ``gmm.seed``), fitted back as the tracker does
+            (:func:`~services.predictor.novelty.through_sensor`); 0: as recorded.
     """
 
     gmm: GMMConfig = GMMConfig()
@@ -87,6 +92,16 @@ class TrainConfig:
     time_bin: int = 5
     novelty_quantile: float = DEFAULT_QUANTILE
     novelty_window: int = DEFAULT_WINDOW
+    sensor_noise_m: float = 0.0
+
+    def __repr__(self) -> str:
+        """The dataclass's repr, with ``sensor_noise_m`` only where set.
+
+        The demo's and the experiments' model caches key on it: a model trained as before keeps its key (and file).
+        """
+        shown = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in fields(self)
+                          if f.name != "sensor_noise_m" or self.sensor_noise_m)
+        return f"{type(self).__name__}({shown})"
 
 
 def default_library(scene: Scene | None = None) -> MotionLibrary:
@@ -170,6 +185,14 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
         raise UserError(f"--novelty-quantile must be in [0, 1), got {cfg.novelty_quantile}")
     if not (1 <= cfg.novelty_window <= 10_000):
         raise UserError(f"novelty window must be in [1, 10000] frames, got {cfg.novelty_window}")
+    if not (np.isfinite(cfg.sensor_noise_m) and 0.0 <= cfg.sensor_noise_m < 1.0):
+        raise UserError(f"--sensor-noise-m must be in [0, 1) m, got {cfg.sensor_noise_m}")
+    if cfg.sensor_noise_m:
+        try:  # the tracker publishes the paper's 12 features: the library's must be them to be fitted back
+            require_mapping(library.feature_names, "--sensor-noise-m (the tracker's fit of body keypoints)",
+                            f"library {library.source}", exact=LIVE_MAPPING)
+        except MappingError as exc:
+            raise UserError(str(exc)) from None
     demos = list(library.demos) if demos is None else demos
     encoder = FeatureEncoder(cfg.features, cfg.time_scale, feature_names=library.feature_names,
                              source=f"library {library.source}")
@@ -203,8 +226,11 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
                 choice = choose_temperature(feats, fit, folds=cfg.folds)
         else:
             choice = TemperatureChoice(float(cfg.temperature), "given")
+        scored = None if not cfg.sensor_noise_m else [[encoder.batch(f) for f in ds] for ds in through_sensor(
+            [[d.features for d in ds] for ds in by_class], cfg.sensor_noise_m, cfg.gmm.seed)]
         with threadpool_limits(1):  # the same folds: their fits are in the cache when the temperature was chosen
-            novelty = learn_novelty(feats, fit, cfg.folds, cfg.novelty_window, cfg.novelty_quantile)
+            novelty = learn_novelty(feats, fit, cfg.folds, cfg.novelty_window, cfg.novelty_quantile, scored,
+                                    cfg.sensor_noise_m)
     except FoldFitError as exc:  # the whole class fitted; a fold without one of its demonstrations did not
         raise UserError(f"library {library.source}: {exc.naming(library.class_names[exc.class_index])}") from None
     bank = MixtureBank.from_sklearn(mixtures)
@@ -293,6 +319,11 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
                              "least familiarity, so about Q of known motions are called unfamiliar at some moment "
                              "(given more than 1/Q demonstrations; 0: the least of them; default: "
                              f"{DEFAULT_QUANTILE})")
+    parser.add_argument("--sensor-noise-m", type=float, default=0.0, metavar="SIGMA",
+                        help="calibrate the novelty threshold for a sensor: its held-out demonstrations are scored "
+                             "as body keypoints with SIGMA of Gaussian noise per axis (m, seeded by --seed), fitted "
+                             "back and smoothed as the tracker does (the library must have the paper's 12 features); "
+                             "default 0: as recorded")
     parser.add_argument("--volume", choices=VOLUMES, default=DEFAULT_VOLUME,
                         help="per-class occupancy p(x|C_m): paper = body swept along the mean motion (0/1); "
                              "spread = trajectories drawn within the GMR covariance; demos = the training "
@@ -321,7 +352,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
             raise UserError(str(exc)) from None
         cfg = TrainConfig(gmm=gcfg, features=args.features, resolution=args.resolution, interior=args.interior,
                           temperature=args.temperature, volume=args.volume, folds=args.folds,
-                          novelty_quantile=args.novelty_quantile)
+                          novelty_quantile=args.novelty_quantile, sensor_noise_m=args.sensor_noise_m)
         model = train_model(lib, scene, cfg, demos, progress=not args.quiet)
         model.save(args.out)
         size = Path(args.out).stat().st_size

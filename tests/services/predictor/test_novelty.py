@@ -19,6 +19,7 @@ from services.predictor.novelty import (
     heldout_minima,
     learn_novelty,
     least_familiarity,
+    through_sensor,
 )
 from services.predictor.train import TrainConfig, train_model
 
@@ -130,3 +131,74 @@ def test_novelty_test_checks_its_values():
         NoveltyTest(-3.0, window=0)
     with pytest.raises(ValueError, match="quantile"):
         NoveltyTest(-3.0, quantile=1.5)
+
+
+def test_a_sensor_s_noise_lowers_the_threshold_and_the_model_file_keeps_what_it_was_calibrated_for(
+        small_library, small_model, scene, tmp_path):
+    """`foresight train --sensor-noise-m`: the held-out demonstrations are scored as the tracker gives a live person's
+    (2 cm of keypoint noise fitted back: every known reach fell below the threshold learnt as recorded)."""
+    import dataclasses
+
+    from .conftest import _FITS
+
+    noisy = train_model(small_library, scene, dataclasses.replace(SMALL, sensor_noise_m=0.02), progress=False,
+                        fit_cache=dict(_FITS))
+    clean = small_model.novelty
+    assert clean is not None and noisy.novelty is not None
+    assert clean.sensor_noise_m == 0.0 and noisy.novelty.sensor_noise_m == 0.02
+    assert noisy.novelty.threshold < clean.threshold - 1.0  # the fitted features' error: far less familiar
+    assert noisy.novelty.heldout == clean.heldout and "2 cm of noise" in noisy.novelty.describe()
+    assert "calibrated for no sensor" in clean.describe()
+    np.testing.assert_array_equal(noisy.means, small_model.means)  # the mixtures: fitted to the features as recorded
+    path = tmp_path / "noisy.npz"
+    noisy.save(path)
+    assert PredictionModel.load(path).novelty == noisy.novelty
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    older = {k: v for k, v in arrays.items() if k != "novelty_sensor_noise_m"}  # a file from before: as recorded
+    np.savez_compressed(tmp_path / "old.npz", **older)
+    assert PredictionModel.load(tmp_path / "old.npz").novelty.sensor_noise_m == 0.0
+    np.savez_compressed(tmp_path / "bad.npz", **{**arrays, "novelty_sensor_noise_m": np.array(-0.01)})
+    with pytest.raises(ModelError, match="sensor noise"):
+        PredictionModel.load(tmp_path / "bad.npz")
+
+
+def test_no_sensor_noise_is_the_threshold_and_the_file_as_before(small_library, small_model, tmp_path):
+    """0 (the default) scores the features as recorded: the threshold is learn_novelty's on them, and the file has
+    no new array (a model trained as before is the same file, but for its time of training)."""
+    enc = FeatureEncoder("paper", feature_names=small_library.feature_names)
+    feats = [[enc.batch(d.features) for d in small_library.by_class(m)] for m in range(small_library.n_classes)]
+    fit = partial(class_fit, gmm=SMALL.gmm, cache={})
+    assert learn_novelty(feats, fit, folds=3, scored=None) == small_model.novelty
+    small_model.save(tmp_path / "m.npz")
+    with np.load(tmp_path / "m.npz") as z:
+        assert [k for k in z.files if k.startswith("novelty_")] == ["novelty_threshold", "novelty_window",
+                                                                    "novelty_quantile", "novelty_heldout"]
+
+
+def test_through_the_sensor_clean_keypoints_come_back_near_the_features_and_noise_is_seeded(small_library):
+    demos = [[d.features for d in small_library.by_class(m)[:2]] for m in range(2)]
+    clean = through_sensor(demos, 0.0)
+    assert [len(c) for c in clean] == [2, 2] and all(a.shape == b.shape for c, ds in zip(clean, demos, strict=True)
+                                                     for a, b in zip(c, ds, strict=True))
+    pelvis = np.concatenate([a - b for c, ds in zip(clean, demos, strict=True)
+                             for a, b in zip(c, ds, strict=True)])[:, :3]
+    assert np.abs(pelvis).max() < 0.05  # the fit's pelvis, One-Euro smoothed (its lag in a step)
+    once, again, other = (through_sensor(demos, 0.02, seed) for seed in (0, 0, 1))
+    np.testing.assert_array_equal(once[1][0], again[1][0])
+    assert not np.array_equal(once[1][0], other[1][0])
+
+
+def test_train_refuses_a_sensor_noise_it_cannot_calibrate_for(small_library, scene):
+    from shared.feature_sets import generic_names
+    from shared.runtime import UserError
+
+    with pytest.raises(UserError, match="--sensor-noise-m must be in"):
+        train_model(small_library, scene, TrainConfig(sensor_noise_m=-0.01), progress=False)
+    import dataclasses
+
+    renamed = dataclasses.replace(small_library, feature_names=generic_names(len(small_library.feature_names)))
+    with pytest.raises(UserError, match="--sensor-noise-m .* needs the herakles feature set"):
+        train_model(renamed, scene, TrainConfig(sensor_noise_m=0.02), progress=False)
+    with pytest.raises(ValueError, match="sensor noise"):
+        NoveltyTest(-3.0, sensor_noise_m=float("nan"))

@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from services.predictor.novelty import least_familiarity
 from services.predictor.novelty_eval import TRADE_OFF, main, run_novelty
 from shared.library import save_library
 
@@ -25,6 +26,22 @@ def test_leaving_a_class_out_flags_its_demonstrations_more_than_the_known_ones(s
                for a, b in zip(TRADE_OFF, TRADE_OFF[1:], strict=False))  # a higher quantile flags more of both
 
 
+def test_through_a_noisy_sensor_every_demonstration_is_scored_as_the_tracker_gives_it(small_library):
+    """`--sensor-noise-m`: the known held-out demonstrations (the threshold's) and the left-out ones both go through
+    the sensor, so the threshold is calibrated for it: at quantile 0 no known one is flagged."""
+    clean = run_novelty(small_library, SMALL.gmm, progress=False)
+    noisy = run_novelty(small_library, SMALL.gmm, progress=False, sensor_noise_m=0.02)
+    assert noisy.sensor_noise_m == 0.02 and noisy.to_json()["sensor_noise_m"] == 0.02 and clean.sensor_noise_m == 0
+    assert "2 cm of noise" in noisy.lines()[0] and "noise" not in clean.lines()[0]
+    for c, n in zip(clean.classes, noisy.classes, strict=True):
+        assert n.known_flagged(0.0) == 0 and n.threshold(0.0) < c.threshold(0.0)
+        assert np.median([least_familiarity(s) for s in n.traces]) < np.median([least_familiarity(s)
+                                                                                for s in c.traces])
+    # scored against the threshold learnt as recorded, the noisy known demonstrations fall below it (the problem)
+    assert sum((n.known_minima < c.threshold(0.05)).mean() for c, n in zip(clean.classes, noisy.classes,
+                                                                        strict=True)) / 3 > 0.5
+
+
 def test_the_command_prints_the_table_and_json_and_draws_the_png(small_library, tmp_path, capsys):
     lib = tmp_path / "lib.npz"
     save_library(small_library, lib)
@@ -41,6 +58,7 @@ def test_the_command_prints_the_table_and_json_and_draws_the_png(small_library, 
 
 
 @pytest.mark.parametrize("args, said", [(["--quantile", "1"], "--quantile in [0, 1)"),
+                                        (["--sensor-noise-m", "-0.1"], "--sensor-noise-m in [0, 1) m"),
                                         (["--library", "missing-dir"], "missing-dir")])
 def test_bad_options_are_one_line(args, said, tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_:

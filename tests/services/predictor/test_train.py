@@ -33,3 +33,32 @@ def test_train_writes_its_model_into_directories_it_creates(tmp_path, capsys) ->
     with pytest.raises(SystemExit):
         main(["--help"])
     assert "missing directories are created" in " ".join(capsys.readouterr().out.split())
+
+
+def test_train_calibrates_the_novelty_threshold_for_a_sensor_s_noise_and_says_so(tmp_path, capsys) -> None:
+    """`foresight train --sensor-noise-m 0.02`: the model holds the noise its novelty threshold was calibrated for,
+    and the command's last line says it."""
+    from services.predictor.model import PredictionModel
+    from services.predictor.train import main
+    from shared.library import save_library
+    from shared.synthetic import generate_library
+
+    library = tmp_path / "lib.npz"
+    save_library(generate_library(n_classes=2, n_demos=4, seed=3), library)
+    common = ["--library", str(library), "--components", "2", "--temperature", "1", "--quiet"]
+    assert main([*common, "--out", str(tmp_path / "clean.npz")]) == 0
+    assert main([*common, "--out", str(tmp_path / "noisy.npz"), "--sensor-noise-m", "0.02"]) == 0
+    clean, noisy = (PredictionModel.load(tmp_path / f"{n}.npz").novelty for n in ("clean", "noisy"))
+    assert clean.sensor_noise_m == 0.0 and noisy.sensor_noise_m == 0.02 and noisy.threshold < clean.threshold
+    assert "with 2 cm of noise per axis, fitted back as the tracker does" in capsys.readouterr().out
+
+
+def test_a_model_cache_keyed_on_the_training_options_tells_a_sensor_s_noise_apart() -> None:
+    """The demo's and the experiments' caches key on ``repr(TrainConfig)``: a model calibrated for a sensor is another
+    model, and one calibrated as before keeps the key it had (no sensor_noise_m in it)."""
+    from dataclasses import replace
+
+    from services.predictor.train import TrainConfig
+
+    assert "sensor_noise_m" not in repr(TrainConfig()) and repr(TrainConfig()).startswith("TrainConfig(gmm=")
+    assert repr(replace(TrainConfig(), sensor_noise_m=0.02)) == repr(TrainConfig())[:-1] + ", sensor_noise_m=0.02)"
