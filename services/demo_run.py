@@ -160,10 +160,11 @@ def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable
     out(f"foresight demo: library {lib.source}: {lib.n_classes} classes, {len(lib.demos)} demonstrations; "
         f"the human performs {demo.class_name} #{demo.index} ({demo.n_samples} samples, "  # real time: its rate
         + (f"{scenario.samples_per_tick} per step)" if cfg.mode == "lockstep" else f"played at {cfg.rate_hz:g} Hz)"))
-    # the tracker's keypoints: the novelty threshold calibrated for their noise (the replayer's features: as recorded)
+    # the tracker's keypoints: the novelty threshold calibrated for their noise, the mixtures' time from where its
+    # reach rule starts a demonstration (the replayer's features: as recorded, from their first sample)
     noise = cfg.keypoint_noise_m if cfg.human == "keypoints" else 0.0
     model = model_for(lib, scene, demo, cfg.models_dir, None if cfg.components < 0 else cfg.components,
-                      sensor_noise_m=noise,
+                      sensor_noise_m=noise, time_from="tracker" if cfg.human == "keypoints" else "recording",
                       on_train=lambda path: out(f"foresight demo: training the prediction model without the human's "
                                                 f"demonstration, once: about a minute on 2 cores (its progress below); "
                                                 f"later runs load it from {path.parent}"))

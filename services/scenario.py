@@ -95,7 +95,8 @@ def _damage(path: Path) -> str:
 def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Sequence[Demonstration],
               models_dir: Path, components: int | None = None, progress: bool = True,
               fit_cache: MutableMapping[str, Any] | None = None, volume: str | None = None,
-              on_train: Callable[[Path], None] | None = None, sensor_noise_m: float = 0.0) -> Path:
+              on_train: Callable[[Path], None] | None = None, sensor_noise_m: float = 0.0,
+              time_from: str = "recording") -> Path:
     """The prediction model for a run: trained on ``library`` without ``held_out``, cached in ``models_dir``.
 
     The cache key covers the library's data, the held-out demonstrations, the scene and the training
@@ -115,6 +116,8 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
             the next minute passes.
         sensor_noise_m: The keypoint noise the novelty threshold is calibrated for (``foresight train
             --sensor-noise-m``; 0: the features as recorded). In the key: another noise is another model.
+        time_from: Where each training demonstration's time starts (``foresight train --time-from``): ``tracker``
+            for a human through the tracker, whose reach starts where its rule says. In the key where not the default.
 
     Returns:
         Path of the model file (trained now if it was not cached).
@@ -131,6 +134,7 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
         cfg = replace(cfg, volume=volume)
     if sensor_noise_m:  # in repr(cfg), the key, only where set: the models cached before keep their keys
         cfg = replace(cfg, sensor_noise_m=sensor_noise_m)
+    cfg = replace(cfg, time_from=time_from)  # in repr(cfg) only where not "recording"
     out = [held_out] if isinstance(held_out, Demonstration) else list(held_out)
     left = sorted((d.label, d.index) for d in out)
     key = hashlib.sha256(json.dumps([_library_digest(library), left, repr(scene), repr(cfg),

@@ -34,6 +34,8 @@ Contents (M classes, K Gaussians at most per class, F posture features, D featur
   test (:mod:`services.predictor.novelty`; optional: files without it call every motion familiar) |
 | ``novelty_sensor_noise_m`` | f8 | the keypoint noise the novelty test was calibrated for (written when not 0; files
   without it: 0, the features as recorded) |
+| ``time_from`` | str | where a demonstration's time starts (:data:`TIME_FROM`; written when not ``recording``: files
+  without it index from the recording's start) |
 
 Version 2 added ``volume_method``, ``volume_probabilities`` and the ``timed_*`` arrays; version 1 files
 (paper volumes) still load.
@@ -63,12 +65,14 @@ from .novelty import NoveltyTest
 from .swept_volume import pack_volumes, unpack_volumes
 from .volumes import VOLUMES
 
-__all__ = ["MODEL_FORMAT", "MODEL_VERSION", "ModelError", "PredictionModel", "TimedVolumes", "to_bytes", "from_bytes",
-           "quantised"]
+__all__ = ["MODEL_FORMAT", "MODEL_VERSION", "TIME_FROM", "ModelError", "PredictionModel", "TimedVolumes", "to_bytes",
+           "from_bytes", "quantised"]
 
 MODEL_FORMAT = "foresight-prediction-model"
 MODEL_VERSION = 2
 READABLE_VERSIONS = (1, 2)
+TIME_FROM = ("recording", "tracker")
+"""Sample 0 of a training demonstration: the recording's first, or where the tracker's reach rule starts its reach."""
 
 
 def to_bytes(p: np.ndarray) -> np.ndarray:
@@ -140,6 +144,7 @@ class PredictionModel:
     volume_method: str = "paper"
     timed: TimedVolumes | None = None
     novelty: NoveltyTest | None = None
+    time_from: str = "recording"
 
     @property
     def n_classes(self) -> int:
@@ -162,6 +167,12 @@ class PredictionModel:
         A model trained before it was recorded: the last sample of its longest class motion.
         """
         return int(self.meta.get("last_index", int(np.max(self.motion_lengths)) - 1))
+
+    def describe_time(self) -> str:
+        """Where the mixtures' time starts, for ``foresight train``'s output and the predictor's start line."""
+        if self.time_from == "tracker":
+            return "time from where the tracker's reach rule starts each demonstration (a live person's reach)"
+        return "time from each demonstration's first sample, at rest (the replayer's reach)"
 
     def require_volumes(self, what: str) -> np.ndarray:
         """The ``(M, nx, ny, nz)`` swept volumes, or a one-line :class:`ModelError` saying why there are none.
@@ -235,6 +246,8 @@ class PredictionModel:
             arrays["novelty_heldout"] = np.array(int(self.novelty.heldout), dtype=np.int64)
             if self.novelty.sensor_noise_m:  # absent at 0: a model calibrated as before is the same file
                 arrays["novelty_sensor_noise_m"] = np.array(float(self.novelty.sensor_noise_m))
+        if self.time_from != "recording":  # absent at the default: a model trained as before is the same file
+            arrays["time_from"] = np.array(self.time_from)
         with atomic_write(p) as f:  # an interrupted save leaves no half model in the cache
             np.savez_compressed(f, **arrays)
 
@@ -363,6 +376,9 @@ class PredictionModel:
             noise = float(d["novelty_sensor_noise_m"]) if "novelty_sensor_noise_m" in d else 0.0
             novelty = NoveltyTest(float(d["novelty_threshold"]), int(d["novelty_window"]),
                                   float(d["novelty_quantile"]), int(d["novelty_heldout"]), noise)
+        time_from = str(d["time_from"]) if "time_from" in d else "recording"
+        if time_from not in TIME_FROM:
+            raise ValueError(f"time_from {time_from[:40]!r} is not one of {', '.join(TIME_FROM)}")
         motions = d["motions"].astype(np.float64)
         lengths = d["motion_lengths"].astype(np.int64)
         if motions.shape[0] != m or motions.shape[2] != len(feature_names) or lengths.shape != (m,) \
@@ -375,7 +391,7 @@ class PredictionModel:
                     scene_name=str(d["scene_name"]), human_pelvis=d["human_pelvis"].astype(np.float64),
                     spacing=float(d["spacing"]), interior=bool(d["interior"]), meta=meta,
                     temperature=temperature, feature_names=feature_names, volume_method=method,
-                    timed=timed, novelty=novelty)
+                    timed=timed, novelty=novelty, time_from=time_from)
         if model.encoder().dim != mu.shape[2]:
             raise ValueError(f"feature variant {model.feature_variant!r} has {model.encoder().dim} dimensions, "
                              f"the mixtures {mu.shape[2]}")

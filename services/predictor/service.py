@@ -240,9 +240,9 @@ class PredictorService:
             sub = subscribe_ordered(session, self.keys.human_all, types, self._on_message, self.rejects,
                                     self.receipt)
             presence = Presence(session, self.keys, "predictor", stop_with=self.config.stop_with, stop=stop)
-            log.info("predictor: model %s (%d classes, grid %s at %g m, features %s, %s), method %s, scene %s, "
+            log.info("predictor: model %s (%d classes, grid %s at %g m, features %s, %s, %s), method %s, scene %s, "
                      "session %s", self.config.model, self.model.n_classes, self.model.grid.dims,
-                     self.model.grid.resolution, self.model.feature_variant,
+                     self.model.grid.resolution, self.model.feature_variant, self.model.describe_time(),
                      self.model.novelty.describe() if self.model.novelty is not None else
                      "no novelty test: every motion is called familiar (retrain to learn one)",
                      self.config.method, self.scene.name, describe(session)["zid"])

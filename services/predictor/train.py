@@ -42,7 +42,7 @@ from .features import VARIANTS, FeatureEncoder
 from .fit_cache import cached, class_fit
 from .gmm import GMMConfig, GMMError, MixtureBank
 from .gmr import gmr
-from .model import PredictionModel, TimedVolumes, quantised
+from .model import TIME_FROM, PredictionModel, TimedVolumes, quantised
 from .novelty import DEFAULT_QUANTILE, DEFAULT_WINDOW, learn_novelty, through_sensor
 from .swept_volume import surface_spacing
 from .volumes import DEFAULT_VOLUME, VOLUMES
@@ -77,6 +77,8 @@ class TrainConfig:
         sensor_noise_m: The novelty threshold's held-out demonstrations are scored as body keypoints with this
             noise per axis (m, seeded by ``gmm.seed``), fitted back as the tracker does
             (:func:`~services.predictor.novelty.through_sensor`); 0: as recorded.
+        time_from: ``recording``: a demonstration's sample 0 is its first; ``tracker``: each is cut where the
+            tracker's reach rule would start it, and indexed from there, as a live person's reach is.
     """
 
     gmm: GMMConfig = GMMConfig()
@@ -93,14 +95,15 @@ class TrainConfig:
     novelty_quantile: float = DEFAULT_QUANTILE
     novelty_window: int = DEFAULT_WINDOW
     sensor_noise_m: float = 0.0
+    time_from: str = "recording"
 
     def __repr__(self) -> str:
-        """The dataclass's repr, with ``sensor_noise_m`` only where set.
+        """The dataclass's repr, with ``sensor_noise_m`` and ``time_from`` only where not their defaults.
 
         The demo's and the experiments' model caches key on it: a model trained as before keeps its key (and file).
         """
         shown = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in fields(self)
-                          if f.name != "sensor_noise_m" or self.sensor_noise_m)
+                          if f.name not in ("sensor_noise_m", "time_from") or getattr(self, f.name) != f.default)
         return f"{type(self).__name__}({shown})"
 
 
@@ -187,13 +190,21 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
         raise UserError(f"novelty window must be in [1, 10000] frames, got {cfg.novelty_window}")
     if not (np.isfinite(cfg.sensor_noise_m) and 0.0 <= cfg.sensor_noise_m < 1.0):
         raise UserError(f"--sensor-noise-m must be in [0, 1) m, got {cfg.sensor_noise_m}")
-    if cfg.sensor_noise_m:
-        try:  # the tracker publishes the paper's 12 features: the library's must be them to be fitted back
-            require_mapping(library.feature_names, "--sensor-noise-m (the tracker's fit of body keypoints)",
-                            f"library {library.source}", exact=LIVE_MAPPING)
+    if cfg.time_from not in TIME_FROM:
+        raise UserError(f"--time-from {cfg.time_from!r} is not one of {', '.join(TIME_FROM)}")
+    # the tracker publishes the paper's 12 features: the library's must be them to be fitted back, or to place a wrist
+    for what in [w for w, asked in (("--sensor-noise-m (the tracker's fit of body keypoints)", cfg.sensor_noise_m),
+                                    ("--time-from tracker (the tracker's reach rule)", cfg.time_from == "tracker"))
+                 if asked]:
+        try:
+            require_mapping(library.feature_names, what, f"library {library.source}", exact=LIVE_MAPPING)
         except MappingError as exc:
             raise UserError(str(exc)) from None
     demos = list(library.demos) if demos is None else demos
+    if cfg.time_from == "tracker":  # the tracker's first pose of a reach is its index 0 (docs/keypoints.md)
+        from services.tracker.core import TrackerConfig
+        from services.tracker.reach import recorded_start
+        demos = [replace(d, features=d.features[recorded_start(d.features, TrackerConfig()):]) for d in demos]
     encoder = FeatureEncoder(cfg.features, cfg.time_scale, feature_names=library.feature_names,
                              source=f"library {library.source}")
     check_resolution(cfg.resolution)
@@ -268,7 +279,7 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
                            human_pelvis=np.array([*scene.human.pelvis_xyz, scene.human.pelvis_yaw]),
                            spacing=cfg.spacing, interior=cfg.interior, meta=meta, temperature=choice.temperature,
                            feature_names=tuple(library.feature_names), volume_method=cfg.volume,
-                           timed=timed, novelty=novelty)
+                           timed=timed, novelty=novelty, time_from=cfg.time_from)
 
 
 def _temperature(text: str) -> float | None:
@@ -324,6 +335,9 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
                              "as body keypoints with SIGMA of Gaussian noise per axis (m, seeded by --seed), fitted "
                              "back and smoothed as the tracker does (the library must have the paper's 12 features); "
                              "default 0: as recorded")
+    parser.add_argument("--time-from", choices=TIME_FROM, default="recording",
+                        help="a demonstration's sample 0: recording = its first (the replayer's); tracker = where the "
+                             "tracker's reach rule would start it, as a live reach's first pose (default: recording)")
     parser.add_argument("--volume", choices=VOLUMES, default=DEFAULT_VOLUME,
                         help="per-class occupancy p(x|C_m): paper = body swept along the mean motion (0/1); "
                              "spread = trajectories drawn within the GMR covariance; demos = the training "
@@ -352,7 +366,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
             raise UserError(str(exc)) from None
         cfg = TrainConfig(gmm=gcfg, features=args.features, resolution=args.resolution, interior=args.interior,
                           temperature=args.temperature, volume=args.volume, folds=args.folds,
-                          novelty_quantile=args.novelty_quantile, sensor_noise_m=args.sensor_noise_m)
+                          novelty_quantile=args.novelty_quantile, sensor_noise_m=args.sensor_noise_m,
+                          time_from=args.time_from)
         model = train_model(lib, scene, cfg, demos, progress=not args.quiet)
         model.save(args.out)
         size = Path(args.out).stat().st_size
@@ -366,7 +381,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight train") -> int:
         print(f"wrote {args.out} ({size / 1e6:.2f} MB): {model.n_classes} classes, "
               f"{len(demos)} demonstrations from {lib.source}, features {cfg.features}, "
               f"temperature {model.temperature:g} ({model.meta['temperature_choice']}), "
-              f"components {model.meta['components']}, {occupancy}")
+              f"components {model.meta['components']}, {occupancy}; {model.describe_time()}")
         losses = model.meta["temperature_log_loss"]
         if losses:
             print(f"temperature {model.temperature:g}: least mean log-loss of {cfg.folds}-fold cross-validation; "

@@ -28,12 +28,19 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from shared.human import HumanModel
 from shared.keypoints.fit import POINT_NAMES
 
-__all__ = ["ReachRule", "ReachDetector", "ReachEvent", "body_wrist", "spread"]
+from .filters import OneEuroFilter
+
+if TYPE_CHECKING:
+    from .core import TrackerConfig
+
+__all__ = ["ReachRule", "ReachDetector", "ReachEvent", "body_wrist", "spread", "first_start", "recorded_start"]
 
 _WRIST, _PELVIS = POINT_NAMES.index("r_wrist"), POINT_NAMES.index("pelvis")
 _SHOULDERS = POINT_NAMES.index("r_shoulder"), POINT_NAMES.index("l_shoulder")
@@ -182,3 +189,47 @@ class ReachDetector:
 def spread(points: np.ndarray) -> float:
     """The rms distance of positions ``(N, ..., 3)`` from their mean over the ``N`` frames (m): how still they are."""
     return float(np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=-1))))
+
+
+def first_start(wrists: np.ndarray, rate_hz: float, rule: ReachRule) -> int | None:
+    """The sample of the first reach's first pose, as the rule starts it on a motion that begins at rest.
+
+    The first position is held for ``rest_s`` before the motion (the rule learns the rest position over it, and no
+    reach starts meanwhile), as for a person standing still before reaching; a first pose within ``pre_s`` of the
+    motion's start is its sample 0.
+
+    Args:
+        wrists: ``(T, 3)`` the wrist's body-frame positions (:func:`body_wrist`), one per sample at ``rate_hz``.
+        rate_hz: Samples per second.
+        rule: The thresholds.
+
+    Returns:
+        The sample in ``0 .. T - 1``, or None where no reach starts (the wrist never goes ``start_m`` from rest).
+    """
+    held = int(np.ceil(rule.rest_s * rate_hz)) + 1
+    det = ReachDetector(rule)
+    for k, w in enumerate(np.concatenate([np.repeat(wrists[:1], held, axis=0), wrists])):
+        event = det.update(w, k / rate_hz)
+        if event is not None:  # not under way: a start
+            # the first pose is the first frame at or after the start's stamp (services.tracker.demos)
+            return min(len(wrists) - 1, max(0, int(np.ceil(event.stamp * rate_hz - 1e-6)) - held))
+    return None
+
+
+def recorded_start(features: np.ndarray, config: TrackerConfig, model: HumanModel | None = None) -> int:
+    """Where the tracker would start a recorded demonstration's reach: its sample there (0 where it starts none).
+
+    The features are smoothed with the tracker's One-Euro filter, the wrist placed by the human model, and the rule
+    run (:func:`first_start`) with ``config``'s thresholds at its ``pose_rate_hz`` (the library's clock): what the
+    tracker does with a person's keypoints, less the sensor and the fit.
+
+    Args:
+        features: ``(T, 12)`` the paper's posture features at ``config.pose_rate_hz``, starting at rest.
+        config: The tracker's options (:class:`services.tracker.core.TrackerConfig`).
+        model: The human model (default: ``HumanModel()``).
+    """
+    smooth, model = OneEuroFilter(config.min_cutoff_hz, config.beta), model or HumanModel()
+    f = np.array([smooth(x, k / config.pose_rate_hz) for k, x in enumerate(np.asarray(features, np.float64))])
+    wrists = np.array([body_wrist(j) for j in model.joint_positions(f)])
+    start = first_start(wrists, config.pose_rate_hz, config.rule)
+    return 0 if start is None else start

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from services.tracker.reach import ReachDetector, ReachRule
@@ -52,3 +54,40 @@ def test_a_hand_put_down_off_its_old_rest_takes_that_as_its_rest() -> None:
     wrist = _path((HOME, HOME, 1.5), (HOME, GOAL, 1.0), (GOAL, GOAL, 1.5), (GOAL, near, 1.0), (near, near, 1.5),
                   (near, GOAL, 1.0), (GOAL, GOAL, 1.5))
     assert [e for e, _ in _events(wrist)] == ["start", "end", "start", "end"]
+
+
+def test_the_rule_s_first_start_on_a_motion_from_rest_is_its_first_pose_s_sample() -> None:
+    """``first_start``, what a trainer cuts a demonstration at (``foresight train --time-from tracker``): the sample of
+    the first pose the tracker publishes, ``pre_s`` before the wrist is ``start_m`` from rest; None without a reach."""
+    from services.tracker.reach import first_start
+
+    wrist = _path((HOME, HOME, 0.5), (HOME, GOAL, 1.0), (GOAL, GOAL, 1.0))
+    crossed = int(np.argmax(np.linalg.norm(wrist - HOME, axis=1) > RULE.start_m))
+    assert first_start(wrist, RATE, RULE) == crossed - round(RULE.pre_s * RATE) > 0
+    assert first_start(wrist[crossed - 3:], RATE, RULE) == 0  # its first pose before the motion's first sample
+    assert first_start(_path((HOME, HOME + [0.05, 0, 0], 1.0)), RATE, RULE) is None
+
+
+def test_a_recorded_demonstration_starts_where_the_tracker_starts_its_reach(tmp_path) -> None:
+    """``recorded_start`` on a library demonstration is the sample of the first pose the tracker publishes for it,
+    fed its keypoints after a person's rest (a review: 8-30 samples into the synthetic library's demonstrations)."""
+    from services.tracker.core import TrackerConfig, TrackerCore
+    from services.tracker.reach import recorded_start
+    from shared.keypoints.library import read_keypoint_csv, write_keypoint_library
+    from shared.library import MotionLibrary
+    from shared.protocol import DemoMarker, HumanPose
+    from shared.synthetic import generate_library
+
+    lib = generate_library(n_classes=2, n_demos=2, seed=3)
+    demo, rest = lib.demos[0], 45
+    padded = np.concatenate([np.repeat(demo.features[:1], rest, 0), demo.features])
+    one = MotionLibrary(class_names=lib.class_names, demos=[replace(demo, features=padded)], issues=[], source="x")
+    write_keypoint_library(one, tmp_path)
+    kd = read_keypoint_csv(tmp_path / f"{demo.class_name}.csv")[0]
+    core, msgs = TrackerCore(TrackerConfig()), []
+    for frame, pos in zip(kd.frames, kd.positions, strict=True):
+        msgs += core.on_frame(float(frame) / RATE, kd.names, pos, int(frame)).messages
+    live = {m.demo_id for m in msgs if isinstance(m, DemoMarker) and m.event == "start" and m.class_name == "live"}
+    first = next(m for m in msgs if isinstance(m, HumanPose) and m.demo_id in live)
+    start = recorded_start(demo.features, TrackerConfig())
+    assert start == round(first.stamp * RATE) - rest > 0
