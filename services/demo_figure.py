@@ -119,7 +119,9 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
                                 zorder=0))
     for cup in scene.cups:
         top.add_patch(Circle(tuple(cup.position[:2]), max(cup.radius, 0.03), color=_goal_color(cup.name), zorder=5))
-        top.annotate(cup.name, cup.position[:2], xytext=(6, 6), textcoords="offset points", fontsize=9)
+        # above the robot's paths and marks, which hid it
+        top.annotate(cup.name, cup.position[:2], xytext=(6, 6), textcoords="offset points", fontsize=9, zorder=9,
+                     bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "alpha": 0.7, "linewidth": 0})
     if prediction is not None and prediction.indices.size:
         p = prediction.values.astype(np.float64) / 255.0
         keep = p >= min_probability
@@ -141,7 +143,7 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
     if body is not None:
         ends, radii = body
         for i, ((a, b), r) in enumerate(zip(ends, radii, strict=True)):
-            top.plot([a[0], b[0]], [a[1], b[1]], color="#f0b7a0", lw=max(2.0, 120 * float(r)), alpha=0.7,
+            top.plot([a[0], b[0]], [a[1], b[1]], color="#b04a5a", lw=max(2.0, 120 * float(r)), alpha=0.8,
                      solid_capstyle="round", zorder=2, label="human's body at the run's end" if i == 0 else None)
     steps = max((len(o.chosen_goal_per_step) for o in outcomes), default=0)
     unit = _unit_words(outcomes)
@@ -184,8 +186,20 @@ def draw_outcomes(outcomes: list[Outcome], scene: Scene, prediction: OccupancyGr
     goals.set_title(f"goal chosen at each {unit} (square colour = cup)", fontsize=10)
     goals.set_ylim(-0.6, len(outcomes) - 0.4)
     if title:
-        fig.suptitle(title, fontsize=11)
+        fig.suptitle(_wrapped(title, fig.get_figwidth(), 11), fontsize=11)
     return save_figure(fig, out)
+
+
+def _wrapped(title: str, width_in: float, fontsize: float, lines: int = 3) -> str:
+    """``title`` in lines that fit a figure ``width_in`` inches wide, at most ``lines`` of them.
+
+    One line ran off both edges (a ``--compare`` run cut short: 203 characters on a 15-inch figure); a character
+    of the title's font is taken as 0.62 of its size, a little wider than its average.
+    """
+    import textwrap
+
+    return "\n".join(textwrap.wrap(title, max(20, int(width_in * 72 / (0.62 * fontsize))), max_lines=lines,
+                                   placeholder=" ..."))
 
 
 def figure_title(cfg: DemoConfig, summary: Summary, scene: str, cut: str = "") -> str:

@@ -282,11 +282,17 @@ class Summary:
 
 
 def belief(posterior: ClassPosterior | None) -> str:
-    """The table's "human (belief)" cell: the most probable class and its probability, or ``""``."""
+    """The table's "human (belief)" cell: the most probable class and its probability, or ``""``.
+
+    A flat posterior names no class, ``(flat) p=0.13``: its top one at 0.13 among 8 classes read as a belief. Flat is
+    under twice the uniform 1/K, and under an even chance (with 2 classes the top one always has one).
+    """
     if posterior is None:
         return ""
     k = int(np.argmax(posterior.posterior))
-    return f"{posterior.class_names[k]} p={posterior.posterior[k]:.2f}"
+    p = float(posterior.posterior[k])
+    name = posterior.class_names[k] if p >= min(2.0 / len(posterior.class_names), 0.5) else "(flat)"
+    return f"{name} p={p:.2f}"
 
 
 def posterior_for(plan: Plan, posteriors: dict[int, ClassPosterior]) -> ClassPosterior | None:

@@ -3,8 +3,9 @@
 argparse leaves an argument no sub-command knows to the top parser, so ``foresight eval interference --quick`` said
 ``foresight eval: error: unrecognized arguments: --quick``, naming neither the command that refused it nor what was
 meant. :class:`ArgumentParser` names the sub-command that was given it, the closest option it has (``--robot-sped``:
-did you mean ``--robot-speed``?) and the sibling commands that have the option itself (``--quick``: an option of
-``foresight eval all``). Sub-parsers made with ``add_subparsers`` are of the same class.
+did you mean ``--robot-speed``?), the sibling commands that have the option itself (``--quick``: an option of
+``foresight eval all``) and the closest choice to a misspelt one (``foresight log inf``: did you mean ``info``?).
+Sub-parsers made with ``add_subparsers`` are of the same class.
 """
 
 from __future__ import annotations
@@ -57,6 +58,22 @@ class ArgumentParser(argparse.ArgumentParser):
     def error(self, message: str) -> typing.NoReturn:
         """Exit with status 2 after one line: ``<prog>: error: <message>`` (``--help`` gives the usage)."""
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+    def _check_value(self, action: argparse.Action, value: Any) -> None:
+        """As argparse's; a value that is none of the choices names the closest one (``log inf``: did you mean info?).
+
+        argparse checks every value of an action with choices here, sub-commands included, and said only ``invalid
+        choice: 'inf' (choose from ...)`` where the top level (``foresight demoo``) suggested ``demo``.
+        """
+        try:
+            super()._check_value(action, value)
+        except argparse.ArgumentError:
+            choices = [str(c) for c in action.choices or ()]
+            close = closest(value, choices) if isinstance(value, str) else ""
+            if not close:
+                raise
+            raise argparse.ArgumentError(action, f"invalid choice: {value!r} ({close.removeprefix('; ')} choose from "
+                                                 f"{', '.join(choices)})") from None
 
     def parse_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
                    namespace: argparse.Namespace | None = None) -> argparse.Namespace:

@@ -9,7 +9,6 @@ options. ``python -m tools`` runs this dispatcher too.
 from __future__ import annotations
 
 import argparse
-import difflib
 import importlib
 import sys
 
@@ -114,8 +113,10 @@ def _dispatch(argv: list[str] | None) -> int:
         return 0
     if command not in COMMANDS:
         _parser().print_usage(sys.stderr)
-        close = difflib.get_close_matches(command, list(COMMANDS), n=1, cutoff=0.6)
-        hint = f"did you mean {close[0]}? " if close else ""
+        from shared.config_names import closest
+
+        close = closest(command, COMMANDS)  # as a sub-command's misspelt choice (shared.arguments)
+        hint = f"{close.removeprefix('; ')} " if close else ""
         print(f"foresight: error: unknown command {command!r} ({hint}choose from {', '.join(COMMANDS)})",
               file=sys.stderr)
         return 2

@@ -181,7 +181,8 @@ class SwitchResult:
             cells = []
             for m in METHODS:
                 r = by.get((d, m))
-                cells.append("-" if r is None else f"{r.settle_step} / {r.final_goal} / {r.reached_step}")
+                cells.append("-" if r is None else f"{r.settle_step} / {r.final_goal} / "
+                             f"{'not reached' if r.reached_step is None else r.reached_step}")
             out.append(f"{'#' + str(d):>6}" + "".join(f"{c:>40}" for c in cells))
         out.append("median settle step: " + ", ".join(f"{m} {self.median_settle(m):g}" for m in METHODS))
         out.append(f"median step from which the robot never again goes for {self.config.human_cup} (never = "
@@ -236,10 +237,15 @@ def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compi
                             contact.min_clearance, contact.time_in_contact,
                             float(np.median([p.planning_ms for p in rec.plans])) if rec.plans else math.nan)
             result.runs.append(run)
-            progress(f"  [{len(cfg.methods) * i + j + 1}/{total}] demo #{demo.index} {method:<10} goals "
-                     f"{''.join(g[0] for g in chosen)}  settle step {run.settle_step}  final {run.final_goal}  "
-                     f"reached step {run.reached_step}")
+            progress(f"  [{len(cfg.methods) * i + j + 1}/{total}] {run_line(run)}")
     return result
+
+
+def run_line(run: SwitchRun) -> str:
+    """One run's progress line; a run that ended short of its final goal says so, worded as interference does."""
+    reached = f"reached step {run.reached_step}" if run.reached_step is not None else "not at its goal by the run's end"
+    return (f"demo #{run.demo} {run.method:<10} goals {''.join(g[0] for g in run.goals)}  settle step "
+            f"{run.settle_step}  final {run.final_goal}  {reached}")
 
 
 def _colour(name: str) -> str:

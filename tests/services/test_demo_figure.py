@@ -116,3 +116,26 @@ def test_the_top_views_legend_lies_off_the_paths(tmp_path: Path, monkeypatch) ->
     assert legend.height > 0 and not legend.overlaps(top.get_window_extent(renderer))
     assert not any(legend.overlaps(ax.get_window_extent(renderer)) for ax in fig.axes  # type: ignore[attr-defined]
                    if ax is not top)
+
+
+def test_a_long_title_is_wrapped_inside_the_figure(tmp_path: Path, monkeypatch) -> None:
+    """A --compare run cut short in its second planner: its 203-character title ran off both edges of run.png."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from services import demo_figure
+
+    title = ("foresight demo: far_left reach, scene pr2_two_cups_side, robot at 0.5 of its velocity limits, 10 s in "
+             "real time, 100 plans (the prediction planner's): the current occupancy planner's run was interrupted")
+    assert len(title) >= 200
+    figs: list = []
+    real_save = demo_figure.save_figure
+    monkeypatch.setattr(demo_figure, "save_figure", lambda fig, path: figs.append(fig) or real_save(fig, path))
+    demo_figure.draw_outcomes([_outcome("prediction", ["red_cup"] * 4)], load_scene("pr2_two_cups_side"), None, [],
+                              tmp_path / "long.png", 0.5, title=title)
+    (fig,) = figs
+    suptitle = fig._suptitle  # type: ignore[attr-defined]
+    assert 2 <= len(suptitle.get_text().splitlines()) <= 3 and " ".join(suptitle.get_text().split()) == title
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    box, page = suptitle.get_window_extent(renderer), fig.bbox  # type: ignore[attr-defined]
+    assert page.x0 <= box.x0 and box.x1 <= page.x1 and box.y1 <= page.y1
+    assert not any(box.overlaps(ax.get_window_extent(renderer)) for ax in fig.axes)  # type: ignore[attr-defined]

@@ -170,6 +170,26 @@ def test_each_row_shows_the_belief_its_plan_was_made_with():
     assert realtime.to_json()["recognised_p"] == pytest.approx(0.8)
 
 
+def test_a_flat_belief_names_no_class():
+    """The demo's table showed "far_left p=0.13" among 8 classes (all but uniform) as though it were a belief."""
+    from services.scenario import belief, table_row
+
+    names = ["far_left", "left", "middle", "right", "far_right", "blue_cup", "red_cup", "up"]
+
+    def post(p: list[float], classes: list[str]) -> ClassPosterior:
+        return ClassPosterior(stamp=0.0, tick=0, demo_id=1, index=0, class_names=classes, posterior=np.array(p),
+                              log_likelihood=np.log(np.array(p)))
+
+    assert belief(post([0.13] + [0.87 / 7] * 7, names)) == "(flat) p=0.13"
+    assert belief(post([0.26] + [0.74 / 7] * 7, names)) == "far_left p=0.26"  # over twice 1/8
+    assert belief(post([0.45, 0.3, 0.25], names[:3])) == "(flat) p=0.45" and belief(post([0.5, 0.3, 0.2], names[:3])) \
+        == "far_left p=0.50"
+    assert belief(post([0.55, 0.45], names[:2])) == "far_left p=0.55"  # two classes: the top one always an even chance
+    entry = {"step": 1, "t_s": 0.5, "chosen": "red_cup", "cost_total": {"red_cup": 1.5}, "planning_ms": 74.0}
+    row = table_row(entry, ["red_cup"], belief(post([0.13] + [0.87 / 7] * 7, names)))
+    assert row == table_row(entry, ["red_cup"]) + "  (flat) p=0.13"  # the columns before it as they were
+
+
 def test_the_recorder_keeps_every_real_time_posterior_for_the_beliefs():
     """Real time stamps every posterior tick -1: the recorder (and the demo's live table) kept only the newest, so every
     plan but the last showed an empty belief while the person moved (a review's realtime demo: rows 1-18 empty)."""

@@ -96,3 +96,17 @@ def test_a_hint_only_for_an_option_close_in_its_name_not_in_the_dashes_every_one
     with pytest.raises(SystemExit):
         cli_main(argv)
     assert capsys.readouterr().err.strip().endswith(hint)
+
+
+def test_a_misspelt_sub_command_or_choice_gets_the_closest(capsys) -> None:
+    """`foresight demoo` said "did you mean demo?", `foresight eval interferenc` only argparse's "invalid choice"."""
+    assert refusal(["eval", "interferenc"], capsys).endswith(
+        "invalid choice: 'interferenc' (did you mean interference? choose from all, interference)")
+    assert refusal(["evl", "all"], capsys).endswith(
+        "invalid choice: 'evl' (did you mean eval? choose from eval, render)")
+    picky = ArgumentParser(prog="tool")
+    picky.add_argument("--mode", choices=("lockstep", "realtime"))
+    with pytest.raises(SystemExit):
+        picky.parse_args(["--mode", "lockstp"])
+    assert "invalid choice: 'lockstp' (did you mean lockstep? choose from " in capsys.readouterr().err
+    assert refusal(["eval", "zzz"], capsys).endswith("invalid choice: 'zzz' (choose from 'all', 'interference')")

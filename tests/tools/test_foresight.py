@@ -83,6 +83,17 @@ def test_a_misspelt_command_gets_the_closest(capsys) -> None:
     assert "unknown command 'zzz' (choose from demo, " in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv, meant", [(["log", "inf"], "info"), (["eval", "interferenc"], "interference"),
+                                         (["library", "infoo"], "info")])
+def test_a_misspelt_sub_command_gets_the_closest(argv, meant, capsys) -> None:
+    """As the top level's (`foresight demoo`: did you mean demo?); these gave only argparse's "invalid choice"."""
+    with pytest.raises(SystemExit) as exit_:
+        cli_main(argv)
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert exit_.value.code == 2 and line.startswith(f"foresight {argv[0]}: error: ")
+    assert f"invalid choice: {argv[1]!r} (did you mean {meant}? choose from " in line
+
+
 def test_ctrl_c_finishes_the_progress_bar_before_the_interrupted_line(monkeypatch, tmp_path, capsys) -> None:
     """A new user's Ctrl-C of `foresight train`: the bar was closed only when its loop was collected, after
     "foresight: interrupted", and a half bar was the last thing on the terminal. It ends first, with its count."""

@@ -26,3 +26,19 @@ def test_the_switch_json_says_the_volume_and_iterations_that_ran() -> None:
 
     data = SwitchResult(SwitchConfig(protocol="paper"), "synthetic", CupClass("red_cup", 1, "red_cup", 0.0)).to_json()
     assert data["volume"] == "paper" and data["timing"]["iterations"] == 51
+
+
+def test_a_run_short_of_its_goal_is_worded_not_printed_as_none() -> None:
+    """eval all --quick printed 'final red_cup  reached step None' for a run that never reached its final goal."""
+    from services.experiments.heldout import CupClass
+    from services.experiments.switch import SwitchConfig, SwitchResult, SwitchRun, run_line
+
+    def run(reached: int | None) -> SwitchRun:
+        return SwitchRun(0, "current", ("blue_cup",) * 14 + ("red_cup",) * 6, ("blue_cup", "red_cup"), (), (), 14,
+                         14, "red_cup", reached, 0.1, 0.0, 5.0)
+
+    line = run_line(run(None))
+    assert "None" not in line and line.endswith("final red_cup  not at its goal by the run's end")
+    assert "goals bbbbbbbbbbbbbbrrrrrr" in line and run_line(run(19)).endswith("reached step 19")
+    result = SwitchResult(SwitchConfig(), "synthetic", CupClass("red_cup", 1, "red_cup", 0.0), runs=[run(None)])
+    assert "/ red_cup / not reached" in "\n".join(result.lines())
