@@ -46,7 +46,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from services.demo_dirs import MAIN_VARIANT, RunDirectory, log_state, variant_dir
+from services.demo_dirs import MAIN_VARIANT, RunDirectory, forced_exit_note, log_state, variant_dir
 from services.demo_inputs import check_inputs, share_config_file
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
@@ -214,9 +214,11 @@ def _check_models_dir(cfg: DemoConfig) -> None:
         raise ConfigError(f"demo.models_dir: {models} is not writable (the prediction model is cached there)")
 
 
-def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] = print) -> tuple[int, Summary | None]:
+def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] = print,
+             on_start: Callable[[Path], None] = lambda run: None) -> tuple[int, Summary | None]:
     """Run the scenario (three times with ``cfg.compare``) in a directory of its own; returns ``(status, summary)``.
 
+    ``on_start`` gets each run's directory as its services start (a forced exit names it: :func:`forced_exit_note`).
     The summary's ``extra`` holds ``comparison`` (one row per planner: interference, contact, ...), ``verdict``
     (with ``--compare``), ``figure`` (the PNG) and ``run_dir``.
     """
@@ -239,7 +241,10 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
                 out(f"foresight demo: --- {name} ---")
             sub = dataclasses.replace(cfg, compare=False, **changes,
                                       run_dir=root / variant_dir(name) if cfg.compare else root)
-            status, record = demo_run.run_once(sub, name, stop, out, started=run_dir.point_latest)
+            def started(run: Path = Path(sub.run_dir)) -> None:
+                run_dir.point_latest()
+                on_start(run)
+            status, record = demo_run.run_once(sub, name, stop, out, started=started)
             if record is None:
                 if records:  # interrupted before this planner's first plan: what the earlier ones did still counts
                     break
@@ -366,7 +371,9 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
         share_config_file(args.config, cfg)
         setup_logging(cfg.log_level)
         stop = threading.Event()
-        restore = stop_on_signals(stop, grace_s=STOP_GRACE_S, prog=prog)  # the services' own bounded stops come first
+        runs: list[Path] = []  # whose services started: a forced exit names the last (they stop on their own)
+        restore = stop_on_signals(stop, grace_s=STOP_GRACE_S, prog=prog,  # the services' own bounded stops come first
+                                  context=lambda: forced_exit_note(runs[-1]) if runs else None)
         progress = (lambda line: print(line, file=sys.stderr, flush=True)) if cfg.json else \
             (lambda line: print(line, flush=True))
         if cfg.prepare is not None:
@@ -377,7 +384,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
             finally:
                 restore()
         try:
-            status, summary = run_demo(cfg, stop, out=progress)
+            status, summary = run_demo(cfg, stop, out=progress, on_start=runs.append)
         finally:
             restore()
         if summary is not None:

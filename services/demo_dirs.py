@@ -14,8 +14,13 @@ import shutil
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-__all__ = ["RunDirectory", "variant_dir", "compare_log", "log_state", "MAIN_VARIANT"]
+if TYPE_CHECKING:
+    from services.processes import ServiceProcess
+
+__all__ = ["RunDirectory", "variant_dir", "compare_log", "log_state", "forced_exit_note", "stop_service",
+           "MAIN_VARIANT"]
 
 MAIN_VARIANT = "prediction"
 """The planner a ``--compare`` run is about (the paper's method; ``services.demo.VARIANTS``' first)."""
@@ -46,6 +51,37 @@ def log_state(mcap: str | Path) -> str:
         return read_log(mcap).state
     except UserError as exc:  # not an MCAP at all (an empty file: the executor died as it opened it)
         return f"unreadable: {exc}"
+
+
+def forced_exit_note(run: Path) -> str:
+    """What the demo's forced exit (a second Ctrl-C while it stops) adds to its one line: where the run's files are.
+
+    That line was the demo's last (``make: *** ... Error 3`` after it), naming neither the run's directory nor its
+    MCAP log, which was complete: each service runs in a process group of its own and stops by itself once it sees
+    its parent gone, the executor finalising the log as it does (a new user's first hour).
+    """
+    return (f"this run's files: {run}/; its services stop on their own (each sees the demo gone) and the executor "
+            f"finishes the MCAP log: check it with `foresight log info {run}`")
+
+
+def stop_service(proc: ServiceProcess, timeout: float) -> int | None:
+    """Stop ``proc`` (:meth:`ServiceProcess.stop`); one stopped before it wrote anything gets a line in its log.
+
+    SIGTERM while a service still imports ends it before its handlers exist: its log in the run's directory was
+    empty, unexplained beside the planner's "stopped while starting" (Ctrl-C during a new user's first start-up).
+    """
+    from services.processes import describe_exit
+
+    running = proc.running
+    code = proc.stop(timeout=timeout)
+    if running and code is not None and not proc.tail(1):
+        try:
+            with proc.log_path.open("a") as log:
+                log.write(f"{proc.name} {describe_exit(code)}: stopped by foresight demo before it had started "
+                          "(SIGTERM while it was still importing, before its signal handlers)\n")
+        except OSError:  # a full disk: the log stays empty, the stop goes on
+            pass
+    return code
 
 
 @dataclass

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from services.demo_dirs import stop_service
 from services.demo_inputs import check_goals, library_for
 from services.demo_services import (
     KEYPOINT_REST_S,
@@ -132,7 +133,6 @@ def _run_length(cfg: DemoConfig) -> str:
             "row per plan")
 
 
-
 @dataclasses.dataclass
 class RunRecord:
     """What one run of the scenario left: its summary, what was received, and its measured outcome."""
@@ -143,7 +143,6 @@ class RunRecord:
     final: OccupancyGrid | None
     poses: list[HumanPose]
     run_dir: Path
-
 
 
 def prepare_inputs(cfg: DemoConfig, scene: Scene, directory: Path, out: Callable[[str], None]
@@ -311,6 +310,9 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                             if cfg.mode == "lockstep" else ""))
                 elif name != "executor":
                     began = time.monotonic()  # each service said as it comes up: the start-up is silent otherwise
+                    if name == "planner":  # its first start took 10-50 s, and said nothing (a new user's first hour)
+                        out("foresight demo: waiting for the planner: it loads torch and compiles its cost, typically "
+                            f"10-40 s on 2 cores (its log: {procs[name].log_path})")
                     try:
                         up = procs[name].wait_alive(presence.is_alive, timeout=min(120.0, cfg.timeout), stop=stop)
                     except UserError as exc:  # died at start: this run ends (status 1, as an executor's failure),
@@ -351,7 +353,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
             if status == 1 and executor is not None and executor.returncode not in (0, None):
                 said.add("executor")  # reported above, one line: not again as a warning
             for name in reversed(order):
-                code = procs[name].stop(timeout=SHUTDOWN_GRACE_S + 2.0)  # past its own grace: its stack dump is kept
+                code = stop_service(procs[name], SHUTDOWN_GRACE_S + 2.0)  # past its grace: its stack dump is kept
                 if name == "executor":  # its log is closed: what the others still send is not the run's
                     recording.clear()
                 if code not in (0, None, -15) and name not in said:

@@ -107,8 +107,8 @@ def interruptible(stop: threading.Event, grace_s: float | None = None, prog: str
             signal.signal(s, h)
 
 
-def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: str | None = None
-                    ) -> Callable[[], None]:
+def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: str | None = None,
+                    context: Callable[[], str | None] | None = None) -> Callable[[], None]:
     """Set ``stop`` on SIGINT/SIGTERM (main thread only); returns a function restoring the old handlers.
 
     A process must obey the signal even when a call it is in blocks (a Zenoh call whose router went
@@ -120,8 +120,10 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
     finished by then (the executor's MCAP, closed before its session) is kept. The first signal is the first
     one received, whether or not ``stop`` was already set (by ``--stop-with``, a parent gone, the service itself):
     a process that is stopping on its own still gets its grace. ``prog`` names the process in those lines
-    (default: the script's name). All of this happens in the signal relay's thread (:mod:`shared.signal_relay`),
-    not in the handler: the main thread may be the one stuck, and the kernel may give the signal to any thread.
+    (default: the script's name); ``context``, called then, may add what the person needs to know to that one line
+    (``foresight demo``: where the run's files are and that its services stop on their own). All of this happens
+    in the signal relay's thread (:mod:`shared.signal_relay`), not in the handler: the main thread may be the one
+    stuck, and the kernel may give the signal to any thread.
     Where there is no relay (another owner of the wakeup descriptor, now or since; a forked child), the handler
     acts, when it gets to run.
     """
@@ -136,7 +138,7 @@ def stop_on_signals(stop: threading.Event, grace_s: float | None = None, prog: s
 
     def force(why: str, stacks: bool = True) -> None:
         if not restored.is_set():
-            _forced_exit(prog, why, stacks)
+            _forced_exit(prog, why, stacks, context)
 
     def watchdog(signame: str) -> None:
         if not restored.wait(grace):
@@ -230,10 +232,19 @@ def _drop_parents_interrupt() -> None:
         signal.sigtimedwait([signal.SIGINT], 0)
 
 
-def _forced_exit(prog: str | None, why: str, stacks: bool = True) -> None:
-    """Say why in one line (with every thread's stack: where it was stuck) and exit with :data:`FORCED_EXIT` now."""
+def _forced_exit(prog: str | None, why: str, stacks: bool = True, context: Callable[[], str | None] | None = None
+                 ) -> None:
+    """Say why in one line (with every thread's stack: where it was stuck) and exit with :data:`FORCED_EXIT` now.
+
+    ``context()`` (when given and not empty) ends the line; a failure of it costs only its words, never the exit.
+    """
+    try:
+        more = context() if context is not None else None
+    except Exception:  # noqa: BLE001 (the exit must happen whatever the context does)
+        more = None
     print(f"{prog or os.path.basename(sys.argv[0]) or 'foresight'}: {why}; exiting with status {FORCED_EXIT}"
-          + (" (stacks of every thread follow)" if stacks else ""), file=sys.stderr, flush=True)
+          + (f"; {more}" if more else "") + (" (stacks of every thread follow)" if stacks else ""),
+          file=sys.stderr, flush=True)
     if stacks:
         faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
     os._exit(FORCED_EXIT)

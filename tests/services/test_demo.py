@@ -489,3 +489,34 @@ def test_an_interrupted_runs_closing_lines_say_whether_its_log_was_finalised(tmp
     mcap.write_bytes(mcap.read_bytes()[:-30])
     assert any(ln.startswith(f"MCAP log: {mcap} (TRUNCATED (") for ln in _closing_lines(DemoConfig(), summary, True))
     assert f"MCAP log: {mcap}" in _closing_lines(DemoConfig(), summary)  # a whole run: its log was read already
+
+
+STOPPING_DEMO = """
+import sys, threading, time
+from pathlib import Path
+import services.demo as demo
+
+def run_demo(cfg, stop, out=print, on_start=lambda run: None):  # the services started, then stop one by one, slowly
+    on_start(Path(sys.argv[1]) / "run")
+    print("ready", flush=True)
+    stop.wait(30)
+    time.sleep(30)
+    return 130, None
+
+demo.run_demo = run_demo
+sys.exit(demo.main(["--run-dir", sys.argv[1]]))
+"""
+
+
+def test_a_second_ctrl_c_while_the_demo_stops_names_the_runs_directory(tmp_path: Path, signalled) -> None:
+    """A new user's second Ctrl-C as `make demo` stopped ended with "second SIGINT while stopping; exiting with status
+    3" and make's "Error 3": no line said where the run was, nor that its MCAP log (complete) was being finished."""
+    import signal
+
+    end = signalled(["-c", STOPPING_DEMO, str(tmp_path)], [(signal.SIGINT, 0.0), (signal.SIGINT, 0.5)], timeout=30)
+    run = tmp_path / "run"
+    assert end.returncode == 3, end.stderr[-2000:]
+    assert end.stderr.splitlines()[-1] == (
+        f"foresight demo: second SIGINT while stopping; exiting with status 3; this run's files: {run}/; its services "
+        f"stop on their own (each sees the demo gone) and the executor finishes the MCAP log: check it with "
+        f"`foresight log info {run}`"), end.stderr[-2000:]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -62,3 +63,74 @@ def test_a_ctrl_c_while_training_ends_its_progress_bar_before_saying_so(monkeypa
     lines = capsys.readouterr().err.strip().splitlines()
     assert status == 130 and lines[-1].startswith("foresight demo: interrupted while preparing the run"), lines
     assert lines[-2].startswith("GMM per class:") and "| 2/4 [" in lines[-2], lines
+
+
+class _Service(demo_run.ServiceProcess):
+    """A service that "starts" at once and writes ``said`` to its log; the executor's start is the person's Ctrl-C."""
+
+    stop_event: threading.Event
+    said: list[str]
+    waits: list[tuple[str, bool]]
+
+    def start(self) -> _Service:
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        self.log_path.write_text("stopped while starting\n" if self.name == "planner" else "")  # the executor: empty
+        self._log_from, self.alive = 0, True
+        if self.name == "executor":
+            self.stop_event.set()  # Ctrl-C as the executor still imports: SIGTERM comes before its handlers
+        return self
+
+    @property
+    def running(self) -> bool:
+        return self.alive
+
+    @property
+    def returncode(self) -> int | None:
+        return None if self.alive else -15
+
+    def wait_alive(self, is_alive, timeout, stop=None) -> bool:  # the line before it is queued, printed in a moment
+        deadline = time.monotonic() + (2.0 if self.name == "planner" else 0.0)
+        while not any(line.startswith("foresight demo: waiting for the planner") for line in self.said):
+            if time.monotonic() > deadline:
+                break
+            time.sleep(0.01)
+        self.waits.append((self.name, any("waiting for the planner" in line for line in self.said)))
+        return True
+
+    def stop(self, timeout: float = 5.0) -> int | None:
+        self.alive = False
+        return -15
+
+
+def _start_and_interrupt(monkeypatch, tmp_path: Path) -> tuple[list[str], list[tuple[str, bool]]]:
+    """One run whose services are fakes (:class:`_Service`), interrupted as the executor starts."""
+    from types import SimpleNamespace
+
+    stop, said, waits = threading.Event(), [], []
+    scenario = SimpleNamespace(demo=SimpleNamespace(class_name="blue_cup"), samples_per_tick=1)
+    monkeypatch.setattr(demo_run, "prepare_inputs", lambda *a: (scenario, tmp_path / "m.npz", tmp_path / "h.npz"))
+    monkeypatch.setattr(_Service, "stop_event", stop, raising=False)
+    monkeypatch.setattr(_Service, "said", said, raising=False)
+    monkeypatch.setattr(_Service, "waits", waits, raising=False)
+    monkeypatch.setattr(demo_run, "ServiceProcess", _Service)
+    status, record = demo_run.run_once(DemoConfig(run_dir=str(tmp_path)), "prediction", stop, said.append)
+    assert (status, record) == (130, None), said
+    return said, waits
+
+
+def test_the_planners_silent_start_is_said_before_the_demo_waits_for_it(monkeypatch, tmp_path: Path) -> None:
+    """A new user's first start went from "predictor up (2.7 s)" to "planner up (50.2 s)" with nothing between."""
+    said, waits = _start_and_interrupt(monkeypatch, tmp_path)
+    assert ("planner", True) in waits, (waits, said)  # said before the wait, not after it
+    (line,) = [ln for ln in said if "waiting for the planner" in ln]
+    assert "loads torch and compiles its cost" in line and str(tmp_path / "planner.log") in line, line
+
+
+def test_a_service_stopped_before_it_wrote_anything_gets_a_line_in_its_log(monkeypatch, tmp_path: Path) -> None:
+    """Ctrl-C 2.5 s after "replayer up": the executor, still importing, died of the SIGTERM before its handlers
+    existed, and its log was empty beside the planner's "stopped while starting" (a new user's first hour)."""
+    _start_and_interrupt(monkeypatch, tmp_path)
+    assert (tmp_path / "executor.log").read_text() == (
+        "executor was killed (SIGTERM): stopped by foresight demo before it had started (SIGTERM while it was still "
+        "importing, before its signal handlers)\n")
+    assert (tmp_path / "planner.log").read_text() == "stopped while starting\n"  # it said why itself

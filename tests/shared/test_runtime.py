@@ -343,3 +343,26 @@ def test_a_ctrl_c_held_since_a_parent_forked_the_service_is_the_parents_and_drop
     end = signalled(["-c", HELD, "none"], [], timeout=30)
     assert end.returncode == 0 and "serving" not in end.stdout, end.stderr[-2000:]
     assert "foresight replayer: stopped while starting" in end.stderr, end.stderr[-2000:]
+
+
+STOPPING = """
+import sys, threading, time
+from shared import runtime
+stop = threading.Event()
+context = (lambda: "this run's files: /runs/x/") if sys.argv[1] == "context" else None
+runtime.stop_on_signals(stop, grace_s=30.0, prog="stopping", **({"context": context} if context else {}))
+print("ready", flush=True)
+stop.wait(30)
+time.sleep(30)  # an orderly stop that takes its time (the demo's services stopping, one after the other)
+"""
+
+
+@pytest.mark.parametrize("context", ["context", "none"])
+def test_a_forced_exit_ends_its_one_line_with_the_context_it_was_given(context, signalled) -> None:
+    """``foresight demo``'s second Ctrl-C while it stopped said only "second SIGINT while stopping; exiting with status
+    3": not where the run's files were, nor that its services stop on their own (a new user's first hour). Other
+    processes give no context, and their line is as it was."""
+    end = signalled(["-c", STOPPING, context], [(signal.SIGTERM, 0.0), (signal.SIGTERM, 0.5)], timeout=20)
+    assert end.returncode == 3, end.stderr[-2000:]
+    line = "stopping: second SIGTERM while stopping; exiting with status 3"
+    assert end.stderr == (f"{line}; this run's files: /runs/x/\n" if context == "context" else f"{line}\n")
