@@ -91,15 +91,8 @@ class Reference:
         start = min(start, end)
         inner = self.dt * np.arange(len(self.waypoints))
         ts = np.concatenate([[start], inner[(inner > start) & (inner < end)], [end]])
-        points = np.array([self.at(t) for t in ts])
-        k = 1.0 if self.weights is None else self.weights
-        d = np.diff(points, axis=0) * k
-        r = (np.asarray(q, dtype=np.float64) - points[:-1]) * k
-        dd = np.sum(d * d, axis=-1)
-        a = np.clip(np.sum(r * d, axis=-1) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
-        dist = np.linalg.norm(r - a[:, None] * d, axis=-1)
-        i = int(np.argmax(dist <= dist.min() + 1e-6))
-        return float(ts[i] + a[i] * (ts[i + 1] - ts[i]))
+        i, a = _closest_on(np.array([self.at(t) for t in ts]), q, self.weights)
+        return float(ts[i] + a * (ts[i + 1] - ts[i]))
 
     def nearest(self, q: np.ndarray, within: float, by_length: bool = False) -> float:
         """Where the point of the path nearest ``q`` ``(D,)`` lies: seconds from its start, or length (``by_length``).
@@ -116,13 +109,23 @@ class Reference:
             return 0.0
         starts = self.cumulative[:-1] if by_length else self.dt * np.arange(len(w) - 1)
         n = max(1, int(np.count_nonzero(starts < within)))
-        k = 1.0 if self.weights is None else self.weights
-        d = np.diff(w[:n + 1], axis=0) * k
-        r = (np.asarray(q, dtype=np.float64) - w[:n]) * k
-        dd = np.sum(d * d, axis=-1)
-        a = np.clip(np.sum(r * d, axis=-1) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)  # 0 on a segment of no length
-        dist = np.linalg.norm(r - a[:, None] * d, axis=-1)
-        i = int(np.argmax(dist <= dist.min() + 1e-6))
+        i, a = _closest_on(w[:n + 1], q, self.weights)
         if by_length:
-            return float(self.cumulative[i] + a[i] * (self.cumulative[i + 1] - self.cumulative[i]))
-        return float((i + a[i]) * self.dt)
+            return float(self.cumulative[i] + a * (self.cumulative[i + 1] - self.cumulative[i]))
+        return float((i + a) * self.dt)
+
+
+def _closest_on(points: np.ndarray, q: np.ndarray, weights: np.ndarray | None) -> tuple[int, float]:
+    """The segment of the polyline ``points`` ``(N, D)`` nearest ``q`` ``(D,)`` and the fraction along it.
+
+    In the weighted metric of the path's length; of the points as near as the nearest (to 1e-6) the first is taken,
+    and a segment of no length is at its start.
+    """
+    k = 1.0 if weights is None else weights
+    d = np.diff(points, axis=0) * k
+    r = (np.asarray(q, dtype=np.float64) - points[:-1]) * k
+    dd = np.sum(d * d, axis=-1)
+    a = np.clip(np.sum(r * d, axis=-1) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+    dist = np.linalg.norm(r - a[:, None] * d, axis=-1)
+    i = int(np.argmax(dist <= dist.min() + 1e-6))
+    return i, float(a[i])
