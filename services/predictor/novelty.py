@@ -196,9 +196,10 @@ def through_sensor(features: list[list[np.ndarray]], noise_m: float, seed: int =
     seeded with ``seed``, drawn demonstration by demonstration in the order given), the model fitted back frame by
     frame, each frame warm-started from the last one taken (:meth:`~shared.keypoints.fit.KeypointFit.fit_sequences`,
     the tracker's fit, refusing a frame over the tracker's ``max_residual_m``; a refused one is interpolated between
-    the frames taken, as the tracker bridges it), then One-Euro smoothed with the tracker's defaults, a pose every
-    ``1 / pose_rate_hz`` (:class:`services.tracker.core.TrackerConfig`). A person's ``[tracker]`` options are not
-    known here: the calibration is for the defaults.
+    the frames taken, as the tracker bridges it, however long the run of refusals: where the tracker would lose the
+    person after ``max_gap_s``, this keeps the demonstration whole), then One-Euro smoothed with the tracker's
+    defaults, a pose every ``1 / pose_rate_hz`` (:class:`services.tracker.core.TrackerConfig`). A person's
+    ``[tracker]`` options are not known here: the calibration is for the defaults.
 
     Args:
         features: Per class, each demonstration's ``(T, 12)`` features as recorded (the paper's 12, the set the live
@@ -210,7 +211,7 @@ def through_sensor(features: list[list[np.ndarray]], noise_m: float, seed: int =
         The same demonstrations' ``(T, 12)`` features as the tracker would publish them.
     """
     from services.tracker.core import TrackerConfig  # the tracker's fit, limits and smoothing: only when asked for
-    from services.tracker.filters import OneEuroFilter
+    from services.tracker.filters import smooth_sequence
     from shared.human import HumanModel
     from shared.keypoints.fit import KeypointFit
 
@@ -221,15 +222,15 @@ def through_sensor(features: list[list[np.ndarray]], noise_m: float, seed: int =
     longest = max(len(p) for p in pts)
     batch = np.stack([np.concatenate([p, np.repeat(p[-1:], longest - len(p), 0)]) for p in pts])  # padding: unused
     res = KeypointFit().fit_sequences(batch, max_residual_m=cfg.max_residual_m)
-    assert res.refused is not None
+    if res.refused is None:  # fit_sequences marks refusals whenever max_residual_m is given
+        raise RuntimeError("through_sensor: KeypointFit.fit_sequences returned no refused frames for a max_residual_m")
     out: list[np.ndarray] = []
     for i, d in enumerate(demos):
         f, taken = res.features[i, :len(d)], ~res.refused[i, :len(d)]
         if taken.any() and not taken.all():
             t = np.arange(len(d))
             f = np.stack([np.interp(t, t[taken], f[taken, k]) for k in range(f.shape[1])], axis=-1)
-        smooth = OneEuroFilter(cfg.min_cutoff_hz, cfg.beta)
-        out.append(np.array([smooth(x, t / cfg.pose_rate_hz) for t, x in enumerate(f)]))
+        out.append(smooth_sequence(f, cfg.pose_rate_hz, cfg.min_cutoff_hz, cfg.beta))
     sizes = np.cumsum([0, *(len(ds) for ds in features)])
     return [out[a:b] for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
 

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-__all__ = ["OneEuroFilter"]
+__all__ = ["OneEuroFilter", "smooth_sequence"]
 
 
 def _alpha(cutoff_hz: np.ndarray | float, dt: float) -> np.ndarray | float:
@@ -59,3 +59,26 @@ class OneEuroFilter:
         self._x = self._x + a * (x - self._x)
         self._t = t
         return self._x.copy()
+
+
+def smooth_sequence(values: np.ndarray, rate_hz: float, min_cutoff_hz: float = 1.0, beta: float = 0.5) -> np.ndarray:
+    """A whole recorded sequence through one fresh :class:`OneEuroFilter`, a value every ``1 / rate_hz`` s.
+
+    What the tracker does to a person's frames as they come, done to a recording at once (the tracker's reach start
+    on the library, :func:`services.tracker.reach.recorded_start`; the novelty test's calibration through the
+    sensor, :func:`services.predictor.novelty.through_sensor`).
+
+    Args:
+        values: ``(T, N)`` the sequence, one row per sample.
+        rate_hz: Samples per second (> 0).
+        min_cutoff_hz: The filter's cutoff at rest (Hz).
+        beta: How fast its cutoff rises with speed.
+
+    Returns:
+        ``(T, N)`` float64: the filtered sequence; row 0 is ``values[0]``.
+    """
+    if not rate_hz > 0:
+        raise ValueError(f"smooth_sequence: rate_hz must be > 0, got {rate_hz}")
+    values = np.asarray(values, dtype=np.float64)
+    smooth = OneEuroFilter(min_cutoff_hz, beta)
+    return np.array([smooth(x, k / rate_hz) for k, x in enumerate(values)]).reshape(values.shape)

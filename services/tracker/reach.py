@@ -35,7 +35,7 @@ import numpy as np
 from shared.human import HumanModel
 from shared.keypoints.fit import POINT_NAMES
 
-from .filters import OneEuroFilter
+from .filters import smooth_sequence
 
 if TYPE_CHECKING:
     from .core import TrackerConfig
@@ -228,8 +228,8 @@ def recorded_start(features: np.ndarray, config: TrackerConfig, model: HumanMode
         config: The tracker's options (:class:`services.tracker.core.TrackerConfig`).
         model: The human model (default: ``HumanModel()``).
     """
-    smooth, model = OneEuroFilter(config.min_cutoff_hz, config.beta), model or HumanModel()
-    f = np.array([smooth(x, k / config.pose_rate_hz) for k, x in enumerate(np.asarray(features, np.float64))])
+    model = model or HumanModel()
+    f = smooth_sequence(features, config.pose_rate_hz, config.min_cutoff_hz, config.beta)
     wrists = np.array([body_wrist(j) for j in model.joint_positions(f)])
     start = first_start(wrists, config.pose_rate_hz, config.rule)
     return 0 if start is None else start
