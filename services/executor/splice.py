@@ -6,7 +6,9 @@ arrives earlier starts ahead of it. :func:`take_over` makes one :class:`Referenc
 progress on it:
 
 * **joined**: the arm is past the plan's start: it joins the plan at its point nearest the arm
-  (:meth:`Reference.nearest`) instead of being driven back to waypoint 0;
+  (:meth:`Reference.nearest`) instead of being driven back to waypoint 0. Where that point is off the arm (a plan
+  that leaves the arm's path: 0.03-0.05 rad in a review's real-time runs), the arm goes straight to the plan's next
+  waypoint at the plan's pace, as a lead-in (below), instead of closing the gap at its velocity limits;
 * **spliced**: waypoint 0 lies on the reference the arm is following, ahead of it (within ``stale_limit_s`` of its
   progress, and every joint within ``goal_tolerance`` of it): the arm goes on along that reference to its point
   nearest waypoint 0, then along the plan, as a motion controller splices trajectories. Before, it went straight
@@ -34,7 +36,10 @@ import numpy as np
 from .config import ExecutorConfig
 from .reference import Reference
 
-__all__ = ["Takeover", "take_over", "pace"]
+__all__ = ["Takeover", "take_over", "pace", "JOIN_ON_PATH"]
+
+JOIN_ON_PATH = 1e-6
+"""A late plan's point nearest the arm within this of it (every joint, rad or m) is on the arm: followed from there."""
 
 
 @dataclass(frozen=True)
@@ -72,10 +77,6 @@ def take_over(new: Reference, q: np.ndarray, current: Reference | None, progress
     rate = config.path_per_step / config.step_period_s  # length per second of the paper authors' pace (0: in time)
     by_length = rate > 0
     within = config.stale_limit_s * rate if by_length else config.stale_limit_s
-    joined = new.nearest(q, within, by_length)
-    if joined > 0.0:
-        return Takeover(new, joined, "joined")
-    w0 = new.waypoints[0]
     fastest = velocity * config.velocity_scale
     share = pace(new, velocity)
     lead_speed = velocity * min(share, config.velocity_scale) if share > 0 else fastest
@@ -84,6 +85,18 @@ def take_over(new: Reference, q: np.ndarray, current: Reference | None, progress
         return max(float(np.max(np.abs(gap) / fastest)),
                    min(float(np.max(np.abs(gap) / lead_speed)), config.stale_limit_s))
 
+    q = np.asarray(q, dtype=np.float64)
+    joined = new.nearest(q, within, by_length)
+    if joined > 0.0:
+        on = new.at_length(joined) if by_length else new.at(joined)
+        if float(np.max(np.abs(on - q))) <= JOIN_ON_PATH:
+            return Takeover(new, joined, "joined")
+        # off the plan: led to its next waypoint at its pace (the waypoints behind the arm are dropped)
+        nxt = int(np.searchsorted(new.cumulative, joined, side="right")) if by_length else int(joined / new.dt) + 1
+        rest = Reference(new.waypoints[min(nxt, len(new.waypoints) - 1):], new.dt, new.weights)
+        gap = rest.waypoints[0] - q
+        return _led(rest, lambda u: q + u * gap, lead_s(gap), by_length, "joined")
+    w0 = new.waypoints[0]
     if current is not None:
         start = min(current.time_at_length(progress) if by_length else progress, current.duration)
         end = current.time_at_length(progress + within) if by_length else start + within
@@ -92,7 +105,7 @@ def take_over(new: Reference, q: np.ndarray, current: Reference | None, progress
         if float(np.max(np.abs(gap))) <= config.goal_tolerance:
             return _led(new, lambda u: current.at(start + u * (s - start)) + u * gap,
                         max(s - start, lead_s(gap)), by_length, "spliced")
-    gap = w0 - np.asarray(q, dtype=np.float64)
+    gap = w0 - q
     return _led(new, lambda u: q + u * gap, lead_s(gap), by_length, "led in")
 
 

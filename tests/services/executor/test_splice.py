@@ -108,6 +108,38 @@ def test_a_plan_that_starts_off_the_arm_s_path_is_led_in_at_its_own_pace(stale_l
     assert off_paths(qs, lead, new) < 1e-9 and off_paths(qs[-5:], new) < 1e-9  # straight to waypoint 0, then on
 
 
+@pytest.mark.parametrize("path_per_step", [0.0, 0.02])
+def test_a_late_plan_off_the_arm_s_path_is_joined_at_its_pace_not_raced_to(path_per_step: float) -> None:
+    """A plan that began 0.2 s behind the arm and 0.045 rad off its path (a late plan that leaves the path): the arm
+    closed the gap to the plan's nearest point at its velocity limit (1.0 of it); now it goes straight to the plan's
+    next waypoint at the plan's own pace, then along the plan."""
+    core, first = _following(path_per_step)
+    off = np.array([0.04, -0.02, 0.0])  # across the arm's path (j0, j1 at 1 : 2)
+    plan = paced(first.at(0.3) + off, np.array([0.1, 0.2, 0.0]) + 1.5 * off)
+    new, here = ref_of(plan), core.q.copy()
+    core.adopt(plan)
+    assert core.taken == "joined" and core.goal == 0
+    qs, fast = shares(core, 3.0)
+    if path_per_step == 0.0:
+        assert fast.max() <= 1.05 * SHARE, fast.max()
+    else:
+        speeds = np.linalg.norm(np.diff(np.vstack([here, qs]), axis=0), axis=1) / 0.02
+        assert speeds.max() <= 1.05 * path_per_step / core.config.step_period_s, speeds.max()
+    nxt = int(new.nearest(here, new.duration) / new.dt) + 1  # the plan's waypoint after its point nearest the arm
+    lead = Reference(np.vstack([here, new.waypoints[nxt]]), 1.0)
+    assert off_paths(qs, lead, new) < 1e-6  # straight to that waypoint, then along the plan (float32 plans)
+    assert core.reached and np.allclose(core.q, new.goal, atol=1e-9)
+
+
+def test_a_late_plan_through_the_arm_is_joined_where_the_arm_is() -> None:
+    """On the arm's path (a late plan along the same line): joined at the arm's point, no lead."""
+    core, first = _following()
+    plan = paced(first.at(0.3), first.at(0.3) + 2 * (first.goal - first.at(0.3)))
+    core.adopt(plan)
+    assert core.taken == "joined" and core.reference.waypoints.shape == plan.trajectories[0].shape
+    np.testing.assert_allclose(core.reference.at(core.tau), core.q, atol=1e-9)
+
+
 class RealTimeRobot(FakeRobot):
     """A command arrives a state period after the state it was made from, as in the real-time loop."""
 
