@@ -5,6 +5,11 @@ keeps ``(key, reason)`` counts, logs at most one line per key per ``log_period_s
 on a key at once (each line says how many were refused on that key so far, by reason, so a flood never floods
 the log, and a second kind of fault is never hidden behind the first), and gives a
 one-line :meth:`RejectCounter.summary` for the service's status and shutdown lines.
+
+It tracks at most ``max_keys`` keys: a peer can publish on any number of keys under the prefix, so the rejects
+on any further key are counted together under :data:`OTHER_KEYS` (one key for the rate limit too), and a flood
+of distinct keys neither grows the counter nor floods the log. Keys and texts are logged escaped: a peer's key
+or text never starts a log line of its own.
 """
 
 from __future__ import annotations
@@ -14,9 +19,19 @@ import threading
 import time
 from collections.abc import Callable
 
-__all__ = ["RejectCounter"]
+__all__ = ["RejectCounter", "OTHER_KEYS", "MAX_KEYS"]
 
 log = logging.getLogger("foresight.rejects")
+
+MAX_KEYS = 32  # keys tracked one by one; a service hears about a dozen
+OTHER_KEYS = "(other keys)"  # the bucket for the rejects on every key past the first MAX_KEYS
+
+
+def _escaped(text: str) -> str:
+    """``text`` with line breaks and other control characters written as escapes (one log line stays one)."""
+    text = text.replace("\r", "\\r").replace("\n", "\\n")
+    return "".join(c if c.isprintable() else f"\\x{ord(c):02x}" if ord(c) < 0x100 else f"\\u{ord(c):04x}"
+                   for c in text)
 
 
 class RejectCounter:
@@ -26,16 +41,29 @@ class RejectCounter:
         service: The service's name (starts each log line).
         log_period_s: Smallest time between two log lines about one key.
         clock: Monotonic clock (s).
+        max_keys: Keys counted one by one; the rejects on any further key are counted under :data:`OTHER_KEYS`.
     """
 
-    def __init__(self, service: str, log_period_s: float = 1.0, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, service: str, log_period_s: float = 1.0, clock: Callable[[], float] = time.monotonic,
+                 max_keys: int = MAX_KEYS) -> None:
         self.service = service
         self.log_period_s = log_period_s
+        self.max_keys = max_keys
         self._clock = clock
         self._by_reason: dict[tuple[str, str], int] = {}
+        self._keys: set[str] = set()  # the keys counted one by one (at most max_keys)
         self._last_log: dict[str, float] = {}
         self._traced: set[str] = set()
         self._lock = threading.Lock()
+
+    def _bucket(self, key: str) -> str:
+        """The key ``key`` is counted under: itself, or :data:`OTHER_KEYS` past ``max_keys`` (lock held)."""
+        if key in self._keys:
+            return key
+        if len(self._keys) < self.max_keys:
+            self._keys.add(key)
+            return key
+        return OTHER_KEYS
 
     def reject(self, key: str, error: Exception | str, reason: str | None = None, said: bool = False) -> None:
         """Record one rejected message on ``key``.
@@ -48,20 +76,21 @@ class RejectCounter:
         """
         why = reason or getattr(error, "reason", None) or "malformed"
         with self._lock:
-            new_reason = (key, why) not in self._by_reason
-            self._by_reason[(key, why)] = self._by_reason.get((key, why), 0) + 1
+            bucket = self._bucket(key)
+            new_reason = (bucket, why) not in self._by_reason
+            self._by_reason[(bucket, why)] = self._by_reason.get((bucket, why), 0) + 1
             now = self._clock()
-            if said or (not new_reason and now - self._last_log.get(key, -float("inf")) < self.log_period_s):
+            if said or (not new_reason and now - self._last_log.get(bucket, -float("inf")) < self.log_period_s):
                 if said:
-                    self._last_log[key] = now
+                    self._last_log[bucket] = now
                 return
-            self._last_log[key] = now
-            counts = {r: n for (k, r), n in self._by_reason.items() if k == key}
+            self._last_log[bucket] = now
+            counts = {r: n for (k, r), n in self._by_reason.items() if k == bucket}
         total = sum(counts.values())
         detail = ", ".join(f"{r} {n}" for r, n in sorted(counts.items()))
-        text = str(error)[:300].replace("\r", "\\r").replace("\n", "\\n")  # a peer's text never starts a log line
-        log.warning("%s: rejected a message on %s (%s): %s [%d so far: %s]", self.service, key, why, text, total,
-                    detail)
+        where = f" on keys past the first {self.max_keys}, counted as {OTHER_KEYS}" if bucket == OTHER_KEYS else ""
+        log.warning("%s: rejected a message on %s (%s): %s [%d so far%s: %s]", self.service, _escaped(key[:200]),
+                    _escaped(why), _escaped(str(error)[:300]), total, where, detail)
 
     def unexpected(self, key: str, error: Exception, what: str) -> None:
         """Record a message refused by a bug of this process, not by the wire contract (reason ``handler``).
@@ -76,16 +105,17 @@ class RejectCounter:
             what: What failed, e.g. ``"decoding a message"``.
         """
         with self._lock:
-            first = key not in self._traced
-            self._traced.add(key)
+            bucket = self._bucket(key)
+            first = bucket not in self._traced
+            self._traced.add(bucket)
         if first:
             log.error("%s: %s on %s failed unexpectedly (this traceback once per key; later ones are counted)",
-                      self.service, what, key, exc_info=error)
+                      self.service, what, _escaped(key[:200]), exc_info=error)
         self.reject(key, error, reason="handler", said=first)
 
     @property
     def counts(self) -> dict[str, int]:
-        """Rejected messages per key."""
+        """Rejected messages per key (those past ``max_keys`` keys under :data:`OTHER_KEYS`)."""
         out: dict[str, int] = {}
         with self._lock:
             for (key, _), n in self._by_reason.items():
@@ -94,7 +124,7 @@ class RejectCounter:
 
     @property
     def by_reason(self) -> dict[tuple[str, str], int]:
-        """Rejected messages per ``(key, reason)``."""
+        """Rejected messages per ``(key, reason)`` (keys past ``max_keys`` as :data:`OTHER_KEYS`)."""
         with self._lock:
             return dict(self._by_reason)
 
@@ -105,8 +135,8 @@ class RejectCounter:
             return sum(self._by_reason.values())
 
     def summary(self) -> str:
-        """One line: ``"none"`` or ``"key: reason n, reason n; key: ..."``."""
+        """One line: ``"none"`` or ``"key: reason n, reason n; key: ..."`` (keys escaped: services log it)."""
         by_key: dict[str, list[str]] = {}
         for (key, why), n in sorted(self.by_reason.items()):
-            by_key.setdefault(key, []).append(f"{why} {n}")
+            by_key.setdefault(_escaped(key[:200]), []).append(f"{_escaped(why)} {n}")
         return "; ".join(f"{k}: {', '.join(v)}" for k, v in by_key.items()) or "none"

@@ -64,6 +64,19 @@ def _unpack(data: bytes) -> Any:
                            max_ext_len=0, list_hook=budget.take, object_hook=budget.take)
 
 
+def _unpack_error(exc: Exception) -> ProtocolError:
+    """What :func:`_unpack` raising ``exc`` means: a bound passed (too-large), an ext type or bad bytes (malformed)."""
+    text = str(exc)
+    if "exceeds max_ext_len" in text:  # max_ext_len=0: any ext type (a timestamp too) is refused by size
+        return ProtocolError("message: not valid msgpack (msgpack ext types are not allowed)", "malformed")
+    if isinstance(exc, _TooMany) or (isinstance(exc, ValueError) and "exceeds max_" in text):
+        return ProtocolError(f"message: too many msgpack objects ({type(exc).__name__}: {text[:120]})", "too-large")
+    if not text:  # msgpack raises these two without a text
+        text = ("a byte that starts no msgpack object" if isinstance(exc, msgpack.FormatError)
+                else "nested deeper than msgpack's limit" if isinstance(exc, msgpack.StackError) else "no detail")
+    return ProtocolError(f"message: not valid msgpack ({type(exc).__name__}: {text[:120]})", "malformed")
+
+
 @dataclasses.dataclass(frozen=True)
 class _Field:
     """One field of a message class, with what encoding and decoding it needs resolved once."""
@@ -237,9 +250,7 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M] | None = None
     try:
         raw = _unpack(bytes(data))
     except Exception as exc:  # msgpack raises several unrelated types for bad input
-        over = isinstance(exc, _TooMany) or (isinstance(exc, ValueError) and "exceeds max_" in str(exc))
-        raise ProtocolError(f"message: {'too many msgpack objects' if over else 'not valid msgpack'} "
-                            f"({type(exc).__name__}: {str(exc)[:120]})", "too-large" if over else "malformed") from None
+        raise _unpack_error(exc) from None
     if not isinstance(raw, dict):
         raise ProtocolError(f"message: expected a map, got {type(raw).__name__}")
     t = raw.get("_type")

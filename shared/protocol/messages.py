@@ -286,6 +286,8 @@ class Plan(Message):
             raise _err(self.TYPE, "goal_names", f"has {len(self.goal_names)} names for {k} trajectories")
         if len(self.joint_names) != d:
             raise _err(self.TYPE, "joint_names", f"has {len(self.joint_names)} names for {d} joints")
+        if d == 0:
+            raise _err(self.TYPE, "trajectories", "has no joints; a robot has at least 1")
         _distinct(self.TYPE, "goal_names", self.goal_names)
         _distinct(self.TYPE, "joint_names", self.joint_names)  # the ROS 2 gateway sent on what its parsers refuse
         if not (0 <= self.chosen < k) or not bool(self.valid[self.chosen]):
@@ -321,6 +323,8 @@ class RobotState(Message):
         """Validate this message's invariants (see the class docstring)."""
         if len(self.joint_names) != self.q.shape[0]:
             raise _err(self.TYPE, "joint_names", f"has {len(self.joint_names)} names for {self.q.shape[0]} joints")
+        if self.q.shape[0] == 0:
+            raise _err(self.TYPE, "q", "has no joints; a robot has at least 1")
         _distinct(self.TYPE, "joint_names", self.joint_names)
 
 

@@ -9,10 +9,11 @@ from what it knows (its clock mode, its robot's joints and limits, its scene's g
   when the receiver knows the period P (the executor), else in ``[0, (tick + 1) MAX_PERIOD_S]``, and
   no tick beyond the lock-step clock (``max_tick``);
 * ranges: features within their plausible human range, grid geometry (resolution, origin, the
-  scene's grid), periods, waypoint spacing, planning time, costs, counters;
+  scene's grid), periods, waypoint spacing, planning time, costs (non-negative, bounded), counters;
 * the robot: joint names equal to the receiver's, positions within its limits plus
-  ``JOINT_LIMIT_TOL``, velocities within its limits plus ``VELOCITY_LIMIT_TOL`` (without a model:
-  ``MAX_ABS_JOINT`` / ``MAX_ABS_JOINT_VELOCITY``).
+  ``JOINT_LIMIT_TOL`` (every goal's waypoints, valid or not), velocities within its limits plus
+  ``VELOCITY_LIMIT_TOL`` (without a model: ``MAX_ABS_JOINT`` / ``MAX_ABS_JOINT_VELOCITY``);
+* keypoints: real time (``tick == -1``) whatever the receiver's clock: a sensor has no other.
 
 Per-sender order (ticks, sequence numbers) is :mod:`shared.protocol.receipt`'s. Every failure is a
 :class:`~shared.protocol.schema.ProtocolError` with its ``reason``. No Zenoh here.
@@ -187,6 +188,8 @@ def _counter(t: str, name: str, value: int, low: int, high: int) -> None:
 def _joints(t: str, names: Sequence[str], q: np.ndarray, exp: Expectations, what: str) -> None:
     """``q (..., D)`` positions: the receiver's joints and limits (or the generic bound)."""
     robot = exp.robot
+    if not np.isfinite(q).all():  # decode refuses these; a message built in this process is checked here only
+        raise _err(t, what, "contains NaN or infinity", "non-finite")
     if robot is None:
         if q.size and float(np.max(np.abs(q))) > L.MAX_ABS_JOINT:
             raise _err(t, what, f"|q| up to {float(np.max(np.abs(q))):.4g} (limit {L.MAX_ABS_JOINT:g})",
@@ -225,6 +228,9 @@ def _pose(msg: HumanPose, exp: Expectations) -> None:
 
 
 def _keypoints(msg: HumanKeypoints, exp: Expectations) -> None:
+    # a sensor runs in real time: every sender stamps -1, and a receiver on clock "auto" took a tick >= 0 as lock-step
+    if msg.tick != -1:
+        raise _err(msg.TYPE, "tick", f"{msg.tick}: a sensor runs in real time (must be -1)", "mismatch")
     _counter(msg.TYPE, "frame", msg.frame, 0, L.MAX_FRAME)
     seen = msg.positions[~np.isnan(msg.positions).any(axis=1)]
     if seen.size and float(np.max(np.abs(seen))) > L.MAX_KEYPOINT_M:
@@ -279,7 +285,10 @@ def _plan(msg: Plan, exp: Expectations) -> None:
         cost = getattr(msg, name)[msg.valid]
         if cost.size and float(np.max(np.abs(cost))) > L.MAX_ABS_COST:
             raise _err(t, name, f"|cost| {float(np.max(np.abs(cost))):.4g} above {L.MAX_ABS_COST:g}", "out-of-range")
-    _joints(t, msg.joint_names, msg.trajectories[msg.valid].astype(np.float64), exp, "trajectories")
+        if cost.size and float(np.min(cost)) < 0.0:  # each term is a sum of squares or penetrations, never below 0
+            raise _err(t, name, f"{float(np.min(cost)):.6g} is negative (every cost term is >= 0)", "out-of-range")
+    # every goal's waypoints, an invalid goal's too: the live view and the log's scene run FK on all K
+    _joints(t, msg.joint_names, msg.trajectories.astype(np.float64), exp, "trajectories")
 
 
 def _state(msg: RobotState, exp: Expectations) -> None:

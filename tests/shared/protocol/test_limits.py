@@ -135,6 +135,18 @@ def test_reasons_of_the_decoder():
     assert _reject(msgpack.packb(raw, use_bin_type=True), RobotState).reason == "non-finite"
 
 
+@pytest.mark.parametrize(("payload", "text"), [
+    (b"\xc7\x05\x01hello", "(msgpack ext types are not allowed)"),
+    (msgpack.packb({"_type": "HumanPose", "stamp": msgpack.Timestamp(1, 0)}), "(msgpack ext types are not allowed)"),
+    (b"\xc1", "(FormatError: a byte that starts no msgpack object)"),
+    (b"\x91" * 100_000 + b"\xc0", "(StackError: nested deeper than msgpack's limit)"),
+], ids=["ext", "timestamp-ext", "reserved-byte", "deep"])
+def test_what_is_not_msgpack_is_malformed_and_says_why(payload, text):
+    """An ext type was filed too-large ("exceeds max_ext_len(0)"); a FormatError or StackError said nothing."""
+    err = _reject(payload, HumanPose)
+    assert err.reason == "malformed" and str(err) == f"message: not valid msgpack {text}"
+
+
 def _valid(cls: type):
     if cls is RobotState:
         return RobotState(stamp=1.0, tick=-1, joint_names=["a", "b"], goal=0, reached=False, holding=False,

@@ -36,6 +36,21 @@ def test_names_receivers_key_on_are_distinct(msg, field) -> None:
         encode(msg)
 
 
+def _empty(dtype: str, *shape: int) -> dict:
+    return {"dtype": dtype, "shape": list(shape), "data": b""}
+
+
+@pytest.mark.parametrize(("raw", "field"), [
+    (_raw(state()) | {"joint_names": [], "q": _empty("<f8", 0), "qd": _empty("<f8", 0)}, "RobotState.q"),
+    (_raw(plan()) | {"joint_names": [], "trajectories": _empty("<f4", 1, 2, 0)}, "Plan.trajectories"),
+])
+def test_a_robot_has_at_least_one_joint(raw, field) -> None:
+    """A RobotState of no joints (D = 0) decoded and passed every check."""
+    with pytest.raises(ProtocolError, match=rf"{field}: has no joints") as info:
+        decode(msgpack.packb(raw))
+    assert info.value.reason == "invariant"
+
+
 def test_a_grid_sends_each_voxel_once_and_only_non_zero_ones() -> None:
     """Indices [1, 1] with values [10, 20] decoded, and to_dense kept the last (0.078); docs/protocol.md says only
     voxels of non-zero probability are sent."""

@@ -152,15 +152,24 @@ def test_joint_names_must_be_the_receivers():
     refused(plan(joint_names=["a", "b"]), realtime(robot=ROBOT), "mismatch")
 
 
-def test_plan_waypoints_within_limits_invalid_goals_ignored():
+def test_plan_waypoints_within_limits_invalid_goals_too():
+    """Before, an invalid goal's waypoints went unchecked: at 1e30 they passed, and the live view's scene runs FK
+    on all K goals. The planner sends an invalid goal as the robot's start, within the limits."""
     exp = realtime(robot=ROBOT)
     check_values(plan(), exp)
     far = np.array([[[0.1, -1.0], [9.0, -1.0]]], np.float32)
     refused(plan(traj=far), exp, "joint-limits", "trajectories")
-    two = np.concatenate([np.array([[[0.1, -1.0], [0.2, -0.5]]], np.float32), far])
-    ok = plan(traj=two, goal_names=["g", "h"], valid=np.array([True, False]), cost_smoothness=np.array([1, np.inf]),
-              cost_obstacle=np.array([1, np.inf]), cost_human=np.array([1, np.inf]), cost_total=np.array([1, np.inf]))
-    check_values(ok, exp)
+    start = np.array([[[0.1, -1.0], [0.1, -1.0]]], np.float32)
+    invalid = dict(goal_names=["g", "h"], valid=np.array([True, False]), cost_smoothness=np.array([1, np.inf]),
+                   cost_obstacle=np.array([1, np.inf]), cost_human=np.array([1, np.inf]),
+                   cost_total=np.array([1, np.inf]))
+    check_values(plan(traj=np.concatenate([plan().trajectories, start]), **invalid), exp)
+    refused(plan(traj=np.concatenate([plan().trajectories, far]), **invalid), exp, "joint-limits", "trajectories")
+    huge = np.full((1, 2, 2), 1e30, np.float32)
+    refused(plan(traj=np.concatenate([plan().trajectories, huge]), **invalid), realtime(), "joint-limits",
+            "trajectories")
+    nan = np.full((1, 2, 2), np.nan, np.float32)  # built in this process: decode never saw it
+    refused(plan(traj=np.concatenate([plan().trajectories, nan]), **invalid), realtime(), "non-finite")
 
 
 def test_plan_scalars_and_costs_bounded():
@@ -169,6 +178,9 @@ def test_plan_scalars_and_costs_bounded():
     refused(plan(dt=1e3), exp, "out-of-range", "Plan.dt")
     refused(plan(planning_ms=-1.0), exp, "out-of-range", "planning_ms")
     refused(plan(cost_total=np.array([1e303])), exp, "out-of-range", "cost_total")
+    for name in ("cost_smoothness", "cost_obstacle", "cost_human", "cost_total"):  # squares and penetrations: >= 0
+        refused(plan(**{name: np.array([-5.0])}), exp, "out-of-range", f"{name}: -5 is negative")
+    check_values(plan(cost_obstacle=np.array([0.0]), cost_human=np.array([-0.0])), exp)
     refused(plan(step=-1), exp, "out-of-range", "Plan.step")
     refused(state(goal=L.MAX_GOALS), exp, "out-of-range", "RobotState.goal")
 
@@ -196,6 +208,14 @@ def test_keypoints_within_range_of_the_sensor():
         check_values(dataclasses.replace(kp, frame=L.MAX_FRAME + 1), realtime())
     with pytest.raises(ProtocolError, match="stamp") as info:
         check_values(dataclasses.replace(kp, stamp=NOW - 1000.0), realtime())
+
+
+def test_keypoints_are_real_time_at_every_receiver():
+    """Before, a frame of tick 5 (a simulated stamp) passed a receiver on clock "auto" (the view, the ROS 2 gateway);
+    only the tracker refused it. Every sensor stamps -1."""
+    kp = HumanKeypoints(stamp=1.0, tick=5, frame=3, frame_id="recorder", names=["pelvis"], positions=np.ones((1, 3)))
+    for exp in (Expectations(clock="auto"), Expectations(clock="lockstep")):
+        refused(kp, exp, "mismatch", "HumanKeypoints.tick: 5: a sensor runs in real time (must be -1)")
 
 
 def test_marker_counters():
