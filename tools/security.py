@@ -124,9 +124,9 @@ def main(argv: list[str] | None = None, prog: str = "foresight security") -> int
     sub = parser.add_subparsers(dest="cmd", required=True, metavar="{" + ",".join(SUBCOMMANDS) + "}")
     p = sub.add_parser("init", help=SUBCOMMANDS["init"])
     p.add_argument("dir", type=Path, help="directory for ca.crt, ca.key and <role>.crt / <role>.key")
-    p.add_argument("--hosts", default=None, help="comma-separated host names or addresses the sessions listen on "
-                   "beyond loopback (e.g. the router's), written into every certificate (default: those of the "
-                   "certificates being replaced, none at first)")
+    p.add_argument("--hosts", default=None, help="comma-separated host names or addresses clients connect to "
+                   "beyond loopback (e.g. the router's; not 0.0.0.0), written into every certificate (default: those "
+                   "of the certificates being replaced, none at first)")
     p.add_argument("--days", type=int, default=365, help=f"validity of the role certificates (default: 365, at "
                    f"most the authority's {CA_DAYS})")
     p.add_argument("--new-ca", action="store_true", help="make a new authority even if DIR has one")

@@ -66,7 +66,9 @@ def check_host(host: str) -> str:
     """``host`` if it is an IP address or a DNS name a certificate can carry, else a ``ValueError`` saying why.
 
     An address is written bare (``::1``, not ``[::1]``) and a name has no port: a certificate names hosts,
-    and a name it does not match exactly is refused by the peer at the first connection, far from here.
+    and a name it does not match exactly is refused by the peer at the first connection, far from here. The
+    unspecified addresses (``0.0.0.0``, ``::``: what ``--listen`` binds to) and multicast groups are refused:
+    no client connects to them, so the certificate would match none of its connections.
     A DNS name is dot-separated labels of letters, digits and inner hyphens (RFC 1123), the first may be
     ``*`` (a wildcard) when others follow, and the last is not all digits (``192.168.1.300`` is a mistyped
     address, not a name); a trailing dot (the DNS root) is dropped, since peers never match it.
@@ -79,6 +81,10 @@ def check_host(host: str) -> str:
         if getattr(address, "scope_id", None):  # fe80::1%eth0: the certificate would name fe80::1, no word said
             raise ValueError(f"host {host!r}: a certificate names an address without its scope (give "
                              f"{host.split('%')[0]!r}; the scope is the endpoint's)")
+        if address.is_unspecified or address.is_multicast:  # 0.0.0.0 copied from --listen: refused at connect
+            what = "the listen wildcard" if address.is_unspecified else "a multicast group"
+            raise ValueError(f"host {host!r} is {what}, which no client connects to: give the address clients "
+                             "connect to (e.g. 192.168.1.10 or robot.local)")
         return str(address)
     if host.startswith("[") and "]" in host:
         raise ValueError(f"host {host!r}: write an IPv6 address without brackets or port "
@@ -134,7 +140,8 @@ def issue(authority: Issued, role: str, hosts: Sequence[str] = (), days: int = 3
         authority: The CA (certificate and key).
         role: Common name, e.g. ``planner``.
         hosts: DNS names or IP addresses the holder serves, beside :data:`LOOPBACK_HOSTS`.
-        days: Validity from ``now``.
+        days: Validity from ``now``; never past the authority's end (with its ``days``, a role certificate ended
+            milliseconds after the authority that signed it).
         now: Issue time (default: now).
         not_after: End of validity, overriding ``days`` (tests make expired certificates with it).
     """
@@ -144,7 +151,7 @@ def issue(authority: Issued, role: str, hosts: Sequence[str] = (), days: int = 3
     if not isinstance(ca_key, ec.EllipticCurvePrivateKey):
         raise ValueError("the authority's key is not an EC key")
     key = ec.generate_private_key(ec.SECP256R1())
-    end = not_after or now + dt.timedelta(days=days)
+    end = min(not_after or now + dt.timedelta(days=days), ca_cert.not_valid_after_utc)
     start = min(now - dt.timedelta(minutes=5), end - dt.timedelta(minutes=10))
     cert = (x509.CertificateBuilder()
             .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, role),
@@ -260,6 +267,7 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
             authority's end, or a directory others may write (:func:`check_directory`); nothing written.
     """
     hosts = [check_host(h) for h in hosts]
+    now = dt.datetime.now(dt.UTC)  # one time for the authority and every role: --days N of each ends together
     d = Path(directory)
     d.mkdir(mode=0o700, parents=True, exist_ok=True)  # 0700 whatever the umask (002 made it 775, then refused)
     check_directory(d)
@@ -283,20 +291,20 @@ def init_security_dir(directory: str | os.PathLike[str], roles: Sequence[str], h
         ca = load_authority(ca_crt)  # one authority, a CA: a second one added would be handed out with it
         if not _same_key(ca, key):
             raise FileExistsError(f"security directory {d}: ca.key is not the key of ca.crt")
-        _validity(ca, "ca.crt (the authority)", dt.datetime.now(dt.UTC))
-        left = ca.not_valid_after_utc - dt.datetime.now(dt.UTC)
+        _validity(ca, "ca.crt (the authority)", now)
+        left = ca.not_valid_after_utc - now
         if dt.timedelta(days=days) > left:
             raise CertificateError(f"--days {days}: the authority (ca.crt) ends on {ca.not_valid_after_utc:%Y-%m-%d}, "
                                    f"in {left.days} days; a certificate cannot outlive it (--new-ca makes a new one)")
     elif days > CA_DAYS:
         raise CertificateError(f"--days {days}: at most {CA_DAYS}, the validity of a new authority")
     else:
-        authority = make_authority()
+        authority = make_authority(now=now)
         _write(ca_crt, authority.cert_pem, private=False)
         _write(ca_key, authority.key_pem, private=True)
     written = {"ca.crt": ca_crt, "ca.key": ca_key}
     for role in roles:
-        issued = issue(authority, role, hosts, days=days)
+        issued = issue(authority, role, hosts, days=days, now=now)
         _write(d / f"{role}.crt", issued.cert_pem, private=False)
         _write(d / f"{role}.key", issued.key_pem, private=True)
         written[f"{role}.crt"] = d / f"{role}.crt"

@@ -61,7 +61,8 @@ def _wildcard_denied(keys: Keys, role: str, expr: str) -> str:
 
     Zenoh allows a subscription only where an allowed key expression includes it whole; one that also matches a
     key the role does not consume is refused, so the keys it does consume are lost with it (a planner's
-    ``foresight/human/*``, an executor run under another role's certificate: its log's ``foresight/**``). An
+    ``foresight/prediction/*``: it consumes the occupancy, not the posterior; an executor run under another role's
+    certificate: its log's ``foresight/**``). An
     expression that meets no key of the contract (a ROS 2 node's keys) is not judged here.
     """
     import zenoh

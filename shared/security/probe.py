@@ -3,7 +3,9 @@
 Zenoh retries a refused TLS link in silence, and a client's warnings read the same whether the router is down,
 its certificate is from another authority, its name is not the one connected to, or it refused this machine's
 certificate (a review of a four-machine cell: all three said "a refused certificate ... looks like this"). One
-handshake to the endpoint with the role's own files tells them apart; the warnings carry its line.
+handshake to the endpoint with the role's own files tells them apart; the warnings carry its line. This machine's
+own files are checked first, as at start: a certificate that expired while the service ran was reported as the
+other side's refusal (``sslv3 alert certificate expired``), every few seconds, without naming the file or when.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import ssl
 
 from shared.config import endpoint_host_port
 
-from .certificates import read_role
+from .certificates import CertificateError, read_role, verify_role
 
 __all__ = ["diagnose", "speaks_tls"]
 
@@ -36,9 +38,12 @@ def diagnose(endpoint: str, security_dir: str | os.PathLike[str], role: str, tim
     """
     try:
         host, port = endpoint_host_port(endpoint)
+        verify_role(security_dir, role)  # this side first: ours expiring while the service ran was blamed on the router
         ca, cert, key = read_role(security_dir, role)
         context = ssl.create_default_context(cafile=str(ca))
         context.load_cert_chain(str(cert), str(key))
+    except CertificateError as exc:  # this machine's file and what is wrong, e.g. planner.crt: expired at ... UTC
+        return str(exc)
     except (ValueError, OSError, ssl.SSLError) as exc:
         return f"no handshake tried ({exc})"
     where = f"{host}:{port}"

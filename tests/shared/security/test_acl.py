@@ -61,6 +61,34 @@ def test_each_role_puts_only_what_it_owns_and_receives_what_it_consumes() -> Non
     assert _rules_of(acl, ROUTER, "put", "ingress") == set(KEYS.data_keys())  # it forwards
 
 
+_EVERY = {"keypoints", "pose", "demo", "posterior", "occupancy", "plan", "robot_state", "clock"}
+WRITTEN_BY_HAND = {  # role: (keys it may put, keys it may receive); read from services/*/service.py, docs/protocol.md
+    "replayer": ({"pose", "demo"}, {"clock"}),  # streams the recording; lock-step paces it by the clock
+    "tracker": ({"pose", "demo"}, {"keypoints"}),  # its --from player puts keypoints as the sensor
+    "predictor": ({"posterior", "occupancy"}, {"pose", "demo"}),  # foresight/human/*, ordered
+    "planner": ({"plan"}, {"pose", "demo", "occupancy", "robot_state", "clock"}),
+    "executor": ({"robot_state", "clock"}, _EVERY),  # its MCAP log: foresight/**
+    "sensor": ({"keypoints"}, set()),
+    "observer": (set(), _EVERY),
+    "router": (_EVERY, _EVERY),  # it forwards
+}
+
+
+@pytest.mark.parametrize("role", ROLES)
+def test_the_rules_grant_each_role_what_the_services_do(role: str) -> None:
+    """A table written from the services' code, not from ROUTES: a wrong derivation of the rules fails here."""
+    acl, (puts, receives) = access_control(KEYS), WRITTEN_BY_HAND[role]
+    assert _rules_of(acl, role, "put", "ingress") == {getattr(KEYS, k) for k in puts}
+    assert _rules_of(acl, role, "put", "egress") == {getattr(KEYS, k) for k in receives}
+    subscribe = _rules_of(acl, role, "declare_subscriber", "ingress")
+    assert {e for e in subscribe if "*" not in e} == {getattr(KEYS, k) for k in receives}
+    assert (KEYS.human_all in subscribe) == ({"pose", "demo"} <= receives)  # the predictor's one ordered stream
+    assert ("cell/**" in subscribe) == (receives == _EVERY)
+    assert ("cell/prediction/*" in subscribe) == ({"posterior", "occupancy"} <= receives)  # not the planner's
+    assert _rules_of(acl, role, "liveliness_token", "ingress") == (
+        {KEYS.alive(role)} if role in SERVICES else {KEYS.alive_all} if role == ROUTER else set())
+
+
 def test_a_client_session_names_its_router_only() -> None:
     every, client = access_control(KEYS, remote_roles("peer")), access_control(KEYS, remote_roles("client"))
     assert remote_roles("router") == remote_roles("peer") == ROLES and remote_roles("client") == (ROUTER,)

@@ -114,6 +114,10 @@ def test_a_key_file_that_was_readable_is_replaced_private(tmp_path: Path) -> Non
     ("192.168.1.300", "no IP address"),
     ("10.0.0", "no IP address"),
     ("fe80::1%eth0", r"names an address without its scope \(give 'fe80::1'"),  # it named fe80::1, no word said
+    ("0.0.0.0", "the listen wildcard, which no client connects to: give the address clients connect to"),
+    ("::", "the listen wildcard"),  # copied from --listen: accepted, then every client refused the router
+    ("224.0.0.224", "a multicast group"),
+    ("ff02::1", "a multicast group"),
 ])
 def test_a_host_a_certificate_cannot_name_is_refused_before_anything_is_written(tmp_path: Path, host: str,
                                                                                  match: str, capsys) -> None:
@@ -223,6 +227,15 @@ def test_days_past_the_authority_are_refused_before_anything_is_written(tmp_path
     init_security_dir(tmp_path / "old", ["planner"])
     with pytest.raises(CertificateError, match="cannot outlive it"):
         init_security_dir(tmp_path / "old", ["planner"], days=4000)
+
+
+def test_no_role_certificate_outlives_its_authority(tmp_path: Path) -> None:
+    authority = make_authority(days=1)
+    end = authority.certificate.not_valid_after_utc
+    assert issue(authority, "planner", days=365).certificate.not_valid_after_utc == end  # it ran a year past it
+    init_security_dir(tmp_path, ["planner"], days=3650)  # the authority's validity: both end together, not ms apart
+    ca = x509.load_pem_x509_certificate((tmp_path / "ca.crt").read_bytes())
+    assert verify_role(tmp_path, "planner").not_valid_after_utc <= ca.not_valid_after_utc
 
 
 def test_check_on_a_cell_machine_checks_the_roles_it_holds_and_names_their_hosts(tmp_path: Path, capsys) -> None:
