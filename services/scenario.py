@@ -24,6 +24,7 @@ import numpy as np
 from services.demo_inputs import DEFAULT_HUMAN_CLASS, human_label
 from services.executor.config import is_separation_hold
 from services.experiments.measures import interference
+from shared.belief import recognised_class
 from shared.library import Demonstration, MotionLibrary
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
@@ -215,6 +216,7 @@ class Summary:
     extra: dict[str, Any] = field(default_factory=dict)
     scored_against: str = "final prediction"
     recognised_p: float | None = None  # the recognised class's probability in the last posterior
+    recognised_flat: bool = False  # the last posterior names no class (shared.belief): recognised_class its argmax
     recognised_index: int | None = None  # the pose that posterior was made after
     separation_held_s: float = 0.0  # real time: seconds the separation guard held the robot (docs/executor.md)
     separation_at_end: bool = False  # and whether it held the robot at the run's end
@@ -257,10 +259,13 @@ class Summary:
         reached = "no"
         if self.reached:
             reached = "yes"
+            # past the table's last step (the tick counts on while the robot ends its plan): "during step 20" of 0..9
+            late = self.reached_step is not None and self.reached_step > max(by_step, default=self.reached_step)
             if self.reached_step is not None:
-                reached += f", during {self.unit} {self.reached_step}"
+                reached += f", after the last {self.unit} ({max(by_step)})" if late else \
+                    f", during {self.unit} {self.reached_step}"
             if self.reached_t_s is not None:
-                reached += f" (t = {self.reached_t_s:.2f} s)"
+                reached += f", at t = {self.reached_t_s:.2f} s" if late else f" (t = {self.reached_t_s:.2f} s)"
         if not self.reached and self.left_goal is not None:
             g = self.left_goal
             reached += (f" (it reached {g['goal']} at t = {g['reached_t_s']:.2f} s and left it at "
@@ -271,7 +276,8 @@ class Summary:
                        "nearer the person than separation.stop_m; docs/executor.md)")
         at = (f" (p {self.recognised_p:.2f}, after pose {self.recognised_index})"  # an interrupted run's belief
               if self.recognised_p is not None else "")                        # differed from its last row's
-        out.append(f"human class: {self.human_class}; recognised at the end: {self.recognised_class}{at}")
+        named = f"none (flat; most probable {self.recognised_class})" if self.recognised_flat else self.recognised_class
+        out.append(f"human class: {self.human_class}; recognised at the end: {named}{at}")
         if self.scored:
             out.append(f"interference cost of the executed trajectory ({self.scored_against}): "
                        f"{self.interference_cost:.4f}")
@@ -289,10 +295,8 @@ def belief(posterior: ClassPosterior | None) -> str:
     """
     if posterior is None:
         return ""
-    k = int(np.argmax(posterior.posterior))
-    p = float(posterior.posterior[k])
-    name = posterior.class_names[k] if p >= min(2.0 / len(posterior.class_names), 0.5) else "(flat)"
-    return f"{name} p={p:.2f}"
+    p = float(np.max(posterior.posterior))
+    return f"{recognised_class(posterior.class_names, posterior.posterior) or '(flat)'} p={p:.2f}"
 
 
 def posterior_for(plan: Plan, posteriors: dict[int, ClassPosterior]) -> ClassPosterior | None:
@@ -378,11 +382,12 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
             reached_step = before[-1]["step"] if before else None
     guarded = [i for i in range(1, len(states)) if is_separation_hold(states[i].reason)]
     separation_held = float(sum(states[i].stamp - states[i - 1].stamp for i in guarded))
-    recognised = recognised_p = recognised_index = None
+    recognised, recognised_p, recognised_index, flat = None, None, None, False
     if posteriors:
         last = posteriors[max(posteriors)]
         best = int(np.argmax(last.posterior))
         recognised, recognised_p, recognised_index = last.class_names[best], float(last.posterior[best]), last.index
+        flat = not recognised_class(last.class_names, last.posterior)
     goal_names = list(ordered[-1].goal_names) if ordered else []
     if left is not None and 0 <= left["goal"] < len(goal_names):
         left["goal"] = goal_names[left["goal"]]
@@ -390,6 +395,6 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
                    mcap_path=mcap_path, reached=bool(reached_states), reached_step=reached_step,
                    human_class=human_class, recognised_class=recognised, goal_names=goal_names,
                    reached_t_s=reached_t, scored_against=final_label(final_occupancy), recognised_p=recognised_p,
-                   recognised_index=recognised_index, separation_held_s=separation_held, left_goal=left,
-                   separation_at_end=bool(states) and is_separation_hold(states[-1].reason),
+                   recognised_flat=flat, recognised_index=recognised_index, separation_held_s=separation_held,
+                   left_goal=left, separation_at_end=bool(states) and is_separation_hold(states[-1].reason),
                    unit="plan" if realtime else "step", scored=final_occupancy is not None)

@@ -35,11 +35,13 @@ def _make(cfg: ViewConfig, zcfg: ZenohConfig, stop: threading.Event) -> Callable
 def _write_layout(cfg: ViewConfig) -> None:
     from pathlib import Path
 
-    from shared.foxglove.layout import foresight_layout, layout_text
+    from shared.foxglove.layout import foresight_layout, layout_text, library_class_names
     from shared.scene import load_scene
 
     path = Path(cfg.write_layout)
-    path.write_text(layout_text(foresight_layout(load_scene(cfg.scene or None), voxel_size=cfg.voxel_size or None)))
+    classes = library_class_names(cfg.library)  # the posterior's classes are the library's, not the scene's cups
+    path.write_text(layout_text(foresight_layout(load_scene(cfg.scene or None), class_names=classes,
+                                                 voxel_size=cfg.voxel_size or None)))
     print(f"foresight view: wrote the Foxglove layout {path} (Foxglove: Layouts -> Import from file)")
 
 

@@ -32,8 +32,11 @@ class ViewConfig:
     device: str = opt("cpu", help="torch device of the robot model (cpu or cuda)")
     nice: int = opt(10, help="`foresight view` lowers its CPU priority by this much (0-19): drawing must not "
                     "take CPU from the planning loop on a shared machine")
-    write_layout: str = opt("", help="write the Foxglove layout for this scene (3D panel, posterior and cost plots) "
-                            "to this file and exit")
+    write_layout: str = opt("", help="write the Foxglove layout for this scene and --library (3D panel, posterior "
+                            "and cost plots) to this file and exit")
+    library: str = opt("", help="the motion library whose classes the layout's posterior plot shows (--write-layout):"
+                       " a directory of compound_*.csv or a .npz, the one the model was trained on; empty: the "
+                       "embedded synthetic library's 8 classes")
     voxel_size: float = opt(0.0, help="the layout's cube per occupancy voxel (m; --write-layout): 0, the scene "
                             "grid's resolution; give the model's when it was trained with another (foresight train "
                             "--resolution), or its voxels are drawn overlapping or apart")

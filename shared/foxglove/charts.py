@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from shared.belief import recognised_class
 from shared.protocol import ClassPosterior, Plan
 
 __all__ = ["POSTERIOR_SCHEMA", "COSTS_SCHEMA", "posterior_chart", "costs_chart"]
@@ -34,8 +35,9 @@ POSTERIOR_SCHEMA: dict[str, Any] = {
         "demo_id": {"type": "integer"},
         "index": {"type": "integer", "description": "the pose's sample index in its demonstration"},
         "probability": _by_name("p(c|xi) per class name"),
-        "recognised": {"type": "string", "description": "the most probable class"},
-        "recognised_probability": {"type": "number"},
+        "recognised": {"type": "string", "description": "the most probable class; empty when the posterior is flat "
+                       "(its top class under 2/K and under 1/2: no class recognised)"},
+        "recognised_probability": {"type": "number", "description": "the most probable class's probability"},
         "familiar": {"type": "boolean", "description": "whether any class explains the motion's last frames (if "
                      "not, 'recognised' is only the least unlikely class)"},
         "familiarity": {"type": "number", "description": "nats per frame; below the model's novelty threshold: "
@@ -70,11 +72,12 @@ def _named(names: list[str], values: np.ndarray) -> dict[str, float | None]:
 
 
 def posterior_chart(post: ClassPosterior, stamp: float) -> dict[str, Any]:
-    """The ``/viz/posterior`` object of ``post``, stamped ``stamp`` (seconds)."""
+    """The ``/viz/posterior`` object of ``post``, stamped ``stamp`` (seconds); ``recognised`` is empty when flat."""
     k = int(np.argmax(post.posterior))
     return {"timestamp": _time(stamp), "demo_id": int(post.demo_id), "index": int(post.index),
             "probability": _named(list(post.class_names), post.posterior),
-            "recognised": post.class_names[k], "recognised_probability": float(post.posterior[k]),
+            "recognised": recognised_class(post.class_names, post.posterior),
+            "recognised_probability": float(post.posterior[k]),
             "familiar": bool(post.familiar), "familiarity": float(post.familiarity)}
 
 

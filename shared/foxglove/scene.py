@@ -136,11 +136,16 @@ in `foresight log snapshot` (two reviews)."""
 
 
 def goal_rgb(name: str, k: int) -> tuple[float, float, float]:
-    """Colour of goal ``k`` called ``name`` (its colour word if it has one, else a tab10 colour)."""
+    """Colour of goal ``k`` called ``name`` (its colour word if it has one, else a tab10 colour).
+
+    tab10 less its green (the chosen path's) and red (the red cup's) and grey (the robot's): seven, so that the
+    synthetic library's eight classes (two named after cups) plot in eight colours; five gave two pairs alike.
+    """
     for word, rgb in _NAMED.items():
         if word in name.lower():
             return rgb
-    tab = [(0.12, 0.47, 0.71), (1.0, 0.5, 0.05), (0.58, 0.4, 0.74), (0.55, 0.34, 0.29), (0.89, 0.47, 0.76)]
+    tab = [(0.12, 0.47, 0.71), (1.0, 0.5, 0.05), (0.58, 0.4, 0.74), (0.55, 0.34, 0.29), (0.89, 0.47, 0.76),
+           (0.74, 0.74, 0.13), (0.09, 0.75, 0.81)]
     return tab[k % len(tab)]
 
 

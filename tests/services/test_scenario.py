@@ -345,3 +345,32 @@ def test_a_model_save_interrupted_at_its_rename_leaves_no_temporary_file_and_the
     with pytest.raises(KeyboardInterrupt):
         model_for(lib, load_scene(), lib.demos[0], tmp_path, components=2, progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == [first.name] and first.read_bytes() == b"damaged"
+
+
+def test_a_goal_reached_after_the_last_step_is_said_so_not_during_a_step_the_table_lacks():
+    """A 10-step run said "goal reached: yes, during step 20" under a table of steps 0..9: the tick counts on while
+    the robot finishes its last plan."""
+    plans = [_plan(i, 0, [1.0, 3.0]) for i in range(4)]
+    states = [RobotState(stamp=0.1 * i, tick=i, joint_names=["a", "b", "c"], goal=0, reached=i == 7, holding=False,
+                         reason="", q=np.full(3, 0.15), qd=np.zeros(3)) for i in range(8)]
+    s = summarise(plans, states, _grid(0.5), {}, PointRobot(), "red_cup", None)
+    assert s.reached and s.reached_step == 7 and [e["step"] for e in s.steps] == [0, 1, 2, 3]
+    text = "\n".join(s.lines())
+    assert "goal reached: yes, after the last step (3), at t = 0.70 s" in text and "during step 7" not in text
+
+
+def test_the_summary_names_no_class_recognised_at_the_end_when_the_last_posterior_is_flat():
+    """The step table said "(flat) p=0.13" for the last belief and the summary's line under it "recognised at the
+    end: far_left": one rule (shared.belief) for both."""
+    names = ["far_left", "blue_cup", "red_cup", "near_left", "near_centre", "near_right", "far_right", "right_edge"]
+    plans = [_plan(i, 0, [1.0, 3.0]) for i in range(2)]
+    states = [RobotState(stamp=0.1 * i, tick=i, joint_names=["a", "b", "c"], goal=0, reached=False, holding=False,
+                         reason="", q=np.full(3, 0.15), qd=np.zeros(3)) for i in range(2)]
+
+    def lines(p: list[float]) -> str:
+        post = ClassPosterior(stamp=0.0, tick=1, demo_id=1, index=5, class_names=names, posterior=np.array(p),
+                              log_likelihood=np.log(np.array(p)))
+        return "\n".join(summarise(plans, states, _grid(0.5), {1: post}, PointRobot(), "red_cup", None).lines())
+
+    assert "recognised at the end: none (flat; most probable far_left) (p 0.13" in lines([0.13] + [0.87 / 7] * 7)
+    assert "recognised at the end: far_left (p 0.30" in lines([0.30] + [0.70 / 7] * 7)

@@ -3,8 +3,8 @@
 * ``foresight log info FILE [--json]``: channels, schemas and message counts (:mod:`tools.log.info`);
 * ``foresight log render FILE --step N --out PNG`` (or ``--all --out DIR``): draw replanning steps
   (:mod:`tools.log.render`);
-* ``foresight log latency FILE [--json] [--slowest N]``: pose -> occupancy -> plan latencies, and the N latest
-  plans (:mod:`tools.log.latency`);
+* ``foresight log latency FILE [--json] [--slowest N]``: pose -> occupancy -> plan latencies, and the N plans
+  with the longest pose -> plan, slowest first (:mod:`tools.log.latency`);
 * ``foresight log compress IN OUT``: the same log with compressed chunks, read back identical
   (:mod:`tools.log.compress`);
 * ``foresight log snapshot FILE [--at SECONDS] [--out PNG]``: the logged 3D scene (Foxglove's channels) at a

@@ -104,6 +104,7 @@ def run_latencies(messages: list[Any], topics: dict[str, str],
     kp_to_pose: list[float] = []
     kp_to_plan: list[float] = []
     current_demo = -1
+    occ_demo: dict[int, int] = {}  # occupancy index -> the demonstration of the newest occupancy of that index
     first_pose: int | None = None
     streaming = True
     decoded, refused, relevant = 0, [], set(topics.values())
@@ -126,6 +127,7 @@ def run_latencies(messages: list[Any], topics: dict[str, str],
             elif m.topic == topics["occupancy"]:
                 occ = decode(m.data, OccupancyGrid)
                 occ_time[(occ.demo_id, occ.index)] = m.log_time
+                occ_demo[occ.index] = occ.demo_id
                 t0 = pose_time.get((occ.demo_id, occ.index))
                 if t0 is not None:
                     pose_to_occ.append((m.log_time - t0) / 1e6)
@@ -133,7 +135,9 @@ def run_latencies(messages: list[Any], topics: dict[str, str],
                 plan = decode(m.data, Plan)
                 plan_times.append(m.log_time)
                 planning.append(plan.planning_ms)
-                key = (current_demo, plan.occupancy_index)
+                # the demonstration of the occupancy it planned against (a plan names its index only), not the
+                # newest pose's: in real time a plan can come after the next demonstration's first poses
+                key = (occ_demo.get(plan.occupancy_index, current_demo), plan.occupancy_index)
                 if not streaming:
                     continue
                 occ_ms = (m.log_time - occ_time[key]) / 1e6 if key in occ_time else float("nan")

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from shared.atomic_file import make_parent
+from shared.belief import recognised_class
 from shared.foxglove.decode import SceneDecodeError, SceneRecord, read_scene
 from shared.recording.reader import DAMAGED
 from shared.runtime import UserError
@@ -57,13 +58,21 @@ class SceneState:
         return next((by_id[entity_id] for by_id in self.entities.values() if entity_id in by_id), None)
 
     def summary(self) -> str:
-        """``t=..s, N voxels, chosen GOAL, recognised CLASS (p=..)``."""
+        """``t=..s, N voxels, chosen GOAL, recognised CLASS (p=..)``; ``recognised none (flat, p=..)`` as the table."""
         chosen = (self.costs or {}).get("chosen") or "-"
         step = f"step {self.costs['step']}, " if self.costs and "step" in self.costs else ""
         rec = "recognised -"
-        if self.posterior and self.posterior.get("recognised"):
-            name = self.posterior["recognised"]
-            p = self.posterior.get("recognised_probability", self.posterior.get("probability", {}).get(name))
+        post = self.posterior or {}
+        probs = post.get("probability")
+        if isinstance(probs, dict) and probs and all(isinstance(v, int | float) for v in probs.values()):
+            # the table's rule on the plotted probabilities (a log written before 2026-11-29 named the top class
+            # of a flat posterior in "recognised")
+            name = recognised_class(list(probs), list(probs.values()))
+            top = max(probs.values())
+            rec = f"recognised {name} (p={top:.2f})" if name else f"recognised none (flat, p={top:.2f})"
+        elif post.get("recognised"):
+            name = post["recognised"]
+            p = post.get("recognised_probability")
             rec = f"recognised {name}" + (f" (p={p:.2f})" if isinstance(p, int | float) else "")
         return f"t={self.t_s:.3f}s, {len(self.voxels)} voxels, {step}chosen {chosen}, {rec}"
 
@@ -86,6 +95,10 @@ def _cloud(state: SceneState, cloud: Any) -> None:
                            for k in ("red", "green", "blue", "alpha")], -1).astype(np.uint8)
 
 
+_AT_MAX_S = 1e9
+"""``--at`` beyond this (about 32 years) is read as this: later than any log's end, and a finite nanosecond count."""
+
+
 def scene_at(path: str | Path, at_s: float | None) -> SceneState:
     """Replay a log's scene channels up to ``at_s`` seconds after its first scene record (None: the last plan).
 
@@ -106,7 +119,8 @@ def scene_at(path: str | Path, at_s: float | None) -> SceneState:
     expiry: dict[tuple[str, str], int] = {}  # (topic, id) -> log time its lifetime ends (keypoints: 0.5 s)
     for r in _records(p):
         if t0 is None:
-            t0, end = r.log_time, (end if at_s is None else r.log_time + round(at_s * 1e9))
+            # past any log's end it draws the last state: 1e300 s overflowed in round() (a traceback)
+            t0, end = r.log_time, (end if at_s is None else r.log_time + round(min(at_s, _AT_MAX_S) * 1e9))
         last = r.log_time
         if r.log_time > end:
             break

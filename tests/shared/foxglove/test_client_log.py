@@ -33,3 +33,27 @@ def test_a_gone_clients_errors_are_one_info_line_and_other_lines_are_left_alone(
 def test_the_filter_is_installed_once_on_the_sdks_client_logger() -> None:
     first = install()
     assert install() is first and first in logging.getLogger(CLIENT_LOGGER).filters
+
+
+def test_connections_that_never_handshake_are_info_lines_not_errors(caplog) -> None:
+    """20 raw TCP connects to the live view gave 20 ``ERROR ... Dropping client ...: handshake failed`` lines."""
+    import socket
+    import time
+
+    from shared.foxglove.live import LiveServer
+
+    caplog.set_level(logging.DEBUG)
+    with LiveServer(port=0) as server:
+        for _ in range(3):
+            socket.create_connection(("127.0.0.1", server.port), timeout=2).close()
+        with socket.create_connection(("127.0.0.1", server.port), timeout=2) as s:
+            s.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")  # HTTP, no WebSocket upgrade
+            s.recv(1024)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and sum("handshake" in r.getMessage() for r in caplog.records) < 4:
+            time.sleep(0.05)
+    dropped = [r for r in caplog.records if "handshake" in r.getMessage()]
+    assert len(dropped) == 4 and all(r.levelno == logging.INFO for r in dropped), [
+        (r.levelname, r.getMessage()) for r in dropped]
+    assert all(r.getMessage().startswith("live view: dropped 127.0.0.1:") for r in dropped)
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING and r.name.startswith("foxglove")]

@@ -226,3 +226,20 @@ def test_a_joint_name_mismatch_is_said_once_per_name_list(builder, caplog) -> No
         builder.robot_spheres(other)
     warned = [r.getMessage() for r in caplog.records if "do not match" in r.getMessage()]
     assert len(warned) == 2 and "'x'" in warned[0] and "'y'" in warned[1]
+
+
+def test_a_flat_posterior_s_chart_recognises_no_class_as_the_table_says() -> None:
+    """The chart named the top class of a flat posterior ("blue_cup" at 0.15 among 8) where the table said "(flat)"."""
+    from services.scenario import belief
+    from shared.foxglove.charts import posterior_chart
+
+    names = ["blue_cup", "red_cup", "near_left", "far_left", "near_centre", "near_right", "far_right", "right_edge"]
+    for probs in ([0.15] + [0.85 / 7] * 7, [0.26] + [0.74 / 7] * 7, [0.45, 0.3, 0.25], [0.55, 0.45]):
+        post = dataclasses.replace(posterior(), class_names=names[:len(probs)], posterior=np.array(probs),
+                                   log_likelihood=np.zeros(len(probs)))
+        chart = posterior_chart(post, 1.0)
+        assert (chart["recognised"] or "(flat)") == belief(post).split(" p=")[0], probs
+        assert chart["recognised_probability"] == pytest.approx(max(probs))
+    flat = dataclasses.replace(posterior(), class_names=names, posterior=np.array([0.15] + [0.85 / 7] * 7),
+                               log_likelihood=np.zeros(8))
+    assert posterior_chart(flat, 1.0)["recognised"] == ""

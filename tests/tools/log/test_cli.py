@@ -201,3 +201,16 @@ def test_a_file_in_the_way_of_the_output_s_directory_is_named(run_log, tmp_path,
     assert exc.value.code == 2 and len(err) == 1
     assert err[0] == f"foresight log {argv[0]}: error: {text}: a file is in the way (a directory is needed there)"
     assert text.read_text() == "notes"
+
+
+def test_the_words_for_slowest_say_slowest_not_latest() -> None:
+    """README and the module's docstring said `--slowest N` lists the N latest plans; it lists the N slowest."""
+    from pathlib import Path
+
+    import tools.log.cli as cli
+
+    readme = (Path(__file__).resolve().parents[3] / "README.md").read_text()
+    said = [ln for ln in readme.splitlines() if "--slowest" in ln] + [
+        ln for ln in (cli.__doc__ or "").split("* ") if "--slowest" in ln]
+    assert said and all("latest plans" not in " ".join(ln.split()) and "slowest" in ln.replace("--slowest", "")
+                        for ln in said), said

@@ -186,3 +186,30 @@ def test_a_stray_message_on_another_key_does_not_take_the_runs_place(tmp_path, o
         with pytest.raises(ValueError, match=rf"HumanPose on 2 keys \({keys.pose}, {keys.prefix}/elsewhere/pose|"
                            rf"HumanPose on 2 keys \({keys.prefix}/elsewhere/pose, {keys.pose}"):
             log_latencies(path)
+
+
+def test_a_plan_that_comes_after_the_next_demonstration_s_first_poses_follows_its_occupancy_s_demonstration():
+    """Pose -> plan was keyed by the newest pose's demonstration: a real-time plan of demonstration 1's occupancy
+    that came after demonstration 2's first poses was timed from demonstration 2's pose of that index (10 ms, not 70)
+    or, before that pose came, dropped."""
+    from shared.protocol import DemoMarker
+
+    ms = 1_000_000
+
+    def pose(demo: int, index: int) -> bytes:
+        return encode(HumanPose(stamp=0.0, tick=-1, tick_last=True, demo_id=demo, index=index, features=np.zeros(12)))
+
+    def marker(demo: int, event: str) -> bytes:
+        return encode(DemoMarker(stamp=0.0, tick=-1, demo_id=demo, event=event, true_class=0, class_name="a",
+                                 n_samples=6))
+
+    occ = OccupancyGrid.from_dense(np.zeros((2, 2, 2), np.float32), np.zeros(3), 0.05, stamp=0.0, tick=-1,
+                                   tick_last=True, demo_id=1, index=5, method="prediction")
+    head = [Msg("p", 0, pose(1, 5)), Msg("o", 30 * ms, encode(occ)), Msg("d", 40 * ms, marker(1, "end")),
+            Msg("d", 45 * ms, marker(2, "start")), Msg("p", 50 * ms, pose(2, 0))]
+    topics = {"pose": "p", "occupancy": "o", "plan": "x", "demo": "d"}
+    later_poses = [Msg("p", (50 + i) * ms, pose(2, i)) for i in range(1, 6)]
+    for msgs in (head + later_poses, head):  # demonstration 2's pose of index 5 before the plan, and not yet
+        stats = run_latencies(msgs + [Msg("x", 70 * ms, encode(_plan(5)))], topics)
+        assert stats["pose_to_plan"] == Stat(1, 70.0, 70.0, 70.0)
+        assert stats["occupancy_to_plan"] == Stat(1, 40.0, 40.0, 40.0)

@@ -175,3 +175,23 @@ def test_a_run_s_directory_with_one_log_is_that_log(run_log, tmp_path) -> None:
     (run / "executor.log").write_text("the services' logs sit beside it\n")
     assert scene_at(run, None).summary() == scene_at(run_log, None).summary()
     assert main(["table", str(run)]) == 0
+
+
+def test_the_summary_names_no_class_for_a_flat_posterior_as_the_table() -> None:
+    """`log snapshot --at 0.3` said "recognised blue_cup (p=0.15)" where `log table` said "(flat) p=0.14"; a log
+    written before the chart applied the rule still names the top class in "recognised"."""
+    names = ["blue_cup", "red_cup", "near_left", "far_left", "near_centre", "near_right", "far_right", "right_edge"]
+    flat = {"probability": dict(zip(names, [0.15] + [0.85 / 7] * 7, strict=True)), "recognised": "blue_cup",
+            "recognised_probability": 0.15}
+    assert "recognised none (flat, p=0.15)" in SceneState(posterior=flat).summary()
+    sure = {"probability": dict(zip(names, [0.3] + [0.7 / 7] * 7, strict=True)), "recognised": "blue_cup"}
+    assert "recognised blue_cup (p=0.30)" in SceneState(posterior=sure).summary()
+    assert "recognised -" in SceneState().summary()
+
+
+def test_a_time_too_large_for_nanoseconds_draws_the_end(run_log, tmp_path, capsys) -> None:
+    """``--at 1e300`` (finite) overflowed converting to nanoseconds: an OverflowError traceback."""
+    out = tmp_path / "end.png"
+    assert main(["snapshot", str(run_log), "--out", str(out), "--at", "1e300"]) == 0
+    assert "past the end of the scene" in capsys.readouterr().err and out.read_bytes()[:8] == PNG
+    assert scene_at(run_log, 1e300).t_s == scene_at(run_log, 1000.0).t_s
