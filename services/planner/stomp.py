@@ -3,9 +3,9 @@
 The optimizer sees only a per-waypoint cost callable and the joint bounds. One iteration, for all K
 trajectories at once (tensors ``(K, R, T, D)``: goals x rollouts x waypoints x joints):
 
-1. noisy rollouts ``theta + eps_r``, ``eps ~ N(0, sigma^2 R^-1)`` (``R = A^T A``, A the finite
-   differencing matrix of accelerations), clamped to the joint limits; with ``reuse`` the previous
-   iteration's best rollouts join them with the costs they already have;
+1. noisy rollouts ``theta + eps_r``, ``eps ~ N(0, sigma^2 R^-1 / max(R^-1))`` (``R = A^T A``, A the finite
+   differencing matrix of accelerations; unit variance at the middle waypoint), clamped to the joint limits; with
+   ``reuse`` the previous iteration's best rollouts join them with the costs they already have;
 2. costs ``S(r, i)`` per rollout and waypoint (cost-to-go by default);
 3. probabilities ``P(r, i) = softmax_r(-h (S - min_r S) / (max_r S - min_r S))``;
 4. update ``delta = M sum_r P(r, i) eps_r(i)``, ``M`` = R^-1 with each column scaled so its max is 1/N;

@@ -26,9 +26,13 @@ def finite_difference_matrix(n: int, dtype: torch.dtype = torch.float64) -> torc
         dtype: Result dtype.
 
     Returns:
-        ``(N + 2, N)``: row i gives ``theta[i-2] - 2 theta[i-1] + theta[i]`` with the fixed start and
-        goal contributing zero, so ``theta^T A^T A theta`` is the sum of squared accelerations of
-        the deviation from a trajectory with the same endpoints.
+        ``(N + 2, N)``: row i gives ``theta[i-2] - 2 theta[i-1] + theta[i]`` (theta outside 0..N-1 taken as 0),
+        the acceleration at waypoint i of a deviation that leaves the fixed start (waypoint 0) and goal (N + 1)
+        in place. ``theta^T A^T A theta`` sums the squared accelerations at all N + 2 waypoints, the start's and
+        goal's too (``theta[0]^2`` and ``theta[N-1]^2``, as if held still beyond the ends). ``R = A^T A`` only
+        shapes STOMP's exploration noise and update; the smoothness the planner minimises is
+        :func:`services.planner.costs.acceleration_cost` (``w_smooth`` x the squared accelerations at the
+        interior waypoints of the trajectory itself), not ``0.5 theta^T R theta``.
     """
     a = torch.zeros(n + 2, n, dtype=dtype)
     idx = torch.arange(n)

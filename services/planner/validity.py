@@ -15,8 +15,10 @@ follows a plan only until the next one, whose optimisation goes on from it; a pl
 then what the warning says. The warning says where the least deep path first goes in (:func:`first_contact`): in
 real time's first plans, 2-6 s along paths each followed ~0.1 s before the next (docs/planner.md).
 
-The robot's start is where it is: a path is refused only where it goes deeper than its own start (a real robot's
-reading a millimetre inside a modelled table would otherwise refuse every plan and leave the robot where it is).
+The robot's start is where it is: a path is refused only where a sphere goes deeper into the scene, or an arm/body
+sphere pair deeper into each other, than that sphere or pair is at the start (a real robot's reading a millimetre
+inside a modelled table would otherwise refuse every plan and leave the robot where it is); another sphere's contact
+at the start excuses none.
 """
 
 from __future__ import annotations
@@ -52,8 +54,8 @@ def path_penetration(cost: object, paths: torch.Tensor, substeps: int = SUBSTEPS
         substeps: Configurations per segment (``substeps - 1`` between two waypoints, plus the next waypoint).
 
     Returns:
-        ``(K,)`` the deepest penetration after the start minus the start's own (m), 0 where that is below
-        :data:`TOLERANCE_M`.
+        ``(K,)`` the deepest penetration after the start, each sphere or pair less its own at the start (m), 0
+        where that is below :data:`TOLERANCE_M`.
     """
     k, t, _ = paths.shape
     if t < 2 or not isinstance(cost, StateCost):
@@ -63,7 +65,7 @@ def path_penetration(cost: object, paths: torch.Tensor, substeps: int = SUBSTEPS
 
 
 def first_contact(cost: object, path: torch.Tensor, substeps: int = SUBSTEPS) -> float:
-    """Where along ``path`` ``(T, D)`` it first goes deeper than its start (0-1 of its waypoints' span; nan: never)."""
+    """Where along ``path`` ``(T, D)`` a sphere or pair first goes deeper than at the start (0-1; nan: never)."""
     if len(path) < 2 or not isinstance(cost, StateCost):
         return math.nan
     inside = torch.nonzero(_beyond_start(cost, path[None], substeps)[0] >= TOLERANCE_M).flatten()
@@ -71,17 +73,22 @@ def first_contact(cost: object, path: torch.Tensor, substeps: int = SUBSTEPS) ->
 
 
 def _beyond_start(cost: StateCost, paths: torch.Tensor, substeps: int) -> torch.Tensor:
-    """``(K, (T-1) substeps)`` each dense configuration's penetration after the start, less the start's (m)."""
+    """``(K, (T-1) substeps)`` each dense configuration's deepest penetration beyond the start (m).
+
+    Each sphere (in the scene) and each arm/body sphere pair (overlap) is measured against its own depth at the
+    start (comparing the deepest of all with the start's deepest let a start with one sphere 2.9 cm in the table
+    hide a path driving another 1.8 cm into it: a review's case).
+    """
     k, _, d = paths.shape
     frac = torch.arange(1, substeps + 1, device=paths.device, dtype=paths.dtype) / substeps  # (S,)
     seg = paths[:, :-1, None] + frac[:, None] * (paths[:, 1:, None] - paths[:, :-1, None])  # (K, T-1, S, D)
     q = torch.cat([paths[:, :1], seg.reshape(k, -1, d)], 1)  # (K, 1 + (T-1) S, D)
     centers = cost.robot.sphere_centers(q)
-    depth = (cost.radii - cost.sdf(centers[..., cost.spheres, :])).amax(-1).clamp(min=0)  # (K, N)
+    depth = (cost.radii - cost.sdf(centers[..., cost.spheres, :])).clamp(min=0)  # (K, N, spheres)
     if cost.has_self:
-        overlap = (-cost.robot.self_collision_distance(centers)).flatten(-2).amax(-1).clamp(min=0)
-        depth = torch.maximum(depth, overlap)
-    return (depth[:, 1:] - depth[:, :1]).clamp(min=0)
+        overlap = (-cost.robot.self_collision_distance(centers)).flatten(-2).clamp(min=0)  # (K, N, A B)
+        depth = torch.cat([depth, overlap], -1)
+    return (depth[:, 1:] - depth[:, :1]).clamp(min=0).amax(-1)
 
 
 def publishable(cost: object, paths: torch.Tensor, terms: dict[str, torch.Tensor],

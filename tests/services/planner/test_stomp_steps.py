@@ -7,8 +7,9 @@ import math
 import pytest
 import torch
 
+from services.planner.costs import acceleration_cost
 from services.planner.stomp import _compiled
-from services.planner.stomp_steps import advance, join_kept, keep_best, rollouts, update
+from services.planner.stomp_steps import advance, finite_difference_matrix, join_kept, keep_best, rollouts, update
 
 
 def test_keep_best_takes_the_least_total_costs_first() -> None:
@@ -121,3 +122,17 @@ def test_no_finite_rollout_leaves_the_trajectory_where_it_was() -> None:
         args = _update_args(cost, eps, to_go)
         got, total = update(**args)[:2]
         assert torch.equal(got, args["theta"]) and torch.isfinite(total).all()
+
+
+def test_r_counts_the_accelerations_at_the_fixed_ends_which_the_smoothness_cost_does_not() -> None:
+    """``theta^T R theta`` is the squared accelerations at all N + 2 waypoints of a deviation held still beyond the
+    ends; the planner's smoothness (:func:`acceleration_cost`) sums only the interior ones (docstring of A)."""
+    n = 6
+    theta = torch.randn(n, 1, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    a = finite_difference_matrix(n)
+    quadratic = float(theta.T @ a.T @ a @ theta)
+    zero = theta.new_zeros(1, 1)
+    held = torch.cat([zero, zero, theta, zero, zero])  # start and goal fixed (deviation 0), one still step beyond
+    interior = float(acceleration_cost(torch.cat([zero, theta, zero])).sum())
+    assert quadratic == pytest.approx(float(acceleration_cost(held).sum()))
+    assert quadratic == pytest.approx(interior + float(theta[0, 0] ** 2 + theta[-1, 0] ** 2))

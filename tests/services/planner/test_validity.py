@@ -53,13 +53,65 @@ def test_a_start_inside_the_scene_refuses_only_a_deeper_path(robot, cost) -> Non
     """A real robot read a millimetre inside a modelled table would otherwise have every plan refused."""
     line = _line(robot, UNDER_TABLE)
     dense = resample_path(line, 400)
-    depths = (cost.radii - cost.sdf(robot.sphere_centers(dense)[..., cost.spheres, :])).amax(-1)
-    inside = int(torch.argmax(depths))  # the deepest configuration of the path
+    depths = (cost.radii - cost.sdf(robot.sphere_centers(dense)[..., cost.spheres, :])).clamp(min=0)  # (400, S)
+    deeper = (depths[1:] >= depths[:-1]).all(-1)  # every sphere at least as deep as a step before
+    inside = int(torch.nonzero(~deeper).flatten()[0])  # as far as it goes straight in: every sphere leaves
+    assert float(depths[inside].amax()) > 0.02
     start = dense[inside]
     assert float(path_penetration(cost, start.expand(5, -1)[None])[0]) == 0.0  # holding where it is
     back = torch.stack([start + (robot.q_start - start) * f for f in torch.linspace(0, 1, 20, dtype=start.dtype)])
     assert float(path_penetration(cost, back[None])[0]) < TOLERANCE_M  # leaving the table
     assert float(path_penetration(cost, dense[None])[0]) > 0  # from outside, into it
+    # from the path's deepest configuration, the way back drives a sphere deeper than it was: that is refused
+    start = dense[int(depths.amax(-1).argmax())]
+    back = torch.stack([start + (robot.q_start - start) * f for f in torch.linspace(0, 1, 20, dtype=start.dtype)])
+    assert float(path_penetration(cost, back[None])[0]) >= TOLERANCE_M
+
+
+IN_TABLE = [0.1405, 0.0583, 0.745, -3.3122, -0.9275, 0.7546, -1.8198, -1.4906]
+"""A configuration with sphere 7 ~7 cm inside the scene, drawn at random (as a review's, which found sphere 7 2.9 cm
+deep at a start hiding sphere 5 1.8 cm deep at the goal)."""
+
+OTHER_SPHERE_IN = [0.1889, -0.7914, 1.2755, -0.8187, -1.5929, -1.8974, -1.2727, -1.3551]
+"""Another with sphere 12 ~4 cm inside the scene, and sphere 7 out of it (the first's deepest: shallower here)."""
+
+SELF_OVERLAP = [0.0683, -0.6032, 1.3588, -0.1412, -0.1062, 2.9462, -0.2383, -1.7633]
+"""A configuration with one arm/body sphere pair overlapping ~5 cm, free of the scene."""
+
+OTHER_PAIR_OVERLAP = [0.205, -1.8945, 1.2559, -2.4616, -0.4615, 0.0935, -1.1749, -0.1002]
+"""Another with a different pair overlapping ~2 cm (the first pair apart), free of the scene."""
+
+
+def _between(a: list[float], b: list[float], dtype: torch.dtype, n: int = 40) -> torch.Tensor:
+    qa, qb = torch.tensor(a, dtype=dtype), torch.tensor(b, dtype=dtype)
+    return qa + torch.linspace(0, 1, n, dtype=dtype)[:, None] * (qb - qa)
+
+
+@pytest.mark.parametrize("start, goal", [(IN_TABLE, OTHER_SPHERE_IN), (SELF_OVERLAP, OTHER_PAIR_OVERLAP)],
+                         ids=["scene", "self"])
+def test_a_start_in_contact_excuses_no_other_sphere(robot, cost, start, goal) -> None:
+    """Each sphere (pair) is measured against its own start: the deepest over all, less the start's deepest, took a
+    path driving another sphere centimetres in for free (the review's case: 2.9 cm at the start, 1.8 cm after, 0)."""
+    line = _between(start, goal, robot.dtype)
+    centers = robot.sphere_centers(line[[0, -1]])
+    scene_depth = (cost.radii - cost.sdf(centers[..., cost.spheres, :])).clamp(min=0)  # (2, spheres)
+    pair_depth = (-robot.self_collision_distance(centers)).flatten(-2).clamp(min=0)  # (2, A B)
+    depth = torch.cat([scene_depth, pair_depth], -1)
+    deepest = depth.argmax(-1)
+    assert int(deepest[0]) != int(deepest[1]) and float(depth[0].amax()) > float(depth[1].amax()) + 0.01
+    assert float(depth[1, deepest[0]]) < TOLERANCE_M and float(depth[0, deepest[1]]) < TOLERANCE_M  # each its own
+    got = float(path_penetration(cost, line[None])[0])
+    assert got >= float(depth[1].amax()) - 1e-6  # at least the goal's own contact, which the start did not have
+    assert 0 < first_contact(cost, line) <= 1
+
+
+def test_path_penetration_of_a_batch_is_that_of_each_path(robot, cost) -> None:
+    paths = torch.stack([_between(IN_TABLE, OTHER_SPHERE_IN, robot.dtype), _line(robot, UNDER_TABLE),
+                         _between(SELF_OVERLAP, OTHER_PAIR_OVERLAP, robot.dtype), _line(robot, robot.q_start.tolist()),
+                         _between(OTHER_SPHERE_IN, IN_TABLE, robot.dtype)])
+    batched = path_penetration(cost, paths)
+    looped = torch.cat([path_penetration(cost, p[None]) for p in paths])
+    assert torch.allclose(batched, looped, atol=1e-6) and int((batched > 0).sum()) == 4
 
 
 def test_only_free_paths_are_published_and_with_none_free_every_finite_one_is(robot, cost, caplog) -> None:
