@@ -81,7 +81,7 @@ class _PrefixScorer:
         self._bank: MixtureBank | None = None
 
     def scores(self, x: np.ndarray, ends: np.ndarray, x_key: str) -> np.ndarray:
-        """``(F,)`` ``sum_{t <= e} ln p(x_t | mixture)`` for each ``e`` of ``ends (F,)``; ``x`` is ``(T, D)``.
+        """``(P,)`` ``sum_{t <= e} ln p(x_t | mixture)`` for each ``e`` of ``ends (P,)``; ``x`` is ``(T, D)``.
 
         ``x_key`` is ``digest(x, ends)``, computed once by the caller for every class's scorer.
         """
@@ -183,7 +183,7 @@ def choose_temperature(feats: list[list[np.ndarray]], fit: Callable[[np.ndarray]
                 n = len(feats[m][j])
                 ends = np.clip(np.rint(np.asarray(fractions) * n).astype(int), 1, n) - 1
                 x_key = digest(feats[m][j], ends)  # once per demonstration, for every class's scorer
-                cums.append(np.stack([s.scores(feats[m][j], ends, x_key) for s in scorers], axis=-1))  # (F, M)
+                cums.append(np.stack([s.scores(feats[m][j], ends, x_key) for s in scorers], axis=-1))  # (P, M)
                 labels.append(m)
     cum, lab = np.array(cums), np.array(labels)
     losses = {float(t): log_loss(cum, lab, t) for t in grid}

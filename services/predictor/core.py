@@ -47,6 +47,13 @@ METHODS = ("prediction", "current")
 UNFAMILIAR = ("report", "all-classes")
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """A read-only view of ``a`` (the array itself stays writable where it was)."""
+    v = a.view()
+    v.setflags(write=False)
+    return v
+
+
 class PredictorError(ValueError):
     """Bad input to the predictor core (wrong shape, NaN); the message names it."""
 
@@ -106,8 +113,12 @@ class PredictionResult:
         log_likelihood: ``(M,)`` ln p(xi | C_m) of the observed prefix.
         grid: The voxel grid.
         method: ``"prediction"`` or ``"current"``.
-        indices: ``(N,)`` flat C-order indices of the voxels with non-zero probability.
+        indices: ``(N,)`` flat C-order indices of the voxels the prediction covers: the union of the class volumes
+            (``prediction``; a voxel may have probability 0 under this posterior) or the current posture's voxels.
         values: ``(N,)`` float32 their probability.
+
+    ``indices`` and ``values`` are read-only: they may be the core's own arrays (the union, the all-classes
+    occupancy), which a caller editing them would change for every later prediction. Copy them to edit.
         n_observed: Number of postures observed in this demonstration.
         familiarity: How well the best class explains the last frames (nats per frame,
             :mod:`services.predictor.novelty`).
@@ -180,7 +191,7 @@ class PredictorCore:
         self.encoder = model.encoder()
         self.human = HumanModel()
         flat = volumes.reshape(model.n_classes, -1)
-        self.support = np.flatnonzero(flat.any(axis=0))                      # (U,) union of the volumes
+        self.support = _read_only(np.flatnonzero(flat.any(axis=0)))          # (U,) union of the volumes
         self.volumes_u = np.ascontiguousarray(flat[:, self.support], dtype=np.float32)  # (M, U)
         self.timed_u: np.ndarray | None = None                               # (B, M, U): p(x|C_m, t) per time bin
         if model.timed is not None:
@@ -240,7 +251,7 @@ class PredictorCore:
 
         Returns:
             ``(indices (U,), values (U,) float32)``: flat voxel indices (the union of the swept
-            volumes) and their probabilities.
+            volumes, the core's read-only array) and their probabilities.
         """
         vol = self.volumes_u if self.timed_u is None else self.timed_u[self.model.timed.bin(index)]  # type: ignore
         val = np.asarray(posterior, dtype=np.float32) @ vol
@@ -307,11 +318,11 @@ class PredictorCore:
             idx = posture_voxels(self.human.surface_points(placed, spacing=self.model.spacing,
                                                            interior=self.model.interior), self.model.grid)
             val = np.ones(len(idx), dtype=np.float32)
-        return PredictionResult(post, self._ll.copy(), self.model.grid, self.config.method, idx, val, self._count,
-                                self._familiarity, self.familiar)
+        return PredictionResult(post, self._ll.copy(), self.model.grid, self.config.method, _read_only(idx),
+                                _read_only(val), self._count, self._familiarity, self.familiar)
 
     def every_class(self, index: int = 0) -> np.ndarray:
-        """``(U,)`` float32 ``max_m p(x|C_m)`` over the support: every known class's volume at once.
+        """``(U,)`` float32 ``max_m p(x|C_m)`` over the support: every known class's volume at once (read-only).
 
         Args:
             index: The observed sample index (a ``timed`` model: what is still to come of every class).
@@ -319,7 +330,7 @@ class PredictorCore:
         if self.timed_u is not None:
             return self.timed_u[self.model.timed.bin(index)].max(axis=0)  # type: ignore[union-attr]
         if self._all_u is None:
-            self._all_u = self.volumes_u.max(axis=0)
+            self._all_u = _read_only(self.volumes_u.max(axis=0))  # cached: shared by every prediction
         return self._all_u
 
     def update(self, features: np.ndarray, index: int | None = None) -> PredictionResult:

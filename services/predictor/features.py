@@ -52,7 +52,8 @@ def _relative(f: np.ndarray, first: np.ndarray) -> np.ndarray:
     out[..., 0] = c * d[..., 0] - s * d[..., 1]
     out[..., 1] = s * d[..., 0] + c * d[..., 1]
     out[..., 2] = d[..., 2]
-    out[..., 3] = f[..., 3] - yaw0
+    # wrapped to (-pi, pi]: yaw0 = 3.1 and yaw = -3.1 are 0.083 rad apart, not -6.2
+    out[..., 3] = math.pi - np.mod(math.pi - (f[..., 3] - yaw0), 2 * math.pi)
     return out
 
 

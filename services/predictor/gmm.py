@@ -189,7 +189,8 @@ def posterior_from_log_likelihood(log_likelihood: np.ndarray, log_prior: np.ndar
         temperature: tau > 0, the divisor of the log-likelihoods.
 
     Returns:
-        ``(..., M)`` posteriors summing to 1 over the last axis; uniform in a row without a finite value.
+        ``(..., M)`` posteriors summing to 1 over the last axis; in a row without a finite value (after the prior)
+        the prior, normalised (uniform without one).
 
     Raises:
         ValueError: If ``temperature`` is not a finite number > 0, or a log-likelihood is NaN or +inf (no
@@ -201,10 +202,27 @@ def posterior_from_log_likelihood(log_likelihood: np.ndarray, log_prior: np.ndar
     bad = np.isnan(ll) | (ll == np.inf)
     if bad.any():
         raise ValueError(f"log-likelihoods must be finite or -inf, got {int(bad.sum())} NaN or +inf of {ll.size}")
+    # each row shifted by its maximum before the division: ll / 1e-306 overflowed to -inf in every class, and the
+    # row fell back to uniform where one class leads (the shift leaves the softmax as it is)
+    top = np.max(ll, axis=-1, keepdims=True, initial=-np.inf)
+    ll = ll - np.where(np.isfinite(top), top, 0.0)
     if temperature != 1.0:
-        ll = ll / temperature
+        with np.errstate(over="ignore"):  # a tiny tau: every class behind the leader goes to -inf, one-hot
+            ll = ll / temperature
     if log_prior is not None:
         ll = ll + log_prior
-    known = np.isfinite(ll).any(axis=-1, keepdims=True)  # a row with no finite value: no evidence, uniform
+    known = np.isfinite(ll).any(axis=-1, keepdims=True)  # a row with no finite value: no evidence, the prior
     ll = np.where(known, ll, 0.0)
-    return np.where(known, np.exp(ll - logsumexp(ll, axis=-1, keepdims=True)), 1.0 / ll.shape[-1])
+    return np.where(known, np.exp(ll - logsumexp(ll, axis=-1, keepdims=True)), _no_evidence(log_prior, ll.shape[-1]))
+
+
+def _no_evidence(log_prior: np.ndarray | None, m: int) -> np.ndarray:
+    """``(M,)`` the posterior of a row without evidence: the prior (uniform without one, or one with no finite value).
+
+    Uniform gave mass to the classes of prior 0 where every class with a prior had no likelihood.
+    """
+    p = None if log_prior is None else np.asarray(log_prior, dtype=np.float64)
+    if p is None or not np.isfinite(p).any():
+        return np.full(m, 1.0 / m)
+    p = np.where(np.isfinite(p), p, -np.inf)
+    return np.exp(p - logsumexp(p))

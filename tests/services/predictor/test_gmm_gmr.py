@@ -130,3 +130,27 @@ def test_bad_gmm_options_are_named_before_any_fit(cfg, match) -> None:
     """A NaN tol passed and failed inside scikit-learn, naming its own parameter."""
     with pytest.raises(ValueError, match=match):
         cfg.validate()
+
+
+def test_a_row_without_evidence_takes_the_prior_not_uniform() -> None:
+    """Uniform gave half the mass to the class of prior 0 when the only class with a prior had no likelihood."""
+    ll = np.array([[-math.inf, 0.0], [-1.0, -3.0]])
+    prior = np.log([0.75, 0.25])
+    p = posterior_from_log_likelihood(ll, prior)
+    np.testing.assert_allclose(p[0], [0.0, 1.0])  # the evidence, where some class has both
+    np.testing.assert_allclose(posterior_from_log_likelihood(np.array([0.0, -math.inf]), np.array([-math.inf, 0.0])),
+                               [0.0, 1.0])
+    np.testing.assert_allclose(posterior_from_log_likelihood(np.full(3, -math.inf), np.log([0.2, 0.3, 0.5])),
+                               [0.2, 0.3, 0.5])
+    np.testing.assert_allclose(posterior_from_log_likelihood(np.full(2, -math.inf), np.full(2, -math.inf)),
+                               [0.5, 0.5])  # a prior without a finite value says nothing either
+
+
+def test_a_tiny_temperature_gives_the_leader_everything() -> None:
+    """ll / 1e-306 overflowed to -inf in every class: a uniform posterior where one class leads."""
+    ll = np.array([[-1000.0, -1003.0, -math.inf], [-5.0, -5.0, -6.0]])
+    for tau in (1e-306, 5e-324):
+        np.testing.assert_array_equal(posterior_from_log_likelihood(ll, temperature=tau),
+                                      [[1.0, 0.0, 0.0], [0.5, 0.5, 0.0]])
+    np.testing.assert_allclose(posterior_from_log_likelihood(ll, temperature=150.0),
+                               np.exp(ll / 150.0) / np.exp(ll / 150.0).sum(axis=1, keepdims=True))

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 
 import numpy as np
@@ -90,6 +91,13 @@ def test_posterior_and_occupancy(small_model: PredictionModel, small_library, sc
         assert occ.shape == small_model.grid.dims and occ.dtype == np.float32
         assert occ.min() >= 0.0 and occ.max() <= 1.0
     assert int(np.argmax(res.posterior)) == 2
+    # the indices are the union of the class volumes, the core's own array: read-only, or an edit would move
+    # every later prediction's voxels
+    assert np.array_equal(res.indices, np.flatnonzero(small_model.volumes.reshape(small_model.n_classes, -1)
+                                                      .any(axis=0)))
+    for a in (res.indices, res.values, core.support):
+        with pytest.raises(ValueError, match="read-only"):
+            a[:1] = 0
     # one-hot posterior: the occupancy is that class's swept volume
     for m in range(small_model.n_classes):
         idx, val = core.occupancy_for(np.eye(small_model.n_classes)[m])
@@ -380,3 +388,19 @@ def test_an_unreadable_model_file_names_its_owner_not_corruption(small_model, tm
     (tmp_path / "m.npz").chmod(0)
     with pytest.raises(ModelError, match=r"cannot read it \(owner uid \d+, mode 0\)"):
         PredictionModel.load(tmp_path / "m.npz")
+
+
+def test_the_relative_yaw_is_wrapped_to_a_half_turn_either_way() -> None:
+    """yaw0 = 3.1, yaw = -3.1 gave -6.2 where the pelvis had turned 0.083 rad: a class's yaw split at the half turn."""
+    first = np.zeros(12)
+    first[3] = 3.1
+    yaws = np.array([-3.1, 3.1, 3.1 - math.pi, 3.1 + math.pi, 3.0])
+    postures = np.repeat(first[None], len(yaws), axis=0)
+    postures[:, 3] = yaws
+    want = [2 * math.pi - 6.2, 0.0, math.pi, math.pi, -0.1]  # (-pi, pi]: a half turn either way is +pi
+    for variant in ("relative", "relative_velocity"):
+        batch = FeatureEncoder(variant).batch(np.vstack([first, postures]))
+        np.testing.assert_allclose(batch[1:, 4], want, atol=1e-12)
+        enc = FeatureEncoder(variant)
+        enc.step(first, 0)
+        np.testing.assert_allclose([enc.step(p, i + 1)[4] for i, p in enumerate(postures)], want, atol=1e-12)

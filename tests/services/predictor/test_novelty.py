@@ -96,6 +96,11 @@ def test_all_classes_occupancy_keeps_every_class_volume_while_unfamiliar(two_cla
     union = two_class_model.volumes.reshape(2, -1).max(axis=0)
     np.testing.assert_array_equal(every.predict().occupancy.ravel(), union)
     assert not np.array_equal(report.predict().occupancy.ravel(), union)  # the posterior's mixture instead
+    res = every.predict()  # its values are the core's cached all-classes occupancy: an edit would change the next
+    for a in (res.indices, res.values):
+        with pytest.raises(ValueError, match="read-only"):
+            a[:] = 0
+    np.testing.assert_array_equal(every.predict().occupancy.ravel(), union)
     with pytest.raises(PredictorError, match="unfamiliar"):
         PredictorCore(two_class_model, scene, PredictorConfig(unfamiliar="ignore"))
 

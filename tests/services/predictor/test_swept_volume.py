@@ -89,3 +89,20 @@ def test_training_samples_the_surface_for_its_grid_and_refuses_a_bad_spacing(sce
     assert train_model(two, scene, cfg, progress=False).spacing == pytest.approx(0.016)
     with pytest.raises(UserError, match="spacing must be a finite number > 0 m, got nan"):
         train_model(two, scene, dataclasses.replace(cfg, spacing=math.nan), progress=False)
+
+
+def test_a_point_on_a_voxel_face_is_in_the_voxel_above_it() -> None:
+    # pr2_two_cups_side's grid: (x - -1) / 0.05 at x = -0.9 rounds to 1.9999999999999996; of the faces written as
+    # decimals 16 of 47 in x, 17 of 47 in y and 12 of 39 in z fell into the voxel below them
+    from shared.scene import load_scene
+
+    grid = load_scene("pr2_two_cups_side").grid
+    for axis in range(3):
+        n = grid.dims[axis]
+        faces = np.tile(grid.min + grid.resolution * 0.5, (n - 1, 1))
+        faces[:, axis] = np.round(grid.min[axis] + grid.resolution * np.arange(1, n), 10)
+        idx, inside = grid.index(faces)
+        assert inside.all() and idx[:, axis].tolist() == list(range(1, n)), axis
+        flat = np.ravel_multi_index(idx.T, grid.dims)
+        assert posture_voxels(faces, grid).tolist() == sorted(flat.tolist()), axis
+        assert np.concatenate(voxels_per_posture(faces[None], grid)).tolist() == flat.tolist(), axis
