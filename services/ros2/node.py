@@ -1,7 +1,8 @@
 """A ROS 2 node on a Zenoh session as rmw_zenoh makes one: its graph tokens, publishers and subscriptions.
 
 The format is :mod:`services.ros2.wire`'s; this is its use on a live session. A publisher numbers its
-samples from 1 and attaches rmw_zenoh's 33 bytes (sequence number, source time, its GID); a subscription
+samples from 1 and attaches rmw_zenoh's 33 bytes (sequence number, source time, its GID: rmw_zenoh's, the hash of
+its graph token, so that a subscriber gets the GID ``ros2 topic info -v`` shows); a subscription
 listens on its topic and type with any type hash, so that a sample of another hash (another definition of
 the type) is refused with its reason rather than never seen, and refuses a sample without rmw_zenoh's
 attachment, as a ROS 2 subscription does. Refusals go to a :class:`shared.rejects.RejectCounter`: one
@@ -10,7 +11,6 @@ logged line each (rate-limited), counted by reason.
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import threading
 import time
@@ -19,7 +19,16 @@ from typing import Any
 
 from shared.rejects import RejectCounter
 
-from .wire import Attachment, AttachmentError, data_key, endpoint_token, node_token, qos_chunk
+from .wire import (
+    HUMBLE_TYPE_HASH,
+    Attachment,
+    AttachmentError,
+    data_key,
+    endpoint_gid,
+    endpoint_token,
+    node_token,
+    qos_chunk,
+)
 
 __all__ = ["Ros2Node", "Ros2Publisher", "next_entity_id"]
 
@@ -87,17 +96,21 @@ class Ros2Node:
         self._subscriber: Any = None
         self.ordered = ordered
 
-    def _token(self, kind: str, topic: str, msgtype: str) -> int:
+    def _token(self, kind: str, topic: str, msgtype: str) -> bytes:
+        """Declare the entity's graph token (its QoS written out in full); its GID."""
         entity = next_entity_id(self.zid)
-        self._tokens.append(self.session.liveliness().declare_token(endpoint_token(
-            self.domain_id, self.zid, self.node_id, entity, kind, self.namespace, self.name, topic, msgtype,
-            self.hashes[msgtype], qos_chunk(depth=10))))
-        return entity
+
+        def token(explicit: bool) -> str:
+            return endpoint_token(self.domain_id, self.zid, self.node_id, entity, kind, self.namespace, self.name,
+                                  topic, msgtype, self.hashes[msgtype], qos_chunk(depth=10, explicit=explicit))
+
+        self._tokens.append(self.session.liveliness().declare_token(token(True)))
+        # rmw_zenoh hashes the token as it re-writes it (QoS defaults blank), not the string it received
+        return endpoint_gid(token(False))
 
     def publisher(self, topic: str, msgtype: str) -> Ros2Publisher:
-        """A publisher of ``msgtype`` on the absolute ``topic``, with its ``MP`` token."""
-        entity = self._token("MP", topic, msgtype)
-        gid = hashlib.sha256(f"{self.zid}/{entity}".encode()).digest()[:16]
+        """A publisher of ``msgtype`` on the absolute ``topic``, with its ``MP`` token and rmw_zenoh's GID for it."""
+        gid = self._token("MP", topic, msgtype)
         pub = Ros2Publisher(self.session, data_key(self.domain_id, topic, msgtype, self.hashes[msgtype]), gid)
         self._undeclare.append(pub)
         return pub
@@ -128,6 +141,10 @@ class Ros2Node:
             return  # another topic of the domain
         topic, msgtype, callback = handler
         expected = self.hashes[msgtype]
+        if got == HUMBLE_TYPE_HASH:
+            self.rejects.reject(topic, f"{msgtype}: a ROS 2 Humble node (rmw_zenoh on Humble sends no type hash): "
+                                "not supported, docs/ros2.md", reason="type")
+            return
         if got != expected:
             self.rejects.reject(topic, f"{msgtype}: type hash {got}, expected {expected} (another definition)",
                                 reason="type")

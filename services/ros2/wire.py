@@ -1,16 +1,18 @@
 """How rmw_zenoh puts a ROS 2 topic on Zenoh: data keys, the sample attachment, graph liveliness tokens.
 
 Followed: ros2/rmw_zenoh ``docs/design.md`` and ``rmw_zenoh_cpp/src/detail/`` (``attachment_helpers.cpp``:
-``AttachmentData::serialize_to_zbytes`` with zenoh-cpp's ``ext::Serializer``, the layout since late
-2024, rolling and jazzy; ``liveliness_utils.cpp``: the tokens; ``qos.cpp``: the QoS chunk). Pure: no
-Zenoh, no ROS; the ``rosbags`` type store gives the message definitions, CDR and the RIHS01 hashes.
+``AttachmentData::serialize_to_zbytes`` with zenoh-cpp's ``ext::Serializer``, the layout of rmw_zenoh_cpp 0.2.4 (Jazzy),
+0.6.0 (Rolling) and 0.1.2 (Humble) on, April-June 2025, PR #601; ``liveliness_utils.cpp``: the tokens and the GID;
+``qos.cpp``: the QoS defaults). Pure: no Zenoh, no ROS; the ``rosbags`` type store gives the message definitions, CDR
+and the RIHS01 hashes.
 
 * data key: ``<domain>/<topic without its leading slash>/<pkg>::msg::dds_::<Type>_/<RIHS01 hash>``;
 * payload: CDR, little-endian, with its 4-byte encapsulation header ``00 01 00 00``;
 * attachment, 33 bytes: int64 LE sequence number, int64 LE source timestamp (ns since the epoch),
   the byte 16 (the GID's length), the 16-byte GID. A ROS 2 subscriber drops a sample without one;
 * graph: ``@ros2_lv/<domain>/<zid>/<node id>/<entity id>/<NN|MP|MS>/<enclave>/<namespace>/<node>``
-  ``[/<topic, / as %>/<dds type>/<hash>/<qos>]``, empty names as ``%``.
+  ``[/<topic, / as %>/<dds type>/<hash>/<qos>]``, empty names as ``%``;
+* GID: XXH3-128 of the entity's token, its low 64 bits then its high 64, each little-endian.
 """
 
 from __future__ import annotations
@@ -19,13 +21,19 @@ import re
 import struct
 from dataclasses import dataclass
 
+import xxhash
+
 __all__ = ["Attachment", "ATTACHMENT_SIZE", "GID_SIZE", "dds_type", "data_key", "mangle", "node_token",
            "endpoint_token", "Endpoint", "parse_endpoint_token", "qos_chunk", "AttachmentError", "ROS_NAME",
-           "topic_problem", "MAX_TOPIC_LENGTH"]
+           "topic_problem", "MAX_TOPIC_LENGTH", "endpoint_gid", "HUMBLE_TYPE_HASH"]
 
 GID_SIZE = 16
 ATTACHMENT_SIZE = 8 + 8 + 1 + GID_SIZE
 _LAYOUT = struct.Struct("<qqB16s")
+_LABELLED = b"\x0fsequence_number"  # how the older attachment starts: the label, after its LEB128 length
+_RELEASES = "rmw_zenoh_cpp 0.2.4 (Jazzy), 0.6.0 (Rolling), 0.1.2 (Humble)"
+HUMBLE_TYPE_HASH = "TypeHashNotSupported"
+"""What rmw_zenoh on Humble puts where the type hash goes (Humble's messages have none)."""
 
 
 class AttachmentError(ValueError):
@@ -55,8 +63,13 @@ class Attachment:
         """
         if data is None:
             raise AttachmentError("attachment: missing (rmw_zenoh sends one with every sample)")
+        if data.startswith(_LABELLED):
+            raise AttachmentError(f"attachment: {len(data)} bytes, labelled (sequence_number, source_timestamp, "
+                                  f"source_gid): the attachment of rmw_zenoh_cpp before {_RELEASES}; Foresight "
+                                  "speaks those releases and later (docs/ros2.md)")
         if len(data) != ATTACHMENT_SIZE:
-            raise AttachmentError(f"attachment: {len(data)} bytes, rmw_zenoh's is {ATTACHMENT_SIZE}")
+            raise AttachmentError(f"attachment: {len(data)} bytes, rmw_zenoh's is {ATTACHMENT_SIZE} "
+                                  f"(since {_RELEASES})")
         seq, stamp, n, gid = _LAYOUT.unpack(data)
         if n != GID_SIZE:
             raise AttachmentError(f"attachment: GID length {n}, expected {GID_SIZE}")
@@ -117,14 +130,41 @@ def mangle(name: str) -> str:
     return name.replace("/", "%") if name and name != "/" else "%"
 
 
-def qos_chunk(reliable: bool = True, depth: int = 10, transient_local: bool = False) -> str:
-    """rmw_zenoh's QoS field of a token; a component equal to its default (reliable, volatile, keep last) is empty.
+_INFINITE = "9223372036,854775807"  # rmw's RMW_DURATION_INFINITE, seconds,nanoseconds
+_DEFAULT_DEPTH = 42  # rmw_zenoh's depth for a profile of depth 0 (qos.cpp)
 
-    ``<reliability>:<durability>:<history>,<depth>:<deadline>:<lifespan>:<liveliness>,<lease>``.
+
+def qos_chunk(reliable: bool = True, depth: int = 10, transient_local: bool = False, explicit: bool = True) -> str:
+    """rmw_zenoh's QoS field of a token (``liveliness_utils.cpp``, ``qos_to_keyexpr``).
+
+    ``<reliability>:<durability>:<history>,<depth>:<deadline s>,<ns>:<lifespan s>,<ns>:<liveliness>,<lease s>,<ns>``,
+    rmw's enum values (reliable 1, best effort 2; transient local 1, volatile 2; keep last 1; automatic 1). History
+    keep last, the durations infinite, the liveliness automatic: what rmw_zenoh makes of a ROS 2 default profile.
+
+    Args:
+        reliable: Reliable, else best effort.
+        depth: The history's depth (keep last).
+        transient_local: Transient local, else volatile.
+        explicit: Every component written, as this bridge declares its tokens: a blank one is read as the reader's
+            default, and rmw_zenoh's defaults changed (durability: transient local until #521, volatile since).
+            ``False``: blank where a component equals today's default, as rmw_zenoh writes it and re-writes a token
+            it receives before hashing it into the GID (:func:`endpoint_gid`).
     """
-    reliability = "" if reliable else "2"
-    durability = "1" if transient_local else ""
-    return f"{reliability}:{durability}:,{depth}:,:,:,,"
+    def field(value: str, default: str) -> str:
+        return value if explicit or value != default else ""
+
+    span = _INFINITE if explicit else ","  # deadline, lifespan, lease: always infinite here
+    return (f"{field('1' if reliable else '2', '1')}:{field('1' if transient_local else '2', '2')}:"
+            f"{field('1', '1')},{field(str(depth), str(_DEFAULT_DEPTH))}:{span}:{span}:{field('1', '1')},{span}")
+
+
+def endpoint_gid(token: str) -> bytes:
+    """The 16-byte GID rmw_zenoh gives the entity of liveliness ``token``: what ``ros2 topic info -v`` shows.
+
+    ``liveliness_utils.cpp``, ``Entity::Entity``: XXH3-128 of the token string, ``low64`` then ``high64`` copied as
+    the host (little-endian) stores them, i.e. the 128-bit value little-endian.
+    """
+    return xxhash.xxh3_128_intdigest(token.encode()).to_bytes(GID_SIZE, "little")
 
 
 def node_token(domain: int, zid: str, node_id: int, namespace: str, node: str, enclave: str = "") -> str:

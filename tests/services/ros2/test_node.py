@@ -9,7 +9,7 @@ from collections.abc import Callable
 
 from services.ros2.core import Ros2Config, Ros2Mapping
 from services.ros2.node import Ros2Node, next_entity_id
-from services.ros2.wire import Attachment, data_key
+from services.ros2.wire import Attachment, data_key, endpoint_gid, qos_chunk
 from shared.config import ZenohConfig
 from shared.rejects import RejectCounter
 from shared.transport import open_session
@@ -113,3 +113,42 @@ def test_a_handler_failing_on_every_sample_is_counted_each_time_with_one_traceba
             node.close()
     assert rejects.by_reason == {("/chatter", "handler"): 100}
     assert sum(1 for r in caplog.records if r.exc_info) == 1
+
+
+def test_a_publishers_gid_is_rmw_zenohs_for_its_token(
+        zenoh_hub: Callable[[], ZenohConfig], wait_until: Callable[..., bool]) -> None:
+    """The GID was sha256(zid/entity): a subscriber got one that `ros2 topic info -v` never shows.
+
+    rmw_zenoh parses a token, writes it again (QoS defaults blank) and hashes that: the GID of the token as seen.
+    """
+    hashes = Ros2Mapping(Ros2Config()).hashes
+    with open_session(zenoh_hub()) as session, open_session(zenoh_hub()) as graph:
+        node = Ros2Node(session, 9, "/", "talker", hashes, RejectCounter("test"))
+        try:
+            pub = node.publisher("/joint_states", "sensor_msgs/msg/JointState")
+            assert wait_until(lambda: any("/MP/" in t for t in _tokens(graph, 9)), 10.0)
+            token = next(t for t in _tokens(graph, 9) if "/MP/" in t)
+            prefix, _, qos = token.rpartition("/")
+            assert qos == qos_chunk(depth=10)  # declared in full
+            assert pub.gid == endpoint_gid(f"{prefix}/{qos_chunk(depth=10, explicit=False)}")
+        finally:
+            node.close()
+
+
+def test_a_humble_sample_is_refused_as_humbles_not_as_another_definition(
+        zenoh_hub: Callable[[], ZenohConfig], caplog) -> None:
+    mapping = Ros2Mapping(Ros2Config())
+    rejects = RejectCounter("test")
+    with open_session(zenoh_hub()) as session:
+        node = Ros2Node(session, 3, "/", "listener", mapping.hashes, rejects)
+        try:
+            node.subscription("/chatter", STRING, lambda payload: None)
+            key = data_key(3, "/chatter", STRING, "TypeHashNotSupported")
+            with caplog.at_level(logging.WARNING):
+                node._on_sample(_Sample(key, b"hi", 1))
+        finally:
+            node.close()
+    assert rejects.by_reason == {("/chatter", "type"): 1}
+    text = " ".join(r.getMessage() for r in caplog.records)
+    assert "a ROS 2 Humble node (rmw_zenoh on Humble sends no type hash): not supported, docs/ros2.md" in text, text
+    assert "another definition" not in text
