@@ -46,7 +46,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from services.demo_dirs import MAIN_VARIANT, RunDirectory, forced_exit_note, log_state, variant_dir
+from services.demo_dirs import MAIN_VARIANT, RunDirectory, describe_log, forced_exit_note, variant_dir
 from services.demo_inputs import check_inputs, share_config_file
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
@@ -304,7 +304,7 @@ def _variant_name(cfg: DemoConfig) -> str:
 def _closing_lines(cfg: DemoConfig, summary: Summary, interrupted: bool = False) -> list[str]:
     """What the demo prints at the end: the run's summary (or the comparison), the picture, where everything is.
 
-    ``interrupted``: the MCAP lines say each log's state (``complete``: the executor finalised it before stopping).
+    ``interrupted``: the MCAP lines say each log's state (``complete``: finalised); else only a log not complete.
     """
     extra, robot = summary.extra, "the prediction planner's robot" if cfg.compare else "the robot"  # summary: its run
     lines = [] if cfg.compare else summary.lines(table=False)[:-1]  # the table was printed live; the log comes last
@@ -325,8 +325,8 @@ def _closing_lines(cfg: DemoConfig, summary: Summary, interrupted: bool = False)
                      f"s: the run goes on until it is there (--no-finish ends it at {cfg.run_s:g} s)")
     lines += extra.get("outcome_lines", [])
 
-    def with_state(path: str | None) -> str:  # an interrupted run's log: whether the executor finalised it
-        return f"{path} ({log_state(path)})" if interrupted and path and Path(path).is_file() else str(path)
+    def with_state(path: str | None) -> str:  # its state after an interrupt, else only when it is not complete
+        return describe_log(path, interrupted, extra.get("log_incomplete", "") if path == summary.mcap_path else "")
 
     if cfg.compare:
         lines.append("MCAP logs: " + ", ".join(with_state(r["mcap_path"]) for r in extra.get("comparison", [])))

@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from services.processes import ServiceProcess
 
-__all__ = ["RunDirectory", "variant_dir", "compare_log", "log_state", "forced_exit_note", "stop_service",
-           "MAIN_VARIANT"]
+__all__ = ["RunDirectory", "variant_dir", "compare_log", "log_state", "describe_log", "log_incomplete",
+           "forced_exit_note", "stop_service", "MAIN_VARIANT"]
 
 MAIN_VARIANT = "prediction"
 """The planner a ``--compare`` run is about (the paper's method; ``services.demo.VARIANTS``' first)."""
@@ -51,6 +51,41 @@ def log_state(mcap: str | Path) -> str:
         return read_log(mcap).state
     except UserError as exc:  # not an MCAP at all (an empty file: the executor died as it opened it)
         return f"unreadable: {exc}"
+
+
+def describe_log(path: str | None, interrupted: bool = False, said: str = "") -> str:
+    """The demo's ``MCAP log:`` entry: the path, and what is wrong with the log where it is not complete.
+
+    A full disk lost half a run's log while the demo printed the usual lines (a review): now ``PATH — INCOMPLETE:
+    N of M messages written (why)`` from the executor's own line (``said``), or the reader's state where it said
+    nothing (a log without its footer). After an interrupt, the state in any case: ``PATH (complete)``.
+    """
+    if not path or not Path(path).is_file():
+        return str(path)
+    if interrupted:
+        return f"{path} ({log_state(path)})"
+    if said:
+        return f"{path} — INCOMPLETE: {said.split('INCOMPLETE: ', 1)[-1]}"
+    from shared.recording.reader import MAGIC
+
+    with open(path, "rb") as f:  # a finished log ends with the magic: nothing else to read for a whole one
+        f.seek(max(0, f.seek(0, 2) - len(MAGIC)))
+        whole = f.read() == MAGIC
+    return str(path) if whole else f"{path} — INCOMPLETE: {log_state(path)}"
+
+
+def log_incomplete(executor: ServiceProcess | None) -> dict[str, str]:
+    """The summary's ``log_incomplete`` entry when the executor ended with its log incomplete, else ``{}``.
+
+    Its value is the executor's last ``mcap:`` line (``PATH: INCOMPLETE: N of M messages written (why)``), said after
+    its status :data:`~services.executor.result.LOG_INCOMPLETE`.
+    """
+    from services.executor.result import LOG_INCOMPLETE
+
+    if executor is None or executor.returncode != LOG_INCOMPLETE:
+        return {}
+    said = [line for line in executor.tail(20).splitlines() if line.startswith("mcap: ") and "INCOMPLETE" in line]
+    return {"log_incomplete": said[-1].removeprefix("mcap: ") if said else "the executor said its log is incomplete"}
 
 
 def forced_exit_note(run: Path) -> str:

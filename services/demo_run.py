@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from services.demo_dirs import stop_service
+from services.demo_dirs import log_incomplete, stop_service
 from services.demo_inputs import check_goals, library_for
 from services.demo_services import (
     KEYPOINT_REST_S,
@@ -29,6 +29,7 @@ from services.demo_services import (
     service_args,
     services_in_order,
 )
+from services.executor.result import LOG_INCOMPLETE
 from services.processes import ServiceProcess, free_port
 from services.run_log import RunRecorder, keep_posterior, recorder_from_log
 from services.scenario import (
@@ -335,12 +336,12 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                     status = 1
                     break
                 stop.wait(0.1)
-            if stop.is_set() and executor.returncode == 0 and status == 0:  # it had finished: the run is whole
+            if stop.is_set() and executor.returncode in (0, LOG_INCOMPLETE) and status == 0:  # it had finished
                 pass  # (a Ctrl-C just after the last step said "interrupted after 20 of 20 steps", status 130)
             elif stop.is_set():
                 out("foresight demo: interrupted; stopping the services (the executor first: it closes the log)")
                 status = 130
-            elif executor.returncode not in (0, None):
+            elif executor.returncode not in (0, None, LOG_INCOMPLETE):  # a log cut short: a whole run, said at the end
                 said = executor.last_words()  # a killed process's last line is not why it died: only an error's is
                 out(f"foresight demo: executor {describe_exit(executor.returncode)}" + (f": {said}" if said else ""))
                 status = 1
@@ -350,8 +351,8 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 out("foresight demo: faults during the run: " + ", ".join(faults))
         finally:
             said = reported | ({name for name, _ in supervisor.faults} if supervisor is not None else set())
-            if status == 1 and executor is not None and executor.returncode not in (0, None):
-                said.add("executor")  # reported above, one line: not again as a warning
+            if executor is not None and executor.returncode and (status == 1 or executor.returncode == LOG_INCOMPLETE):
+                said.add("executor")  # reported above, or in the closing MCAP line (its log): not again as a warning
             for name in reversed(order):
                 code = stop_service(procs[name], SHUTDOWN_GRACE_S + 2.0)  # past its grace: its stack dump is kept
                 if name == "executor":  # its log is closed: what the others still send is not the run's
@@ -386,6 +387,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     summary.extra["mode"] = cfg.mode
     summary.extra["method"] = cfg.method
     summary.extra["human_cost"] = cfg.human_cost
+    summary.extra.update(log_incomplete(executor))  # a full disk cut its log short: the closing MCAP line says so
     if status:  # its numbers are of a part of the run: no comparison may take them for a whole one
         summary.extra["cut_short"] = f"{'interrupted' if status == 130 else 'stopped'} after {done}"
     elif faults:  # real time goes on without (or with a restarted) service: a run, but not one to compare

@@ -12,9 +12,10 @@ from shared.runtime import service_main
 from shared.security.acl import refuse_ros2_keys
 
 from .core import ExecutorConfig
+from .result import LOG_INCOMPLETE
 from .service import ExecutorService
 
-__all__ = ["main", "INCOMPLETE"]
+__all__ = ["main", "INCOMPLETE", "LOG_INCOMPLETE"]
 
 INCOMPLETE = 1
 """Exit status of a lock-step run that finished with ticks that went on without their plan or prediction."""
@@ -26,7 +27,9 @@ MCAP file (plus Foxglove 3D channels). In lock-step mode the executor is the sim
 emits the ClockTicks. Stops after --steps, or on SIGINT/SIGTERM (the MCAP file is finalised either
 way). Options come from the dataclass defaults < --config FILE ([executor], [zenoh]) < env
 FORESIGHT_EXECUTOR_<NAME> / FORESIGHT_ZENOH_<NAME> < flags. Exit status 1: a lock-step run finished with
-ticks that went on without their plan or prediction (a service gone mid-run), not the run its seed makes."""
+ticks that went on without their plan or prediction (a service gone mid-run), not the run its seed makes;
+4: the MCAP log is not complete (a full disk: its last line, `mcap: PATH: INCOMPLETE: N of M messages
+written (why)`, says how many were lost)."""
 
 
 SWITCH_INTERVAL_S = 0.001
@@ -47,8 +50,10 @@ def _make(cfg: ExecutorConfig, zcfg: ZenohConfig, stop: threading.Event) -> Call
 
     def run() -> int:
         result = service.run()
-        if result.mcap_path:
-            print(f"mcap: {result.mcap_path}")
+        if result.mcap_path:  # a log a full disk cut short: said in this line (it ended 'mcap: PATH', status 0)
+            print(f"mcap: {result.log_incomplete or result.mcap_path}", flush=True)
+        if result.log_incomplete:
+            return LOG_INCOMPLETE
         # a lock-step run whose ticks went on without their plan or prediction is not the run its seed makes: a
         # planner killed mid-run ended 'done ... reached=True', status 0, and compose and scripts took it for one
         return INCOMPLETE if result.lockstep_timeouts else 0
@@ -57,7 +62,10 @@ def _make(cfg: ExecutorConfig, zcfg: ZenohConfig, stop: threading.Event) -> Call
 
 
 def main(argv: list[str] | None = None, prog: str = "python -m services.executor") -> int:
-    """Run the executor; returns the exit status (0 done or stopped, 1 :data:`INCOMPLETE`, 2 bad input)."""
+    """Run the executor; returns the exit status (0 done or stopped, 1 :data:`INCOMPLETE`, 2 bad input, 4 its log's).
+
+    4 is :data:`LOG_INCOMPLETE`: the MCAP log lost messages (a full disk).
+    """
     return service_main(argv, prog, section="executor", config_cls=ExecutorConfig, description=DESCRIPTION,
                         make=_make)
 

@@ -6,7 +6,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["ExecutorResult"]
+__all__ = ["ExecutorResult", "LOG_INCOMPLETE"]
+
+LOG_INCOMPLETE = 4
+"""The executor's exit status when its MCAP log lost messages (a full disk): its ``mcap:`` line says how many.
+
+Here, not in ``__main__``: ``foresight demo`` reads it without importing the executor's service.
+"""
 
 
 @dataclass
@@ -29,7 +35,11 @@ class ExecutorResult:
         plans: Plans adopted; ``plans_rejected``: plans with the wrong joints.
         rejects: Payloads refused (decoding, values, order), per key; ``reject_reasons`` per
             ``"key reason"``.
-        mcap_path: The log, or None; ``log_write_failures``: messages the log could not take (a full disk).
+        mcap_path: The log, or None; ``log_write_failures``: writes to it that failed (a full disk: messages refused
+            once the file had ended, flushes, the close).
+        log_incomplete: The close's one line when the log is not complete (``<path>: INCOMPLETE: N of M messages
+            written (why)``; '' when it is); ``log_lost`` those M - N messages; ``log_dropped_after_close``: messages
+            given to the log after its close (not written).
         times: ``(N,)`` stamps of the published states; ``q``: ``(N, D)`` their configurations.
     """
 
@@ -47,6 +57,9 @@ class ExecutorResult:
     rejects: dict[str, int] = field(default_factory=dict)
     reject_reasons: dict[str, int] = field(default_factory=dict)
     log_write_failures: int = 0
+    log_incomplete: str = ""
+    log_lost: int = 0
+    log_dropped_after_close: int = 0
     mcap_path: str | None = None
     times: np.ndarray = field(default_factory=lambda: np.zeros(0))
     q: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))

@@ -172,6 +172,18 @@ class ExecutorService:
             if n == 1 or n % 100 == 0:
                 log.error("executor: writing the MCAP log failed (%d so far): %s: %s", n, type(exc).__name__, exc)
 
+    def _close_log(self) -> None:
+        """Close the log; one a full disk left incomplete goes in the result (its line, the messages lost)."""
+        mcap = self.mcap
+        if mcap is None:
+            return
+        try:
+            mcap.close()  # retries what the disk refused for a few seconds first (CLOSE_RETRY_S)
+        except Exception as exc:  # said by the log in one line (INCOMPLETE: N of M messages written)
+            self.result.log_write_failures += 1
+            self.result.log_incomplete = str(exc.strerror if isinstance(exc, OSError) and exc.strerror else exc)
+        self.result.log_lost = mcap.ledger.lost
+
     def _dispatch(self, key: str, msg: Message) -> None:
         if key == self.keys.plan and isinstance(msg, Plan):
             try:
@@ -223,7 +235,7 @@ class ExecutorService:
                 self.mcap = McapLog(path, self.keys, builder, viz_period_s=1.0 / cfg.viz_rate_hz,
                                     viz_thread=cfg.mode != "lockstep", compression=cfg.mcap_compression,
                                     scene_text=text, run_metadata=meta, on_viz=live.log if live else None)
-                closing.callback(self._write, self.mcap.close)  # a full disk's failure: counted, said
+                closing.callback(self._close_log)  # a full disk's failure: counted, said
                 self.result.mcap_path = str(path)
             link = self._connect_robot(session) if cfg.robot == "ros2" else None
             if refused := denied(session, f"{self.zenoh.prefix}/**", "subscribe"):  # the log would stay empty
@@ -252,6 +264,9 @@ class ExecutorService:
         r.reject_reasons = {f"{k} {why}": n for (k, why), n in sorted(self.rejects.by_reason.items())}
         r.plans = self.core.plans_adopted
         r.separation_holds = self.guard.holds_ if self.guard is not None else 0
+        if self.mcap is not None and (late := self.mcap.dropped_after_close):  # said once by the log as it came
+            r.log_dropped_after_close = late
+            log.warning("executor: %d message(s) came after the MCAP log was closed: not in it", late)
         r.times = np.asarray(self._times)
         r.q = np.asarray(self._qs).reshape(len(self._qs), self.limits.dof)
         if r.lockstep_timeouts:
@@ -288,7 +303,7 @@ class ExecutorService:
         except BaseException:
             link.close()
             if self.mcap is not None:
-                self._write(self.mcap.close)  # complete, with what it has: the run never started
+                self._close_log()  # complete, with what it has: the run never started
             raise
         self.core = Ros2Arm(self.limits, q0, self.config, link, guard=self.guard)
         return link

@@ -15,6 +15,7 @@ import errno
 import fcntl
 import logging
 import os
+import time
 from pathlib import Path
 
 from shared.atomic_file import not_a_file
@@ -107,17 +108,19 @@ class DirectFile:
                 n = os.write(self._fd, self._held)
             except OSError as exc:
                 self.refusals += 1
-                if self.refusals == 1 or len(self._held) > MAX_HELD_BYTES:
+                ending = len(self._held) > MAX_HELD_BYTES and self._failed is None  # said once: a close retries
+                if self.refusals == 1 or ending:
                     log.warning("mcap log %s: the OS refused a write (%s); %d bytes held until it takes them",
                                 self._path, exc.strerror, len(self._held))
-                if len(self._held) > MAX_HELD_BYTES:
+                if ending:
                     self._failed = exc
                     raise OSError(exc.errno, f"{self._path}: {len(self._held)} bytes refused by the OS "
                                   f"({exc.strerror}); the log ends at {self._pos - len(self._held)} bytes") from None
                 return
             del self._held[:n]
             if not self._held and self.refusals:
-                log.warning("mcap log %s: the OS takes writes again; nothing held is lost", self._path)
+                log.warning("mcap log %s: the OS takes writes again; nothing held is lost%s", self._path,
+                            " (the log still ends there)" * (self._failed is not None))
 
     @property
     def failed(self) -> OSError | None:
@@ -143,6 +146,23 @@ class DirectFile:
         if self._held and self._failed is None:
             self._drain()
 
+    def drain(self, timeout_s: float, poll_s: float = 0.05) -> int:
+        """Retry writing what is held for at most ``timeout_s`` (a close: space may come back); returns bytes held.
+
+        Also after the file ended (:attr:`failed`): what is held is a whole prefix of the records it was given, and
+        every byte of it written makes more of the log readable.
+        """
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        while True:
+            if self._held:
+                try:
+                    self._drain()
+                except OSError:  # past MAX_HELD_BYTES: still held, tried again until the deadline
+                    pass
+            if not self._held or time.monotonic() >= deadline:
+                return len(self._held)
+            time.sleep(min(poll_s, max(0.0, deadline - time.monotonic())))
+
     def fsync(self) -> None:
         """Write what is held and ask the OS to put the file on the disk.
 
@@ -156,7 +176,7 @@ class DirectFile:
         os.fsync(self._fd)
 
     def close(self) -> None:
-        """Close the file (once); what is still held is lost (:meth:`fsync` first says so)."""
+        """Close the file (once); what is still held is lost (:meth:`drain` and :meth:`fsync` first)."""
         if self._fd >= 0:
             os.close(self._fd)
             self._fd = -1

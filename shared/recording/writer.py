@@ -24,7 +24,11 @@ chunk is flushed every ``flush_period_s``, by a thread of its own when no messag
 waiting for its peers); if the process is killed, everything up to the last complete chunk stays readable
 (with a non-seeking reader, see :func:`shared.recording.reader.read_log`). Once the file has ended (the OS
 refused bytes past what :mod:`shared.recording.direct_file` holds), every later message raises at once
-instead of growing the writer's index of a chunk that will never be written.
+instead of growing the writer's index of a chunk that will never be written. At the close, bytes still held are
+retried for :data:`CLOSE_RETRY_S` (space may come back); what is still refused then is lost, and the close says how
+many messages in one line (``INCOMPLETE: N of M messages written``; ``McapLog.ledger``), counted per chunk. A message
+given after the close is not written: counted (``McapLog.dropped_after_close``) and said once. The log time of a
+message is read under the writer's lock, so a file's raw messages are in log-time order whatever thread writes them.
 """
 
 from __future__ import annotations
@@ -49,15 +53,19 @@ from shared.protocol import MESSAGE_TYPES, Keys, Message, ProtocolError, decode
 
 from .background import BackgroundWorker
 from .direct_file import DirectFile
+from .ledger import Ledger
 from .schemas import PROFILE, REJECTED_SCHEMA, REJECTED_TOPIC, message_json_schema
 
-__all__ = ["McapLog", "COMPRESSION"]
+__all__ = ["McapLog", "COMPRESSION", "CLOSE_RETRY_S"]
 
 COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 """Chunk compressions by name (the ``mcap`` library compresses with ``zstandard`` and ``lz4``)."""
 
 MAX_NS = 2 ** 64 - 1
 """The latest time an MCAP record holds (uint64 nanoseconds: the year 2554)."""
+
+CLOSE_RETRY_S = 3.0
+"""Seconds a close retries the bytes a full disk refused (within a stopping service's grace, with its other waits)."""
 
 log = logging.getLogger(__name__)
 
@@ -112,6 +120,8 @@ class McapLog:
         self._last_flush = time.monotonic()
         self._closed = False
         self._removal_said = False
+        self.ledger = Ledger(self._file, self._writer)  # which messages are on the disk
+        self.dropped_after_close = 0
         self.counts: dict[str, int] = {}
         self.rejects: dict[str, int] = {}
         self.reject_reasons: dict[str, int] = {}
@@ -126,7 +136,8 @@ class McapLog:
         if self._stream is not None:  # stamped and logged at the same (receive-time) clock as every later update
             for m in self._stream.static(self._clock()):
                 self.write_viz(m)
-        self._writer.flush()
+        with self.ledger.writing():
+            self._writer.flush()
         self._viz = (BackgroundWorker(self._visualise_item, "mcap-foxglove", viz_pending)
                      if builder is not None and viz_thread else None)
         self._flush_errors = 0
@@ -153,6 +164,7 @@ class McapLog:
 
     def _add(self, channel: int, topic: str, data: bytes, log_time: int, publish_time: int) -> None:
         if (failed := self._file.failed) is not None:  # the file has ended: the writer would only grow its index
+            self.ledger.refused += 1
             raise OSError(failed.errno, f"{self.path}: the log has ended ({failed.strerror}); message on {topic} "
                           "not written")
         # checked before the writer takes it: a field that does not pack failed half-way through the record, and the
@@ -161,17 +173,29 @@ class McapLog:
             if not (isinstance(t, int) and 0 <= t <= MAX_NS):
                 raise ValueError(f"{self.path}: message on {topic} not written: its {name} time {t!r} ns is not an "
                                  f"MCAP time (an integer 0 .. {MAX_NS}, until the year 2554)")
-        self._writer.add_message(channel_id=channel, log_time=log_time, data=data, publish_time=publish_time,
-                                 sequence=self.counts.get(topic, 0) & 0xFFFFFFFF)  # uint32: it wraps
-        self.counts[topic] = self.counts.get(topic, 0) + 1
+        with self.ledger.writing():  # a chunk filled up and written: this message is the last in it
+            try:
+                self._writer.add_message(channel_id=channel, log_time=log_time, data=data, publish_time=publish_time,
+                                         sequence=self.counts.get(topic, 0) & 0xFFFFFFFF)  # uint32: it wraps
+            finally:  # taken even when its chunk's bytes ended the file: they are held
+                self.counts[topic] = self.counts.get(topic, 0) + 1
+                self.ledger.total += 1
         self.flush_if_due()
+
+    def _late(self, topic: str) -> None:
+        """A message given after the close: not written, counted, said once."""
+        self.dropped_after_close += 1
+        if self.dropped_after_close == 1:
+            log.warning("mcap log %s: a message on %s came after the log was closed: not written (counted, "
+                        "dropped_after_close)", self.path, topic)
+
 
     def write_rejected(self, obj: dict[str, Any], log_time: int | None = None) -> None:
         """Write a record on the rejects channel (JSON)."""
         data = json.dumps(obj, separators=(",", ":")).encode()
         with self._lock:
             if self._closed:
-                return
+                return self._late(REJECTED_TOPIC)
             cid = self._channel_id(REJECTED_TOPIC, "foresight.Rejected", REJECTED_SCHEMA, "json")
             t = self._clock() if log_time is None else log_time
             self._add(cid, REJECTED_TOPIC, data, t, t)
@@ -180,7 +204,7 @@ class McapLog:
         """Write an encoded scene message on its channel (registered with its schema on first use)."""
         with self._lock:
             if self._closed:
-                return
+                return self._late(m.topic)
             if m.topic not in self._channels:
                 s = m.schema
                 if s.name not in self._schemas:
@@ -202,7 +226,7 @@ class McapLog:
         """Write a ROS 2 message as sent or received (CDR, schema ``ros2msg``: its definition from ``rosbags``)."""
         with self._lock:
             if self._closed:
-                return
+                return self._late(topic)
             if topic not in self._channels:
                 from rosbags.typesys import Stores, get_typestore
 
@@ -215,24 +239,27 @@ class McapLog:
     # -- samples -------------------------------------------------------------------------------
 
     def on_sample(self, key: str, payload: bytes) -> Message | None:
-        """Decode and log one sample received on ``key``; returns the message (None if rejected)."""
-        log_time = self._clock()
+        """Decode and log one sample received on ``key``; returns the message (None if rejected).
+
+        Its log time is read as it is written (under the lock): read before, a thread that waited for the lock wrote
+        a time older than the record before it.
+        """
         try:
             msg: Message = decode(payload, self._expected.get(key))
         except ProtocolError as exc:
-            self.reject(key, payload, str(exc), log_time, reason=exc.reason)
+            self.reject(key, payload, str(exc), reason=exc.reason)
             return None
-        self.log_message(key, payload, msg, log_time)
+        self.log_message(key, payload, msg)
         return msg
 
     def log_message(self, key: str, payload: bytes, msg: Message, log_time: int | None = None) -> None:
-        """Log a payload already decoded (and so validated) as ``msg`` on ``key``'s channel."""
-        log_time = self._clock() if log_time is None else log_time
+        """Log a payload already decoded (and so validated) as ``msg`` on ``key``'s channel (``log_time``: now)."""
         stamp = float(getattr(msg, "stamp", -1.0))
-        publish = int(min(stamp * 1e9, 2.0 ** 64)) if stamp >= 0 else log_time  # past MCAP's times: refused by _add
         with self._lock:
             if self._closed:
-                return
+                return self._late(key)
+            log_time = self._clock() if log_time is None else log_time  # under the lock: the file in log-time order
+            publish = int(min(stamp * 1e9, 2.0 ** 64)) if stamp >= 0 else log_time  # past MCAP's: refused by _add
             cid = self._channels.get(key)
             if cid is None:  # the schema is built once per channel, not per message
                 cid = self._channel_id(key, f"foresight.{msg.TYPE}", message_json_schema(MESSAGE_TYPES[msg.TYPE]),
@@ -306,7 +333,8 @@ class McapLog:
         """Write the open chunk to the file now (nothing once a full disk has ended the file)."""
         with self._lock:
             if not self._closed and self._file.failed is None:
-                self._writer.flush()
+                with self.ledger.writing():
+                    self._writer.flush()
                 self._last_flush = time.monotonic()
                 if not self._removal_said and self._file.removed:
                     self._removal_said = True
@@ -326,29 +354,32 @@ class McapLog:
             if self._closed:
                 return
             self._closed = True  # first: a close that fails (a full disk) is not repeated over what it half-wrote
+            error: OSError | None = None
             try:
                 if self._stream is not None:  # lock-step's too (built in the callback: none dropped, none left)
                     pending = self._viz.pending if self._viz is not None else 0  # queued past the worker's close
-                    self._writer.add_metadata("foresight.viz", {"dropped": str(self.viz_dropped),
-                                                                "unfinished": str(pending),
-                                                                "errors": str(self.viz_errors)})
+                    viz = {"dropped": self.viz_dropped, "unfinished": pending, "errors": self.viz_errors}
+                    self._writer.add_metadata("foresight.viz", {k: str(v) for k, v in viz.items()})
                 self._writer.add_metadata("foresight.rejects", {k: str(v) for k, v in sorted(self.rejects.items())})
                 self._writer.add_metadata("foresight.rejects.reasons",
                                           {k: str(v) for k, v in sorted(self.reject_reasons.items())})
-                self._writer.finish()
-                self._file.fsync()
-                if self._file.removed:
-                    raise OSError(errno.ENOENT, f"the file was deleted while it was written (or its directory): "
-                                  f"its {sum(self.counts.values())} messages are lost")
-            except OSError as exc:  # a full disk: said here, once, whoever closes (and raised to them)
-                if exc.errno == errno.ENOENT:
-                    log.error("mcap log %s: %s", self.path, exc)
+                with self.ledger.writing():
+                    self._writer.finish()
+            except OSError as exc:  # the file had ended (a full disk): what it holds is still written below
+                error = exc
+            try:
+                if held := self._file.drain(CLOSE_RETRY_S):  # space may come back within a few seconds
+                    error = error or OSError(errno.ENOSPC, f"{held} bytes refused for {CLOSE_RETRY_S:g} s")
                 else:
-                    log.error("mcap log %s: could not be finished (%s); readers recover the messages before where "
-                              "it ends", self.path, exc)
-                raise
+                    self._file.fsync()
+            except OSError as exc:
+                error = error or exc
             finally:
+                removed = self._file.removed
                 self._file.close()
+            if (incomplete := self.ledger.closed(self.path, removed, error)) is not None:
+                log.error("mcap log %s", incomplete.strerror)  # said here, once, whoever closes (and raised to them)
+                raise incomplete
         log.info("mcap log: wrote %s (%d messages on %d channels, %d rejected, %d scene updates dropped)",
                  self.path, sum(self.counts.values()), len(self.counts), sum(self.rejects.values()), self.viz_dropped)
 

@@ -488,7 +488,28 @@ def test_an_interrupted_runs_closing_lines_say_whether_its_log_was_finalised(tmp
     assert f"MCAP log: {mcap} (complete)" in _closing_lines(DemoConfig(), summary, interrupted=True)
     mcap.write_bytes(mcap.read_bytes()[:-30])
     assert any(ln.startswith(f"MCAP log: {mcap} (TRUNCATED (") for ln in _closing_lines(DemoConfig(), summary, True))
-    assert f"MCAP log: {mcap}" in _closing_lines(DemoConfig(), summary)  # a whole run: its log was read already
+    # not interrupted: a log that is not complete says so all the same (a full disk lost half of one without a word)
+    assert any(ln.startswith(f"MCAP log: {mcap} — INCOMPLETE: TRUNCATED (") for ln in _closing_lines(DemoConfig(),
+                                                                                                    summary))
+
+
+def test_a_whole_runs_closing_line_says_when_a_full_disk_cut_its_log_short(tmp_path: Path) -> None:
+    from services.demo import _closing_lines
+    from services.scenario import Summary
+    from shared.protocol import Keys
+    from shared.recording.writer import McapLog
+
+    mcap = tmp_path / "run.mcap"
+    with McapLog(mcap, Keys()):
+        pass
+    summary = Summary(steps=[], chosen_goal_per_step=[], switch_step=None, interference_cost=0.0, mcap_path=str(mcap),
+                      reached=True, reached_step=3, human_class="blue_cup", recognised_class="blue_cup",
+                      extra={"run_dir": str(tmp_path)})
+    assert f"MCAP log: {mcap}" in _closing_lines(DemoConfig(), summary)  # complete: the path alone
+    summary.extra["log_incomplete"] = (f"{mcap}: INCOMPLETE: 582 of 1164 messages written (No space left on device: "
+                                       "1687437 bytes refused for 3 s)")
+    assert (f"MCAP log: {mcap} — INCOMPLETE: 582 of 1164 messages written (No space left on device: 1687437 bytes "
+            "refused for 3 s)") in _closing_lines(DemoConfig(), summary)
 
 
 STOPPING_DEMO = """

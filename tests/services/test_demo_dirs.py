@@ -75,3 +75,32 @@ def test_a_run_nothing_was_kept_of_says_nothing(tmp_path) -> None:
     run = RunDirectory.create(tmp_path, "lockstep", False)
     run.end_without_log()
     assert run.whereabouts() is None
+
+
+def test_the_demo_takes_the_executors_incomplete_log_line_and_checks_a_log_it_did_not_hear_about(tmp_path) -> None:
+    from services.demo_dirs import describe_log, log_incomplete
+    from services.executor.result import LOG_INCOMPLETE
+    from shared.protocol import Keys
+    from shared.recording.writer import McapLog
+
+    class Executor:
+        returncode = LOG_INCOMPLETE
+
+        def tail(self, lines: int = 3) -> str:
+            return ("executor: done after 20 steps\nmcap: run.mcap: INCOMPLETE: 9 of 20 messages written (No space "
+                    "left on device: 12 bytes refused for 3 s)\nzenoh: closed")
+
+    said = log_incomplete(Executor())  # the executor's own line, whatever its log says after it
+    assert said == {"log_incomplete": "run.mcap: INCOMPLETE: 9 of 20 messages written (No space left on device: 12 "
+                                      "bytes refused for 3 s)"}
+    Executor.returncode = 0
+    assert log_incomplete(Executor()) == {} and log_incomplete(None) == {}
+    mcap = tmp_path / "run.mcap"
+    with McapLog(mcap, Keys()):
+        pass
+    assert describe_log(str(mcap)) == str(mcap)
+    assert describe_log(str(mcap), said=said["log_incomplete"]) == (
+        f"{mcap} — INCOMPLETE: 9 of 20 messages written (No space left on device: 12 bytes refused for 3 s)")
+    mcap.write_bytes(mcap.read_bytes()[:-8])  # its footer's magic gone: not complete, though no one said so
+    assert describe_log(str(mcap)).startswith(f"{mcap} — INCOMPLETE: TRUNCATED (")
+    assert describe_log(None) == "None" and describe_log(str(tmp_path / "none.mcap")) == str(tmp_path / "none.mcap")
