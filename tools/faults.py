@@ -1,5 +1,9 @@
 """``foresight bench faults``: kill -9 each service (and the router) of a moving robot's run, measure the hold.
 
+A system check, not a speed benchmark: it runs no baseline to compare with and prints no ratio; what counts is
+that the robot holds when a service dies, moves again when it is back, never moves on stale inputs, and that the
+executor's MCAP is read back; its latencies say how soon, on this machine.
+
 A real-time run as processes (:mod:`tools.system`; the replayer loops, the executor runs until
 stopped). For each victim in turn, once the robot moves: SIGKILL it, record when the robot's state
 first says ``holding`` (and why), start it again after ``--down-s``, record when its liveliness token

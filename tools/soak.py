@@ -1,5 +1,9 @@
 """``foresight bench soak``: human poses at 300 Hz for 60 s through the real-time system, as processes.
 
+A system check, not a speed benchmark: it runs no baseline to compare with and prints no ratio; its figures say
+whether the system as a whole keeps up under load on this machine (a latency that grows, poses dropped, a
+replanning period that stretches, memory that grows), to be read against the real-time budgets.
+
 Once the robot moves (the planner is up), for ``--duration-s`` seconds the watcher (:mod:`tools.system`)
 records every pose, occupancy grid, plan and robot state. It prints:
 

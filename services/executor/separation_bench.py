@@ -6,7 +6,9 @@ path's clearance falls from over 0.15 m to under 0. Each run steps the executor'
 ``--seconds`` with a new pose every state, its features noisy (Gaussian per pose, or drifting: each error 0.9 of the
 last), and prints where the robot ends, measured against the true body: with the guard's window (the nearest body of
 the last ``window_s``) and, as the baseline in the same process, with the newest pose alone (``window_s`` 0). Then the
-guard's time per state against the bodies of a 30 Hz sensor's window, and per pose (one thread).
+guard's time per state against the bodies of a 30 Hz sensor's window and, as the baseline, calls interleaved with
+them, against the newest body alone (``window_s`` 0), with the ratio of the two; and per pose (one thread). Both at
+``--stop-m`` (0: the guard is off, and a call costs nothing).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from shared.clearance import body_clearance, sphere_centres
 from shared.human import HumanModel, StreamPlacement
 from shared.native_threads import limit_blas_threads
 from shared.protocol import HumanPose, Plan, ProtocolError
+from shared.runtime import cli_errors
 from shared.scene import load_scene
 from shared.synthetic import generate_library
 
@@ -81,6 +84,14 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench separation"
     args = parser.parse_args(argv)
     if args.seeds < 1 or not args.seconds > 0:
         parser.error("--seeds must be >= 1 and --seconds > 0")
+    if not (args.stop_m >= 0 and math.isfinite(args.stop_m)):
+        parser.error(f"--stop-m must be a finite number >= 0 (0: the guard off), got {args.stop_m:g}")
+    with cli_errors(prog):
+        return _bench(prog, args.seeds, args.seconds, args.stop_m)
+
+
+def _bench(prog: str, seeds: int, seconds: float, stop_m: float) -> int:
+    """The benchmark of :func:`main`'s checked options."""
     limit_blas_threads(1)
     import torch
 
@@ -92,19 +103,22 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench separation"
     placement = StreamPlacement(scene)
     placement.place(0, 0, away)
     truth, human = placement.place(0, 1, near), HumanModel()
-    print(f"{prog}: the PR2 on a straight path into a body ({args.seconds:g} s at 50 states a second, a pose each), "
-          f"stop_m {args.stop_m:g} m; true clearance where the robot ends (m), seeds 0-{args.seeds - 1}")
+    print(f"{prog}: the PR2 on a straight path into a body ({seconds:g} s at 50 states a second, a pose each), "
+          f"stop_m {stop_m:g} m; true clearance where the robot ends (m), seeds 0-{seeds - 1}")
     print(f"{'noise per pose':<20}{'window 0.5 s':>24}{'newest pose only':>24}")
     for name, pelvis, angles, drifting in NOISE:
         cells = []
         for window in (0.5, 0.0):
-            ends = [_run(robot, limits, scene, q0, goal, away, near, SeparationConfig(args.stop_m, window), pelvis,
-                         angles, drifting, seed, args.seconds) for seed in range(args.seeds)]
+            ends = [_run(robot, limits, scene, q0, goal, away, near, SeparationConfig(stop_m, window), pelvis,
+                         angles, drifting, seed, seconds) for seed in range(seeds)]
             cells.append(", ".join(f"{body_clearance(robot, q[None], truth[None], human)[0]:+.3f}" for q in ends))
         print(f"{name:<20}{cells[0]:>24}{cells[1]:>24}")
-    call_ms, pose_ms = _timing(robot, scene, q0, away)
+    call_ms, newest_ms, pose_ms = _timing(robot, scene, q0, stop_m)
     print(f"time per state (15 bodies, a 30 Hz sensor's half second): median {call_ms:.2f} ms, {call_ms * 5:.1f} % "
           f"of a core at 50 states a second; per pose (its capsules): {pose_ms:.2f} ms")
+    ratio = f"{call_ms / newest_ms:.1f}x" if newest_ms > 0 else "-"
+    print(f"baseline, the newest body alone (window 0): median {newest_ms:.2f} ms a state; the window costs {ratio} "
+          "as much")
     return 0
 
 
@@ -136,23 +150,26 @@ def _straight_plan(q0: np.ndarray, goal: np.ndarray, limits: ArmLimits) -> Plan:
                 valid=np.ones(1, bool))
 
 
-def _timing(robot, scene, q0: np.ndarray, away: np.ndarray) -> tuple[float, float]:
-    """Median ms of a guard call against 15 bodies, and of a pose noted."""
-    guard = SeparationGuard(SeparationConfig(), robot, scene)
+def _timing(robot, scene, q0: np.ndarray, stop_m: float) -> tuple[float, float, float]:
+    """Median ms of a guard call against 15 bodies, of one against the newest body alone, and of a pose noted."""
+    guard = SeparationGuard(SeparationConfig(stop_m), robot, scene)
+    newest = SeparationGuard(SeparationConfig(stop_m, window_s=0.0), robot, scene)  # the baseline
     features = generate_library(seed=0).demos[0].features
     for i in range(15):
         guard.note_pose(0, i, features[i], i / 30)
+        newest.note_pose(0, i, features[i], i / 30)
     q1 = q0 + 0.005
-    calls, poses = [], []
-    for _ in range(200):
-        t = time.perf_counter()
-        guard(q0, q1)
-        calls.append(time.perf_counter() - t)
+    calls, alone, poses = [], [], []
+    for i in range(200):
+        for g, times in ((guard, calls), (newest, alone))[:: 1 if i % 2 else -1]:  # neither always goes first
+            t = time.perf_counter()
+            g(q0, q1)
+            times.append(time.perf_counter() - t)
     for i in range(200):
         t = time.perf_counter()
         guard.note_pose(0, 15 + i, features[i % len(features)], (15 + i) / 30)
         poses.append(time.perf_counter() - t)
-    return float(np.median(calls) * 1e3), float(np.median(poses) * 1e3)
+    return float(np.median(calls) * 1e3), float(np.median(alone) * 1e3), float(np.median(poses) * 1e3)
 
 
 if __name__ == "__main__":

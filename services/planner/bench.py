@@ -182,7 +182,7 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
                            "fk_cpu_ms": [], "pk_fk_ms": [], "ratio": [], "cost_ms": [], "construct_s": [],
                            "final_cost": [],
                            "compiled": False,
-                           "checkpoints": list(CHECKPOINTS), "cost_cold": [], "cost_warm": [],
+                           "checkpoints": [], "cost_cold": [], "cost_warm": [],
                            "rollouts": config.stomp.rollouts, "waypoints": config.stomp.waypoints,
                            "iterations": config.stomp.iterations, "threads": torch.get_num_threads(),
                            "device": config.device, "dtype": config.dtype, "steps": steps,
@@ -221,6 +221,8 @@ def run_bench(ks: list[int], config: PlannerConfig, steps: int = 5, scene: Scene
     if 1 in out["K"]:
         one = out["step_ms"][out["K"].index(1)]
         out["time_vs_k1"] = [round(t / one, 2) for t in out["step_ms"]]
+    # the iterations run (cost_history has I + 1 rows): a checkpoint past them has no cost in any list
+    out["checkpoints"] = list(CHECKPOINTS[:max(map(len, out["cost_cold"] + out["cost_warm"]), default=0)])
     out["load_avg_1min_end"] = os.getloadavg()[0]
     return out
 
@@ -299,7 +301,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench planner") -
     p.add_argument("--baseline", action="store_true",
                    help="also time the unfused reference cost path (StateCost, eager) in the same process")
     p.add_argument("--profile", action="store_true", help="also print a torch.profiler table of a K=2 step")
-    p.add_argument("--memory", action="store_true", help="also measure the peak RSS of a K=8 planning process")
+    p.add_argument("--memory", action="store_true",
+                   help="also measure the peak RSS of a planning process with the largest K of --k")
     p.add_argument("--plot", metavar="PNG", default=None,
                    help="also plan around a blob and draw the paths (e.g. runs/plots/stomp_blob.png)")
     args = p.parse_args(argv)

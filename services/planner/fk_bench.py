@@ -15,6 +15,7 @@ Timings on a shared machine are noisy: the median of ``repeats`` calls after a w
 
 from __future__ import annotations
 
+import argparse
 import statistics
 import time
 from collections.abc import Callable
@@ -26,6 +27,7 @@ from shared.arguments import ArgumentParser
 from shared.config_tree import ConfigError
 from shared.devices import check_device
 from shared.robot import PR2
+from shared.runtime import cli_errors
 
 __all__ = ["fk_time_ms", "synchronize", "METHODS", "main"]
 
@@ -109,6 +111,18 @@ def main(argv: list[str] | None = None, prog: str = "python -m services.planner.
         check_device(args.device, "--device")
     except ConfigError as exc:
         parser.error(str(exc))
+    if args.repeats < 1:
+        parser.error(f"--repeats must be at least 1, got {args.repeats}")
+    if min(args.n) < 1:
+        parser.error(f"--n: each batch size must be at least 1, got {min(args.n)}")
+    if args.threads < 0:
+        parser.error(f"--threads must be >= 0 (0: torch's default), got {args.threads}")
+    with cli_errors(prog):
+        return _table(args)
+
+
+def _table(args: argparse.Namespace) -> int:
+    """Time every method at each batch size of :func:`main`'s checked options and print them."""
     if args.threads:
         torch.set_num_threads(args.threads)
     methods = [m for m in METHODS if args.compile or not m.endswith("_compiled")]

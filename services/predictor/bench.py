@@ -115,6 +115,9 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench predictor")
                         help=f"volume method of the quick model (default: {DEFAULT_VOLUME})")
     parser.add_argument("--json", action="store_true", help="print one JSON object (key update_ms_median, ...)")
     args = parser.parse_args(argv)
+    for name in ("grid", "demos", "repeats"):  # before the quick model's training (about a minute)
+        if getattr(args, name) < 1:
+            parser.error(f"--{name} must be at least 1, got {getattr(args, name)}")
     with cli_errors(prog):
         scene = load_scene(None)
         lib = default_library()

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from services.processes import free_port
 from shared.arguments import ArgumentParser
+from shared.runtime import cli_errors
 from tools.host_bench import stall_line
 from tools.log.latency import log_latencies
 
@@ -57,6 +58,14 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench human") -> 
     parser.add_argument("--out", default="runs/bench-human", help="the runs' directories")
     parser.add_argument("demo_args", nargs=argparse.REMAINDER, help="after --: more `foresight demo` options")
     args = parser.parse_args(argv)
+    if args.rounds < 1:  # before any run: a round is three demo runs of a minute or more
+        parser.error(f"--rounds must be at least 1, got {args.rounds}")
+    with cli_errors(prog):
+        return _rounds(args)
+
+
+def _rounds(args: argparse.Namespace) -> int:
+    """The runs of :func:`main`'s checked options, their table and the summary."""
     demo_args = [a for a in args.demo_args if a != "--"]
     names = list(VARIANTS)
     rows: dict[str, list[float]] = {v: [] for v in names}

@@ -12,6 +12,9 @@ measured 2.43 s median at 120 Hz and 7.08 s at 240 Hz on this 2-core machine.
 
 from __future__ import annotations
 
+import argparse
+import math
+import shutil
 import sys
 import tempfile
 import threading
@@ -26,7 +29,9 @@ from shared.config import ZenohConfig
 from shared.human import HumanModel
 from shared.keypoints.bench import source_library
 from shared.keypoints.fit import POINT_NAMES
+from shared.library import MotionLibrary
 from shared.protocol import AT_REST, DemoMarker, HumanKeypoints, HumanPose, Keys
+from shared.runtime import cli_errors
 from shared.transport import TypedPublisher, open_session, subscribe
 
 from .bench import sample_at
@@ -51,7 +56,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench tracker-liv
     parser.add_argument("--library", default=None, help="motion library (default: the synthetic one, seed 0)")
     parser.add_argument("--demo", type=int, default=0, help="the demonstration played (the library's n-th)")
     parser.add_argument("--rest-s", type=float, default=1.5, help="rest before and after the reach (s)")
-    parser.add_argument("--out", default=None, help="the processes' logs (default: a temporary directory)")
+    parser.add_argument("--out", default=None, help="keep the processes' logs in this directory (default: a "
+                        "temporary one, removed at the end; kept, and named, if the bench fails)")
     args = parser.parse_args(argv)
     try:
         rates = [float(r) for r in args.rates.split(",") if r.strip()]
@@ -59,16 +65,33 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench tracker-liv
         parser.error(f"--rates: {args.rates!r} is not a comma-separated list of numbers")
     if not rates or not all(0 < r <= 1000 for r in rates):
         parser.error(f"--rates: each rate must be in (0, 1000] Hz, got {args.rates!r}")
-    lib, model = source_library(args.library), HumanModel()
+    if not (args.rest_s >= 0 and math.isfinite(args.rest_s)):
+        parser.error(f"--rest-s must be a finite number >= 0, got {args.rest_s:g}")
+    with cli_errors(prog):
+        lib = source_library(args.library)
+        if args.out:
+            return _run(prog, args, rates, lib, Path(args.out))
+        out = Path(tempfile.mkdtemp(prefix="foresight-tracker-live-"))
+        try:
+            status = _run(prog, args, rates, lib, out)
+        except BaseException:
+            print(f"{prog}: the processes' logs are kept in {out}", file=sys.stderr)
+            raise
+        shutil.rmtree(out, ignore_errors=True)
+        return status
+
+
+def _run(prog: str, args: argparse.Namespace, rates: list[float], lib: MotionLibrary, out: Path) -> int:
+    """The benchmark of :func:`main`'s checked options, the processes' logs in ``out``."""
+    model = HumanModel()
     demo = lib.demos[min(max(0, args.demo), len(lib.demos) - 1)]
-    out = Path(args.out or tempfile.mkdtemp(prefix="foresight-tracker-live-"))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     plain = ["--no-multicast-scouting"]
     router = ServiceProcess("router", "tools.router", ["--listen", endpoint, *plain], out / "router.log").start()
     tracker = ServiceProcess("tracker", "services.tracker", ["--connect", endpoint, "--listen", "tcp/127.0.0.1:0",
                                                              *plain], out / "tracker.log")
-    print(f"{prog}: {demo.class_name} #{demo.index} of {lib.source}, {args.rest_s:g} s of rest around it; "
-          f"logs in {out}")
+    logs = f"logs in {out}" if args.out else "logs removed at the end (--out keeps them)"
+    print(f"{prog}: {demo.class_name} #{demo.index} of {lib.source}, {args.rest_s:g} s of rest around it; {logs}")
     try:
         time.sleep(1.0)  # the router listens
         tracker.start()

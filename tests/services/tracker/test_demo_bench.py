@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 import services.tracker.demo_bench as bench
 
 
@@ -35,3 +37,14 @@ def test_each_variant_runs_each_round_and_its_median_p99_is_compared_with_the_re
     assert "the tracker (clean keypoints): 55.0 ms, +5.0 ms (target <= +10 ms: met)" in out
     assert "the tracker (2 cm noise): 70.0 ms, +20.0 ms (target <= +10 ms: missed)" in out
     assert out.splitlines()[-1] == "the machine's stall factor"  # how much of any p99 is the machine's, last
+
+
+def test_no_rounds_is_one_line_before_any_run(monkeypatch, capsys) -> None:
+    def fake_run(out, variant, demo_args):
+        raise AssertionError("a demo ran before the options were checked")
+
+    monkeypatch.setattr(bench, "_run", fake_run)
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--rounds", "0"])
+    assert exc.value.code == 2  # was statistics.StatisticsError (the median of no runs) after the table's header
+    assert capsys.readouterr().err.strip() == "foresight bench human: error: --rounds must be at least 1, got 0"

@@ -32,6 +32,25 @@ def test_bench_writes_both_paths_with_the_same_voxels(tmp_path, capsys) -> None:
     assert all(400 <= n <= 600 for n in cubes)
 
 
+def test_one_update_fewer_than_the_warm_ups_is_timed_and_the_file_size_counts_every_update(tmp_path) -> None:
+    out = tmp_path / "viz.json"
+    assert main(["--updates", "1", "--voxels", "50", "--grid", "16", "--json-out", str(out)]) == 0
+    res = json.loads(out.read_text())
+    for name, path in res["paths"].items():
+        assert len(path["cpu_ms"]) == len(path["items"]) == 1
+        assert path["file_updates"] == 2  # the one occupancy, written once as the warm-up and once timed
+        assert res["summary"][name]["file_bytes_per_update"] == path["file_bytes"] / 2
+
+
+def test_the_file_size_per_update_divides_by_the_warm_ups_too(tmp_path) -> None:
+    out = tmp_path / "viz.json"
+    assert main(["--updates", "3", "--voxels", "200", "--grid", "16", "--json-out", str(out)]) == 0
+    res = json.loads(out.read_text())
+    for name, path in res["paths"].items():
+        assert path["file_updates"] == 5  # 2 warm-ups + 3 timed
+        assert res["summary"][name]["file_bytes_per_update"] == path["file_bytes"] / 5
+
+
 def test_the_baseline_json_decodes_to_one_cube_per_point_of_the_cloud() -> None:
     (occ,) = bench_occupancies(SCENE, 1, 500, seed=3)
     text = dumps_sliced(json_occupancy(occ, 1.5))
