@@ -16,7 +16,8 @@ BENCHES: dict[str, tuple[str, str]] = {
     "planner": ("services.planner.bench", "one replanning step (STOMP over all goals)"),
     "body": ("services.planner.body_bench", "the planner's body term: the person at rest after a reach, plans with the "
              "term and without; clearance, chosen goal, step time"),
-    "faults": ("tools.faults", "kill -9 each service of a moving robot's run: hold and resume latency, MCAP recovery"),
+    "faults": ("tools.faults", "a system check (no baseline): kill -9 each service of a moving robot's run: "
+               "hold and resume latency, MCAP recovery"),
     "tracker": ("services.tracker.bench", "the live tracker's core on a library's reaches: lag, error, refusals, "
                 "time per frame"),
     "tracker-live": ("services.tracker.live_bench", "the tracker as a process behind a router, one reach played at "
@@ -28,7 +29,8 @@ BENCHES: dict[str, tuple[str, str]] = {
              "view (a Foxglove client on each): pose -> plan p99"),
     "separation": ("services.executor.separation_bench", "the executor's separation guard: noisy poses of a person "
                    "in the robot's way, the nearest of the window against the newest pose alone; time per state"),
-    "soak": ("tools.soak", "poses at 300 Hz for 60 s: predictor latency and drops, replanning period, RSS"),
+    "soak": ("tools.soak", "a system check (no baseline): poses at 300 Hz for 60 s: predictor latency and "
+             "drops, replanning period, RSS"),
     "codec": ("shared.protocol.bench", "encode and decode of each wire message against bare msgpack: what the "
               "checks cost"),
     "host": ("tools.host_bench", "the same fixed work 300 times in one thread, nothing else of Foresight running: "
