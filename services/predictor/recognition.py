@@ -31,6 +31,7 @@ from shared.runtime import UserError, cli_errors
 from .features import VARIANTS, FeatureEncoder
 from .fit_cache import class_fit
 from .gmm import DEFAULT_TEMPERATURE, GMMConfig, MixtureBank, posterior_from_log_likelihood
+from .model import TIME_FROM
 from .train import DEFAULT_FEATURES, default_library
 
 __all__ = ["FRACTIONS", "RecognitionResult", "leave_one_out", "plot_recognition", "plot_calibration", "main"]
@@ -249,7 +250,9 @@ only its class without it, classify its prefixes at executed fractions 10%..100%
 recognition rate and of the calibration of the class posteriors (log-loss = mean -ln p(true class), Brier
 score) at temperature 1 (the paper) and --temperature, and the temperature of a grid with the least mean
 log-loss; writes a PNG of recognition rate against executed fraction and one of the calibration;
---json prints one JSON object instead of the tables."""
+--json prints one JSON object instead of the tables. --through-tracker classifies, instead of each held-out
+demonstration's recorded features, the poses the tracker publishes for it played as a person's body keypoints
+(services/tracker/sensed.py; docs/keypoints.md)."""
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
@@ -266,7 +269,15 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
                    help="also evaluate these variants (comma-separated, e.g. paper:20,relative:0) and plot all")
     p.add_argument("--reg-covar", type=float, default=GMMConfig.reg_covar, help="covariance regularisation")
     p.add_argument("--max-iter", type=int, default=100, help="EM iterations at most (default: 100)")
-    p.add_argument("--seed", type=int, default=0, help="k-means seed (default: 0)")
+    p.add_argument("--seed", type=int, default=0, help="k-means seed, and the keypoint noise's (default: 0)")
+    p.add_argument("--through-tracker", action="store_true", help="classify the poses the tracker publishes for each "
+                   "held-out demonstration played as body keypoints (at rest 1.5 s before and after), at fractions of "
+                   "its first reach's poses")
+    p.add_argument("--keypoint-noise-m", type=float, default=None, metavar="SIGMA",
+                   help="--through-tracker: Gaussian noise of the keypoints per axis, m (default: 0)")
+    p.add_argument("--time-from", choices=TIME_FROM, default=None,
+                   help="--through-tracker: the mixtures' time from each demonstration's first sample (recording, "
+                   "the default) or from where the tracker starts its reach (tracker, as foresight train --time-from)")
     p.add_argument("--n-jobs", type=int, default=2, help="parallel refits (default: 2)")
     p.add_argument("--json", action="store_true", help="print one JSON object {fractions, recognition_rates, ...}")
     p.add_argument("--plot", metavar="PNG", default="runs/plots/recognition.png",
@@ -288,6 +299,12 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
             raise UserError("--temperature/--temperatures: temperatures must be finite numbers > 0")
         if args.n_jobs == 0:
             raise UserError("--n-jobs: 0 runs nothing; give >= 1, or a negative number for all cores but -n-1")
+        for opt, given in (("--keypoint-noise-m", args.keypoint_noise_m), ("--time-from", args.time_from)):
+            if given is not None and not args.through_tracker:
+                raise UserError(f"{opt}: only with --through-tracker (the recorded features have neither)")
+        noise = 0.0 if args.keypoint_noise_m is None else args.keypoint_noise_m
+        if not (np.isfinite(noise) and 0.0 <= noise < 1.0):
+            raise UserError(f"--keypoint-noise-m must be in [0, 1) m, got {noise:g}")
         for png in (args.plot, args.calibration_plot):  # before the work: a file in the way lost it all
             ready_to_write(png)
         lib = load_library(args.library) if args.library else default_library()
@@ -300,14 +317,25 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
                 variants.append((name, int(n) if n else args.components))
             except ValueError:
                 raise UserError(f"--compare: {item!r}: components must be an integer") from None
-        results = []
+        results, tracked = [], []
+        if args.through_tracker:
+            from .recognition_tracker import leave_one_out_tracked, sense_library, tracker_label
+
+            sensed = sense_library(lib, noise, args.seed, args.n_jobs, progress=not args.quiet)
         for feats, k in variants:
             cfg = GMMConfig(n_components=k, reg_covar=args.reg_covar, max_iter=args.max_iter, seed=args.seed)
             try:
                 cfg.validate()
             except ValueError as exc:
                 raise UserError(str(exc)) from None
-            results.append(leave_one_out(lib, cfg, feats, n_jobs=args.n_jobs, progress=not args.quiet))
+            if args.through_tracker:
+                tracked.append(leave_one_out_tracked(
+                    lib, cfg, sensed, feats, args.time_from or "recording", n_jobs=args.n_jobs,
+                    progress=not args.quiet, name=f"Foresight, {feats} features, {k or 'BIC'} Gaussians per class, "
+                    f"{tracker_label(noise, args.time_from or 'recording')}"))
+                results.append(tracked[-1].result)
+            else:
+                results.append(leave_one_out(lib, cfg, feats, n_jobs=args.n_jobs, progress=not args.quiet))
         where = f"{Path(lib.source).name} ({len(lib.demos)} demos, {lib.n_classes} classes)"
         png = plot_recognition(results, args.plot, f"leave-one-out recognition: {where}")
         main_res = results[0]
@@ -328,10 +356,14 @@ def main(argv: list[str] | None = None, prog: str = "foresight eval") -> int:
                    "plot": str(png), "calibration_plot": str(cal)}
             if len(results) > 1:
                 out["variants"] = {r.name: r.rates for r in results}
+            if tracked:
+                out["through_tracker"] = tracked[0].summary(noise, args.time_from or "recording", args.seed)
             print(strict_json.dumps(out))
         else:
             print(f"leave-one-out recognition on {lib.source}: {len(lib.demos)} demonstrations, "
                   f"{lib.n_classes} classes, features {describe_features(lib.feature_names)}")
+            if tracked:
+                print(tracked[0].line())
             print(format_table(results))
             print(f"\nposterior calibration of {main_res.name} (log-loss: mean -ln p(true class | prefix); "
                   f"uniform = {np.log(lib.n_classes):.3f}):")

@@ -202,9 +202,8 @@ def train_model(library: MotionLibrary, scene: Scene, config: TrainConfig | None
             raise UserError(str(exc)) from None
     demos = list(library.demos) if demos is None else demos
     if cfg.time_from == "tracker":  # the tracker's first pose of a reach is its index 0 (docs/keypoints.md)
-        from services.tracker.core import TrackerConfig
-        from services.tracker.reach import recorded_start
-        demos = [replace(d, features=d.features[recorded_start(d.features, TrackerConfig()):]) for d in demos]
+        from services.tracker.reach import from_tracker_start
+        demos = from_tracker_start(demos)
     encoder = FeatureEncoder(cfg.features, cfg.time_scale, feature_names=library.feature_names,
                              source=f"library {library.source}")
     check_resolution(cfg.resolution)

@@ -38,9 +38,12 @@ from shared.keypoints.fit import POINT_NAMES
 from .filters import smooth_sequence
 
 if TYPE_CHECKING:
+    from shared.library import Demonstration
+
     from .core import TrackerConfig
 
-__all__ = ["ReachRule", "ReachDetector", "ReachEvent", "body_wrist", "spread", "first_start", "recorded_start"]
+__all__ = ["ReachRule", "ReachDetector", "ReachEvent", "body_wrist", "spread", "first_start", "recorded_start",
+           "from_tracker_start"]
 
 _WRIST, _PELVIS = POINT_NAMES.index("r_wrist"), POINT_NAMES.index("pelvis")
 _SHOULDERS = POINT_NAMES.index("r_shoulder"), POINT_NAMES.index("l_shoulder")
@@ -233,3 +236,21 @@ def recorded_start(features: np.ndarray, config: TrackerConfig, model: HumanMode
     wrists = np.array([body_wrist(j) for j in model.joint_positions(f)])
     start = first_start(wrists, config.pose_rate_hz, config.rule)
     return 0 if start is None else start
+
+
+def from_tracker_start(demos: list[Demonstration], config: TrackerConfig | None = None) -> list[Demonstration]:
+    """Each demonstration cut where the tracker would start its reach (:func:`recorded_start`), indexed from there.
+
+    The cut of ``foresight train --time-from tracker`` (its model's time starts at the tracker's first pose of a
+    reach) and of ``foresight eval recognition --through-tracker --time-from tracker``: one rule for both.
+
+    Args:
+        demos: The demonstrations, their features at the tracker's ``pose_rate_hz``.
+        config: The tracker's options (default: ``TrackerConfig()``, the defaults a person's tracker runs with).
+    """
+    from dataclasses import replace
+
+    from .core import TrackerConfig as Defaults  # the tracker's core imports this module
+
+    config = config or Defaults()
+    return [replace(d, features=d.features[recorded_start(d.features, config):]) for d in demos]
