@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import errno
-import os
 import re
 
 import pytest
@@ -13,28 +11,14 @@ from services.executor.service import ExecutorService
 from shared.recording.reader import read_log
 
 from .conftest import SCENE
+from .test_service import run_on_a_disk_full_after
 
 
 def test_a_full_disk_makes_the_run_say_how_many_messages_its_log_lost(pr2, tmp_path, monkeypatch, caplog) -> None:
     """The disk fills during the run: every write was held, the close failed with one error line, and the run
     returned as a whole one (status 0, `mcap: PATH`): half the log gone without a word in the result."""
-    import shared.recording.direct_file as direct_file
-    from shared.config import ZenohConfig
-
     monkeypatch.setattr("shared.recording.writer.CLOSE_RETRY_S", 0.2)
-    real_write = os.write
-
-    def full_after_8_kib(fd: int, data) -> int:
-        if os.fstat(fd).st_size > 8192 and os.readlink(f"/proc/self/fd/{fd}").endswith("run.mcap"):
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return real_write(fd, data)
-
-    monkeypatch.setattr(direct_file.os, "write", full_after_8_kib)
-    cfg = ExecutorConfig(mode="realtime", steps=10, wait_for=[], require_occupancy=False,
-                         mcap=str(tmp_path / "run.mcap"), mcap_compression="none")
-    service = ExecutorService(cfg, ZenohConfig(listen=["tcp/127.0.0.1:0"], connect=[], multicast_scouting=False),
-                              robot=pr2, human=(None, None), scene=SCENE)
-    result = service.run()
+    cfg, result = run_on_a_disk_full_after(8192, pr2, tmp_path, monkeypatch)
     assert result.steps == 10
     m = re.fullmatch(r".*run\.mcap: INCOMPLETE: (\d+) of (\d+) messages written \(No space left on device: .*\)",
                      result.log_incomplete)

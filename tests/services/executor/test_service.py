@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from services.executor.core import ExecutorConfig
+from services.executor.result import ExecutorResult
 from services.executor.service import ExecutorService
 from shared.foxglove.decode import read_scene, scene_stamps
 from shared.protocol import Keys, RobotState, decode
@@ -360,26 +361,33 @@ def test_a_log_that_cannot_be_written_costs_the_robot_nothing(pr2, tmp_path, cap
 
 
 
-def test_a_disk_that_stays_full_ends_the_log_but_never_the_run(pr2, tmp_path, monkeypatch) -> None:
-    """The loop's own flushes (after each published state; lock-step's waits) and the close at the end went to
-    the log unguarded: once a full disk had ended it, the next state raised and run() ended with an OSError."""
+def run_on_a_disk_full_after(size: int, pr2, tmp_path, monkeypatch) -> tuple[ExecutorConfig, ExecutorResult]:
+    """A 10-step real-time run without peers whose MCAP's disk refuses every write once the file is ``size`` bytes."""
     import shared.recording.direct_file as direct_file
     from shared.config import ZenohConfig
 
-    monkeypatch.setattr(direct_file, "MAX_HELD_BYTES", 1024)
     real_write = os.write
 
-    def full_after_4_kib(fd: int, data) -> int:
-        if os.fstat(fd).st_size > 4096 and os.readlink(f"/proc/self/fd/{fd}").endswith("run.mcap"):
+    def full(fd: int, data) -> int:
+        if os.fstat(fd).st_size > size and os.readlink(f"/proc/self/fd/{fd}").endswith("run.mcap"):
             raise OSError(errno.ENOSPC, "No space left on device")
         return real_write(fd, data)
 
-    monkeypatch.setattr(direct_file.os, "write", full_after_4_kib)
+    monkeypatch.setattr(direct_file.os, "write", full)
     cfg = ExecutorConfig(mode="realtime", steps=10, wait_for=[], require_occupancy=False,
                          mcap=str(tmp_path / "run.mcap"), mcap_compression="none")
     service = ExecutorService(cfg, ZenohConfig(listen=["tcp/127.0.0.1:0"], connect=[], multicast_scouting=False),
                               robot=pr2, human=(None, None), scene=SCENE)
-    result = service.run()
+    return cfg, service.run()
+
+
+def test_a_disk_that_stays_full_ends_the_log_but_never_the_run(pr2, tmp_path, monkeypatch) -> None:
+    """The loop's own flushes (after each published state; lock-step's waits) and the close at the end went to
+    the log unguarded: once a full disk had ended it, the next state raised and run() ended with an OSError."""
+    import shared.recording.direct_file as direct_file
+
+    monkeypatch.setattr(direct_file, "MAX_HELD_BYTES", 1024)
+    cfg, result = run_on_a_disk_full_after(4096, pr2, tmp_path, monkeypatch)
     assert result.steps == 10 and result.log_write_failures > 0
     assert not read_log(cfg.mcap).complete  # ends where the disk stopped taking bytes
 
