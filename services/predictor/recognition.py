@@ -34,7 +34,8 @@ from .gmm import DEFAULT_TEMPERATURE, GMMConfig, MixtureBank, posterior_from_log
 from .model import TIME_FROM
 from .train import DEFAULT_FEATURES, default_library
 
-__all__ = ["FRACTIONS", "RecognitionResult", "leave_one_out", "plot_recognition", "plot_calibration", "main"]
+__all__ = ["FRACTIONS", "RecognitionResult", "leave_one_out", "prefix_scores", "plot_recognition", "plot_calibration",
+           "main"]
 
 FRACTIONS = tuple(round(0.1 * i, 1) for i in range(1, 11))
 PAPER_FIG6 = {"fractions": (0.43, 0.6, 0.8, 1.0), "rates": (0.5, 0.8, 0.92, 0.92)}
@@ -91,15 +92,24 @@ def _prefix_lengths(n: int, fractions: tuple[float, ...]) -> np.ndarray:
     return np.clip(np.rint(np.asarray(fractions) * n).astype(int), 1, n)
 
 
-def _score_demo(i: int, feats: list[np.ndarray], labels: np.ndarray, full: MixtureBank,
-                fit: Callable[[np.ndarray], GaussianMixture], fractions: tuple[float, ...]) -> np.ndarray:
+def prefix_scores(i: int, x: np.ndarray, feats: list[np.ndarray], labels: np.ndarray, full: MixtureBank,
+                  fit: Callable[[np.ndarray], GaussianMixture], fractions: tuple[float, ...]) -> np.ndarray:
+    """``(F, M)`` summed ``ln p(x_1..t | C_m)`` of ``x``'s prefixes at ``fractions``, ``i``'s class refitted without it.
+
+    Args:
+        i: The held-out demonstration (its class's mixture is refitted on the others' ``feats``).
+        x: ``(T, D)`` the encoded motion to classify: demonstration ``i``'s features, or the tracker's poses of it.
+        feats: Every demonstration's ``(T_j, D)`` encoded features.
+        labels: ``(N,)`` their classes.
+        full: The mixtures fitted on every demonstration.
+        fit: Fits one class's mixture.
+        fractions: Executed fractions.
+    """
     m = int(labels[i])
-    rest = np.vstack([feats[j] for j in np.flatnonzero(labels == m) if j != i])
-    own = MixtureBank.from_sklearn([fit(rest)])
-    ll = full.log_likelihood(feats[i])                  # (T, M)
-    ll[:, m] = own.log_likelihood(feats[i])[:, 0]
-    cum = np.cumsum(ll, axis=0)
-    return cum[_prefix_lengths(len(ll), fractions) - 1]                  # (F, M)
+    own = MixtureBank.from_sklearn([fit(np.vstack([feats[j] for j in np.flatnonzero(labels == m) if j != i]))])
+    ll = full.log_likelihood(x)                         # (T, M)
+    ll[:, m] = own.log_likelihood(x)[:, 0]
+    return np.cumsum(ll, axis=0)[_prefix_lengths(len(ll), fractions) - 1]  # (F, M)
 
 
 def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAULT_FEATURES,
@@ -135,7 +145,7 @@ def leave_one_out(library: MotionLibrary, cfg: GMMConfig, features: str = DEFAUL
     full = Parallel(n_jobs=n_jobs)(delayed(fit)(np.vstack([feats[j] for j in np.flatnonzero(labels == m)]))
                                    for m in range(library.n_classes))
     bank = MixtureBank.from_sklearn(full)
-    jobs = (delayed(_score_demo)(i, feats, labels, bank, fit, fractions) for i in range(len(demos)))
+    jobs = (delayed(prefix_scores)(i, feats[i], feats, labels, bank, fit, fractions) for i in range(len(demos)))
     it = Parallel(n_jobs=n_jobs, return_as="generator")(jobs)
     cum = np.array(list(progress_bar(it, total=len(demos), desc=f"leave-one-out ({features})", unit="demo",
                                      enabled=progress)))                   # (N, F, M)

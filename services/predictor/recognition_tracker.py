@@ -30,7 +30,7 @@ from .features import FeatureEncoder
 from .fit_cache import class_fit
 from .gmm import GMMConfig, MixtureBank
 from .model import TIME_FROM
-from .recognition import FRACTIONS, RecognitionResult, _prefix_lengths
+from .recognition import FRACTIONS, RecognitionResult, prefix_scores
 from .train import DEFAULT_FEATURES
 
 __all__ = ["TrackedRecognition", "sense_library", "leave_one_out_tracked", "tracker_label"]
@@ -99,18 +99,6 @@ def sense_library(library: MotionLibrary, noise_m: float, seed: int = 0, n_jobs:
     return list(progress_bar(it, total=len(library.demos), desc="through the tracker", unit="demo", enabled=progress))
 
 
-def _score(i: int, feats: list[np.ndarray], labels: np.ndarray, full: MixtureBank, gmm: GMMConfig,
-           encoder: FeatureEncoder, poses: np.ndarray, fractions: tuple[float, ...]) -> np.ndarray:
-    """``(F, M)`` summed log-likelihoods of the prefixes of ``poses``, the own class refitted without ``i``."""
-    m = int(labels[i])
-    own = MixtureBank.from_sklearn([class_fit(np.vstack([feats[j] for j in np.flatnonzero(labels == m) if j != i]),
-                                              gmm)])
-    x = encoder.batch(poses)  # the live predictor's reading: pose k at time k (at most the model's last_index)
-    ll = full.log_likelihood(x)                                       # (P, M)
-    ll[:, m] = own.log_likelihood(x)[:, 0]
-    return np.cumsum(ll, axis=0)[_prefix_lengths(len(ll), fractions) - 1]
-
-
 def leave_one_out_tracked(library: MotionLibrary, cfg: GMMConfig, sensed: list[tuple[np.ndarray, int] | None],
                           features: str = DEFAULT_FEATURES, time_from: str = "recording",
                           fractions: tuple[float, ...] = FRACTIONS, n_jobs: int = 1, progress: bool = True,
@@ -151,9 +139,11 @@ def leave_one_out_tracked(library: MotionLibrary, cfg: GMMConfig, sensed: list[t
         delayed(fit)(np.vstack([feats[j] for j in np.flatnonzero(labels == m)])) for m in range(library.n_classes)))
     have = [i for i, s in enumerate(sensed) if s is not None]
     # the held-out model's last_index, as train_model writes it: its longest demonstration's samples, less one
-    jobs = (delayed(_score)(i, feats, labels, full, cfg, FeatureEncoder(
-        features, feature_names=library.feature_names, last_index=int(np.delete(lengths, i).max()) - 1),
-        sensed[i][0], fractions) for i in have)  # type: ignore[index]
+    def reading(i: int) -> np.ndarray:  # the live predictor's reading: pose k at time k (at most last_index)
+        return FeatureEncoder(features, feature_names=library.feature_names,
+                              last_index=int(np.delete(lengths, i).max()) - 1).batch(sensed[i][0])  # type: ignore[index]
+
+    jobs = (delayed(prefix_scores)(i, reading(i), feats, labels, full, fit, fractions) for i in have)
     it = Parallel(n_jobs=n_jobs, return_as="generator")(jobs)
     cum = np.zeros((len(demos), len(fractions), library.n_classes))
     for i, c in zip(have, progress_bar(it, total=len(have), desc=f"leave-one-out ({features}, tracker's poses)",
