@@ -30,6 +30,7 @@ from shared.security.acl import ROLES, access_control, remote_roles
 from shared.security.certificates import (
     CA_DAYS,
     certificate_hosts,
+    check_host,
     check_private,
     fingerprint,
     init_security_dir,
@@ -54,9 +55,18 @@ def _init(args: argparse.Namespace) -> int:
     kept = (args.dir / "ca.key").is_file() and not args.new_ca
     try:
         if args.hosts is None:  # rotation keeps the cell's hosts; a first init has none beyond loopback
-            hosts = issued_hosts(args.dir, ROLES) if args.dir.is_dir() else []  # --new-ca too: the cell's hosts
+            issued = issued_hosts(args.dir, ROLES) if args.dir.is_dir() else []  # --new-ca too: the cell's hosts
+            hosts, dropped = [], []
+            for h in issued:  # one issued before wildcards were refused (0.0.0.0) would stop every rotation
+                try:
+                    hosts.append(check_host(h))
+                except ValueError:
+                    dropped.append(h)
             if hosts:
                 print(f"hosts kept from the certificates replaced: {', '.join(hosts)} (--hosts gives others)")
+            if dropped:
+                print(f"hosts dropped from the certificates replaced: {', '.join(dropped)} (no client connects to "
+                      "them; --hosts gives the addresses clients connect to)")
         else:
             hosts = [h.strip() for h in args.hosts.split(",") if h.strip()]
         written = init_security_dir(args.dir, ROLES, hosts=hosts, days=args.days, force=args.new_ca)

@@ -160,6 +160,23 @@ def test_rotation_without_hosts_keeps_the_hosts_of_the_certificates_it_replaces(
     assert re.search(r"^authority: .*ca.crt, SHA-256 ([0-9A-F]{2}:){31}[0-9A-F]{2}$", capsys.readouterr().out, re.M)
 
 
+def test_rotation_drops_a_listen_wildcard_its_old_certificates_named(tmp_path: Path, monkeypatch, capsys) -> None:
+    """Certificates issued before wildcards were refused may name 0.0.0.0: init without --hosts re-read them and
+    stopped at check_host, so the cell could not rotate until someone passed --hosts."""
+    import shared.security.certificates as certificates
+
+    real = certificates.check_host
+    monkeypatch.setattr(certificates, "check_host", lambda h: h if h == "0.0.0.0" else real(h))  # the old rule
+    init_security_dir(tmp_path, ROLES, hosts=["0.0.0.0", "robot.local"])
+    monkeypatch.undo()
+    assert issued_hosts(tmp_path, ROLES) == ["0.0.0.0", "robot.local"]
+    assert main(["init", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "hosts kept from the certificates replaced: robot.local" in out
+    assert "hosts dropped from the certificates replaced: 0.0.0.0 (no client connects to them" in out
+    assert issued_hosts(tmp_path, ROLES) == ["robot.local"]
+
+
 def test_a_directory_others_may_write_is_refused_and_no_planted_link_is_followed(tmp_path: Path) -> None:
     d = tmp_path / "sec"
     init_security_dir(d, ["planner"])
