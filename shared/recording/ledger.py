@@ -50,6 +50,7 @@ class Ledger:
             if chunks and since <= chunks[-1].chunk_start_offset < end:
                 end = chunks[-1].chunk_start_offset + chunks[-1].chunk_length
             self._marks.append((end, self.total))
+            self._settle()
 
     @contextmanager
     def writing(self) -> Iterator[None]:
@@ -67,6 +68,10 @@ class Ledger:
     @property
     def written(self) -> int:
         """Messages on the disk: those of the chunks whose bytes the OS has all taken."""
+        return self._settle()
+
+    def _settle(self) -> int:
+        """Drop the marks of chunks now on the disk (one a flush: a day's run kept 86 000); the messages on it."""
         done = self._file.tell() - self._file.held
         while self._marks and self._marks[0][0] <= done:
             self._on_disk = self._marks.popleft()[1]

@@ -367,19 +367,19 @@ class McapLog:
                     self._writer.finish()
             except OSError as exc:  # the file had ended (a full disk): what it holds is still written below
                 error = exc
-            try:
-                if held := self._file.drain(CLOSE_RETRY_S):  # space may come back within a few seconds
-                    error = error or OSError(errno.ENOSPC, f"{held} bytes refused for {CLOSE_RETRY_S:g} s")
-                else:
-                    self._file.fsync()
-            except OSError as exc:
-                error = error or exc
-            finally:
-                removed = self._file.removed
-                self._file.close()
-            if (incomplete := self.ledger.closed(self.path, removed, error)) is not None:
-                log.error("mcap log %s", incomplete.strerror)  # said here, once, whoever closes (and raised to them)
-                raise incomplete
+        try:  # outside the lock (closed: no writer touches the file): a late message is not kept waiting by the retry
+            if held := self._file.drain(CLOSE_RETRY_S):  # space may come back within a few seconds
+                error = error or OSError(errno.ENOSPC, f"{held} bytes refused for {CLOSE_RETRY_S:g} s")
+            else:
+                self._file.fsync()
+        except OSError as exc:
+            error = error or exc
+        finally:
+            removed = self._file.removed
+            self._file.close()
+        if (incomplete := self.ledger.closed(self.path, removed, error)) is not None:
+            log.error("mcap log %s", incomplete.strerror)  # said here, once, whoever closes (and raised to them)
+            raise incomplete
         log.info("mcap log: wrote %s (%d messages on %d channels, %d rejected, %d scene updates dropped)",
                  self.path, sum(self.counts.values()), len(self.counts), sum(self.rejects.values()), self.viz_dropped)
 

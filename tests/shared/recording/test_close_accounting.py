@@ -139,3 +139,13 @@ def test_log_times_follow_file_order_with_writers_on_several_threads(tmp_path) -
     log.close()
     times = [m.log_time for m in read_log(path, keep=lambda c: True).messages]
     assert len(times) == 600 and times == sorted(times)
+
+
+def test_the_ledger_keeps_only_the_chunks_not_yet_on_the_disk(tmp_path: Path) -> None:
+    """A mark per chunk, dropped only at the close: a day's run at a flush a second kept 86 000 of them."""
+    log = McapLog(tmp_path / "run.mcap", KEYS, None, flush_period_s=0.0, compression="none")
+    for i in range(300):  # a chunk each: flushed after every message
+        log.on_sample(KEYS.robot_state, state(i))
+    assert len(log.ledger._marks) <= 1 and log.ledger.written == 300  # the count read after: it prunes too
+    log.close()
+    assert read_log(tmp_path / "run.mcap").message_count == 300
