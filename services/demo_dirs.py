@@ -66,12 +66,9 @@ def describe_log(path: str | None, interrupted: bool = False, said: str = "") ->
         return f"{path} ({log_state(path)})"
     if said:
         return f"{path} — INCOMPLETE: {said.split('INCOMPLETE: ', 1)[-1]}"
-    from shared.recording.reader import MAGIC
+    from shared.recording.reader import ends_finished
 
-    with open(path, "rb") as f:  # a finished log ends with the magic: nothing else to read for a whole one
-        f.seek(max(0, f.seek(0, 2) - len(MAGIC)))
-        whole = f.read() == MAGIC
-    return str(path) if whole else f"{path} — INCOMPLETE: {log_state(path)}"
+    return str(path) if ends_finished(path) else f"{path} — INCOMPLETE: {log_state(path)}"  # whole: nothing read
 
 
 def log_incomplete(executor: ServiceProcess | None) -> dict[str, str]:

@@ -27,7 +27,7 @@ from mcap.stream_reader import StreamReader
 from shared.runtime import UserError
 
 __all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "iter_messages", "open_records", "log_path", "DAMAGED",
-           "MAGIC", "summary_damage", "being_written", "SOURCE_METADATA", "STILL_WRITTEN"]
+           "MAGIC", "summary_damage", "being_written", "ends_finished", "SOURCE_METADATA", "STILL_WRITTEN"]
 
 SOURCE_METADATA = "foresight.compress"
 """Metadata record of a copy made from a truncated or damaged log (``foresight log compress``): ``source``,
@@ -76,6 +76,16 @@ def summary_damage(path: str | Path) -> str:
         f.seek(start)
         got = zlib.crc32(f.read(size - len(MAGIC) - 4 - start))  # up to the footer's CRC itself
     return "" if got == crc else f"the summary, its index, fails its CRC: {got:#010x} where the footer says {crc:#010x}"
+
+
+def ends_finished(path: str | Path) -> bool:
+    """Whether the log ends as a finished one does: with the magic bytes after its footer.
+
+    A quick look, no record read; :func:`read_log` says what a log without them holds.
+    """
+    with log_path(path).open("rb") as f:
+        f.seek(max(0, f.seek(0, 2) - len(MAGIC)))
+        return f.read() == MAGIC
 
 
 def being_written(path: str | Path) -> bool:
