@@ -6,10 +6,11 @@ on a key at once (each line says how many were refused on that key so far, by re
 the log, and a second kind of fault is never hidden behind the first), and gives a
 one-line :meth:`RejectCounter.summary` for the service's status and shutdown lines.
 
-It tracks at most ``max_keys`` keys: a peer can publish on any number of keys under the prefix, so the rejects
-on any further key are counted together under :data:`OTHER_KEYS` (one key for the rate limit too), and a flood
-of distinct keys neither grows the counter nor floods the log. Keys and texts are logged escaped: a peer's key
-or text never starts a log line of its own.
+It tracks at most ``max_keys`` keys besides the contract's own (``known_keys``, always one by one): a peer can
+publish on any number of keys under the prefix, so the rejects on any further key are counted together under
+:data:`OTHER_KEYS` (one key for the rate limit too), a flood of distinct keys neither grows the counter nor
+floods the log, and junk on the first keys to arrive never hides a contract key's rejects among them. Keys and
+texts are logged escaped: a peer's key or text never starts a log line of its own.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 __all__ = ["RejectCounter", "OTHER_KEYS", "MAX_KEYS"]
 
@@ -41,24 +42,27 @@ class RejectCounter:
         service: The service's name (starts each log line).
         log_period_s: Smallest time between two log lines about one key.
         clock: Monotonic clock (s).
-        max_keys: Keys counted one by one; the rejects on any further key are counted under :data:`OTHER_KEYS`.
+        max_keys: Keys counted one by one besides ``known_keys``; the rejects on any further key are counted
+            under :data:`OTHER_KEYS`.
+        known_keys: The wire contract's keys (e.g. ``Keys(prefix).data_keys()``): always counted one by one.
     """
 
     def __init__(self, service: str, log_period_s: float = 1.0, clock: Callable[[], float] = time.monotonic,
-                 max_keys: int = MAX_KEYS) -> None:
+                 max_keys: int = MAX_KEYS, known_keys: Iterable[str] = ()) -> None:
         self.service = service
         self.log_period_s = log_period_s
         self.max_keys = max_keys
+        self.known_keys = frozenset(known_keys)
         self._clock = clock
         self._by_reason: dict[tuple[str, str], int] = {}
-        self._keys: set[str] = set()  # the keys counted one by one (at most max_keys)
+        self._keys: set[str] = set()  # the other keys counted one by one (at most max_keys)
         self._last_log: dict[str, float] = {}
         self._traced: set[str] = set()
         self._lock = threading.Lock()
 
     def _bucket(self, key: str) -> str:
         """The key ``key`` is counted under: itself, or :data:`OTHER_KEYS` past ``max_keys`` (lock held)."""
-        if key in self._keys:
+        if key in self._keys or key in self.known_keys:
             return key
         if len(self._keys) < self.max_keys:
             self._keys.add(key)
@@ -88,7 +92,8 @@ class RejectCounter:
             counts = {r: n for (k, r), n in self._by_reason.items() if k == bucket}
         total = sum(counts.values())
         detail = ", ".join(f"{r} {n}" for r, n in sorted(counts.items()))
-        where = f" on keys past the first {self.max_keys}, counted as {OTHER_KEYS}" if bucket == OTHER_KEYS else ""
+        where = (f" on other keys past the first {self.max_keys}, counted as {OTHER_KEYS}"
+                 if bucket == OTHER_KEYS else "")
         log.warning("%s: rejected a message on %s (%s): %s [%d so far%s: %s]", self.service, _escaped(key[:200]),
                     _escaped(why), _escaped(str(error)[:300]), total, where, detail)
 

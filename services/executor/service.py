@@ -107,7 +107,7 @@ class ExecutorService:
         q0 = start_configuration(self.limits, config, robot, self.scene)
         self.guard = separation_guard(config, robot, self.scene)  # real time, else None
         self.core = ExecutorCore(self.limits, q0, config, guard=self.guard)
-        self.rejects = RejectCounter("executor")
+        self.rejects = RejectCounter("executor", known_keys=self.keys.data_keys())
         lim = self.limits
         lockstep = config.mode == "lockstep"
         self.receipt = Receipt(Expectations(

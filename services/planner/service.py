@@ -120,7 +120,7 @@ class PlannerService:
         self.scene = scene or load_scene(config.scene or None)
         self.planner = planner or Planner(self.scene, config.planner_config())
         self.keys = Keys(zenoh.prefix)
-        self.rejects = RejectCounter("planner")
+        self.rejects = RejectCounter("planner", known_keys=self.keys.data_keys())
         # what arrives is checked against this planner's robot and scene grid (shared.protocol.receipt); a grid
         # finer than half the scene grid's resolution (8x its voxels) is refused: its lookup tables are the cost
         self.receipt = Receipt(Expectations(clock=config.mode, robot=RobotSpec.from_robot(self.planner.robot),

@@ -69,7 +69,7 @@ class PredictorService:
         self.core = PredictorCore(self.model, self.scene, config)
         self.model.check_planner_grid(self.scene)  # what it publishes, the planner must take
         self.keys = Keys(zenoh_config.prefix)
-        self.rejects = RejectCounter("predictor")
+        self.rejects = RejectCounter("predictor", known_keys=self.keys.data_keys())
         # values and per-sender order of what arrives; stamps by the message's tick (either mode)
         self.receipt = Receipt(Expectations(clock="auto"))
         self.stats = PredictorStats()

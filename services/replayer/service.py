@@ -54,7 +54,7 @@ class ReplayerService:
         self.demos = select_demos(self.library, config)
         self.keys = Keys(zenoh_config.prefix)
         self.stats = ReplayStats()
-        self.rejects = RejectCounter("replayer")
+        self.rejects = RejectCounter("replayer", known_keys=self.keys.data_keys())
 
     def run(self, stop: threading.Event | None = None) -> ReplayStats:
         """Publish until the selection is streamed (or forever with ``loop``) or ``stop`` is set."""

@@ -93,7 +93,7 @@ class Ros2Service:
         self.keys = Keys(zenoh.prefix)
         self.mapping = Ros2Mapping(config)
         self.scene = load_scene(config.scene or None)
-        self.rejects = RejectCounter("ros2")
+        self.rejects = RejectCounter("ros2", known_keys=self.keys.data_keys())
         self.receipt = Receipt(Expectations(clock="auto"))  # values, stamps and each sender's order, as any service
         self.stats = Ros2Stats({role: 0 for role in TOPICS})
         self._lock = threading.Lock()

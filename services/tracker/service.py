@@ -92,7 +92,7 @@ class TrackerService:
         self.keys = Keys(zenoh_config.prefix)
         self.core = TrackerCore(config.tracker, model)
         self.stats = TrackerStats()
-        self.rejects = RejectCounter("tracker")
+        self.rejects = RejectCounter("tracker", known_keys=self.keys.data_keys())
         self._lock = threading.Lock()
         self._ros2_frame = 0
         self._accepted_at = time.monotonic()  # when the core last took a frame (check_silence)

@@ -57,7 +57,7 @@ class ViewService:
         self.scene = load_scene(config.scene or None)
         self.core = ViewCore(default_builder(self.scene, config.device),
                              viz_period_s=1.0 / config.viz_rate_hz)
-        self.rejects = RejectCounter("view")
+        self.rejects = RejectCounter("view", known_keys=self.keys.data_keys())
         self.receipt = Receipt(Expectations(clock="auto"))  # values, stamps and each sender's order, as any service
         self.server: LiveServer | None = None
         self.failures = 0

@@ -78,8 +78,19 @@ def test_a_flood_of_distinct_keys_is_counted_in_one_bucket_and_logged_rate_limit
     # 4 keys one by one (2 of them a traceback), then the bucket: its first malformed and its traceback at once,
     # then its new reason at 1.5 s; nothing else
     assert len(lines) == 4 + 2 + 1 and sum(bool(r.exc_info) for r in caplog.records) == 3
-    assert lines[-1].startswith("svc: rejected a message on fs/junk/late (too-large): bad [3997 so far on keys past "
-                                f"the first 4, counted as {OTHER_KEYS}: handler 1998, malformed 1998, too-large 1]")
+    assert lines[-1].startswith("svc: rejected a message on fs/junk/late (too-large): bad [3997 so far on "
+                                f"other keys past the first 4, counted as {OTHER_KEYS}: handler 1998, malformed 1998, "
+                                "too-large 1]")
     assert rejects.total == 4002 and len(rejects.by_reason) == 4 + 3  # every message counted, in bounded records
     assert rejects.counts[OTHER_KEYS] == 3998 and rejects.counts["fs/junk/0"] == 1
     assert rejects.summary().startswith(f"{OTHER_KEYS}: handler 1998, malformed 1998, too-large 2; fs/bug/0")
+
+
+def test_the_contracts_keys_keep_their_own_count_after_a_flood_of_junk_keys() -> None:
+    """Before, junk on the first ``max_keys`` keys pushed a contract key's rejects into the shared bucket."""
+    rejects = RejectCounter("svc", max_keys=4, known_keys=["fs/planner/plan"])
+    for i in range(10):
+        rejects.reject(f"fs/junk/{i}", ProtocolError("bad"))
+    rejects.reject("fs/planner/plan", ProtocolError("bad plan", "too-large"))
+    assert rejects.counts["fs/planner/plan"] == 1 and rejects.counts[OTHER_KEYS] == 6
+    assert rejects.by_reason[("fs/planner/plan", "too-large")] == 1

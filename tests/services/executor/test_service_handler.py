@@ -30,3 +30,13 @@ def test_a_bug_handling_a_valid_message_is_counted_not_raised_into_zenohs_thread
     assert service.rejects.by_reason == {(service.keys.demo, "handler"): 3}
     traced = [r for r in caplog.records if r.exc_info]
     assert len(traced) == 1 and "handling a DemoMarker on" in traced[0].getMessage()
+
+
+def test_junk_keys_arriving_first_leave_the_plan_key_counted_on_its_own(pr2) -> None:
+    """The executor logs ``<prefix>/**``: before, 32 made-up keys first sent a plan's rejects to ``(other keys)``."""
+    service = ExecutorService(ExecutorConfig(mode="realtime"), ZenohConfig(), robot=pr2, human=(None, None),
+                              scene=SCENE)
+    for i in range(40):
+        service._on_sample(f"{service.keys.prefix}/junk/{i}", b"\x01", "replayer")
+    service._on_sample(service.keys.plan, b"not msgpack", "planner")
+    assert service.rejects.counts[service.keys.plan] == 1
