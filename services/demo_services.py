@@ -126,8 +126,9 @@ def service_options(cfg: DemoConfig, model: Path, replay_library: Path, samples_
         "planner": ["--mode", cfg.mode, "--seed", str(cfg.seed), "--period-s", str(cfg.period_s),
                     "--velocity-scale", str(cfg.robot_speed), *(["--goals", cfg.goals] if cfg.goals else []),
                     "--lookahead-s", str(cfg.period_s), *([] if cfg.human_cost else NO_HUMAN_COST), *scene],
-        "replayer": ["--library", str(replay_library), "--mode", cfg.mode, "--samples-per-tick", str(samples_per_tick),
-                     "--rate-hz", str(cfg.rate_hz), *([] if lockstep else ["--wait-for", RUN])],
+        "replayer": ["--library", str(replay_library), "--mode", cfg.mode,  # each mode's own pace option only
+                     *(["--samples-per-tick", str(samples_per_tick)] if lockstep
+                       else ["--rate-hz", str(cfg.rate_hz), "--wait-for", RUN])],
         "tracker": ["--from-file", str(Path(replay_library).parent / KEYPOINTS_FILE), "--rate-hz", str(cfg.rate_hz),
                     "--lead-s", "0", "--hold-s", "0", "--wait-for", RUN],  # the rest is in the recording
         "ros2": [*scene, *([] if cfg.robot == "sim" else ["--no-joint-states"])],  # a ROS 2 robot has its own

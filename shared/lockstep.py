@@ -11,7 +11,7 @@ Replanning step n = 0, 1, ... covers the simulated time ``[t_n, t_n + P)``, ``t_
   tick: a message of tick k counts as received at ``k * P``), simulates ``substeps`` states stamped
   ``t_n + h .. t_n + P`` and sends ClockTick n; then it waits for the plan of tick n
   (:meth:`PlanInbox.wait_plan`);
-* the replayer publishes its poses of tick n on ClockTick n, each tick once and in order, and the planner
+* the replayer publishes its poses of tick n on ClockTick n, each tick of the run once and in turn, and the planner
   plans tick n from the last robot state of tick n (where plan n starts) and the prediction of tick n-1:
   the clock's followers, :mod:`shared.lockstep_followers`.
 """

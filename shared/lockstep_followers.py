@@ -2,9 +2,9 @@
 
 The master, the executor's rules, is :mod:`shared.lockstep`.
 
-No Zenoh here. The replayer publishes its poses of tick n on ClockTick n, each tick once and in order
-(:class:`TickOrder`, fed by a :class:`TickQueue`); the planner plans tick n from the last robot state of tick n
-(where plan n starts) and the prediction of tick n-1 (:class:`TickInbox`).
+No Zenoh here. The replayer publishes its poses of tick n on ClockTick n, each tick of the executor's run once and
+in turn (:class:`TickOrder`, fed by a :class:`TickQueue`); the planner plans tick n from the last robot state of
+tick n (where plan n starts) and the prediction of tick n-1 (:class:`TickInbox`).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from shared.protocol import ClockTick, DemoMarker, OccupancyGrid, RobotState
 
-__all__ = ["TickQueue", "TickOrder", "PlanningInputs", "TickInbox", "STOP_SLICE_S"]
+__all__ = ["TickQueue", "TickVerdict", "TickOrder", "PlanningInputs", "TickInbox", "STOP_SLICE_S"]
 
 STOP_SLICE_S = 0.1
 """Longest a stopped follower goes on waiting for its inputs (a stopped planner once waited its whole timeout)."""
@@ -38,26 +38,75 @@ class TickQueue:
             return None
 
 
+@dataclass(frozen=True)
+class TickVerdict:
+    """What :meth:`TickOrder.accept` made of a clock tick.
+
+    Attributes:
+        take: Act on the tick (publish its poses).
+        note: What to log ("" when all is in order): a late join, a new run, a resumed run, or why it is refused.
+        reason: Why it is refused, a key of :data:`shared.protocol.schema.REASONS` ("" when taken).
+        new_run: Tick 0 of a new run after an earlier run's ticks: the stream starts over from its beginning.
+    """
+
+    take: bool
+    note: str = ""
+    reason: str = ""
+    new_run: bool = False
+
+
 class TickOrder:
-    """Each tick once and in order (the replayer's rule): a repeated or older tick is ignored, a gap reported."""
+    """The replayer's rule: the ticks of one executor's run, each once and in turn; anything else is refused.
+
+    The executor ticks 0, 1, 2, ... with one period (:class:`shared.lockstep.LockstepMaster`). A follower sees
+    another sequence only in three cases, all taken: its first tick may be later than 0 (it joined a run already
+    going); and after the executor's liveliness token went away (:meth:`executor_gone`: its process ended, or the
+    link to it went and the ticks sent meanwhile were lost), tick 0 starts a new run (any period) and a later tick
+    of the same period resumes the run. Otherwise only the last tick + 1 with the same period is taken: with
+    security off anyone may publish on the clock key, and one forged tick far ahead silenced the replayer for the
+    rest of its run (each later tick was "older"), a forged tick 0 restarted it mid-run.
+
+    Thread-safe: :meth:`executor_gone` is called on the transport's thread.
+    """
 
     def __init__(self) -> None:
         self.last = -1
+        self.period: float | None = None
+        self._gone = False  # the executor's token went away since the last tick taken
+        self._lock = threading.Lock()
 
-    def accept(self, tick: int) -> tuple[bool, str]:
-        """Whether to act on ``tick``, and what to report ("" when all is in order).
+    def executor_gone(self) -> None:
+        """The executor's liveliness token went away: the next tick may start a new run or resume after a gap."""
+        with self._lock:
+            self._gone = True
 
-        Tick 0 after a later one is a new run (the executor started again, as the receiving checks take it): it is
-        acted on, and reported; it used to be ignored, with every tick of the new run up to the old one's last.
-        """
-        if tick == 0 and self.last > 0:
-            self.last = 0
-            return True, "clock restarted at tick 0 (a new run: the executor started again)"
-        if tick <= self.last:
-            return False, f"ignoring clock tick {tick} (already at tick {self.last})"
-        note = f"clock jumped from tick {self.last} to {tick}" if tick != self.last + 1 and self.last >= 0 else ""
-        self.last = tick
-        return True, note
+    def accept(self, tick: int, period: float) -> TickVerdict:
+        """Whether to act on ClockTick ``tick`` of ``period`` s, and what to report."""
+        with self._lock:
+            verdict = self._judge(tick, period)
+            if verdict.take:
+                self.last, self.period, self._gone = tick, period, False
+            return verdict
+
+    def _judge(self, tick: int, period: float) -> TickVerdict:
+        last, gone = self.last, self._gone
+        if self.period is None:
+            return TickVerdict(True, "" if tick == 0 else f"joined the clock at tick {tick} (a run already going): "
+                                                           "the stream starts from its beginning at this tick")
+        if tick == 0 and gone:
+            return TickVerdict(True, f"clock restarted at tick 0 after tick {last} (the executor left and a new run "
+                                     "began): the stream starts over from its beginning", new_run=True)
+        if period != self.period:
+            return TickVerdict(False, f"clock tick {tick}: period {period:g} s, this run's is {self.period:g} s",
+                               "mismatch")
+        if tick == last + 1 or (gone and tick > last):
+            note = f"clock resumed at tick {tick} after tick {last} (the executor's link went)" * (tick > last + 1)
+            return TickVerdict(True, note)
+        if tick > last:
+            return TickVerdict(False, f"clock tick {tick} ahead of the run's next, {last + 1} (the executor ticks "
+                                      "each in turn)", "stamp-future")
+        why = "" if tick else " (a new run starts at 0 only once the executor has left)"
+        return TickVerdict(False, f"clock tick {tick} not after the run's last, {last}{why}", "tick-order")
 
 
 @dataclass(frozen=True)

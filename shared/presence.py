@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 import zenoh
 
 from shared.protocol import Keys
+from shared.rejects import escaped
 from shared.security.guard import denied
 
 __all__ = ["Presence", "DEPARTURE_GRACE_S", "REJOIN_S", "CUT_WAIT_S", "UNSEEN_WARN_S", "connected"]
@@ -120,13 +121,14 @@ class Presence:
             ended = not up and peer in self._seen
             if up and peer in self._stop_with:
                 self._seen.add(peer)
-        if peer != self.service:
-            log.info("%s: peer %s %s", self.service, peer, "appeared" if up else "disappeared")
+        if peer != self.service:  # escaped: any peer may declare a token whose name forges a log line of its own
+            log.info("%s: peer %s %s", self.service, escaped(peer[:200]), "appeared" if up else "disappeared")
         if self._on_change is not None:
             try:
                 self._on_change(peer, up)
             except Exception:  # the service's reaction failed: the departure below must still be acted on
-                log.exception("%s: reacting to peer %s %s failed", self.service, peer, "appearing" if up else "leaving")
+                log.exception("%s: reacting to peer %s %s failed", self.service, escaped(peer[:200]),
+                              "appearing" if up else "leaving")
         if ended and self._stop is not None:
             # lost with the link (the router went: the link is already down when the deletions come), or withdrawn
             # (the peer ended; a link lost after that, the peer's own in peer mode, changes nothing)

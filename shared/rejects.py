@@ -20,7 +20,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 
-__all__ = ["RejectCounter", "OTHER_KEYS", "MAX_KEYS"]
+__all__ = ["RejectCounter", "OTHER_KEYS", "MAX_KEYS", "escaped"]
 
 log = logging.getLogger("foresight.rejects")
 
@@ -28,7 +28,7 @@ MAX_KEYS = 32  # keys tracked one by one; a service hears about a dozen
 OTHER_KEYS = "(other keys)"  # the bucket for the rejects on every key past the first MAX_KEYS
 
 
-def _escaped(text: str) -> str:
+def escaped(text: str) -> str:
     """``text`` with line breaks and other control characters written as escapes (one log line stays one)."""
     text = text.replace("\r", "\\r").replace("\n", "\\n")
     return "".join(c if c.isprintable() else f"\\x{ord(c):02x}" if ord(c) < 0x100 else f"\\u{ord(c):04x}"
@@ -94,8 +94,8 @@ class RejectCounter:
         detail = ", ".join(f"{r} {n}" for r, n in sorted(counts.items()))
         where = (f" on other keys past the first {self.max_keys}, counted as {OTHER_KEYS}"
                  if bucket == OTHER_KEYS else "")
-        log.warning("%s: rejected a message on %s (%s): %s [%d so far%s: %s]", self.service, _escaped(key[:200]),
-                    _escaped(why), _escaped(str(error)[:300]), total, where, detail)
+        log.warning("%s: rejected a message on %s (%s): %s [%d so far%s: %s]", self.service, escaped(key[:200]),
+                    escaped(why), escaped(str(error)[:300]), total, where, detail)
 
     def unexpected(self, key: str, error: Exception, what: str) -> None:
         """Record a message refused by a bug of this process, not by the wire contract (reason ``handler``).
@@ -115,7 +115,7 @@ class RejectCounter:
             self._traced.add(bucket)
         if first:
             log.error("%s: %s on %s failed unexpectedly (this traceback once per key; later ones are counted)",
-                      self.service, what, _escaped(key[:200]), exc_info=error)
+                      self.service, what, escaped(key[:200]), exc_info=error)
         self.reject(key, error, reason="handler", said=first)
 
     @property
@@ -143,5 +143,5 @@ class RejectCounter:
         """One line: ``"none"`` or ``"key: reason n, reason n; key: ..."`` (keys escaped: services log it)."""
         by_key: dict[str, list[str]] = {}
         for (key, why), n in sorted(self.by_reason.items()):
-            by_key.setdefault(_escaped(key[:200]), []).append(f"{_escaped(why)} {n}")
+            by_key.setdefault(escaped(key[:200]), []).append(f"{escaped(why)} {n}")
         return "; ".join(f"{k}: {', '.join(v)}" for k, v in by_key.items()) or "none"

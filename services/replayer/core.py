@@ -20,8 +20,9 @@ from shared.config_names import check_services
 from shared.feature_sets import LIVE_MAPPING, require_mapping
 from shared.library import Demonstration, MotionLibrary, heldout_split, load_library
 from shared.protocol import SERVICES, DemoMarker, HumanPose, Message
+from shared.scene import SCENE_HELP, load_scene
 
-__all__ = ["ReplayerConfig", "ReplayEvent", "ReplayerCore", "select_demos", "load_replay_library"]
+__all__ = ["ReplayerConfig", "ReplayEvent", "ReplayerCore", "select_demos", "load_replay_library", "unused_options"]
 
 PEERS = tuple(s for s in SERVICES if s != "replayer")
 """The services ``wait_for`` and ``stop_with`` may name (the wire contract's, but itself)."""
@@ -35,7 +36,9 @@ class ReplayerConfig:
 
     library: Path | None = opt(None, help="motion library: a directory of compound_*.csv or a .npz; "
                                     "unset = the embedded synthetic library (shared.synthetic, seed 0: the one "
-                                    "`foresight train` trains on by default)")
+                                    "`foresight train` trains on by default, for --scene)")
+    scene: str = opt("", help=SCENE_HELP + " whose cups the embedded synthetic library reaches for, as `foresight "
+                              "train --scene` (empty: pr2_two_cups); a --library is streamed as it is")
     mode: str = opt("realtime", choices=("realtime", "lockstep"),
                     help="realtime: publish at --rate-hz; lockstep: publish --samples-per-tick poses per ClockTick")
     rate_hz: float = opt(30.0, help="real-time publishing rate (poses per second)")
@@ -85,9 +88,11 @@ def load_replay_library(cfg: ReplayerConfig) -> MotionLibrary:
     Raises:
         LibraryError: If the library file is missing or unreadable.
         ConfigError: If no library is given and the synthetic generator is not available.
+        SceneError: If ``cfg.scene`` names no scene.
     """
     if cfg.library is not None:
         return load_library(cfg.library)
+    scene = load_scene(cfg.scene or None)  # a misspelt scene is said before the generator's import
     try:
         from shared.synthetic import generate_library  # type: ignore[import-not-found]
     except ModuleNotFoundError as exc:
@@ -96,7 +101,23 @@ def load_replay_library(cfg: ReplayerConfig) -> MotionLibrary:
         raise ConfigError("replayer.library: no library given and the embedded synthetic library "
                           "(shared.synthetic) is not available in this build; pass --library DIR_OR_NPZ, "
                           "e.g. --library ../shared/data/paper-library") from None
-    return generate_library(seed=0)  # what `foresight train` trains on by default: --seed selects from it
+    # what `foresight train --scene` trains on by default: --seed selects from it
+    return generate_library(seed=0, scene=scene)
+
+
+def unused_options(cfg: ReplayerConfig) -> list[str]:
+    """One line for each option set (not its default) that the chosen mode or library does not use.
+
+    They were taken without a word: ``--rate-hz 5`` in lock-step streamed at the clock's pace all the same.
+    """
+    defaults = ReplayerConfig()
+    unused = {"lockstep": ("rate_hz", "wait_timeout"), "realtime": ("samples_per_tick",)}[cfg.mode]
+    out = [f"replayer.{name} = {getattr(cfg, name)} is unused in {cfg.mode} mode" for name in unused
+           if getattr(cfg, name) != getattr(defaults, name)]
+    if cfg.scene and cfg.library is not None:
+        out.append(f"replayer.scene = {cfg.scene} is unused with a library given ({cfg.library}): it is the embedded "
+                   "synthetic library's")
+    return out
 
 
 def _ranges(values: list[int]) -> str:

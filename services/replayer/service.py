@@ -12,9 +12,10 @@ from shared.human_source import HumanPublisher
 from shared.library import MotionLibrary
 from shared.lockstep_followers import TickOrder, TickQueue
 from shared.protocol import ClockTick, DemoMarker, Expectations, HumanPose, Keys, Message, Receipt
+from shared.scene import DEFAULT_SCENE
 from shared.transport import Presence, RejectCounter, describe, open_session, subscribe
 
-from .core import ReplayerConfig, ReplayerCore, load_replay_library, select_demos
+from .core import ReplayerConfig, ReplayerCore, load_replay_library, select_demos, unused_options
 
 __all__ = ["ReplayStats", "ReplayerService", "LINGER_S"]
 
@@ -51,6 +52,7 @@ class ReplayerService:
         self.config = config
         self.zenoh_config = zenoh_config
         self.library = library if library is not None else load_replay_library(config)
+        self.embedded = library is None and config.library is None  # the synthetic library, for config.scene
         self.demos = select_demos(self.library, config)
         self.keys = Keys(zenoh_config.prefix)
         self.stats = ReplayStats()
@@ -60,23 +62,32 @@ class ReplayerService:
         """Publish until the selection is streamed (or forever with ``loop``) or ``stop`` is set."""
         stop = stop or threading.Event()
         cfg = self.config
-        core = ReplayerCore(self.demos, loop=cfg.loop, max_demos=cfg.max_demos)
+        core = self._new_core()
         with open_session(self.zenoh_config, stop, "replayer") as session:
             human = HumanPublisher(session, self.keys)
             # lock-step: listen to the clock before announcing ourselves, so no tick sent after our
             # liveliness token appears is missed
-            ticks = TickQueue()
+            ticks, order = TickQueue(), TickOrder()
             receipt = Receipt(Expectations(clock="lockstep"))
             clock_sub = (subscribe(session, self.keys.clock, ClockTick, ticks.put, self.rejects, receipt)
                          if cfg.mode == "lockstep" else None)
-            presence = Presence(session, self.keys, "replayer", stop_with=cfg.stop_with, stop=stop)
+
+            def on_peer(peer: str, appeared: bool) -> None:  # the executor gone: its next tick may start a new run
+                if peer == "executor" and not appeared:
+                    order.executor_gone()
+
+            presence = Presence(session, self.keys, "replayer", on_change=on_peer, stop_with=cfg.stop_with, stop=stop)
             total = core.total_poses
-            log.info("replayer: %d demonstrations selected from %s (%s poses), mode %s, session %s",
-                     len(self.demos), self.library.source, "endless" if total is None else total, cfg.mode,
+            # the embedded library's reaches are for one scene's cups: said, as a model's scene is
+            scene = f", scene {cfg.scene or DEFAULT_SCENE}" if self.embedded else ""
+            log.info("replayer: %d demonstrations selected from %s%s (%s poses), mode %s, session %s",
+                     len(self.demos), self.library.source, scene, "endless" if total is None else total, cfg.mode,
                      describe(session)["zid"])
+            for line in unused_options(cfg):
+                log.warning("replayer: %s", line)
             try:
                 if clock_sub is not None:
-                    self._run_lockstep(ticks, core, human, stop, presence)
+                    core = self._run_lockstep(ticks, order, core, human, stop, presence)
                 else:
                     presence.wait_for(cfg.wait_for, cfg.wait_timeout, stop)
                     self._run_realtime(core, human, stop)
@@ -119,9 +130,18 @@ class ReplayerService:
             elif delay < -1.0:  # fell far behind (suspended?): do not burst to catch up
                 next_t = time.monotonic()
 
-    def _run_lockstep(self, ticks: TickQueue, core: ReplayerCore, human: HumanPublisher,
-                      stop: threading.Event, presence: Presence) -> None:
-        order = TickOrder()
+    def _new_core(self) -> ReplayerCore:
+        """The schedule from the selection's beginning."""
+        return ReplayerCore(self.demos, loop=self.config.loop, max_demos=self.config.max_demos)
+
+    def _run_lockstep(self, ticks: TickQueue, order: TickOrder, core: ReplayerCore, human: HumanPublisher,
+                      stop: threading.Event, presence: Presence) -> ReplayerCore:
+        """Publish each accepted tick's poses until the stream ends or ``stop``; returns the core last used.
+
+        A tick :class:`TickOrder` refuses is counted and said by the reject counter (a forged or stray tick); tick 0
+        of a new run (the executor left and came back) starts the stream over, so that the new run is the one its
+        seed makes.
+        """
         n = self.config.samples_per_tick
         last = time.monotonic()  # the start, then the last tick: a replayer with no clock said nothing for ever
         while not stop.is_set() and not core.done:
@@ -139,10 +159,14 @@ class ReplayerService:
                     last = time.monotonic()
                 continue
             last = time.monotonic()
-            take, note = order.accept(tick.tick)
-            if note:
-                log.warning("replayer: %s", note)
-            if not take:
+            verdict = order.accept(tick.tick, tick.period)
+            if not verdict.take:
+                self.rejects.reject(self.keys.clock, verdict.note, verdict.reason)
                 continue
+            if verdict.note:
+                log.warning("replayer: %s", verdict.note)
+            if verdict.new_run:
+                core = self._new_core()
             self.stats.ticks += 1
             self._publish(core.step(n, stamp=tick.stamp, tick=tick.tick, dt=tick.period / n), human)
+        return core

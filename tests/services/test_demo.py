@@ -359,14 +359,18 @@ def test_what_the_demo_sets_on_its_services_is_refused_from_their_file_or_variab
     monkeypatch.setenv("FORESIGHT_CONFIG", "")  # recorded as unset: whatever the demo sets, the test's end unsets
     monkeypatch.delenv("FORESIGHT_CONFIG")
     sets = {section: {o.name for o in options} for section, options in demo_set_options(DemoConfig()).items()}
-    assert {"replayer.rate_hz", "planner.seed", "executor.steps", "zenoh.connect"} <= set().union(*sets.values())
+    assert {"replayer.samples_per_tick", "planner.seed", "executor.steps", "zenoh.connect"} <= set().union(
+        *sets.values())
+    assert "replayer.rate_hz" not in sets["replayer"]  # each mode's own pace option only: the replayer says others
+    realtime = DemoConfig(mode="realtime")
+    assert "replayer.rate_hz" in {o.name for o in demo_set_options(realtime)["replayer"]}
     assert "tracker" not in sets and "planner.cost.w_human" not in sets["planner"]  # not run / not set by default
     assert "planner.cost.w_human" in {o.name for o in demo_set_options(DemoConfig(human_cost=False))["planner"]}
     conf = tmp_path / "c.toml"
     conf.write_text("[replayer]\nrate_hz = 10\n[planner]\nlog_level = 'DEBUG'\n[zenoh]\nconnect_timeout_s = 5\n")
     with pytest.raises(ConfigError, match=re.escape(f"replayer.rate_hz in {conf} (the demo's --rate-hz): foresight "
                                                     "demo sets this on its services' command lines")):
-        share_config_file(str(conf), DemoConfig())
+        share_config_file(str(conf), realtime)
     conf.write_text("[planner]\nlog_level = 'DEBUG'\n[zenoh]\nconnect_timeout_s = 5\n")  # what it leaves alone
     share_config_file(str(conf), DemoConfig())
     monkeypatch.setenv("FORESIGHT_ZENOH_CONNECT", "tcp/127.0.0.1:7447")

@@ -1,4 +1,4 @@
-"""The clock's followers without Zenoh: each tick once and in order, the planner's tick inbox."""
+"""The clock's followers without Zenoh: each tick of the run once and in turn, the planner's tick inbox."""
 
 from __future__ import annotations
 
@@ -7,8 +7,9 @@ import time
 
 import numpy as np
 
-from shared.lockstep_followers import STOP_SLICE_S, TickInbox, TickOrder
+from shared.lockstep_followers import STOP_SLICE_S, TickInbox, TickOrder, TickVerdict
 from shared.protocol import ClockTick, DemoMarker, OccupancyGrid, RobotState
+from shared.protocol.schema import REASONS
 
 NAMES = ("j0", "j1")
 
@@ -23,13 +24,29 @@ def state(tick: int, stamp: float) -> RobotState:
                       reason="", q=np.zeros(2), qd=np.zeros(2))
 
 
-def test_tick_order_takes_each_tick_once_in_order() -> None:
+def test_tick_order_takes_each_tick_once_in_turn() -> None:
+    """A jump ahead is refused now (it was taken, reported): the executor ticks each in turn, and one forged tick far
+    ahead (--security off) made every later tick of the run "older": the replayer fell silent for the rest of it."""
     order = TickOrder()
-    assert order.accept(0) == (True, "")
-    assert order.accept(1) == (True, "")
-    assert order.accept(1) == (False, "ignoring clock tick 1 (already at tick 1)")
-    assert order.accept(3) == (True, "clock jumped from tick 1 to 3")
-    assert order.accept(2)[0] is False
+    assert order.accept(0, 0.2) == TickVerdict(True)
+    assert order.accept(1, 0.2) == TickVerdict(True)
+    assert order.accept(1, 0.2) == TickVerdict(False, "clock tick 1 not after the run's last, 1", "tick-order")
+    ahead = order.accept(1_000_000, 0.2)
+    assert not ahead.take and ahead.reason == "stamp-future" and "1000000 ahead of the run's next, 2" in ahead.note
+    assert order.accept(3, 0.2).reason == "stamp-future"  # a tick slightly ahead too
+    assert order.accept(2, 50.0) == TickVerdict(False, "clock tick 2: period 50 s, this run's is 0.2 s", "mismatch")
+    stale = order.accept(0, 0.2)  # tick 0 mid-run with the executor still there
+    assert not stale.take and stale.reason == "tick-order" and "once the executor has left" in stale.note
+    assert order.accept(2, 0.2) == TickVerdict(True) and order.last == 2  # the run goes on untouched
+    assert all(r in REASONS for r in ("tick-order", "stamp-future", "mismatch"))
+
+
+def test_a_late_join_is_taken_and_said() -> None:
+    """A replayer started after the executor's first ticks started its stream at tick 7 without a word."""
+    order = TickOrder()
+    first = order.accept(7, 0.2)
+    assert first.take and not first.new_run and "joined the clock at tick 7" in first.note
+    assert order.accept(8, 0.2) == TickVerdict(True)
 
 
 def test_tick_inbox_pairs_a_tick_with_its_state_and_the_previous_prediction() -> None:
@@ -78,13 +95,30 @@ def test_inboxes_keep_only_recent_ticks() -> None:
 
 
 def test_a_restarted_clock_is_a_new_run_for_the_replayer() -> None:
-    """Tick 0 after a later tick: the replayer ignored every tick of the new run up to the old run's last."""
+    """Tick 0 after a later tick: the replayer ignored every tick of the new run up to the old run's last. Now the
+    executor's token must have gone first (its process ended with it): any tick 0 mid-run was taken as a new run."""
     order = TickOrder()
     for t in range(20):
-        order.accept(t)
-    took, note = order.accept(0)
-    assert took and "new run" in note
-    assert order.accept(1) == (True, "")
+        order.accept(t, 0.2)
+    order.executor_gone()
+    got = order.accept(0, 0.5)  # a new run may have another period
+    assert got.take and got.new_run and "starts over" in got.note
+    assert order.accept(1, 0.5) == TickVerdict(True)
+    assert order.accept(0, 0.5).reason == "tick-order"  # taken once: the token has to go again
+
+
+def test_after_a_lost_link_the_run_resumes_past_the_missed_ticks() -> None:
+    """The ticks sent while the link was down are lost; the executor's token went with the link: a later tick of the
+    same period resumes the run, an older one or another period is still refused."""
+    order = TickOrder()
+    for t in range(5):
+        order.accept(t, 0.2)
+    order.executor_gone()
+    assert order.accept(3, 0.2).reason == "tick-order"
+    assert order.accept(9, 0.5).reason == "mismatch"
+    got = order.accept(9, 0.2)
+    assert got.take and not got.new_run and "resumed at tick 9 after tick 4" in got.note
+    assert order.accept(11, 0.2).reason == "stamp-future"  # the token back in place: each in turn again
 
 
 def test_a_new_run_does_not_get_the_last_runs_states_and_grids() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
 import time
 from collections.abc import Iterator
@@ -173,3 +174,29 @@ def test_a_router_restart_does_not_stop_the_services_that_stop_with_the_executor
                     assert stop.wait(10.0)
             finally:
                 watcher.close()
+
+
+def test_a_peers_token_name_cannot_forge_a_log_line(zenoh_hub, wait_until, caplog) -> None:
+    """A token ``alive/x<newline>FAKE ... ERROR`` wrote a log line of its own, and ANSI escapes reached the terminal;
+    the name is logged escaped, the reaction's failure line too."""
+
+    def fail(peer: str, up: bool) -> None:
+        raise RuntimeError("reaction")
+
+    caplog.set_level(logging.INFO, logger="shared.transport")
+    keys = Keys("p")
+    names = ["x\nFAKE foresight.replayer ERROR injected", "x\x1b[31mred"]
+    with open_session(zenoh_hub()) as sa, open_session(zenoh_hub()) as sb:
+        watcher = Presence(sa, keys, "planner", on_change=fail)
+        tokens = [sb.liveliness().declare_token(f"p/alive/{name}") for name in names]
+        try:
+            assert wait_until(lambda: all(watcher.is_alive(n) for n in names), 10.0)
+        finally:
+            for token in tokens:
+                token.undeclare()
+            watcher.close()
+    said = [r.getMessage() for r in caplog.records if "x" in r.getMessage() and "peer" in r.getMessage()]
+    assert any("peer x\\nFAKE foresight.replayer ERROR injected appeared" in m for m in said)
+    assert any("peer x\\x1b[31mred appeared" in m for m in said)
+    assert any("reacting to peer x\\nFAKE" in m for m in said)
+    assert not any("\n" in m or "\x1b" in m for m in said)
