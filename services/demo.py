@@ -14,7 +14,9 @@ its cup each step too (the paper's Fig. 9).
 3. Be the Zenoh router on a free loopback port and start the replayer, predictor, planner and
    executor, each as ``python -m services.<name> --connect <router>`` in its own process group, with
    their logs and the MCAP in the run's own directory, ``runs/demo/<UTC time>-<mode>/``
-   (``runs/demo/latest`` points to the newest with an MCAP log).
+   (``runs/demo/latest`` points to the newest run whose services started; one stopped before its executor
+   opened an MCAP log hands it back to the run before, unless there is none: then it points to that run's
+   service logs).
 4. Lock-step (default): the executor ticks ``--steps`` replanning steps; the human advances by a fixed
    number of samples per step (the paper's protocol); then the robot finishes its last plan.
    Real time: the replayer streams at ``--rate-hz``, the planner replans every ``--period-s``, the
@@ -31,6 +33,12 @@ Ctrl-C (or SIGTERM) at any moment stops the services in order, the executor firs
 its MCAP; the demo then says after how many of its steps it stopped (plans, in real time), that the log
 is complete, and where the run's files are; it exits with status 130 (``make demo`` takes that as its end).
 With ``--compare`` a run cut short is marked in the table and no verdict is given.
+
+Exit status: 0 a whole run; 1 a service failed (at start; dead or hung in lock-step; the executor dead or hung), a
+timeout, or a run that went to its end but not whole (a service dead or restarted in real time, lock-step ticks that
+went on without their plan: "faults during the run"); 2 bad input; 3 a second signal while it stops; 4 its MCAP log
+is not complete (a full disk: the closing ``MCAP log: PATH — INCOMPLETE: ...`` line says how much it lost); 130
+interrupted (``services.demo_status``).
 """
 
 from __future__ import annotations
@@ -46,7 +54,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from services.demo_dirs import MAIN_VARIANT, RunDirectory, describe_log, forced_exit_note, variant_dir
+from services.demo_closing import closing_lines, picture
+from services.demo_dirs import MAIN_VARIANT, RunDirectory, forced_exit_note, variant_dir
 from services.demo_inputs import check_inputs, share_config_file
 from services.view.config import DEFAULT_PORT
 from shared import strict_json
@@ -276,22 +285,11 @@ def run_demo(cfg: DemoConfig, stop: threading.Event, out: Callable[[str], None] 
     against = ("the prediction planner's final prediction" if summary.scored_against == "final prediction"
                else f"the run's {summary.scored_against}")
     summary.extra["outcome_lines"] = outcome_lines(outcomes, against, planned, failed=status not in (0, 130))
-    figure = _picture(lambda png: draw_outcomes(outcomes, scene, reference, records[0].poses, png, cfg.period_s,
+    figure = picture(lambda png: draw_outcomes(outcomes, scene, reference, records[0].poses, png, cfg.period_s,
                                                 title), root / "run.png", out)
     if figure is not None:
         summary.extra["figure"] = str(figure)
     return status, summary
-
-
-def _picture(draw: Callable[[Path], Path], png: Path, out: Callable[[str], None]) -> Path | None:
-    """``draw(png)``; a failure to write it (a full disk) is one warning: the run's outcome is printed regardless."""
-    try:
-        return draw(png)
-    except OSError as exc:
-        png.unlink(missing_ok=True)
-        out(f"foresight demo: warning: the picture of the run was not drawn: {exc.filename or png}: "
-            f"{exc.strerror or exc}")
-        return None
 
 
 def _variant_name(cfg: DemoConfig) -> str:
@@ -299,44 +297,6 @@ def _variant_name(cfg: DemoConfig) -> str:
     if not cfg.human_cost:
         return "no human cost"
     return "prediction" if cfg.method == "prediction" else "current occupancy"
-
-
-def _closing_lines(cfg: DemoConfig, summary: Summary, interrupted: bool = False) -> list[str]:
-    """What the demo prints at the end: the run's summary (or the comparison), the picture, where everything is.
-
-    ``interrupted``: the MCAP lines say each log's state (``complete``: finalised); else only a log not complete.
-    """
-    extra, robot = summary.extra, "the prediction planner's robot" if cfg.compare else "the robot"  # summary: its run
-    lines = [] if cfg.compare else summary.lines(table=False)[:-1]  # the table was printed live; the log comes last
-    if cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra and summary.separation_at_end:
-        lines.append(f"note: {robot} had not arrived: the separation guard held it at the end "
-                     f"({summary.separation_held_s:.1f} s of the run in all), its path passing nearer the person than "
-                     "separation.stop_m (docs/executor.md: it waits for the person to step back; --config with "
-                     "[executor.separation] stop_m = 0 turns it off)")
-    elif cfg.mode == "realtime" and not summary.reached and "cut_short" not in extra:
-        lines.append(f"note: a real-time run lasts its {cfg.steps} steps of {cfg.period_s:g} s ({cfg.run_s:g} s)"
-                     + (f" and goes on until the robot arrives, at most {cfg.finish_s:g} s more" if cfg.finish else "")
-                     + f"; {robot}, at {cfg.robot_speed:g} of its velocity limits, had not arrived: "
-                     + (f"--steps {2 * cfg.steps} gives it twice as long" if cfg.finish else
-                        "--finish lets it go on to its goal"))
-    elif (cfg.mode == "realtime" and cfg.finish and summary.reached and summary.reached_t_s is not None
-          and summary.reached_t_s > cfg.run_s):
-        lines.append(f"note: {robot} arrived {summary.reached_t_s - cfg.run_s:.1f} s after the run's {cfg.run_s:g} "
-                     f"s: the run goes on until it is there (--no-finish ends it at {cfg.run_s:g} s)")
-    lines += extra.get("outcome_lines", [])
-
-    def with_state(path: str | None) -> str:  # its state after an interrupt, else only when it is not complete
-        return describe_log(path, interrupted, extra.get("log_incomplete", "") if path == summary.mcap_path else "")
-
-    if cfg.compare:
-        lines.append("MCAP logs: " + ", ".join(with_state(r["mcap_path"]) for r in extra.get("comparison", [])))
-    else:
-        lines.append(f"MCAP log: {with_state(summary.mcap_path)}")
-    if "figure" in extra:
-        lines.append(f"picture of the run: {extra['figure']}")
-    lines.append(f"this run's logs: {extra.get('run_dir')}/ (each step: foresight log render "
-                 f"{summary.mcap_path} --step N --out step.png)")
-    return lines
 
 
 def _bare_live(argv: list[str]) -> list[str]:
@@ -358,7 +318,7 @@ LIVE_PORT = DEFAULT_PORT
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
-    """Run the demo; returns 0 when the run completed."""
+    """Run the demo; returns its exit status (0: a whole run; the others in this module's docstring)."""
     parser = ArgumentParser(prog=prog, description=help_text(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_arguments(parser, "demo", DemoConfig, with_zenoh=False)
@@ -391,7 +351,7 @@ def main(argv: list[str] | None = None, prog: str = "foresight demo") -> int:
             if cfg.json:
                 print(strict_json.dumps(summary.to_json()))
             else:
-                for line in _closing_lines(cfg, summary, interrupted=status == 130):
+                for line in closing_lines(cfg, summary, interrupted=status == 130):
                     print(line)
         return status
 

@@ -3,8 +3,10 @@
 Each run gets ``<UTC stamp>-<mode>[-compare]`` (``-2``, ``-3`` for runs within one second). ``latest`` points to a
 run once its services start, so that their logs can be followed during the run; a run interrupted before it wrote an
 MCAP log hands ``latest`` back to the run it pointed to before (the README's ``foresight log info
-runs/demo/latest`` found nothing after an early Ctrl-C), and a run no service wrote into is removed. Such a run's
-last line names its directory and what ``latest`` points to (:meth:`RunDirectory.whereabouts`).
+runs/demo/latest`` found nothing after an early Ctrl-C), and a run no service wrote into is removed. The first run
+(``latest`` pointed nowhere before) keeps it while its service logs are kept: ``latest`` then points to a run without
+an MCAP log, on purpose, its logs being all there is to look at. Such a run's last line names its directory and what
+``latest`` points to (:meth:`RunDirectory.whereabouts`).
 """
 
 from __future__ import annotations
@@ -96,7 +98,7 @@ def forced_exit_note(run: Path) -> str:
             f"finishes the MCAP log: check it with `foresight log info {run}`")
 
 
-def stop_service(proc: ServiceProcess, timeout: float) -> int | None:
+def stop_service(proc: ServiceProcess, timeout: float, kill_wait: float = 5.0) -> int | None:
     """Stop ``proc`` (:meth:`ServiceProcess.stop`); one stopped before it wrote anything gets a line in its log.
 
     SIGTERM while a service still imports ends it before its handlers exist: its log in the run's directory was
@@ -105,7 +107,7 @@ def stop_service(proc: ServiceProcess, timeout: float) -> int | None:
     from services.processes import describe_exit
 
     running = proc.running
-    code = proc.stop(timeout=timeout)
+    code = proc.stop(timeout=timeout, kill_wait=kill_wait)
     if running and code is not None and not proc.tail(1):
         try:
             with proc.log_path.open("a") as log:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import queue
 import shutil
 import threading
 import time
@@ -19,8 +18,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from services.demo_dirs import log_incomplete, stop_service
+from services.demo_dirs import log_incomplete
 from services.demo_inputs import check_goals, library_for
+from services.demo_lines import Lines, log_phrase, unexecuted
 from services.demo_services import (
     KEYPOINT_REST_S,
     KEYPOINTS_FILE,
@@ -29,6 +29,8 @@ from services.demo_services import (
     service_args,
     services_in_order,
 )
+from services.demo_status import ending, stop_in_order
+from services.executor.__main__ import INCOMPLETE
 from services.executor.result import LOG_INCOMPLETE
 from services.processes import ServiceProcess, free_port
 from services.run_log import RunRecorder, keep_posterior, recorder_from_log
@@ -44,7 +46,7 @@ from services.scenario import (
     table_header,
     table_row,
 )
-from services.supervisor import Supervisor, describe_exit
+from services.supervisor import Supervisor
 from shared.config import ZenohConfig
 from shared.library import MotionLibrary, save_library
 from shared.progress import close_interrupted
@@ -60,69 +62,6 @@ if TYPE_CHECKING:
 __all__ = ["RunRecord", "run_once", "prepare_inputs"]
 
 log = logging.getLogger("foresight.demo")
-
-
-def _log_state(mcap: Path, plan_topic: str | None = None, received: int = 0, summarised: int | None = None) -> str:
-    """One phrase on the run's MCAP: complete (the executor finished it) or not, with its message count.
-
-    With ``plan_topic``: its plans too, and how many of the ``received`` ones (the rows printed) came after the
-    executor closed it, or how many it logged after the last row (the rows stop at Ctrl-C; the executor logs until
-    it has stopped). ``summarised``: the plans the summary counts (real time: those made before the robot's last
-    state; the others were never executed, and `foresight log table` leaves them out as the summary does: it said
-    it printed every one, and printed 23 of 29; a review).
-    """
-    if not mcap.is_file():
-        return "no log was written (the executor ended before it opened one, or had not started)"
-    from shared.recording.reader import read_log
-
-    lf = read_log(mcap)
-    text = f"log {mcap}: {lf.state}, {lf.message_count} messages"
-    if plan_topic is not None:
-        logged = sum(c.count for c in lf.channels.values() if c.topic == plan_topic)
-        late = received - logged
-        closed = "came after the executor closed it" if lf.complete else "are not in it: it ends before them"
-        counted = (f"; the summary and `foresight log table {mcap}` count the {summarised} made before the robot's "
-                   "last state, the others were never executed" if summarised is not None and summarised < logged
-                   else f": `foresight log table {mcap}` prints every one")
-        text += f", {logged} plans" + (f" (the last {late} {closed})" if late > 0 else
-                                       f" ({-late} after the rows above, made while the executor stopped{counted})"
-                                       if late < 0 else "")
-    return text
-
-
-def _unexecuted(k: int) -> str:
-    """Why the last ``k`` rows of a real-time run's table are not in its summary."""
-    rows, them = ("row above was a plan", "it") if k == 1 else (f"{k} rows above were plans", "them")
-    return (f"the last {rows} made from the run's last state (the goal reached, or the run over), never executed: "
-            f"the summary leaves {them} out")
-
-
-class _Lines:
-    """Lines printed by a thread of their own, in the order given (a context manager: its exit prints the rest).
-
-    The table's rows are printed from a Zenoh callback: a terminal that does not read (``foresight demo | less``
-    left unscrolled) blocked that callback, and with it every service's publisher (they block on congestion): the
-    whole run froze. Now only this thread waits for the terminal.
-    """
-
-    def __init__(self, out: Callable[[str], None]) -> None:
-        self._queue: queue.SimpleQueue[str | None] = queue.SimpleQueue()
-        self._thread = threading.Thread(target=self._print, args=(out,), name="demo-lines", daemon=True)
-
-    def __call__(self, line: str) -> None:
-        self._queue.put(line)
-
-    def _print(self, out: Callable[[str], None]) -> None:
-        while (line := self._queue.get()) is not None:
-            out(line)
-
-    def __enter__(self) -> _Lines:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._queue.put(None)
-        self._thread.join()
 
 
 def _run_length(cfg: DemoConfig) -> str:
@@ -279,7 +218,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 keep_posterior(posteriors, msg)
         recorder.on_message(msg)
 
-    status = 0
+    status, whole = 0, False
     faults: list[str] = []
     # with --ros2 the ROS 2 gateway starts before the executor, so that it sees the whole run; so does the robot
     services = services_in_order(cfg)
@@ -288,7 +227,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
              for name in order}
     deadline = time.monotonic() + cfg.timeout
     direct = out
-    with _Lines(direct) as out, open_session(hub) as session:  # the rows are printed on a thread of their own
+    with Lines(direct) as out, open_session(hub) as session:  # the rows are printed on a thread of their own
         subs = [subscribe(session, keys.plan, Plan, on_plan),
                 subscribe(session, keys.robot_state, RobotState, on_state),
                 subscribe(session, keys.occupancy, OccupancyGrid, on_other),
@@ -336,25 +275,15 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                     status = 1
                     break
                 stop.wait(0.1)
-            if stop.is_set() and executor.returncode in (0, LOG_INCOMPLETE) and status == 0:  # it had finished
-                pass  # (a Ctrl-C just after the last step said "interrupted after 20 of 20 steps", status 130)
-            elif stop.is_set():
-                out("foresight demo: interrupted; stopping the services (the executor first: it closes the log)")
-                status = 130
-            elif executor.returncode not in (0, None, LOG_INCOMPLETE):  # a log cut short: a whole run, said at the end
-                said = executor.last_words()  # a killed process's last line is not why it died: only an error's is
-                out(f"foresight demo: executor {describe_exit(executor.returncode)}" + (f": {said}" if said else ""))
-                status = 1
             faults = [f"{name} ({'hung' if code is None else 'killed' if code < 0 else code})"
                       for name, code in supervisor.faults]
-            if faults:
-                out("foresight demo: faults during the run: " + ", ".join(faults))
+            status, whole = ending(status, stop.is_set(), executor, faults, out)
         finally:
             said = reported | ({name for name, _ in supervisor.faults} if supervisor is not None else set())
             if executor is not None and executor.returncode and (status == 1 or executor.returncode == LOG_INCOMPLETE):
                 said.add("executor")  # reported above, or in the closing MCAP line (its log): not again as a warning
-            for name in reversed(order):
-                code = stop_service(procs[name], SHUTDOWN_GRACE_S + 2.0)  # past its grace: its stack dump is kept
+            # past its grace its stack dump is kept; all within one budget, inside the demo's own grace (a signal's)
+            for name, code in stop_in_order(procs, tuple(reversed(order)), SHUTDOWN_GRACE_S + 2.0):
                 if name == "executor":  # its log is closed: what the others still send is not the run's
                     recording.clear()
                 if code not in (0, None, -15) and name not in said:
@@ -364,7 +293,7 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
                 s.undeclare()
     out = direct
     received = len(recorder.snapshot()[0])
-    if status and mcap.is_file():  # cut short: the summary is of what the log holds, as foresight log table's is
+    if status and not whole and mcap.is_file():  # cut short: the summary is of what the log holds, as log table's is
         recorder = recorder_from_log(mcap, keys) or recorder
     plans, states, final, posteriors = recorder.snapshot()
     from shared.robot import PR2
@@ -372,12 +301,15 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     summary = summarise(plans, states, final, posteriors, PR2.from_scene(scene), demo.class_name,
                         str(mcap) if mcap.is_file() else None, t0=run_start[0]) if plans else None
     n = len(summary.steps) if summary is not None else 0  # the plans of the run (not one made after its last state)
-    if realtime and not status and n < received:  # the rows are printed as plans come, before the run's last state
-        out(f"foresight demo: {_unexecuted(received - n)}")
-    if status:  # interrupted, a dead service, the executor's own failure, a timeout: what the log holds
-        done = f"{n} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{n} plans"
+    if realtime and (whole or not status) and n < received:  # rows are printed as plans come, before the last state
+        out(f"foresight demo: {unexecuted(received - n)}")
+    done = f"{n} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{n} plans"
+    if status and not whole:  # interrupted, a dead service, the executor's own failure, a timeout: what the log holds
         out(f"foresight demo: {'interrupted' if status == 130 else 'stopped'} after {done}; "
-            f"{_log_state(mcap, keys.plan, received, n)}")
+            f"{log_phrase(mcap, keys.plan, received, n)}")
+    elif status == 1:  # it went to its end, not whole (faults said above); an incomplete log: its closing line says
+        out(f"foresight demo: the run went to its end, but it is not whole ({n} plans"
+            + (f" for its {cfg.steps} steps" if cfg.mode == "lockstep" else "") + "; see above): exit status 1")
     elif stop.is_set():  # a signal while the services stopped, after the run's end: it ended whole
         out("foresight demo: interrupted while stopping the services, after the run had ended: nothing was lost")
     if summary is None:
@@ -388,10 +320,12 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     summary.extra["method"] = cfg.method
     summary.extra["human_cost"] = cfg.human_cost
     summary.extra.update(log_incomplete(executor))  # a full disk cut its log short: the closing MCAP line says so
-    if status:  # its numbers are of a part of the run: no comparison may take them for a whole one
+    if status and not whole:  # its numbers are of a part of the run: no comparison may take them for a whole one
         summary.extra["cut_short"] = f"{'interrupted' if status == 130 else 'stopped'} after {done}"
     elif faults:  # real time goes on without (or with a restarted) service: a run, but not one to compare
         summary.extra["cut_short"] = "faults during the run: " + ", ".join(faults)
+    elif executor is not None and executor.returncode == INCOMPLETE:  # no fault seen: a service hung for a while
+        summary.extra["cut_short"] = "some ticks went on without their plan or prediction"
     if faults:
         summary.extra["faults"] = faults
     return status, RunRecord(planner, summary, states, final, recorder.human_poses(), run_dir)

@@ -146,8 +146,12 @@ class ServiceProcess:
             time.sleep(0.02)
         return True
 
-    def stop(self, timeout: float = 5.0) -> int | None:
-        """SIGTERM, wait up to ``timeout`` s, then SIGKILL; returns the exit status."""
+    def stop(self, timeout: float = 5.0, kill_wait: float = 5.0) -> int | None:
+        """SIGTERM, wait up to ``timeout`` s, then SIGKILL and wait up to ``kill_wait`` s; returns the exit status.
+
+        None when it has not ended even then (a process in uninterruptible sleep, ``D``, outlives SIGKILL until its
+        I/O returns): said in one warning, not raised, so that a caller stopping several goes on to the next.
+        """
         if self.proc is None:
             return None
         if self.proc.poll() is None:
@@ -158,8 +162,12 @@ class ServiceProcess:
             except subprocess.TimeoutExpired:
                 log.warning("%s did not stop within %g s: killing it", self.name, timeout)
                 self.proc.kill()
-                self.proc.wait(timeout=5.0)
-        return self.proc.returncode
+                try:
+                    self.proc.wait(timeout=kill_wait)
+                except subprocess.TimeoutExpired:
+                    log.warning("%s (pid %d) outlived SIGKILL by %g s (uninterruptible I/O?): left to end by itself",
+                                self.name, self.proc.pid, kill_wait)
+        return self.proc.poll()
 
     def __enter__(self) -> ServiceProcess:
         return self.start()

@@ -47,7 +47,8 @@ class Supervisor:
 
     Attributes:
         faults: ``(service, exit status)`` of every death (status None: hung).
-        fatal_fault: With ``fatal``, the service whose death ends the run (None while none did).
+        fatal_fault: The service whose death (with ``fatal``) or hang (a ``skip`` one, the executor) ends the run
+            (None while none did).
     """
 
     def __init__(self, procs: Mapping[str, ServiceProcess], out: Callable[[str], None], restart: bool = False,
@@ -71,15 +72,29 @@ class Supervisor:
         self._reported: set[str] = set()
 
     def check(self, skip: tuple[str, ...] = ("executor",)) -> None:
-        """Look at every process once (the ``skip`` ones are the caller's to watch)."""
+        """Look at every process once.
+
+        The ``skip`` ones' exit is the caller's to watch (the executor's ends the run); their hang is checked here and
+        ends the run (:attr:`fatal_fault`), restart or not: a SIGSTOPped executor went unnoticed until ``--timeout``,
+        15 silent minutes (a review).
+        """
         for name, proc in self.procs.items():
-            if name in skip or proc.proc is None or name in self._reported:
+            if proc.proc is None or name in self._reported:
                 continue
             if proc.running:
-                gone_s = self._hung(name)
-                if gone_s is not None:
-                    self._fault(name, proc, None, f"{name} stopped answering (its process runs, but its liveliness "
-                                f"token has been gone for {gone_s:.0f} s: hung or stopped)")
+                if (gone_s := self._hung(name)) is None:
+                    continue
+                what = (f"{name} stopped answering (its process runs, but its liveliness token has been gone for "
+                        f"{gone_s:.0f} s: hung or stopped)")
+                if name not in skip:
+                    self._fault(name, proc, None, what)
+                    continue
+                self.faults.append((name, None))
+                self._reported.add(name)
+                self.fatal_fault = self.fatal_fault or name
+                self.out(f"foresight demo: {what}; the run cannot go on without it: stopping the run")
+                continue
+            if name in skip:
                 continue
             code = proc.returncode
             if code == 0 and name in self.expected:

@@ -246,7 +246,7 @@ def test_unusable_models_dir_and_taken_live_port_are_found_before_any_work(tmp_p
 
 def test_a_picture_that_cannot_be_written_costs_a_warning_not_the_runs_outcome(tmp_path: Path) -> None:
     """A full disk used to end the demo in 'error: No space left on device', its 20 steps' outcome lost."""
-    from services.demo import _picture
+    from services.demo_closing import picture as _picture
 
     lines: list[str] = []
     png = tmp_path / "run.png"
@@ -295,7 +295,8 @@ def test_a_real_time_run_that_ends_before_the_goal_says_why_and_what_to_do() -> 
     """`make demo DEMO_ARGS=--mode realtime` ended with 'goal reached: no' and nothing explaining it."""
     import dataclasses
 
-    from services.demo import DemoConfig, _closing_lines
+    from services.demo import DemoConfig
+    from services.demo_closing import closing_lines as _closing_lines
     from services.scenario import Summary
 
     summary = Summary(steps=[], chosen_goal_per_step=[], switch_step=None, interference_cost=0.0, mcap_path="x.mcap",
@@ -478,7 +479,7 @@ def test_a_run_interrupted_before_its_first_plan_ends_naming_its_directory(tmp_p
 
 
 def test_an_interrupted_runs_closing_lines_say_whether_its_log_was_finalised(tmp_path: Path) -> None:
-    from services.demo import _closing_lines
+    from services.demo_closing import closing_lines as _closing_lines
     from services.scenario import Summary
     from shared.protocol import Keys
     from shared.recording.writer import McapLog
@@ -498,7 +499,7 @@ def test_an_interrupted_runs_closing_lines_say_whether_its_log_was_finalised(tmp
 
 
 def test_a_whole_runs_closing_line_says_when_a_full_disk_cut_its_log_short(tmp_path: Path) -> None:
-    from services.demo import _closing_lines
+    from services.demo_closing import closing_lines as _closing_lines
     from services.scenario import Summary
     from shared.protocol import Keys
     from shared.recording.writer import McapLog

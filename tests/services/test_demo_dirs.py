@@ -1,4 +1,4 @@
-"""The demo's run directories: ``latest`` points to the newest run that wrote a log."""
+"""The demo's run directories: ``latest`` points to the newest run whose services started (and wrote a log)."""
 
 from __future__ import annotations
 
@@ -104,3 +104,19 @@ def test_the_demo_takes_the_executors_incomplete_log_line_and_checks_a_log_it_di
     mcap.write_bytes(mcap.read_bytes()[:-8])  # its footer's magic gone: not complete, though no one said so
     assert describe_log(str(mcap)).startswith(f"{mcap} — INCOMPLETE: TRUNCATED (")
     assert describe_log(None) == "None" and describe_log(str(tmp_path / "none.mcap")) == str(tmp_path / "none.mcap")
+
+
+def test_latest_is_said_to_point_where_it_does_after_a_first_run_without_an_mcap_log(tmp_path) -> None:
+    """The demo's help said ``latest`` points to "the newest with an MCAP log"; after a Ctrl-C in the first run's
+    planner start-up it points, on purpose, to that run, which has only its service logs (a review)."""
+    import services.demo
+    import services.demo_dirs
+
+    run = RunDirectory.create(tmp_path, "lockstep", False)
+    run.point_latest()
+    (run.path / "planner.log").write_text("stopped while starting\n")
+    run.end_without_log()
+    assert (tmp_path / "latest").resolve() == run.path.resolve() and not run.has_log()
+    for doc in (services.demo.__doc__, services.demo_dirs.__doc__):
+        assert "newest with an MCAP log" not in " ".join(doc.split())
+    assert "unless there is none: then it points to that run's service logs" in " ".join(services.demo.__doc__.split())

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from services import demo_run
+from services import demo_lines, demo_run
 from services.demo import DemoConfig
 
 
@@ -36,7 +36,7 @@ def test_the_rows_never_wait_for_the_terminal_and_keep_their_order() -> None:
         gate.wait(30)
         printed.append(line)
 
-    with demo_run._Lines(terminal) as say:
+    with demo_lines.Lines(terminal) as say:
         for i in range(200):
             say(f"row {i}")  # returns although the terminal reads nothing: else this test would hang here
         assert printed == []
@@ -97,7 +97,7 @@ class _Service(demo_run.ServiceProcess):
         self.waits.append((self.name, any("waiting for the planner" in line for line in self.said)))
         return True
 
-    def stop(self, timeout: float = 5.0) -> int | None:
+    def stop(self, timeout: float = 5.0, kill_wait: float = 5.0) -> int | None:
         self.alive = False
         return -15
 

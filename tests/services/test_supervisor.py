@@ -151,3 +151,21 @@ def test_a_hung_service_is_killed_and_started_again_with_restart_and_not_judged_
     tokens.now = 60.0  # started again, its token not up yet: starting, not hung
     sup.check()
     assert len(lines) == 1 and procs["predictor"].started == 1
+
+
+def test_a_hung_executor_is_named_and_ends_the_run_even_in_real_time_and_with_restart():
+    """A SIGSTOPped executor was never looked at (the supervisor skipped it): with the default --timeout a run sat
+    silent for 15 minutes (a review)."""
+    for options in ({}, {"restart": True}, {"fatal": True}):
+        lines, tokens, procs, sup = watched("planner", **options)
+        tokens.alive.add("executor")
+        sup.check()
+        tokens.alive.discard("executor")
+        sup.check()
+        tokens.now = 11.0
+        sup.check()
+        sup.check()  # said once
+        assert sup.fatal_fault == "executor" and sup.faults == [("executor", None)], options
+        assert lines == ["foresight demo: executor stopped answering (its process runs, but its liveliness token has "
+                         "been gone for 11 s: hung or stopped); the run cannot go on without it: stopping the run"]
+        assert procs["executor"].started == 0  # not restarted: it holds the run's clock and its log

@@ -61,3 +61,29 @@ def test_messages_after_the_log_closed_are_in_the_result(pr2, tmp_path, late) ->
     for _ in range(late):
         service._record_ros2("/joint_states", "sensor_msgs/msg/JointState", b"")
     assert service.result.log_incomplete == "" and service.mcap.dropped_after_close == late
+
+
+def test_a_full_disk_under_the_executors_output_leaves_its_status(monkeypatch) -> None:
+    """A review filled the disk: the ``mcap:`` line raised ENOSPC and status 4 (its log incomplete) became 1."""
+    import errno
+
+    import services.executor.__main__ as executor_main
+    from services.executor.result import ExecutorResult
+
+    class Ran:
+        def __init__(self, *_a) -> None:
+            pass
+
+        def run(self) -> ExecutorResult:
+            return ExecutorResult(mcap_path="runs/x.mcap", log_incomplete="runs/x.mcap: INCOMPLETE: 0 of 9 messages")
+
+    class Full:  # stdout on a full disk
+        def write(self, text: str) -> int:
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def flush(self) -> None:
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(executor_main, "ExecutorService", Ran)
+    monkeypatch.setattr("sys.stdout", Full())
+    assert executor_main.main(["--mode", "lockstep", "--steps", "1", "--connect", "tcp/127.0.0.1:9"]) == 4
