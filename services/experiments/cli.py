@@ -13,10 +13,12 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+from services.planner.config import MAX_ROLLOUTS, StompConfig
 from services.predictor.volumes import VOLUMES
 from shared import strict_json
 from shared.arguments import ArgumentParser
 from shared.atomic_file import ready_to_write
+from shared.protocol.limits import MAX_PERIOD_S, MIN_PERIOD_S
 from shared.runtime import UserError, cli_errors, help_text, setup_logging
 from shared.scene import SCENE_HELP
 from tools.png import check_png
@@ -84,12 +86,30 @@ def _user_errors() -> Iterator[None]:
 
 
 def _timing(args: argparse.Namespace) -> Timing:
+    """The runs' timing, checked with the options' names before any model is trained.
+
+    The planner and the executor check them too, but after the training and by their own names: ``--rollouts 3``
+    failed minutes in as "planner.stomp.reuse must be in [0, rollouts - 1 = 2], got 5", an option never given.
+    """
     t = Timing(args.steps, args.period_s, args.iterations, args.robot_speed, args.rollouts, args.reuse)
-    if (t.rollouts is not None and t.rollouts < 2) or (t.reuse is not None and t.reuse < 0):
-        raise UserError(f"--rollouts must be >= 2 and --reuse >= 0, got {t.rollouts} and {t.reuse}")
-    if t.steps < 1 or (t.iterations is not None and t.iterations < 1) or not t.period_s > 0 \
-            or not 0 < t.robot_speed <= 1:
-        raise UserError("--steps and --iterations must be >= 1, --period-s > 0, --robot-speed in (0, 1]")
+    if (t.rollouts is not None and not 2 <= t.rollouts <= MAX_ROLLOUTS) or (t.reuse is not None and t.reuse < 0):
+        raise UserError(f"--rollouts must be in [2, {MAX_ROLLOUTS}] and --reuse >= 0, got {t.rollouts} and {t.reuse}")
+    prot = protocol(args.protocol)
+    rollouts, reuse = (next(v for v in (asked, getattr(prot, key), getattr(StompConfig, key)) if v is not None)
+                       for key, asked in (("rollouts", t.rollouts), ("reuse", t.reuse)))
+    if reuse >= rollouts:  # each defaults to the protocol's, else the planner's: say which was not given
+        def said(key: str, value: int, asked: int | None) -> str:
+            whose = f"the {prot.name} protocol's" if getattr(prot, key) is not None else "the planner's"
+            return f"--{key} {value}" + ("" if asked is not None else f" (its default, {whose})")
+
+        given = [said("rollouts", rollouts, t.rollouts), said("reuse", reuse, t.reuse)]
+        raise UserError(f"--reuse must be below --rollouts (the best rollouts kept for the next iteration), got "
+                        f"{' and '.join(given)}")
+    if not MIN_PERIOD_S <= t.period_s <= MAX_PERIOD_S:  # the executor's clock tick, on the wire
+        raise UserError(f"--period-s must be in [{MIN_PERIOD_S:g}, {MAX_PERIOD_S:g}] s (a clock tick's period), "
+                        f"got {t.period_s}")
+    if t.steps < 1 or (t.iterations is not None and t.iterations < 1) or not 0 < t.robot_speed <= 1:
+        raise UserError("--steps and --iterations must be >= 1, --robot-speed in (0, 1]")
     if args.components < 1:
         raise UserError(f"--components must be >= 1, got {args.components}")
     if args.w_human is not None and not (math.isfinite(args.w_human) and args.w_human >= 0):

@@ -10,9 +10,12 @@ planning, not the IK of its goals.
 
 from __future__ import annotations
 
+import hashlib
 import logging
+import pickle
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -283,16 +286,25 @@ def _join_unless_run_fails(threads: list[ServiceThread], planner: PlannerService
     return result
 
 
-_EXECUTOR_MODELS: dict[int, tuple[Scene, Any, Any]] = {}
+_EXECUTOR_MODELS: OrderedDict[tuple[str, str], tuple[Any, Any]] = OrderedDict()
+EXECUTOR_MODELS_KEPT = 4
+"""Scenes whose executor models are kept (the least recently used goes): an experiment runs one or two."""
 
 
 def _executor_models(scene: Scene) -> tuple[Any, Any]:
-    """The executor's robot and human models for ``scene``, loaded once per scene object (runs are sequential)."""
-    cached = _EXECUTOR_MODELS.get(id(scene))
-    if cached is None or cached[0] is not scene:
+    """The executor's robot and human models for ``scene``, loaded once per scene (runs are sequential).
+
+    Keyed by the scene's reference and content, not the object: every experiment loads its scene again, and a pace
+    sweep kept one robot model per point (keyed by ``id``, which a later scene can reuse).
+    """
+    key = (scene.ref, hashlib.sha256(pickle.dumps(scene)).hexdigest())
+    if key not in _EXECUTOR_MODELS:
         robot, human, place = load_models(scene)
-        cached = _EXECUTOR_MODELS[id(scene)] = (scene, robot, (human, place))
-    return cached[1], cached[2]
+        _EXECUTOR_MODELS[key] = (robot, (human, place))
+        while len(_EXECUTOR_MODELS) > EXECUTOR_MODELS_KEPT:
+            _EXECUTOR_MODELS.popitem(last=False)
+    _EXECUTOR_MODELS.move_to_end(key)
+    return _EXECUTOR_MODELS[key]
 
 
 def run_lockstep(spec: RunSpec, planner: Planner, mcap: str | Path | None = None) -> RunRecord:

@@ -33,7 +33,8 @@ from shared.scene import Scene
 from .fit_store import fit_store
 
 __all__ = ["SYNTHETIC", "FAR_FROM_CUP_M", "load_experiment_library", "library_tag", "short_name", "CupClass",
-           "cup_class", "HeldOutModels", "human_file", "samples_per_tick", "class_at_cup", "human_class"]
+           "cup_class", "HeldOutModels", "human_file", "samples_per_tick", "class_at_cup", "human_class",
+           "draw_demos", "table1_demos"]
 
 FAR_FROM_CUP_M = 0.3
 """A class whose mean reach ends further than this from its cup (horizontally) does not reach for it: the synthetic
@@ -146,6 +147,31 @@ def class_at_cup(library: MotionLibrary, scene: Scene, cup: str | None, label: i
     gaps = {c.name: float(np.linalg.norm(reach.mean(axis=0)[:2] - c.center[:2])) for c in scene.cups}
     cup = cup or min(gaps, key=gaps.__getitem__)
     return CupClass(cup, label, library.class_names[label], gaps[cup])
+
+
+def draw_demos(pool: int, n: int, seed: int, draw: int = 0) -> list[int]:
+    """The held-out demonstrations of a class of ``pool``: the first ``n`` of ``seed``'s draw of ``max(n, draw)``.
+
+    A draw of 3 was not the first 3 of a draw of 5 (seed 0: [12, 15, 19] against [6, 7, 11, 14, 17]): the pace
+    sweep at Table I's pace ran other demonstrations than Table I, and said no planner touched the human where
+    Table I's basic STOMP did (on #6). Sorted indices into the pool, at most ``pool - 1`` drawn.
+    """
+    drawn = np.random.default_rng(seed).choice(pool, size=max(n, min(draw, pool - 1)), replace=False)
+    return sorted(drawn[:n].tolist())
+
+
+def table1_demos(pool: int, n: int, trial: tuple[str, tuple[int, ...]] | None, seed: int, draw: int = 0
+                 ) -> tuple[list[int], str]:
+    """Table I's ``n`` held-out demonstrations of a class of ``pool``, as indices into it, and how they were chosen.
+
+    With the authors' ``trial`` (``protocol.authors_trial``): their motions, then the class's other demonstrations
+    in order, as the switch takes them (``--demos 8`` ran the authors' 5 and said nothing); else
+    :func:`draw_demos`. ``n`` is checked by :meth:`CupClass.held_out`.
+    """
+    if trial is None:
+        return draw_demos(pool, n, seed, draw), f"drawn with seed {seed}"
+    order = [i for i in trial[1] if i < pool] + [i for i in range(pool) if i not in trial[1]]
+    return order[:n], "the authors' motions" + (", then the class's others" if n > len(trial[1]) else "")
 
 
 def samples_per_tick(demo: Demonstration, steps: int) -> int:

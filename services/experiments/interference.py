@@ -30,10 +30,12 @@ from .harness import RunRecord, RunSpec, run_lockstep
 from .heldout import (
     CupClass,
     HeldOutModels,
+    draw_demos,
     human_class,
     human_file,
     load_experiment_library,
     samples_per_tick,
+    table1_demos,
 )
 from .planners import VARIANTS, Timing, build_planner
 from .protocol import (
@@ -81,17 +83,6 @@ class InterferenceConfig:
     basic_once: bool = True  # basic STOMP planned once per seed, checked on the first (services.experiments.reuse)
     models_dir: Path = Path("models/experiments")
     work_dir: Path = Path("runs/experiments")
-
-
-def draw_demos(pool: int, n: int, seed: int, draw: int = 0) -> list[int]:
-    """The held-out demonstrations of a class of ``pool``: the first ``n`` of ``seed``'s draw of ``max(n, draw)``.
-
-    A draw of 3 was not the first 3 of a draw of 5 (seed 0: [12, 15, 19] against [6, 7, 11, 14, 17]): the pace
-    sweep at Table I's pace ran other demonstrations than Table I, and said no planner touched the human where
-    Table I's basic STOMP did (on #6). Sorted indices into the pool, at most ``pool - 1`` drawn.
-    """
-    drawn = np.random.default_rng(seed).choice(pool, size=max(n, min(draw, pool - 1)), replace=False)
-    return sorted(drawn[:n].tolist())
 
 
 def ratio_text(ratio: float | None) -> str:
@@ -173,7 +164,8 @@ class InterferenceResult:
                    human_class_distance_m=self.human.distance, demos=self.demos, seeds=self.config.seeds,
                    robot_cup=self.config.robot_cup, human_cup=self.human.cup,
                    w_human=self.config.w_human, basic_runs_borrowed=self.borrowed,
-                   **settings_run(self.config.protocol, self.config.timing, self.config.volume),
+                   **settings_run(self.config.protocol, self.config.timing, self.config.volume, self.config.scene,
+                                  self.config.path_per_step),
                    runs=[dataclasses.asdict(r) for r in self.runs])
         return out
 
@@ -236,17 +228,21 @@ class InterferenceResult:
         """Whether these runs are the authors' Table I trials (paper protocol, their motions 25-29)."""
         trial = AUTHORS_TRIALS.get(self.config.scene)
         return (self.config.protocol == "paper" and trial is not None and self.human.name == trial[0]
-                and tuple(self.demos) == trial[1][:len(self.demos)])
+                and tuple(self.demos[:len(trial[1])]) == trial[1][:len(self.demos)])
 
     def authors_comparison(self) -> list[dict[str, Any]]:
-        """Per motion and planner: the authors' 10 runs (mean, min, max) and these runs (mean, min, max)."""
+        """Per motion and planner: the authors' 10 runs (mean, min, max) and these runs (mean, min, max).
+
+        Their motions only: the class's other demonstrations (``--demos`` above 5) have no run of theirs.
+        """
         if not self.authors_trials() or not {"basic", "least_penetration"} <= set(self.names):
             return []
+        theirs_of = len(AUTHORS_TRIALS[self.config.scene][1])
         rows = []
         for name in ("basic", "least_penetration"):
             theirs = table1_summary(name)
             ours = self.values(name, "interference")
-            for i, d in enumerate(self.demos):
+            for i, d in enumerate(self.demos[:theirs_of]):
                 rows.append({"planner": name, "motion": 25 + d, "demo": d, "authors": theirs[d],
                              "ours": {"mean": float(ours[i].mean()),
                                       "std": float(ours[i].std(ddof=1)) if ours.shape[1] > 1 else math.nan,  # as theirs
@@ -268,9 +264,13 @@ class InterferenceResult:
                        f"[{o['min']:.3f}, {o['max']:.3f}]")
         theirs = {n: np.mean([r["authors"]["mean"] for r in rows if r["planner"] == n])
                   for n in ("basic", "least_penetration")}
+        ours = {n: float(np.mean([r["ours"]["mean"] for r in rows if r["planner"] == n]))
+                for n in ("basic", "least_penetration")}  # on their motions, as theirs
+        lp = ours["least_penetration"]
+        ratio = ours["basic"] / lp if lp > 0 else (math.inf if ours["basic"] > 0 else math.nan)
         out.append(f"basic / least penetration: the authors' runs "
                    f"{theirs['basic'] / theirs['least_penetration']:.1f}x, the paper protocol here "
-                   f"{ratio_text(self.ratio())}")
+                   f"{ratio_text(ratio)}")
         return out
 
 
@@ -288,13 +288,8 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
     trial = authors_trial(cfg.trials, prot, scene.name, lib.class_names)
     human = human_class(lib, scene, trial, cfg.human_cup)
     pool = lib.by_class(human.label)
-    if trial is not None:  # the paper's library: the authors' human motions
-        demos = [pool[i] for i in trial[1][:cfg.demos] if i < len(pool)]
-        how = "the authors' motions"
-    else:
-        picked = draw_demos(len(pool), human.held_out(len(pool), cfg.demos), cfg.selection_seed, cfg.draw)
-        demos = [pool[i] for i in picked]
-        how = f"drawn with seed {cfg.selection_seed}"
+    picked, how = table1_demos(len(pool), human.held_out(len(pool), cfg.demos), trial, cfg.selection_seed, cfg.draw)
+    demos = [pool[i] for i in picked]
     progress(f"interference ({prot.name} protocol): {lib.source}, scene {scene.name}; robot -> {cfg.robot_cup}; "
              f"human -> {human.cup}: class {human.name} (mean reach {human.distance:.3f} m from the cup), "
              f"demonstrations {[d.index for d in demos]} ({how}, held out)")

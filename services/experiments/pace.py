@@ -146,6 +146,17 @@ class PaceResult:
 def run_pace(cfg: PaceConfig, progress: Callable[[str], None] = print, compile: bool = True) -> PaceResult:
     """Run Table I at every pace of every protocol and library."""
     result = PaceResult(cfg)
+    said: set[str] = set()
+
+    def relay(line: str) -> None:
+        # each run's line and what the runs say, indented under the point's; not the setup line (the point's says
+        # where), and a warning once (each pace's Table I repeats its class's; it was dropped with the setup line)
+        if line.startswith("interference (") or line in said:
+            return
+        if line.startswith("warning:"):
+            said.add(line)
+        progress(f"  {line}")
+
     for prot in cfg.protocols:
         protocol(prot)  # raises on a bad name
         for library in cfg.libraries:
@@ -161,9 +172,7 @@ def run_pace(cfg: PaceConfig, progress: Callable[[str], None] = print, compile: 
                                           path_per_step=pace if prot == "paper" else None,
                                           models_dir=cfg.models_dir, work_dir=cfg.work_dir)
                 progress(f"pace: {prot} protocol, {short_name(library)}, pace {pace:g}")
-                # each run's line, indented under the point's; the setup line said once (the point's says where)
-                res = run_interference(icfg, progress=lambda line: line.startswith("  [") and progress(f"  {line}"),
-                                       compile=compile)
+                res = run_interference(icfg, progress=relay, compile=compile)
                 result.points.append(_point(res, prot, library, pace))
                 progress(f"  ratio {ratio_text(res.ratio())}")
     return result

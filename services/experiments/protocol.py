@@ -218,17 +218,27 @@ def move3d_path_weights(robot: object) -> np.ndarray:
     return np.where(prismatic, 1.0, reach)
 
 
-def settings_run(name: str, timing: Any, volume: str | None) -> dict[str, Any]:
-    """``timing`` (a :class:`~services.experiments.planners.Timing`) and ``volume`` as protocol ``name`` runs them.
+def settings_run(name: str, timing: Any, volume: str | None, scene: str, path_per_step: float | None = None
+                 ) -> dict[str, Any]:
+    """``timing`` (a :class:`~services.experiments.planners.Timing`) and ``volume`` as protocol ``name`` ran them.
 
     An option left unset (None) is the protocol's, else the planner's or the trainer's default: the paper
-    protocol's JSON said ``"volume": null`` and ``"iterations": null`` where ``paper`` and 51 ran.
+    protocol's JSON said ``"volume": null``, ``"iterations": null``, ``"rollouts": null`` and ``"reuse": null``
+    where ``paper``, 51, 10 and 5 ran. The robot's pace is the one that ran: ``robot_speed`` where it follows its
+    plan in time, else ``path_per_step`` in ``scene`` (``path_per_step`` given: a pace sweep's; the paper
+    protocol's JSON said ``"robot_speed": 0.25``, which paces nothing there, and not the 0.05 it ran).
     """
     import dataclasses
 
+    from services.planner.config import StompConfig
     from services.predictor.volumes import DEFAULT_VOLUME
 
     prot = protocol(name)
     times = dataclasses.asdict(timing)
-    times["iterations"] = prot.stomp_iterations(times["iterations"])  # as build_planner sets it
+    times["iterations"] = prot.stomp_iterations(times["iterations"])  # as build_planner sets them
+    for key in ("rollouts", "reuse"):
+        times[key] = next(v for v in (times[key], getattr(prot, key), getattr(StompConfig, key)) if v is not None)
+    if pace := prot.pace(scene):
+        del times["robot_speed"]
+        times["path_per_step"] = pace if path_per_step is None else path_per_step
     return {"timing": times, "volume": volume or prot.volume or DEFAULT_VOLUME}

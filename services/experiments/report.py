@@ -195,17 +195,18 @@ def run_report(args: argparse.Namespace) -> int:
         raise UserError(f"--libraries: {len(libs)} libraries but the name {clash[0]!r} is given twice ("
                         f"{', '.join(s for s, t in zip(libs, tags, strict=True) if t == clash[0])}); the report "
                         "names each library by its folder's name: give each library a different folder name")
+    asked = report_workers(args.workers)  # before the directory: --workers -1 left an empty one behind
+    started = time.monotonic()
+    # every part reads its library again: read each here first (a bad one fails before any work and before the
+    # directory is made), say what it dropped, and let no part say it again
+    said = [line for spec in libs if spec != SYNTHETIC for line in report_drops(load_library(spec, report=False))]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     timing = Timing(iterations=plan.iterations)
-    started = time.monotonic()
     # every library's recognition and each protocol are independent parts: one worker process per core
     jobs = [(spec, part) for spec in libs for part in part_names(protocols)]
-    workers = min(len(jobs), report_workers(args.workers))
+    workers = min(len(jobs), asked)
     done: dict[str, dict[str, tuple[list[str], dict[str, Any]]]] = {spec: {} for spec in libs}
-    # every part reads its library again: read each here first (a bad one fails before any work), say what it
-    # dropped, and let no part say it again
-    said = [line for spec in libs if spec != SYNTHETIC for line in report_drops(load_library(spec, report=False))]
     with said_once(said):
         if workers > 1:
             order = sorted(jobs, key=lambda job: -part_weight(job[1], plan))  # the longest first: cores end together
@@ -213,7 +214,8 @@ def run_report(args: argparse.Namespace) -> int:
                                                for spec, part in order], workers, said=said)
             for (spec, part), result in zip(order, results, strict=True):
                 done[spec][part] = result
-        sections = [library_section(spec, plan, out, Path(args.models_dir), volume=args.volume,
+        # the parts not made in workers are made here: --workers 1 ran the recognition in 2 processes all the same
+        sections = [library_section(spec, plan, out, Path(args.models_dir), n_jobs=workers, volume=args.volume,
                                     protocols=protocols, parts=done[spec]) for spec in libs]
     pace = PaceResult(PaceConfig(libraries=tuple(libs), protocols=protocols, demos=plan.pace_demos,
                                  seeds=plan.pace_seeds))

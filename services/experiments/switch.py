@@ -167,7 +167,7 @@ class SwitchResult:
         out.update(protocol=self.config.protocol, library=self.library, scene=self.config.scene,
                    human_class=self.human.name,
                    human_class_distance_m=self.human.distance, w_human=self.config.w_human,
-                   **settings_run(self.config.protocol, self.config.timing, self.config.volume),
+                   **settings_run(self.config.protocol, self.config.timing, self.config.volume, self.config.scene),
                    runs=[dataclasses.asdict(r) for r in self.runs])
         return out
 

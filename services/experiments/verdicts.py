@@ -63,11 +63,16 @@ def switch_verdict(res: SwitchResult) -> str:
     """One line: whether the prediction planner leaves the human's cup >= 5 steps before the current one (4 vs 13)."""
     ap, ac = res.median_away("prediction"), res.median_away("current")
     steps = res.config.timing.steps
+    current = f"leaves it at step {ac:g}" if ac < steps else f"never leaves it within the run's {steps} steps"
+    if ac - ap >= 5 and ap > 0 and ac >= steps:  # a current planner that never left is counted as the run's length:
+        # '16 steps earlier' was said of a switch that did not happen
+        return (f"**reproduced**: in the median run the prediction planner leaves the human's cup at step {ap:g}, the "
+                f"current-occupancy planner {current}: at least {steps - ap:g} steps earlier (paper: 9)")
     if ac - ap >= 5 and ap > 0:
         return f"**reproduced**: the prediction planner leaves the human's cup {ac - ap:g} steps earlier (paper: 9)"
     if ac - ap >= 5:  # it never went there: 'leaves 6 steps earlier' was said of a planner that never did
         return (f"**not judged (no switch to time)**: in the median run the prediction planner never goes for the "
-                f"human's cup, the current one leaves it at step {ac:g}; in the paper both went there first and "
+                f"human's cup, the current one {current}; in the paper both went there first and "
                 "prediction left earlier (4 against 13)")
     away = {m: res.away(m) for m in ("prediction", "current")}
     if ap >= steps and ac >= steps:
@@ -83,7 +88,16 @@ def switch_verdict(res: SwitchResult) -> str:
         said = {m: ("never goes there" if a <= 0 else "never leaves it (ends going for it)" if a >= steps else
                     f"leaves at step {a:g}" + _runs(away[m], a)) for m, a in (("prediction", ap), ("current", ac))}
         why = f"prediction {said['prediction']}, current {said['current']} (medians)"
-    return f"**not reproduced**: {why} ({ac - ap:+g} steps; paper: 4 against 13)"
+    # a difference of steps only between two steps it left at: a run that never left is no step
+    gap = f"{ac - ap:+g} steps; " if 0 < ap < steps and 0 < ac < steps else ""
+    return f"**not reproduced**: {why} ({gap}paper: 4 against 13)"
+
+
+def _leaves(switch: dict[str, Any]) -> str:
+    """``prediction / current`` median away steps of a switch's JSON; one at the run's length said ``(never)``."""
+    steps = switch["timing"]["steps"]
+    return " / ".join(f"{v:g}" + (" (never)" if v >= steps else "")
+                      for v in (switch["away_step_prediction"], switch["away_step_current"]))
 
 
 def summary(libs: list[str], sections: list[tuple[list[str], dict[str, Any]]], protocols: tuple[str, ...]
@@ -102,10 +116,9 @@ def summary(libs: list[str], sections: list[tuple[list[str], dict[str, Any]]], p
             p = d["protocols"][prot]
             t1, sw, mi = p["interference"], p["switch"], p["switch_mirrored"]
             b, lp = float(np.mean(t1["basic"])), float(np.mean(t1["least_penetration"]))
-            mirrored = "" if mi is None else f"{mi['away_step_prediction']:g} / {mi['away_step_current']:g}"
+            mirrored = "" if mi is None else _leaves(mi)
             ratio = ratio_text(t1["ratio_basic_over_least_penetration"])
-            md.append(f"| {tag} | {prot} | {b:.3f} / {lp:.3f} | {ratio} | "
-                      f"{sw['away_step_prediction']:g} / {sw['away_step_current']:g} | {mirrored} |")
+            md.append(f"| {tag} | {prot} | {b:.3f} / {lp:.3f} | {ratio} | {_leaves(sw)} | {mirrored} |")
             verdicts += [f"- {tag}, {prot} protocol, Table I: {p['verdicts']['table1']}.",
                          f"- {tag}, {prot} protocol, switch: {p['verdicts']['switch']}"
                          + (f"; mirrored: {p['verdicts']['switch_mirrored']}." if mi is not None else ".")]

@@ -8,7 +8,7 @@ predicted occupancy), every run through the four services in lock-step:
 * Table I (:mod:`services.experiments.interference`): the robot's one task crosses the human's reach;
   ``demos`` held-out demonstrations x ``seeds`` seeds;
 * the goal switch (:mod:`services.experiments.switch`): two tasks, every demonstration of the class
-  held out in turn.
+  (``switch_demos``: the first that many) held out in turn.
 
 Each run is scored against the human who was really there: time in contact with the body model,
 minimum clearance, and whether the robot reached its goal; the switch also by its settle step.
@@ -110,9 +110,13 @@ class VolumesResult:
 
     def lines(self) -> list[str]:
         """A table, one row per volume, then the choice."""
+        ran = {len(r["switch_runs"]) for r in self.raw.values()}  # what ran: --switch-demos 2 said "every"
+        n = ran.pop() if len(ran) == 1 else self.config.switch_demos
+        switch = (f"{n} demonstration{'s' * (n != 1)}" if n else "every demonstration") + (
+            " of the class" if self.config.switch_demos == 0 else "")
         out = [f"closed-loop volume comparison ({self.library}): least penetration, Table I "
-               f"({self.config.demos} demonstrations x {self.config.seeds} seeds) + the switch (every "
-               f"demonstration held out in turn); scored against the real human",
+               f"({self.config.demos} demonstrations x {self.config.seeds} seeds) + the switch ({switch}, each held "
+               f"out in turn); scored against the real human",
                f"{'volume':<8}{'runs':>6}{'contact s':>11}{'runs touching':>15}{'median min clear.':>19}"
                f"{'near s':>8}{'reached':>9}{'settle':>8}{'away':>6}{'at human cup':>14}{'plan ms':>9}"]
         for s in self.scores:

@@ -81,3 +81,24 @@ def test_recognition_with_no_workers_is_one_line(capsys) -> None:
         main(["recognition", "--n-jobs", "0"])
     assert stop.value.code == 2 and "--n-jobs: 0 runs nothing" in capsys.readouterr().err
 
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["interference", "--rollouts", "3"], "--reuse must be below --rollouts (the best rollouts kept for the next "
+     "iteration), got --rollouts 3 and --reuse 5 (its default, the planner's)"),
+    (["switch", "--protocol", "paper", "--rollouts", "5"], "got --rollouts 5 and --reuse 5 (its default, the paper "
+     "protocol's)"),
+    (["interference", "--reuse", "10"], "got --rollouts 10 (its default, the planner's) and --reuse 10"),
+    (["interference", "--rollouts", "2000"], "--rollouts must be in [2, 1024] and --reuse >= 0, got 2000 and None"),
+    (["interference", "--period-s", "inf"], "--period-s must be in [0.001, 60] s (a clock tick's period), got inf"),
+    (["switch", "--period-s", "120"], "--period-s must be in [0.001, 60] s (a clock tick's period), got 120.0"),
+])
+def test_stomp_and_period_options_are_checked_by_their_names_before_any_training(tmp_path, capsys, argv,
+                                                                                message) -> None:
+    """``--rollouts 3`` failed after the models' training as "planner.stomp.reuse must be in [0, rollouts - 1 = 2],
+    got 5", an option never given; ``--period-s inf`` and ``120`` as executor.step_period_s, minutes in."""
+    with pytest.raises(SystemExit) as stop:
+        main([*argv, "--models-dir", str(tmp_path / "models"), "--work-dir", str(tmp_path / "work")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert stop.value.code == 2 and len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "models").exists() and not (tmp_path / "work").exists()

@@ -244,3 +244,20 @@ def test_a_period_longer_than_the_stale_limit_still_moves_the_robot(small_run):
     rec = run_lockstep(dataclasses.replace(spec, period_s=0.6), planner)
     assert rec.result.held_steps == 1  # the first step only: no plan yet
     assert np.abs(np.diff(rec.q(), axis=0)).sum() > 0.1
+
+
+def test_the_executor_models_are_kept_per_scene_not_per_scene_object(monkeypatch):
+    """Keyed by ``id(scene)``, every run_interference's new scene object loaded them again: a pace sweep kept one
+    robot model per point. Now by the scene's reference and content, the least recently used going past a few."""
+    loaded = []
+    monkeypatch.setattr(harness, "load_models", lambda scene: loaded.append(scene.name) or (object(), None, None))
+    monkeypatch.setattr(harness, "_EXECUTOR_MODELS", type(harness._EXECUTOR_MODELS)())
+    first = harness._executor_models(load_scene("pr2_two_cups_side"))[0]
+    assert harness._executor_models(load_scene("pr2_two_cups_side"))[0] is first
+    assert loaded == ["pr2_two_cups_side"]
+    moved = load_scene("pr2_two_cups_side")  # the same name, another content: its own models
+    moved = dataclasses.replace(moved, robot=dataclasses.replace(moved.robot, torso_lift=moved.robot.torso_lift / 2))
+    assert harness._executor_models(moved)[0] is not first and len(loaded) == 2
+    for i in range(2 * harness.EXECUTOR_MODELS_KEPT):
+        harness._executor_models(dataclasses.replace(moved, name=f"s{i}", source=f"s{i}.toml"))
+    assert len(harness._EXECUTOR_MODELS) == harness.EXECUTOR_MODELS_KEPT

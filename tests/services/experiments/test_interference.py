@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from services.experiments.authors import TABLE1_RUNS
 from services.experiments.heldout import CupClass
 from services.experiments.interference import InterferenceConfig, InterferenceResult
+from services.experiments.planners import Timing
+from services.experiments.protocol import PAPER
 from services.experiments.scoring import RunScore
+from shared.runtime import UserError
 
 
 def test_the_authors_comparison_puts_sample_standard_deviations_side_by_side() -> None:
@@ -72,3 +77,44 @@ def test_the_table_says_why_current_occupancy_equals_basic_stomp() -> None:
                            "lay on the path it chose)"]
     assert said([0.0, 0.25])[0].endswith("(its chosen paths' human cost: at most 0.2500)")
     assert said([]) == []
+
+
+def test_more_demos_than_the_authors_five_run_their_five_then_the_class_s_others() -> None:
+    """``--demos 7`` on the authors' trials ran their five and said nothing (docs: the class's others follow)."""
+    from services.experiments.heldout import table1_demos
+
+    trial = ("compound_1", (0, 1, 2, 3, 4))
+    assert table1_demos(25, 7, trial, 0) == ([0, 1, 2, 3, 4, 5, 6], "the authors' motions, then the class's others")
+    assert table1_demos(25, 3, trial, 0) == ([0, 1, 2], "the authors' motions")
+    assert table1_demos(4, 3, ("compound_3", (2,)), 0)[0] == [2, 0, 1]  # as the switch orders them
+    with pytest.raises(UserError, match="--demos 25: class compound_1 has 25 demonstrations"):
+        CupClass("blue_cup", 1, "compound_1", 0.4).held_out(25, 25)
+    # beside the authors' runs: their five motions, not the others (which have no run of theirs)
+    cfg = InterferenceConfig(scene="pr2_two_cups_side_parallel", protocol="paper", demos=6, seeds=2)
+    res = InterferenceResult(cfg, "paper", CupClass("blue_cup", 1, "compound_1", 0.4), list(range(6)))
+    for demo in range(6):
+        for seed in range(2):
+            for name in ("basic", "least_penetration", "current"):
+                value = 2.0 if name == "basic" else 1.0 + 9 * (demo == 5)  # #5 would change the ratio
+                res.runs.append(RunScore(demo, seed, name, value, 0.0, 0.0, 0.1, 0.0, 0.0, 5, ("red_cup",), 30.0))
+    assert [r["motion"] for r in res.authors_comparison()] == [25, 26, 27, 28, 29] * 2
+    assert res.authors_lines()[-1].endswith("the paper protocol here 2.0x")
+
+
+@pytest.mark.parametrize(("protocol", "pace", "timing"), [
+    ("paper", None, {"path_per_step": 0.05}), ("paper", 0.1, {"path_per_step": 0.1}),
+    ("product", None, {"robot_speed": 0.25})])
+def test_the_json_says_the_stomp_and_the_pace_that_ran(protocol, pace, timing) -> None:
+    """``--protocol paper --json`` said "rollouts": null, "reuse": null where 10 and 5 ran, and "robot_speed": 0.25,
+    which paces nothing there, not the path length per step it ran."""
+    cfg = InterferenceConfig(scene=PAPER.table1_scene if protocol == "paper" else "pr2_two_cups_side",
+                             protocol=protocol, seeds=1, path_per_step=pace)
+    res = InterferenceResult(cfg, "synthetic", CupClass("blue_cup", 0, "blue_cup", 0.0), [0])
+    for name in ("basic", "least_penetration", "current"):
+        res.runs.append(RunScore(0, 0, name, 1.0, 0.0, 0.0, 0.1, 0.0, 0.0, 5, ("red_cup",), 30.0))
+    ran = res.to_json()["timing"]
+    assert ran["rollouts"] == 10 and ran["reuse"] == 5
+    assert {k: v for k, v in ran.items() if k in ("robot_speed", "path_per_step")} == pytest.approx(timing)
+    asked = dataclasses.replace(cfg, timing=Timing(rollouts=6, reuse=2))
+    ran = InterferenceResult(asked, "synthetic", res.human, [0], res.runs).to_json()["timing"]
+    assert (ran["rollouts"], ran["reuse"]) == (6, 2)

@@ -136,3 +136,27 @@ def test_a_sweep_of_one_pace_at_the_operating_point_is_drawn_where_it_can_be_see
     for ax in figures[0].axes:
         lo, hi = ax.get_xlim()
         assert lo <= pace / 1.9 and hi >= pace * 1.9, (lo, hi)
+
+
+def test_the_sweep_passes_a_classs_warning_on_once(monkeypatch):
+    """Only lines starting "  [" were passed on: the paper's library's "warning: class compound_1's mean reach ends
+    0.45 m from blue_cup" never reached `eval pace` or `eval all`."""
+    import types
+
+    from services.experiments import pace
+
+    warning = "warning: class compound_1's mean reach ends 0.45 m from blue_cup, more than 0.3: ..."
+
+    def fake_interference(cfg, progress=None, compile=True):
+        progress("interference (paper protocol): the library, scene ...; demonstrations [0] (held out)")
+        progress(warning)
+        progress("  [1/2] demo #0 seed 0 basic STOMP        interference    0.008")
+        return types.SimpleNamespace(ratio=lambda: float("nan"))
+
+    monkeypatch.setattr(pace, "run_interference", fake_interference)
+    monkeypatch.setattr(pace, "_point", lambda res, prot, lib, p: point(p, 0.0, 0.0))
+    said: list[str] = []
+    pace.run_pace(PaceConfig(protocols=("paper",), paces={"paper": (0.05, 0.1)}), progress=said.append)
+    assert said.count(f"  {warning}") == 1  # once, not once per pace
+    assert not any("interference (paper protocol)" in line for line in said)  # the point's line says where
+    assert said.count("    [1/2] demo #0 seed 0 basic STOMP        interference    0.008") == 2

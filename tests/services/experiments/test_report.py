@@ -143,3 +143,31 @@ def test_the_workers_do_not_repeat_the_drops_the_report_said(tmp_path):
     heard = run_parts(_read_and_listen, jobs, workers=2, context="fork")
     assert all(h in ([], said) for h in heard) and 1 <= heard.count(said) <= 2  # once in each worker at most
     assert run_parts(_read_and_listen, jobs, workers=2, context="fork", said=said) == [[]] * 4
+
+
+def test_bad_workers_leave_no_report_directory_and_one_worker_is_one_process(tmp_path, capsys, monkeypatch):
+    """``--workers -1`` was refused after ``--out`` was made, leaving it empty; ``--workers 1`` ran the recognition's
+    leave-one-out in 2 processes (library_section's default) all the same."""
+    import argparse
+
+    from services.experiments import sections
+    from services.experiments.report import add_report_arguments, run_report
+
+    out = tmp_path / "report"
+    with pytest.raises(SystemExit) as stop:
+        main(["all", "--workers", "-1", "--out", str(out), "--libraries", "synthetic"])
+    assert stop.value.code == 2 and "--workers must be >= 0" in capsys.readouterr().err and not out.exists()
+
+    class Made(Exception):
+        pass
+
+    def section(spec, plan, out, models_dir, n_jobs=2, **kwargs):
+        raise Made(n_jobs)
+
+    monkeypatch.setattr(sections, "library_section", section)
+    parser = argparse.ArgumentParser()
+    add_report_arguments(parser)
+    args = parser.parse_args(["--workers", "1", "--out", str(out), "--libraries", "synthetic", "--quick"])
+    with pytest.raises(Made) as made:
+        run_report(args)
+    assert made.value.args == (1,)

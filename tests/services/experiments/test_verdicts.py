@@ -78,3 +78,28 @@ def test_no_verdict_rests_on_a_ratio_or_a_switch_that_is_not_there():
     assert "prediction never leaves it (ends going for it), current never goes there" in switch_verdict(stays)
     assert "leaves at step 20" not in switch_verdict(stays)
     assert switch({"prediction": [1, 2, 3], "current": [9, 9, 9]}).to_json()["earlier_by"] == 7
+
+
+def test_a_current_planner_that_never_left_is_no_step_difference():
+    """It said "reproduced: the prediction planner leaves the human's cup 16 steps earlier" where the current one never
+    left (counted as the run's length, 20): a switch that did not happen."""
+    v = switch_verdict(switch({"prediction": [4, 4, 4], "current": [None, None, 13]}))
+    assert v.startswith("**reproduced**") and "cup 16 steps earlier" not in v, v
+    assert ("the prediction planner leaves the human's cup at step 4, the current-occupancy planner never leaves it "
+            "within the run's 20 steps: at least 16 steps earlier") in v
+    assert "leaves the human's cup 9 steps earlier" in switch_verdict(switch({"prediction": [4], "current": [13]}))
+    never = switch_verdict(switch({"prediction": [0, 0, 0], "current": [None, None, None]}))
+    assert "the current one never leaves it within the run's 20 steps" in never and "at step 20" not in never
+    stays = switch_verdict(switch({"prediction": [None, None, 3], "current": [2, 2, 2]}))
+    assert "steps; paper" not in stays and "(paper: 4 against 13)" in stays  # no '-18 steps' to a run that stayed
+
+
+def test_the_summary_marks_a_median_at_the_runs_length_never():
+    from services.experiments.verdicts import summary
+
+    t1 = table1(25.0, 0.5).to_json()
+    sw = switch({"prediction": [4, 4, 4], "current": [None, None, 13]}).to_json()
+    data = {"protocols": {"product": {"interference": t1, "switch": sw, "switch_mirrored": None,
+                                      "verdicts": {"table1": "t", "switch": "s"}}}}
+    rows = [ln for ln in summary(["synthetic"], [([], data)], ("product",)) if ln.startswith("| synthetic")]
+    assert rows == ["| synthetic | product | 25.000 / 0.500 | 50.0x | 4 / 20 (never) |  |"]

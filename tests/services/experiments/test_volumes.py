@@ -49,3 +49,14 @@ def test_unknown_volumes_are_refused(capsys):
         eval_main(["volumes", "--volumes", "paper,blob"])
     assert exit_.value.code == 2
     assert "--volumes: blob" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("switch_demos", "runs", "said"), [
+    (2, 2, "the switch (2 demonstrations, each held out in turn)"),
+    (0, 25, "the switch (25 demonstrations of the class, each held out in turn)"),
+    (0, None, "the switch (every demonstration of the class, each held out in turn)")])
+def test_the_table_says_which_switch_ran(switch_demos, runs, said):
+    """It said "every demonstration held out in turn" under --switch-demos 2."""
+    raw = {} if runs is None else {v: {"interference_runs": [], "switch_runs": [{}] * runs} for v in ("paper", "demos")}
+    res = VolumesResult(VolumesConfig(switch_demos=switch_demos), "synthetic", [_score("paper", 0.0, 0.1)], raw)
+    assert said in res.lines()[0], res.lines()[0]
