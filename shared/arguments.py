@@ -117,8 +117,9 @@ class ArgumentParser(argparse.ArgumentParser):
             if not token.startswith("-") or token == "-":
                 continue
             name = token.split("=", 1)[0]
+            zenoh = "--zenoh-" + name.removeprefix("--")  # --mode is the services' own; elsewhere the session's
             # the options' common "--" left out of the likeness (closest's prefix): --bogus was "close" to --ros2
-            close = closest(name, mine, prefix="--")
+            close = f"did you mean {zenoh}?" if zenoh in mine else closest(name, mine, prefix="--")
             if close:
                 hints.append(close.removeprefix("; "))
                 continue

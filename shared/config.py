@@ -53,6 +53,7 @@ from shared.config_tree import (
     parse_value,
 )
 from shared.data_files import relative_to_cwd
+from shared.endpoints import HOST_PORT, check_host_port, endpoint_host_port, picked_port
 from shared.security.acl import OBSERVER, ROLES
 
 __all__ = [
@@ -92,43 +93,6 @@ def check_prefix(prefix: str, option: str) -> None:
                           "from the other services' would never meet them")
 
 
-def endpoint_host_port(endpoint: str) -> tuple[str, int]:
-    """The host and port of a Zenoh endpoint: ``tcp/127.0.0.1:7447#...`` -> ``("127.0.0.1", 7447)``.
-
-    Any protocol (``tcp/``, ``tls/``, ...); an IPv6 host loses its brackets; ``#`` and ``?`` parts are dropped.
-
-    Raises:
-        ValueError: No ``proto/`` part, or no integer port.
-    """
-    if "/" not in endpoint:
-        raise ValueError(f"endpoint {endpoint!r} is not of the form proto/HOST:PORT")
-    address = endpoint.split("/", 1)[1].split("#")[0].split("?")[0]
-    host, _, port = address.rpartition(":")
-    return host.strip("[]"), int(port)
-
-
-_HOST_PORT = ("tcp", "tls", "udp", "quic", "ws")
-"""The endpoint protocols of a ``HOST:PORT`` address."""
-
-
-def _check_host_port(option: str, endpoint: str, lowest: int) -> None:
-    try:
-        host, port = endpoint_host_port(endpoint)
-    except ValueError:
-        host, port = "", -1
-    if not host or not lowest <= port <= 65535:
-        raise ConfigError(f"{option}: endpoint {endpoint!r} is not of the form proto/HOST:PORT (a port "
-                          f"{lowest}-65535)")
-
-
-def _picked_port(endpoint: str) -> bool:
-    """Whether ``endpoint`` listens on a port picked at random (``:0``), which nothing can know to connect to."""
-    try:
-        return endpoint_host_port(endpoint)[1] == 0
-    except ValueError:  # no port (a unix socket's path): a fixed address
-        return False
-
-
 @dataclasses.dataclass
 class ZenohConfig:
     """The Zenoh section shared by every service (``[zenoh]`` in the TOML file)."""
@@ -159,12 +123,16 @@ class ZenohConfig:
             for ep in getattr(self, name):
                 if "/" not in ep or not ep.split("/", 1)[1]:
                     raise ConfigError(f"zenoh.{name}: endpoint {ep!r} is not of the form proto/address")
-                if ep.split("/", 1)[0] in _HOST_PORT:  # tcp/127.0.0.1:abc was taken, and retried for ever
-                    _check_host_port(f"zenoh.{name}", ep, lowest=0 if name == "listen" else 1)
+                if ep.split("/", 1)[0] in HOST_PORT:  # tcp/127.0.0.1:abc was taken, and retried for ever
+                    check_host_port(f"zenoh.{name}", ep, lowest=0 if name == "listen" else 1)
         if not self.connect and self.mode != "router" and not self.multicast_scouting:
             # an empty FORESIGHT_ZENOH_CONNECT ran a service nobody could find
-            if self.mode == "client" or all(_picked_port(ep) for ep in self.listen):
-                raise ConfigError(f"zenoh.connect: empty, and this {self.mode} listens on no fixed port "
+            if self.mode == "client":  # a client listens on nothing: it reaches only what it connects to
+                raise ConfigError("zenoh.connect: empty, and a client reaches only the endpoints it connects to "
+                                  "(scouting off): it would reach nothing; give the router's endpoint, e.g. "
+                                  "tcp/127.0.0.1:7447")
+            if all(picked_port(ep) for ep in self.listen):
+                raise ConfigError(f"zenoh.connect: empty, and this peer listens on no fixed port "
                                   f"({', '.join(self.listen) or 'nothing'}) with scouting off: nothing can reach it; "
                                   "give the router's endpoint, e.g. tcp/127.0.0.1:7447")
         if self.role and self.role not in ROLES:
@@ -332,6 +300,8 @@ def _resolve_section(section: str, cls: type[T], file_values: dict[str, Any],
     for o in config_options(section, cls):
         flag = (cli_names or {}).get(o.field, o.flag)
         if o.dest in cli:
+            if base_type(o.tp)[0] is Path and not str(cli[o.dest]).strip():  # cleared the file's value, unlike PATH=
+                raise ConfigError(f"{flag}: empty; give a path (leave the flag out to keep the file's or the default)")
             changes[o.attrs], given[o.name] = parse_value(flag, o.tp, cli[o.dest], o.choices), flag
         elif o.env in env and not (base_type(o.tp)[0] is Path and not env[o.env].strip()):  # PATH= : unset
             changes[o.attrs], given[o.name] = parse_value(o.env, o.tp, env[o.env], o.choices), o.env
@@ -356,7 +326,8 @@ def _resolve_section(section: str, cls: type[T], file_values: dict[str, Any],
 def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None = None,
                    env: typing.Mapping[str, str] | None = None,
                    config_file: str | os.PathLike[str] | None = None,
-                   with_zenoh: bool = True, zenoh_base: ZenohConfig | None = None) -> tuple[T, ZenohConfig]:
+                   with_zenoh: bool = True, zenoh_base: ZenohConfig | None = None,
+                   zenoh_fixed: tuple[str, ...] = ()) -> tuple[T, ZenohConfig]:
     """Resolve a section's config tree and the Zenoh config from defaults, file, env and CLI.
 
     Args:
@@ -367,6 +338,8 @@ def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None =
         config_file: TOML file; overrides ``args.config`` and ``$FORESIGHT_CONFIG``.
         with_zenoh: Also resolve the ``[zenoh]`` section.
         zenoh_base: Defaults of the Zenoh section for this command (e.g. the router's listen endpoint).
+        zenoh_fixed: Zenoh fields whose ``zenoh_base`` value the file and the variables leave (the router's mode:
+            ``[zenoh]`` and ``FORESIGHT_ZENOH_*`` are the services' too); a flag still sets them.
 
     Returns:
         ``(section_config, zenoh_config)``.
@@ -392,7 +365,11 @@ def resolve_config(section: str, cls: type[T], args: argparse.Namespace | None =
     check_environment(env, {section: cls, **({"zenoh": ZenohConfig} if with_zenoh else {})})
     sec = _resolve_section(section, cls, data.get(section, {}), env, cli, source=source)
     names = _zenoh_flags({o.flag for o in config_options(section, cls)})
-    zen = (_resolve_section("zenoh", ZenohConfig, data.get("zenoh", {}), env, cli, zenoh_base, names, source)
+    zdata, zenv = data.get("zenoh", {}), env
+    if zenoh_fixed:
+        zdata = {k: v for k, v in zdata.items() if k not in zenoh_fixed}
+        zenv = {k: v for k, v in env.items() if k not in {f"{ENV_PREFIX}_ZENOH_{n}".upper() for n in zenoh_fixed}}
+    zen = (_resolve_section("zenoh", ZenohConfig, zdata, zenv, cli, zenoh_base, names, source)
            if with_zenoh else ZenohConfig())
     if not zen.role:  # the certificate a command presents by default: its own role, else the read-only observer
         zen = dataclasses.replace(zen, role=section if section in ROLES else OBSERVER)

@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import logging
-import re
 import threading
 
 from shared.arguments import ArgumentParser
-from shared.config import ConfigError, ZenohConfig, add_config_arguments, resolve_config
+from shared.config import LOG_LEVELS, ConfigError, ZenohConfig, add_config_arguments, resolve_config
+from shared.endpoints import picked_port
 from shared.runtime import cli_errors, setup_logging, stop_on_signals, watch_parent
 from shared.transport import describe, open_session
 
-__all__ = ["RouterConfig", "main", "check_listen", "ROUTER_ENDPOINT"]
+__all__ = ["RouterConfig", "main", "check_listen", "check_mode", "ROUTER_ENDPOINT"]
 
 ROUTER_ENDPOINT = "tcp/127.0.0.1:7447"
 log = logging.getLogger("foresight.router")
@@ -22,8 +23,7 @@ log = logging.getLogger("foresight.router")
 class RouterConfig:
     """Router options (the endpoints are in the [zenoh] section)."""
 
-    log_level: str = dataclasses.field(default="INFO", metadata={"help": "log level",
-                                                                 "choices": ("DEBUG", "INFO", "WARNING")})
+    log_level: str = dataclasses.field(default="INFO", metadata={"help": "log level", "choices": LOG_LEVELS})
 
 
 def check_listen(listen: list[str]) -> None:
@@ -36,10 +36,24 @@ def check_listen(listen: list[str]) -> None:
     if not listen:
         raise ConfigError(f"zenoh.listen: empty; a router must listen on an endpoint, e.g. {ROUTER_ENDPOINT}")
     for ep in listen:
-        port = re.split(r"[/#?]", ep.split("/", 1)[1].rsplit(":", 1)[-1])[0]  # tcp/HOST:PORT[#...]
-        if port.isdigit() and int(port) == 0:
+        if picked_port(ep):
             raise ConfigError(f"zenoh.listen: {ep!r} asks for a free port, which the services could not be told; "
                               f"give the port they connect to, e.g. {ROUTER_ENDPOINT}")
+
+
+def check_mode(args: argparse.Namespace) -> None:
+    """Refuse ``--zenoh-mode`` naming another mode than ``router``.
+
+    A router always runs in router mode: the ``[zenoh]`` table's ``mode`` and ``FORESIGHT_ZENOH_MODE`` are the
+    services' and do not apply to it (``mode = "client"`` made it a client, ``peer`` a peer that logged "router
+    listening").
+
+    Raises:
+        ConfigError: ``args`` has another ``--zenoh-mode``.
+    """
+    mode = vars(args).get("zenoh__mode", "router")
+    if mode != "router":
+        raise ConfigError(f"--zenoh-mode: {mode!r}; a router runs in router mode (leave the flag out)")
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight router") -> int:
@@ -49,7 +63,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight router") -> int:
     add_config_arguments(parser, "router", RouterConfig, zenoh_base=base)
     args = parser.parse_args(argv)
     with cli_errors(prog):
-        cfg, zcfg = resolve_config("router", RouterConfig, args, zenoh_base=base)
+        check_mode(args)
+        cfg, zcfg = resolve_config("router", RouterConfig, args, zenoh_base=base, zenoh_fixed=("mode",))
         check_listen(zcfg.listen)
     setup_logging(cfg.log_level)
     stop = threading.Event()

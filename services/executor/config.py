@@ -90,7 +90,8 @@ class ExecutorConfig:
     steps: int = opt(20, help="replanning steps to run (the paper runs 20); 0 = until stopped")
     step_period_s: float = opt(0.2, help="replanning period: simulated seconds per clock tick (lockstep) or the "
                                "run length unit steps * period (realtime)")
-    state_rate_hz: float = opt(50.0, help="RobotState publishing rate (per simulated second in lockstep)")
+    state_rate_hz: float = opt(50.0, help="RobotState publishing rate (per simulated second in lockstep, rounded to "
+                               "a whole number of states per step, at least 1)")
     stale_limit_s: float = opt(0.5, help="hold the robot when the latest plan or occupancy is older than this")
     require_occupancy: bool = opt(True, help="also hold when the occupancy prediction is missing or stale")
     hold_without: list[str] = opt(default_factory=lambda: ["predictor", "planner", "replayer", "tracker"],
@@ -193,6 +194,19 @@ class ExecutorConfig:
     def substeps(self) -> int:
         """Simulation substeps per replanning period (one RobotState each)."""
         return max(1, round(self.step_period_s * self.state_rate_hz))
+
+    def state_rate_note(self) -> str:
+        """In lock-step, the rate :attr:`substeps` gives where it is not ``state_rate_hz`` (a line to log at start).
+
+        A step publishes a whole number of states, at least one: 1, 2.6 and 7 Hz all published at 5 Hz with 0.2 s
+        steps, without a word. "" in real time, or where the rate is kept.
+        """
+        used = self.substeps / self.step_period_s
+        if self.mode != "lockstep" or math.isclose(used, self.state_rate_hz, rel_tol=1e-9):
+            return ""
+        return (f"executor: lock-step publishes {self.substeps} RobotState(s) per {self.step_period_s:g} s step, "
+                f"{used:g} Hz of simulated time, not state_rate_hz {self.state_rate_hz:g} (a whole number per step, "
+                "at least 1)")
 
     def mcap_path(self, now: str) -> Path | None:
         """The MCAP path to write (``now``: a UTC timestamp for the default name), or None for 'none'.

@@ -247,6 +247,8 @@ class ExecutorService:
             presence = Presence(session, self.keys, "executor", on_change=self._on_peer)
             log.info("executor: %s mode, %d steps of %.3f s, log %s, session %s", cfg.mode, cfg.steps,
                      cfg.step_period_s, path, describe(session)["zid"])
+            if note := cfg.state_rate_note():
+                log.info(note)
             try:
                 if cfg.mode == "lockstep":
                     self._run_lockstep(state_pub, clock_pub, presence)

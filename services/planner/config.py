@@ -29,10 +29,22 @@ from .replan import TRIGGERS
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["PlannerConfig", "PlannerServiceConfig", "StompConfig", "StompError", "CostConfig", "MAX_ROLLOUTS"]
+__all__ = ["PlannerConfig", "PlannerServiceConfig", "StompConfig", "StompError", "CostConfig", "MAX_ROLLOUTS",
+           "MAX_THREADS", "MIN_TORSO_TABLE_STEP_M", "SDF_RESOLUTION_M"]
 
 MAX_ROLLOUTS = 1024
 """Most noisy rollouts per goal and iteration: 100 times the default; the rollouts' tensors grow with it."""
+
+SDF_RESOLUTION_M = (0.005, 0.5)
+"""Bounds of ``cost.sdf_resolution``, those of ``foresight train --resolution``: 1e-300 was a numpy traceback (a grid
+of negative size), 0.005 m is 64 times the default's voxels."""
+
+MIN_TORSO_TABLE_STEP_M = 1e-4
+"""Smallest ``cost.torso_table_step`` but 0 (off): about 3,000 rows over the PR2's lift; 1e-300 was a torch
+traceback (a table of 10^299 rows)."""
+
+MAX_THREADS = 1024
+"""Most torch threads: 3000000000 was a ValueError traceback from ``torch.set_num_threads``."""
 
 
 class StompError(ValueError):
@@ -116,11 +128,11 @@ class CostConfig:
     w_human: float = 1.0  # weight of the summed occupancy probability
     clearance: float = 0.05  # obstacle margin eps (m): spheres closer than this to a surface pay
     self_clearance: float = 0.01  # margin of the arm-vs-body self-collision term (m); < 0 disables it
-    sdf_resolution: float = 0.02  # voxel edge of the static signed distance field (m)
+    sdf_resolution: float = 0.02  # voxel edge of the static signed distance field (m; 0.005-0.5)
     human_points: int = 1  # points per sphere for the human cost: 1 (centre) or 7 (centre + 6)
     human_point_radius: float = 0.7  # offset of the extra points, as a fraction of the sphere radius
     human_interp: str = "trilinear"  # "trilinear" or "nearest" (the voxel containing the point)
-    torso_table_step: float = 0.002  # lift step (m) of the tabulated costs of torso-carried spheres; 0: off
+    torso_table_step: float = 0.002  # lift step (m) of the torso-carried spheres' cost tables; 0: off, else >= 1e-4
     body_clearance: float = 0.10  # real time: arm spheres nearer the person's body as last seen pay (m; 0: off)
     # (services.planner.body): the obstacle hinge, linear within its inner half; the default is the executor's
     # separation stop_m (0.05, where the guard holds the robot) plus the obstacle margin `clearance` (0.05)
@@ -130,20 +142,24 @@ class CostConfig:
         def finite(x: float) -> bool:  # an infinite weight or margin makes every cost inf * 0 or inf - inf: NaN
             return math.isfinite(x)
 
+        lo, hi = SDF_RESOLUTION_M
+        rules = {"sdf_resolution": f"{lo}-{hi} m", "torso_table_step": f"0 (off) or >= {MIN_TORSO_TABLE_STEP_M} m"}
         checks = [("w_smooth", finite(self.w_smooth) and self.w_smooth >= 0),
                   ("w_obstacle", finite(self.w_obstacle) and self.w_obstacle >= 0),
                   ("w_human", finite(self.w_human) and self.w_human >= 0),
                   ("clearance", finite(self.clearance) and self.clearance > 0),
                   ("self_clearance", finite(self.self_clearance)),
-                  ("sdf_resolution", finite(self.sdf_resolution) and self.sdf_resolution > 0),
+                  ("sdf_resolution", lo <= self.sdf_resolution <= hi),
                   ("human_points", self.human_points in (1, 7)),
                   ("human_point_radius", 0 <= self.human_point_radius <= 1),
                   ("human_interp", self.human_interp in ("trilinear", "nearest")),
-                  ("torso_table_step", finite(self.torso_table_step) and self.torso_table_step >= 0),
+                  ("torso_table_step", finite(self.torso_table_step)
+                   and (self.torso_table_step == 0 or self.torso_table_step >= MIN_TORSO_TABLE_STEP_M)),
                   ("body_clearance", finite(self.body_clearance) and self.body_clearance >= 0)]
         for name, ok in checks:
             if not ok:
-                raise ValueError(f"costs.{name}: bad value {getattr(self, name)!r}")
+                rule = f" (must be {rules[name]})" if name in rules else ""
+                raise ValueError(f"costs.{name}: bad value {getattr(self, name)!r}{rule}")
 
 
 @dataclass
@@ -156,7 +172,8 @@ class PlannerConfig:
 
     device: str = opt("cpu", help="torch device (cpu, cuda, cuda:1, ...)")
     dtype: str = opt("float32", help="torch float dtype", choices=("float32", "float64"))
-    threads: int = opt(1, help="torch intra-op threads of the process (0: torch's default; >1 is slow on shared cores, "
+    threads: int = opt(1, help="torch intra-op threads of the process (0: torch's default; at most 1024; >1 is slow "
+                       "on shared cores, "
                        "and another count sums in another order: plans differ from the 7th digit)")
     fused_cost: bool = opt(True, help="evaluate the PR2 cost with the fused kernel (same numbers as the reference "
                            "StateCost path, fewer ops)")
@@ -207,7 +224,10 @@ class PlannerConfig:
             self.cost.validate()
         except ValueError as exc:
             raise ConfigError(f"planner.cost.{str(exc).removeprefix('costs.')}") from None
-        checks = [("seed", self.seed >= 0), ("threads", self.threads >= 0),
+        if not 0 <= self.threads <= MAX_THREADS:
+            raise ConfigError(f"planner.threads: bad value {self.threads!r} (must be 0-{MAX_THREADS}; 0: torch's "
+                              "default)")
+        checks = [("seed", self.seed >= 0),
                   ("lookahead_s", 0 <= self.lookahead_s < math.inf),
                   ("goal_dwell_s", math.isfinite(self.goal_dwell_s) and self.goal_dwell_s >= 0),
                   ("cost_chunk_goals", self.cost_chunk_goals >= 0),

@@ -51,7 +51,8 @@ class RobotSimConfig:
     rate_hz: float = opt(100.0, help="joint states per second on the wall clock (sim_time off)")
     scene: str = opt("", help=SCENE_HELP + " (the start configuration, as the executor's; empty: pr2_two_cups)")
     start_q: list[float] = opt(default_factory=list, help="start configuration (empty: the executor's default)")
-    stop_with: str = opt("", help="stop when this Foresight service's liveliness token goes away (e.g. executor)")
+    stop_with: list[str] = opt(default_factory=list, help="stop when one of these Foresight services (e.g. executor) "
+                               "disappears after it was seen (comma-separated, as the other services')")
     log_level: str = opt("INFO", choices=LOG_LEVELS, help="log level")
 
     def validate(self) -> None:
@@ -60,8 +61,8 @@ class RobotSimConfig:
         check_node_name(self.node, "simrobot.node")
         if not self.rate_hz > 0:
             raise ConfigError(f"simrobot.rate_hz: must be > 0, got {self.rate_hz}")
-        if self.stop_with:  # misspelt, it is never seen go, and the robot runs on without a word
-            check_services([self.stop_with], "simrobot.stop_with", SERVICES)
+        # misspelt, a service is never seen go, and the robot runs on without a word
+        check_services(self.stop_with, "simrobot.stop_with", SERVICES)
         check_robot_names(self.controller, self.joint_states, "simrobot.")
 
 
@@ -124,8 +125,7 @@ class RobotSim:
             node.subscription(command_topic(cfg.controller), ROBOT_TYPES["command"], self.on_command)
             if cfg.sim_time:
                 node.subscription(CLOCK_TOPIC, ROBOT_TYPES["clock"], self.on_clock)
-            presence = Presence(session, Keys(self.zenoh.prefix), "simrobot", stop_with=[cfg.stop_with] if
-                                cfg.stop_with else [], stop=stop)
+            presence = Presence(session, Keys(self.zenoh.prefix), "simrobot", stop_with=cfg.stop_with, stop=stop)
             log.info("simrobot: node /%s on domain %d: %s in, %s out, %s", cfg.node, cfg.domain_id,
                      command_topic(cfg.controller), cfg.joint_states,
                      "following /clock" if cfg.sim_time else f"{cfg.rate_hz:g} Hz on the wall clock")

@@ -56,7 +56,8 @@ class Ros2ServiceConfig(Ros2Config):
 
     scene: str = opt("", help=SCENE_HELP + " (places the human's markers; empty: pr2_two_cups)")
     viz_rate_hz: float = opt(5.0, help="highest rate of the occupancy and human markers per topic")
-    stop_with: str = opt("", help="stop when this service's liveliness token goes away (e.g. executor)")
+    stop_with: list[str] = opt(default_factory=list, help="stop when one of these services (e.g. executor) "
+                               "disappears after it was seen (comma-separated, as the other services')")
     nice: int = opt(10, help="`foresight ros2` lowers its CPU priority by this much (0-19): encoding markers must "
                     "not take CPU from the planning loop on a shared machine")
 
@@ -67,8 +68,8 @@ class Ros2ServiceConfig(Ros2Config):
             raise ConfigError(f"ros2.nice: must be 0..19, got {self.nice}")
         if not self.viz_rate_hz > 0:
             raise ConfigError(f"ros2.viz_rate_hz: must be > 0, got {self.viz_rate_hz}")
-        if self.stop_with:  # misspelt, it is never seen go, and the gateway runs on without a word
-            check_services([self.stop_with], "ros2.stop_with", SERVICES)
+        # misspelt, a service is never seen go, and the gateway runs on without a word
+        check_services(self.stop_with, "ros2.stop_with", SERVICES)
 
 
 @dataclass
@@ -265,8 +266,7 @@ class Ros2Service:
                 (k.plan, Plan, self.on_plan), (k.robot_state, RobotState, self.on_state),
                 (k.occupancy, OccupancyGrid, self.on_occupancy), (k.posterior, ClassPosterior, self.on_posterior),
                 (k.pose, HumanPose, self.on_human), (k.clock, ClockTick, self.on_tick))]
-            ends = [cfg.stop_with] if cfg.stop_with else []  # one service's name, not its letters
-            presence = Presence(session, self.keys, "ros2", stop_with=ends, stop=stop)
+            presence = Presence(session, self.keys, "ros2", stop_with=cfg.stop_with, stop=stop)
             log.info("ros2: node %s%s on domain %d, topics %s, session %s", cfg.node_namespace.rstrip("/") + "/",
                      cfg.node, cfg.domain_id, ", ".join(cfg.topic(r) for r in TOPICS), zid)
             try:

@@ -110,3 +110,14 @@ def test_a_misspelt_sub_command_or_choice_gets_the_closest(capsys) -> None:
         picky.parse_args(["--mode", "lockstp"])
     assert "invalid choice: 'lockstp' (did you mean lockstep? choose from " in capsys.readouterr().err
     assert refusal(["eval", "zzz"], capsys).endswith("invalid choice: 'zzz' (choose from 'all', 'interference')")
+
+
+def test_mode_where_a_command_has_only_the_zenoh_mode_points_to_it(capsys) -> None:
+    """``foresight view --mode client`` said only "unrecognized arguments": the session's mode is ``--zenoh-mode``."""
+    view = ArgumentParser(prog="foresight view")
+    view.add_argument("--zenoh-mode")
+    view.add_argument("--model")  # closer to --mode in spelling than --zenoh-mode: the session's mode still wins
+    with pytest.raises(SystemExit):
+        view.parse_args(["--mode", "client"])
+    assert capsys.readouterr().err.strip() == (
+        "foresight view: error: unrecognized arguments: --mode client (did you mean --zenoh-mode?)")

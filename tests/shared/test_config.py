@@ -118,7 +118,10 @@ def test_section_field_shadowing_a_zenoh_flag():
     # an empty connect (a blank $ROUTER) ran a service nothing could reach, without a word
     ([], {"FORESIGHT_ZENOH_CONNECT": ""}, r"zenoh\.connect: empty, and this peer listens on no fixed port .*"
                                           r"nothing can reach it.*\(set by FORESIGHT_ZENOH_CONNECT\)"),
-    (["--zenoh-mode", "client", "--connect", ""], {}, r"zenoh\.connect: empty, and this client"),
+    # a client listens on nothing: "this client listens on no fixed port" named the wrong cause
+    (["--zenoh-mode", "client", "--connect", ""], {},
+     r"^zenoh\.connect: empty, and a client reaches only the endpoints it connects to \(scouting off\): it would "
+     r"reach nothing"),
 ])
 def test_bad_values(argv, env, pattern):
     with pytest.raises(ConfigError, match=pattern):
@@ -342,23 +345,12 @@ def test_an_empty_path_from_the_environment_is_unset_and_a_number_is_no_path(tmp
         resolve_config("demo", DemoCfg, parse(["--config", str(write(tmp_path, "[demo]\nlibrary = 5\n"))]), env={})
 
 
-@pytest.mark.parametrize(("endpoint", "expected"), [
-    ("tcp/127.0.0.1:7447", ("127.0.0.1", 7447)),
-    ("tls/router.local:7447#iface=lo", ("router.local", 7447)),
-    ("tcp/[::1]:7448?rel=1", ("::1", 7448)),
-])
-def test_an_endpoints_host_and_port(endpoint: str, expected: tuple[str, int]) -> None:
-    from shared.config import endpoint_host_port
-
-    assert endpoint_host_port(endpoint) == expected
-
-
-@pytest.mark.parametrize("endpoint", ["127.0.0.1:7447", "tcp/127.0.0.1", "tcp/127.0.0.1:port"])
-def test_an_endpoint_without_proto_or_port_is_refused(endpoint: str) -> None:
-    from shared.config import endpoint_host_port
-
-    with pytest.raises(ValueError):
-        endpoint_host_port(endpoint)
+def test_an_empty_path_flag_is_refused_not_taken_as_unset(tmp_path):
+    """``--library ""`` silently cleared the file's path, where ``FORESIGHT_DEMO_LIBRARY=`` leaves it."""
+    conf = write(tmp_path, "[demo]\nlibrary = 'mine.npz'\n")
+    for empty in ("", "  "):
+        with pytest.raises(ConfigError, match=r"^--library: empty; give a path \(leave the flag out to keep"):
+            resolve_config("demo", DemoCfg, parse(["--config", str(conf), "--library", empty]), env={})
 
 
 @pytest.mark.parametrize(("option", "endpoint"), [
@@ -367,7 +359,7 @@ def test_an_endpoint_without_proto_or_port_is_refused(endpoint: str) -> None:
 def test_an_endpoint_without_a_host_and_port_is_refused_by_the_config(option: str, endpoint: str) -> None:
     """``--connect tcp/127.0.0.1:abc`` was taken: the session retried for ever and the replayer played to no one."""
     with pytest.raises(ConfigError, match=rf"zenoh\.{option}: endpoint '{re.escape(endpoint)}' is not of the form "
-                       r"proto/HOST:PORT \(a port [01]-65535\) \(set by FORESIGHT_ZENOH_"):
+                       r"proto/HOST:PORT \(a port [01]-65535\): .* \(set by FORESIGHT_ZENOH_"):
         resolve_config("demo", DemoCfg, parse([]), env={f"FORESIGHT_ZENOH_{option.upper()}": endpoint})
 
 

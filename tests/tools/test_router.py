@@ -14,7 +14,12 @@ import pytest
 
 from services.processes import free_port
 from shared.config import ConfigError
+from tools import router
 from tools.router import ROUTER_ENDPOINT, check_listen, main
+
+
+class _Opened(Exception):
+    """Raised by the stand-in for ``open_session``: the config the router would have opened its session with."""
 
 
 def test_help_shows_the_routers_own_zenoh_defaults(capsys):
@@ -49,6 +54,51 @@ def test_the_command_fails_in_one_line_before_opening_a_session(argv, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("foresight router: error: zenoh.listen:")
+
+
+def _fake_open(zcfg):
+    raise _Opened(zcfg)
+
+
+def _opened_with(monkeypatch, argv: list[str]):
+    """The Zenoh config ``main(argv)`` opens its session with (no session is opened)."""
+    monkeypatch.setattr(router, "open_session", _fake_open)
+    with pytest.raises(_Opened) as got:
+        main(argv)
+    return got.value.args[0]
+
+
+@pytest.mark.parametrize(("variable", "file"), [("peer", ""), ("", "client")])
+def test_the_services_mode_from_the_shared_file_or_variable_is_set_aside(monkeypatch, tmp_path, variable, file):
+    """``[zenoh] mode = "client"`` made the router a client; FORESIGHT_ZENOH_MODE=peer a peer logging "router
+    listening"."""
+    for name in ("FORESIGHT_ZENOH_MODE", "FORESIGHT_CONFIG", "FORESIGHT_PARENT_PID"):
+        monkeypatch.delenv(name, raising=False)
+    if variable:
+        monkeypatch.setenv("FORESIGHT_ZENOH_MODE", variable)
+    if file:
+        (tmp_path / "cell.toml").write_text(f'[zenoh]\nmode = "{file}"\n')  # a client's, shared
+        monkeypatch.setenv("FORESIGHT_CONFIG", str(tmp_path / "cell.toml"))
+    zcfg = _opened_with(monkeypatch, ["--listen", f"tcp/127.0.0.1:{free_port()}"])
+    assert zcfg.mode == "router" and zcfg.connect == []
+
+
+@pytest.mark.parametrize("mode", ["peer", "client", "hub"])
+def test_another_mode_given_to_the_router_itself_is_refused_in_one_line(monkeypatch, capsys, mode):
+    monkeypatch.delenv("FORESIGHT_CONFIG", raising=False)
+    monkeypatch.setattr(router, "open_session", _fake_open)  # taken, it would not run until a signal
+    with pytest.raises(SystemExit) as exc:
+        main(["--zenoh-mode", mode])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and err == [f"foresight router: error: --zenoh-mode: '{mode}'; a router runs in "
+                                           "router mode (leave the flag out)"]
+
+
+def test_the_router_takes_every_log_level(monkeypatch):
+    """``--log-level ERROR``, which every other command takes, was refused."""
+    monkeypatch.delenv("FORESIGHT_CONFIG", raising=False)
+    zcfg = _opened_with(monkeypatch, ["--log-level", "ERROR", "--listen", f"tcp/127.0.0.1:{free_port()}"])
+    assert zcfg.mode == "router"
 
 
 def test_a_router_started_by_a_process_that_dies_stops_by_itself(tmp_path):

@@ -30,6 +30,25 @@ def test_a_misspelt_stop_with_service_is_named_with_the_closest() -> None:
     for make, option in ((lambda s: RobotSimConfig(stop_with=s), "simrobot.stop_with"),
                          (lambda s: Ros2ServiceConfig(stop_with=s), "ros2.stop_with")):
         with pytest.raises(ConfigError, match=rf"^{option}: unknown service 'exectuor' \(did you mean 'executor'\?\)"):
-            make("exectuor").validate()
-        make("executor").validate()
-        make("").validate()
+            make(["planner", "exectuor"]).validate()
+        make(["executor"]).validate()
+        make([]).validate()
+
+
+@pytest.mark.parametrize("section", ["simrobot", "ros2"])
+def test_stop_with_is_a_list_of_services_as_everywhere_else(section: str) -> None:
+    """It was one name in [ros2] and [simrobot]: ``--stop-with executor,planner`` was an unknown service there and a
+    list in the other services; a single name still reads as a list of one."""
+    import argparse
+
+    from services.ros2.service import Ros2ServiceConfig
+    from shared.config import add_config_arguments, resolve_config
+
+    cls = RobotSimConfig if section == "simrobot" else Ros2ServiceConfig
+    parser = argparse.ArgumentParser()
+    add_config_arguments(parser, section, cls)
+    for argv, env, expected in ((["--stop-with", "executor,planner"], {}, ["executor", "planner"]),
+                                ([], {f"FORESIGHT_{section.upper()}_STOP_WITH": "executor"}, ["executor"]),
+                                ([], {}, [])):
+        cfg = resolve_config(section, cls, parser.parse_args(argv), env=env)[0]
+        assert cfg.stop_with == expected
