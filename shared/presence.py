@@ -27,7 +27,7 @@ from shared.protocol import Keys
 from shared.rejects import escaped
 from shared.security.guard import denied
 
-__all__ = ["Presence", "DEPARTURE_GRACE_S", "REJOIN_S", "CUT_WAIT_S", "UNSEEN_WARN_S", "connected"]
+__all__ = ["Presence", "DEPARTURE_GRACE_S", "REJOIN_S", "CUT_WAIT_S", "UNSEEN_WARN_S", "WAIT_REPORT_S", "connected"]
 
 log = logging.getLogger("shared.transport")
 
@@ -47,6 +47,9 @@ POLL_S = 0.1
 
 UNSEEN_WARN_S = 60.0
 """A ``stop_with`` peer not seen this long after the start is said, once."""
+
+WAIT_REPORT_S = 10.0
+"""Period of the "still waiting" lines of :meth:`Presence.wait_for` (a first start compiling torch takes a minute)."""
 
 LINK_WINDOW_S = 0.5
 """A link found gone this soon after a peer's token is taken to have gone first (the router's loss: the deletions
@@ -180,7 +183,8 @@ class Presence:
         """Wait until every one of ``services`` is alive, at most ``timeout`` seconds (or until ``stop``).
 
         How a run waits for its peers before it starts (the executor before its first tick, a real-time
-        replayer before streaming); what it waits for is logged when the wait starts, and both outcomes.
+        replayer before streaming); what it waits for is logged when the wait starts, every
+        :data:`WAIT_REPORT_S` while it lasts (a minute's silence read as a hang), and both outcomes.
 
         Returns:
             The services still missing (empty when all are present).
@@ -189,7 +193,8 @@ class Presence:
         if not wanted:
             return []
         stop = stop or threading.Event()
-        deadline = time.monotonic() + timeout
+        start = time.monotonic()
+        deadline, report = start + timeout, start + WAIT_REPORT_S
         missing = [s for s in wanted if not self.is_alive(s)]
         if missing:
             log.info("%s: waiting for %s (at most %.0f s)", self.service, ", ".join(missing), timeout)
@@ -200,7 +205,12 @@ class Presence:
                 return []
             if stop.is_set():
                 return missing
-            if time.monotonic() >= deadline:
+            now = time.monotonic()
+            if now >= report and now < deadline:  # a long wait is said as it goes, not only at its end
+                log.info("%s: still waiting for %s (%.0f s of at most %.0f s)", self.service, ", ".join(missing),
+                         now - start, timeout)
+                report += WAIT_REPORT_S
+            if now >= deadline:
                 log.warning("%s: starting without %s (not seen within %.1f s)", self.service, ", ".join(missing),
                             timeout)
                 return missing

@@ -124,7 +124,7 @@ class ExecutorConfig:
     wait_for: list[str] = opt(default_factory=lambda: ["replayer", "predictor", "planner"],
                               help="services whose liveliness token to wait for (at most startup_timeout_s) "
                               "before the run starts: the first tick (lockstep) or the clock (realtime)")
-    startup_timeout_s: float = opt(60.0, help="longest wait (wall s) for the wait_for services")
+    startup_timeout_s: float = opt(300.0, help="longest wait (wall s) for the wait_for services")
     start_q: list[float] = opt(default_factory=list, help="start configuration, one value per joint in the "
                                "robot model's order (empty: the robot model's start configuration)")
     scene: str = opt("", help=SCENE_HELP + " (empty: pr2_two_cups)")

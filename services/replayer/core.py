@@ -55,7 +55,7 @@ class ReplayerConfig:
     max_demos: int = opt(0, help="stop after this many demonstrations (0 = no limit)")
     wait_for: list[str] = opt(default_factory=list, help="real-time: wait for the liveliness tokens of these "
                                                          "services (e.g. predictor) before streaming")
-    wait_timeout: float = opt(60.0, help="seconds to wait for --wait-for services before streaming anyway")
+    wait_timeout: float = opt(300.0, help="seconds to wait for --wait-for services before streaming anyway")
     stop_with: list[str] = opt(default_factory=list, help="end when one of these services (e.g. executor) "
                                "disappears after it was seen (comma-separated; how a compose run ends)")
     log_level: str = opt("INFO", choices=LOG_LEVELS, help="log level")

@@ -64,7 +64,7 @@ class TrackerServiceConfig:
                                "disappears after it was seen (comma-separated; how a compose run ends)")
     wait_for: list[str] = opt(default_factory=list, help="--from: wait for the liveliness tokens of these services "
                               "(e.g. executor) before playing")
-    wait_timeout: float = opt(60.0, help="seconds to wait for --wait-for services before playing anyway")
+    wait_timeout: float = opt(300.0, help="seconds to wait for --wait-for services before playing anyway")
     log_level: str = opt("INFO", choices=LOG_LEVELS, help="log level")
     tracker: TrackerConfig = nested(TrackerConfig, inline=True, help="the tracker's fit, checks, smoothing and reach "
                                     "rule")

@@ -200,3 +200,19 @@ def test_a_peers_token_name_cannot_forge_a_log_line(zenoh_hub, wait_until, caplo
     assert any("peer x\\x1b[31mred appeared" in m for m in said)
     assert any("reacting to peer x\\nFAKE" in m for m in said)
     assert not any("\n" in m or "\x1b" in m for m in said)
+
+
+def test_a_long_wait_for_peers_is_said_as_it_goes(zenoh_hub, monkeypatch, caplog) -> None:
+    """A wait said only its start and its end: a minute of silence while a planner compiled read as a hang."""
+    monkeypatch.setattr(presence, "WAIT_REPORT_S", 0.2)
+    with open_session(zenoh_hub()) as session:
+        watcher = Presence(session, Keys("w"), "replayer")
+        try:
+            with caplog.at_level(logging.INFO, logger="shared.transport"):
+                assert watcher.wait_for(["planner"], 0.7) == ["planner"]
+        finally:
+            watcher.close()
+    lines = [r.getMessage() for r in caplog.records]
+    still = [line for line in lines if "still waiting for planner" in line]
+    assert 2 <= len(still) <= 3 and still[0].startswith("replayer: still waiting for planner (0 s of at most 1 s)")
+    assert lines[-1].startswith("replayer: starting without planner")
