@@ -6,7 +6,8 @@ means writing its ``add_arguments``/``run`` pair and one entry there):
 - ``info PATH``: features (and their mapping to the human model), classes, valid demonstrations per
   class, sample counts, issues.
 - ``validate PATH``: print every malformed demonstration; exit status 1 if there is any.
-- ``convert PATH --out FILE.npz``: write the native npz (valid demonstrations and the issue list).
+- ``convert PATH --out FILE.npz|DIR``: write the native npz (valid demonstrations and the issue list) or a
+  directory of the paper's CSV files (the valid demonstrations).
 - ``generate --classes 8 --demos 25 --seed 0 --out PATH``: a synthetic library (shared/synthetic.py),
   as the native npz or the paper's CSV files.
 - ``to-keypoints PATH --out DIR``: the library as 3D body keypoints, one CSV per class.
@@ -50,13 +51,15 @@ __all__ = ["main", "SUBCOMMANDS", "format_info"]
 
 def format_info(lib: MotionLibrary) -> str:
     """Human-readable summary: the features, one line per class, then the issues."""
-    lines = [f"library: {lib.source}", f"classes: {lib.n_classes}, valid demonstrations: {len(lib.demos)}, "
+    origin = f" (converted from {lib.origin})" if lib.origin and lib.origin != lib.source else ""
+    lines = [f"library: {lib.source}{origin}", f"classes: {lib.n_classes}, valid demonstrations: {len(lib.demos)}, "
              f"issues: {len(lib.issues)}, features: {describe_features(lib.feature_names)}"]
     width = max((len(n) for n in lib.class_names), default=5)
     for label, name in enumerate(lib.class_names):
         demos = lib.by_class(label)
         lengths = np.array([d.n_samples for d in demos]) if demos else np.zeros(0, dtype=int)
-        n_issues = sum(1 for i in lib.issues if i.class_name == name)
+        mine = [i for i in lib.issues if i.class_name == name]
+        n_issues = sum(not i.summary for i in mine) or len(mine)  # "holds no valid demonstration" sums the others
         span = f"{lengths.min()}-{lengths.max()}" if lengths.size else "-"
         lines.append(f"  {label:>2} {name:<{width}}  {len(demos):>4} demos  samples/demo {span:>7}  "
                      f"issues {n_issues}")
@@ -98,20 +101,30 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 def _convert_args(p: argparse.ArgumentParser) -> None:
     _info_args(p)
-    p.add_argument("--out", required=True, metavar="FILE.npz", help="output npz file")
+    p.add_argument("--out", required=True, metavar="FILE.npz|DIR",
+                   help="output: FILE.npz (native) or a directory of compound_<m>.csv (paper format)")
 
 
 def _cmd_convert(args: argparse.Namespace) -> int:
     out = _out_path(args.out)
-    if out.suffix != ".npz":
-        raise LibraryError(f"--out {str(out)!r}: the native format is a .npz file")
+    if out.suffix and out.suffix != ".npz":
+        raise LibraryError(f"--out {str(out)!r}: give a .npz file or a directory (no extension)")
     lib = load_library(args.path, report=False)
     if not lib.demos:
         raise LibraryError(f"library {lib.source}: no valid demonstration, nothing to convert "
                            f"({len(lib.issues)} issue(s); `foresight library validate {args.path}` lists them)")
-    save_library(lib, out)
-    print(f"wrote {out}: {len(lib.demos)} demonstrations in {lib.n_classes} classes "
-          f"({len(lib.issues)} issue(s) recorded, malformed demonstrations left out)")
+    if out.suffix == ".npz":
+        save_library(lib, out)
+        print(f"wrote {out}: {len(lib.demos)} demonstrations in {lib.n_classes} classes "
+              f"({len(lib.issues)} issue(s) recorded, malformed demonstrations left out)")
+        return 0
+    before = set(out.glob("compound_*.csv")) if out.is_dir() else set()
+    files = write_csv_dir(lib, out)
+    named = "" if [f.stem for f in files] == lib.class_names else \
+        f"; classes {', '.join(lib.class_names)} are named {', '.join(f.stem for f in files)} there"
+    print(f"wrote {out}/ ({len(files)} CSV files{_replaced(before - set(files))}): {len(lib.demos)} demonstrations "
+          f"in {lib.n_classes} classes (malformed demonstrations left out, the CSV format keeps no issue list: "
+          f"{len(lib.issues)} not recorded){named}")
     return 0
 
 
@@ -246,7 +259,8 @@ def _cmd_from_keypoints(args: argparse.Namespace) -> int:
 SUBCOMMANDS: dict[str, tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {
     "info": ("classes, demonstrations per class and issues of a library", _info_args, _cmd_info),
     "validate": ("report malformed demonstrations; exit status 1 if any", _info_args, _cmd_validate),
-    "convert": ("convert a library (e.g. the paper's CSVs) to the native .npz", _convert_args, _cmd_convert),
+    "convert": ("convert a library (e.g. the paper's CSVs) to the native .npz, or to the paper's CSVs",
+                _convert_args, _cmd_convert),
     "generate": ("generate a synthetic library of table reaches (IK on the human model; shared/synthetic.py)",
                  _generate_args, _cmd_generate),
     "to-keypoints": ("write a library as 3D body keypoints, one CSV per class (optionally noisy, with drops)",

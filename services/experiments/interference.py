@@ -103,6 +103,7 @@ class InterferenceResult:
     runs: list[RunScore] = field(default_factory=list)
     current_as_basic: list[float] = field(default_factory=list)  # per run where current occupancy executed basic
     # STOMP's path (:func:`current_as_basic`): the largest human cost its planner gave a chosen path in that run
+    trial: tuple[str, tuple[int, ...]] | None = None  # the authors' (class, motions) run (protocol.authors_trial)
 
     @property
     def borrowed(self) -> int:
@@ -225,8 +226,12 @@ class InterferenceResult:
         return out + self.authors_lines()
 
     def authors_trials(self) -> bool:
-        """Whether these runs are the authors' Table I trials (paper protocol, their motions 25-29)."""
-        trial = AUTHORS_TRIALS.get(self.config.scene)
+        """Whether these runs are the authors' Table I trials (paper protocol, their motions 25-29).
+
+        As :func:`~services.experiments.protocol.authors_trial` recognised them, by the library's values: by the class's
+        name, a generated library's compound_1 was compared with the authors' costs.
+        """
+        trial = self.trial
         return (self.config.protocol == "paper" and trial is not None and self.human.name == trial[0]
                 and tuple(self.demos[:len(trial[1])]) == trial[1][:len(self.demos)])
 
@@ -285,7 +290,7 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
     scene = load_scene(cfg.scene)
     cfg = dataclasses.replace(cfg, scene=scene.name)  # the result names its scene (PR2TwoCupsSide -> its file name)
     lib = load_experiment_library(cfg.library, scene)
-    trial = authors_trial(cfg.trials, prot, scene.name, lib.class_names)
+    trial = authors_trial(cfg.trials, prot, scene.name, lib)
     human = human_class(lib, scene, trial, cfg.human_cup)
     pool = lib.by_class(human.label)
     picked, how = table1_demos(len(pool), human.held_out(len(pool), cfg.demos), trial, cfg.selection_seed, cfg.draw)
@@ -304,7 +309,7 @@ def run_interference(cfg: InterferenceConfig, progress: Callable[[str], None] = 
     pacing = run_pacing(prot, scene.name, weights)
     if cfg.path_per_step is not None and pacing["path_per_step"]:
         pacing["path_per_step"] = cfg.path_per_step
-    result = InterferenceResult(cfg, lib.source, human, [d.index for d in demos])
+    result = InterferenceResult(cfg, lib.source, human, [d.index for d in demos], trial=trial)
     total, done = len(demos) * cfg.seeds * len(variants), 0
     paths = {demo.index: human_file(lib, demo, Path(cfg.work_dir) / "humans") for demo in demos}
     finals: dict[int, Any] = {}

@@ -23,7 +23,9 @@ and line, and what the product does differently):
 * Table I: the executed path's penetration integrated along its configuration-space length, sampled every
   0.005, against the final prediction (``Trajectory::cost()`` after ``run()``);
 * trials: on the paper's library the authors' human motions, 25-29 (side scene) and 77 (facing scene), the
-  library indexed as 25 x class + demonstration: compound_1 #0-4 and compound_3 #2;
+  library indexed as 25 x class + demonstration: compound_1 #0-4 and compound_3 #2; the paper's library is
+  recognised by those demonstrations' values (:data:`AUTHORS_DIGESTS`), not by its class names, which every
+  CSV library has;
 * scenes: Table I in the authors' side-by-side scene, ``PR2TwoCupsSideParallel`` (the one
   ``launch_pipeline_parallel_side_by_side`` loads; the robot beside the human), Fig. 9 in
   ``PR2TwoCupsFacing`` (its ``Parallel`` variant holds the same poses).
@@ -31,16 +33,23 @@ and line, and what the product does differently):
 
 from __future__ import annotations
 
+import hashlib
+import logging
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from shared.runtime import UserError
 
+if TYPE_CHECKING:
+    from shared.library import MotionLibrary
+
+log = logging.getLogger(__name__)
+
 __all__ = ["PROTOCOLS", "Protocol", "PAPER", "PRODUCT", "protocol", "move3d_path_weights", "AUTHORS_TRIALS", "TRIALS",
-           "authors_trial", "run_pacing", "settings_run"]
+           "authors_trial", "trial_digest", "AUTHORS_DIGESTS", "run_pacing", "settings_run"]
 
 PROTOCOLS = ("product", "paper")
 
@@ -57,6 +66,9 @@ AUTHORS_TRIALS = {"pr2_two_cups_side_parallel": ("compound_1", (0, 1, 2, 3, 4)),
                   "pr2_two_cups_side": ("compound_1", (0, 1, 2, 3, 4)), "pr2_two_cups_facing": ("compound_3", (2,))}
 """The authors' human motions per scene, as (class, demonstrations) of the paper's library: ids 25-29 and 77
 (move3d-launch ``human_traj_id``; comments of ``HRICS_initOccupancyPredictionFramework``), id = 25 x class + demo."""
+
+AUTHORS_DIGESTS = {("compound_1", (0, 1, 2, 3, 4)): "47c6606b93489145", ("compound_3", (2,)): "fa434d7949fb6406"}
+""":func:`trial_digest` of each authors' trial in the paper's library (its CSVs, or an .npz converted from them)."""
 
 _R_INV_MAX_99 = 5315.97
 """Largest entry of R^-1 for the authors' 99 free waypoints (their 5-point acceleration stencil, no dt scaling)."""
@@ -138,25 +150,52 @@ def protocol(name: str) -> Protocol:
 TRIALS = ("auto", "authors", "cup")
 
 
-def authors_trial(trials: str, prot: Protocol, scene: str, class_names: list[str]
+def trial_digest(library: MotionLibrary, trial: tuple[str, tuple[int, ...]]) -> str:
+    """A digest of the values of ``trial``'s demonstrations in ``library`` ("" where it lacks one of them).
+
+    Rounded to 1e-9, the float64 values hash the same from the CSVs, from an .npz converted from them and from
+    CSVs written back (``%.17g``).
+    """
+    names = list(library.class_names)
+    pool = library.by_class(names.index(trial[0])) if trial[0] in names else []
+    if not trial[1] or max(trial[1]) >= len(pool):
+        return ""
+    h = hashlib.sha256()
+    for i in trial[1]:
+        h.update(np.round(np.asarray(pool[i].features, dtype=np.float64), 9).astype("<f8").tobytes())
+    return h.hexdigest()[:16]
+
+
+def _not_theirs(library: MotionLibrary, trial: tuple[str, tuple[int, ...]]) -> str:
+    """Why ``library`` is not the paper's, where the authors' ``trial`` was run ("": it is)."""
+    digest = trial_digest(library, trial)
+    if not digest:
+        return f"its {trial[0]} has fewer than {max(trial[1]) + 1} demonstrations"
+    if digest != AUTHORS_DIGESTS[trial]:
+        return (f"its {trial[0]} demonstrations {', '.join(map(str, trial[1]))} are not the paper's (digest {digest}, "
+                f"the paper's {AUTHORS_DIGESTS[trial]})")
+    return ""
+
+
+def authors_trial(trials: str, prot: Protocol, scene: str, library: MotionLibrary
                   ) -> tuple[str, tuple[int, ...]] | None:
     """The authors' (class, demonstrations) to run, or None for the product's choice (the class at the human's cup).
 
     Args:
-        trials: ``authors``, ``cup`` or ``auto`` (the authors' with a protocol that says so, where the library has
-            their class: the paper's library).
+        trials: ``authors``, ``cup`` or ``auto`` (the authors' with a protocol that says so, on the paper's library).
         prot: The protocol.
         scene: The scene's name (the authors ran one motion set per scene).
-        class_names: The library's classes.
+        library: The library. The paper's is recognised by its values (:data:`AUTHORS_DIGESTS`): any CSV library
+            has a class ``compound_1``.
 
     Raises:
         ValueError: An unknown ``trials``.
-        UserError: ``authors`` where the scene has no authors' trial or the library lacks their class.
+        UserError: ``authors`` where the scene has no authors' trial or the library is not the paper's.
     """
     if trials not in TRIALS:
         raise ValueError(f"trials must be one of {', '.join(TRIALS)}, got {trials!r}")
     trial = AUTHORS_TRIALS.get(scene)
-    usable = trial is not None and trial[0] in class_names
+    usable = trial is not None and trial[0] in library.class_names
     if trials == "authors" and trial is None:
         raise UserError(f"--trials authors: the authors ran no trial in scene {scene} (they ran "
                         f"{', '.join(f'{k}: {v[0]}' for k, v in AUTHORS_TRIALS.items())})")
@@ -164,6 +203,14 @@ def authors_trial(trials: str, prot: Protocol, scene: str, class_names: list[str
         raise UserError(f"--trials authors: this library has no class {trial[0]!r}, the one the authors ran in "
                         f"scene {scene} (their motions are of the paper's library, "
                         "../shared/data/paper-library)")
+    why = _not_theirs(library, trial) if usable else ""
+    if trials == "authors" and why:  # its compound_1 is not the motions the authors' costs are of
+        raise UserError(f"--trials authors: this library is not the paper's: {why} (the authors' motions are of "
+                        "../shared/data/paper-library)")
+    if trials == "auto" and prot.authors_trials and usable and why:
+        log.warning("%s", f"{prot.name} protocol: the authors' trials and the comparison with their runs are skipped: "
+                          f"this library is not the paper's: {why}")
+        return None
     if trials == "authors" or (trials == "auto" and prot.authors_trials and usable):
         return trial
     return None

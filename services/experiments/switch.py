@@ -202,7 +202,7 @@ def run_switch(cfg: SwitchConfig, progress: Callable[[str], None] = print, compi
     scene = load_scene(cfg.scene)
     cfg = dataclasses.replace(cfg, scene=scene.name)
     lib = load_experiment_library(cfg.library, scene)
-    trial = authors_trial(cfg.trials, prot, scene.name, lib.class_names)
+    trial = authors_trial(cfg.trials, prot, scene.name, lib)
     human = human_class(lib, scene, trial, cfg.human_cup)
     cfg = dataclasses.replace(cfg, human_cup=human.cup)
     demos = lib.by_class(human.label)

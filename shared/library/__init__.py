@@ -30,7 +30,7 @@ and the issues found when the library was read.
 
 Modules: :mod:`~shared.library.motions` (the library's types, held-out splits),
 :mod:`~shared.library.validation` (the rules every demonstration passes),
-:mod:`~shared.library.paper_csv` (the paper's CSV format, read and written),
+:mod:`~shared.library.paper_csv` (the paper's CSV format, read; :mod:`~shared.library.csv_write` writes it),
 :mod:`~shared.library.npz` (the native format), :mod:`~shared.library.report` (what reading dropped,
 one line per file); :func:`load_library` (here) reads either and says what it dropped.
 """

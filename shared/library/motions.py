@@ -15,8 +15,8 @@ import numpy as np
 
 from shared.feature_sets import HERAKLES_NAMES, HERAKLES_RANGES, HERAKLES_UNITS, FeatureMapping, mapping_for
 
-__all__ = ["FEATURE_NAMES", "FEATURE_UNITS", "PLAUSIBLE_RANGES", "LibraryError", "Demonstration", "LibraryIssue",
-           "MotionLibrary", "heldout_split"]
+__all__ = ["FEATURE_NAMES", "FEATURE_UNITS", "PLAUSIBLE_RANGES", "NO_VALID_DEMONSTRATION", "LibraryError",
+           "Demonstration", "LibraryIssue", "MotionLibrary", "heldout_split"]
 
 FEATURE_NAMES: tuple[str, ...] = HERAKLES_NAMES
 """The paper's 12 features of a posture, in its (and its CSV's) order (``shared.feature_sets``)."""
@@ -25,6 +25,10 @@ FEATURE_UNITS: tuple[str, ...] = HERAKLES_UNITS
 
 PLAUSIBLE_RANGES: dict[str, tuple[float, float]] = HERAKLES_RANGES
 """Per-feature ``(low, high)`` bounds of a plausible human posture (recorder frame)."""
+
+
+NO_VALID_DEMONSTRATION = "holds no valid demonstration"
+"""The end of a class file's summary issue, said after the issues that left it empty (not one of them)."""
 
 
 class LibraryError(ValueError):
@@ -74,6 +78,11 @@ class LibraryIssue:
         where = "whole file" if self.block < 0 else f"block {self.block}"
         return f"{self.class_name} {where}: {self.reason}"
 
+    @property
+    def summary(self) -> bool:
+        """Whether this is a class file's "holds no valid demonstration" line, a sum of its other issues."""
+        return self.block < 0 and self.reason.endswith(NO_VALID_DEMONSTRATION)
+
 
 @dataclass
 class MotionLibrary:
@@ -85,6 +94,7 @@ class MotionLibrary:
         issues: Malformed demonstrations that were left out.
         source: Path the library was read from (or a description for generated ones).
         feature_names: The F features of every demonstration, in column order (default: the paper's 12).
+        origin: What a converted library (an ``.npz``) was converted from, as it was written ("" otherwise).
     """
 
     class_names: list[str]
@@ -92,6 +102,7 @@ class MotionLibrary:
     issues: list[LibraryIssue] = field(default_factory=list)
     source: str = ""
     feature_names: tuple[str, ...] = FEATURE_NAMES
+    origin: str = ""
 
     @property
     def n_classes(self) -> int:

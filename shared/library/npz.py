@@ -3,6 +3,7 @@
 It holds the concatenated features, per-demonstration labels, lengths, indices and sources, the
 class names, the feature names and the issues found when the library was read
 (:data:`NPZ_FORMAT` is the layout's version). A stored demonstration is validated again on reading.
+The library read names the ``.npz`` as its ``source``; the path it was converted from is its ``origin``.
 """
 
 from __future__ import annotations
@@ -115,8 +116,12 @@ def _library(path: Path, data: dict[str, np.ndarray], where: str) -> MotionLibra
         if data[key].size and data[key].dtype.kind not in "iu":
             raise LibraryError(f"{where}: {key} must hold integers, got {data[key].dtype}")
     version = data["format_version"]
-    if version.dtype.kind not in "iu" or version.ndim != 0 or int(version) != NPZ_FORMAT:
-        raise LibraryError(f"{where}: format_version {version.tolist()!r}, this build reads {NPZ_FORMAT}")
+    if version.ndim != 0:  # [1] said "format_version [1], this build reads 1"
+        raise LibraryError(f"{where}: format_version must be a scalar, got shape {version.shape}")
+    if version.dtype.kind not in "iu":
+        raise LibraryError(f"{where}: format_version must be an integer, got {version.dtype} {version.tolist()!r}")
+    if int(version) != NPZ_FORMAT:
+        raise LibraryError(f"{where}: format_version {int(version)}, this build reads {NPZ_FORMAT}")
     feature_names = tuple(str(s) for s in data["feature_names"].tolist())
     if not feature_names or len(set(feature_names)) != len(feature_names):
         raise LibraryError(f"{where}: feature_names must be unique names of at least one feature, got "
@@ -162,4 +167,6 @@ def _library(path: Path, data: dict[str, np.ndarray], where: str) -> MotionLibra
         f.setflags(write=False)
         demos.append(Demonstration(label, names[label], int(indices[k]), f, sources[k]))
     demos.sort(key=lambda d: (d.label, d.index))
-    return MotionLibrary(names, demos, issues, str(data["source"]) or str(path), feature_names)
+    # the file read is the source (what every message names); what it was converted from is its origin
+    origin = str(data["source"]) if data["source"].ndim == 0 else ""
+    return MotionLibrary(names, demos, issues, str(path), feature_names, origin=origin)

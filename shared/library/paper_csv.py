@@ -10,8 +10,12 @@ another count is left out with one issue line saying how many lines of which cou
 
 On top of :func:`shared.library.validation.validate_block`, a block (demonstration) must have the
 library's column count of numeric values in every row, an index column counting 0, 1, 2, ... without
-gaps, and must not be much shorter than its file's other blocks (:data:`TRUNCATED_FRACTION`). A block
-that breaks a rule is left out and reported as a :class:`LibraryIssue` (class, block index, reason).
+gaps, must not be much shorter than its file's other blocks (:data:`TRUNCATED_FRACTION`) and must not
+repeat an earlier block's values (a file joined to itself). A block that breaks a rule is left out and
+reported as a :class:`LibraryIssue` (class, block index, reason). A value is a plain number (``1_0`` is
+not 10); beside ``compound_<digits>.csv`` files no other .csv is a class; a kept last block shorter than
+its file's others, all of one length, is said (the file may have been cut); a file over
+:data:`MAX_CLASS_FILE_BYTES` is refused. Writing: :mod:`~shared.library.csv_write`.
 """
 
 from __future__ import annotations
@@ -24,16 +28,19 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.atomic_file import make_parent
 from shared.feature_sets import generic_names
 
-from .motions import FEATURE_NAMES, Demonstration, LibraryError, LibraryIssue, MotionLibrary
+from .csv_write import write_csv_dir
+from .motions import FEATURE_NAMES, NO_VALID_DEMONSTRATION, Demonstration, LibraryError, LibraryIssue, MotionLibrary
 from .validation import line_ranges, validate_block
 
-__all__ = ["TRUNCATED_FRACTION", "load_csv_class", "load_csv_dir", "write_csv_dir"]
+__all__ = ["MAX_CLASS_FILE_BYTES", "TRUNCATED_FRACTION", "load_csv_class", "load_csv_dir", "write_csv_dir"]
 
 TRUNCATED_FRACTION = 0.5
 """A block shorter than this fraction of its file's median block length is reported as truncated."""
+
+MAX_CLASS_FILE_BYTES = 200_000_000
+"""Largest class file read: parsing holds about 9 times a file's size in memory (the paper's are 0.3 MB each)."""
 
 _PAPER_COLS = 1 + len(FEATURE_NAMES)
 
@@ -76,10 +83,17 @@ class _Block:
         return out
 
 
+def _number(text: str) -> float:
+    """A field's value; ``float()`` but for its digit separators (``1_0`` is 10 to it, a typo in a CSV)."""
+    if "_" in text:
+        raise ValueError(f"not a number: {text!r}")
+    return float(text)
+
+
 def _parse_row(line: str) -> tuple[list[float] | None, str | None]:
     parts = line.split(",")
     try:
-        values = [float(p) for p in parts]
+        values = [_number(p) for p in parts]
     except ValueError:
         bad = next(p for p in parts if not _is_float(p))
         return None, f"non-numeric value {bad.strip()[:20]!r}"
@@ -88,7 +102,7 @@ def _parse_row(line: str) -> tuple[list[float] | None, str | None]:
 
 def _is_float(text: str) -> bool:
     try:
-        float(text)
+        _number(text)
     except ValueError:
         return False
     return True
@@ -97,6 +111,11 @@ def _is_float(text: str) -> bool:
 def _read_lines(p: Path) -> list[tuple[int, str]]:
     """The non-blank lines of a class file with their 1-based line numbers."""
     try:
+        size = p.stat().st_size
+        if size > MAX_CLASS_FILE_BYTES:
+            raise LibraryError(f"library file {str(p)!r}: {size / 1e6:.0f} MB, over the "
+                               f"{MAX_CLASS_FILE_BYTES / 1e6:.0f} MB a class file may have (reading holds about 9 "
+                               "times its size in memory)")
         text = p.read_text(encoding="utf-8-sig", errors="replace")  # a byte-order mark is not part of line 1
     except OSError as exc:
         raise LibraryError(f"cannot read library file {str(p)!r}: {exc.strerror or exc}") from None
@@ -133,8 +152,8 @@ def _numbered_header(lines: list[tuple[int, str]]) -> bool:
     if len(lines) < 2 or not all(_is_float(f) for f in fields) or len(fields) < 3:
         return False
     second = lines[1][1].split(",", 1)[0]
-    return [float(f) for f in fields] == [float(i) for i in range(len(fields))] and _is_float(second) \
-        and float(second) == 0.0
+    return [_number(f) for f in fields] == [float(i) for i in range(len(fields))] and _is_float(second) \
+        and _number(second) == 0.0
 
 
 def _feature_names_for(n_cols: int) -> tuple[str, ...]:
@@ -180,7 +199,7 @@ def _parse_class(p: Path, lines: list[tuple[int, str]], label: int, name: str, n
         # a row that does not parse still starts a demonstration when its sample index is 0: else the row and
         # the demonstration after it would be merged into the one before
         first = line.split(",", 1)[0]
-        idx: float | None = values[0] if values else (float(first) if _is_float(first) else None)
+        idx: float | None = values[0] if values else (_number(first) if _is_float(first) else None)
         starts = idx == 0.0 or not blocks
         if starts:
             blocks.append(_Block(first_line=lineno))
@@ -215,6 +234,7 @@ def _parse_class(p: Path, lines: list[tuple[int, str]], label: int, name: str, n
         blk.lines.append(lineno)
     demos: list[Demonstration] = []
     issues: list[LibraryIssue] = []
+    first_of: dict[bytes, int] = {}  # a demonstration's values -> the block they were first read from
     typical = float(np.median([len(b.rows) for b in blocks])) if blocks else 0.0
     for b, blk in enumerate(blocks):
         where = f"lines {blk.first_line}-{blk.last_line}"
@@ -229,11 +249,33 @@ def _parse_class(p: Path, lines: list[tuple[int, str]], label: int, name: str, n
             issues.append(LibraryIssue(name, b, f"{where}: " + "; ".join(reasons)))
             continue
         feats = np.asarray(blk.rows, dtype=np.float64)
+        twin = first_of.setdefault(feats.tobytes(), b)
+        if twin != b:  # a file joined to itself: held out, a demonstration would be recognised by its own copy
+            issues.append(LibraryIssue(name, b, f"{where}: the same values as block {twin} (lines "
+                                       f"{blocks[twin].first_line}-{blocks[twin].last_line}): a repeated "
+                                       "demonstration, left out"))
+            continue
         feats.setflags(write=False)
         demos.append(Demonstration(label, name, len(demos), feats, f"{p.name}#block {b}"))
     if not demos:
-        issues.append(LibraryIssue(name, -1, f"{p.name} holds no valid demonstration"))
+        issues.append(LibraryIssue(name, -1, f"{p.name} {NO_VALID_DEMONSTRATION}"))
+    elif demos[-1].source == f"{p.name}#block {len(blocks) - 1}":
+        issues.extend(_cut_short(p, name, blocks[-1], demos))
     return demos, issues
+
+
+def _cut_short(p: Path, name: str, last: _Block, demos: list[Demonstration]) -> list[LibraryIssue]:
+    """A note on a kept last demonstration shorter than the file's others, all of one length: a file cut short.
+
+    Cut at a line end, the rest of the file is valid; the last block passes when it keeps
+    :data:`TRUNCATED_FRACTION` of its samples, and a variable-length library has shorter ones of its own.
+    """
+    lengths = {d.n_samples for d in demos[:-1]}
+    if len(demos) < 3 or len(lengths) != 1 or demos[-1].n_samples >= min(lengths):
+        return []
+    return [LibraryIssue(name, -1, f"{p.name}: its last demonstration (lines {last.first_line}-{last.last_line}) "
+                         f"has {demos[-1].n_samples} samples where its other {len(demos) - 1} all have "
+                         f"{min(lengths)}: the file may have been cut short (kept)")]
 
 
 def _class_number(p: Path) -> int | None:
@@ -243,13 +285,16 @@ def _class_number(p: Path) -> int | None:
 
 
 def _class_files(directory: Path) -> list[Path]:
+    """The class files: ``compound_<digits>.csv`` where there are any, else every .csv.
+
+    ``compound_3 (copy).csv`` or ``compound_2.bak.csv`` beside numbered files are no classes (they split a
+    class's posterior with its copy); :func:`_unread` names them.
+    """
     files = list(directory.glob("compound_*.csv"))
-    if files:
-        def key(p: Path) -> tuple[int, str]:
-            n = _class_number(p)
-            return (1 << 30 if n is None else n, p.name)
-        return sorted(files, key=key)
-    return sorted(directory.glob("*.csv"))
+    numbered = {f: n for f in files if (n := _class_number(f)) is not None}
+    if numbered:
+        return sorted(numbered, key=lambda f: (numbered[f], f.name))
+    return sorted(files or directory.glob("*.csv"))
 
 
 def _library_columns(directory: Path, files: list[Path], counts: list[Counter[int]]) -> int:
@@ -328,28 +373,3 @@ def _unread(directory: Path, files: list[Path]) -> list[LibraryIssue]:
         out.append(LibraryIssue(f"compound_{missing[0]}", -1, f"{shown} missing: the classes are numbered in their "
                                 f"files' order (class {files.index(after)} is {after.stem})"))
     return out
-
-
-def write_csv_dir(lib: MotionLibrary, directory: str | Path) -> list[Path]:
-    """Write ``lib`` in the paper's format: ``compound_<m>.csv`` per class (index + its F features).
-
-    Args:
-        lib: The library.
-        directory: Output directory (created).
-
-    Returns:
-        The files written. Any other ``compound_*.csv`` in ``directory`` (an earlier, larger library's) is
-        removed: the reader takes every one, and would mix the two libraries.
-    """
-    out = Path(directory)
-    make_parent(out / "compound_0.csv")
-    files = []
-    for m in range(lib.n_classes):
-        rows = [np.column_stack([np.arange(d.n_samples), d.features]) for d in lib.by_class(m)]
-        path = out / f"compound_{m}.csv"
-        np.savetxt(path, np.concatenate(rows) if rows else np.zeros((0, 1 + lib.n_features)), delimiter=",",
-                   fmt=["%d"] + ["%.17g"] * lib.n_features)  # every float64 back as written (%.9g: 5e-9 off)
-        files.append(path)
-    for stale in set(out.glob("compound_*.csv")) - set(files):
-        stale.unlink()
-    return files

@@ -11,15 +11,17 @@ from services.experiments.authors import TABLE1_RUNS
 from services.experiments.heldout import CupClass
 from services.experiments.interference import InterferenceConfig, InterferenceResult
 from services.experiments.planners import Timing
-from services.experiments.protocol import PAPER
+from services.experiments.protocol import AUTHORS_TRIALS, PAPER
 from services.experiments.scoring import RunScore
 from shared.runtime import UserError
+
+TRIAL = AUTHORS_TRIALS["pr2_two_cups_side_parallel"]  # what authors_trial returns on the paper's library
 
 
 def test_the_authors_comparison_puts_sample_standard_deviations_side_by_side() -> None:
     """Theirs were sample (ddof 1), ours population (ddof 0): 7.574 against 7.185 on the same 10 numbers."""
     cfg = InterferenceConfig(scene="pr2_two_cups_side_parallel", protocol="paper", demos=1, seeds=3)
-    res = InterferenceResult(cfg, "paper", CupClass("blue_cup", 0, "compound_1", 0.4), [0])
+    res = InterferenceResult(cfg, "paper", CupClass("blue_cup", 0, "compound_1", 0.4), [0], trial=TRIAL)
     for seed, value in enumerate((1.0, 2.0, 4.0)):
         for name in ("basic", "least_penetration", "current"):
             res.runs.append(RunScore(0, seed, name, value, 0.0, 0.0, 0.1, 0.0, 0.0, None, (), 30.0))
@@ -91,7 +93,7 @@ def test_more_demos_than_the_authors_five_run_their_five_then_the_class_s_others
         CupClass("blue_cup", 1, "compound_1", 0.4).held_out(25, 25)
     # beside the authors' runs: their five motions, not the others (which have no run of theirs)
     cfg = InterferenceConfig(scene="pr2_two_cups_side_parallel", protocol="paper", demos=6, seeds=2)
-    res = InterferenceResult(cfg, "paper", CupClass("blue_cup", 1, "compound_1", 0.4), list(range(6)))
+    res = InterferenceResult(cfg, "paper", CupClass("blue_cup", 1, "compound_1", 0.4), list(range(6)), trial=TRIAL)
     for demo in range(6):
         for seed in range(2):
             for name in ("basic", "least_penetration", "current"):
@@ -118,3 +120,13 @@ def test_the_json_says_the_stomp_and_the_pace_that_ran(protocol, pace, timing) -
     asked = dataclasses.replace(cfg, timing=Timing(rollouts=6, reuse=2))
     ran = InterferenceResult(asked, "synthetic", res.human, [0], res.runs).to_json()["timing"]
     assert (ran["rollouts"], ran["reuse"]) == (6, 2)
+
+
+def test_a_result_not_run_on_the_authors_trial_is_not_compared_with_their_runs() -> None:
+    """A generated library's compound_1 (any CSV library has one) was compared with the authors' costs by its name."""
+    cfg = InterferenceConfig(scene="pr2_two_cups_side_parallel", protocol="paper", demos=1, seeds=1)
+    res = InterferenceResult(cfg, "generated", CupClass("blue_cup", 0, "compound_1", 0.4), [0])  # no trial
+    for name in ("basic", "least_penetration"):
+        res.runs.append(RunScore(0, 0, name, 1.0, 0.0, 0.0, 0.1, 0.0, 0.0, None, (), 30.0))
+    assert not res.authors_trials() and res.authors_comparison() == []
+    assert dataclasses.replace(res, trial=TRIAL).authors_comparison() != []
