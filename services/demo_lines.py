@@ -17,9 +17,9 @@ def log_phrase(mcap: Path, plan_topic: str | None = None, received: int = 0, sum
 
     With ``plan_topic``: its plans too, and how many of the ``received`` ones (the rows printed) came after the
     executor closed it, or how many it logged after the last row (the rows stop at Ctrl-C; the executor logs until
-    it has stopped). ``summarised``: the plans the summary counts (real time: those made before the robot's last
-    state; the others were never executed, and `foresight log table` leaves them out as the summary does: it said
-    it printed every one, and printed 23 of 29; a review).
+    it has stopped). ``summarised``: the plans the summary counts (real time: those the executor adopted,
+    :mod:`services.adopted_plans`; the others were never executed, and `foresight log table` leaves them out as the
+    summary does: it said it printed every one, and printed 23 of 29; a review).
     """
     if not mcap.is_file():
         return "no log was written (the executor ended before it opened one, or had not started)"
@@ -34,8 +34,8 @@ def log_phrase(mcap: Path, plan_topic: str | None = None, received: int = 0, sum
         logged = sum(c.count for c in lf.channels.values() if c.topic == plan_topic)
         late = received - logged
         closed = "came after the executor closed it" if lf.complete else "are not in it: it ends before them"
-        counted = (f"; the summary and `foresight log table {mcap}` count the {summarised} made before the robot's "
-                   "last state, the others were never executed" if summarised is not None and summarised < logged
+        counted = (f"; the summary and `foresight log table {mcap}` count the {summarised} the executor adopted, "
+                   "the others were never executed" if summarised is not None and summarised < logged
                    else f": `foresight log table {mcap}` prints every one")
         text += f", {logged} plans" + (f" (the last {late} {closed})" if late > 0 else
                                        f" ({-late} after the rows above, made while the executor stopped{counted})"
@@ -44,10 +44,10 @@ def log_phrase(mcap: Path, plan_topic: str | None = None, received: int = 0, sum
 
 
 def unexecuted(k: int) -> str:
-    """Why the last ``k`` rows of a real-time run's table are not in its summary."""
-    rows, them = ("row above was a plan", "it") if k == 1 else (f"{k} rows above were plans", "them")
-    return (f"the last {rows} made from the run's last state (the goal reached, or the run over), never executed: "
-            f"the summary leaves {them} out")
+    """Why ``k`` rows of a real-time run's table are not in its summary."""
+    rows, them = ("one row above was a plan", "it") if k == 1 else (f"{k} rows above were plans", "them")
+    return (f"{rows} the executor never adopted (overtaken by a newer plan before its next state, or made as the "
+            f"run ended): the summary leaves {them} out")
 
 
 class Lines:

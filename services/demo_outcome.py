@@ -25,8 +25,8 @@ from shared.recording.reader import read_log
 from shared.runtime import UserError
 from shared.scene import Scene
 
-__all__ = ["Outcome", "measure_run", "verdict", "outcome_lines", "cut_words", "novelty_counts", "novelty_lines",
-           "INTERFERENCE_EQUAL"]
+__all__ = ["Outcome", "measure_run", "reached_after_last", "verdict", "outcome_lines", "cut_words", "novelty_counts",
+           "novelty_lines", "INTERFERENCE_EQUAL"]
 
 INTERFERENCE_EQUAL = 0.005
 """Interferences nearer than this are a tie: the verdict prints them to two decimals, and a real-time run's 0.001 /
@@ -57,6 +57,9 @@ class Outcome:
             None: one a replanning period apart, as in lock-step).
         unfamiliar: Poses the predictor's novelty test called unlike every class (:func:`novelty_counts`).
         judged: Poses whose class posterior the run's log holds (what ``unfamiliar`` is out of).
+        reached_t_s: When the goal was reached (s into the run; None: never).
+        reached_after: Reached after the table's last step (lock-step: the robot ends its last plan then, and
+            ``reached_step`` counts on past it, "reached step 22" of a 20-step run; a review): said by its time.
     """
 
     planner: str
@@ -76,6 +79,8 @@ class Outcome:
     plan_t_s: np.ndarray | None = field(default=None, repr=False)
     unfamiliar: int = 0
     judged: int = 0
+    reached_t_s: float | None = None
+    reached_after: bool = False
 
     def to_json(self) -> dict[str, Any]:
         """The scalar fields (the arrays stay out of ``--json``)."""
@@ -84,7 +89,8 @@ class Outcome:
                 "min_clearance_m": self.min_clearance_m if math.isfinite(self.min_clearance_m) else None,
                 "switch_step": self.switch_step, "reached_step": self.reached_step,
                 "chosen_goal_per_step": self.chosen_goal_per_step, "mcap_path": self.mcap_path,
-                "cut_short": self.cut_short, "unfamiliar_poses": self.unfamiliar, "poses_judged": self.judged}
+                "cut_short": self.cut_short, "unfamiliar_poses": self.unfamiliar, "poses_judged": self.judged,
+                "reached_t_s": self.reached_t_s, "reached_after_last_step": self.reached_after}
 
 
 def measure_run(planner: str, states: list[RobotState], poses: list[HumanPose], reference: OccupancyGrid | None,
@@ -117,7 +123,20 @@ def measure_run(planner: str, states: list[RobotState], poses: list[HumanPose], 
                    summary.switch_step, summary.reached_step, list(summary.chosen_goal_per_step), t, ee, clearance,
                    summary.mcap_path, str(summary.extra.get("cut_short", "")), summary.unit,
                    np.array([float(s["t_s"]) for s in summary.steps], dtype=np.float64),
-                   *novelty_counts(summary.mcap_path))
+                   *novelty_counts(summary.mcap_path), summary.reached_t_s, reached_after_last(summary))
+
+
+def reached_after_last(summary: Any) -> bool:
+    """Whether a run's goal was reached after its table's last step (``reached_step`` past every row's)."""
+    last = max((s["step"] for s in summary.steps), default=None)
+    return summary.reached_step is not None and last is not None and summary.reached_step > last
+
+
+def _reached_cell(o: Outcome) -> str:
+    """The table's "reached" cell: the step, or after the last one its time (its step number is past the run's)."""
+    if o.reached_after and o.reached_t_s is not None:
+        return f"after ({o.reached_t_s:.1f} s)"
+    return "-" if o.reached_step is None else str(o.reached_step)
 
 
 def novelty_counts(mcap_path: str | None) -> tuple[int, int]:
@@ -241,14 +260,14 @@ def outcome_lines(outcomes: list[Outcome], against: str = "the prediction planne
            f"comparison (interference: the paper's Table I measure against {against}; contact: overlap with the "
            "real human's body):",
            f"  {'planner':<20}{'interference':>13}{'contact s':>11}{'within 5 cm s':>15}{'min clearance m':>17}"
-           f"{'switch ' + unit:>13}{'reached ' + unit:>14}"]
+           f"{'switch ' + unit:>13}{'reached ' + unit:>17}"]
     for o in outcomes:
         sw = "-" if o.switch_step is None else str(o.switch_step)
-        re = "-" if o.reached_step is None else str(o.reached_step)
+        re = _reached_cell(o)
         clear = f"{o.min_clearance_m:+.3f}" if math.isfinite(o.min_clearance_m) else "-"
         name = f"{o.planner} *" if o.cut_short else o.planner
         out.append(f"  {name:<20}{o.interference:>13.3f}{o.contact_s:>11.2f}{o.near_s:>15.2f}{clear:>17}{sw:>13}"
-                   f"{re:>14}")
+                   f"{re:>17}")
     out += [f"  * {o.planner}: {o.cut_short}" for o in outcomes if o.cut_short]
     text = verdict(outcomes)
     missing = not_run(outcomes, planned or [])

@@ -34,6 +34,7 @@ from services.executor.__main__ import INCOMPLETE
 from services.executor.result import LOG_INCOMPLETE
 from services.processes import ServiceProcess, free_port
 from services.run_log import RunRecorder, keep_posterior, recorder_from_log
+from services.run_table import step_entry, table_header, table_row
 from services.scenario import (
     Scenario,
     Summary,
@@ -41,10 +42,7 @@ from services.scenario import (
     choose_demonstration,
     model_for,
     posterior_for,
-    step_entry,
     summarise,
-    table_header,
-    table_row,
 )
 from services.supervisor import Supervisor
 from shared.config import ZenohConfig
@@ -299,8 +297,9 @@ def run_once(cfg: DemoConfig, planner: str, stop: threading.Event, out: Callable
     from shared.robot import PR2
 
     summary = summarise(plans, states, final, posteriors, PR2.from_scene(scene), demo.class_name,
-                        str(mcap) if mcap.is_file() else None, t0=run_start[0]) if plans else None
-    n = len(summary.steps) if summary is not None else 0  # the plans of the run (not one made after its last state)
+                        str(mcap) if mcap.is_file() else None, t0=run_start[0],
+                        received=recorder.plan_arrivals()) if plans else None
+    n = len(summary.steps) if summary is not None else 0  # the plans the executor adopted (services.adopted_plans)
     if realtime and (whole or not status) and n < received:  # rows are printed as plans come, before the last state
         out(f"foresight demo: {unexecuted(received - n)}")
     done = f"{n} of {cfg.steps} steps" if cfg.mode == "lockstep" else f"{n} plans"

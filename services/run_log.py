@@ -13,6 +13,7 @@ final prediction, the recognised class, the interference) differed from ``foresi
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 
 from shared.protocol import (
@@ -60,16 +61,18 @@ class RunRecorder:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self.plans: list[Plan] = []
+        self.plan_times: list[float] = []  # when each plan arrived (s, wall clock): which the executor adopted
         self.states: list[RobotState] = []
         self.final_occupancy: OccupancyGrid | None = None
         self.posteriors: dict[int, ClassPosterior] = {}
         self.poses: list[HumanPose] = []
 
-    def on_message(self, msg: Message) -> None:
-        """Feed one received message."""
+    def on_message(self, msg: Message, received: float | None = None) -> None:
+        """Feed one received message; ``received``: when (s, wall clock; default now: a log's is its log time)."""
         with self._lock:
             if isinstance(msg, Plan):
                 self.plans.append(msg)
+                self.plan_times.append(time.time() if received is None else received)
             elif isinstance(msg, RobotState):
                 self.states.append(msg)
             elif isinstance(msg, OccupancyGrid):
@@ -85,12 +88,15 @@ class RunRecorder:
         with self._lock:
             return list(self.plans), list(self.states), self.final_occupancy, dict(self.posteriors)
 
+    def plan_arrivals(self) -> list[float]:
+        """When each plan of :meth:`snapshot` arrived (``summarise``'s ``received``: the plans the executor adopted)."""
+        with self._lock:
+            return list(self.plan_times)
+
     def human_poses(self) -> list[HumanPose]:
         """The human's poses received so far, in time order."""
         with self._lock:
             return sorted(self.poses, key=lambda p: (p.stamp, p.index))
-
-
 
 
 def recorder_from_log(path: Path, keys: Keys) -> RunRecorder | None:
@@ -107,7 +113,7 @@ def recorder_from_log(path: Path, keys: Keys) -> RunRecorder | None:
         for m in iter_messages(path):
             if m.topic in types:
                 try:
-                    recorder.on_message(decode(m.data, expected[m.topic]))
+                    recorder.on_message(decode(m.data, expected[m.topic]), m.log_time / 1e9)
                 except ProtocolError:
                     continue  # only valid payloads are on a key's channel; be tolerant anyway
     except (UserError, OSError, *DAMAGED):

@@ -21,9 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from services.adopted_plans import adopted
 from services.demo_inputs import DEFAULT_HUMAN_CLASS, human_label
 from services.executor.config import is_separation_hold
 from services.experiments.measures import interference
+from services.run_table import step_entry, table_header, table_row
 from shared.belief import recognised_class
 from shared.library import Demonstration, MotionLibrary
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
@@ -31,7 +33,7 @@ from shared.runtime import UserError
 from shared.scene import Scene
 
 __all__ = ["Scenario", "choose_demonstration", "model_for", "Summary", "summarise", "DEFAULT_HUMAN_CLASS",
-           "step_entry", "table_header", "table_row", "belief", "posterior_for"]
+           "belief", "posterior_for"]
 
 log = logging.getLogger("foresight.scenario")
 
@@ -156,44 +158,6 @@ def model_for(library: MotionLibrary, scene: Scene, held_out: Demonstration | Se
     return path
 
 
-def step_entry(plan: Plan, t0: float, step: int | None = None) -> dict[str, Any]:
-    """One row of the run's table (and of ``--json``'s ``steps``) for ``plan``.
-
-    Args:
-        plan: The plan.
-        t0: Start of the run on the plans' clock (0 in lock-step; the executor's first state in real time).
-        step: The row's number (default: the tick in lock-step, the planner's own step count in real time).
-
-    Returns:
-        ``step``, ``tick`` (-1 in real time), ``t_s`` (seconds into the run the plan was made), ``chosen``,
-        ``planning_ms``, ``occupancy_tick``, and ``cost_total`` / ``cost_human`` by goal name for the valid goals.
-    """
-    names = list(plan.goal_names)
-    if step is None:  # the tick in lock-step: a restarted planner counts its own steps from 0 again
-        step = plan.tick if plan.tick >= 0 else plan.step
-    return {"step": step, "tick": plan.tick, "t_s": float(plan.stamp - t0), "chosen": names[plan.chosen],
-            "planning_ms": plan.planning_ms, "occupancy_tick": plan.occupancy_tick,
-            "cost_total": {n: float(c) for n, c, v in zip(names, plan.cost_total, plan.valid, strict=True) if v},
-            "cost_human": {n: float(c) for n, c, v in zip(names, plan.cost_human, plan.valid, strict=True) if v}}
-
-
-def table_header(goal_names: list[str], unit: str = "step") -> str:
-    """The header of the run's table (one column per goal's total cost).
-
-    ``unit``: what a row is (a real-time run's rows are its plans, several a replanning step).
-    """
-    return (f"{unit:>4} {'t (s)':>6}  {'chosen':<12}" + "".join(f"{'cost ' + n:>16}" for n in goal_names)
-            + f"{'plan ms':>9}  human (belief)")
-
-
-def table_row(entry: dict[str, Any], goal_names: list[str], belief: str = "") -> str:
-    """One row of the run's table for a :func:`step_entry` (invalid goals: ``invalid``)."""
-    costs = "".join(f"{entry['cost_total'][n]:>16.3f}" if n in entry["cost_total"] else f"{'invalid':>16}"
-                    for n in goal_names)
-    return (f"{entry['step']:>4} {entry['t_s']:>6.2f}  {entry['chosen']:<12}{costs}{entry['planning_ms']:>9.0f}"
-            + (f"  {belief}" if belief else "")).rstrip()
-
-
 def _at(entry: dict[str, Any]) -> str:
     return f"{entry['step']} (t = {entry['t_s']:.2f} s)"
 
@@ -234,7 +198,9 @@ class Summary:
                "reached_t_s": self.reached_t_s, "recognised_p": self.recognised_p,
                "recognised_index": self.recognised_index, "separation_held_s": self.separation_held_s,
                "separation_at_end": self.separation_at_end, "left_goal": self.left_goal, "unit": self.unit,
-               "interference_scored": self.scored}
+               "interference_scored": self.scored,  # lock-step's reached_step counts on past the last row's
+               "reached_after_last_step": self.reached_step is not None and bool(self.steps)
+               and self.reached_step > max(s["step"] for s in self.steps)}
         out.update(self.extra)
         return out
 
@@ -319,7 +285,8 @@ def final_label(final: OccupancyGrid | None) -> str:
 
 def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: OccupancyGrid | None,
               posteriors: dict[int, ClassPosterior], robot: Any, human_class: str, mcap_path: str | None,
-              goal_tolerance: float = 0.02, t0: float | None = None) -> Summary:
+              goal_tolerance: float = 0.02, t0: float | None = None, received: Sequence[float] | None = None
+              ) -> Summary:
     """Summarise a run from its messages.
 
     Args:
@@ -333,6 +300,8 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
         goal_tolerance: Joint-space tolerance of "goal reached".
         t0: Start of the run on the messages' clock (default: 0 in lock-step, the first robot state in
             real time); the ``t_s`` of each step and ``reached_t_s`` count from it.
+        received: Real time: when each plan of ``plans`` arrived (s, wall clock; the executor's log time): the
+            steps are then the plans the executor adopted.
     """
     by_tick: dict[int, Plan] = {}
     for p in plans:
@@ -341,10 +310,12 @@ def summarise(plans: list[Plan], states: list[RobotState], final_occupancy: Occu
     ordered = [by_tick[t] for t in keys]
     states = sorted(states, key=lambda s: s.stamp)
     realtime = bool(ordered) and all(p.tick < 0 for p in ordered)
-    if realtime and states:  # a plan is stamped with the state it starts from: one from the run's last state (the
-        # goal reached, the run over) or later was never executed (a review: "reached during plan 89" of 88 adopted)
-        kept = [(k, p) for k, p in zip(keys, ordered, strict=True) if p.stamp < states[-1].stamp]
-        keys, ordered = [k for k, _ in kept], [p for _, p in kept]
+    if realtime and states:  # the plans the executor adopted (services.adopted_plans); without their arrival times,
+        # those stamped before the run's last state (one made from it or later was never executed)
+        keep = (adopted(list(received), [s.stamp for s in states]) if received is not None else
+                [p.stamp < states[-1].stamp for p in ordered])
+        keys = [k for k, a in zip(keys, keep, strict=True) if a]
+        ordered = [p for p, a in zip(ordered, keep, strict=True) if a]
     if t0 is None:
         t0 = (states[0].stamp if states else ordered[0].stamp) if realtime else 0.0
     steps = [step_entry(p, t0, k) for k, p in zip(keys, ordered, strict=True)]  # ticks, or the plans' order

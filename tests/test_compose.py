@@ -251,7 +251,7 @@ def _strip_ms(table: str, tmp_path: Path) -> str:
 def test_the_checks_table_comparison_drops_the_plan_times_and_keeps_the_beliefs(tmp_path) -> None:
     """It dropped each row's last field, which became the belief (p=0.13) when that column was filled: the plan
     times stayed in and the check failed on every machine."""
-    from services.scenario import table_header, table_row
+    from services.run_table import table_header, table_row
 
     goals = ["red_cup", "blue_cup"]
 

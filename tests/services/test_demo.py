@@ -13,7 +13,7 @@ import pytest
 from mcap.reader import make_reader
 
 from services.demo import DemoConfig, main
-from services.scenario import table_header
+from services.run_table import table_header
 from shared.config import ConfigError
 from shared.library import save_library
 from shared.synthetic import generate_library

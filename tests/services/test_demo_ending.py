@@ -67,6 +67,9 @@ class _Recorder:
     def snapshot(self) -> tuple[list[object], list[object], None, dict[int, object]]:
         return [object()] * 3, [], None, {}
 
+    def plan_arrivals(self) -> list[float]:
+        return [0.0, 0.1, 0.2]
+
     def human_poses(self) -> list[object]:
         return []
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from services import demo_outcome
 from services.demo_outcome import Outcome, measure_run, outcome_lines, verdict
 from shared.protocol import HumanPose, OccupancyGrid, RobotState
 from shared.robot import PR2
@@ -108,7 +109,7 @@ def test_measure_run_scores_contact_and_interference() -> None:
     states = [RobotState(stamp=0.5 * i, tick=i, joint_names=robot.joint_names, goal=0, reached=False, holding=False,
                          reason="", q=q0, qd=np.zeros(len(q0))) for i in (2, 0, 1)]  # any order
     summary = types.SimpleNamespace(extra={}, switch_step=None, reached_step=None, chosen_goal_per_step=["red_cup"] * 3,
-                                    mcap_path=None, unit="step", steps=[])
+                                    mcap_path=None, unit="step", steps=[], reached_t_s=None)
     # no human, empty prediction: nothing measured against
     empty = OccupancyGrid.from_dense(np.zeros(scene.grid.dims), scene.grid.origin, scene.grid.resolution, stamp=0.0,
                                      tick=0, tick_last=True, demo_id=0, index=0, method="prediction")
@@ -250,6 +251,21 @@ def test_the_summary_counts_the_poses_the_novelty_test_called_unlike_every_class
     scene = load_scene("pr2_two_cups_side")
     robot = PR2.from_scene(scene, device="cpu", dtype=torch.float32)
     summary = types.SimpleNamespace(extra={}, switch_step=None, reached_step=None, chosen_goal_per_step=[],
-                                    mcap_path=str(path), unit="plan", steps=[])
+                                    mcap_path=str(path), unit="plan", steps=[], reached_t_s=None)
     o = measure_run("prediction", [], [], None, robot, scene, summary)
     assert (o.unfamiliar, o.judged) == (3, 5)
+
+
+def test_a_goal_reached_after_the_last_step_is_said_by_its_time_not_a_step_past_the_run() -> None:
+    """Lock-step's tick counts on while the robot ends its last plan: the table said "reached step 22" of 20 steps."""
+    import dataclasses
+
+    o = dataclasses.replace(_outcome("prediction", 0.3, 0.0, 0.0, 0.1), reached_step=22, reached_t_s=11.2,
+                            reached_after=True)
+    row = outcome_lines([o])[3]
+    assert row.rstrip().endswith("after (11.2 s)") and "22" not in row
+    assert o.to_json()["reached_step"] == 22 and o.to_json()["reached_after_last_step"] is True
+    steps = [{"step": k, "t_s": 0.5 * k} for k in range(20)]
+    summary = types.SimpleNamespace(steps=steps, reached_step=22)
+    assert demo_outcome.reached_after_last(summary)
+    assert not demo_outcome.reached_after_last(types.SimpleNamespace(steps=steps, reached_step=19))

@@ -11,7 +11,8 @@ import pytest
 import torch
 
 from services.run_log import RunRecorder
-from services.scenario import Summary, choose_demonstration, summarise, table_header
+from services.run_table import table_header
+from services.scenario import Summary, choose_demonstration, summarise
 from shared.atomic_file import atomic_write
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
@@ -172,7 +173,8 @@ def test_each_row_shows_the_belief_its_plan_was_made_with():
 
 def test_a_flat_belief_names_no_class():
     """The demo's table showed "far_left p=0.13" among 8 classes (all but uniform) as though it were a belief."""
-    from services.scenario import belief, table_row
+    from services.run_table import table_row
+    from services.scenario import belief
 
     names = ["far_left", "left", "middle", "right", "far_right", "blue_cup", "red_cup", "up"]
 
@@ -374,3 +376,16 @@ def test_the_summary_names_no_class_recognised_at_the_end_when_the_last_posterio
 
     assert "recognised at the end: none (flat; most probable far_left) (p 0.13" in lines([0.13] + [0.87 / 7] * 7)
     assert "recognised at the end: far_left (p 0.30" in lines([0.30] + [0.70 / 7] * 7)
+
+
+def test_realtime_summary_keeps_the_plans_the_executor_adopted() -> None:
+    """With the plans' arrival times the steps are the plans the executor took (services.adopted_plans): plan 1 is
+    overtaken by plan 2 before the next state, plan 3 came after the last; all were stamped before the last state."""
+    t0 = 100.0
+    states = [RobotState(stamp=t0 + t, tick=-1, joint_names=["a", "b", "c"], goal=0, reached=False, holding=False,
+                         reason="", q=np.zeros(3), qd=np.zeros(3)) for t in (0.0, 0.02, 0.04)]
+    plans = [_plan(-1, 0, [1.0, 2.0], stamp=t0 + t, step=k) for k, t in enumerate((0.0, 0.02, 0.02, 0.03))]
+    s = summarise(plans, states, None, {}, PointRobot(), "red_cup", None,
+                  received=[t0 + t for t in (0.01, 0.03, 0.035, 0.05)])
+    assert [e["step"] for e in s.steps] == [0, 2]
+    assert s.to_json()["reached_after_last_step"] is False

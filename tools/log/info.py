@@ -3,7 +3,8 @@
 Header, time range, channels (topic, schema, encodings, message counts), attachments, metadata and
 rejected payloads; a file whose writer was killed is read up to its last complete chunk and the
 summary says it is truncated. Refused payloads (the ``/foresight/rejected`` channel) are not data:
-they are left out of the message count and reported on their own, per key and reason.
+they are left out of the message count and reported on their own, per key and reason. The ``ran:`` line
+(:func:`steps_run`) says how many of the run's steps the log holds: an interrupted run's log is complete too.
 """
 
 from __future__ import annotations
@@ -11,10 +12,11 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
+from shared.protocol import Keys
 from shared.recording.reader import SOURCE_METADATA, STILL_WRITTEN, LogFile
 from shared.recording.schemas import REJECTED_TOPIC
 
-__all__ = ["info_dict", "format_info"]
+__all__ = ["info_dict", "format_info", "steps_run"]
 
 
 def _fmt_time(ns: int | None) -> str:
@@ -45,6 +47,48 @@ def _shown(entries: dict[str, str], limit: int = 200) -> str:
     return text if len(text) <= limit else text[:limit] + "...}"
 
 
+def steps_run(lf: LogFile) -> dict[str, Any] | None:
+    """How much of its run a log holds, from its channels' counts and times; None where it cannot tell.
+
+    Lock-step: the clock ticks logged (one a step; the steps that finish the last plan send none). Real time: the
+    span of the robot's states (the first is a state period into the run; the last at or past its end): the
+    executor's ``done after N steps``. A run with ``stop_on_goal`` may end early at its goal: not said interrupted.
+    ``foresight log info`` said ``run: mode=realtime steps=20 ... complete`` of a run interrupted after 2 (a review).
+
+    Returns:
+        ``steps`` (run), ``of`` (the steps configured; 0: no bound), ``interrupted`` and, in real time, ``more_s``
+        (seconds past the run's end it went on to reach its goal: ``finish_s``).
+    """
+    run = lf.metadata.get("foresight.run", {})
+    try:
+        mode, of, period = run["mode"], int(run["steps"]), float(run["step_period_s"])
+        keys = Keys(run.get("prefix", "foresight"))
+    except (KeyError, ValueError):
+        return None
+    early = run.get("stop_on_goal") == "True"
+    if mode == "lockstep":
+        n = sum(c.count for c in lf.channels.values() if c.topic == keys.clock)
+        return {"steps": n, "of": of, "interrupted": bool(of) and n < of and not early, "more_s": 0.0}
+    states = [c for c in lf.channels.values() if c.topic == keys.robot_state and c.first_time is not None]
+    if mode != "realtime" or not states or period <= 0:
+        return None
+    try:
+        h = 1.0 / float(run.get("state_rate_hz", "50"))
+    except (ValueError, ZeroDivisionError):
+        return None
+    ran = (max(c.last_time for c in states) - min(c.first_time for c in states)) / 1e9 + h  # the last state's time
+    n = int(ran / period + 1e-6)
+    end = of * period
+    return {"steps": min(n, of) if of else n, "of": of, "interrupted": bool(of) and ran + h < end and not early,
+            "more_s": max(0.0, ran - end) if of and ran - end > h else 0.0}
+
+
+def _ran_line(ran: dict[str, Any]) -> str:
+    of = f" of {ran['of']}" if ran["of"] else ""
+    more = f", and {ran['more_s']:.1f} s more (finish_s: on until the robot arrives)" if ran["more_s"] else ""
+    return f"ran:       {ran['steps']}{of} steps{more}" + (" (interrupted)" if ran["interrupted"] else "")
+
+
 def info_dict(lf: LogFile) -> dict[str, Any]:
     """The summary :func:`format_info` prints, as a JSON-ready dict."""
     firsts = [c.first_time for c in lf.channels.values() if c.first_time is not None]
@@ -68,6 +112,7 @@ def info_dict(lf: LogFile) -> dict[str, Any]:
         "rejected": rejects,
         "rejected_reasons": reasons,
         "warnings": warnings,
+        "ran": steps_run(lf),
     }
 
 
@@ -113,6 +158,8 @@ def format_info(lf: LogFile) -> str:
     if run:
         keys = ("mode", "steps", "step_period_s", "stale_limit_s", "prefix")
         lines += ["", "run:       " + "  ".join(f"{k}={run[k]}" for k in keys if k in run)]
+        if d["ran"] is not None:
+            lines.append(_ran_line(d["ran"]))
     if "foresight.rejects" in lf.metadata:
         rej = d["rejected"]
         lines += ["rejected:  " + (", ".join(f"{k}: {v}" for k, v in sorted(rej.items())) if rej else "none")]

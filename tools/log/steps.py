@@ -36,6 +36,7 @@ class StepView:
     first_pose: HumanPose | None
     state: RobotState | None
     t0: float = 0.0
+    number: int | None = None  # real time: the plan's row in ``foresight log table`` (None: lock-step's step)
 
 
 def run_topics(lf: LogFile, schema: str) -> set[str]:
@@ -90,7 +91,12 @@ def _latest_before(items: list[tuple[int, Any]], t: int, pred: Callable[[Any], b
 
 
 def step_views(lf: LogFile) -> dict[int, StepView]:
-    """One :class:`StepView` per replanning step (``Plan.step``) in the log (the last plan of a step wins)."""
+    """One :class:`StepView` per replanning step (``Plan.step``) in the log (the last plan of a step wins).
+
+    Real time: one per plan the executor adopted (:mod:`services.adopted_plans`), numbered by its place among the
+    logged plans, as ``foresight log table`` numbers its rows; it listed every plan logged, 0..15 where the table had
+    0..10 (a review).
+    """
     plans = decode_all(lf, "foresight.Plan", Plan, required=True)
     occs = decode_all(lf, "foresight.OccupancyGrid", OccupancyGrid)
     poses = decode_all(lf, "foresight.HumanPose", HumanPose)
@@ -99,8 +105,14 @@ def step_views(lf: LogFile) -> dict[int, StepView]:
     t0 = 0.0
     if realtime:
         t0 = min([s.stamp for _, s in states] or [p.stamp for _, p in plans])
+    numbered = list(enumerate(plans))
+    if realtime and states:
+        from services.adopted_plans import adopted
+
+        keep = adopted([lt / 1e9 for lt, _ in plans], [s.stamp for _, s in states])
+        numbered = [(k, p) for (k, p), a in zip(numbered, keep, strict=True) if a]
     views: dict[int, StepView] = {}
-    for lt, plan in plans:
+    for k, (lt, plan) in numbered:
         occ = _latest_before(occs, lt, lambda o, p=plan: o.tick == p.occupancy_tick and o.index == p.occupancy_index)
         occ = occ or _latest_before(occs, lt)
         pose = None
@@ -111,7 +123,8 @@ def step_views(lf: LogFile) -> dict[int, StepView]:
         if pose is not None:
             same = [h for _, h in poses if h.demo_id == pose.demo_id]
             first = min(same, key=lambda h: h.index) if same else pose
-        views[plan.step] = StepView(plan, occ, pose, first, _latest_before(states, lt), t0)
+        views[k if realtime else plan.step] = StepView(plan, occ, pose, first, _latest_before(states, lt), t0,
+                                                       k if realtime else None)
     return views
 
 
@@ -146,5 +159,6 @@ def step_title(view: StepView) -> str:
     state_txt = ""
     if view.state is not None:
         state_txt = f"; robot {'HOLDING: ' + view.state.reason if view.state.holding else 'moving'}"
-    return (f"Replanning step {plan.step} ({when}): chosen {plan.goal_names[plan.chosen]}; cost {costs}; "
+    name = f"Replanning step {plan.step}" if view.number is None else f"Plan {view.number}"
+    return (f"{name} ({when}): chosen {plan.goal_names[plan.chosen]}; cost {costs}; "
             f"planning {plan.planning_ms:.0f} ms\n{occ_txt}{state_txt}")

@@ -2,8 +2,9 @@
 
 The plans, robot states, final occupancy and class posteriors of the MCAP go through the same summary as the
 demo's (:func:`services.scenario.summarise`): one row per replanning step (time, chosen goal, each goal's
-cost, planning time), the switch step, whether and when the goal was reached, the interference cost. Two
-runs of one scenario -- ``foresight demo`` and ``docker compose up``, say -- compare by their tables.
+cost, planning time; real time: per plan the executor adopted, :mod:`services.adopted_plans`), the switch step,
+whether and when the goal was reached, the interference cost. Two runs of one scenario -- ``foresight demo`` and
+``docker compose up``, say -- compare by their tables.
 """
 
 from __future__ import annotations
@@ -29,11 +30,11 @@ def run_summary(lf: LogFile) -> Summary:
 
     recorder = RunRecorder()  # the demo's own rules: the newest grid, posteriors by tick or arrival (run_log.py)
     for cls in (Plan, RobotState, OccupancyGrid, ClassPosterior):
-        for _, msg in decode_all(lf, f"foresight.{cls.TYPE}", cls, required=cls is Plan):
-            recorder.on_message(msg)
+        for log_time, msg in decode_all(lf, f"foresight.{cls.TYPE}", cls, required=cls is Plan):
+            recorder.on_message(msg, log_time / 1e9)  # a plan's: when the executor received it
     plans, states, final, posteriors = recorder.snapshot()
     robot = PR2.from_scene(scene_of(lf), device="cpu", dtype=torch.float32)
-    return summarise(plans, states, final, posteriors, robot, "", lf.path)
+    return summarise(plans, states, final, posteriors, robot, "", lf.path, received=recorder.plan_arrivals())
 
 
 def table_lines(summary: Summary) -> list[str]:

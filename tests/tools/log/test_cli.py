@@ -149,17 +149,17 @@ def test_a_metadata_record_of_counts_that_is_not_is_a_warning_and_the_rest_is_sh
 def test_the_demos_interrupt_line_says_which_plans_the_log_has(run_log) -> None:
     """Ctrl-C mid-run: the live table printed a 64th plan made after the executor had closed its log, and the demo
     said "interrupted after 64 plans; log ...: complete" while the log held 63."""
-    from services.demo_run import _log_state
+    from services.demo_lines import log_phrase as _log_state
 
     assert _log_state(run_log, KEYS.plan, 2).endswith("complete, " + _log_state(run_log).split("complete, ")[1]
                                                      + ", 2 plans")
     assert _log_state(run_log, KEYS.plan, 3).endswith(", 2 plans (the last 1 came after the executor closed it)")
     assert "2 plans (1 after the rows above" in _log_state(run_log, KEYS.plan, 1)  # rows stop at Ctrl-C, the log not
-    # real time: plans made after the robot's last state are in the log, not in the summary or `log table` (it said
+    # real time: plans the executor never adopted are in the log, not in the summary or `log table` (it said
     # `log table` printed every one: 29 logged, 23 printed)
     assert _log_state(run_log, KEYS.plan, 0, 1).endswith(
         f"2 plans (2 after the rows above, made while the executor stopped; the summary and `foresight log table "
-        f"{run_log}` count the 1 made before the robot's last state, the others were never executed)")
+        f"{run_log}` count the 1 the executor adopted, the others were never executed)")
     assert _log_state(run_log, KEYS.plan, 0, 2).endswith(f": `foresight log table {run_log}` prints every one)")
     cut = run_log.parent / "cut.mcap"  # a killed executor never closed its log: its last plans were never in it
     data = run_log.read_bytes()

@@ -33,7 +33,8 @@ def test_step_titles_lockstep_and_realtime(run_log, tmp_path, robot) -> None:
     scene = load_scene(None)
     q0 = robot.q_start.numpy().astype(np.float64)
     path = tmp_path / "rt.mcap"
-    log = McapLog(path, KEYS, None)
+    now = [t0]  # the log's clock: the wall clock the states are stamped on (the executor's)
+    log = McapLog(path, KEYS, None, clock=lambda: int(now[0] * 1e9))
     grid = np.zeros(scene.grid.dims, np.float32)
     grid[18:24, 10:18, 14:20] = 0.5
     log.on_sample(KEYS.robot_state, encode(RobotState(stamp=t0, tick=-1, joint_names=robot.joint_names, goal=-1,
@@ -47,9 +48,12 @@ def test_step_titles_lockstep_and_realtime(run_log, tmp_path, robot) -> None:
                                          occupancy_tick=-1, occupancy_index=30, trajectories=traj,
                                          cost_smoothness=np.ones(2), cost_obstacle=np.zeros(2), cost_human=np.zeros(2),
                                          cost_total=np.ones(2), valid=np.ones(2, bool))))
+    now[0] = t0 + 1.3
+    log.on_sample(KEYS.robot_state, encode(RobotState(stamp=t0 + 1.3, tick=-1, joint_names=robot.joint_names, goal=0,
+                                                      reached=False, holding=False, reason="", q=q0, qd=np.zeros(8))))
     log.close()
-    title = step_title(step_views(read_log(path, keep=lambda ch: ch.message_encoding == "msgpack"))[6])
-    assert "Replanning step 6 (t = 1.25 s into the run)" in title
+    title = step_title(step_views(read_log(path, keep=lambda ch: ch.message_encoding == "msgpack"))[0])
+    assert "Plan 0 (t = 1.25 s into the run)" in title  # its row in `foresight log table`, not the planner's count
     assert "occupancy of pose 30 at t = 1.00 s (prediction)" in title
     assert "tick -1" not in title and "1700000000" not in title
 

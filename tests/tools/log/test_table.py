@@ -87,3 +87,56 @@ def test_a_log_without_occupancy_grids_says_its_interference_is_not_scored(run_l
     assert json.loads(capsys.readouterr().out)["interference_scored"] is False
     assert main(["table", str(run_log), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["interference_scored"] is True
+
+
+def test_a_realtime_log_counts_the_plans_the_executor_adopted_in_table_and_render(tmp_path, robot) -> None:
+    """Table, render and the demo's summary (from the log) count the plans the executor took, with the same numbers.
+
+    An interrupted run said "interrupted after 11 plans" and `log render` "steps 0..15" where the executor adopted 9:
+    they kept every plan stamped before the robot's last state (a review). Here plan 1 is overtaken by plan 2 before
+    the next state, and plan 3 comes after the last state: the executor adopts plans 0 and 2.
+    """
+    from services.run_log import recorder_from_log
+    from services.scenario import summarise
+    from shared.protocol import Keys, Plan, RobotState, encode
+    from shared.recording.reader import read_log
+    from shared.recording.writer import McapLog
+    from tools.log.steps import step_views
+    from tools.log.table import WANTED, run_summary
+
+    keys, t0 = Keys(), 1_700_000_000.0
+    q0 = robot.q_start.numpy().astype(np.float64)
+    now = [t0]
+    path = tmp_path / "rt.mcap"
+    log = McapLog(path, keys, None, clock=lambda: int(now[0] * 1e9))
+
+    def state(t: float) -> None:
+        now[0] = t0 + t
+        log.on_sample(keys.robot_state, encode(RobotState(stamp=t0 + t, tick=-1, joint_names=robot.joint_names,
+                                                          goal=0, reached=False, holding=False, reason="", q=q0,
+                                                          qd=np.zeros(8))))
+
+    def plan(step: int, made: float, arrives: float) -> None:
+        now[0] = t0 + arrives
+        traj = np.stack([np.linspace(q0, q0 + 0.1, 5)] * 2).astype(np.float32)
+        log.on_sample(keys.plan, encode(Plan(stamp=t0 + made, tick=-1, step=step, goal_names=["blue_cup", "red_cup"],
+                                             joint_names=robot.joint_names, dt=0.1, chosen=0, planning_ms=10.0,
+                                             occupancy_tick=-1, occupancy_index=0, trajectories=traj,
+                                             cost_smoothness=np.ones(2), cost_obstacle=np.zeros(2),
+                                             cost_human=np.zeros(2), cost_total=np.ones(2), valid=np.ones(2, bool))))
+
+    state(0.0)
+    plan(0, 0.0, 0.01)
+    state(0.02)  # adopts plan 0
+    plan(1, 0.02, 0.03)
+    plan(2, 0.02, 0.035)  # before the next state: plan 1 is never taken
+    state(0.04)  # adopts plan 2
+    plan(3, 0.03, 0.05)  # stamped before the last state, but it came after it
+    log.close()
+    lf = read_log(path, keep=lambda ch: ch.schema_name in WANTED | {"foresight.HumanPose"}
+                  and ch.message_encoding == "msgpack")
+    assert [s["step"] for s in run_summary(lf).steps] == [0, 2]
+    assert sorted(step_views(lf)) == [0, 2]
+    plans, states, final, posteriors = (recorder := recorder_from_log(path, keys)).snapshot()
+    demo = summarise(plans, states, final, posteriors, robot, "", str(path), received=recorder.plan_arrivals())
+    assert [s["step"] for s in demo.steps] == [0, 2]
