@@ -27,7 +27,7 @@ from services.executor.config import is_separation_hold
 from services.experiments.measures import interference
 from services.run_table import step_entry, table_header, table_row
 from shared.belief import recognised_class
-from shared.library import Demonstration, MotionLibrary
+from shared.library import FEATURE_NAMES, Demonstration, MotionLibrary
 from shared.protocol import ClassPosterior, OccupancyGrid, Plan, RobotState
 from shared.runtime import UserError
 from shared.scene import Scene
@@ -77,8 +77,15 @@ def choose_demonstration(library: MotionLibrary, steps: int, seed: int, human_cl
 
 
 def _library_digest(library: MotionLibrary) -> str:
+    """A digest of the library's classes, values and labels, and of its feature names where not the paper's 12.
+
+    A 17-column CSV and a wide .npz of the same numbers shared a key, and a model; the paper's 12 keep the keys of
+    the models cached before.
+    """
     h = hashlib.sha256()
     h.update(json.dumps(list(library.class_names)).encode())
+    if tuple(library.feature_names) != FEATURE_NAMES:
+        h.update(json.dumps(list(library.feature_names)).encode())
     for d in library.demos:
         h.update(np.ascontiguousarray(d.features, dtype=np.float64).tobytes())
         h.update(str(d.label).encode())

@@ -389,3 +389,13 @@ def test_realtime_summary_keeps_the_plans_the_executor_adopted() -> None:
                   received=[t0 + t for t in (0.01, 0.03, 0.035, 0.05)])
     assert [e["step"] for e in s.steps] == [0, 2]
     assert s.to_json()["reached_after_last_step"] is False
+
+
+def test_the_model_cache_key_tells_libraries_of_other_features_apart() -> None:
+    """A 17-column CSV and a wide .npz of the same numbers shared a cached model; the paper's 12 keep their key."""
+    from services.scenario import _library_digest
+
+    lib = generate_library(2, 2, seed=0)
+    renamed = dataclasses.replace(lib, feature_names=tuple(f"f{i}" for i in range(lib.n_features)))
+    assert _library_digest(renamed) != _library_digest(lib)
+    assert _library_digest(lib) == _library_digest(generate_library(2, 2, seed=0))
