@@ -30,8 +30,7 @@ from services.demo_services import (
     services_in_order,
 )
 from services.demo_status import ending, stop_in_order
-from services.executor.__main__ import INCOMPLETE
-from services.executor.result import LOG_INCOMPLETE
+from services.executor.result import INCOMPLETE, LOG_INCOMPLETE
 from services.processes import ServiceProcess, free_port
 from services.run_log import RunRecorder, keep_posterior, recorder_from_log
 from services.run_table import step_entry, table_header, table_row

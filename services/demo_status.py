@@ -13,8 +13,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from services.demo_dirs import stop_service
-from services.executor.__main__ import INCOMPLETE
-from services.executor.result import LOG_INCOMPLETE
+from services.executor.result import INCOMPLETE, LOG_INCOMPLETE
 from services.processes import describe_exit
 
 if TYPE_CHECKING:

@@ -12,13 +12,10 @@ from shared.runtime import service_main
 from shared.security.acl import refuse_ros2_keys
 
 from .core import ExecutorConfig
-from .result import LOG_INCOMPLETE
+from .result import INCOMPLETE, LOG_INCOMPLETE
 from .service import ExecutorService
 
 __all__ = ["main", "INCOMPLETE", "LOG_INCOMPLETE"]
-
-INCOMPLETE = 1
-"""Exit status of a lock-step run that finished with ticks that went on without their plan or prediction."""
 
 DESCRIPTION = """Simulate the PR2 arm following the chosen trajectory of the latest Plan (within its
 joint and velocity limits; the plan of replanning step n-1 runs during step n), publish RobotState,

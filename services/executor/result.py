@@ -6,12 +6,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["ExecutorResult", "LOG_INCOMPLETE"]
+__all__ = ["ExecutorResult", "INCOMPLETE", "LOG_INCOMPLETE"]
+
+INCOMPLETE = 1
+"""Exit status of a lock-step run that finished with ticks that went on without their plan or prediction."""
 
 LOG_INCOMPLETE = 4
 """The executor's exit status when its MCAP log lost messages (a full disk): its ``mcap:`` line says how many.
 
-Here, not in ``__main__``: ``foresight demo`` reads it without importing the executor's service.
+Here, not in ``__main__`` (nor :data:`INCOMPLETE`): ``foresight demo`` reads them without importing the
+executor's service.
 """
 
 
