@@ -45,26 +45,37 @@ lint: $(STAMP)
 
 setup: $(STAMP)
 
+# Python 3.11+ checked before anything is installed (a 3.10 venv downloaded torch, 4.6 GB, then failed on the
+# project's requires-python and stayed); a venv Python could not finish (Debian without python3-venv) is removed,
+# or every later make failed on it with "No module named pip".
 $(VENV)/bin/python:
-	$(PYTHON) -m venv $(VENV)
+	@$(PYTHON) -c "import sys; sys.exit(sys.version_info < (3, 11))" || { echo "make setup: Foresight needs" \
+	  "Python 3.11+, and $(PYTHON) is $$($(PYTHON) -V 2>&1); run make PYTHON=python3.11 (or newer)"; exit 1; }
+	@$(PYTHON) -m venv $(VENV) || { rm -rf $(VENV); echo "make setup: '$(PYTHON) -m venv' failed (on Debian and" \
+	  "Ubuntu: apt install python3-venv), and the half-made $(VENV) is removed"; exit 1; }
 	$(PIP) install --quiet --upgrade pip
 
-# torch first, from TORCH_INDEX when it answers (see the top of this file), then the project.
+# torch first, from TORCH_INDEX when it answers (see the top of this file), then the project. Its build backend
+# goes into the venv once and the project installs without build isolation: an isolated build fetched setuptools
+# from the network on every reinstall (after a pull touched pyproject.toml), and `make demo` failed offline.
 $(STAMP): pyproject.toml | $(VENV)/bin/python
 	@$(PY) -c "import torch" 2>/dev/null || $(MAKE) --no-print-directory torch
-	$(PIP) install --quiet -e ".[dev]"
+	$(PIP) install --quiet "setuptools>=77"
+	$(PIP) install --quiet --no-build-isolation -e ".[dev]"
 	touch $(STAMP)
 
 # Probe the index first: an unreachable index would otherwise cost pip minutes of retries per package.
 .PHONY: torch
 torch: | $(VENV)/bin/python
-	@if [ -n "$(TORCH_INDEX)" ] && $(PY) -c "import sys, urllib.request; \
-	  urllib.request.urlopen(sys.argv[1].rstrip('/') + '/torch/', timeout=10)" "$(TORCH_INDEX)" 2>/dev/null; then \
+	@if [ -n "$(TORCH_INDEX)" ] && why=$$($(PY) -c "import sys, urllib.request; \
+	  urllib.request.urlopen(sys.argv[1].rstrip('/') + '/torch/', timeout=10)" "$(TORCH_INDEX)" 2>&1); then \
 	  echo "installing torch==$(TORCH_VERSION) from $(TORCH_INDEX)"; \
 	  $(PIP) install "torch==$(TORCH_VERSION)" --index-url "$(TORCH_INDEX)"; \
 	else \
-	  [ -z "$(TORCH_INDEX)" ] || echo "note: TORCH_INDEX $(TORCH_INDEX) cannot be reached;" \
-	    "installing torch==$(TORCH_VERSION) from pip's own indexes (the build they have)"; \
+	  [ -z "$(TORCH_INDEX)" ] || echo "note: TORCH_INDEX $(TORCH_INDEX) cannot be reached" \
+	    "($$(echo "$$why" | tail -n 1));" \
+	    "installing torch==$(TORCH_VERSION) from pip's own indexes (the build they have: from PyPI on Linux," \
+	    "the CUDA build, several GB)"; \
 	  $(PIP) install "torch==$(TORCH_VERSION)"; \
 	fi
 

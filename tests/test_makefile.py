@@ -73,3 +73,36 @@ def test_make_demo_fails_with_the_demos_failure(status: int, said: str, tmp_path
     rest = proc.communicate(timeout=30)[0]
     assert first == "ready\n" and (said in rest if said else rest == ""), rest
     assert proc.returncode == (2 if said else 0)
+
+
+def _fake_python(path: Path, body: str) -> Path:
+    """An executable ``python3`` for ``make setup``: ``body`` is a shell script's, then the real Python's."""
+    path.write_text(f"#!/bin/sh\n{body}\nexec {sys.executable} \"$@\"\n")
+    path.chmod(0o755)
+    return path
+
+
+def _make_setup(tmp_path: Path, python: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(["make", "-s", "-C", str(REPO), "setup", f"VENV={tmp_path / 'venv'}", f"PYTHON={python}"],
+                          capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=60)
+
+
+def test_setup_on_python_3_10_stops_before_installing_anything(tmp_path: Path) -> None:
+    """A 3.10 venv downloaded torch (4.6 GB), then failed on requires-python, and stayed for every later make."""
+    old = _fake_python(tmp_path / "python3", 'case "$1" in -V) echo "Python 3.10.13"; exit 0;; -c) exit 1;; esac\n'
+                                             "exit 99")
+    done = _make_setup(tmp_path, old)
+    assert done.returncode != 0 and not (tmp_path / "venv").exists()
+    assert f"make setup: Foresight needs Python 3.11+, and {old} is Python 3.10.13; run make PYTHON=python3.11" \
+        in done.stdout, done.stdout + done.stderr
+
+
+def test_a_venv_python_could_not_finish_is_removed(tmp_path: Path) -> None:
+    """Debian without python3-venv: the half-made venv had no pip, and every later make failed on it."""
+    debian = _fake_python(tmp_path / "python3", f'if [ "$1" = "-m" ] && [ "$2" = venv ]; then mkdir -p "$3/bin"; '
+                                               f'ln -s {sys.executable} "$3/bin/python"; '
+                                               'echo "The virtual environment was not created successfully because '
+                                               'ensurepip is not available." >&2; exit 1; fi')
+    done = _make_setup(tmp_path, debian)
+    assert done.returncode != 0 and not (tmp_path / "venv").exists()
+    assert "apt install python3-venv), and the half-made" in done.stdout, done.stdout + done.stderr
