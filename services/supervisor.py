@@ -17,6 +17,7 @@ from collections.abc import Callable, Mapping
 from services.processes import ServiceProcess, describe_exit
 from shared.presence import REJOIN_S
 from shared.protocol import HUMAN_SOURCES
+from shared.stopping import SHUTDOWN_GRACE_S
 
 __all__ = ["Supervisor", "describe_exit", "HUNG_AFTER_S"]
 
@@ -76,13 +77,14 @@ class Supervisor:
 
         The ``skip`` ones' exit is the caller's to watch (the executor's ends the run); their hang is checked here and
         ends the run (:attr:`fatal_fault`), restart or not: a SIGSTOPped executor went unnoticed until ``--timeout``,
-        15 silent minutes (a review).
+        15 silent minutes (a review). Their token may stay gone :data:`SHUTDOWN_GRACE_S` longer: the executor
+        withdraws it at the run's end, then closes its log, which may take that long (a full disk's retries).
         """
         for name, proc in self.procs.items():
             if proc.proc is None or name in self._reported:
                 continue
             if proc.running:
-                if (gone_s := self._hung(name)) is None:
+                if (gone_s := self._hung(name, SHUTDOWN_GRACE_S if name in skip else 0.0)) is None:
                     continue
                 what = (f"{name} stopped answering (its process runs, but its liveliness token has been gone for "
                         f"{gone_s:.0f} s: hung or stopped)")
@@ -103,8 +105,8 @@ class Supervisor:
             said = proc.last_words()  # a killed process's last line is not why it died: only an error's is
             self._fault(name, proc, code, f"{name} {describe_exit(code)}" + (f": {said}" if said else ""))
 
-    def _hung(self, name: str) -> float | None:
-        """Seconds ``name``'s token, seen since it (re)started, has stayed gone, once that is ``hung_after_s``."""
+    def _hung(self, name: str, more_s: float = 0.0) -> float | None:
+        """How long ``name``'s token, seen since it (re)started, has been gone, once ``hung_after_s + more_s``+."""
         if self.is_alive is None:
             return None
         if self.is_alive(name):
@@ -114,7 +116,7 @@ class Supervisor:
         if name not in self._seen:  # starting, or started again: not up yet
             return None
         gone = self.clock() - self._gone_since.setdefault(name, self.clock())
-        return gone if gone >= self.hung_after_s else None
+        return gone if gone >= self.hung_after_s + more_s else None
 
     def _fault(self, name: str, proc: ServiceProcess, code: int | None, what: str) -> None:
         self.faults.append((name, code))
