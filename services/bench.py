@@ -45,9 +45,9 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench") -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     width = max(map(len, BENCHES))  # 'tracker-live' ran into its text at a fixed 10
     usage = "\n".join(f"  {k:<{width}}  {desc}" for k, (_, desc) in BENCHES.items())
-    if not argv or argv[0] in ("-h", "--help"):
+    if not argv or argv[0] in ("-h", "--help"):  # asked for: stdout, 0; no name at all: an error, stderr, 2
         print(f"usage: {prog} {{{','.join(BENCHES)}}} [ARGS...]\n\nbenchmarks:\n{usage}\n\n"
-              f"Run '{prog} NAME --help' for a benchmark's options.")
+              f"Run '{prog} NAME --help' for a benchmark's options.", file=sys.stdout if argv else sys.stderr)
         return 0 if argv else 2
     name, rest = argv[0], argv[1:]
     if name not in BENCHES:

@@ -46,6 +46,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python tools/cpus.py", description=__doc__.split("\n")[0])
     p.add_argument("--max", type=int, default=0, help="print at most this many (0: no cap)")
     args = p.parse_args(argv)
+    if args.max < 0:  # it printed every CPU for --max -3, as for no cap
+        p.error(f"--max: must be 0 (no cap) or more, got {args.max}")
     n = usable_cpus()
     print(min(n, args.max) if args.max > 0 else n)
     return 0

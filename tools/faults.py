@@ -9,11 +9,13 @@ stopped). For each victim in turn, once the robot moves: SIGKILL it, record when
 first says ``holding`` (and why), start it again after ``--down-s``, record when its liveliness token
 is back and when the robot moves again. Over the whole run, every state that is not holding is checked
 against the inputs the watcher saw: the newest plan and occupancy must be younger than the stale
-limit (plus ``SLACK_S`` for the watcher's own delivery). Last, SIGKILL the executor and read its MCAP
-back with the reader ``foresight log info`` uses (how much it recovered).
+limit (plus ``SLACK_S`` for the watcher's own delivery). Last, SIGKILL the executor and read each of its
+MCAPs back (``run.mcap``, and ``run-<n>.mcap`` per restart when it was a victim) with the reader ``foresight log
+info`` uses (how much it recovered).
 
 Prints one line per victim (hold latency after the kill, resume latency after the service's return),
-the release check and the MCAP recovery; ``--json`` prints one object.
+the release check and one line per MCAP; ``--json`` prints one object. Exits 1 when the robot moved while a
+service was down (the router aside: the services talk peer to peer without it).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,14 +34,27 @@ from shared.runtime import cli_errors, help_text, interruptible, setup_logging
 
 from .system import PROCESSES, ProcessSystem, SystemSpec, Watcher, positive_number
 
-__all__ = ["measure_kill", "stale_releases", "recover_after_kill", "demo_model", "main", "SLACK_S"]
+__all__ = ["measure_kill", "stale_releases", "recover_after_kill", "read_back", "executor_mcaps",
+           "moved_failures", "demo_model", "main", "SLACK_S"]
 
 SLACK_S = 0.1
 """Allowance (s) for the watcher seeing a message later or earlier than the executor does."""
 
 
-def demo_model(models_dir: Path, components: int = 4) -> Path:
-    """The prediction model of the embedded synthetic library (cached in ``models_dir``)."""
+def _say_training(path: Path) -> None:
+    print(f"foresight bench: training the prediction model once, about a minute; later runs load it from {path}",
+          file=sys.stderr, flush=True)
+
+
+def demo_model(models_dir: Path, components: int = 4, on_train: Callable[[Path], None] = _say_training) -> Path:
+    """The prediction model of the embedded synthetic library (cached in ``models_dir``).
+
+    Args:
+        models_dir: The model cache.
+        components: Gaussians per class.
+        on_train: Called with the model's path before it is trained (not when cached): by default one line on
+            stderr, as the minute of training passed without a word.
+    """
     from services.scenario import choose_demonstration, model_for
     from shared.scene import load_scene
     from shared.synthetic import generate_library
@@ -46,7 +62,7 @@ def demo_model(models_dir: Path, components: int = 4) -> Path:
     scene = load_scene(None)
     lib = generate_library(seed=0, scene=scene)
     demo = choose_demonstration(lib, 20, 0).demo
-    return model_for(lib, scene, demo, models_dir, components=components, progress=False)
+    return model_for(lib, scene, demo, models_dir, components=components, progress=False, on_train=on_train)
 
 
 def _first(items: list, after: float, pred: Any) -> tuple[float, Any] | None:
@@ -59,8 +75,9 @@ def measure_kill(system: ProcessSystem, watcher: Watcher, victim: str, down_s: f
 
     Returns:
         ``victim``; ``hold_s`` (kill -> first holding state, None: never held) and ``hold_reason``;
-        ``moved_while_down`` (states not holding between the hold and the restart); ``back_s``
-        (restart -> liveliness token back; the router has none: 0; None: the token never came back);
+        ``moved_while_down`` (states not holding between the hold and the restart; with no hold before the
+        restart, between the kill and the restart); ``back_s`` (restart -> liveliness token back; the router,
+        which has none: restart -> its port takes connections; None: the token never came back);
         ``resume_s`` (token back -> first state not holding after the restart), ``resume_after_start_s``
         and ``resume_after_output_s`` (its first plan or occupancy after its return -> moving); ``events``
         in order.
@@ -72,17 +89,22 @@ def measure_kill(system: ProcessSystem, watcher: Watcher, victim: str, down_s: f
                  min(down_s, 10.0))
     time.sleep(max(0.0, down_s - (time.monotonic() - t_kill)))
     t_start = time.monotonic()
-    system.start(victim)
-    if victim != "router":
+    t_router = t_start
+    if victim == "router":  # no token: back when its port takes connections (start() returned at once: 0.00 s)
+        system.start_router(timeout)
+        t_router = time.monotonic()
+    else:
+        system.start(victim)
         watcher.wait(lambda: any(t > t_start and s == victim and up for t, s, up in watcher.snapshot(watcher.tokens)),
                      timeout)
     token = next((t for t, s, up in watcher.snapshot(watcher.tokens) if t > t_start and s == victim and up), None)
-    back = t_start if token is None else token
+    back = t_router if victim == "router" else t_start if token is None else token
     watcher.wait(lambda: _first(watcher.snapshot(watcher.states), back, lambda m: not m.holding) is not None, timeout)
     states = watcher.snapshot(watcher.states)
     hold = _first(states, t_kill, lambda m: m.holding)
     resume = _first(states, max(back, hold[0] if hold else t_kill), lambda m: not m.holding)
-    moved = sum(1 for t, m in states if hold and hold[0] < t < t_start and not m.holding)
+    down_from = hold[0] if hold and hold[0] < t_start else t_kill  # never held while down: every state moved
+    moved = sum(1 for t, m in states if down_from < t < t_start and not m.holding)
     outputs = {"predictor": watcher.occupancy, "planner": watcher.plans}.get(victim)
     first_out = next((t for t, _ in watcher.snapshot(outputs) if t > back), None) if outputs is not None else None
     events = [("kill", 0.0)]
@@ -126,29 +148,56 @@ def stale_releases(watcher: Watcher, limit: float, slack: float = SLACK_S) -> li
     return out
 
 
-def recover_after_kill(system: ProcessSystem) -> dict[str, Any]:
-    """SIGKILL the executor and read its MCAP back (up to the last complete chunk)."""
-    system.kill("executor")
-    lf = read_log(system.mcap_path)
+def read_back(path: Path) -> dict[str, Any]:
+    """What the reader ``foresight log info`` uses recovers of one MCAP (up to its last complete chunk)."""
+    lf = read_log(path)
     lasts = [c.last_time for c in lf.channels.values() if c.last_time is not None]
     firsts = [c.first_time for c in lf.channels.values() if c.first_time is not None]
-    return {"path": str(system.mcap_path), "size_bytes": lf.size, "complete": lf.complete, "error": lf.error,
+    return {"path": str(path), "size_bytes": lf.size, "complete": lf.complete, "error": lf.error,
             "messages": lf.message_count, "channels": len(lf.channels),
             "duration_s": (max(lasts) - min(firsts)) / 1e9 if lasts else 0.0}
+
+
+def recover_after_kill(system: ProcessSystem) -> dict[str, Any]:
+    """SIGKILL the executor and read its newest MCAP back (up to the last complete chunk)."""
+    system.kill("executor")
+    return read_back(system.mcap_path)
+
+
+def executor_mcaps(system: ProcessSystem) -> list[Path]:
+    """Every MCAP the executor wrote in this check: ``run.mcap``, then ``run-<n>.mcap`` per restart, oldest first.
+
+    Counted from its starts, not globbed: an earlier check's ``run-<n>.mcap`` in the same folder is not this one's.
+    """
+    n = system.starts.get("executor", 0) if system.spec.mcap else 0
+    return [system.spec.mcap_path] + [system.spec.run_dir / f"run-{i}.mcap" for i in range(1, n)] if n else []
+
+
+def moved_failures(kills: list[dict[str, Any]]) -> list[str]:
+    """One line per victim the robot moved while it was down for (the router aside: no hold is needed without it)."""
+    def held(k: dict[str, Any]) -> str:
+        return "never held" if k["hold_s"] is None else f"held {k['hold_s']:.2f} s after the kill"
+
+    return [f"the robot moved {k['moved_while_down']} states while the {k['victim']} was down ({held(k)})"
+            for k in kills if k["victim"] != "router" and k["moved_while_down"]]
 
 
 def _line(r: dict[str, Any]) -> str:
     def f(x: float | None) -> str:
         return "-" if x is None else f"{x:.2f} s"
 
+    router = " (no hold needed: the services talk peer to peer)" if r["victim"] == "router" else ""
     return (f"  {r['victim']:<9}  hold {f(r['hold_s'])} after kill ({r['hold_reason'] or 'never held'}); "
-            f"moved while down: {r['moved_while_down']} states; back {f(r['back_s'])} after restart; "
+            f"moved while down: {r['moved_while_down']} states{router}; back {f(r['back_s'])} after restart; "
             f"resume {f(r['resume_s'])} after its return ({f(r['resume_after_start_s'])} after its start, "
             f"{f(r.get('resume_after_output_s'))} after its first output)")
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench faults") -> int:
-    """Run the fault injection; returns 0 when it ran (the numbers are the result)."""
+    """Run the fault injection; returns 0 when it ran (the numbers are the result), 1 when the robot moved.
+
+    The robot moving while a service other than the router was down is the failure (a line each on stderr).
+    """
     p = ArgumentParser(prog=prog, description=help_text(__doc__), formatter_class=DefaultsHelpFormatter)
     p.add_argument("--victims", default="predictor,planner,replayer,router",
                    help=f"what to kill, in order (comma-separated, of {', '.join(PROCESSES)})")
@@ -179,18 +228,23 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench faults") ->
                     if not args.json:
                         print(_line(r), flush=True)
                 results["stale_releases"] = stale_releases(watcher, spec.stale_limit_s)
-                results["mcap"] = recover_after_kill(system)
+                system.kill("executor")
+                results["mcap"] = [read_back(path) for path in executor_mcaps(system)]
         finally:
             results["exit"] = system.close()
+    results["failures"] = moved_failures(results["kills"])
     if args.json:
         print(strict_json.dumps(results))
-        return 0
-    print(f"  releases with an input older than {spec.stale_limit_s:g} + {SLACK_S:g} s: "
-          f"{len(results['stale_releases'])}")
-    m = results["mcap"]
-    print(f"  executor SIGKILLed: {m['path']} {m['size_bytes'] / 1e6:.2f} MB, complete={m['complete']}, recovered "
-          f"{m['messages']} messages on {m['channels']} channels, {m['duration_s']:.1f} s ({m['error'] or 'no error'})")
-    return 0
+    else:
+        print(f"  releases with an input older than {spec.stale_limit_s:g} + {SLACK_S:g} s: "
+              f"{len(results['stale_releases'])}")
+        for m in results["mcap"]:
+            print(f"  executor SIGKILLed: {m['path']} {m['size_bytes'] / 1e6:.2f} MB, complete={m['complete']}, "
+                  f"recovered {m['messages']} messages on {m['channels']} channels, {m['duration_s']:.1f} s "
+                  f"({m['error'] or 'no error'})")
+    for line in results["failures"]:
+        print(f"{prog}: {line}", file=sys.stderr)
+    return 1 if results["failures"] else 0
 
 
 if __name__ == "__main__":

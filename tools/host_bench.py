@@ -30,7 +30,12 @@ from shared import strict_json
 from shared.arguments import ArgumentParser
 from shared.runtime import UserError, cli_errors
 
-__all__ = ["stall_stats", "time_work", "steal_share", "run_bench", "format_bench", "stall_line", "main"]
+from .cpus import usable_cpus
+
+__all__ = ["stall_stats", "time_work", "steal_share", "run_bench", "format_bench", "stall_line", "main", "MAX_THREADS"]
+
+MAX_THREADS = 1024
+"""The most ``--threads`` (torch segfaulted at 100000000 and raised a traceback at 99999999999)."""
 
 
 def stall_stats(ms: list[float]) -> dict[str, Any]:
@@ -106,7 +111,7 @@ def _python_work(loop: int) -> Callable[[], object]:
 def run_bench(repeats: int = 300, products: int = 60, loop: int = 300_000, threads: int = 1,
               say: Callable[[str], None] = lambda _s: None) -> dict[str, Any]:
     """Time both workloads ``repeats`` times each (``say`` is told which, as it starts); the report dict."""
-    out: dict[str, Any] = {"repeats": repeats, "threads": threads, "cpus": os.cpu_count(),
+    out: dict[str, Any] = {"repeats": repeats, "threads": threads, "cpus": usable_cpus(), "cpu_count": os.cpu_count(),
                            "load_avg_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None}
     before = _cpu_times()
     for name, work in (("torch", _torch_work(products, threads)), ("python", _python_work(loop))):
@@ -119,8 +124,12 @@ def run_bench(repeats: int = 300, products: int = 60, loop: int = 300_000, threa
 def format_bench(r: dict[str, Any]) -> str:
     """The report as a table and a one-line reading of it."""
     load = r.get("load_avg_1min")
-    cpus = "CPUs not known" if r.get("cpus") is None else f"{r['cpus']} CPUs"
-    lines = [f"the same work {r['repeats']} times in one thread ({cpus}, "
+    count = r.get("cpu_count")
+    cpus = ("CPUs not known" if r.get("cpus") is None else f"{r['cpus']} usable CPUs"
+            + (f" of {count}" if count is not None and count != r["cpus"] else ""))
+    threads = r.get("threads", 1)  # --threads 3 read "in one thread": the torch work ran on 3
+    how = " in one thread" if threads == 1 else f", torch on {threads} threads and python on one"
+    lines = [f"the same work {r['repeats']} times{how} ({cpus}, "
              + ("load not known here" if load is None else f"load {load:.2f}") + "):",
              f"{'work':<8}{'p50 ms':>9}{'p99 ms':>9}{'max ms':>9}{'p99/p50':>9}{'max/p50':>9}{'> 2x p50':>10}"]
     for name in ("torch", "python"):
@@ -155,13 +164,16 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench host") -> i
     ap.add_argument("--repeats", type=int, default=300, help="runs of each workload")
     ap.add_argument("--products", type=int, default=60, help="matrix products per torch run")
     ap.add_argument("--loop", type=int, default=300_000, help="additions per Python run")
-    ap.add_argument("--threads", type=int, default=1, help="torch threads (the planner's default: 1)")
+    ap.add_argument("--threads", type=int, default=1,
+                    help=f"torch threads, 1 to {MAX_THREADS} (the planner's default: 1)")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     args = ap.parse_args(argv)
     with cli_errors(prog):
         for name in ("repeats", "products", "loop", "threads"):
             if getattr(args, name) < 1:
                 raise UserError(f"--{name}: must be 1 or more, got {getattr(args, name)}")
+        if args.threads > MAX_THREADS:
+            raise UserError(f"--threads: must be 1 to {MAX_THREADS}, got {args.threads}")
         say = (lambda _s: None) if args.json else (lambda s: print(s, file=sys.stderr, flush=True))
         r = run_bench(args.repeats, args.products, args.loop, args.threads, say)
         print(strict_json.dumps(r) if args.json else format_bench(r))

@@ -1,20 +1,24 @@
 """The one check of a PNG output path, made before any work.
 
-Used by ``foresight log snapshot --out`` and ``render --out``, ``library generate --plot`` and
-``python -m tools.reach --out``.
+Used by ``foresight log snapshot --out`` and ``render --out``, ``library generate --plot``,
+``foresight experiments ... --plot`` and ``python -m tools.reach --out``.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from shared.atomic_file import ready_to_write
 from shared.runtime import UserError
 
 __all__ = ["check_png"]
 
 
 def check_png(path: str, option: str) -> None:
-    """Refuse a plot path that would not become the PNG named.
+    """Refuse a plot path that would not become the PNG named, before the work that draws it.
+
+    Its folder is made here (as writing it would) and must be writable: ``--plot /proc/nope/x.png`` failed only
+    once the work was done. Nothing is written to the file itself.
 
     Args:
         path: The path given on the command line.
@@ -22,9 +26,15 @@ def check_png(path: str, option: str) -> None:
 
     Raises:
         UserError: ``path`` is empty (the current directory) or does not end in ``.png`` (matplotlib would
-            refuse the format, or add ``.png`` to a name without one).
+            refuse the format, or add ``.png`` to a name without one); its folder cannot be made or written
+            to; a directory is at ``path``.
     """
     if not path.strip():
         raise UserError(f"{option}: empty; give the PNG file to write")
     if Path(path).suffix.lower() != ".png":
         raise UserError(f"{option} {path!r}: the plot is a PNG; give a file name ending in .png")
+    try:
+        ready_to_write(path)
+    except OSError as exc:
+        # the words of every other output path's check (shared.atomic_file, cli_errors): the culprit named
+        raise UserError(f"{exc.filename or path}: {exc.strerror or exc}") from None

@@ -16,6 +16,8 @@ records every pose, occupancy grid, plan and robot state. It prints:
 * the replanning period (between plans received: p50 / p99 / max) and the plans' planning time;
 * the share of robot states that held, and why;
 * the resident memory (RSS) of every process at the start and the end of the window.
+
+It exits 1 when a process was not running at the window's end, with a line each (how it ended, its log).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from services.executor.core import reason_kind
+from services.processes import describe_exit
 from services.replayer.core import MAX_RATE_HZ, MIN_RATE_HZ
 from shared import strict_json
 from shared.arguments import ArgumentParser, DefaultsHelpFormatter
@@ -39,7 +42,7 @@ from shared.runtime import cli_errors, help_text, interruptible, setup_logging
 from .faults import demo_model
 from .system import ProcessSystem, SystemSpec, Watcher, positive_number
 
-__all__ = ["soak", "summarise", "main"]
+__all__ = ["soak", "summarise", "exit_lines", "main"]
 
 
 def _pct(values: list[float]) -> dict[str, float | None]:
@@ -106,13 +109,23 @@ def soak(system: ProcessSystem, watcher: Watcher, duration_s: float, timeout: fl
     while (left := t0 + duration_s - time.monotonic()) > 0:  # it slept the whole window without a word
         time.sleep(min(10.0, left))
         if time.monotonic() < t0 + duration_s:
-            progress(f"soak: {time.monotonic() - t0:.0f} / {duration_s:g} s, {len(watcher.poses)} poses seen")
+            n = sum(1 for t, _ in watcher.snapshot(watcher.poses) if t >= t0)  # the window's, not since the watcher
+            progress(f"soak: {time.monotonic() - t0:.0f} / {duration_s:g} s, {n} poses in the window")
     t1 = time.monotonic()
     rss1 = system.rss()
     out = summarise(watcher, t0, t1)
     out["rss_mb"] = {n: {"start": rss0.get(n, 0.0), "end": rss1.get(n, 0.0)} for n in system.procs}
     out["running"] = {n: p.running for n, p in system.procs.items()}
+    out["exited"] = {n: {"status": p.returncode, "log": str(p.log_path)} for n, p in system.procs.items()
+                     if not p.running}
     return out
+
+
+def exit_lines(exited: dict[str, dict[str, Any]]) -> list[str]:
+    """One line per process not running at the window's end: how it ended and its log (the exit status said 1 alone)."""
+    return [f"{n} was not running at the window's end: "
+            f"{'it ' + describe_exit(e['status']) if e['status'] is not None else 'never started'}; its log: {e['log']}"
+            for n, e in exited.items()]
 
 
 def _ms(x: float | None) -> str:
@@ -124,7 +137,7 @@ def _fmt(d: dict[str, float | None], scale: float = 1e3, unit: str = "ms") -> st
 
 
 def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> int:
-    """Run the soak; returns 0 when every process was still running at the end."""
+    """Run the soak; returns 0 when every process was still running at the end (else 1, a line each on stderr)."""
     p = ArgumentParser(prog=prog, description=help_text(__doc__), formatter_class=DefaultsHelpFormatter)
     p.add_argument("--rate-hz", type=positive_number(MIN_RATE_HZ, MAX_RATE_HZ, inclusive=True), default=300.0,
                    help="poses per second")
@@ -163,6 +176,8 @@ def main(argv: list[str] | None = None, prog: str = "foresight bench soak") -> i
         print(f"states {r['states']}, held {100 * r['held_share']:.1f}% {r['held_reasons']}")
         for n, m in r["rss_mb"].items():
             print(f"rss {n:<9} {m['start']:.0f} MB -> {m['end']:.0f} MB")
+    for line in exit_lines(r["exited"]):
+        print(f"{prog}: {line}", file=sys.stderr)
     return 0 if all(r["running"].values()) else 1
 
 

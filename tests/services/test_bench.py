@@ -18,3 +18,10 @@ def test_an_unknown_benchmark_is_one_line(capsys) -> None:
     assert main(["nonsense"]) == 2
     assert capsys.readouterr().err.strip() == (
         f"foresight bench: error: unknown benchmark 'nonsense' (choose from {', '.join(BENCHES)})")
+
+
+def test_no_benchmark_named_is_an_error_on_stderr(capsys) -> None:
+    """The list went to stdout with exit status 2."""
+    assert main([]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("usage: foresight bench {") and "benchmarks:" in err

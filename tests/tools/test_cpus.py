@@ -46,3 +46,11 @@ def test_runs_without_the_package_as_make_runs_it() -> None:
     out = subprocess.run([sys.executable, "-I", str(REPO / "tools" / "cpus.py"), "--max", "1"], capture_output=True,
                          text=True, timeout=30, check=True)
     assert out.stdout == "1\n"
+
+
+def test_a_negative_cap_is_refused() -> None:
+    """--max -3 printed every CPU, as for no cap."""
+    out = subprocess.run([sys.executable, "-I", str(REPO / "tools" / "cpus.py"), "--max", "-3"], capture_output=True,
+                         text=True, timeout=30)
+    assert out.returncode == 2 and out.stdout == ""
+    assert out.stderr.splitlines()[-1] == "python tools/cpus.py: error: --max: must be 0 (no cap) or more, got -3"

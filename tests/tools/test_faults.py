@@ -145,3 +145,131 @@ def test_an_executor_started_again_keeps_the_first_runs_log(tmp_path, monkeypatc
     first, second = (a[a.index("--mcap") + 1] for a in started)
     assert first == str(tmp_path / "run.mcap") and second == str(tmp_path / "run-1.mcap")
     assert s.mcap_path == tmp_path / "run-1.mcap"
+
+
+class _Clock:
+    """time.monotonic / time.sleep of tools.faults on a clock the test moves (a kill at 10 s)."""
+
+    def __init__(self, monkeypatch) -> None:
+        self.now = 10.0
+        monkeypatch.setattr(faults.time, "monotonic", lambda: self.now)
+        monkeypatch.setattr(faults.time, "sleep", self.sleep)
+
+    def sleep(self, s: float) -> None:
+        self.now += s
+
+
+class _Recorded(_Watcher):
+    def __init__(self, states: list, tokens: list) -> None:
+        super().__init__(moves=True)
+        self.states, self.tokens, self.plans, self.occupancy = states, tokens, [], []
+
+    def snapshot(self, items):
+        return list(items)
+
+
+def _moving(t: float) -> tuple[float, NS]:
+    return (t, NS(holding=False, reason=""))
+
+
+def _holding(t: float) -> tuple[float, NS]:
+    return (t, NS(holding=True, reason="predictor gone"))
+
+
+@pytest.mark.parametrize("states, moved", [
+    ([_moving(10.5), _moving(11.0), _moving(12.0), _moving(14.0)], 3),  # never held: it read 0
+    ([_moving(10.5), _holding(13.2), _moving(14.0)], 1),  # held only after the restart (13 s): it read 0
+    ([_holding(10.2), _moving(11.0), _holding(12.0), _moving(14.0)], 1),  # held, then moved once while down
+])
+def test_a_robot_that_moved_while_the_victim_was_down_counts_those_states(tmp_path, monkeypatch, states, moved):
+    """With no hold seen, ``moved_while_down`` counted nothing: a robot that never held read "0 states"."""
+    clock = _Clock(monkeypatch)
+    tokens: list = []
+    s = _system(tmp_path, {"predictor": _Proc(None)})
+    s.kill = lambda name: None
+    s.start = lambda name: tokens.append((clock.now + 0.5, name, True))
+    r = faults.measure_kill(s, _Recorded(states, tokens), "predictor", down_s=3.0, timeout=1.0)
+    assert r["moved_while_down"] == moved, r
+    held = "never held" if r["hold_s"] is None else f"held {r['hold_s']:.2f} s after the kill"
+    assert faults.moved_failures([r]) == [f"the robot moved {moved} states while the predictor was down ({held})"]
+    assert faults.moved_failures([{**r, "victim": "router"}]) == []  # no hold is needed without the router
+
+
+def test_the_router_is_back_when_its_port_takes_connections(tmp_path, monkeypatch):
+    """It was started with start(), which does not wait: "back 0.00 s" whatever the router did."""
+    clock = _Clock(monkeypatch)
+    s = _system(tmp_path, {"router": _Proc(None)})
+    s.kill = lambda name: None
+    s.start = lambda name: None
+    s.start_router = lambda timeout=30.0: clock.sleep(0.4)
+    r = faults.measure_kill(s, _Recorded([_moving(10.5), _moving(13.6)], []), "router", down_s=3.0, timeout=1.0)
+    assert r["back_s"] == pytest.approx(0.4) and r["moved_while_down"] == 1, r
+    assert ("back", pytest.approx(3.4)) in r["events"]
+
+
+def test_faults_reads_back_every_mcap_and_fails_when_the_robot_moved(tmp_path, monkeypatch, capsys):
+    """Only the newest run-<n>.mcap was read back (the one the executor was killed in never was), and a robot that
+    moved while a service was down exited 0."""
+    read: list[str] = []
+
+    class System:
+        def __init__(self, spec):
+            self.spec, self.endpoint = spec, "tcp/127.0.0.1:1"
+            self.starts = {"executor": 2}  # killed as a victim once: run.mcap, then run-1.mcap
+            self.mcap_path = spec.run_dir / "run-1.mcap"
+
+        def start_router(self):
+            pass
+
+        def start_services(self):
+            pass
+
+        def kill(self, name):
+            pass
+
+        def close(self):
+            return {}
+
+    class Watcher:
+        def __init__(self, *a, **k):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+    kill = {"victim": "executor", "hold_s": None, "hold_reason": "", "moved_while_down": 4, "back_s": 0.5,
+            "resume_s": 0.1, "resume_after_start_s": 0.6, "resume_after_output_s": None, "events": []}
+    monkeypatch.setattr(faults, "ProcessSystem", System)
+    monkeypatch.setattr(faults, "Watcher", Watcher)
+    monkeypatch.setattr(faults, "demo_model", lambda models_dir: tmp_path / "m.npz")
+    monkeypatch.setattr(faults, "measure_kill", lambda *a: kill)
+    monkeypatch.setattr(faults, "stale_releases", lambda *a: [])
+    monkeypatch.setattr(faults, "read_log", lambda path: read.append(Path(path).name) or NS(
+        size=1000, complete=False, error="", message_count=3, channels={}))
+    code = faults.main(["--victims", "executor", "--run-dir", str(tmp_path)])
+    out, err = capsys.readouterr()
+    assert read == ["run.mcap", "run-1.mcap"] and out.count("executor SIGKILLed: ") == 2, out
+    assert code == 1 and err.strip() == ("foresight bench faults: the robot moved 4 states while the executor was "
+                                         "down (never held)")
+
+
+def test_the_demo_model_says_it_trains_before_the_minute_it_takes(tmp_path, monkeypatch, capsys):
+    """faults and soak were silent for about a minute on first use."""
+    import services.scenario
+    import shared.synthetic
+
+    def model_for(lib, scene, demo, models_dir, on_train=None, **kwargs):
+        if on_train is not None:
+            on_train(models_dir / "m.npz")
+        return models_dir / "m.npz"
+
+    monkeypatch.setattr(shared.synthetic, "generate_library", lambda **k: None)
+    monkeypatch.setattr(services.scenario, "choose_demonstration", lambda *a: NS(demo=None))
+    monkeypatch.setattr(services.scenario, "model_for", model_for)
+    assert faults.demo_model(tmp_path) == tmp_path / "m.npz"
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "training the prediction model once, about a minute" in err
+    assert str(tmp_path / "m.npz") in err

@@ -59,7 +59,7 @@ def test_the_table_reads_where_the_machine_gives_no_load_average():
     text = host_bench.format_bench(r)
     assert "(CPUs not known, load not known here)" in text
     assert "steal (CPU time the host took): not available here" in text
-    assert "(2 CPUs, load 0.50)" in host_bench.format_bench({**r, "cpus": 2, "load_avg_1min": 0.5})
+    assert "(2 usable CPUs, load 0.50)" in host_bench.format_bench({**r, "cpus": 2, "load_avg_1min": 0.5})
 
 
 def test_stall_line_measures_the_machine_now_and_says_what_it_means():
@@ -67,3 +67,25 @@ def test_stall_line_measures_the_machine_now_and_says_what_it_means():
     assert line.startswith("this machine's stall factor, measured now (5 runs of `foresight bench host`'s torch work")
     factor = float(line.split("work): ", 1)[1].split(" ", 1)[0])
     assert factor >= 1.0 and ("(a quiet machine" in line) == (factor < 1.5)
+
+
+@pytest.mark.parametrize("threads", ["0", "1025", "100000000", "99999999999"])
+def test_a_thread_count_torch_cannot_take_is_one_line(capsys, monkeypatch, threads):
+    """--threads 100000000 segfaulted (rc 139) and 99999999999 raised a traceback, both inside torch."""
+    monkeypatch.setattr(host_bench, "run_bench", lambda *a, **k: pytest.fail("ran with a bad --threads"))
+    with pytest.raises(SystemExit) as exit_:
+        host_bench.main(["--threads", threads])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and err.count("\n") == 0 and "--threads: must be 1 " in err and threads in err
+
+
+def test_the_table_says_how_many_threads_ran_and_the_cpus_this_process_may_use(monkeypatch):
+    """--threads 3 read "in one thread"; the CPUs were os.cpu_count(), not those of the affinity and quota."""
+    monkeypatch.setattr(host_bench, "usable_cpus", lambda: 3, raising=False)
+    monkeypatch.setattr(host_bench.os, "cpu_count", lambda: 16)
+    r = host_bench.run_bench(repeats=2, products=1, loop=10, threads=2)
+    assert r["cpus"] == 3
+    head = host_bench.format_bench(r).splitlines()[0]
+    assert head.startswith("the same work 2 times, torch on 2 threads and python on one (3 usable CPUs of 16, "), head
+    assert host_bench.format_bench({**r, "threads": 1, "cpu_count": 3}).startswith(
+        "the same work 2 times in one thread (3 usable CPUs, ")

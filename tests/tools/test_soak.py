@@ -69,11 +69,58 @@ def test_the_soak_says_what_it_waits_for_and_how_far_the_window_is(monkeypatch):
     monkeypatch.setattr(soak_module.time, "monotonic", lambda: clock[0])
     monkeypatch.setattr(soak_module.time, "sleep", lambda s: clock.__setitem__(0, clock[0] + s))
     system = NS(wait_moving=lambda watcher, timeout: None, rss=dict, procs={})
-    watcher = NS(poses=[], occupancy=[], plans=[], states=[], snapshot=lambda xs: list(xs))
+    pose = NS(demo_id=0, index=0)
+    poses = [(-3.0, pose), (-1.0, pose), (4.0, pose), (15.0, pose)]  # the last one comes after the first line
+    watcher = NS(poses=poses, occupancy=[], plans=[], states=[],
+                 snapshot=lambda xs: [p for p in xs if p[0] <= clock[0]])
     lines: list[str] = []
     soak_module.soak(system, watcher, 25.0, 240.0, progress=lines.append)
     assert lines == ["soak: waiting for the robot to move (at most 240 s)", "soak: the robot moves; measuring 25 s",
-                     "soak: 10 / 25 s, 0 poses seen", "soak: 20 / 25 s, 0 poses seen"]
+                     "soak: 10 / 25 s, 1 poses in the window", "soak: 20 / 25 s, 2 poses in the window"]
+
+
+def test_the_soak_names_each_process_that_was_not_running_at_the_end(tmp_path, monkeypatch, capsys):
+    """It exited 1 with only "rss predictor 160 MB -> 0 MB" to say why."""
+    from tools import soak as soak_module
+
+    dead = NS(running=False, returncode=-9, log_path=tmp_path / "predictor.log")
+    alive = NS(running=True, returncode=None, log_path=tmp_path / "planner.log")
+    system = NS(wait_moving=lambda watcher, timeout: None, rss=dict, procs={"predictor": dead, "planner": alive})
+    watcher = NS(poses=[], occupancy=[], plans=[], states=[], snapshot=lambda xs: list(xs))
+    monkeypatch.setattr(soak_module.time, "sleep", lambda s: None)
+    r = soak_module.soak(system, watcher, 0.01)
+
+    class Processes:
+        def __init__(self, spec):
+            self.endpoint = "tcp/127.0.0.1:1"
+
+        def start_router(self):
+            pass
+
+        def start_services(self):
+            pass
+
+        def close(self):
+            return {}
+
+    class Watcher:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+    monkeypatch.setattr(soak_module, "ProcessSystem", Processes)
+    monkeypatch.setattr(soak_module, "Watcher", Watcher)
+    monkeypatch.setattr(soak_module, "demo_model", lambda models_dir: tmp_path / "m.npz")
+    monkeypatch.setattr(soak_module, "soak", lambda *a, **k: r)
+    assert soak_module.main(["--run-dir", str(tmp_path)]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"foresight bench soak: predictor was not running at the window's end: it was killed (SIGKILL); its log: "
+        f"{tmp_path / 'predictor.log'}"]
 
 
 def test_the_soak_and_faults_help_show_their_defaults(capsys):
