@@ -59,6 +59,7 @@ def closing_lines(cfg: DemoConfig, summary: Summary, interrupted: bool = False) 
         lines.append(f"MCAP log: {with_state(summary.mcap_path)}")
     if "figure" in extra:
         lines.append(f"picture of the run: {extra['figure']}")
-    lines.append(f"this run's logs: {extra.get('run_dir')}/ (each step: foresight log render "
-                 f"{summary.mcap_path} --step N --out step.png)")
+    each = "plan" if cfg.mode == "realtime" else "step"  # render numbers a real-time run's plans, not its steps
+    lines.append(f"this run's logs: {extra.get('run_dir')}/ (each {each}: foresight log render "
+                 f"{summary.mcap_path} --step N --out {each}.png)")
     return lines

@@ -2,14 +2,14 @@
 
 :func:`read_log` goes through the file with mcap's stream reader, so it needs no summary section:
 a file whose writer was killed is read up to its last complete chunk (``LogFile.complete`` is then
-False and ``LogFile.error`` says why reading stopped). The records it understands are the ones
+False and ``LogFile.error`` says why reading stopped); a finished one with a damaged chunk is read past it
+(:mod:`shared.recording.recovery`; ``LogFile.damage`` says what was skipped). The records it understands are the ones
 :mod:`shared.recording.writer` writes: header, schemas, channels, messages, attachments, metadata.
 """
 
 from __future__ import annotations
 
 import fcntl
-import io
 import os
 import struct
 import typing
@@ -19,15 +19,16 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import zstandard
 from mcap.exceptions import McapError
-from mcap.records import Attachment, Channel, Footer, Header, Message, Metadata, Schema
+from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
+from shared.recording.recovery import DAMAGED, Bounded, Records, describe
 from shared.runtime import UserError
 
 __all__ = ["LogChannel", "LogMessage", "LogFile", "read_log", "iter_messages", "open_records", "log_path", "DAMAGED",
-           "MAGIC", "summary_damage", "being_written", "ends_finished", "SOURCE_METADATA", "STILL_WRITTEN"]
+           "MAGIC", "summary_damage", "being_written", "ends_finished", "SOURCE_METADATA", "STILL_WRITTEN",
+           "checked_records"]
 
 SOURCE_METADATA = "foresight.compress"
 """Metadata record of a copy made from a truncated or damaged log (``foresight log compress``): ``source``,
@@ -40,13 +41,9 @@ STILL_WRITTEN = "still being written when copied: up to its last whole chunk the
 MAGIC = b"\x89MCAP0\r\n"
 """The first (and last) eight bytes of an MCAP file."""
 
-DAMAGED = (McapError, struct.error, ValueError, EOFError, zstandard.ZstdError, RuntimeError, MemoryError,
-           OverflowError)
-"""What reading a damaged MCAP raises: the mcap library's errors, a record cut short (``struct.error``,
-``EOFError``), a chunk whose CRC does not match (``CRCValidationError``, a ``ValueError``), and a compressed chunk
-that does not decompress (zstandard's ``ZstdError``; lz4 raises ``RuntimeError``), and, as a backstop, a damaged
-length that asks for more memory than there is. Every reader of the logs reads through :func:`open_records`
-(``validate_crcs=True``, no read past the file's end) and stops at the first of these: what came before stands."""
+# DAMAGED (shared.recording.recovery): what reading a damaged MCAP raises. Every reader of the logs reads through
+# open_records (validate_crcs=True, no read past the file's end); read_log and iter_messages through checked_records,
+# which skips a damaged chunk of a finished log and stops at any other damage: what came before stands.
 
 
 _FOOTER = struct.Struct("<BQQQI")
@@ -110,22 +107,6 @@ def being_written(path: str | Path) -> bool:
     return False
 
 
-class _Bounded:
-    """A file whose reads never ask for more than the bytes it has left.
-
-    A damaged length inside a record (an attachment's, say) then reads to the end of the file and fails
-    there, instead of allocating exabytes.
-    """
-
-    def __init__(self, f: io.BufferedReader, size: int) -> None:
-        self._f, self._left = f, size
-
-    def read(self, n: int = -1) -> bytes:
-        data = self._f.read(self._left if n is None or n < 0 else min(n, self._left))
-        self._left -= len(data)
-        return data
-
-
 def log_path(path: str | Path) -> Path:
     """The log a path names: the path itself, or the one ``.mcap`` under a directory (``runs/demo/latest``).
 
@@ -147,6 +128,44 @@ def open_records(path: str | Path) -> Iterator[StreamReader]:
         UserError: The path is missing, a directory with no log or several under it, not a regular file (a pipe),
             empty, or does not start with the MCAP magic.
     """
+    with _opened(path) as (reader, _):
+        yield reader
+
+
+@contextmanager
+def checked_records(path: str | Path) -> Iterator[Records]:
+    """The records of a log as :func:`open_records` reads them, past a damaged chunk where it can be skipped.
+
+    A chunk failing its CRC in a finished log whose summary is intact is skipped and counted
+    (:class:`~shared.recording.recovery.Records`); elsewhere reading stops there. The readers of messages
+    (:func:`read_log`, :func:`iter_messages`, ``foresight log compress``) read through it, so they agree.
+
+    Raises:
+        UserError: As :func:`open_records`, and a file that ends (or is damaged) before its header does.
+    """
+    p = log_path(path)
+    with _opened(p, emit_chunks=True) as (reader, source):
+        skip = ends_finished(p) and not summary_damage(p)
+        try:
+            yield Records(reader, source, skip, _schemas_and_channels(p) if skip else None)
+        except UserError as exc:  # raised by Records, which has no path
+            raise UserError(f"{p}: {exc}") from None
+
+
+def _schemas_and_channels(p: Path) -> list[typing.Any]:
+    """The schemas and channels of a finished log's summary (none where it cannot be read)."""
+    from mcap.reader import SeekingReader
+
+    try:
+        with p.open("rb") as f:
+            summary = SeekingReader(f, validate_crcs=True).get_summary()
+    except DAMAGED:
+        return []
+    return [] if summary is None else [*summary.schemas.values(), *summary.channels.values()]
+
+
+@contextmanager
+def _opened(path: str | Path, emit_chunks: bool = False) -> Iterator[tuple[StreamReader, Bounded]]:
     p = log_path(path)
     if p.is_dir():
         logs = sorted(p.rglob("*.mcap"))
@@ -164,8 +183,9 @@ def open_records(path: str | Path) -> Iterator[StreamReader]:
         if head != MAGIC:
             raise UserError(f"{p}: not an MCAP file ({'empty' if not size else 'no MCAP magic at its start'})")
         f.seek(0, os.SEEK_SET)
-        yield StreamReader(typing.cast(typing.IO[bytes], _Bounded(f, size)), validate_crcs=True,
-                           record_size_limit=1 << 31)
+        source = Bounded(f, size)
+        yield StreamReader(typing.cast(typing.IO[bytes], source), validate_crcs=True, emit_chunks=emit_chunks,
+                           record_size_limit=1 << 31), source
 
 
 @dataclass
@@ -198,8 +218,14 @@ class LogFile:
     """What :func:`read_log` found in an MCAP file.
 
     Attributes:
-        complete: True when the footer was read (the writer finished the file) and its summary is intact.
-        error: Why reading stopped early (truncated or damaged file), or why the summary is not to be trusted, else "".
+        complete: True when the footer was read (the writer finished the file), its summary is intact and nothing in
+            it is damaged.
+        error: Why reading stopped early (truncated or damaged file), why the summary is not to be trusted, or what
+            is damaged, else "".
+        damage: What is damaged in the file (chunks skipped, the chunk reading stopped at, an attachment or the
+            metadata), else "": the log is then DAMAGED, not TRUNCATED, even while a run writes it.
+        chunks_skipped: Chunks of a finished log that failed their CRC and were skipped (the others were read).
+        messages_lost: The messages in them (from their message indexes; None: not known).
         summary_damaged: The footer was read and every record before it, but the summary's CRC does not hold
             (:func:`summary_damage`): the messages are all here, the index is not to be used.
         being_written: A run held the file's lock when it was read (:func:`being_written`): it ends at the last
@@ -219,16 +245,22 @@ class LogFile:
     error: str = ""
     summary_damaged: bool = False
     being_written: bool = False
+    damage: str = ""
+    chunks_skipped: int = 0
+    messages_lost: int | None = 0
 
     @property
     def state(self) -> str:
         """How every tool names a log's state.
 
-        ``complete``, ``STILL BEING WRITTEN (...)`` (a run holds it), ``DAMAGED (<its summary>)`` or
-        ``TRUNCATED (<why>)``.
+        ``complete``, ``DAMAGED (<what>)`` (a chunk, an attachment, the metadata or the summary; a damaged chunk is
+        named even while a run holds the log), ``STILL BEING WRITTEN (...)`` (a run holds it) or ``TRUNCATED (<why>)``.
         """
         if self.complete:
             return "complete"
+        if self.damage:
+            live = "; a run holds its lock" if self.being_written else ""
+            return f"DAMAGED ({self.damage}{live})"
         if self.being_written:
             return "STILL BEING WRITTEN (a run holds its lock: read up to its last whole chunk so far)"
         return f"DAMAGED ({self.error})" if self.summary_damaged else f"TRUNCATED ({self.error or 'no footer'})"
@@ -255,11 +287,10 @@ def read_log(path: str | Path, keep: Callable[[LogChannel], bool] | None = None)
     """
     p = Path(path)
     schemas: dict[int, Schema] = {}
-    footer = False
-    with open_records(p) as reader:
+    with checked_records(p) as records:
         out = LogFile(str(p), p.stat().st_size, being_written=being_written(log_path(p)))
         try:
-            for rec in reader.records:
+            for rec in records:
                 if isinstance(rec, Header):
                     out.profile, out.library = rec.profile, rec.library
                 elif isinstance(rec, Schema):
@@ -283,28 +314,31 @@ def read_log(path: str | Path, keep: Callable[[LogChannel], bool] | None = None)
                     out.attachments[rec.name] = bytes(rec.data)
                 elif isinstance(rec, Metadata):
                     out.metadata[rec.name] = dict(rec.metadata)
-                elif isinstance(rec, Footer):
-                    footer = True
-            out.complete = footer  # and the closing magic after it: a copy cut within it is not complete
-            if footer and (damage := summary_damage(p)):
-                out.complete, out.summary_damaged, out.error = False, True, damage
         except DAMAGED as exc:
-            out.error = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            out.error = describe(exc)
+        out.damage, out.chunks_skipped, out.messages_lost = records.damage, records.skipped, records.lost
+        out.complete = records.ended and not records.damage  # and the closing magic after the footer: a copy cut
+        if records.ended and (damage := summary_damage(p)):  # within it is not complete
+            out.complete, out.summary_damaged, out.error = False, True, damage
+        elif records.damage:  # and where reading stopped after it, if it did
+            then = f"; then stopped: {out.error}" if out.error and out.error not in records.damage else ""
+            out.error = records.damage + then
     return out
 
 
 def iter_messages(path: str | Path) -> Iterator[LogMessage]:
     """Every message of a log in file order, one at a time (what :func:`read_log` keeps, without holding it all).
 
-    Stops where the file is damaged or ends, as :func:`read_log` does (its ``error`` says why).
+    Skips a damaged chunk and stops where the file is damaged otherwise or ends, as :func:`read_log` does (its
+    ``error`` says why).
 
     Raises:
         UserError: If the file is missing or not an MCAP file at all.
     """
     topics: dict[int, str] = {}
-    with open_records(Path(path)) as reader:
+    with checked_records(Path(path)) as records:
         try:
-            for rec in reader.records:
+            for rec in records:
                 if isinstance(rec, Channel):
                     topics.setdefault(rec.id, rec.topic)
                 elif isinstance(rec, Message):

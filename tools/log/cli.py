@@ -1,8 +1,8 @@
 """``foresight log``: look at a run's MCAP log without Foxglove.
 
 * ``foresight log info FILE [--json]``: channels, schemas and message counts (:mod:`tools.log.info`);
-* ``foresight log render FILE --step N --out PNG`` (or ``--all --out DIR``): draw replanning steps
-  (:mod:`tools.log.render`);
+* ``foresight log render FILE --step N --out PNG`` (or ``--all --out DIR``): draw replanning steps, a real-time
+  run's plans (:mod:`tools.log.render`);
 * ``foresight log latency FILE [--json] [--slowest N]``: pose -> occupancy -> plan latencies, and the N plans
   with the longest pose -> plan, slowest first (:mod:`tools.log.latency`);
 * ``foresight log compress IN OUT``: the same log with compressed chunks, read back identical
@@ -78,41 +78,86 @@ def _main_render(args: argparse.Namespace, prog: str) -> int:
     if args.all and args.step is not None:  # --step was ignored without a word, and every step drawn
         raise UserError("give --step N or --all, not both")
     if not args.all:
-        check_png(str(args.out), "--out")  # matplotlib would write NAME.png where we print NAME
-        ready_to_write(args.out)  # before the log is read: a file in the way of its directory, named
+        check_png(str(args.out), "--out", make_folder=False)  # matplotlib would write NAME.png where we print NAME
     elif args.out.exists() and not args.out.is_dir():  # it failed with "File exists" after reading the log
-        raise UserError(f"--out {args.out}: a file; with --all, --out is the directory of the steps' PNGs")
+        raise UserError(f"--out {args.out}: a file; with --all, --out is the directory of the PNGs")
+    else:
+        _check_out(args.out, directory=True)  # before the log is read; nothing made until the PNGs are drawn
     wanted = {"foresight.Plan", "foresight.OccupancyGrid", "foresight.HumanPose", "foresight.RobotState"}
     lf = read_log(args.file, keep=lambda ch: ch.schema_name in wanted and ch.message_encoding == "msgpack")
     views = step_views(lf)
     if not views:
-        raise UserError(f"{args.file}: no Plan messages in the log, nothing to render")
+        raise UserError(_with_state(f"{args.file}: no Plan messages in the log, nothing to render", lf))
     scene = scene_of(lf)
+    # a real-time run's plans are numbered by their place in the log (as `log table` numbers them), not steps
+    word = "plan" if any(v.number is not None for v in views.values()) else "step"
     if args.all:
         steps = sorted(views)
     else:
         if args.step is None:
             raise UserError("give --step N or --all")
         if args.step not in views:
-            raise UserError(f"{args.file}: no plan for step {args.step} (steps {min(views)}..{max(views)})")
+            what = f"plan {args.step}" if word == "plan" else f"plan for step {args.step}"
+            raise UserError(_with_state(f"{args.file}: no {what} ({word}s {_ranges(sorted(views))})", lf))
         steps = [args.step]
     import torch
 
     from shared.robot import PR2
 
     robot = PR2.from_scene(scene, device="cpu", dtype=torch.float32)
+    _make_for(args.out, directory=args.all)
     for n in steps:
-        out = Path(args.out) / f"step_{n:03d}.png" if args.all else Path(args.out)
+        out = Path(args.out) / f"{word}_{n:03d}.png" if args.all else Path(args.out)
         render_step(views[n], scene, out, robot=robot, min_probability=args.min_probability)
         print(out)
     _note_truncated(lf)
     return 0
 
 
+def _ranges(numbers: list[int]) -> str:
+    """Sorted numbers as runs: ``0..3, 5, 7..9`` (a real-time run's adopted plans have gaps)."""
+    runs: list[list[int]] = []
+    for n in numbers:
+        if runs and n == runs[-1][1] + 1:
+            runs[-1][1] = n
+        else:
+            runs.append([n, n])
+    return ", ".join(f"{a}..{b}" if b > a else f"{a}" for a, b in runs)
+
+
+def _with_state(message: str, lf: LogFile) -> str:
+    """An error about what a log lacks, with the log's state when it is not complete: the damage may be why."""
+    return message if lf.complete else f"{message} (the log is {lf.state})"
+
+
+def _check_out(out: Path, directory: bool = False) -> None:
+    """Refuse, before the log is read, an output path with a file where a directory is needed; nothing is made."""
+    for above in ([out] if directory else []) + list(out.parents):
+        if above.exists():
+            if not above.is_dir():
+                raise UserError(f"{above}: a file is in the way (a directory is needed there)")
+            return
+
+
+def _make_for(out: Path, directory: bool = False) -> None:
+    """Make the directories an output goes in, just before it is written, and say so (one line on stderr).
+
+    They were made before the log was read, and left behind when it failed (a review).
+    """
+    need = out if directory else out.parent
+    missing = not need.exists()
+    ready_to_write(out, directory=directory)
+    if missing:
+        print(f"foresight log: note: made the directory {need}", file=sys.stderr)
+
+
 def _note_truncated(lf: LogFile) -> None:
-    """Say on stderr that a log is truncated: what the tools print of it stops where the file does."""
+    """Say on stderr that a log is not complete: what the tools print of it stops where the file does."""
     if lf.summary_damaged:
         print(f"foresight log: note: {lf.path} is {lf.state}: it was read in file order, not through its index",
+              file=sys.stderr)
+    elif lf.damage:
+        print(f"foresight log: note: {lf.path} is {lf.state}: what follows lacks what the damage took",
               file=sys.stderr)
     elif not lf.complete:
         print(f"foresight log: note: {lf.path} is {lf.state}: what follows covers the run up to its last whole "
@@ -125,7 +170,7 @@ def _main_table(args: argparse.Namespace) -> int:
     lf = read_log(args.file, keep=lambda ch: ch.schema_name in WANTED and ch.message_encoding == "msgpack")
     summary = run_summary(lf)
     if not summary.steps:
-        raise UserError(f"{args.file}: no plans logged")
+        raise UserError(_with_state(f"{args.file}: no plans logged", lf))
     _note_truncated(lf)
     print(strict_json.dumps({**summary.to_json(), "complete": lf.complete, "error": lf.error}) if args.json
           else "\n".join(table_lines(summary)))
@@ -137,14 +182,15 @@ def _main_snapshot(args: argparse.Namespace) -> int:
 
     file = log_path(args.file)  # a run's directory: its log (the picture beside it, named for it)
     if args.out is not None:
-        check_png(str(args.out), "--out")
+        check_png(str(args.out), "--out", make_folder=False)
     out = Path(args.out) if args.out is not None else file.with_name(f"{file.stem}-snapshot.png")
-    ready_to_write(out)  # before the scene is read: a file in the way of its directory, named
+    _check_out(out)  # before the scene is read: a file in the way of its directory, named; nothing made yet
     state = scene_at(file, args.at)
     if args.at is not None and args.at > state.t_s + 1e-6:  # it drew the end without a word
         print(f"foresight log: note: --at {args.at:g} s is past the end of the scene ({state.t_s:.3f} s of "
               "recording; a lock-step run records its simulated steps faster): drawing its last state",
               file=sys.stderr)
+    _make_for(out)
     draw_snapshot(state, out, title=file.name)
     _note_truncated(read_log(file, keep=lambda ch: False))  # whether the scene reader stopped at a damaged chunk
     print(f"wrote {out} ({state.summary()})")
@@ -159,7 +205,7 @@ def _main_latency(args: argparse.Namespace) -> int:
         samples: list[PlanSample] = []
         stats = log_latencies(args.file, read, samples)
     except ValueError as exc:
-        raise UserError(str(exc)) from exc
+        raise UserError(_with_state(str(exc), read[0]) if read else str(exc)) from exc
     _note_truncated(read[0])
     slow = slowest_plans(samples, args.slowest)
     if args.json:  # strict JSON: a series without samples has null statistics, not NaN
@@ -188,8 +234,11 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
     pi.add_argument("--json", action="store_true", help="print one JSON object")
     pr = sub.add_parser("render", help=SUBCOMMANDS["render"])
     pr.add_argument("file", help=_FILE_HELP)
-    pr.add_argument("--step", type=int, default=None, help="replanning step (Plan.step) to draw")
-    pr.add_argument("--all", action="store_true", help="draw every step; --out is then a directory")
+    pr.add_argument("--step", type=int, default=None, metavar="N",
+                    help="replanning step (Plan.step) to draw; a real-time run's: plan N, numbered as "
+                    "'foresight log table' numbers them")
+    pr.add_argument("--all", action="store_true", help="draw every step (step_NNN.png; a real-time run's plans: "
+                    "plan_NNN.png); --out is then a directory")
     pr.add_argument("--out", required=True, type=Path, help="PNG path (or directory with --all)")
     pr.add_argument("--min-probability", type=float, default=0.05, help="hide voxels below this probability")
     pl = sub.add_parser("latency", help=SUBCOMMANDS["latency"])
@@ -221,9 +270,13 @@ def main(argv: list[str] | None = None, prog: str = "foresight log") -> int:
         if args.cmd == "table":
             return _main_table(args)
         if args.cmd == "compress":
+            _check_out(args.out)
+            missing = not args.out.parent.exists()
             result = compress_log(args.file, args.out, args.compression)
+            if missing:  # made by its atomic write, once the input was found to be a log
+                print(f"foresight log: note: made the directory {args.out.parent}", file=sys.stderr)
             print(result.line(log_path(args.file), Path(args.out)))
-            return 0 if result.identical else 1
+            return 0 if result.ok else 1  # a copy that lacks part of a damaged input is no success
         if args.cmd == "info":
             return _main_info(args)
         if args.cmd == "latency":

@@ -98,7 +98,8 @@ def info_dict(lf: LogFile) -> dict[str, Any]:
     refused = sum(c.count for c in lf.channels.values() if c.topic == REJECTED_TOPIC)
     return {
         "path": lf.path, "size_bytes": lf.size, "complete": lf.complete, "error": lf.error,
-        "being_written": lf.being_written,
+        "being_written": lf.being_written, "damage": lf.damage, "chunks_skipped": lf.chunks_skipped,
+        "messages_lost": lf.messages_lost,
         "profile": lf.profile, "library": lf.library,
         "start": _fmt_time(min(firsts)) if firsts else None, "end": _fmt_time(max(lasts)) if lasts else None,
         "duration_s": (max(lasts) - min(firsts)) / 1e9 if firsts else 0.0,
@@ -122,6 +123,9 @@ def _state_words(lf: LogFile, d: dict) -> str:
     if lf.complete and source.get("source_error") == STILL_WRITTEN:
         return ("complete; copied from a log still being written, up to its last whole chunk then: what the run wrote "
                 "after that is not here")
+    if lf.complete and source.get("source_state") == "DAMAGED":  # not truncated: nothing was cut (a review)
+        return (f"complete; copied from a DAMAGED log ({source.get('source_error', '')}): what the damage took is not "
+                "here")
     if lf.complete and source.get("source_complete") == "false":
         return (f"complete; copied from a TRUNCATED log ({source.get('source_error', 'no footer')}): what the run "
                 "wrote after its last whole chunk is not here")
@@ -129,6 +133,8 @@ def _state_words(lf: LogFile, d: dict) -> str:
         return "complete"
     if lf.summary_damaged:
         return f"{lf.state}: all {d['messages']} messages read in file order; its index is not to be trusted"
+    if lf.damage:
+        return f"{lf.state}: {d['messages']} messages read, {d['duration_s']:.2f} s"
     if lf.being_written:  # not a killed run's end: the run goes on
         return f"{lf.state}: {d['messages']} messages, {d['duration_s']:.2f} s"
     return (f"{lf.state}: recovered {d['messages']} messages"
